@@ -1,0 +1,10 @@
+//! Rendering of Gaussian scenes for splatraj.
+//!
+//! This crate holds the camera model and the renderers: an independent brute-force f64
+//! reference renderer (the yardstick for tests and a CPU preview), and the backend choice for
+//! burn tensors. It does not read files or pick objects: it takes a [`splatraj_scene::Scene`]
+//! and per-Gaussian channels from the crates before it in the pipeline.
+
+pub mod backend;
+pub mod compositing;
+pub mod reference;

@@ -1,0 +1,124 @@
+//! Scene file formats: detection, reading (then validation) and writing.
+
+pub mod compressed_ply;
+pub mod inria_ply;
+pub mod labels_json;
+pub mod ply_table;
+pub mod ply_writer;
+pub mod spz;
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+pub use labels_json::read_label_sidecar;
+pub use ply_writer::write_inria_ply;
+
+use crate::error::{Result, SceneError};
+use crate::scene::Scene;
+use crate::validate::{InvalidPolicy, validate};
+
+/// The scene file formats splatraj reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SceneFormat {
+    /// INRIA 3DGS PLY (ASCII or binary, either byte order).
+    InriaPly,
+    /// PlayCanvas/SuperSplat compressed PLY (chunks of 256 with quantised values).
+    CompressedPly,
+    /// Niantic SPZ (gzip-wrapped versions 1-3, or version 4).
+    Spz,
+}
+
+/// How to read a scene file.
+#[derive(Debug, Clone, Default)]
+pub struct ReadOptions {
+    /// What to do with Gaussians holding values that cannot be rendered.
+    pub invalid: InvalidPolicy,
+    /// A ground-truth label sidecar (SuperSplat segments JSON) to attach as labels.
+    pub labels: Option<PathBuf>,
+}
+
+/// A scene with where it came from.
+#[derive(Debug, Clone)]
+pub struct LoadedScene {
+    /// The validated scene.
+    pub scene: Scene,
+    /// The format it was read from.
+    pub format: SceneFormat,
+    /// Gaussians dropped as invalid (only under [`InvalidPolicy::Drop`]).
+    pub dropped: usize,
+}
+
+/// Recognises the format from the file's first bytes (not its name).
+pub fn detect_format(bytes: &[u8], path: &Path) -> Result<SceneFormat> {
+    if bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r\n") {
+        // Compressed PLY is a PLY whose header declares a `chunk` element and packed vertices.
+        let head = &bytes[..bytes.len().min(64 * 1024)];
+        let header_end = find(head, b"end_header").unwrap_or(head.len());
+        let header = String::from_utf8_lossy(&head[..header_end]);
+        let compressed = header
+            .lines()
+            .any(|l| l.trim() == "property uint packed_position")
+            || header.lines().any(|l| l.starts_with("element chunk "));
+        return Ok(if compressed {
+            SceneFormat::CompressedPly
+        } else {
+            SceneFormat::InriaPly
+        });
+    }
+    if bytes.starts_with(&[0x1f, 0x8b]) || bytes.starts_with(spz::MAGIC_BYTES) {
+        return Ok(SceneFormat::Spz);
+    }
+    let shown: String = String::from_utf8_lossy(&bytes[..bytes.len().min(16)])
+        .chars()
+        .map(|c| if c.is_ascii_graphic() { c } else { '.' })
+        .collect();
+    Err(SceneError::UnknownFormat {
+        path: path.to_path_buf(),
+        detail: format!(
+            "the file starts with {shown:?}; expected a PLY ('ply' header: INRIA 3DGS or \
+             compressed), or SPZ (gzip or 'NGSP')"
+        ),
+    })
+}
+
+fn find(haystack: &[u8], needle: &[u8]) -> Option<usize> {
+    haystack.windows(needle.len()).position(|w| w == needle)
+}
+
+/// Reads, decodes and validates a scene file of any supported format.
+pub fn read_scene(path: &Path, options: &ReadOptions) -> Result<LoadedScene> {
+    let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    let format = detect_format(&bytes, path)?;
+    let mut scene = decode(&bytes, format, path)?;
+    let report = validate(&mut scene, path, options.invalid)?;
+    if let Some(sidecar) = &options.labels {
+        if report.dropped > 0 {
+            return Err(SceneError::sidecar(
+                sidecar,
+                "cannot attach a label sidecar after dropping invalid Gaussians: the indices \
+                 would no longer match",
+            ));
+        }
+        scene.extras.labels = Some(read_label_sidecar(sidecar, scene.len())?);
+    }
+    Ok(LoadedScene {
+        scene,
+        format,
+        dropped: report.dropped,
+    })
+}
+
+/// Decodes bytes of a known format into a scene that is not yet validated.
+pub fn decode(bytes: &[u8], format: SceneFormat, path: &Path) -> Result<Scene> {
+    match format {
+        SceneFormat::InriaPly => {
+            inria_ply::scene_from_tables(&ply_table::read_ply_tables(bytes, path)?, path)
+        }
+        SceneFormat::CompressedPly => {
+            compressed_ply::scene_from_tables(&ply_table::read_ply_tables(bytes, path)?, path)
+        }
+        SceneFormat::Spz => spz::decode_spz(bytes, path),
+    }
+}

@@ -1,0 +1,269 @@
+//! Any PLY file (ASCII, binary little or big endian) as named columns of numbers, element by
+//! element. Header parsing and value decoding are ply-rs-bw's; this file only collects the
+//! values column-wise so the Gaussian readers can address properties by name.
+
+use std::io::{BufRead, Cursor};
+use std::path::Path;
+
+use ply_rs_bw::parser::{Parser, Reader};
+use ply_rs_bw::ply::{
+    ElementDef, Encoding, Header, PropertyAccess, PropertyAccessResult, PropertyType, ScalarType,
+};
+
+use crate::error::{Result, SceneError};
+
+/// One PLY row as it is parsed: scalar values in header order (lists are skipped).
+///
+/// f64 holds every PLY scalar type exactly (32-bit ints included), so packed integers survive.
+struct Row(Vec<f64>);
+
+impl PropertyAccess for Row {
+    fn new() -> Self {
+        Row(Vec::with_capacity(64))
+    }
+    fn set_char(&mut self, _: &str, v: i8) -> PropertyAccessResult {
+        self.0.push(v.into());
+        PropertyAccessResult::Set
+    }
+    fn set_uchar(&mut self, _: &str, v: u8) -> PropertyAccessResult {
+        self.0.push(v.into());
+        PropertyAccessResult::Set
+    }
+    fn set_short(&mut self, _: &str, v: i16) -> PropertyAccessResult {
+        self.0.push(v.into());
+        PropertyAccessResult::Set
+    }
+    fn set_ushort(&mut self, _: &str, v: u16) -> PropertyAccessResult {
+        self.0.push(v.into());
+        PropertyAccessResult::Set
+    }
+    fn set_int(&mut self, _: &str, v: i32) -> PropertyAccessResult {
+        self.0.push(v.into());
+        PropertyAccessResult::Set
+    }
+    fn set_uint(&mut self, _: &str, v: u32) -> PropertyAccessResult {
+        self.0.push(v.into());
+        PropertyAccessResult::Set
+    }
+    fn set_float(&mut self, _: &str, v: f32) -> PropertyAccessResult {
+        self.0.push(v.into());
+        PropertyAccessResult::Set
+    }
+    fn set_double(&mut self, _: &str, v: f64) -> PropertyAccessResult {
+        self.0.push(v);
+        PropertyAccessResult::Set
+    }
+}
+
+/// Values of one scalar property of an element.
+#[derive(Debug, Clone)]
+pub enum ColumnData {
+    /// A `float` property.
+    F32(Vec<f32>),
+    /// Any other scalar type, widened losslessly.
+    F64(Vec<f64>),
+}
+
+/// One scalar property of a PLY element.
+#[derive(Debug, Clone)]
+pub struct Column {
+    /// Property name as in the header.
+    pub name: String,
+    /// Type declared in the header.
+    pub scalar: ScalarType,
+    /// One value per element.
+    pub data: ColumnData,
+}
+
+impl Column {
+    /// Value `i` as f32 (rounded for non-float types).
+    pub fn f32(&self, i: usize) -> f32 {
+        match &self.data {
+            ColumnData::F32(v) => v[i],
+            ColumnData::F64(v) => v[i] as f32,
+        }
+    }
+    /// Value `i` as f64.
+    pub fn f64(&self, i: usize) -> f64 {
+        match &self.data {
+            ColumnData::F32(v) => v[i].into(),
+            ColumnData::F64(v) => v[i],
+        }
+    }
+    /// All values as f32.
+    pub fn to_f32_vec(&self) -> Vec<f32> {
+        match &self.data {
+            ColumnData::F32(v) => v.clone(),
+            ColumnData::F64(v) => v.iter().map(|&x| x as f32).collect(),
+        }
+    }
+    /// Number of values.
+    pub fn len(&self) -> usize {
+        match &self.data {
+            ColumnData::F32(v) => v.len(),
+            ColumnData::F64(v) => v.len(),
+        }
+    }
+    /// True when the column holds no value.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// True for the PLY integer types.
+    pub fn is_integer(&self) -> bool {
+        !matches!(self.scalar, ScalarType::Float | ScalarType::Double)
+    }
+}
+
+/// One PLY element (e.g. `vertex`, `chunk`, `sh`) with its scalar properties as columns.
+#[derive(Debug, Clone)]
+pub struct Table {
+    /// Element name.
+    pub name: String,
+    /// Number of rows.
+    pub count: usize,
+    /// Scalar properties in header order (list properties are not kept).
+    pub columns: Vec<Column>,
+}
+
+impl Table {
+    /// The column called `name`, if any.
+    pub fn column(&self, name: &str) -> Option<&Column> {
+        self.columns.iter().find(|c| c.name == name)
+    }
+
+    /// The column called `name`, or an error naming the element and property.
+    pub fn require(&self, name: &str, path: &Path) -> Result<&Column> {
+        self.column(name).ok_or_else(|| {
+            SceneError::malformed(
+                path,
+                format!("element '{}' has no property '{name}'", self.name),
+            )
+        })
+    }
+}
+
+/// A parsed PLY file: its encoding, comments and elements.
+#[derive(Debug, Clone)]
+pub struct PlyFile {
+    /// Payload encoding.
+    pub encoding: Encoding,
+    /// Header comments.
+    pub comments: Vec<String>,
+    /// Elements in file order.
+    pub tables: Vec<Table>,
+}
+
+impl PlyFile {
+    /// The element called `name`, if any.
+    pub fn table(&self, name: &str) -> Option<&Table> {
+        self.tables.iter().find(|t| t.name == name)
+    }
+}
+
+/// Parses a whole PLY file held in memory.
+pub fn read_ply_tables(bytes: &[u8], path: &Path) -> Result<PlyFile> {
+    let parser = Parser::<Row>::new();
+    let mut reader = Reader::new(Cursor::new(bytes));
+    let header: Header = parser
+        .read_header(&mut reader)
+        .map_err(|e| SceneError::malformed(path, format!("bad PLY header: {e}")))?;
+    let mut tables = Vec::with_capacity(header.elements.len());
+    for def in header.elements.values() {
+        tables.push(read_element(&parser, &mut reader, &header, def, path)?);
+    }
+    Ok(PlyFile {
+        encoding: header.encoding,
+        comments: header.comments.clone(),
+        tables,
+    })
+}
+
+fn read_element<T: BufRead>(
+    parser: &Parser<Row>,
+    reader: &mut Reader<T>,
+    header: &Header,
+    def: &ElementDef,
+    path: &Path,
+) -> Result<Table> {
+    let scalars: Vec<(String, ScalarType)> = def
+        .properties
+        .values()
+        .filter_map(|p| match &p.data_type {
+            PropertyType::Scalar(s) => Some((p.name.clone(), s.clone())),
+            PropertyType::List(..) => None,
+        })
+        .collect();
+    // Cap the up-front allocation: a corrupt header may claim billions of rows.
+    let capacity = def.count.min(1 << 24);
+    let mut columns: Vec<Column> = scalars
+        .iter()
+        .map(|(name, scalar)| Column {
+            name: name.clone(),
+            scalar: scalar.clone(),
+            data: match scalar {
+                ScalarType::Float => ColumnData::F32(Vec::with_capacity(capacity)),
+                _ => ColumnData::F64(Vec::with_capacity(capacity)),
+            },
+        })
+        .collect();
+
+    let mut line = String::new();
+    for i in 0..def.count {
+        let row = match header.encoding {
+            Encoding::Ascii => {
+                line.clear();
+                let read = reader
+                    .get_mut()
+                    .read_line(&mut line)
+                    .map_err(|e| SceneError::io(path, e))?;
+                if read == 0 {
+                    return Err(truncated(path, def, i));
+                }
+                parser.read_ascii_element(line.trim(), def)
+            }
+            Encoding::BinaryLittleEndian => {
+                parser.read_little_endian_element(reader.get_mut(), def)
+            }
+            Encoding::BinaryBigEndian => parser.read_big_endian_element(reader.get_mut(), def),
+        };
+        let row = row.map_err(|e| {
+            if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                truncated(path, def, i)
+            } else {
+                SceneError::malformed(path, format!("element '{}' row {i}: {e}", def.name))
+            }
+        })?;
+        if row.0.len() != columns.len() {
+            return Err(SceneError::malformed(
+                path,
+                format!(
+                    "element '{}' row {i}: {} scalar values for {} properties",
+                    def.name,
+                    row.0.len(),
+                    columns.len()
+                ),
+            ));
+        }
+        for (column, value) in columns.iter_mut().zip(row.0) {
+            match &mut column.data {
+                ColumnData::F32(v) => v.push(value as f32),
+                ColumnData::F64(v) => v.push(value),
+            }
+        }
+    }
+    Ok(Table {
+        name: def.name.clone(),
+        count: def.count,
+        columns,
+    })
+}
+
+fn truncated(path: &Path, def: &ElementDef, row: usize) -> SceneError {
+    SceneError::malformed(
+        path,
+        format!(
+            "file is truncated: element '{}' declares {} rows but the data ends at row {row}",
+            def.name, def.count
+        ),
+    )
+}

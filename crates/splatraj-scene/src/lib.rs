@@ -1,0 +1,21 @@
+//! Gaussian Splatting scenes as plain Rust data.
+//!
+//! This crate holds the scene model ([`Scene`], a struct of arrays of activated values), the
+//! readers for the files users have (INRIA 3DGS PLY in binary and ASCII, PlayCanvas/SuperSplat
+//! compressed PLY, Niantic SPZ, label sidecars), the INRIA PLY writer, validation with clear
+//! errors, a guess of the scene's up axis, and the procedural demo scene. It does not render,
+//! select objects or depend on burn: those live in the crates further down the pipeline.
+
+pub mod atomic;
+pub mod demo;
+pub mod error;
+pub mod formats;
+pub mod scene;
+pub mod up_axis;
+pub mod validate;
+
+pub use error::{Result, SceneError};
+pub use formats::{ReadOptions, SceneFormat, read_scene, write_inria_ply};
+pub use scene::{Bounds, Extras, Features, Labels, NamedProperty, SH_C0, Scene};
+pub use up_axis::{UpGuess, guess_up_axis};
+pub use validate::InvalidPolicy;

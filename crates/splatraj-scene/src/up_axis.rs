@@ -1,0 +1,207 @@
+//! A guess of the scene's world-up direction, for scenes that do not say.
+//!
+//! Captured scenes are dominated by flat splats on horizontal surfaces (floors, tables) and
+//! vertical ones (walls). The normal of a flat splat is its shortest axis. We take the
+//! opacity- and area-weighted scatter matrix of these normals and pick its principal direction;
+//! then the sign: the densest slab of Gaussians along that direction is the ground, which lies
+//! at the *bottom* of the scene, so up points away from it. The result is snapped to the
+//! nearest coordinate axis (COLMAP captures are y-down, nerfstudio and Blender scenes z-up)
+//! when it is close to one. It is a guess: configs can always state `up`.
+
+use glam::{Mat3, Quat, Vec3};
+use serde::Serialize;
+
+use crate::scene::Scene;
+
+/// The guessed up direction and how much to trust it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct UpGuess {
+    /// Unit up vector, snapped to ±x/±y/±z when within 25° of one.
+    pub up: [f32; 3],
+    /// The unsnapped estimate.
+    pub raw: [f32; 3],
+    /// Share of the normals' weight along the chosen direction, 1/3 (no preference) to 1.
+    pub confidence: f32,
+    /// Whether flat splats were found (`normals`) or the point spread was used (`spread`).
+    pub method: UpMethod,
+}
+
+/// How [`UpGuess`] was obtained.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum UpMethod {
+    /// From the normals of flat splats.
+    Normals,
+    /// From the direction of least spread of the centres (few flat splats).
+    Spread,
+}
+
+/// A splat counts as flat when its shortest axis is this much shorter than its middle one.
+const FLATNESS: f32 = 0.3;
+/// Minimum number of flat splats for the normal-based estimate.
+const MIN_FLAT: usize = 100;
+
+/// Guesses the up direction; `None` for an empty scene.
+pub fn guess_up_axis(scene: &Scene) -> Option<UpGuess> {
+    let bounds = scene.robust_bounds(0.02)?;
+    let mut scatter = Mat3::ZERO;
+    let mut flat = 0usize;
+    let mut total = 0.0f32;
+    for i in 0..scene.len() {
+        let s = scene.scales[i];
+        let mut order = [0usize, 1, 2];
+        order.sort_by(|&a, &b| s[a].total_cmp(&s[b]));
+        let (short, mid, long) = (s[order[0]], s[order[1]], s[order[2]]);
+        if !(short < FLATNESS * mid) {
+            continue;
+        }
+        let [w, x, y, z] = scene.rotations[i];
+        let normal = Quat::from_xyzw(x, y, z, w) * Vec3::AXES[order[0]];
+        let weight = scene.opacities[i] * mid * long;
+        if !weight.is_finite() || !normal.is_finite() {
+            continue;
+        }
+        scatter +=
+            Mat3::from_cols(normal * normal.x, normal * normal.y, normal * normal.z) * weight;
+        total += weight;
+        flat += 1;
+    }
+
+    let (axis, confidence, method) = if flat >= MIN_FLAT && total > 0.0 {
+        let (axis, value) = principal_direction(scatter / total, Largest);
+        (axis, value, UpMethod::Normals)
+    } else {
+        let centre = Vec3::from(bounds.center());
+        let mut spread = Mat3::ZERO;
+        for m in &scene.means {
+            let d = Vec3::from(*m) - centre;
+            spread += Mat3::from_cols(d * d.x, d * d.y, d * d.z);
+        }
+        let trace = spread.x_axis.x + spread.y_axis.y + spread.z_axis.z;
+        let (axis, value) = principal_direction(spread, Smallest);
+        let confidence = if trace > 0.0 {
+            1.0 - value / trace
+        } else {
+            1.0 / 3.0
+        };
+        (axis, confidence.clamp(1.0 / 3.0, 1.0), UpMethod::Spread)
+    };
+
+    let raw = orient_away_from_ground(scene, axis, &bounds);
+    let snapped = snap_to_axis(raw, 25f32.to_radians());
+    Some(UpGuess {
+        up: snapped.to_array(),
+        raw: raw.to_array(),
+        confidence,
+        method,
+    })
+}
+
+/// Which end of the spectrum [`principal_direction`] returns.
+#[derive(Clone, Copy)]
+enum Extreme {
+    Largest,
+    Smallest,
+}
+use Extreme::{Largest, Smallest};
+
+/// Eigenvector (and eigenvalue) of a symmetric 3×3 matrix, by Jacobi rotations.
+fn principal_direction(m: Mat3, which: Extreme) -> (Vec3, f32) {
+    let mut a = [[0.0f64; 3]; 3];
+    for (r, row) in a.iter_mut().enumerate() {
+        for (c, v) in row.iter_mut().enumerate() {
+            *v = m.col(c)[r] as f64;
+        }
+    }
+    let mut vectors = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0f64]];
+    for _ in 0..50 {
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            if a[p][q].abs() < 1e-15 {
+                continue;
+            }
+            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+            let t = if theta == 0.0 { 1.0 } else { t };
+            let (c, s) = (1.0 / (t * t + 1.0).sqrt(), t / (t * t + 1.0).sqrt());
+            for k in 0..3 {
+                let (akp, akq) = (a[k][p], a[k][q]);
+                a[k][p] = c * akp - s * akq;
+                a[k][q] = s * akp + c * akq;
+            }
+            for k in 0..3 {
+                let (apk, aqk) = (a[p][k], a[q][k]);
+                a[p][k] = c * apk - s * aqk;
+                a[q][k] = s * apk + c * aqk;
+            }
+            for v in vectors.iter_mut() {
+                let (vp, vq) = (v[p], v[q]);
+                v[p] = c * vp - s * vq;
+                v[q] = s * vp + c * vq;
+            }
+        }
+    }
+    let pick = (0..3)
+        .max_by(|&i, &j| {
+            let (x, y) = (a[i][i], a[j][j]);
+            match which {
+                Largest => x.total_cmp(&y),
+                Smallest => y.total_cmp(&x),
+            }
+        })
+        .unwrap_or(0);
+    let v = Vec3::new(
+        vectors[0][pick] as f32,
+        vectors[1][pick] as f32,
+        vectors[2][pick] as f32,
+    );
+    (v.normalize_or(Vec3::Z), a[pick][pick] as f32)
+}
+
+/// Flips `axis` so that it points from the densest slab (the ground) into the scene.
+fn orient_away_from_ground(scene: &Scene, axis: Vec3, bounds: &crate::scene::Bounds) -> Vec3 {
+    const BINS: usize = 32;
+    let corners = [bounds.min, bounds.max];
+    let heights: Vec<f32> = (0..8)
+        .map(|c| {
+            axis.dot(Vec3::new(
+                corners[c & 1][0],
+                corners[(c >> 1) & 1][1],
+                corners[c >> 2][2],
+            ))
+        })
+        .collect();
+    let lo = heights.iter().copied().fold(f32::INFINITY, f32::min);
+    let hi = heights.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    if !(hi > lo) {
+        return axis;
+    }
+    let mut histogram = [0.0f32; BINS];
+    for (m, o) in scene.means.iter().zip(&scene.opacities) {
+        let t = (axis.dot(Vec3::from(*m)) - lo) / (hi - lo);
+        if (0.0..1.0).contains(&t) {
+            histogram[(t * BINS as f32) as usize] += o;
+        }
+    }
+    let densest = (0..BINS)
+        .max_by(|&a, &b| histogram[a].total_cmp(&histogram[b]))
+        .unwrap_or(0);
+    if densest as f32 + 0.5 > BINS as f32 / 2.0 {
+        -axis
+    } else {
+        axis
+    }
+}
+
+/// The nearest signed coordinate axis if within `max_angle` of `v`, else `v`.
+fn snap_to_axis(v: Vec3, max_angle: f32) -> Vec3 {
+    let k = (0..3)
+        .max_by(|&a, &b| v[a].abs().total_cmp(&v[b].abs()))
+        .unwrap_or(2);
+    let mut axis = Vec3::ZERO;
+    axis[k] = v[k].signum();
+    if v.angle_between(axis) <= max_angle {
+        axis
+    } else {
+        v
+    }
+}

@@ -1,0 +1,8 @@
+//! splatraj: camera trajectories that show named objects in 3D Gaussian Splatting scenes.
+//!
+//! This package is the command-line tool and a thin facade over the pipeline's crates:
+//! [`scene`] (files, data model, demo scene) → [`render`] (camera, rasterizer). It adds no
+//! logic of its own beyond the CLI, so library users can depend on the crates directly.
+
+pub use splatraj_render as render;
+pub use splatraj_scene as scene;

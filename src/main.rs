@@ -1,0 +1,49 @@
+//! The `splatraj` command line.
+
+mod commands;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Camera trajectories that show named objects in 3D Gaussian Splatting scenes.
+#[derive(Debug, Parser)]
+#[command(name = "splatraj", version, about, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Inspect, convert or generate scene files.
+    #[command(subcommand)]
+    Scene(commands::scene::SceneCommand),
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .without_time()
+        .init();
+    // A bug must still end with one readable paragraph, not a backtrace.
+    std::panic::set_hook(Box::new(|info| {
+        eprintln!("error: internal error (a bug in splatraj, please report it): {info}");
+    }));
+
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Scene(command) => commands::scene::run(command),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
