@@ -3,7 +3,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::{Args, Subcommand};
 use serde::Serialize;
 use splatraj_scene::demo::{DemoConfig, demo_scene};
@@ -241,7 +241,12 @@ impl SceneInfo {
             None => out += "labels:          none\n",
         }
         match &self.features {
-            Some(f) => out += &format!("features:        {} per Gaussian ({} … {})\n", f.dim, f.first, f.last),
+            Some(f) => {
+                out += &format!(
+                    "features:        {} per Gaussian ({} … {})\n",
+                    f.dim, f.first, f.last
+                )
+            }
             None => out += "features:        none\n",
         }
         if !self.other_properties.is_empty() {

@@ -87,7 +87,8 @@ impl BackendKind {
             #[cfg(feature = "flex")]
             BackendKind::Flex => Ok(Device::flex()),
             #[cfg(feature = "ndarray")]
-            #[allow(deprecated)] // kept as an option for users comparing against older burn
+            #[allow(deprecated)]
+            // kept as an option for users comparing against older burn
             BackendKind::Ndarray => Ok(Device::ndarray()),
             #[cfg(feature = "wgpu")]
             BackendKind::Wgpu => Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice)),
@@ -118,7 +119,9 @@ impl FromStr for BackendKind {
             "flex" | "cpu" => Ok(BackendKind::Flex),
             "ndarray" => Ok(BackendKind::Ndarray),
             "wgpu" | "gpu" => Ok(BackendKind::Wgpu),
-            _ => Err(format!("unknown backend '{s}' (expected flex, cpu, ndarray or wgpu)")),
+            _ => Err(format!(
+                "unknown backend '{s}' (expected flex, cpu, ndarray or wgpu)"
+            )),
         }
     }
 }

@@ -6,5 +6,6 @@
 //! and per-Gaussian channels from the crates before it in the pipeline.
 
 pub mod backend;
+pub mod camera;
 pub mod compositing;
 pub mod reference;

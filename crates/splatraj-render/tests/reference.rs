@@ -107,12 +107,24 @@ fn single_isotropic_gaussian_matches_closed_form() {
     let k = img.index(32, 32);
     assert_eq!(img.alpha[k], o, "alpha at the centre is o exactly");
     assert_eq!(rgb_at(&img, 32, 32), [0.5 * o; 3], "rgb at the centre");
-    assert_eq!(img.depth.as_ref().unwrap()[k], o * f64::from(z), "depth at the centre");
+    assert_eq!(
+        img.depth.as_ref().unwrap()[k],
+        o * f64::from(z),
+        "depth at the centre"
+    );
     assert_eq!(img.masks[0][k], o, "mask at the centre");
 
     let s_px = f * f64::from(s) / f64::from(z);
     let var = s_px * s_px + 0.3;
-    for (dx, dy) in [(1i32, 0i32), (0, 1), (-1, 0), (2, 1), (-3, 2), (3, 3), (0, -4)] {
+    for (dx, dy) in [
+        (1i32, 0i32),
+        (0, 1),
+        (-1, 0),
+        (2, 1),
+        (-3, 2),
+        (3, 3),
+        (0, -4),
+    ] {
         let d2 = f64::from(dx * dx + dy * dy);
         let mut want = o * (-0.5 * d2 / var).exp();
         if want < 1.0 / 255.0 {
@@ -120,8 +132,18 @@ fn single_isotropic_gaussian_matches_closed_form() {
         }
         let (i, j) = ((32 + dx) as usize, (32 + dy) as usize);
         let tol = 1e-12;
-        assert_close(img.alpha[img.index(i, j)], want, tol, &format!("alpha at {dx},{dy}"));
-        assert_close(rgb_at(&img, i, j)[1], 0.5 * want, tol, &format!("g at {dx},{dy}"));
+        assert_close(
+            img.alpha[img.index(i, j)],
+            want,
+            tol,
+            &format!("alpha at {dx},{dy}"),
+        );
+        assert_close(
+            rgb_at(&img, i, j)[1],
+            0.5 * want,
+            tol,
+            &format!("g at {dx},{dy}"),
+        );
     }
 }
 
@@ -150,12 +172,32 @@ fn gaussian_contributes_only_to_tiles_its_square_touches() {
     let inside = value(7.5, 0.5);
     assert_close(img.alpha[img.index(31, j)], inside, 1e-12, "pixel 31");
     let outside = value(8.5, 0.5);
-    assert!(outside >= 1.0 / 255.0, "test set-up: pixel 32 must not be too faint");
-    assert_eq!(img.alpha[img.index(32, j)], 0.0, "pixel 32 is in an untouched tile");
+    assert!(
+        outside >= 1.0 / 255.0,
+        "test set-up: pixel 32 must not be too faint"
+    );
+    assert_eq!(
+        img.alpha[img.index(32, j)],
+        0.0,
+        "pixel 32 is in an untouched tile"
+    );
     // Same below (rows) and on the low side: tile 0 ends at 16 where the square starts.
-    assert_eq!(img.alpha[img.index(j, 32)], 0.0, "row 32 is in an untouched tile");
-    assert_eq!(img.alpha[img.index(15, j)], 0.0, "pixel 15 is in an untouched tile");
-    assert_close(img.alpha[img.index(16, j)], value(7.5, 0.5), 1e-12, "pixel 16");
+    assert_eq!(
+        img.alpha[img.index(j, 32)],
+        0.0,
+        "row 32 is in an untouched tile"
+    );
+    assert_eq!(
+        img.alpha[img.index(15, j)],
+        0.0,
+        "pixel 15 is in an untouched tile"
+    );
+    assert_close(
+        img.alpha[img.index(16, j)],
+        value(7.5, 0.5),
+        1e-12,
+        "pixel 16",
+    );
 }
 
 // An anisotropic Gaussian rotated about the optical axis: Σ_2D = (f/z)² R diag(sx², sy²) Rᵀ
@@ -164,7 +206,12 @@ fn gaussian_contributes_only_to_tiles_its_square_touches() {
 fn rotated_anisotropic_gaussian_matches_closed_form() {
     let (z, f, theta) = (5.0f32, 100.0, 0.6f64);
     let (sx, sy, sz) = (0.1f32, 0.03f32, 0.07f32);
-    let q = [(theta / 2.0).cos() as f32, 0.0, 0.0, (theta / 2.0).sin() as f32];
+    let q = [
+        (theta / 2.0).cos() as f32,
+        0.0,
+        0.0,
+        (theta / 2.0).sin() as f32,
+    ];
     let o = 0.9f32;
     let g = G {
         mean: [0.0, 0.0, z],
@@ -196,7 +243,12 @@ fn rotated_anisotropic_gaussian_matches_closed_form() {
             want = 0.0;
         }
         let (i, j) = ((32 + dx) as usize, (32 + dy) as usize);
-        assert_close(img.alpha[img.index(i, j)], want, 1e-12, &format!("{dx},{dy}"));
+        assert_close(
+            img.alpha[img.index(i, j)],
+            want,
+            1e-12,
+            &format!("{dx},{dy}"),
+        );
     }
     // The elongation is along (c, s): the pixel at +3·(c, s) is brighter than at +3·(c, −s).
     assert!(img.alpha[img.index(35, 34)] > img.alpha[img.index(35, 30)]);
@@ -223,7 +275,12 @@ fn jacobian_uses_clamped_tangent_but_mean_is_not_clamped() {
         let (dx, dy) = (u - (i as f64 + 0.5), 32.5 - (j as f64 + 0.5));
         let want = f64::from(o) * (-0.5 * (dx * dx / var_x + dy * dy / var_y)).exp();
         let want = if want < 1.0 / 255.0 { 0.0 } else { want };
-        assert_close(img.alpha[img.index(i, j)], want, 1e-12, &format!("pixel {i},{j}"));
+        assert_close(
+            img.alpha[img.index(i, j)],
+            want,
+            1e-12,
+            &format!("pixel {i},{j}"),
+        );
     }
 }
 
@@ -248,9 +305,8 @@ fn two_gaussians_composite_front_to_back_whatever_their_order() {
     assert_eq!(a, b, "swapping the file order must not change the image");
 
     // Centre pixel: both Gaussians have exp(0) = 1 there.
-    let colour = |g: &G| -> [f64; 3] {
-        std::array::from_fn(|c| (0.5 + c0() * f64::from(g.sh[c])).max(0.0))
-    };
+    let colour =
+        |g: &G| -> [f64; 3] { std::array::from_fn(|c| (0.5 + c0() * f64::from(g.sh[c])).max(0.0)) };
     let (an, af) = (f64::from(near.opacity), f64::from(far.opacity));
     let (cn, cf) = (colour(&near), colour(&far));
     let got = rgb_at(&a, 32, 32);
@@ -259,11 +315,19 @@ fn two_gaussians_composite_front_to_back_whatever_their_order() {
         let wrong = cf[c] * af + cn[c] * an * (1.0 - af);
         assert_close(got[c], want, 1e-12, &format!("channel {c}"));
         if c < 2 {
-            assert!((want - wrong).abs() > 1e-2, "test set-up: orders must differ");
+            assert!(
+                (want - wrong).abs() > 1e-2,
+                "test set-up: orders must differ"
+            );
         }
     }
     let k = a.index(32, 32);
-    assert_close(a.depth.as_ref().unwrap()[k], 4.0 * an + 6.0 * af * (1.0 - an), 1e-12, "depth");
+    assert_close(
+        a.depth.as_ref().unwrap()[k],
+        4.0 * an + 6.0 * af * (1.0 - an),
+        1e-12,
+        "depth",
+    );
     assert_close(a.masks[0][k], an, 1e-15, "mask of the near Gaussian");
     assert_close(a.alpha[k], 1.0 - (1.0 - an) * (1.0 - af), 1e-15, "alpha");
 }
@@ -302,7 +366,12 @@ fn opaque_stack_stops_after_the_right_number() {
     assert_eq!(img.masks[2][k], 0.0, "layer 3 is past the stop");
     assert_eq!(img.masks[3][k], 0.0, "layer 4 is past the stop");
     assert_close(img.alpha[k], 1.0 - 1e-4, 1e-15, "alpha = 1 − T after two");
-    assert_close(img.depth.as_ref().unwrap()[k], 2.0 * a + 3.0 * a * (1.0 - a), 1e-12, "depth");
+    assert_close(
+        img.depth.as_ref().unwrap()[k],
+        2.0 * a + 3.0 * a * (1.0 - a),
+        1e-12,
+        "depth",
+    );
 
     // o = 0.95: T = 0.05, 0.0025, 1.25e-4, then 6.25e-6 < 1e-4 → stop after three. The fifth
     // layer (α = 0.1) would keep T at 1.125e-4 ≥ 1e-4 but the pixel has already stopped.
@@ -342,15 +411,24 @@ fn gaussians_behind_the_near_plane_contribute_nothing() {
     for z in [-5.0f32, -0.001, 0.0, 0.005] {
         let img = render_reference(&scene_of(&[big(z)], 0), &cam, &ch);
         assert!(img.alpha.iter().all(|&a| a == 0.0), "z = {z}: alpha");
-        assert!(img.rgb.unwrap().iter().all(|p| *p == [0.0; 3]), "z = {z}: rgb");
-        assert!(img.depth.unwrap().iter().all(|&d| d == 0.0), "z = {z}: depth");
+        assert!(
+            img.rgb.unwrap().iter().all(|p| *p == [0.0; 3]),
+            "z = {z}: rgb"
+        );
+        assert!(
+            img.depth.unwrap().iter().all(|&d| d == 0.0),
+            "z = {z}: depth"
+        );
     }
     // Exactly on the near plane is culled (z ≤ near); just past it is not.
     cam.near = 0.5;
     let on = render_reference(&scene_of(&[big(0.5)], 0), &cam, &ch);
     assert!(on.alpha.iter().all(|&a| a == 0.0), "z = near is culled");
     let past = render_reference(&scene_of(&[big(0.5001)], 0), &cam, &ch);
-    assert!(past.alpha.iter().any(|&a| a > 0.0), "z just past near is drawn");
+    assert!(
+        past.alpha.iter().any(|&a| a > 0.0),
+        "z just past near is drawn"
+    );
 
     // Behind a moved camera too: a camera at z = 10 looking toward +z sees nothing at z = 5.
     let cam = RefCamera::look_at(
@@ -396,7 +474,11 @@ fn sh_degree_one_follows_view_direction() {
     ];
     let mut reds = vec![];
     for offset in eyes {
-        let eye = [mean[0] + offset[0], mean[1] + offset[1], mean[2] + offset[2]];
+        let eye = [
+            mean[0] + offset[0],
+            mean[1] + offset[1],
+            mean[2] + offset[2],
+        ];
         let up = if offset[0] == 0.0 && offset[2] == 0.0 {
             [0.0, 0.0, 1.0]
         } else {
@@ -413,11 +495,19 @@ fn sh_degree_one_follows_view_direction() {
         ];
         let got = rgb_at(&img, 32, 32);
         for c in 0..3 {
-            assert_close(got[c], f64::from(o) * want[c], 1e-12, &format!("eye {offset:?} ch {c}"));
+            assert_close(
+                got[c],
+                f64::from(o) * want[c],
+                1e-12,
+                &format!("eye {offset:?} ch {c}"),
+            );
         }
         reds.push(got[0]);
     }
-    assert!((reds[2] - reds[3]).abs() > 0.3, "red must change between ±y views");
+    assert!(
+        (reds[2] - reds[3]).abs() > 0.3,
+        "red must change between ±y views"
+    );
 
     // Negative results clamp to 0 per channel: k = 2 seen from −y gives 0.5 − C1·2 < 0.
     let mut strong = g;
@@ -456,9 +546,14 @@ fn look_at_centres_the_target_and_keeps_up_up() {
         assert_close(det, 1.0, 1e-12, "det R");
 
         let project = |p: [f64; 3]| -> (f64, f64, f64) {
-            let q: [f64; 3] =
-                std::array::from_fn(|a| (0..3).map(|k| r[a][k] * p[k]).sum::<f64>() + cam.translation_cw[a]);
-            (cam.fx * q[0] / q[2] + cam.cx, cam.fy * q[1] / q[2] + cam.cy, q[2])
+            let q: [f64; 3] = std::array::from_fn(|a| {
+                (0..3).map(|k| r[a][k] * p[k]).sum::<f64>() + cam.translation_cw[a]
+            });
+            (
+                cam.fx * q[0] / q[2] + cam.cx,
+                cam.fy * q[1] / q[2] + cam.cy,
+                q[2],
+            )
         };
         let (u, v, z) = project(target);
         assert!(z > 0.0, "target in front");
@@ -482,10 +577,19 @@ fn look_at_centres_the_target_and_keeps_up_up() {
         assert_close(x_dot_up, 0.0, 1e-12, "no roll");
         assert!(minus_y_dot_up > 0.0, "image up leans to world up");
         // A point just above the target lands above the image centre (smaller v).
-        let above = [target[0] + 0.1 * up[0], target[1] + 0.1 * up[1], target[2] + 0.1 * up[2]];
+        let above = [
+            target[0] + 0.1 * up[0],
+            target[1] + 0.1 * up[1],
+            target[2] + 0.1 * up[2],
+        ];
         let (u, v, _) = project(above);
         assert!(v < cam.cy, "above the target is up in the image");
-        assert_close(u, cam.cx, 1e-9, "above the target stays on the vertical centre line");
+        assert_close(
+            u,
+            cam.cx,
+            1e-9,
+            "above the target stays on the vertical centre line",
+        );
     }
 }
 

@@ -301,6 +301,17 @@ impl Shape {
         !matches!(self, Shape::Rect { .. } | Shape::Leaf { .. })
     }
 
+    /// Which parameter bounds are open edges of the surface (u = 0 and 1 together, v = 0,
+    /// v = 1), as opposed to seams, poles or apexes where the surface closes or continues.
+    fn open_edges(&self) -> (bool, bool, bool) {
+        match *self {
+            Shape::Rect { .. } | Shape::Leaf { .. } => (true, true, true),
+            Shape::Annulus { r0, .. } => (false, r0 > 0.0, true),
+            Shape::Frustum { .. } => (false, true, true),
+            Shape::Sphere { .. } | Shape::Torus { .. } => (false, false, false),
+        }
+    }
+
     /// Point at (u, v) and a direction on the outer side of the surface there.
     fn eval(&self, u: f64, v: f64) -> (DVec3, DVec3) {
         match *self {
@@ -422,6 +433,9 @@ struct Look {
     sh: f64,
     /// How the baked key light shades the colour.
     light: Light,
+    /// Scale of the per-splat colour noise (1 for objects; less on large plain surfaces,
+    /// whose coarser splats would otherwise look grainy).
+    noise: f64,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -446,11 +460,19 @@ const MATTE: Look = Look {
     opacity: Opacity::Solid,
     sh: 0.04,
     light: Light::Diffuse,
+    noise: 1.0,
+};
+const ROOM: Look = Look {
+    opacity: Opacity::Solid,
+    sh: 0.02,
+    light: Light::Diffuse,
+    noise: 0.4,
 };
 const GLOSSY: Look = Look {
     opacity: Opacity::Solid,
     sh: 0.12,
     light: Light::Diffuse,
+    noise: 1.0,
 };
 
 type Paint = Box<dyn Fn(DVec3, f64, f64) -> DVec3>;
@@ -706,7 +728,7 @@ fn build_parts(rng: &mut ChaCha8Rng) -> Vec<Part> {
             b: 4.0 * y,
         },
         1.0,
-        MATTE,
+        ROOM,
         Box::new(|p, _, _| floor_color(p)),
     );
     parts.add(
@@ -717,7 +739,7 @@ fn build_parts(rng: &mut ChaCha8Rng) -> Vec<Part> {
             b: 2.5 * z,
         },
         1.0,
-        MATTE,
+        ROOM,
         Box::new(|p, _, _| wall_color(p)),
     );
     parts.add(
@@ -728,7 +750,7 @@ fn build_parts(rng: &mut ChaCha8Rng) -> Vec<Part> {
             b: 2.5 * z,
         },
         1.0,
-        MATTE,
+        ROOM,
         Box::new(|p, _, _| wall_color(p)),
     );
 
@@ -1036,11 +1058,13 @@ fn build_parts(rng: &mut ChaCha8Rng) -> Vec<Part> {
         opacity: Opacity::Range(0.08, 0.3),
         sh: 0.15,
         light: Light::Diffuse,
+        noise: 1.0,
     };
     let water = Look {
         opacity: Opacity::Range(0.15, 0.4),
         sh: 0.08,
         light: Light::Diffuse,
+        noise: 1.0,
     };
     let glass_tint = tinted(rng, DVec3::new(0.84, 0.91, 0.95));
     let water_tint = tinted(rng, DVec3::new(0.45, 0.66, 0.86));
@@ -1109,7 +1133,7 @@ const LIGHT_DIR: DVec3 = DVec3::new(0.35, -0.5, 0.8);
 const AMBIENT: f64 = 0.62;
 /// Tangent standard deviation as a fraction of the local sample spacing: 3σ reaches well past
 /// the neighbours, so the surface renders solid without holes.
-const SPLAT_SPREAD: f64 = 0.62;
+const SPLAT_SPREAD: f64 = 0.8;
 
 /// Per-Gaussian arrays under construction.
 struct Builder {
@@ -1200,8 +1224,23 @@ fn sample_part(part: &Part, n: usize, rng: &mut ChaCha8Rng, out: &mut Builder) {
             let spin: f64 = rng.random_range(-0.25..0.25);
             let t1 = t * spin.cos() + normal.cross(t) * spin.sin();
             let t2 = normal.cross(t1);
-            let mut s1 = SPLAT_SPREAD * pu.length() / in_row as f64 * rng.random_range(0.85..1.2);
-            let mut s2 = SPLAT_SPREAD * pv.length() / rows as f64 * rng.random_range(0.85..1.2);
+            let (space_u, space_v) = (pu.length() / in_row as f64, pv.length() / rows as f64);
+            let mut s1 = SPLAT_SPREAD * space_u * rng.random_range(0.85..1.2);
+            let mut s2 = SPLAT_SPREAD * space_v * rng.random_range(0.85..1.2);
+            // Keep splats from spilling past open edges (a cone's tip, a table's rim), which
+            // would blur silhouettes into halos.
+            let (edge_u, edge_v0, edge_v1) = shape.open_edges();
+            if edge_u {
+                let d = u.min(1.0 - u) * pu.length();
+                s1 = s1.min((0.5 * d).max(0.3 * space_u));
+            }
+            let d = match (edge_v0, edge_v1) {
+                (true, true) => v.min(1.0 - v),
+                (true, false) => v,
+                (false, true) => 1.0 - v,
+                (false, false) => f64::INFINITY,
+            } * pv.length();
+            s2 = s2.min((0.5 * d).max(0.3 * space_v));
             // Near poles and apexes one spacing shrinks; widen that axis rather than leave
             // needle-like splats.
             let big = s1.max(s2);
@@ -1219,12 +1258,13 @@ fn sample_part(part: &Part, n: usize, rng: &mut ChaCha8Rng, out: &mut Builder) {
                 Light::Emissive => 1.0,
             };
             let mut gauss = || rng.sample::<f64, _>(StandardNormal);
-            let luminance = 1.0 + 0.04 * gauss();
+            let noise = part.look.noise;
+            let luminance = 1.0 + 0.04 * noise * gauss();
             let base = (part.paint)(p, u, v) * shading * luminance;
             let colour = DVec3::new(
-                base.x + 0.02 * gauss(),
-                base.y + 0.02 * gauss(),
-                base.z + 0.02 * gauss(),
+                base.x + 0.02 * noise * gauss(),
+                base.y + 0.02 * noise * gauss(),
+                base.z + 0.02 * noise * gauss(),
             )
             .clamp(DVec3::ZERO, DVec3::ONE);
             let mut sh = [0.0f32; 12];

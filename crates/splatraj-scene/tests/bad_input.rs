@@ -236,7 +236,10 @@ fn compressed_with_too_few_chunks() {
     ));
     assert_mentions(
         &message,
-        &["bad.compressed.ply", "64 Gaussians need 1 chunks of 256, the file has 0"],
+        &[
+            "bad.compressed.ply",
+            "64 Gaussians need 1 chunks of 256, the file has 0",
+        ],
     );
 }
 

@@ -334,9 +334,15 @@ fn biker_spz_agrees_with_biker_compressed_ply() {
             ));
         }
     }
+    let kinds = ["mean", "colour", "log-scale", "opacity", "rotation"].map(|kind| {
+        (
+            kind,
+            failures.iter().filter(|f| f.starts_with(kind)).count(),
+        )
+    });
     assert!(
         failures.is_empty(),
-        "{} disagreements, first: {:#?}",
+        "{} disagreements ({kinds:?}), first: {:#?}",
         failures.len(),
         &failures[..failures.len().min(10)]
     );
@@ -522,8 +528,8 @@ fn check_decoded(scene: &Scene, points: &[Packed], version: u32, flip: [f32; 3])
     assert_eq!(scene.len(), points.len());
     let coeffs = scene.sh_coeffs();
     for (i, p) in points.iter().enumerate() {
-        for k in 0..3 {
-            let mean = flip[k] * p.position[k];
+        for (k, f) in flip.iter().enumerate() {
+            let mean = f * p.position[k];
             assert!(
                 close(scene.means[i][k], mean, 2f32.powi(-12)),
                 "mean {i}/{k}: {} vs {mean}",

@@ -4,8 +4,9 @@
 //! stores quantised values inside them:
 //! - `packed_position`, `packed_scale`: 11/10/11 bits (x in the top bits), linear in
 //!   [min, max] of the chunk; scales are log-scales.
-//! - `packed_rotation`: 2 bits naming the largest quaternion component (in x, y, z, w order),
-//!   then the other three in 10 bits each, mapped from [-1/√2, 1/√2].
+//! - `packed_rotation`: 2 bits naming the largest quaternion component (in the file's
+//!   rot_0..rot_3 = w, x, y, z order), then the other three in 10 bits each, mapped from
+//!   [-1/√2, 1/√2].
 //! - `packed_color`: 8 bits each of r, g, b, opacity; r, g, b are the base colour
 //!   0.5 + C0·f_dc, linear in the chunk's colour range when the chunk has one (otherwise in
 //!   [0, 1]); opacity is the activated opacity.
@@ -44,14 +45,14 @@ pub fn unpack_rotation(value: u32) -> [f32; 4] {
     let b = (unorm(value, 10, 10) - 0.5) * scale;
     let c = (unorm(value, 0, 10) - 0.5) * scale;
     let largest = (1.0 - (a * a + b * b + c * c)).max(0.0).sqrt();
-    // Stored order is (x, y, z, w); the 2-bit tag says which one was dropped.
-    let [x, y, z, w] = match value >> 30 {
+    // The tag indexes the file's rot_0..rot_3 order, (w, x, y, z): SuperSplat packs the
+    // PLY's rotation columns as they are (checked against the SPZ copy of biker).
+    match value >> 30 {
         0 => [largest, a, b, c],
         1 => [a, largest, b, c],
         2 => [a, b, largest, c],
         _ => [a, b, c, largest],
-    };
-    [w, x, y, z]
+    }
 }
 
 /// An SH coefficient from its quantised byte (SuperSplat's mapping of [-4, 4] to 0..=255).

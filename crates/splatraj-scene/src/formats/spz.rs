@@ -79,6 +79,7 @@ const MAX_DEFLATE_RATIO: usize = 1032;
 const MAX_ZSTD_RATIO: u64 = 32_768;
 /// Room for extension records after the arrays of a gzip file; anything beyond is ignored.
 const MAX_LEGACY_EXTENSION_BYTES: usize = 1 << 20;
+const FLAG_ANTIALIASED: u8 = 0x1;
 const FLAG_HAS_EXTENSIONS: u8 = 0x2;
 /// `SPZ_ADOBE_coordinate_system`: a u32 naming the axes the data is stored in.
 const EXT_COORDINATE_SYSTEM: u32 = 0xADBE_0003;
@@ -686,6 +687,14 @@ fn unpack(header: &Header, arrays: &[&[u8]; 6], flips: AxisFlips, path: &Path) -
             path.display(),
             header.sh_degree,
             MAX_SCENE_SH_DEGREE
+        );
+    }
+    if header.flags & FLAG_ANTIALIASED != 0 {
+        // Such scenes were trained with Mip-Splatting's filter in the renderer; ours has none,
+        // so they may show some aliasing. Worth a note, not a refusal.
+        tracing::info!(
+            "{}: the SPZ scene was trained with antialiasing; it is rendered without the filter",
+            path.display()
         );
     }
     let file_dim = sh_dim(header.sh_degree);

@@ -1,0 +1,82 @@
+//! The up-axis guess on scenes whose up we know by construction or by their shape.
+
+mod common;
+
+use common::fixture;
+use splatraj_scene::demo::{DEMO_UP, DemoConfig, demo_scene};
+use splatraj_scene::up_axis::UpMethod;
+use splatraj_scene::{ReadOptions, Scene, guess_up_axis, read_scene};
+
+/// A COLMAP-style y-down world: a floor of flat splats at y = 0 (normals along y) and a few
+/// upright flat "walls" of splats standing on it at negative y (above the floor).
+fn y_down_room() -> Scene {
+    let mut scene = Scene::default();
+    let mut push = |mean: [f32; 3], scale: [f32; 3], rotation: [f32; 4]| {
+        scene.means.push(mean);
+        scene.scales.push(scale);
+        scene.rotations.push(rotation);
+        scene.opacities.push(0.9);
+        scene.sh.extend([0.0; 3]);
+    };
+    let half = std::f32::consts::FRAC_1_SQRT_2;
+    for i in 0..40 {
+        for j in 0..40 {
+            // Floor: thin along y (identity rotation, small scale_1).
+            push(
+                [i as f32 * 0.1, 0.0, j as f32 * 0.1],
+                [0.06, 0.002, 0.06],
+                [1.0, 0.0, 0.0, 0.0],
+            );
+        }
+    }
+    for i in 0..20 {
+        for h in 1..10 {
+            // A wall in the x-y plane: thin along z (local y rotated onto z by 90° about x).
+            push(
+                [i as f32 * 0.1, -(h as f32) * 0.1, 4.0],
+                [0.06, 0.002, 0.06],
+                [half, half, 0.0, 0.0],
+            );
+        }
+    }
+    scene
+}
+
+#[test]
+fn y_down_capture_gives_minus_y() {
+    let guess = guess_up_axis(&y_down_room()).unwrap();
+    assert_eq!(guess.method, UpMethod::Normals);
+    assert_eq!(guess.up, [0.0, -1.0, 0.0], "{guess:?}");
+    assert!(guess.confidence > 0.6, "{guess:?}");
+}
+
+#[test]
+fn demo_scene_is_z_up() {
+    let scene = demo_scene(&DemoConfig {
+        seed: 1,
+        gaussians: 60_000,
+    })
+    .unwrap();
+    assert_eq!(guess_up_axis(&scene).unwrap().up, DEMO_UP);
+}
+
+#[test]
+fn tabletop_up_is_along_its_thinnest_extent() {
+    // fruit_drops is a flat tabletop (0.5 × 0.26 m, objects a few cm tall): whatever the sign,
+    // up must be the axis along which the scene is thinnest.
+    let scene = read_scene(&fixture("fruit_drops_minimal.ply"), &ReadOptions::default())
+        .unwrap()
+        .scene;
+    let size = scene.robust_bounds(0.02).unwrap().size();
+    let thinnest = (0..3).min_by(|&a, &b| size[a].total_cmp(&size[b])).unwrap();
+    let guess = guess_up_axis(&scene).unwrap();
+    assert!(
+        guess.raw[thinnest].abs() > 0.9,
+        "size {size:?}, guess {guess:?}"
+    );
+}
+
+#[test]
+fn empty_scene_has_no_guess() {
+    assert!(guess_up_axis(&Scene::default()).is_none());
+}
