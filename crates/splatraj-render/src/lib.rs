@@ -8,4 +8,5 @@
 pub mod backend;
 pub mod camera;
 pub mod compositing;
+pub mod project;
 pub mod reference;

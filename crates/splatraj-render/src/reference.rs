@@ -470,7 +470,8 @@ fn project(
         cov[1][1] + LOW_PASS,
     );
     let det = a * c - b * b;
-    if !(det > 0.0) || !det.is_finite() {
+    // Cull det ≤ 0, and NaN/inf from degenerate input.
+    if !det.is_finite() || det <= 0.0 {
         return None;
     }
     let conic = [c / det, -b / det, a / det];

@@ -48,7 +48,7 @@ fn tensor_rotations(omegas: &[DVec3], dtype: DType) -> (Tensor<2>, Tensor<3>) {
 }
 
 fn to_mats(r: Tensor<3>) -> Vec<DMat3> {
-    let values: Vec<f64> = r.into_data().convert::<f64>().to_vec().unwrap();
+    let values: Vec<f64> = r.into_data().convert::<f64>().try_to_vec::<f64>().unwrap();
     // Row-major [3, 3] per batch entry.
     values
         .chunks(9)
@@ -101,7 +101,7 @@ fn gradient_matches_finite_differences_and_is_finite_at_zero_and_near_pi() {
         .unwrap()
         .into_data()
         .convert::<f64>()
-        .to_vec()
+        .try_to_vec::<f64>()
         .unwrap();
     for (b, o) in omegas.iter().enumerate() {
         for k in 0..3 {

@@ -461,7 +461,7 @@ fn sh_degree_one_follows_view_direction() {
         opacity: o,
         sh,
     };
-    let scene = scene_of(&[g.clone()], 1);
+    let scene = scene_of(std::slice::from_ref(&g), 1);
     let mean = g.mean.map(f64::from);
     let eyes = [
         [3.0, 0.0, 0.0],
@@ -560,8 +560,8 @@ fn look_at_centres_the_target_and_keeps_up_up() {
         assert_close(u, cam.cx, 1e-9, "target u");
         assert_close(v, cam.cy, 1e-9, "target v");
         // The eye maps to the camera origin and center() gives it back.
-        for a in 0..3 {
-            let q = (0..3).map(|k| r[a][k] * eye[k]).sum::<f64>() + cam.translation_cw[a];
+        for (row, t) in r.iter().zip(cam.translation_cw) {
+            let q = (0..3).map(|k| row[k] * eye[k]).sum::<f64>() + t;
             assert_close(q, 0.0, 1e-12, "eye at the camera origin");
         }
         let c = cam.center();

@@ -114,8 +114,8 @@ const LAYOUT: [DemoObject; 11] = [
     obj(5, "blue box", [-0.05, 0.0, 0.86], [0.17, 0.08, 0.23]),
     obj(6, "yellow cone", [0.55, 0.25, 0.83], [0.13, 0.13, 0.17]),
     obj(7, "lamp", [-0.55, 0.28, 0.955], [0.25, 0.25, 0.42]),
-    obj(8, "books", [0.22, 0.15, 0.80], [0.30, 0.24, 0.12]),
-    obj(9, "plant", [1.15, 0.75, 0.21], [0.60, 0.60, 0.43]),
+    obj(8, "books", [0.22, 0.15, 0.8025], [0.275, 0.215, 0.115]),
+    obj(9, "plant", [1.16, 0.72, 0.205], [0.38, 0.34, 0.42]),
     obj(
         10,
         "glass of water",
@@ -210,7 +210,7 @@ fn allocate(parts: &[Part], total: usize) -> Vec<usize> {
         .collect();
     let label_counts = largest_remainder(&label_weight, total);
     let mut counts = vec![0; parts.len()];
-    for l in 0..labels {
+    for (l, &label_count) in label_counts.iter().enumerate() {
         let idx: Vec<usize> = (0..parts.len())
             .filter(|&i| parts[i].label as usize == l)
             .collect();
@@ -218,7 +218,7 @@ fn allocate(parts: &[Part], total: usize) -> Vec<usize> {
             .iter()
             .map(|&i| parts[i].area * parts[i].weight)
             .collect();
-        for (&i, c) in idx.iter().zip(largest_remainder(&w, label_counts[l])) {
+        for (&i, c) in idx.iter().zip(largest_remainder(&w, label_count)) {
             counts[i] = c;
         }
     }
@@ -719,7 +719,7 @@ fn build_parts(rng: &mut ChaCha8Rng) -> Vec<Part> {
     let (x, y, z) = (DVec3::X, DVec3::Y, DVec3::Z);
     let top = f64::from(DEMO_TABLE_TOP_Z);
 
-    // Floor and walls (the room is open towards −x and −y so cameras can stand back).
+    // Floor and walls (the room is open towards +x and −y so cameras can stand back).
     parts.add(
         0,
         Shape::Rect {
@@ -1022,12 +1022,14 @@ fn build_parts(rng: &mut ChaCha8Rng) -> Vec<Part> {
         light: Light::TwoSided,
         ..MATTE
     };
-    for k in 0..14 {
-        // Golden-angle yaws and spread pitches and lengths give an even, natural crown.
+    for k in 0..16 {
+        // Golden-angle yaws and spread pitches give an even, natural crown; steeper leaves
+        // are longer, as inner leaves of a real plant are.
         let kf = k as f64;
         let yaw = kf * 2.399_963 + 0.3;
-        let pitch = (25.0 + 50.0 * (kf * 0.618_034).fract()).to_radians();
-        let length = 0.16 + 0.08 * (kf * 0.381_966 + 0.1).fract();
+        let steep = (kf * 0.618_034).fract();
+        let pitch = (30.0 + 50.0 * steep).to_radians();
+        let length = 0.18 + 0.16 * steep;
         let radial = DVec3::new(yaw.cos(), yaw.sin(), 0.0);
         let dir = pitch.cos() * radial + pitch.sin() * z;
         let side = DVec3::new(-yaw.sin(), yaw.cos(), 0.0);
@@ -1039,8 +1041,8 @@ fn build_parts(rng: &mut ChaCha8Rng) -> Vec<Part> {
                 dir,
                 side,
                 length,
-                half_width: 0.04,
-                droop: 0.25,
+                half_width: 0.045,
+                droop: 0.2,
             },
             1.0,
             leaf_look,

@@ -52,7 +52,7 @@ pub fn guess_up_axis(scene: &Scene) -> Option<UpGuess> {
         let mut order = [0usize, 1, 2];
         order.sort_by(|&a, &b| s[a].total_cmp(&s[b]));
         let (short, mid, long) = (s[order[0]], s[order[1]], s[order[2]]);
-        if !(short < FLATNESS * mid) {
+        if short >= FLATNESS * mid || short.is_nan() {
             continue;
         }
         let [w, x, y, z] = scene.rotations[i];
@@ -105,56 +105,25 @@ enum Extreme {
 }
 use Extreme::{Largest, Smallest};
 
-/// Eigenvector (and eigenvalue) of a symmetric 3×3 matrix, by Jacobi rotations.
+/// Eigenvector (and eigenvalue) of a symmetric positive semi-definite 3×3 matrix at one end of
+/// its spectrum, by power iteration (on trace·I − m for the smallest one).
 fn principal_direction(m: Mat3, which: Extreme) -> (Vec3, f32) {
-    let mut a = [[0.0f64; 3]; 3];
-    for (r, row) in a.iter_mut().enumerate() {
-        for (c, v) in row.iter_mut().enumerate() {
-            *v = m.col(c)[r] as f64;
-        }
+    let trace = m.x_axis.x + m.y_axis.y + m.z_axis.z;
+    let iterated = match which {
+        Largest => m,
+        Smallest => Mat3::from_diagonal(Vec3::splat(trace)) - m,
+    };
+    // Start from the largest column: never orthogonal to the wanted eigenvector unless the
+    // matrix is zero. Three starts guard against an unlucky one.
+    let mut v = [iterated.x_axis, iterated.y_axis, iterated.z_axis]
+        .into_iter()
+        .max_by(|a, b| a.length_squared().total_cmp(&b.length_squared()))
+        .unwrap_or(Vec3::Z)
+        .normalize_or(Vec3::Z);
+    for _ in 0..200 {
+        v = (iterated * v).normalize_or(v);
     }
-    let mut vectors = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0f64]];
-    for _ in 0..50 {
-        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
-            if a[p][q].abs() < 1e-15 {
-                continue;
-            }
-            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-            let t = if theta == 0.0 { 1.0 } else { t };
-            let (c, s) = (1.0 / (t * t + 1.0).sqrt(), t / (t * t + 1.0).sqrt());
-            for k in 0..3 {
-                let (akp, akq) = (a[k][p], a[k][q]);
-                a[k][p] = c * akp - s * akq;
-                a[k][q] = s * akp + c * akq;
-            }
-            for k in 0..3 {
-                let (apk, aqk) = (a[p][k], a[q][k]);
-                a[p][k] = c * apk - s * aqk;
-                a[q][k] = s * apk + c * aqk;
-            }
-            for v in vectors.iter_mut() {
-                let (vp, vq) = (v[p], v[q]);
-                v[p] = c * vp - s * vq;
-                v[q] = s * vp + c * vq;
-            }
-        }
-    }
-    let pick = (0..3)
-        .max_by(|&i, &j| {
-            let (x, y) = (a[i][i], a[j][j]);
-            match which {
-                Largest => x.total_cmp(&y),
-                Smallest => y.total_cmp(&x),
-            }
-        })
-        .unwrap_or(0);
-    let v = Vec3::new(
-        vectors[0][pick] as f32,
-        vectors[1][pick] as f32,
-        vectors[2][pick] as f32,
-    );
-    (v.normalize_or(Vec3::Z), a[pick][pick] as f32)
+    (v, v.dot(m * v))
 }
 
 /// Flips `axis` so that it points from the densest slab (the ground) into the scene.
@@ -172,7 +141,7 @@ fn orient_away_from_ground(scene: &Scene, axis: Vec3, bounds: &crate::scene::Bou
         .collect();
     let lo = heights.iter().copied().fold(f32::INFINITY, f32::min);
     let hi = heights.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-    if !(hi > lo) {
+    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
         return axis;
     }
     let mut histogram = [0.0f32; BINS];

@@ -73,13 +73,13 @@ fn problem_of(scene: &Scene, i: usize) -> Option<(String, String)> {
         };
         return Some((name, "is not finite".into()));
     }
-    if let Some(f) = &scene.extras.features {
-        if let Some(k) = f.row(i).iter().position(|x| !x.is_finite()) {
-            return Some((
-                f.names.get(k).cloned().unwrap_or_default(),
-                "is not finite".into(),
-            ));
-        }
+    if let Some(f) = &scene.extras.features
+        && let Some(k) = f.row(i).iter().position(|x| !x.is_finite())
+    {
+        return Some((
+            f.names.get(k).cloned().unwrap_or_default(),
+            "is not finite".into(),
+        ));
     }
     None
 }

@@ -65,8 +65,8 @@ fn fruit_drops_spot_values_match_the_raw_bytes() {
         assert!(close(scene.opacities[i], sigmoid64(raw(54)), 1e-6));
         let q = [raw(58), raw(59), raw(60), raw(61)];
         let norm = q.iter().map(|v| (*v as f64).powi(2)).sum::<f64>().sqrt() as f32;
-        for k in 0..4 {
-            assert!(close(scene.rotations[i][k], q[k] / norm, 1e-6));
+        for (got, raw) in scene.rotations[i].iter().zip(q) {
+            assert!(close(*got, raw / norm, 1e-6));
         }
         let sh = scene.sh_of(i);
         // DC terms, then f_rest grouped by channel: f_rest_j is channel j / 15, coefficient

@@ -65,6 +65,9 @@ pub fn decode_sh_byte(byte: u8) -> f32 {
     (n - 0.5) * 8.0
 }
 
+/// Per-chunk ranges of three channels: `[channel][chunk]`.
+type ChannelRanges = Vec<Vec<f32>>;
+
 fn lerp(a: f32, b: f32, t: f32) -> f32 {
     a * (1.0 - t) + b * t
 }
@@ -122,7 +125,7 @@ pub fn scene_from_tables(ply: &PlyFile, path: &Path) -> Result<Scene> {
         .map(|a| range(&format!("max_scale_{a}")))
         .collect::<Result<_>>()?;
     // Older files have no colour ranges: colour bytes are then plain [0, 1] values.
-    let color_range: Option<(Vec<Vec<f32>>, Vec<Vec<f32>>)> = if chunk.column("min_r").is_some() {
+    let color_range: Option<(ChannelRanges, ChannelRanges)> = if chunk.column("min_r").is_some() {
         let channels = ["r", "g", "b"];
         Some((
             channels

@@ -1,20 +1,19 @@
-//! Scene loading speed on real files: `cargo bench --bench load_scene`.
+//! Scene loading speed on real files: `cargo bench -p splatraj-scene --bench load_scene`.
 //!
 //! Reads each file whole (decode + validation), as `splatraj` does. Files come from
-//! `$SPLATRAJ_DATA` (default `../shared/data`) and the repository's fixtures; missing ones are
+//! `$SPLATRAJ_DATA` (default `shared/data` beside the repository) and the repository's fixtures; missing ones are
 //! reported and left out.
 
 use std::path::PathBuf;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use splatraj::scene::{ReadOptions, read_scene};
+use splatraj_scene::{ReadOptions, read_scene};
 
 fn data_file(name: &str) -> Option<PathBuf> {
     let shared = std::env::var_os("SPLATRAJ_DATA")
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
-    let fixtures =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("crates/splatraj-scene/tests/data");
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"));
+    let fixtures = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data");
     let found = [shared.join(name), fixtures.join(name)]
         .into_iter()
         .find(|p| p.exists());

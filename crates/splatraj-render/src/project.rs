@@ -1,0 +1,250 @@
+//! First stage of the tensor rasterizer: Gaussians → screen space for a batch of poses.
+//!
+//! Differentiable with respect to the pose tensor Φ `[B, 6]` (burn autodiff); the scene's
+//! pose-independent quantities ([`SceneTensors`]) are constants. Rules (DESIGN.md, INRIA 3DGS):
+//!
+//! - p_cam = R_wcᵀ (p − c), R_wc from [`rotation_matrices`].
+//! - Σ_cam = W Σ Wᵀ with W = R_wcᵀ.
+//! - J = [[fx/z, 0, −fx·x̂/z], [0, fy/z, −fy·ŷ/z]] with x̂ = clamp(x/z, ±1.3·tan_x) and
+//!   ŷ = clamp(y/z, ±1.3·tan_y) (tan of half the field of view); the projected mean
+//!   u = fx·x/z + cx, v = fy·y/z + cy is *not* clamped.
+//! - Σ_2D = J Σ_cam Jᵀ + 0.3·I, conic = Σ_2D⁻¹.
+//!
+//! Culling (z ≤ near, det ≤ 0) is integer data decided on the host without gradient
+//! ([`radii_and_visibility`]). The tensor path never culls: it divides by z clamped to ≥ near,
+//! so a culled entry holds *finite garbage* (values and gradients), never NaN or Inf, and must
+//! be masked out by the caller.
+
+use burn::tensor::{DType, Device, Tensor, TensorData};
+use glam::{DMat3, DQuat, DVec3};
+use splatraj_scene::Scene;
+
+use crate::camera::{Intrinsics, rotation_matrices};
+
+/// Default near plane (camera z, scene units): Gaussians with z ≤ this are culled.
+pub const NEAR_PLANE: f64 = 0.01;
+/// x/z and y/z are clamped to ±`FOV_CLAMP`·tan(half fov) inside the Jacobian (INRIA).
+pub const FOV_CLAMP: f64 = 1.3;
+/// Added to the diagonal of every Σ_2D (INRIA's low-pass / anti-aliasing filter), pixels².
+pub const LOW_PASS: f64 = 0.3;
+/// Floor of the normalised determinant det(Σ_2D)/tr(Σ_2D)² (true value in (0, ¼]).
+///
+/// Below it the 2D footprint is more than ~10⁶ times longer than wide, where f32 rounding makes
+/// the determinant noise (it can come out ≤ 0). The conic divides by the floored value so it
+/// stays finite, and [`radii_and_visibility`] culls such entries. The floor is chosen so that
+/// its square (which appears in the backward pass of the division) does not underflow in f32.
+pub const NORMALISED_DET_FLOOR: f64 = 1e-12;
+
+/// Scene quantities that do not depend on the pose, computed once per scene on the host and uploaded.
+#[derive(Debug, Clone)]
+pub struct SceneTensors {
+    /// Gaussian centres, world coordinates. `[N, 3]`
+    pub means: Tensor<2>,
+    /// World covariances Σ = R S Sᵀ Rᵀ, row-major. `[N, 3, 3]`
+    pub cov_world: Tensor<3>,
+    /// Activated opacities in [0, 1]. `[N]`
+    pub opacities: Tensor<1>,
+}
+
+impl SceneTensors {
+    /// Uploads the Gaussians `indices` (all when `None`, in that order) with Σ computed in f64.
+    ///
+    /// Quaternions are normalised here (a zero quaternion, which validated scenes do not hold,
+    /// is read as the identity rather than producing NaN). Panics if an index is out of range.
+    pub fn new(scene: &Scene, indices: Option<&[usize]>, device: &Device, dtype: DType) -> Self {
+        let all: Vec<usize>;
+        let indices = match indices {
+            Some(i) => i,
+            None => {
+                all = (0..scene.len()).collect();
+                &all
+            }
+        };
+        let n = indices.len();
+        let mut means = Vec::with_capacity(3 * n);
+        let mut covs = Vec::with_capacity(9 * n);
+        let mut opacities = Vec::with_capacity(n);
+        for &i in indices {
+            means.extend(scene.means[i].map(f64::from));
+            covs.extend(world_covariance(scene.scales[i], scene.rotations[i]));
+            opacities.push(f64::from(scene.opacities[i]));
+        }
+        let options = (device, dtype);
+        Self {
+            means: Tensor::from_data(TensorData::new(means, [n, 3]), options),
+            cov_world: Tensor::from_data(TensorData::new(covs, [n, 3, 3]), options),
+            opacities: Tensor::from_data(TensorData::new(opacities, [n]), options),
+        }
+    }
+
+    /// Number of Gaussians N.
+    pub fn len(&self) -> usize {
+        self.means.dims()[0]
+    }
+
+    /// True when there is no Gaussian.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Σ = R S Sᵀ Rᵀ, row-major, in f64. `rotation` is (w, x, y, z), normalised here.
+fn world_covariance(scale: [f32; 3], rotation: [f32; 4]) -> [f64; 9] {
+    let [w, x, y, z] = rotation.map(f64::from);
+    let q = DQuat::from_xyzw(x, y, z, w);
+    let q = if q.length_squared() > 0.0 {
+        q.normalize()
+    } else {
+        DQuat::IDENTITY
+    };
+    let m = DMat3::from_quat(q) * DMat3::from_diagonal(DVec3::from(scale.map(f64::from)));
+    let sigma = m * m.transpose();
+    // glam is column-major; Σ is symmetric anyway, the transpose makes the row-major intent explicit.
+    sigma.transpose().to_cols_array()
+}
+
+/// Screen-space Gaussians for a batch of poses (all batched tensors; see the module docs).
+#[derive(Debug, Clone)]
+pub struct Projected {
+    /// Projected means (u, v) in pixels, not clamped; garbage where culled. `[B, N, 2]`
+    pub means_2d: Tensor<3>,
+    /// Camera-space z (unclamped: this is what the near-plane cull reads). `[B, N]`
+    pub depth: Tensor<2>,
+    /// (a, b, c) of the inverse 2D covariance [[a, b], [b, c]]. `[B, N, 3]`
+    pub conics: Tensor<3>,
+    /// (Σ₁₁, Σ₁₂, Σ₂₂) of Σ_2D, low-pass included. `[B, N, 3]`
+    pub cov_2d: Tensor<3>,
+}
+
+/// [`project_with_near`] with the default [`NEAR_PLANE`].
+pub fn project(scene: &SceneTensors, poses: Tensor<2>, intrinsics: &Intrinsics) -> Projected {
+    project_with_near(scene, poses, intrinsics, NEAR_PLANE)
+}
+
+/// Projects every Gaussian for every pose Φ = (ω, c) in `poses` `[B, 6]`; differentiable in Φ.
+///
+/// `near` only sets the depth that divisions are clamped to (z ≥ near), which keeps culled
+/// entries finite; pass the same value to [`radii_and_visibility`].
+pub fn project_with_near(
+    scene: &SceneTensors,
+    poses: Tensor<2>,
+    intrinsics: &Intrinsics,
+    near: f64,
+) -> Projected {
+    let [batch, _] = poses.dims();
+    let n = scene.len();
+    let Intrinsics { fx, fy, cx, cy, .. } = *intrinsics;
+    let (tan_x, tan_y) = intrinsics.tan_half_fov();
+    let (lim_x, lim_y) = (FOV_CLAMP * tan_x, FOV_CLAMP * tan_y);
+
+    let omega = poses.clone().narrow(1, 0, 3); // [B, 3]
+    let centre = poses.narrow(1, 3, 3); // [B, 3]
+    let r_wc = rotation_matrices(omega); // [B, 3, 3]; column k = camera axis k in world
+
+    // p_cam as a row vector: (p − c)ᵀ R_wc = (R_wcᵀ (p − c))ᵀ, one batched matmul.
+    let offset = scene.means.clone().unsqueeze_dim::<3>(0) - centre.unsqueeze_dim::<3>(1); // [B, N, 3]
+    let p_cam = offset.matmul(r_wc.clone()); // [B, N, 3]
+    let x = p_cam.clone().narrow(2, 0, 1); // [B, N, 1]
+    let y = p_cam.clone().narrow(2, 1, 1); // [B, N, 1]
+    let z = p_cam.narrow(2, 2, 1); // [B, N, 1]
+
+    // Divide only by z ≥ near: behind-camera entries stay finite, and clamp_min's backward
+    // masks their z-gradient to 0 instead of multiplying (so no 0·Inf).
+    let z_safe = z.clone().clamp_min(near); // [B, N, 1]
+    let inv_z = z_safe.recip(); // [B, N, 1]
+    let x_over_z = x * inv_z.clone(); // [B, N, 1]
+    let y_over_z = y * inv_z.clone(); // [B, N, 1]
+
+    let u = x_over_z.clone().mul_scalar(fx).add_scalar(cx); // [B, N, 1]
+    let v = y_over_z.clone().mul_scalar(fy).add_scalar(cy); // [B, N, 1]
+    let means_2d = Tensor::cat(vec![u, v], 2); // [B, N, 2]
+
+    // Jacobian entries with clamped x/z, y/z: J00 = fx/z, J02 = −fx·x̂/z, J11 = fy/z, J12 = −fy·ŷ/z.
+    let tx = x_over_z.clamp(-lim_x, lim_x); // [B, N, 1]
+    let ty = y_over_z.clamp(-lim_y, lim_y); // [B, N, 1]
+    let j00 = inv_z.clone().mul_scalar(fx); // [B, N, 1]
+    let j11 = inv_z.clone().mul_scalar(fy); // [B, N, 1]
+    let j02 = (tx * inv_z.clone()).mul_scalar(-fx); // [B, N, 1]
+    let j12 = (ty * inv_z).mul_scalar(-fy); // [B, N, 1]
+
+    // T = J W with W = R_wcᵀ: row k of W is column k of R_wc (camera axis k in world), so
+    // T's rows are t1 = J00·r0 + J02·r2 and t2 = J11·r1 + J12·r2. This avoids per-Gaussian 3×3
+    // matmuls (tiny batched matmuls are slow on the CPU backends); Σ_2D = T Σ_world Tᵀ.
+    let axis = |k: usize| r_wc.clone().narrow(2, k, 1).reshape([batch, 1, 3]); // [B, 1, 3]
+    let (r0, r1, r2) = (axis(0), axis(1), axis(2));
+    let t1 = j00 * r0 + j02 * r2.clone(); // [B, N, 3]
+    let t2 = j11 * r1 + j12 * r2; // [B, N, 3]
+
+    // Σ t_k for each Gaussian by broadcasting Σ [1, N, 3, 3] against t_k [B, N, 1, 3].
+    let sigma = scene.cov_world.clone().unsqueeze_dim::<4>(0); // [1, N, 3, 3]
+    let sigma_times = |t: Tensor<3>| {
+        (sigma.clone() * t.unsqueeze_dim::<4>(2))
+            .sum_dim(3)
+            .reshape([batch, n, 3])
+    }; // [B, N, 3]
+    let s_t1 = sigma_times(t1.clone()); // [B, N, 3]
+    let s_t2 = sigma_times(t2.clone()); // [B, N, 3]
+    let a = (t1.clone() * s_t1).sum_dim(2).add_scalar(LOW_PASS); // [B, N, 1]
+    let b = (t1 * s_t2.clone()).sum_dim(2); // [B, N, 1]
+    let c = (t2 * s_t2).sum_dim(2).add_scalar(LOW_PASS); // [B, N, 1]
+    let cov_2d = Tensor::cat(vec![a.clone(), b.clone(), c.clone()], 2); // [B, N, 3]
+
+    // Invert through the trace-normalised matrix: a·c − b² itself overflows f32 (and its
+    // square, in the backward pass, overflows much sooner) for big Gaussians near the camera.
+    // trace ≥ 0.6 thanks to the low-pass, so the division is safe.
+    let trace = a.clone() + c.clone(); // [B, N, 1]
+    let inv_trace = trace.clone().recip(); // [B, N, 1]
+    let an = a * inv_trace.clone(); // [B, N, 1]
+    let bn = b * inv_trace.clone(); // [B, N, 1]
+    let cn = c * inv_trace; // [B, N, 1]
+    let det_n = an.clone() * cn.clone() - bn.clone().square(); // [B, N, 1], det / trace²
+    let scale = (det_n.clamp_min(NORMALISED_DET_FLOOR) * trace).recip(); // [B, N, 1], 1/(det/trace)
+    let conics = Tensor::cat(vec![cn, bn.neg(), an], 2) * scale; // [B, N, 3]
+
+    Projected {
+        means_2d,
+        depth: z.reshape([batch, n]),
+        conics,
+        cov_2d,
+    }
+}
+
+/// Host-side cull data from a projection, without gradient: `(radii, visible)`, each `B·N`
+/// long, index `b·N + i`.
+///
+/// visible = z > near ∧ det(Σ_2D) > 0, where the determinant test is det/tr² >
+/// [`NORMALISED_DET_FLOOR`] (see there) computed in f64, and any non-finite value culls.
+/// radius = ceil(3·sqrt(λ_max(Σ_2D))) in pixels; 0 where not visible.
+pub fn radii_and_visibility(projected: &Projected, near: f64) -> (Vec<f32>, Vec<bool>) {
+    let depth = to_f64(&projected.depth);
+    let cov = to_f64(&projected.cov_2d);
+    let mut radii = Vec::with_capacity(depth.len());
+    let mut visible = Vec::with_capacity(depth.len());
+    for (z, abc) in depth.iter().zip(cov.chunks_exact(3)) {
+        let (a, b, c) = (abc[0], abc[1], abc[2]);
+        let trace = a + c;
+        let det = a * c - b * b;
+        let det_n = det / (trace * trace);
+        let ok = *z > near
+            && trace.is_finite()
+            && b.is_finite()
+            && trace > 0.0
+            && det_n > NORMALISED_DET_FLOOR;
+        if ok {
+            let mid = 0.5 * trace;
+            let lambda_max = mid + (mid * mid - det).max(0.0).sqrt();
+            radii.push((3.0 * lambda_max.sqrt()).ceil() as f32);
+        } else {
+            radii.push(0.0);
+        }
+        visible.push(ok);
+    }
+    (radii, visible)
+}
+
+/// Tensor values as f64 on the host (flattened, row-major).
+fn to_f64<const D: usize>(t: &Tensor<D>) -> Vec<f64> {
+    t.to_data()
+        .try_to_vec_as::<f64>()
+        .expect("float tensor converts to f64")
+}
