@@ -9,4 +9,8 @@ pub mod backend;
 pub mod camera;
 pub mod compositing;
 pub mod project;
+pub mod rasterize;
 pub mod reference;
+pub mod render;
+pub mod sh;
+pub mod tiles;

@@ -29,7 +29,11 @@ fn check(backend: BackendKind, precision: Precision, tolerance: f64) {
     let alpha: Tensor<2> = Tensor::from_data(data, (&device, precision.dtype())).require_grad();
     let transmittance = exclusive_transmittance(alpha.clone());
     let grads = transmittance.clone().sum().backward();
-    let got_t: Vec<f64> = transmittance.into_data().convert::<f64>().try_to_vec::<f64>().unwrap();
+    let got_t: Vec<f64> = transmittance
+        .into_data()
+        .convert::<f64>()
+        .try_to_vec::<f64>()
+        .unwrap();
     let got_grad: Vec<f64> = alpha
         .grad(&grads)
         .expect("gradient")

@@ -1,0 +1,251 @@
+//! A render request: which channels, for which batch of poses, with how much pruning.
+//!
+//! Only the work a request asks for is done: SH is evaluated only when RGB is asked for, and a
+//! mask pass with [`Pruning::ObjectOnly`] visits only the tiles the object touches and the
+//! Gaussians in front of its last one there (exact: same image and gradient).
+
+use burn::tensor::{DType, Device, Tensor, TensorData};
+use splatraj_scene::Scene;
+
+use crate::camera::Intrinsics;
+use crate::project::{NEAR_PLANE, SceneTensors, project_with_near, radii_and_visibility};
+use crate::rasterize::{CompositeOptions, Composited, SplatInputs, composite};
+use crate::sh::{ShTensors, sh_colours};
+use crate::tiles::{ScreenData, TileGrid, TileSelection, bin_tiles};
+
+/// One channel of a render.
+#[derive(Debug, Clone)]
+pub enum Channel {
+    /// Colour from SH at the scene's degree, view dependent (3 values).
+    Rgb,
+    /// Camera depth z, composited (1 value; divide by alpha for the expected depth).
+    Depth,
+    /// A per-Gaussian 0/1 (or fractional) mask, one value per Gaussian (1 value).
+    Mask(Vec<f32>),
+    /// Per-Gaussian feature vectors, flat `[N, dim]` (dim values).
+    Features {
+        /// Length of each vector.
+        dim: usize,
+        /// Flat values.
+        values: Vec<f32>,
+    },
+}
+
+impl Channel {
+    /// Number of image channels this produces.
+    pub fn width(&self) -> usize {
+        match self {
+            Channel::Rgb => 3,
+            Channel::Depth | Channel::Mask(_) => 1,
+            Channel::Features { dim, .. } => *dim,
+        }
+    }
+}
+
+/// Which tiles and Gaussians a pass visits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Pruning {
+    /// Every tile and every Gaussian touching it.
+    #[default]
+    None,
+    /// For a single-mask pass: only what can change that mask (exact for the mask channel).
+    ObjectOnly,
+}
+
+/// What to render.
+#[derive(Debug, Clone)]
+pub struct RenderRequest {
+    /// Camera intrinsics (and so the resolution).
+    pub intrinsics: Intrinsics,
+    /// Channels, stacked in this order in the output.
+    pub channels: Vec<Channel>,
+    /// Tile/Gaussian pruning.
+    pub pruning: Pruning,
+    /// Near plane (camera z); Gaussians at or behind it are culled.
+    pub near: f64,
+    /// How compositing is chunked (does not change the result).
+    pub composite: CompositeOptions,
+}
+
+impl RenderRequest {
+    /// A request with default near plane, no pruning and default chunking.
+    pub fn new(intrinsics: Intrinsics, channels: Vec<Channel>) -> Self {
+        RenderRequest {
+            intrinsics,
+            channels,
+            pruning: Pruning::None,
+            near: NEAR_PLANE,
+            composite: CompositeOptions::default(),
+        }
+    }
+}
+
+/// A problem with a render request.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RenderError {
+    /// A per-Gaussian channel does not have one value (or vector) per Gaussian.
+    #[error("channel {index} has {got} values for {gaussians} Gaussians")]
+    ChannelLength {
+        /// Position of the channel in the request.
+        index: usize,
+        /// Values given.
+        got: usize,
+        /// Gaussians in the scene.
+        gaussians: usize,
+    },
+    /// Object-only pruning needs exactly one mask channel.
+    #[error("pruning to the object needs exactly one channel, a mask")]
+    PruningNeedsOneMask,
+    /// The request has no channel.
+    #[error("a render needs at least one channel")]
+    NoChannel,
+}
+
+/// A scene uploaded to a device, ready to render many times.
+#[derive(Debug, Clone)]
+pub struct DeviceScene {
+    /// Pose-independent geometry.
+    pub geometry: SceneTensors,
+    /// SH coefficients (uploaded once, used only by RGB passes).
+    pub sh: ShTensors,
+}
+
+impl DeviceScene {
+    /// Uploads `scene` to `device` in `dtype`.
+    pub fn new(scene: &Scene, device: &Device, dtype: DType) -> Self {
+        DeviceScene {
+            geometry: SceneTensors::new(scene, None, device, dtype),
+            sh: ShTensors::new(scene, None, device, dtype),
+        }
+    }
+
+    /// Number of Gaussians.
+    pub fn len(&self) -> usize {
+        self.geometry.len()
+    }
+
+    /// True for a scene without Gaussians.
+    pub fn is_empty(&self) -> bool {
+        self.geometry.is_empty()
+    }
+}
+
+/// Renders the requested channels for every pose in `poses` `[B, 6]` (Φ = ω, c).
+///
+/// Differentiable in `poses` when they live on an autodiff device. Returns images
+/// `[B, H, W, C]` (channels in request order) and alpha `[B, H, W]`.
+pub fn render(
+    scene: &DeviceScene,
+    poses: Tensor<2>,
+    request: &RenderRequest,
+) -> Result<Composited, RenderError> {
+    let n = scene.len();
+    let [batch, _] = poses.dims();
+    let device = poses.device();
+    let dtype = scene.geometry.means.dtype();
+    if request.channels.is_empty() {
+        return Err(RenderError::NoChannel);
+    }
+    for (index, channel) in request.channels.iter().enumerate() {
+        let got = match channel {
+            Channel::Mask(values) => values.len(),
+            Channel::Features { dim, values } => values.len() / (*dim).max(1),
+            Channel::Rgb | Channel::Depth => n,
+        };
+        if got != n {
+            return Err(RenderError::ChannelLength {
+                index,
+                got,
+                gaussians: n,
+            });
+        }
+    }
+    let in_object: Option<Vec<bool>> = match (request.pruning, request.channels.as_slice()) {
+        (Pruning::None, _) => None,
+        (Pruning::ObjectOnly, [Channel::Mask(mask)]) => {
+            Some(mask.iter().map(|&m| m != 0.0).collect())
+        }
+        (Pruning::ObjectOnly, _) => return Err(RenderError::PruningNeedsOneMask),
+    };
+
+    let projected = project_with_near(
+        &scene.geometry,
+        poses.clone(),
+        &request.intrinsics,
+        request.near,
+    );
+    let (radii, visible) = radii_and_visibility(&projected, request.near);
+    let means_host: Vec<f32> = host_f32(&projected.means_2d);
+    let depth_host: Vec<f32> = host_f32(&projected.depth);
+    let grid = TileGrid::new(request.intrinsics.width, request.intrinsics.height);
+    let screen = ScreenData {
+        n,
+        means_2d: &means_host,
+        depth: &depth_host,
+        radii: &radii,
+        visible: &visible,
+    };
+    let selection = match &in_object {
+        Some(in_object) => TileSelection::Object(in_object),
+        None => TileSelection::All,
+    };
+    let work = bin_tiles(&screen, batch, &grid, selection);
+
+    let mut values = Vec::with_capacity(request.channels.len());
+    for channel in &request.channels {
+        values.push(match channel {
+            Channel::Rgb => sh_colours(
+                &scene.sh,
+                scene.geometry.means.clone(),
+                poses.clone().narrow(1, 3, 3),
+            ),
+            Channel::Depth => projected.depth.clone().unsqueeze_dim::<3>(2),
+            Channel::Mask(mask) => per_gaussian(mask, n, 1, batch, &device, dtype),
+            Channel::Features { dim, values } => {
+                per_gaussian(values, n, *dim, batch, &device, dtype)
+            }
+        });
+    }
+    let width: usize = request.channels.iter().map(Channel::width).sum();
+    let values = Tensor::cat(values, 2).reshape([batch * n, width]);
+    let inputs = SplatInputs {
+        means_2d: projected.means_2d.reshape([batch * n, 2]),
+        conics: projected.conics.reshape([batch * n, 3]),
+        opacities: scene
+            .geometry
+            .opacities
+            .clone()
+            .unsqueeze_dim::<2>(0)
+            .repeat_dim(0, batch)
+            .reshape([batch * n]),
+        values,
+    };
+    Ok(composite(
+        &inputs,
+        &work,
+        n,
+        batch,
+        &grid,
+        request.composite,
+    ))
+}
+
+/// A per-Gaussian constant channel repeated over the batch. `[B, N, dim]`
+fn per_gaussian(
+    values: &[f32],
+    n: usize,
+    dim: usize,
+    batch: usize,
+    device: &Device,
+    dtype: DType,
+) -> Tensor<3> {
+    Tensor::<2>::from_data(TensorData::new(values.to_vec(), [n, dim]), (device, dtype))
+        .unsqueeze_dim::<3>(0)
+        .repeat_dim(0, batch)
+}
+
+fn host_f32<const D: usize>(t: &Tensor<D>) -> Vec<f32> {
+    t.to_data()
+        .try_to_vec_as::<f32>()
+        .expect("float tensor converts to f32")
+}

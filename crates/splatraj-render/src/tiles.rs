@@ -1,0 +1,164 @@
+//! Tile binning on the host: which Gaussians touch which 16×16 tile, front to back.
+//!
+//! This is integer data decided without gradient (DESIGN.md): the cull decisions, the tile
+//! lists and the depth order. It also applies the exact pruning of mask passes: a tile no
+//! object Gaussian touches renders an all-zero mask, and in a tile the object does touch,
+//! Gaussians behind the object's last one cannot change the mask or its gradient (they only
+//! add terms whose mask value is 0, after every term that carries the object).
+
+use rayon::prelude::*;
+
+/// Tile edge in pixels (INRIA 3DGS).
+pub const TILE_SIZE: usize = 16;
+/// Pixels per tile.
+pub const TILE_PIXELS: usize = TILE_SIZE * TILE_SIZE;
+
+/// The tiling of one image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TileGrid {
+    /// Image width in pixels.
+    pub width: usize,
+    /// Image height in pixels.
+    pub height: usize,
+    /// Tiles per row, ceil(width / 16).
+    pub tiles_x: usize,
+    /// Tiles per column, ceil(height / 16).
+    pub tiles_y: usize,
+}
+
+impl TileGrid {
+    /// The grid covering a `width` × `height` image (the last row/column may be partial).
+    pub fn new(width: usize, height: usize) -> Self {
+        TileGrid {
+            width,
+            height,
+            tiles_x: width.div_ceil(TILE_SIZE),
+            tiles_y: height.div_ceil(TILE_SIZE),
+        }
+    }
+
+    /// Number of tiles.
+    pub fn len(&self) -> usize {
+        self.tiles_x * self.tiles_y
+    }
+
+    /// True for an image without pixels.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Tiles touched by the square [u − r, u + r] × [v − r, v + r]: columns
+    /// floor((u − r)/16) ..< ceil((u + r)/16), clipped to the grid (the reference renderer's rule).
+    pub fn touched(
+        &self,
+        u: f64,
+        v: f64,
+        radius: f64,
+    ) -> (std::ops::Range<usize>, std::ops::Range<usize>) {
+        let span = |centre: f64, count: usize| {
+            let lo = ((centre - radius) / TILE_SIZE as f64)
+                .floor()
+                .clamp(0.0, count as f64) as usize;
+            let hi = ((centre + radius) / TILE_SIZE as f64)
+                .ceil()
+                .clamp(0.0, count as f64) as usize;
+            lo..hi.max(lo)
+        };
+        (span(u, self.tiles_x), span(v, self.tiles_y))
+    }
+}
+
+/// Which tiles and Gaussians a pass must visit.
+#[derive(Debug, Clone, Copy)]
+pub enum TileSelection<'a> {
+    /// Every tile, every Gaussian that touches it (any channel).
+    All,
+    /// A mask pass for one object: `in_object[g]` says whether Gaussian g belongs to it. Only
+    /// tiles the object touches, and in each only the Gaussians up to the object's last one.
+    /// Exact for the mask channel (value and gradient); other channels are not rendered right.
+    Object(&'a [bool]),
+}
+
+/// One tile of one image of the batch, with the Gaussians to composite there.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TileWork {
+    /// Index of the image in the batch.
+    pub batch: usize,
+    /// Tile index, row-major: ty · tiles_x + tx.
+    pub tile: usize,
+    /// Gaussian indices (into the scene's N) front to back by depth, ties by index.
+    pub gaussians: Vec<u32>,
+}
+
+/// Per-pose screen-space data pulled to the host, flat `[B · N]` (means `[B · N · 2]`).
+#[derive(Debug, Clone, Copy)]
+pub struct ScreenData<'a> {
+    /// Number of Gaussians per pose.
+    pub n: usize,
+    /// Pixel coordinates (u, v) of the projected means.
+    pub means_2d: &'a [f32],
+    /// Camera depths z.
+    pub depth: &'a [f32],
+    /// Pixel radii ceil(3·sqrt(λ_max)).
+    pub radii: &'a [f32],
+    /// Cull decisions (in front of the near plane, invertible 2D covariance).
+    pub visible: &'a [bool],
+}
+
+/// Bins every visible Gaussian of every pose into tiles and sorts each tile front to back.
+///
+/// Returns only non-empty tiles (after pruning), ordered by (batch, tile).
+pub fn bin_tiles(
+    screen: &ScreenData,
+    batch: usize,
+    grid: &TileGrid,
+    selection: TileSelection,
+) -> Vec<TileWork> {
+    (0..batch)
+        .into_par_iter()
+        .flat_map_iter(|b| bin_one_pose(screen, b, grid, selection))
+        .collect()
+}
+
+fn bin_one_pose(
+    screen: &ScreenData,
+    b: usize,
+    grid: &TileGrid,
+    selection: TileSelection,
+) -> Vec<TileWork> {
+    let n = screen.n;
+    let mut lists: Vec<Vec<(f32, u32)>> = vec![Vec::new(); grid.len()];
+    for g in 0..n {
+        let i = b * n + g;
+        if !screen.visible[i] || screen.radii[i] <= 0.0 {
+            continue;
+        }
+        let (u, v) = (
+            screen.means_2d[2 * i] as f64,
+            screen.means_2d[2 * i + 1] as f64,
+        );
+        let (xs, ys) = grid.touched(u, v, screen.radii[i] as f64);
+        for ty in ys {
+            for tx in xs.clone() {
+                lists[ty * grid.tiles_x + tx].push((screen.depth[i], g as u32));
+            }
+        }
+    }
+    lists
+        .into_iter()
+        .enumerate()
+        .filter_map(|(tile, mut list)| {
+            list.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            let mut gaussians: Vec<u32> = list.into_iter().map(|(_, g)| g).collect();
+            if let TileSelection::Object(in_object) = selection {
+                let last = gaussians.iter().rposition(|&g| in_object[g as usize])?;
+                gaussians.truncate(last + 1);
+            }
+            (!gaussians.is_empty()).then_some(TileWork {
+                batch: b,
+                tile,
+                gaussians,
+            })
+        })
+        .collect()
+}
