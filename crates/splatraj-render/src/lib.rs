@@ -7,7 +7,6 @@
 
 pub mod backend;
 pub mod camera;
-pub mod compositing;
 pub mod project;
 pub mod rasterize;
 pub mod reference;

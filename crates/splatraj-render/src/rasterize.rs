@@ -11,9 +11,8 @@
 //! stop decisions are made on detached values (integer data, no gradient); the gradient flows
 //! through α of the Gaussians that are kept, and through the channel values.
 
-use burn::tensor::{Bool, Int, Tensor, TensorData};
+use burn::tensor::{Int, Tensor, TensorData};
 
-use crate::compositing::exclusive_transmittance;
 use crate::tiles::{TILE_PIXELS, TILE_SIZE, TileGrid, TileWork};
 
 /// Largest alpha a Gaussian can reach (INRIA).
@@ -48,8 +47,8 @@ pub struct CompositeOptions {
 impl Default for CompositeOptions {
     fn default() -> Self {
         CompositeOptions {
-            chunk: 256,
-            tile_group: 32,
+            chunk: 128,
+            tile_group: 16,
         }
     }
 }
@@ -88,14 +87,7 @@ pub fn composite(
     let mut pieces = Vec::new();
     for group in order.chunks(options.tile_group.max(1)) {
         pieces.push(composite_group(
-            &padded,
-            work,
-            group,
-            grid,
-            n,
-            dummy,
-            options.chunk.max(1),
-            channels,
+            &padded, work, group, grid, n, dummy, options, channels,
         ));
     }
     // One zero tile for every (pose, tile) that has no work.
@@ -158,6 +150,11 @@ fn pad_with_transparent_row(inputs: &SplatInputs) -> SplatInputs {
 }
 
 /// Composites one group of tiles over all their depth chunks. Returns `[group, 256, C + 1]`.
+///
+/// Depth chunks start small and double up to `options.chunk`: most pixels of opaque surfaces
+/// stop within the first few dozen Gaussians, and a tile leaves the group as soon as all its
+/// pixels stopped or its list ended, so that long lists cost only where pixels stay open.
+#[allow(clippy::too_many_arguments)] // one internal call site; a struct would only rename them
 fn composite_group(
     inputs: &SplatInputs,
     work: &[TileWork],
@@ -165,45 +162,63 @@ fn composite_group(
     grid: &TileGrid,
     n: usize,
     dummy: i64,
-    chunk: usize,
+    options: CompositeOptions,
     channels: usize,
 ) -> Tensor<3> {
     let device = inputs.means_2d.device();
     let dtype = inputs.means_2d.dtype();
-    let tiles = group.len();
-    let longest = group
-        .iter()
-        .map(|&w| work[w].gaussians.len())
-        .max()
-        .unwrap_or(0);
+    let pixels = pixel_features(&device, dtype); // [1, 256, 6]
 
-    let (px, py) = pixel_centres(work, group, grid, &device, dtype); // [G, 256, 1] each
-    let mut accumulated = Tensor::<3>::zeros([tiles, TILE_PIXELS, channels], (&device, dtype));
-    let mut transmittance = Tensor::<2>::ones([tiles, TILE_PIXELS], (&device, dtype)); // T before the chunk
-    let mut stopped = Tensor::<2>::zeros([tiles, TILE_PIXELS], (&device, dtype)); // 1 once a pixel stopped
+    // Rows of the running state belong to the group positions in `active`.
+    let mut active: Vec<usize> = (0..group.len()).collect();
+    let mut accumulated =
+        Tensor::<3>::zeros([group.len(), TILE_PIXELS, channels], (&device, dtype));
+    let mut log_t = Tensor::<2>::zeros([group.len(), TILE_PIXELS], (&device, dtype)); // ln T before the chunk
+    let mut stopped = Tensor::<2>::zeros([group.len(), TILE_PIXELS], (&device, dtype)); // 1 once stopped
+    let mut finished: Vec<(Vec<usize>, Tensor<3>)> = Vec::new();
 
-    for start in (0..longest).step_by(chunk) {
-        let k = chunk.min(longest - start);
+    let mut start = 0;
+    let mut chunk = FIRST_CHUNK.min(options.chunk.max(1));
+    while !active.is_empty() {
+        let tiles = active.len();
+        let longest = active
+            .iter()
+            .map(|&p| work[group[p]].gaussians.len())
+            .max()
+            .unwrap_or(0);
+        let k = chunk.min(longest.saturating_sub(start)).max(1);
         let mut index = Vec::with_capacity(tiles * k);
-        for &w in group {
-            let list = &work[w].gaussians;
-            let base = (work[w].batch * n) as i64;
+        let mut centres = Vec::with_capacity(2 * tiles);
+        for &p in &active {
+            let w = &work[group[p]];
+            let base = (w.batch * n) as i64;
             index.extend(
-                (start..start + k).map(|j| list.get(j).map_or(dummy, |&g| base + g as i64)),
+                (start..start + k).map(|j| w.gaussians.get(j).map_or(dummy, |&g| base + g as i64)),
             );
+            let (tx, ty) = (w.tile % grid.tiles_x, w.tile / grid.tiles_x);
+            centres.push((
+                (tx * TILE_SIZE) as f64 + 0.5 * TILE_SIZE as f64,
+                (ty * TILE_SIZE) as f64 + 0.5 * TILE_SIZE as f64,
+            ));
         }
         let index = Tensor::<1, Int>::from_data(TensorData::new(index, [tiles * k]), &device);
+        let centre_x: Vec<f64> = centres.iter().map(|c| c.0).collect();
+        let centre_y: Vec<f64> = centres.iter().map(|c| c.1).collect();
+        let centre_x =
+            Tensor::<3>::from_data(TensorData::new(centre_x, [tiles, 1, 1]), (&device, dtype));
+        let centre_y =
+            Tensor::<3>::from_data(TensorData::new(centre_y, [tiles, 1, 1]), (&device, dtype));
 
         let means = inputs
             .means_2d
             .clone()
             .select(0, index.clone())
-            .reshape([tiles, 1, k, 2]);
+            .reshape([tiles, k, 2]);
         let conics = inputs
             .conics
             .clone()
             .select(0, index.clone())
-            .reshape([tiles, 1, k, 3]);
+            .reshape([tiles, k, 3]);
         let opacity = inputs
             .opacities
             .clone()
@@ -215,75 +230,131 @@ fn composite_group(
             .select(0, index)
             .reshape([tiles, k, channels]);
 
-        let dx = px.clone() - means.clone().narrow(3, 0, 1).reshape([tiles, 1, k]); // [G, 256, K]
-        let dy = py.clone() - means.narrow(3, 1, 1).reshape([tiles, 1, k]);
-        let a = conics.clone().narrow(3, 0, 1).reshape([tiles, 1, k]);
-        let b = conics.clone().narrow(3, 1, 1).reshape([tiles, 1, k]);
-        let c = conics.narrow(3, 2, 1).reshape([tiles, 1, k]);
-        let power =
-            (a * dx.clone().square() + c * dy.clone().square()).mul_scalar(-0.5) - b * dx * dy;
-        let alpha = (power.clone().exp() * opacity).clamp_max(MAX_ALPHA);
+        // power = −½ dᵀ·conic·d as one matmul of pixel features [x², xy, y², x, y, 1] with
+        // per-Gaussian coefficients. Coordinates are relative to the tile centre, which keeps
+        // the expanded quadratic free of cancellation in f32.
+        let mx = means.clone().narrow(2, 0, 1) - centre_x; // [G, K, 1]
+        let my = means.narrow(2, 1, 1) - centre_y;
+        let a = conics.clone().narrow(2, 0, 1);
+        let b = conics.clone().narrow(2, 1, 1);
+        let c = conics.narrow(2, 2, 1);
+        let ax_by = a.clone() * mx.clone() + b.clone() * my.clone();
+        let bx_cy = b.clone() * mx.clone() + c.clone() * my.clone();
+        let constant = ax_by.clone() * mx + bx_cy.clone() * my;
+        let coefficients = Tensor::cat(
+            vec![
+                a,
+                b.mul_scalar(2.0),
+                c,
+                ax_by.mul_scalar(-2.0),
+                bx_cy.mul_scalar(-2.0),
+                constant,
+            ],
+            2,
+        )
+        .mul_scalar(-0.5)
+        .swap_dims(1, 2); // [G, 6, K]
+        let power = pixels
+            .clone()
+            .expand([tiles, TILE_PIXELS, 6])
+            .matmul(coefficients); // [G, 256, K]
+        // A positive-definite conic gives power ≤ 0; clamping only removes rounding (INRIA's
+        // `power > 0` skip can only trigger on such rounding for the Gaussians we keep).
+        let alpha = (power.clamp_max(0.0).exp() * opacity).clamp_max(MAX_ALPHA);
+        let alpha = alpha.clone().mask_fill(alpha.lower_elem(MIN_ALPHA), 0.0);
 
-        // Skip decisions: power > 0 (numerical garbage far from the mean) or α < 1/255.
-        let skip: Tensor<3, Bool> = power
-            .greater_elem(0.0)
-            .bool_or(alpha.clone().lower_elem(MIN_ALPHA));
-        let alpha = alpha.mask_fill(skip, 0.0);
-
-        // Stop decisions on detached values: keep a Gaussian while no earlier Gaussian of this
-        // pixel (in this or a previous chunk) would have brought T below 1e-4.
-        let log_keep = alpha.clone().detach().neg().log1p();
+        // Stop decisions on detached values. T only decreases along the list, so "this
+        // Gaussian would bring T below 1e-4" stays true for all later ones: it is the mask of
+        // dropped Gaussians, together with pixels that stopped in an earlier chunk.
+        let log_keep = alpha.clone().neg().log1p(); // [G, 256, K]
         let log_t_after =
-            log_keep.cumsum(2) + transmittance.clone().detach().log().unsqueeze_dim::<3>(2);
-        let stop_here = log_t_after
+            log_keep.clone().detach().cumsum(2) + log_t.clone().detach().unsqueeze_dim::<3>(2);
+        let stop = log_t_after
             .lower_elem(MIN_TRANSMITTANCE.ln())
             .float()
             .cast(dtype);
-        let stops_so_far = stop_here.cumsum(2) + stopped.clone().unsqueeze_dim::<3>(2);
-        let dropped: Tensor<3, Bool> = stops_so_far.clone().greater_elem(0.5);
-        let alpha = alpha.mask_fill(dropped, 0.0);
+        let dropped = (stop.clone() + stopped.clone().unsqueeze_dim::<3>(2)).greater_elem(0.5);
+        let alpha = alpha.mask_fill(dropped.clone(), 0.0);
+        let log_keep = log_keep.mask_fill(dropped, 0.0);
 
-        let t =
-            exclusive_transmittance(alpha.clone()) * transmittance.clone().unsqueeze_dim::<3>(2); // [G, 256, K]
-        let weights = alpha.clone() * t;
-        accumulated = accumulated + weights.matmul(values); // [G, 256, C]
-        let log_kept = alpha.neg().log1p().sum_dim(2).reshape([tiles, TILE_PIXELS]);
-        transmittance = transmittance * log_kept.exp();
-        stopped = stops_so_far
-            .narrow(2, k - 1, 1)
-            .reshape([tiles, TILE_PIXELS])
-            .clamp_max(1.0);
+        let inclusive = log_keep.clone().cumsum(2);
+        let t = (inclusive.clone() - log_keep + log_t.clone().unsqueeze_dim::<3>(2)).exp(); // exclusive T
+        accumulated = accumulated + (alpha * t).matmul(values); // [G, 256, C]
+        log_t = log_t + inclusive.narrow(2, k - 1, 1).reshape([tiles, TILE_PIXELS]);
+        stopped = (stopped + stop.narrow(2, k - 1, 1).reshape([tiles, TILE_PIXELS])).clamp_max(1.0);
+        start += k;
+        chunk = (2 * chunk).min(options.chunk.max(1));
 
-        // Exact shortcut: once every pixel of the group stopped, later chunks add nothing.
-        if stopped.clone().lower_elem(0.5).any().into_scalar::<bool>() {
+        // Tiles whose pixels all stopped, or whose list ended, are done (exact).
+        let all_stopped: Vec<bool> = stopped
+            .clone()
+            .min_dim(1)
+            .greater_elem(0.5)
+            .into_data()
+            .try_to_vec::<bool>()
+            .unwrap_or_else(|_| vec![false; tiles]);
+        let done: Vec<usize> = (0..tiles)
+            .filter(|&r| all_stopped[r] || work[group[active[r]]].gaussians.len() <= start)
+            .collect();
+        if done.is_empty() {
             continue;
         }
-        break;
+        let keep: Vec<usize> = (0..tiles).filter(|r| !done.contains(r)).collect();
+        let rows = |rows: &[usize]| {
+            let rows: Vec<i64> = rows.iter().map(|&r| r as i64).collect();
+            Tensor::<1, Int>::from_data(TensorData::new(rows.clone(), [rows.len()]), &device)
+        };
+        let done_rows = rows(&done);
+        let result = finish(
+            accumulated.clone().select(0, done_rows.clone()),
+            log_t.clone().select(0, done_rows),
+        );
+        finished.push((done.iter().map(|&r| active[r]).collect(), result));
+        if keep.is_empty() {
+            break;
+        }
+        let keep_rows = rows(&keep);
+        accumulated = accumulated.select(0, keep_rows.clone());
+        log_t = log_t.select(0, keep_rows.clone());
+        stopped = stopped.select(0, keep_rows);
+        active = keep.iter().map(|&r| active[r]).collect();
     }
-    let alpha = transmittance.neg().add_scalar(1.0).unsqueeze_dim::<3>(2); // [G, 256, 1]
+
+    // Back to group order.
+    let mut position_of = vec![0i64; group.len()];
+    let mut next = 0;
+    let mut parts = Vec::with_capacity(finished.len());
+    for (positions, part) in finished {
+        for p in positions {
+            position_of[p] = next;
+            next += 1;
+        }
+        parts.push(part);
+    }
+    let order = Tensor::<1, Int>::from_data(TensorData::new(position_of, [group.len()]), &device);
+    Tensor::cat(parts, 0).select(0, order)
+}
+
+/// First depth chunk; later chunks double up to [`CompositeOptions::chunk`].
+const FIRST_CHUNK: usize = 32;
+
+/// Channels and alpha = 1 − T of finished tiles. `[G, 256, C + 1]`
+fn finish(accumulated: Tensor<3>, log_t: Tensor<2>) -> Tensor<3> {
+    let alpha = log_t.exp().neg().add_scalar(1.0).unsqueeze_dim::<3>(2);
     Tensor::cat(vec![accumulated, alpha], 2)
 }
 
-/// Pixel centres (i + 0.5, j + 0.5) of each tile of the group, x and y, `[G, 256, 1]` each.
-fn pixel_centres(
-    work: &[TileWork],
-    group: &[usize],
-    grid: &TileGrid,
-    device: &burn::tensor::Device,
-    dtype: burn::tensor::DType,
-) -> (Tensor<3>, Tensor<3>) {
-    let mut xs = Vec::with_capacity(group.len() * TILE_PIXELS);
-    let mut ys = Vec::with_capacity(group.len() * TILE_PIXELS);
-    for &w in group {
-        let (tx, ty) = (work[w].tile % grid.tiles_x, work[w].tile / grid.tiles_x);
-        for p in 0..TILE_PIXELS {
-            xs.push((tx * TILE_SIZE + p % TILE_SIZE) as f64 + 0.5);
-            ys.push((ty * TILE_SIZE + p / TILE_SIZE) as f64 + 0.5);
-        }
+/// Quadratic features [x², xy, y², x, y, 1] of the 256 pixel centres of a tile, relative to the
+/// tile's centre. `[1, 256, 6]`
+fn pixel_features(device: &burn::tensor::Device, dtype: burn::tensor::DType) -> Tensor<3> {
+    let mut features = Vec::with_capacity(TILE_PIXELS * 6);
+    for p in 0..TILE_PIXELS {
+        let x = (p % TILE_SIZE) as f64 + 0.5 - 0.5 * TILE_SIZE as f64;
+        let y = (p / TILE_SIZE) as f64 + 0.5 - 0.5 * TILE_SIZE as f64;
+        features.extend([x * x, x * y, y * y, x, y, 1.0]);
     }
-    let shape = [group.len(), TILE_PIXELS, 1];
-    (
-        Tensor::from_data(TensorData::new(xs, shape), (device, dtype)),
-        Tensor::from_data(TensorData::new(ys, shape), (device, dtype)),
+    Tensor::from_data(
+        TensorData::new(features, [1, TILE_PIXELS, 6]),
+        (device, dtype),
     )
 }

@@ -1,0 +1,58 @@
+//! Target centring error (TCE): how far the object's mask centroid is from the image centre.
+//!
+//! TCE = ‖(c_x/W, c_y/H) − (½, ½)‖₂, with c the mask-weighted centroid in pixel coordinates,
+//! pixel (column i, row j) having its centre at (i + 0.5, j + 0.5) (DESIGN.md; the paper swaps
+//! W and H). 0 is a centred object, √½ ≈ 0.707 an object in a corner.
+//!
+//! Two guards keep it finite and well-behaved in autodiff:
+//! - **Mass floor.** The centroid divides by max(Σ m, [`MASS_FLOOR`]) and is taken relative to
+//!   the image centre. Below the floor this equals placing the missing mass (floor − Σ m) at
+//!   the image centre, so an empty mask has its centroid *at the centre*: TCE = 0, and (because
+//!   the norm's derivative vanishes at 0) a zero gradient. An object leaving the frame fades
+//!   smoothly to that state instead of jumping.
+//! - **Smoothed norm.** √x has an infinite derivative at 0, so the norm is
+//!   √(d_x² + d_y² + ε²) − ε with ε = [`NORM_EPSILON`]: exactly 0 at d = 0 (ε is a power of
+//!   two, so ε² and its root are exact in f32 and f64), within ε of ‖d‖ elsewhere, and its
+//!   derivative d/√(d² + ε²) is finite everywhere.
+
+use burn::tensor::{Tensor, TensorData};
+
+/// Total mask mass (in pixels) below which the centroid is pulled toward the image centre.
+pub const MASS_FLOOR: f64 = 1e-3;
+
+/// ε of the smoothed norm √(‖d‖² + ε²) − ε, 2⁻²⁰ ≈ 9.5e-7 (a power of two, see module docs).
+pub const NORM_EPSILON: f64 = 1.0 / 1_048_576.0;
+
+/// Offset of the mask centroid from the image centre, in image fractions: `[B, 2]` holding
+/// (c_x/W − ½, c_y/H − ½) per sample, with the mass floor of the module docs (0 for an empty
+/// mask). `mask` is `[B, H, W]`.
+pub fn centroid_offset(mask: Tensor<3>) -> Tensor<2> {
+    let [batch, height, width] = mask.dims();
+    let device = mask.device();
+    let dtype = mask.dtype();
+    // Pixel centres relative to the image centre, in image fractions: (i + ½)/W − ½.
+    let offsets =
+        |n: usize| -> Vec<f64> { (0..n).map(|i| (i as f64 + 0.5) / n as f64 - 0.5).collect() };
+    let xs = Tensor::<1>::from_data(TensorData::new(offsets(width), [width]), (&device, dtype))
+        .reshape([1, 1, width]);
+    let ys = Tensor::<1>::from_data(TensorData::new(offsets(height), [height]), (&device, dtype))
+        .reshape([1, height, 1]);
+    let per_sample = |t: Tensor<3>| t.sum_dim(2).sum_dim(1).reshape([batch, 1]);
+    let mass = per_sample(mask.clone()).clamp_min(MASS_FLOOR);
+    let dx = per_sample(mask.clone() * xs) / mass.clone();
+    let dy = per_sample(mask * ys) / mass;
+    Tensor::cat(vec![dx, dy], 1)
+}
+
+/// Target centring error per sample, `[B]`, of mask images `[B, H, W]` (see module docs).
+pub fn tce(mask: Tensor<3>) -> Tensor<1> {
+    let [batch, _, _] = mask.dims();
+    let offset = centroid_offset(mask);
+    offset
+        .square()
+        .sum_dim(1)
+        .add_scalar(NORM_EPSILON * NORM_EPSILON)
+        .sqrt()
+        .sub_scalar(NORM_EPSILON)
+        .reshape([batch])
+}

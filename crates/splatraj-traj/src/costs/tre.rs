@@ -1,0 +1,27 @@
+//! Target ratio error (TRE): how far the object's share of the frame is from the target.
+//!
+//! TRE = |Σ I_b / (W·H) − r_t|, with I_b the composited mask image and r_t the target ratio
+//! (DESIGN.md; default [`DEFAULT_TARGET_RATIO`]). It needs no guard: it is finite for any mask,
+//! and for an empty mask it is r_t with the constant derivative −1/(W·H) per pixel. That
+//! derivative does not move the camera: pixels the object does not reach do not depend on the
+//! pose, so the pose gradient of an empty mask's TRE is zero. At exactly r_t, burn's |x|
+//! derivative is sign(0) = 0.
+
+use burn::tensor::Tensor;
+
+/// Target ratio of the frame the object should cover when none is configured.
+pub const DEFAULT_TARGET_RATIO: f64 = 0.15;
+
+/// Share of the frame the mask covers, Σ I_b / (W·H), per sample: `[B]` of `[B, H, W]`.
+pub fn coverage(mask: Tensor<3>) -> Tensor<1> {
+    let [batch, height, width] = mask.dims();
+    mask.sum_dim(2)
+        .sum_dim(1)
+        .reshape([batch])
+        .div_scalar((width * height) as f64)
+}
+
+/// Target ratio error per sample, `[B]`, of mask images `[B, H, W]` for target ratio `target`.
+pub fn tre(mask: Tensor<3>, target: f64) -> Tensor<1> {
+    coverage(mask).sub_scalar(target).abs()
+}

@@ -1,0 +1,195 @@
+//! TCE and TRE against hand-computed values, their empty-mask behaviour, and their gradients
+//! against central finite differences in f64.
+
+use burn::tensor::{DType, Device, Tensor, TensorData};
+use splatraj_traj::costs::{NORM_EPSILON, centroid_offset, coverage, tce, tre};
+
+/// A mask `[B, H, W]` from host values in `dtype` on `device`.
+fn mask(values: Vec<f64>, shape: [usize; 3], device: &Device, dtype: DType) -> Tensor<3> {
+    Tensor::from_data(TensorData::new(values, shape), (device, dtype))
+}
+
+fn host<const D: usize>(t: Tensor<D>) -> Vec<f64> {
+    t.into_data().convert::<f64>().try_to_vec::<f64>().unwrap()
+}
+
+/// Pixels (column i, row j) of an H×W image for which `inside(i, j)` holds set to 1.
+fn pattern(height: usize, width: usize, inside: impl Fn(usize, usize) -> bool) -> Vec<f64> {
+    let mut out = Vec::with_capacity(height * width);
+    for j in 0..height {
+        for i in 0..width {
+            out.push(if inside(i, j) { 1.0 } else { 0.0 });
+        }
+    }
+    out
+}
+
+/// A disc of radius 15 px centred on a 64×64 image (symmetric under both mirrors).
+fn centred_disc() -> Vec<f64> {
+    pattern(64, 64, |i, j| {
+        let (x, y) = (i as f64 + 0.5 - 32.0, j as f64 + 0.5 - 32.0);
+        x * x + y * y <= 15.0 * 15.0
+    })
+}
+
+/// Columns 4..12 and rows 2..8 of a 40×20 image: centroid (8, 5) px, i.e. (0.2, 0.25) of the
+/// frame, so TCE = ‖(0.2 − 0.5, 0.25 − 0.5)‖ = √0.1525, and it covers 48/800 = 6 %.
+fn off_centre_rectangle() -> Vec<f64> {
+    pattern(20, 40, |i, j| (4..12).contains(&i) && (2..8).contains(&j))
+}
+
+#[test]
+fn centred_disc_has_zero_tce_in_both_precisions() {
+    let device = Device::flex();
+    for dtype in [DType::F64, DType::F32] {
+        let value = host(tce(mask(centred_disc(), [1, 64, 64], &device, dtype)));
+        assert_eq!(value, vec![0.0], "{dtype:?}");
+    }
+}
+
+#[test]
+fn off_centre_rectangle_has_closed_form_tce() {
+    let device = Device::flex();
+    // Batch of two: the rectangle and its mirror image in x (centroid (32, 5) px).
+    let rect = off_centre_rectangle();
+    let mirrored: Vec<f64> = (0..20)
+        .flat_map(|j| (0..40).rev().map(move |i| (j, i)))
+        .map(|(j, i)| rect[j * 40 + i])
+        .collect();
+    let batch = [rect, mirrored].concat();
+    for (dtype, tolerance) in [(DType::F64, 2.0 * NORM_EPSILON), (DType::F32, 2e-6)] {
+        let m = mask(batch.clone(), [2, 20, 40], &device, dtype);
+        let offset = host(centroid_offset(m.clone()));
+        let want_offset = [-0.3, -0.25, 0.3, -0.25];
+        for (got, want) in offset.iter().zip(want_offset) {
+            assert!((got - want).abs() < 1e-6, "{dtype:?}: offset {offset:?}");
+        }
+        let value = host(tce(m));
+        let want = 0.1525f64.sqrt();
+        for v in &value {
+            assert!(
+                (v - want).abs() <= tolerance,
+                "{dtype:?}: {value:?} vs {want}"
+            );
+        }
+    }
+}
+
+#[test]
+fn known_area_has_known_tre() {
+    let device = Device::flex();
+    let rect = off_centre_rectangle(); // 48 of 800 pixels
+    // Second sample: the same rectangle at half intensity plus one full pixel: 25/800.
+    let mut half: Vec<f64> = rect.iter().map(|v| 0.5 * v).collect();
+    half[799] = 1.0;
+    let m = mask([rect, half].concat(), [2, 20, 40], &device, DType::F64);
+    let cov = host(coverage(m.clone()));
+    assert!((cov[0] - 0.06).abs() < 1e-15 && (cov[1] - 25.0 / 800.0).abs() < 1e-15);
+    let value = host(tre(m.clone(), 0.15));
+    assert!((value[0] - 0.09).abs() < 1e-15, "{value:?}");
+    assert!(
+        (value[1] - (0.15 - 25.0 / 800.0)).abs() < 1e-15,
+        "{value:?}"
+    );
+    // Above the target the error is the excess.
+    let value = host(tre(m, 0.01));
+    assert!((value[0] - 0.05).abs() < 1e-15, "{value:?}");
+}
+
+#[test]
+fn empty_mask_is_finite_with_zero_tce_gradient() {
+    let device = Device::flex().autodiff();
+    for dtype in [DType::F64, DType::F32] {
+        let (h, w) = (12, 20);
+        let x = mask(vec![0.0; 2 * h * w], [2, h, w], &device, dtype).require_grad();
+        let cost = tce(x.clone());
+        let grads = cost.clone().sum().backward();
+        assert_eq!(
+            host(cost),
+            vec![0.0, 0.0],
+            "{dtype:?}: centroid at the centre"
+        );
+        let grad = host(x.grad(&grads).expect("gradient exists"));
+        assert!(grad.iter().all(|&g| g == 0.0), "{dtype:?}: {grad:?}");
+
+        let x = mask(vec![0.0; 2 * h * w], [2, h, w], &device, dtype).require_grad();
+        let cost = tre(x.clone(), 0.15);
+        let grads = cost.clone().sum().backward();
+        let value = host(cost);
+        assert!(value.iter().all(|v| (v - 0.15).abs() < 1e-7), "{value:?}");
+        // The exact derivative −1/(W·H): finite, and it cannot move a pose (see tre docs).
+        let grad = host(x.grad(&grads).expect("gradient exists"));
+        let want = -1.0 / (h * w) as f64;
+        assert!(
+            grad.iter()
+                .all(|g| g.is_finite() && (g - want).abs() < 1e-7),
+            "{dtype:?}: {grad:?}"
+        );
+    }
+}
+
+/// Small deterministic generator (xorshift).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+#[test]
+fn gradients_match_finite_differences_in_f64() {
+    let (b, h, w) = (3, 5, 7);
+    let mut rng = Rng(0x5eed);
+    let mut values = Vec::new();
+    // Sample 0: fractional mask weighted to the left; sample 1: sparse and off-centre;
+    // sample 2: total mass 3e-4, below the mass floor (the floored branch).
+    for j in 0..h {
+        for i in 0..w {
+            values.push(rng.next() * (1.0 - i as f64 / w as f64) * (0.3 + j as f64 / h as f64));
+        }
+    }
+    for _ in 0..h * w {
+        let v = rng.next();
+        values.push(if v > 0.6 { v } else { 0.0 });
+    }
+    for _ in 0..h * w {
+        values.push(rng.next() * 3e-4 / (0.5 * (h * w) as f64));
+    }
+    let weights = [(1.0, 0.0), (0.0, 1.0), (0.7, 1.3)];
+    let target = 0.4;
+    let loss = |x: Tensor<3>, (a, c): (f64, f64)| -> Tensor<1> {
+        (tce(x.clone()).mul_scalar(a) + tre(x, target).mul_scalar(c)).sum()
+    };
+    let plain = Device::flex();
+    let ad = Device::flex().autodiff();
+    for weight in weights {
+        let x = mask(values.clone(), [b, h, w], &ad, DType::F64).require_grad();
+        let grads = loss(x.clone(), weight).backward();
+        let grad = host(x.grad(&grads).unwrap());
+        let value = |v: Vec<f64>| -> f64 {
+            loss(mask(v, [b, h, w], &plain, DType::F64), weight).into_scalar::<f64>()
+        };
+        let mut worst = 0.0f64;
+        for k in 0..values.len() {
+            // The floored sample is ~300× more sensitive (1/floor): a smaller step keeps the
+            // O(h²) truncation error of central differences below the tolerance.
+            let step = if k >= 2 * h * w { 1e-10 } else { 1e-7 };
+            let (mut plus, mut minus) = (values.clone(), values.clone());
+            plus[k] += step;
+            minus[k] -= step;
+            let fd = (value(plus) - value(minus)) / (2.0 * step);
+            let error = (grad[k] - fd).abs() / fd.abs().max(1.0);
+            worst = worst.max(error);
+            assert!(
+                error < 1e-6,
+                "weights {weight:?}, pixel {k}: autodiff {} vs finite differences {fd}",
+                grad[k]
+            );
+        }
+        assert!(grad.iter().any(|g| g.abs() > 1e-3), "{weight:?}: trivial");
+        assert!(worst.is_finite());
+    }
+}
