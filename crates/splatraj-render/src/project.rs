@@ -15,7 +15,7 @@
 //! so a culled entry holds *finite garbage* (values and gradients), never NaN or Inf, and must
 //! be masked out by the caller.
 
-use burn::tensor::{DType, Device, Tensor, TensorData};
+use burn::tensor::{DType, Device, Int, Tensor, TensorData};
 use glam::{DMat3, DQuat, DVec3};
 use splatraj_scene::Scene;
 
@@ -74,6 +74,33 @@ impl SceneTensors {
             means: Tensor::from_data(TensorData::new(means, [n, 3]), options),
             cov_world: Tensor::from_data(TensorData::new(covs, [n, 3, 3]), options),
             opacities: Tensor::from_data(TensorData::new(opacities, [n]), options),
+        }
+    }
+
+    /// The Gaussians at `indices` (a device-side gather). `indices` `[M]`
+    pub fn select(&self, indices: Tensor<1, Int>) -> Self {
+        Self {
+            means: self.means.clone().select(0, indices.clone()),
+            cov_world: self.cov_world.clone().select(0, indices.clone()),
+            opacities: self.opacities.clone().select(0, indices),
+        }
+    }
+
+    /// The Gaussians `start .. start + len`.
+    pub fn narrow(&self, start: usize, len: usize) -> Self {
+        Self {
+            means: self.means.clone().narrow(0, start, len),
+            cov_world: self.cov_world.clone().narrow(0, start, len),
+            opacities: self.opacities.clone().narrow(0, start, len),
+        }
+    }
+
+    /// The same tensors off the autodiff graph (for passes that need no gradient).
+    pub fn without_autodiff(&self) -> Self {
+        Self {
+            means: self.means.clone().without_autodiff(),
+            cov_world: self.cov_world.clone().without_autodiff(),
+            opacities: self.opacities.clone().without_autodiff(),
         }
     }
 

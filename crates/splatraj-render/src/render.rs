@@ -4,7 +4,7 @@
 //! mask pass with [`Pruning::ObjectOnly`] visits only the tiles the object touches and the
 //! Gaussians in front of its last one there (exact: same image and gradient).
 
-use burn::tensor::{DType, Device, Tensor, TensorData};
+use burn::tensor::{DType, Device, Int, Tensor, TensorData};
 use splatraj_scene::Scene;
 
 use crate::camera::Intrinsics;
@@ -168,66 +168,145 @@ pub fn render(
         (Pruning::ObjectOnly, _) => return Err(RenderError::PruningNeedsOneMask),
     };
 
-    let projected = project_with_near(
-        &scene.geometry,
-        poses.clone(),
-        &request.intrinsics,
-        request.near,
-    );
-    let (radii, visible) = radii_and_visibility(&projected, request.near);
-    let means_host: Vec<f32> = host_f32(&projected.means_2d);
-    let depth_host: Vec<f32> = host_f32(&projected.depth);
+    // Decisions (cull, tiles, order, pruning) on all Gaussians without gradient, then the
+    // differentiable pass on only the Gaussians some tile uses.
     let grid = TileGrid::new(request.intrinsics.width, request.intrinsics.height);
+    let decisions = decide(scene, &poses, request);
     let screen = ScreenData {
         n,
-        means_2d: &means_host,
-        depth: &depth_host,
-        radii: &radii,
-        visible: &visible,
+        means_2d: &decisions.means_2d,
+        depth: &decisions.depth,
+        radii: &decisions.radii,
+        visible: &decisions.visible,
     };
     let selection = match &in_object {
         Some(in_object) => TileSelection::Object(in_object),
         None => TileSelection::All,
     };
-    let work = bin_tiles(&screen, batch, &grid, selection);
+    let mut work = bin_tiles(&screen, batch, &grid, selection);
+
+    // used[u] = scene index of the u-th Gaussian some tile needs; lists are renumbered to u.
+    let mut compact_from_scene = vec![u32::MAX; n];
+    for list in &work {
+        for &g in &list.gaussians {
+            compact_from_scene[g as usize] = 0;
+        }
+    }
+    let mut used = Vec::new();
+    for (g, slot) in compact_from_scene.iter_mut().enumerate() {
+        if *slot == 0 {
+            *slot = used.len() as u32;
+            used.push(g);
+        }
+    }
+    for list in &mut work {
+        for g in &mut list.gaussians {
+            *g = compact_from_scene[*g as usize];
+        }
+    }
+    let width: usize = request.channels.iter().map(Channel::width).sum();
+    if used.is_empty() {
+        // Nothing to draw: zeros that still hang off the pose graph, so a gradient exists (0).
+        let zero = poses.sum().mul_scalar(0.0);
+        let images = Tensor::<4>::zeros([batch, grid.height, grid.width, width], (&device, dtype));
+        let alpha = Tensor::<3>::zeros([batch, grid.height, grid.width], (&device, dtype));
+        return Ok(Composited {
+            images: images + zero.clone().reshape([1, 1, 1, 1]),
+            alpha: alpha + zero.reshape([1, 1, 1]),
+        });
+    }
+    let u = used.len();
+    let index = Tensor::<1, Int>::from_data(
+        TensorData::new(used.iter().map(|&g| g as i64).collect::<Vec<_>>(), [u]),
+        &device,
+    );
+    let geometry = scene.geometry.select(index.clone());
+    let projected = project_with_near(&geometry, poses.clone(), &request.intrinsics, request.near);
 
     let mut values = Vec::with_capacity(request.channels.len());
     for channel in &request.channels {
         values.push(match channel {
-            Channel::Rgb => sh_colours(
-                &scene.sh,
-                scene.geometry.means.clone(),
-                poses.clone().narrow(1, 3, 3),
-            ),
+            Channel::Rgb => {
+                let sh = ShTensors {
+                    degree: scene.sh.degree,
+                    coeffs: scene.sh.coeffs.clone().select(0, index.clone()),
+                };
+                sh_colours(&sh, geometry.means.clone(), poses.clone().narrow(1, 3, 3))
+            }
             Channel::Depth => projected.depth.clone().unsqueeze_dim::<3>(2),
-            Channel::Mask(mask) => per_gaussian(mask, n, 1, batch, &device, dtype),
+            Channel::Mask(mask) => {
+                let mask: Vec<f32> = used.iter().map(|&g| mask[g]).collect();
+                per_gaussian(&mask, u, 1, batch, &device, dtype)
+            }
             Channel::Features { dim, values } => {
-                per_gaussian(values, n, *dim, batch, &device, dtype)
+                let rows: Vec<f32> = used
+                    .iter()
+                    .flat_map(|&g| values[g * dim..(g + 1) * dim].iter().copied())
+                    .collect();
+                per_gaussian(&rows, u, *dim, batch, &device, dtype)
             }
         });
     }
-    let width: usize = request.channels.iter().map(Channel::width).sum();
-    let values = Tensor::cat(values, 2).reshape([batch * n, width]);
+    let values = Tensor::cat(values, 2).reshape([batch * u, width]);
     let inputs = SplatInputs {
-        means_2d: projected.means_2d.reshape([batch * n, 2]),
-        conics: projected.conics.reshape([batch * n, 3]),
-        opacities: scene
-            .geometry
+        means_2d: projected.means_2d.reshape([batch * u, 2]),
+        conics: projected.conics.reshape([batch * u, 3]),
+        opacities: geometry
             .opacities
-            .clone()
             .unsqueeze_dim::<2>(0)
             .repeat_dim(0, batch)
-            .reshape([batch * n]),
+            .reshape([batch * u]),
         values,
     };
     Ok(composite(
         &inputs,
         &work,
-        n,
+        u,
         batch,
         &grid,
         request.composite,
     ))
+}
+
+/// Gaussians per block of the decision pass: bounds its memory on very large scenes.
+const DECISION_BLOCK: usize = 1 << 17;
+
+/// Host-side screen data of every Gaussian for every pose, flat `[B · N]`, without gradient.
+struct Decisions {
+    means_2d: Vec<f32>,
+    depth: Vec<f32>,
+    radii: Vec<f32>,
+    visible: Vec<bool>,
+}
+
+/// Projects all Gaussians block by block, off the autodiff graph, and pulls the cull data.
+fn decide(scene: &DeviceScene, poses: &Tensor<2>, request: &RenderRequest) -> Decisions {
+    let n = scene.len();
+    let [batch, _] = poses.dims();
+    let poses = poses.clone().without_autodiff();
+    let mut decisions = Decisions {
+        means_2d: vec![0.0; 2 * batch * n],
+        depth: vec![0.0; batch * n],
+        radii: vec![0.0; batch * n],
+        visible: vec![false; batch * n],
+    };
+    for start in (0..n).step_by(DECISION_BLOCK) {
+        let len = DECISION_BLOCK.min(n - start);
+        let block = scene.geometry.narrow(start, len).without_autodiff();
+        let projected = project_with_near(&block, poses.clone(), &request.intrinsics, request.near);
+        let (radii, visible) = radii_and_visibility(&projected, request.near);
+        let means = host_f32(&projected.means_2d);
+        let depth = host_f32(&projected.depth);
+        for b in 0..batch {
+            let (from, to) = (b * len, b * n + start);
+            decisions.radii[to..to + len].copy_from_slice(&radii[from..from + len]);
+            decisions.visible[to..to + len].copy_from_slice(&visible[from..from + len]);
+            decisions.depth[to..to + len].copy_from_slice(&depth[from..from + len]);
+            decisions.means_2d[2 * to..2 * (to + len)]
+                .copy_from_slice(&means[2 * from..2 * (from + len)]);
+        }
+    }
+    decisions
 }
 
 /// A per-Gaussian constant channel repeated over the batch. `[B, N, dim]`
