@@ -171,7 +171,9 @@ pub fn render(
     // Decisions (cull, tiles, order, pruning) on all Gaussians without gradient, then the
     // differentiable pass on only the Gaussians some tile uses.
     let grid = TileGrid::new(request.intrinsics.width, request.intrinsics.height);
+    let started = std::time::Instant::now();
     let decisions = decide(scene, &poses, request);
+    let decided = started.elapsed();
     let screen = ScreenData {
         n,
         means_2d: &decisions.means_2d,
@@ -184,6 +186,7 @@ pub fn render(
         None => TileSelection::All,
     };
     let mut work = bin_tiles(&screen, batch, &grid, selection);
+    let binned = started.elapsed();
 
     // used[u] = scene index of the u-th Gaussian some tile needs; lists are renumbered to u.
     let mut compact_from_scene = vec![u32::MAX; n];
@@ -258,14 +261,20 @@ pub fn render(
             .reshape([batch * u]),
         values,
     };
-    Ok(composite(
-        &inputs,
-        &work,
-        u,
-        batch,
-        &grid,
-        request.composite,
-    ))
+    let prepared = started.elapsed();
+    let composited = composite(&inputs, &work, u, batch, &grid, request.composite);
+    // Stage times of the forward graph (backends may defer work, so they are indicative).
+    tracing::debug!(
+        decide_ms = decided.as_secs_f64() * 1e3,
+        bin_ms = (binned - decided).as_secs_f64() * 1e3,
+        project_ms = (prepared - binned).as_secs_f64() * 1e3,
+        composite_ms = (started.elapsed() - prepared).as_secs_f64() * 1e3,
+        gaussians_used = u,
+        tiles = work.len(),
+        pairs = work.iter().map(|w| w.gaussians.len()).sum::<usize>(),
+        "render"
+    );
+    Ok(composited)
 }
 
 /// Gaussians per block of the decision pass: bounds its memory on very large scenes.

@@ -303,3 +303,49 @@ fn pose_gradient_matches_finite_differences() {
         );
     }
 }
+
+#[test]
+fn feature_channels_composite_like_masks() {
+    // Features (m, 1 − m): the first equals the mask render, and the two add up to alpha
+    // (compositing is linear in the values and Σ α_i T_i = 1 − T_final).
+    let (scene, mask) = test_scene(5);
+    let device = Device::flex();
+    let uploaded = DeviceScene::new(&scene, &device, DType::F64);
+    let features: Vec<f32> = mask.iter().flat_map(|&m| [m, 1.0 - m]).collect();
+    let request = RenderRequest::new(
+        intrinsics(),
+        vec![
+            Channel::Features {
+                dim: 2,
+                values: features,
+            },
+            Channel::Mask(mask),
+        ],
+    );
+    let out = render(
+        &uploaded,
+        pose_tensor(&[pose()], &device, DType::F64),
+        &request,
+    )
+    .unwrap();
+    let image = host(out.images);
+    let alpha: Vec<f64> = out
+        .alpha
+        .into_data()
+        .convert::<f64>()
+        .try_to_vec::<f64>()
+        .unwrap();
+    for (p, px) in image.chunks(3).enumerate() {
+        assert!(
+            (px[0] - px[2]).abs() < 1e-12,
+            "pixel {p}: feature 0 {} vs mask {}",
+            px[0],
+            px[2]
+        );
+        assert!(
+            (px[0] + px[1] - alpha[p]).abs() < 1e-12,
+            "pixel {p}: features do not sum to alpha"
+        );
+    }
+    assert!(alpha.iter().any(|&a| a > 0.5));
+}
