@@ -7,6 +7,8 @@
 use burn::tensor::{DType, Device, Tensor, TensorData};
 use splatraj_scene::Scene;
 
+// The reference renderer keeps its own copy of these constants on purpose: it shares no code
+// with the tensor path it checks.
 const C0: f64 = 0.282_094_791_773_878_14;
 const C1: f64 = 0.488_602_511_902_919_9;
 const C2: [f64; 5] = [

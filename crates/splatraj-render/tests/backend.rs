@@ -2,11 +2,14 @@
 //! same image as the independent f64 reference renderer, and the same pose gradient as flex in
 //! f64 (itself checked against finite differences in tests/rasterizer.rs).
 
+mod common;
+
 use burn::tensor::{DType, Tensor, TensorData};
+use common::{host, ref_camera};
 use glam::DVec3;
 use splatraj_render::backend::{BackendKind, Precision};
 use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::reference::{RefCamera, RefChannels, render_reference};
+use splatraj_render::reference::{RefChannels, render_reference};
 use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, render};
 use splatraj_scene::Scene;
 
@@ -56,38 +59,14 @@ fn mask_and_gradient(backend: BackendKind, precision: Precision) -> (Vec<f64>, V
     request.pruning = Pruning::ObjectOnly;
     let out = render(&uploaded, poses.clone(), &request).unwrap();
     let grads = out.images.clone().sum().backward();
-    let image = out
-        .images
-        .into_data()
-        .convert::<f64>()
-        .try_to_vec::<f64>()
-        .unwrap();
-    let grad = poses
-        .grad(&grads)
-        .unwrap()
-        .into_data()
-        .convert::<f64>()
-        .try_to_vec::<f64>()
-        .unwrap();
+    let image = host(out.images);
+    let grad = host(poses.grad(&grads).unwrap());
     (image, grad)
 }
 
 fn reference_mask() -> Vec<f64> {
     let (scene, mask, k, pose) = setup();
-    let r_cw = pose.rotation_wc().transpose();
-    let t = -(r_cw * pose.centre());
-    let row = |i: usize| [r_cw.col(0)[i], r_cw.col(1)[i], r_cw.col(2)[i]];
-    let camera = RefCamera {
-        fx: k.fx,
-        fy: k.fy,
-        cx: k.cx,
-        cy: k.cy,
-        width: k.width,
-        height: k.height,
-        rotation_cw: [row(0), row(1), row(2)],
-        translation_cw: t.to_array(),
-        near: 0.01,
-    };
+    let camera = ref_camera(&pose, &k);
     render_reference(
         &scene,
         &camera,
@@ -172,8 +151,5 @@ fn f64_is_really_f64() {
         TensorData::new(vec![1.0f64 + 1e-12], [1]),
         (&device, DType::F64),
     );
-    assert_eq!(
-        x.into_data().convert::<f64>().try_to_vec::<f64>().unwrap()[0],
-        1.0 + 1e-12
-    );
+    assert_eq!(host(x)[0], 1.0 + 1e-12);
 }

@@ -1,10 +1,13 @@
 //! Inputs that break naive rasterizers: values and pose gradients must stay finite and the
 //! image sensible (and, where the reference renderer is defined, equal to it).
 
+mod common;
+
 use burn::tensor::{DType, Device, Tensor, TensorData};
+use common::{host, ref_camera};
 use glam::DVec3;
 use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::reference::{RefCamera, RefChannels, render_reference};
+use splatraj_render::reference::{RefChannels, render_reference};
 use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, render};
 use splatraj_scene::Scene;
 
@@ -78,22 +81,10 @@ fn run(
     request.pruning = pruning;
     let out = render(&uploaded, poses.clone(), &request).unwrap();
     let grads = (out.images.clone().sum() + out.alpha.clone().sum()).backward();
-    let host = |t: Tensor<4>| t.into_data().convert::<f64>().try_to_vec::<f64>().unwrap();
     Output {
         images: host(out.images),
-        alpha: out
-            .alpha
-            .into_data()
-            .convert::<f64>()
-            .try_to_vec::<f64>()
-            .unwrap(),
-        grad: poses
-            .grad(&grads)
-            .expect("a gradient, even if zero")
-            .into_data()
-            .convert::<f64>()
-            .try_to_vec::<f64>()
-            .unwrap(),
+        alpha: host(out.alpha),
+        grad: host(poses.grad(&grads).expect("a gradient, even if zero")),
     }
 }
 
@@ -151,17 +142,7 @@ fn hard_scene_matches_the_reference_at_omega_zero() {
         k,
         DType::F64,
     );
-    let camera = RefCamera {
-        fx: k.fx,
-        fy: k.fy,
-        cx: k.cx,
-        cy: k.cy,
-        width: k.width,
-        height: k.height,
-        rotation_cw: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-        translation_cw: [0.0; 3],
-        near: 0.01,
-    };
+    let camera = ref_camera(&Pose([0.0; 6]), &k);
     let reference = render_reference(
         &scene,
         &camera,
@@ -274,13 +255,7 @@ fn a_million_gaussians_render_in_bounded_blocks() {
     let out = render(&uploaded, poses.clone(), &request).unwrap();
     let coverage = out.images.clone().mean().into_scalar::<f64>();
     let grads = out.images.sum().backward();
-    let grad = poses
-        .grad(&grads)
-        .unwrap()
-        .into_data()
-        .convert::<f64>()
-        .try_to_vec::<f64>()
-        .unwrap();
+    let grad = host(poses.grad(&grads).unwrap());
     // The object is a 0.4 × 0.4 square at depth 5: 3.2 × 3.2 pixels of 64 × 64, nearly opaque.
     assert!(
         coverage > 0.5 * 10.24 / 4096.0 && coverage < 2.0 * 10.24 / 4096.0,

@@ -2,11 +2,14 @@
 //! chunking against the plain render (exactness), and its pose gradient against finite
 //! differences.
 
+mod common;
+
 use burn::tensor::{DType, Device, Tensor, TensorData};
+use common::{host, pose_tensor, ref_camera};
 use glam::DVec3;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::rasterize::CompositeOptions;
-use splatraj_render::reference::{RefCamera, RefChannels, render_reference};
+use splatraj_render::reference::{RefChannels, render_reference};
 use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, render};
 use splatraj_scene::Scene;
 
@@ -34,12 +37,12 @@ fn test_scene(seed: u64) -> (Scene, Vec<f32>) {
         ..Default::default()
     };
     let mut mask = Vec::new();
-    let mut push = |scene: &mut Scene,
-                    mean: [f64; 3],
-                    scale: [f64; 3],
-                    rotation: [f64; 4],
-                    opacity: f64,
-                    rng: &mut Rng| {
+    let push = |scene: &mut Scene,
+                mean: [f64; 3],
+                scale: [f64; 3],
+                rotation: [f64; 4],
+                opacity: f64,
+                rng: &mut Rng| {
         scene.means.push(mean.map(|v| v as f32));
         scene.scales.push(scale.map(|v| v as f32));
         let norm = rotation.iter().map(|v| v * v).sum::<f64>().sqrt();
@@ -100,32 +103,6 @@ fn pose() -> Pose {
     .unwrap()
 }
 
-fn ref_camera(pose: &Pose, k: &Intrinsics) -> RefCamera {
-    let r_cw = pose.rotation_wc().transpose();
-    let t = -(r_cw * pose.centre());
-    let row = |i: usize| [r_cw.col(0)[i], r_cw.col(1)[i], r_cw.col(2)[i]];
-    RefCamera {
-        fx: k.fx,
-        fy: k.fy,
-        cx: k.cx,
-        cy: k.cy,
-        width: k.width,
-        height: k.height,
-        rotation_cw: [row(0), row(1), row(2)],
-        translation_cw: t.to_array(),
-        near: 0.01,
-    }
-}
-
-fn pose_tensor(poses: &[Pose], device: &Device, dtype: DType) -> Tensor<2> {
-    let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
-    Tensor::from_data(TensorData::new(flat, [poses.len(), 6]), (device, dtype))
-}
-
-fn host(t: Tensor<4>) -> Vec<f64> {
-    t.into_data().convert::<f64>().try_to_vec::<f64>().unwrap()
-}
-
 fn max_diff(a: &[f64], b: &[f64]) -> f64 {
     assert_eq!(a.len(), b.len());
     a.iter().zip(b).fold(0.0, |m, (x, y)| m.max((x - y).abs()))
@@ -160,12 +137,7 @@ fn compare_with_reference(dtype: DType, tolerance: f64) {
     }
     let error = max_diff(&got, &want);
     assert!(error <= tolerance, "{dtype:?}: max abs difference {error}");
-    let alpha: Vec<f64> = out
-        .alpha
-        .into_data()
-        .convert::<f64>()
-        .try_to_vec::<f64>()
-        .unwrap();
+    let alpha: Vec<f64> = host(out.alpha);
     assert!(max_diff(&alpha, &reference.alpha) <= tolerance);
     // The scene must exercise early termination: some pixel saturated near 1 − 1e-4.
     assert!(
@@ -212,13 +184,7 @@ fn mask_and_gradient(pruning: Pruning, composite: CompositeOptions) -> (Vec<f64>
         (&device, DType::F64),
     );
     let grads = (out.images.clone() * weights).sum().backward();
-    let grad = poses
-        .grad(&grads)
-        .unwrap()
-        .into_data()
-        .convert::<f64>()
-        .try_to_vec::<f64>()
-        .unwrap();
+    let grad = host(poses.grad(&grads).unwrap());
     (host(out.images), grad)
 }
 
@@ -280,13 +246,7 @@ fn pose_gradient_matches_finite_differences() {
     let device = Device::flex().autodiff();
     let poses = pose_tensor(&[base], &device, DType::F64).require_grad();
     let grads = loss(&device, poses.clone()).backward();
-    let grad = poses
-        .grad(&grads)
-        .unwrap()
-        .into_data()
-        .convert::<f64>()
-        .try_to_vec::<f64>()
-        .unwrap();
+    let grad = host(poses.grad(&grads).unwrap());
     let plain = Device::flex();
     let value = |p: Pose| loss(&plain, pose_tensor(&[p], &plain, DType::F64)).into_scalar::<f64>();
     for i in 0..6 {
@@ -329,12 +289,7 @@ fn feature_channels_composite_like_masks() {
     )
     .unwrap();
     let image = host(out.images);
-    let alpha: Vec<f64> = out
-        .alpha
-        .into_data()
-        .convert::<f64>()
-        .try_to_vec::<f64>()
-        .unwrap();
+    let alpha: Vec<f64> = host(out.alpha);
     for (p, px) in image.chunks(3).enumerate() {
         assert!(
             (px[0] - px[2]).abs() < 1e-12,

@@ -1,0 +1,35 @@
+//! Helpers shared by the render crate's integration tests.
+#![allow(dead_code)] // each test binary uses a different subset
+
+use burn::tensor::{DType, Device, Tensor, TensorData};
+use splatraj_render::camera::{Intrinsics, Pose};
+use splatraj_render::reference::RefCamera;
+
+/// The reference renderer's camera for a pose and intrinsics (near plane 0.01).
+pub fn ref_camera(pose: &Pose, k: &Intrinsics) -> RefCamera {
+    let r_cw = pose.rotation_wc().transpose();
+    let t = -(r_cw * pose.centre());
+    let row = |i: usize| [r_cw.col(0)[i], r_cw.col(1)[i], r_cw.col(2)[i]];
+    RefCamera {
+        fx: k.fx,
+        fy: k.fy,
+        cx: k.cx,
+        cy: k.cy,
+        width: k.width,
+        height: k.height,
+        rotation_cw: [row(0), row(1), row(2)],
+        translation_cw: t.to_array(),
+        near: 0.01,
+    }
+}
+
+/// Poses as a `[B, 6]` tensor.
+pub fn pose_tensor(poses: &[Pose], device: &Device, dtype: DType) -> Tensor<2> {
+    let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
+    Tensor::from_data(TensorData::new(flat, [poses.len(), 6]), (device, dtype))
+}
+
+/// A tensor's values as f64 on the host, row-major.
+pub fn host<const D: usize>(t: Tensor<D>) -> Vec<f64> {
+    t.into_data().convert::<f64>().try_to_vec::<f64>().unwrap()
+}
