@@ -1,0 +1,142 @@
+//! `features` source: per-Gaussian embeddings scored against a text embedding, LERF style.
+
+use rayon::prelude::*;
+use splatraj_scene::Scene;
+
+use crate::embeddings::{Matrix, PhraseTable};
+use crate::error::{Result, SemanticError};
+use crate::sources::{Relevancy, Scoring, TargetSource};
+use crate::vectors::{self, DEFAULT_NEGATIVES, DEFAULT_TEMPERATURE};
+
+/// Where the per-Gaussian feature vectors come from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FeatureInput {
+    /// The scene's own `extras.features` (PLY properties such as `semantic_0..`).
+    Scene,
+    /// A matrix read from a sidecar (see [`crate::embeddings::read_feature_sidecar`]).
+    Sidecar(Matrix),
+}
+
+/// Relevancy of each Gaussian to a phrase, as in LERF and LangSplat:
+///
+/// r = min over negatives n of exp(τ·cos(f, q)) / (exp(τ·cos(f, q)) + exp(τ·cos(f, n)))
+///
+/// with f the Gaussian's feature, q the query phrase's embedding and n each canonical negative
+/// phrase's embedding, all looked up in the phrase table. r lies in (0, 1); 0.5 means "no more
+/// like the query than like the most similar negative".
+#[derive(Debug, Clone)]
+pub struct FeaturesSource {
+    /// Where the per-Gaussian features come from.
+    pub features: FeatureInput,
+    /// Text embeddings of the query phrases and the negatives.
+    pub table: PhraseTable,
+    /// Canonical negative phrases; each must be in the table.
+    pub negatives: Vec<String>,
+    /// Temperature τ scaling the cosines.
+    pub temperature: f32,
+}
+
+impl FeaturesSource {
+    /// A source with the default negatives ("object", "things", "stuff", "texture") and
+    /// temperature (10).
+    pub fn new(features: FeatureInput, table: PhraseTable) -> Self {
+        FeaturesSource {
+            features,
+            table,
+            negatives: DEFAULT_NEGATIVES.iter().map(|s| s.to_string()).collect(),
+            temperature: DEFAULT_TEMPERATURE,
+        }
+    }
+}
+
+impl TargetSource for FeaturesSource {
+    fn kind(&self) -> &'static str {
+        "features"
+    }
+
+    fn relevancy(&self, scene: &Scene, query: &str) -> Result<Relevancy> {
+        if !(self.temperature.is_finite() && self.temperature > 0.0) {
+            return Err(SemanticError::option(
+                "temperature",
+                format!("{} must be finite and > 0", self.temperature),
+            ));
+        }
+        if self.negatives.is_empty() {
+            return Err(SemanticError::option(
+                "negatives",
+                "at least one canonical negative phrase is needed: without one every relevancy \
+                 is 1 and nothing can be told apart",
+            ));
+        }
+        let (source, dim, rows, values): (String, usize, usize, &[f32]) =
+            match &self.features {
+                FeatureInput::Scene => {
+                    let f = scene.extras.features.as_ref().ok_or_else(|| {
+                        SemanticError::MissingData {
+                            source_kind: "features",
+                            detail:
+                                "the scene has no per-Gaussian features: give a feature sidecar \
+                             (.npy or .safetensors, [N, D]) or a scene with feature properties"
+                                    .to_string(),
+                        }
+                    })?;
+                    let rows = f.values.len().checked_div(f.dim).unwrap_or(0);
+                    (
+                        format!(
+                            "scene features ({})",
+                            f.names.first().map_or("", String::as_str)
+                        ),
+                        f.dim,
+                        rows,
+                        &f.values,
+                    )
+                }
+                FeatureInput::Sidecar(m) => (m.source.clone(), m.dim, m.rows, &m.values),
+            };
+        if rows != scene.len() {
+            return Err(SemanticError::Mismatch(format!(
+                "{source}: {rows} feature vectors for a scene of {} Gaussians",
+                scene.len()
+            )));
+        }
+        if dim != self.table.dim() {
+            return Err(SemanticError::Mismatch(format!(
+                "{source} has vectors of length {dim} but the phrase table {} has length {}: \
+                 they must come from the same embedding model",
+                self.table.source,
+                self.table.dim()
+            )));
+        }
+        let q = vectors::unit(self.table.get(query, "phrase")?, || {
+            format!("the embedding of phrase {query:?} in {}", self.table.source)
+        })?;
+        let negatives = self
+            .negatives
+            .iter()
+            .map(|n| {
+                vectors::unit(self.table.get(n, "canonical negative phrase")?, || {
+                    format!(
+                        "the embedding of negative phrase {n:?} in {}",
+                        self.table.source
+                    )
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let tau = self.temperature;
+        let values = values
+            .par_chunks_exact(dim)
+            .enumerate()
+            .map(|(i, f)| {
+                let f = vectors::unit(f, || {
+                    format!("the feature vector of Gaussian {i} in {source}")
+                })?;
+                Ok(vectors::relevancy(&f, &q, &negatives, tau))
+            })
+            .collect::<Result<Vec<f32>>>()?;
+        Ok(Relevancy {
+            name: query.trim().to_string(),
+            values,
+            scoring: Scoring::Graded,
+        })
+    }
+}

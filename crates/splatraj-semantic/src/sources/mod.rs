@@ -1,0 +1,53 @@
+//! Target sources: each turns a query into one value per Gaussian.
+//!
+//! One file per source; adding a source is adding a file here that implements
+//! [`TargetSource`]. Selection (thresholds, DBSCAN) is not the sources' job: it lives in
+//! [`crate::selection`] and reads the [`Scoring`] a source declares.
+
+pub mod features;
+pub mod labels;
+pub mod region;
+
+use serde::Serialize;
+use splatraj_scene::Scene;
+
+use crate::error::Result;
+
+pub use features::{FeatureInput, FeaturesSource};
+pub use labels::LabelsSource;
+pub use region::{Region, RegionSource};
+
+/// How the values of a [`Relevancy`] are to be read by the selection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Scoring {
+    /// Values are already a 0/1 selection (labels, regions): thresholds do not apply.
+    /// `cluster` asks for DBSCAN on the selected Gaussians all the same.
+    Mask {
+        /// Run DBSCAN on the selected Gaussians.
+        cluster: bool,
+    },
+    /// Graded scores (relevancy in [0, 1]): percentile and floor, then DBSCAN.
+    Graded,
+}
+
+/// What a source says about every Gaussian for one query.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Relevancy {
+    /// Canonical name of what the query matched (label name, phrase, region name).
+    pub name: String,
+    /// One value per Gaussian.
+    pub values: Vec<f32>,
+    /// How the values are to be read.
+    pub scoring: Scoring,
+}
+
+/// A way to turn a text query into per-Gaussian relevancy or selection.
+pub trait TargetSource {
+    /// Short name of the source kind, for messages ("labels", "region", "features").
+    fn kind(&self) -> &'static str;
+
+    /// One value per Gaussian of `scene` for `query`, or an error when the query matches
+    /// nothing (listing the closest names) or the scene lacks the data the source needs.
+    fn relevancy(&self, scene: &Scene, query: &str) -> Result<Relevancy>;
+}
