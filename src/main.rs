@@ -19,6 +19,11 @@ enum Command {
     /// Inspect, convert or generate scene files.
     #[command(subcommand)]
     Scene(commands::scene::SceneCommand),
+    /// Render one camera of a scene: RGB and object mask, optionally costs and pose gradient.
+    Render(commands::render::RenderArgs),
+    /// Benchmarks.
+    #[command(subcommand)]
+    Bench(commands::bench::BenchCommand),
 }
 
 fn main() -> ExitCode {
@@ -38,6 +43,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Scene(command) => commands::scene::run(command),
+        Command::Render(args) => commands::render::run(args),
+        Command::Bench(command) => commands::bench::run(command),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,3 +1,5 @@
 //! One module per top-level subcommand.
 
+pub mod bench;
+pub mod render;
 pub mod scene;

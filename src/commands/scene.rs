@@ -62,7 +62,8 @@ pub struct ReadArgs {
 }
 
 impl ReadArgs {
-    fn options(&self) -> ReadOptions {
+    /// The scene reader's options these flags ask for.
+    pub(crate) fn options(&self) -> ReadOptions {
         ReadOptions {
             invalid: if self.drop_invalid {
                 InvalidPolicy::Drop

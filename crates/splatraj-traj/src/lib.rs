@@ -9,3 +9,5 @@
 //! whatever device and dtype the images live on, differentiably when that device is autodiff.
 
 pub mod costs;
+pub mod metrics;
+pub mod trajectory;

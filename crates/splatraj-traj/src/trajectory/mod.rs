@@ -1,0 +1,388 @@
+//! Trajectory models: camera poses Φ(t) `[B, 6]` as a linear function of fixed bases of t.
+//!
+//! Every model of DESIGN.md ("Optimisation problem") has the same shape: six independent scalar
+//! functions of normalised time t ∈ [0, 1], each a weighted sum of the same K basis functions,
+//!
+//! ```text
+//! Φ(t) = Ψ(t) · W        Ψ(t): [B, K] basis values, W: [K, 6] weights (the only parameters)
+//! ```
+//!
+//! with Φ = [ω_x, ω_y, ω_z, c_x, c_y, c_z] (rotation vector of R_wc, camera centre; DESIGN.md
+//! "Conventions"). Models differ only in Ψ, so the design splits the two:
+//!
+//! - [`Basis`] is a plain trait (no burn types in its required methods): the number of bases K
+//!   and ψ_k(t) on the host in f64; optionally a tensor evaluation that avoids a host round trip.
+//!   One file per model implements it: [`rbf`] (SplaTraj), [`waypoint`], [`polynomial`].
+//! - [`TrajectoryModel`] is the serialisable choice among them (`kind = "rbf" | "waypoint" |
+//!   "polynomial"` plus that model's parameters), an enum that forwards [`Basis`] to its variant.
+//! - [`Trajectory`] is the one burn Module: `weights: Param<Tensor<2>>` `[K, 6]` plus the model
+//!   as a `#[module(skip)]` field (burn 0.22's derive needs Debug + Clone + Send for a skipped
+//!   field and keeps it out of parameter traversal, device moves and records).
+//!
+//! Why not a generic `Trajectory<B: Basis>` or a `Box<dyn Basis>` inside the module: the model is
+//! chosen at run time from the config, and the optimiser, checkpoints and `trajectory.json` want
+//! one concrete, serialisable Module type. A generic would push the dispatch into every caller;
+//! a trait object cannot be (de)serialised without extra machinery. The enum keeps both, at the
+//! price that a new model is one new file implementing [`Basis`] plus one variant line in
+//! [`TrajectoryModel`] (and its two forwarding match arms).
+//!
+//! Times outside [0, 1] are accepted: the RBF and polynomial models extend analytically, the
+//! waypoint model holds its first/last segment. Rotation vectors are fitted and interpolated
+//! component-wise, so a pose sequence handed to [`Trajectory::fit`] should not jump between
+//! equivalent rotation vectors (θ and θ − 2π along the same axis): unwrap it first.
+
+pub mod polynomial;
+pub mod rbf;
+pub mod waypoint;
+
+mod lstsq;
+
+use burn::module::{Module, Param};
+use burn::tensor::{DType, Device, Tensor, TensorData};
+use serde::{Deserialize, Serialize};
+
+pub use lstsq::DEFAULT_RIDGE;
+pub use polynomial::Polynomial;
+pub use rbf::Rbf;
+pub use waypoint::Waypoint;
+
+/// Number of pose components: rotation vector (3) then camera centre (3).
+pub const POSE_DIM: usize = 6;
+
+/// One camera pose Φ = [ω_x, ω_y, ω_z, c_x, c_y, c_z] on the host.
+pub type Pose = [f64; POSE_DIM];
+
+/// Why a trajectory model or trajectory could not be built.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TrajectoryError {
+    /// A model parameter is out of range; `key` is the parameter's name in the config.
+    #[error("trajectory model: `{key}` {reason}")]
+    InvalidModel {
+        /// Config key of the offending parameter (e.g. `sigma`).
+        key: &'static str,
+        /// What is wrong and what is allowed.
+        reason: String,
+    },
+    /// The weights do not have one row per basis function.
+    #[error("trajectory weights: expected {expected} rows (one per basis function), got {got}")]
+    WeightRows {
+        /// Number of basis functions K of the model.
+        expected: usize,
+        /// Rows given.
+        got: usize,
+    },
+    /// Fitting data is inconsistent (lengths differ, nothing given, or a non-finite value).
+    #[error("trajectory fit: {0}")]
+    FitData(String),
+}
+
+/// A family of K scalar basis functions ψ_k(t); one implementation per trajectory model.
+pub trait Basis {
+    /// Number of basis functions K (rows of the weight matrix).
+    fn count(&self) -> usize;
+
+    /// Checks the model's parameters; every constructor of [`Trajectory`] calls it first.
+    fn validate(&self) -> Result<(), TrajectoryError>;
+
+    /// Writes ψ_1(t) … ψ_K(t) into `row` (length K), in f64 on the host.
+    fn eval_into(&self, t: f64, row: &mut [f64]);
+
+    /// Basis matrix for `times`, row-major `[B, K]`, on the host.
+    fn matrix(&self, times: &[f64]) -> Vec<f64> {
+        let k = self.count();
+        let mut out = vec![0.0; times.len() * k];
+        for (row, &t) in out.chunks_exact_mut(k).zip(times) {
+            self.eval_into(t, row);
+        }
+        out
+    }
+
+    /// Basis matrix `[B, K]` for times `[B]`, on the times' device and in their dtype.
+    ///
+    /// The default reads the times back to the host and evaluates [`Basis::matrix`]; models whose
+    /// basis is a few elementwise ops override it to stay on the device. Times carry no gradient
+    /// (they are sampled, not optimised), so neither version needs to differentiate in t.
+    fn tensor(&self, times: Tensor<1>) -> Tensor<2> {
+        let (device, dtype) = (times.device(), times.dtype());
+        let [batch] = times.dims();
+        let host = times
+            .into_data()
+            .try_into_vec_as::<f64>()
+            .expect("float tensor data converts to f64");
+        let data = TensorData::new(self.matrix(&host), [batch, self.count()]);
+        Tensor::from_data(data, (&device, dtype))
+    }
+}
+
+/// The trajectory model chosen in the config: which basis, with its parameters.
+///
+/// Serialised with an internal tag, e.g. TOML `kind = "rbf"`, `centres_per_window = 3`;
+/// unknown keys are errors.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum TrajectoryModel {
+    /// Squared-exponential RBFs, centres spread over the query windows (SplaTraj).
+    Rbf(Rbf),
+    /// Piecewise-constant segments (baseline).
+    Waypoint(Waypoint),
+    /// Monomials 1, t, …, t^(N−1) (baseline).
+    Polynomial(Polynomial),
+}
+
+impl Default for TrajectoryModel {
+    /// The paper's model: RBF with its defaults.
+    fn default() -> Self {
+        Self::Rbf(Rbf::default())
+    }
+}
+
+impl TrajectoryModel {
+    /// The model's basis as a trait object (the one place that lists the variants).
+    pub fn basis(&self) -> &dyn Basis {
+        match self {
+            Self::Rbf(b) => b,
+            Self::Waypoint(b) => b,
+            Self::Polynomial(b) => b,
+        }
+    }
+
+    /// The model's config name (`rbf`, `waypoint`, `polynomial`), as in `kind`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Rbf(_) => "rbf",
+            Self::Waypoint(_) => "waypoint",
+            Self::Polynomial(_) => "polynomial",
+        }
+    }
+
+    /// The same model for `n` query windows: sets the RBF's window count, leaves others as
+    /// they are (their bases do not depend on the queries).
+    pub fn with_windows(self, n: usize) -> Self {
+        match self {
+            Self::Rbf(rbf) => Self::Rbf(Rbf { windows: n, ..rbf }),
+            other => other,
+        }
+    }
+}
+
+impl Basis for TrajectoryModel {
+    fn count(&self) -> usize {
+        self.basis().count()
+    }
+    fn validate(&self) -> Result<(), TrajectoryError> {
+        self.basis().validate()
+    }
+    fn eval_into(&self, t: f64, row: &mut [f64]) {
+        self.basis().eval_into(t, row)
+    }
+    fn matrix(&self, times: &[f64]) -> Vec<f64> {
+        self.basis().matrix(times)
+    }
+    fn tensor(&self, times: Tensor<1>) -> Tensor<2> {
+        self.basis().tensor(times)
+    }
+}
+
+/// A model with its weights, as written to `trajectory.json` and read back.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrajectoryRecord {
+    /// Which basis and its parameters.
+    pub model: TrajectoryModel,
+    /// Weights W, one row of six per basis function `[K][6]`.
+    pub weights: Vec<Pose>,
+}
+
+/// A camera trajectory Φ(t) = Ψ(t)·W: the burn Module the optimiser updates.
+#[derive(Module, Debug)]
+pub struct Trajectory {
+    /// Weights W `[K, 6]`: row k scales basis ψ_k in each of the six pose components.
+    pub weights: Param<Tensor<2>>,
+    /// The basis; not a parameter (skipped by the Module derive).
+    #[module(skip)]
+    model: TrajectoryModel,
+}
+
+impl Trajectory {
+    /// A trajectory with all weights zero (Φ ≡ 0), in `dtype` on `device`.
+    pub fn zeros(
+        model: TrajectoryModel,
+        device: &Device,
+        dtype: DType,
+    ) -> Result<Self, TrajectoryError> {
+        model.validate()?;
+        let weights = vec![[0.0; POSE_DIM]; model.count()];
+        Self::from_weights(model, &weights, device, dtype)
+    }
+
+    /// A trajectory with the given weights `[K][6]`, in `dtype` on `device`.
+    pub fn from_weights(
+        model: TrajectoryModel,
+        weights: &[Pose],
+        device: &Device,
+        dtype: DType,
+    ) -> Result<Self, TrajectoryError> {
+        model.validate()?;
+        if weights.len() != model.count() {
+            return Err(TrajectoryError::WeightRows {
+                expected: model.count(),
+                got: weights.len(),
+            });
+        }
+        let flat: Vec<f64> = weights.iter().flatten().copied().collect();
+        let data = TensorData::new(flat, [weights.len(), POSE_DIM]);
+        let weights = Param::from_tensor(Tensor::from_data(data, (device, dtype)));
+        Ok(Self { weights, model })
+    }
+
+    /// A trajectory from a record (e.g. a `trajectory.json` read back).
+    pub fn from_record(
+        record: &TrajectoryRecord,
+        device: &Device,
+        dtype: DType,
+    ) -> Result<Self, TrajectoryError> {
+        Self::from_weights(record.model.clone(), &record.weights, device, dtype)
+    }
+
+    /// The least-squares trajectory of this model through `poses` at `times`.
+    ///
+    /// Minimises Σ_b ‖Ψ(t_b)·W − Φ_b‖² + λ‖W‖² on the host in f64 (Householder QR of the
+    /// ridge-augmented basis matrix, so the normal equations' squared condition number is never
+    /// formed), with λ = ([`DEFAULT_RIDGE`] · largest basis column norm)². The ridge is only
+    /// there for bases the times do not reach (a waypoint segment without a sample gets weight
+    /// 0): sample at least as densely as the model's finest feature. Used to start from a given
+    /// trajectory and to move a trajectory from one model to another.
+    pub fn fit(
+        model: TrajectoryModel,
+        times: &[f64],
+        poses: &[Pose],
+        device: &Device,
+        dtype: DType,
+    ) -> Result<Self, TrajectoryError> {
+        Self::fit_with_ridge(model, times, poses, DEFAULT_RIDGE, device, dtype)
+    }
+
+    /// [`Trajectory::fit`] with an explicit relative ridge (√λ over the largest column norm).
+    pub fn fit_with_ridge(
+        model: TrajectoryModel,
+        times: &[f64],
+        poses: &[Pose],
+        ridge: f64,
+        device: &Device,
+        dtype: DType,
+    ) -> Result<Self, TrajectoryError> {
+        model.validate()?;
+        if times.len() != poses.len() {
+            return Err(TrajectoryError::FitData(format!(
+                "{} times but {} poses",
+                times.len(),
+                poses.len()
+            )));
+        }
+        if times.is_empty() {
+            return Err(TrajectoryError::FitData("no poses to fit".into()));
+        }
+        if !(ridge.is_finite() && ridge >= 0.0) {
+            return Err(TrajectoryError::FitData(format!(
+                "ridge must be finite and ≥ 0, got {ridge}"
+            )));
+        }
+        if let Some(b) = (0..times.len())
+            .find(|&b| !times[b].is_finite() || poses[b].iter().any(|v| !v.is_finite()))
+        {
+            return Err(TrajectoryError::FitData(format!(
+                "sample {b} (t = {}) is not finite",
+                times[b]
+            )));
+        }
+        let basis = model.matrix(times);
+        let targets: Vec<f64> = poses.iter().flatten().copied().collect();
+        let weights = lstsq::ridge_lstsq(&basis, times.len(), model.count(), &targets, ridge);
+        Self::from_weights(model, &weights, device, dtype)
+    }
+
+    /// This trajectory's poses re-fitted with another model on `samples` evenly spaced times.
+    pub fn refit(&self, model: TrajectoryModel, samples: usize) -> Result<Self, TrajectoryError> {
+        let times = uniform_times(samples);
+        let poses = self.poses_at(&times);
+        let value = self.weights.val();
+        Self::fit(model, &times, &poses, &value.device(), value.dtype())
+    }
+
+    /// The basis model.
+    pub fn model(&self) -> &TrajectoryModel {
+        &self.model
+    }
+
+    /// Weights W on the host, one row of six per basis function `[K][6]`.
+    pub fn host_weights(&self) -> Vec<Pose> {
+        let flat = self
+            .weights
+            .val()
+            .into_data()
+            .try_into_vec_as::<f64>()
+            .expect("float tensor data converts to f64");
+        flat.chunks_exact(POSE_DIM)
+            .map(|row| row.try_into().expect("rows of six"))
+            .collect()
+    }
+
+    /// Model and weights, ready to serialise.
+    pub fn record(&self) -> TrajectoryRecord {
+        TrajectoryRecord {
+            model: self.model.clone(),
+            weights: self.host_weights(),
+        }
+    }
+
+    /// Poses Φ(t) `[B, 6]` for times `[B]` (same device as the weights; any float dtype, the
+    /// basis is evaluated in the weights' dtype). Differentiable in the weights.
+    pub fn forward(&self, times: Tensor<1>) -> Tensor<2> {
+        let weights = self.weights.val();
+        let dtype = weights.dtype();
+        // Evaluate the basis in the weights' dtype: an f32 time grid against f64 weights would
+        // otherwise panic in the matmul (mixed dtypes), and f64 times keep full precision.
+        let times = if times.dtype() == dtype {
+            times
+        } else {
+            times.cast(dtype)
+        };
+        let basis = self.model.tensor(times); // [B, K]
+        let basis = if basis.dtype() == dtype {
+            basis
+        } else {
+            basis.cast(dtype)
+        };
+        basis.matmul(weights) // [B, K]·[K, 6] = [B, 6]
+    }
+
+    /// Poses Φ(t) at any times, on the host in f64 (reads the weights once).
+    pub fn poses_at(&self, times: &[f64]) -> Vec<Pose> {
+        let weights = self.host_weights();
+        let k = self.model.count();
+        let basis = self.model.matrix(times);
+        basis
+            .chunks_exact(k)
+            .map(|row| {
+                let mut pose = [0.0; POSE_DIM];
+                for (psi, w) in row.iter().zip(&weights) {
+                    for (p, wj) in pose.iter_mut().zip(w) {
+                        *p += psi * wj;
+                    }
+                }
+                pose
+            })
+            .collect()
+    }
+}
+
+/// `count` evenly spaced times from 0 to 1 inclusive (`[0.0]` for one, empty for zero).
+pub fn uniform_times(count: usize) -> Vec<f64> {
+    match count {
+        0 => Vec::new(),
+        1 => vec![0.0],
+        _ => {
+            let last = (count - 1) as f64;
+            (0..count).map(|i| i as f64 / last).collect()
+        }
+    }
+}
