@@ -1,12 +1,12 @@
 //! Camera trajectories for splatraj: what the optimiser minimises and how.
 //!
-//! This crate will hold the trajectory models (RBF, waypoint, polynomial), the costs behind a
-//! common trait, the optimisers (Adam, SGLD) and the metrics (TCE, TRE, IoU, LDJ). Today it
-//! holds the two image costs of DESIGN.md as plain differentiable burn tensor functions on
-//! rendered mask images `[B, H, W]`: [`costs::tce`] (target centring error) and [`costs::tre`]
-//! (target ratio error). It does not render (that is `splatraj-render`, which produces the mask
-//! images), read scenes or pick objects; it only turns images into scalars per sample, on
-//! whatever device and dtype the images live on, differentiably when that device is autodiff.
+//! Today it holds the trajectory models ([`trajectory`]: RBF, waypoint and polynomial bases
+//! behind the `Basis` trait, one burn Module `Trajectory` mapping times to poses Φ(t)), the
+//! smoothness metric LDJ ([`metrics`]), and the two image costs of DESIGN.md as differentiable
+//! tensor functions on rendered mask images `[B, H, W]` ([`costs`]: target centring error and
+//! target ratio error). Still to come (issue 4): the costs behind a common trait with weights
+//! (upright, prior, IoU), the optimisers (Adam, SGLD), the per-window metrics and the run
+//! itself. It does not render (that is `splatraj-render`), read scenes or pick objects.
 
 pub mod costs;
 pub mod metrics;
