@@ -1,10 +1,12 @@
 //! splatraj: camera trajectories that show named objects in 3D Gaussian Splatting scenes.
 //!
 //! This package is the command-line tool and a thin facade over the pipeline's crates:
-//! [`scene`] (files, data model, demo scene) → [`render`] (camera, rasterizer) → [`traj`]
-//! (costs; trajectories and optimisers to come). It adds no
-//! logic of its own beyond the CLI, so library users can depend on the crates directly.
+//! [`scene`] (files, data model, demo scene) → [`semantic`] (query → the object's Gaussians)
+//! → [`render`] (camera, rasterizer) → [`traj`] (costs; trajectories and optimisers to come).
+//! It adds no logic of its own beyond the CLI, so library users can depend on the crates
+//! directly.
 
 pub use splatraj_render as render;
 pub use splatraj_scene as scene;
+pub use splatraj_semantic as semantic;
 pub use splatraj_traj as traj;

@@ -21,6 +21,8 @@ enum Command {
     Scene(commands::scene::SceneCommand),
     /// Render one camera of a scene: RGB and object mask, optionally costs and pose gradient.
     Render(commands::render::RenderArgs),
+    /// Show what a query selects (labels, region or language features) and picture it.
+    Query(commands::query::QueryArgs),
     /// Benchmarks.
     #[command(subcommand)]
     Bench(commands::bench::BenchCommand),
@@ -44,6 +46,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Scene(command) => commands::scene::run(command),
         Command::Render(args) => commands::render::run(args),
+        Command::Query(args) => commands::query::run(args),
         Command::Bench(command) => commands::bench::run(command),
     };
     match result {

@@ -1,0 +1,733 @@
+//! `splatraj query`: what a semantic query selects in a scene, as text (or JSON) and as a
+//! picture.
+//!
+//! The query goes through one of the semantic sources (labels, a region, or per-Gaussian
+//! language features scored against a phrase table) and the selection (percentile, floor,
+//! DBSCAN) of `splatraj-semantic`. The command prints the counts, clusters, relevancy spread,
+//! centre and extent, and renders `query.png`: the RGB render from a camera that looks at the
+//! selection's centre from 30° above the horizontal (`--elevation`), at a distance where its extent fills
+//! about a third of the frame, with the selected Gaussians tinted magenta. Every input is read
+//! and checked, and the picture rendered, before the file is written (whole or not at all).
+
+use std::collections::BTreeMap;
+use std::io::Cursor;
+use std::path::PathBuf;
+use std::str::FromStr;
+
+use anyhow::{Context, Result, anyhow, bail};
+use burn::tensor::{DType, Device, Tensor, TensorData};
+use clap::{Args, ValueEnum};
+use glam::DVec3;
+use serde::Serialize;
+use splatraj_render::backend::{BackendKind, Precision};
+use splatraj_render::camera::{Intrinsics, Pose};
+use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, render};
+use splatraj_scene::atomic::write_atomically;
+use splatraj_scene::{Scene, guess_up_axis, read_scene};
+use splatraj_semantic::selection::{DEFAULT_FLOOR, DEFAULT_TOP_FRACTION};
+use splatraj_semantic::vectors::DEFAULT_TEMPERATURE;
+use splatraj_semantic::{
+    ClusterOptions, FeatureInput, FeaturesSource, LabelsSource, PhraseTable, Region, RegionSource,
+    SelectionOptions, Target, TargetSource, find_target, read_feature_sidecar,
+};
+
+use super::render::{host, mask_request, pose_tensor};
+use super::scene::ReadArgs;
+
+/// Horizontal field of view of the diagnostic camera, degrees.
+const FOV_X_DEGREES: f64 = 60.0;
+/// Default elevation of the viewing direction above the horizontal, degrees.
+const DEFAULT_ELEVATION_DEGREES: f64 = 30.0;
+/// Share of the frame's smaller side the selection's extent should span.
+const FRAME_SHARE: f64 = 1.0 / 3.0;
+/// Opacity of the highlight.
+const HIGHLIGHT: f64 = 0.6;
+/// Highlight colour (magenta).
+const HIGHLIGHT_RGB: [f64; 3] = [1.0, 0.2, 0.8];
+/// Name of the picture written into `--out`.
+const IMAGE_NAME: &str = "query.png";
+
+/// Arguments of `splatraj query`.
+#[derive(Debug, Args)]
+pub struct QueryArgs {
+    /// Scene file (INRIA PLY, compressed PLY or SPZ).
+    #[arg(long)]
+    scene: PathBuf,
+    #[command(flatten)]
+    read: ReadArgs,
+    /// What to look for: a label name or id (labels), any name (region), a phrase of the
+    /// phrase table (features).
+    #[arg(long)]
+    query: String,
+    /// Target source; by default `region` when --box/--sphere is given, `features` when
+    /// --phrases or --features is given, else `labels` when the scene has labels, else
+    /// `features` when it has feature vectors and a phrase table is given.
+    #[arg(long, value_enum)]
+    source: Option<SourceKind>,
+    /// labels: synonyms of a label, `NAME=ALT1,ALT2` (repeatable).
+    #[arg(long, value_name = "NAME=ALT1,ALT2")]
+    synonym: Vec<String>,
+    /// region: an axis-aligned box in world coordinates.
+    #[arg(
+        long = "box",
+        value_name = "MINX,MINY,MINZ,MAXX,MAXY,MAXZ",
+        conflicts_with = "sphere"
+    )]
+    region_box: Option<String>,
+    /// region: a ball in world coordinates.
+    #[arg(long, value_name = "CX,CY,CZ,R")]
+    sphere: Option<String>,
+    /// features: per-Gaussian feature vectors, `[N, D]` (.npy or .safetensors); by default
+    /// the scene's own feature properties.
+    #[arg(long, value_name = "SIDECAR")]
+    features: Option<PathBuf>,
+    /// features: phrase table of text embeddings (.json, .npy with --phrase-names, or
+    /// .safetensors).
+    #[arg(long, value_name = "TABLE")]
+    phrases: Option<PathBuf>,
+    /// features: phrases of an .npy (or .safetensors) table, one per line in row order.
+    #[arg(long, value_name = "FILE.txt")]
+    phrase_names: Option<PathBuf>,
+    /// features: canonical negative phrase (repeatable; default: object, things, stuff,
+    /// texture).
+    #[arg(long)]
+    negative: Vec<String>,
+    /// features: temperature of the relevancy softmax.
+    #[arg(long, default_value_t = DEFAULT_TEMPERATURE)]
+    temperature: f32,
+    /// Fraction (0, 1] of all Gaussians kept by the relevancy percentile (features).
+    #[arg(long, default_value_t = DEFAULT_TOP_FRACTION)]
+    top_fraction: f32,
+    /// Relevancy a Gaussian must exceed, in [0, 1) (features).
+    #[arg(long, default_value_t = DEFAULT_FLOOR)]
+    floor: f32,
+    /// Keep every Gaussian above the thresholds: no DBSCAN (features).
+    #[arg(long)]
+    no_cluster: bool,
+    /// Output folder for query.png (created if missing).
+    #[arg(long, default_value = ".")]
+    out: PathBuf,
+    /// Picture width in pixels.
+    #[arg(long, default_value_t = 320)]
+    width: usize,
+    /// Picture height in pixels.
+    #[arg(long, default_value_t = 240)]
+    height: usize,
+    /// Elevation of the viewing direction above the horizontal, degrees (the camera looks
+    /// down at the selection from this angle).
+    #[arg(long, default_value_t = DEFAULT_ELEVATION_DEGREES, allow_negative_numbers = true)]
+    elevation: f64,
+    /// Keep the preferred view even when the selection is hidden in it (by default other
+    /// azimuths and the view from below are tried, and the one showing most of the selection
+    /// is used when the preferred one shows less than half as much).
+    #[arg(long)]
+    fixed_view: bool,
+    /// Tensor backend: flex (CPU, default), ndarray or wgpu, among those compiled in.
+    #[arg(long, default_value = "flex", value_parser = BackendKind::from_str)]
+    backend: BackendKind,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// The target sources on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SourceKind {
+    /// Per-Gaussian labels with names.
+    Labels,
+    /// A box or a sphere (--box, --sphere).
+    Region,
+    /// Per-Gaussian language features and a phrase table.
+    Features,
+}
+
+impl SourceKind {
+    fn name(self) -> &'static str {
+        match self {
+            SourceKind::Labels => "labels",
+            SourceKind::Region => "region",
+            SourceKind::Features => "features",
+        }
+    }
+}
+
+/// The diagnostic camera.
+#[derive(Debug, Clone, Serialize)]
+struct CameraReport {
+    /// Camera centre.
+    eye: [f64; 3],
+    /// Point looked at (the selection's centre).
+    look_at: [f64; 3],
+    /// World up used (guessed, or +z).
+    up: [f64; 3],
+    /// Whether `up` came from the scene (`guess`) or the fallback (`default`).
+    up_from: &'static str,
+    /// Distance from the eye to the centre.
+    distance: f64,
+    /// Φ = [ω, c].
+    pose: [f64; 6],
+    fov_x_degrees: f64,
+    /// Azimuth of the view from the preferred one (toward the scene's middle), degrees.
+    azimuth_degrees: f64,
+    /// Elevation of the view above the horizontal, degrees.
+    elevation_degrees: f64,
+    /// Views compared by their visible mask (0: no search).
+    searched_views: usize,
+    width: usize,
+    height: usize,
+}
+
+/// What `query --json` prints.
+#[derive(Debug, Serialize)]
+struct QueryReport {
+    scene: String,
+    source: SourceKind,
+    query: String,
+    /// What the query matched (label name, phrase, region name).
+    name: String,
+    gaussians: usize,
+    count: usize,
+    fraction: f64,
+    candidates: usize,
+    clusters: Vec<usize>,
+    noise: usize,
+    eps: Option<f32>,
+    percentile_threshold: Option<f32>,
+    relevancy: splatraj_semantic::Spread,
+    centre: [f32; 3],
+    extent: [f32; 3],
+    camera: CameraReport,
+    /// Share of the picture's pixels where the selection dominates (mask > 0.5).
+    highlighted_share: f64,
+    image: String,
+}
+
+/// Runs `splatraj query`.
+pub fn run(args: QueryArgs) -> Result<()> {
+    // Cheap checks first, then the scene and the source, then the render; the file last.
+    if args.query.trim().is_empty() {
+        bail!("--query is empty: give a label name, a phrase or a region name");
+    }
+    if args.width == 0 || args.height == 0 {
+        bail!(
+            "--width and --height must be at least 1 (got {}×{})",
+            args.width,
+            args.height
+        );
+    }
+    if !(args.elevation.is_finite() && args.elevation.abs() <= 89.0) {
+        bail!(
+            "--elevation {} must lie in [-89, 89] degrees (at ±90 the view is along the up axis)",
+            args.elevation
+        );
+    }
+    let intrinsics = Intrinsics::from_fov_x(FOV_X_DEGREES, args.width, args.height)?;
+    let region = parse_region(&args)?;
+    let synonyms = parse_synonyms(&args.synonym)?;
+    let device = args.backend.device()?;
+    let dtype = Precision::F32.dtype();
+
+    let loaded = read_scene(&args.scene, &args.read.options())?;
+    if loaded.dropped > 0 {
+        eprintln!(
+            "warning: {}: dropped {} invalid Gaussians",
+            args.scene.display(),
+            loaded.dropped
+        );
+    }
+    let scene = loaded.scene;
+    let kind = choose_source(&args, &scene, region.is_some())?;
+    let source: Box<dyn TargetSource> = match kind {
+        SourceKind::Labels => Box::new(LabelsSource {
+            synonyms,
+            ..LabelsSource::default()
+        }),
+        SourceKind::Region => {
+            let region = region.expect("checked by choose_source");
+            Box::new(RegionSource::single(args.query.trim(), region))
+        }
+        SourceKind::Features => Box::new(features_source(&args)?),
+    };
+    let options = SelectionOptions {
+        top_fraction: args.top_fraction,
+        floor: args.floor,
+        cluster: (!args.no_cluster).then(ClusterOptions::default),
+    };
+    let target = find_target(source.as_ref(), &scene, &args.query, &options)
+        .with_context(|| format!("{} ({} source)", args.scene.display(), source.kind()))?;
+
+    let uploaded = DeviceScene::new(&scene, &device, dtype);
+    let (pose, camera) = diagnostic_camera(
+        &scene,
+        &uploaded,
+        &target,
+        &intrinsics,
+        ViewOptions {
+            elevation_degrees: args.elevation,
+            search: !args.fixed_view,
+        },
+        (&device, dtype),
+    )?;
+    let request = RenderRequest {
+        pruning: Pruning::None,
+        ..RenderRequest::new(
+            intrinsics,
+            vec![Channel::Rgb, Channel::Mask(target.mask.clone())],
+        )
+    };
+    let out = render(&uploaded, pose_tensor(&pose, &device, dtype), &request)?;
+    let pixels = host(out.images)?;
+    let (png, highlighted_share) = highlighted_png(&pixels, &intrinsics)?;
+
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create the output folder {}", args.out.display()))?;
+    let path = args.out.join(IMAGE_NAME);
+    write_atomically(&path, |w| w.write_all(&png))
+        .with_context(|| format!("cannot write {}", path.display()))?;
+
+    let report = QueryReport {
+        scene: args.scene.display().to_string(),
+        source: kind,
+        query: target.query.clone(),
+        name: target.name.clone(),
+        gaussians: scene.len(),
+        count: target.count,
+        fraction: target.count as f64 / scene.len() as f64,
+        candidates: target.candidates,
+        clusters: target.clusters.clone(),
+        noise: target.noise,
+        eps: target.eps,
+        percentile_threshold: target.percentile_threshold,
+        relevancy: target.relevancy_spread,
+        centre: target.centre,
+        extent: target.extent,
+        camera,
+        highlighted_share,
+        image: path.display().to_string(),
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", report_text(&report));
+    }
+    eprintln!(
+        "wrote {} ({}×{}, {:.1}% of the pixels highlighted)",
+        path.display(),
+        intrinsics.width,
+        intrinsics.height,
+        100.0 * highlighted_share
+    );
+    Ok(())
+}
+
+/// The source asked for, or the one the inputs point to (see `--source`).
+fn choose_source(args: &QueryArgs, scene: &Scene, has_region: bool) -> Result<SourceKind> {
+    let feature_options = args.phrases.is_some()
+        || args.features.is_some()
+        || args.phrase_names.is_some()
+        || !args.negative.is_empty();
+    let kind = match args.source {
+        Some(kind) => kind,
+        None if has_region => SourceKind::Region,
+        None if feature_options => SourceKind::Features,
+        None if scene.extras.labels.is_some() => SourceKind::Labels,
+        None if scene.extras.features.is_some() => {
+            bail!(
+                "{} has per-Gaussian feature vectors but no labels: give a phrase table with \
+                 --phrases TABLE (.json, .npy with --phrase-names, or .safetensors) to query \
+                 them, or --box/--sphere for a region",
+                args.scene.display()
+            )
+        }
+        None => bail!(
+            "{} has neither labels nor feature vectors, so there is nothing to match {:?} \
+             against: give a label sidecar with --labels SIDECAR.json, feature vectors with \
+             --features SIDECAR.npy and a phrase table with --phrases TABLE, or a region with \
+             --box MINX,MINY,MINZ,MAXX,MAXY,MAXZ or --sphere CX,CY,CZ,R",
+            args.scene.display(),
+            args.query
+        ),
+    };
+    // Options of another source would be silently ignored: refuse them.
+    let stray: Vec<&str> = [
+        (
+            kind != SourceKind::Labels && !args.synonym.is_empty(),
+            "--synonym",
+        ),
+        (kind != SourceKind::Region && has_region, "--box/--sphere"),
+        (
+            kind != SourceKind::Features && feature_options,
+            "--features/--phrases/--phrase-names/--negative",
+        ),
+    ]
+    .into_iter()
+    .filter_map(|(bad, name)| bad.then_some(name))
+    .collect();
+    if !stray.is_empty() {
+        bail!(
+            "{} do not apply to the {} source (--synonym is for labels, --box/--sphere for \
+             region, --features/--phrases/--phrase-names/--negative for features)",
+            stray.join(", "),
+            kind.name()
+        );
+    }
+    match kind {
+        SourceKind::Region if !has_region => bail!(
+            "the region source needs a region: give --box MINX,MINY,MINZ,MAXX,MAXY,MAXZ or \
+             --sphere CX,CY,CZ,R"
+        ),
+        SourceKind::Features if args.phrases.is_none() => bail!(
+            "the features source needs text embeddings: give a phrase table with --phrases \
+             TABLE (.json, .npy with --phrase-names, or .safetensors)"
+        ),
+        _ => {}
+    }
+    Ok(kind)
+}
+
+/// The features source from the command line's files.
+fn features_source(args: &QueryArgs) -> Result<FeaturesSource> {
+    let table_path = args.phrases.as_deref().expect("checked by choose_source");
+    let table = PhraseTable::read(table_path, args.phrase_names.as_deref())?;
+    let features = match &args.features {
+        Some(path) => FeatureInput::Sidecar(read_feature_sidecar(path)?),
+        None => FeatureInput::Scene,
+    };
+    let mut source = FeaturesSource::new(features, table);
+    if !args.negative.is_empty() {
+        source.negatives = args.negative.clone();
+    }
+    source.temperature = args.temperature;
+    Ok(source)
+}
+
+/// `--box` or `--sphere`, parsed and checked.
+fn parse_region(args: &QueryArgs) -> Result<Option<Region>> {
+    let region = match (&args.region_box, &args.sphere) {
+        (Some(text), _) => {
+            let v = parse_floats::<6>(text, "--box", "MINX,MINY,MINZ,MAXX,MAXY,MAXZ")?;
+            Region::Box {
+                min: [v[0], v[1], v[2]],
+                max: [v[3], v[4], v[5]],
+            }
+        }
+        (None, Some(text)) => {
+            let v = parse_floats::<4>(text, "--sphere", "CX,CY,CZ,R")?;
+            Region::Sphere {
+                centre: [v[0], v[1], v[2]],
+                radius: v[3],
+            }
+        }
+        (None, None) => return Ok(None),
+    };
+    let key = if args.region_box.is_some() {
+        "--box"
+    } else {
+        "--sphere"
+    };
+    region.validate(key).map_err(|e| anyhow!("{e}"))?;
+    Ok(Some(region))
+}
+
+/// `N` comma-separated finite numbers.
+fn parse_floats<const N: usize>(text: &str, option: &str, form: &str) -> Result<[f32; N]> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    if parts.len() != N {
+        bail!(
+            "{option} {text:?}: expected {N} comma-separated numbers {form}, got {}",
+            parts.len()
+        );
+    }
+    let mut values = [0.0f32; N];
+    for (v, p) in values.iter_mut().zip(&parts) {
+        *v = p
+            .parse::<f32>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| anyhow!("{option} {text:?}: {p:?} is not a finite number ({form})"))?;
+    }
+    Ok(values)
+}
+
+/// `NAME=ALT1,ALT2` options into label name → synonyms (repeated names merge).
+fn parse_synonyms(items: &[String]) -> Result<BTreeMap<String, Vec<String>>> {
+    let mut synonyms: BTreeMap<String, Vec<String>> = BTreeMap::new();
+    for item in items {
+        let Some((name, alts)) = item.split_once('=') else {
+            bail!("--synonym {item:?}: expected NAME=ALT1,ALT2 (e.g. \"red mug=cup,coffee mug\")");
+        };
+        let name = name.trim();
+        let alts: Vec<String> = alts
+            .split(',')
+            .map(str::trim)
+            .filter(|a| !a.is_empty())
+            .map(String::from)
+            .collect();
+        if name.is_empty() || alts.is_empty() {
+            bail!(
+                "--synonym {item:?}: both the label name and at least one synonym are needed (NAME=ALT1,ALT2)"
+            );
+        }
+        synonyms.entry(name.to_string()).or_default().extend(alts);
+    }
+    Ok(synonyms)
+}
+
+/// Azimuths tried around the preferred view, degrees (0 first: the preferred one).
+const AZIMUTHS: [f64; 8] = [0.0, 45.0, -45.0, 90.0, -90.0, 135.0, -135.0, 180.0];
+/// The preferred view is kept while it shows at least this share of the best view's mask.
+const KEEP_PREFERRED: f64 = 0.5;
+/// Width of the low-resolution mask renders that compare the views.
+const SEARCH_WIDTH: usize = 64;
+
+/// How the diagnostic view is chosen.
+#[derive(Debug, Clone, Copy)]
+struct ViewOptions {
+    /// Preferred elevation above the horizontal, degrees.
+    elevation_degrees: f64,
+    /// Try other views when the selection is hidden in the preferred one.
+    search: bool,
+}
+
+/// A camera looking at the target's centre at the distance where the target's extent spans
+/// `FRAME_SHARE` of the frame's smaller side.
+///
+/// The preferred view looks down from `elevation_degrees` above the horizontal (w.r.t. the
+/// guessed up axis, else +z), from the side of the scene's middle, so that in a room the
+/// camera stands on the room's side of the object rather than behind a wall. Guessed axes
+/// can be wrong and objects hidden, so unless `search` is off, the mask is also rendered
+/// (small, pruned to the object) from other azimuths and from below, and the preferred view
+/// gives way to the one that shows the most of the selection when it shows less than half
+/// of that.
+fn diagnostic_camera(
+    scene: &Scene,
+    uploaded: &DeviceScene,
+    target: &Target,
+    k: &Intrinsics,
+    view: ViewOptions,
+    (device, dtype): (&Device, DType),
+) -> Result<(Pose, CameraReport)> {
+    let ViewOptions {
+        elevation_degrees,
+        search,
+    } = view;
+    let guess = guess_up_axis(scene);
+    let (up, up_from) = match guess {
+        Some(g) => (DVec3::from_array(g.up.map(f64::from)).normalize(), "guess"),
+        None => (DVec3::Z, "default"),
+    };
+    let centre = DVec3::from_array(target.centre.map(f64::from));
+    let bounds = scene
+        .robust_bounds(0.02)
+        .ok_or_else(|| anyhow!("the scene holds no Gaussian"))?;
+    let scene_centre = DVec3::from_array(bounds.center().map(f64::from));
+    let scene_size = DVec3::from_array(bounds.size().map(f64::from)).length();
+
+    // Horizontal part of "toward the scene's middle"; any horizontal axis when the target
+    // is in the middle.
+    let to_middle = scene_centre - centre;
+    let mut e1 = to_middle - up * to_middle.dot(up);
+    if e1.length() < 1e-6 * scene_size.max(1e-9) {
+        let helper = if up.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
+        e1 = helper - up * helper.dot(up);
+    }
+    let e1 = e1.normalize();
+    let e2 = up.cross(e1);
+
+    // The extent's diagonal, floored so that a single Gaussian still gets a sensible view.
+    let size = DVec3::from_array(target.extent.map(f64::from))
+        .length()
+        .max(scene_size * 0.01)
+        .max(1e-3);
+    let focal = k.fx.min(k.fy);
+    let pixels = (k.width.min(k.height) as f64) * FRAME_SHARE;
+    let distance = focal * size / pixels;
+
+    let mut views: Vec<(f64, f64)> = AZIMUTHS.iter().map(|&a| (a, elevation_degrees)).collect();
+    if elevation_degrees != 0.0 {
+        views.extend(AZIMUTHS.iter().map(|&a| (a, -elevation_degrees)));
+    }
+    if !search {
+        views.truncate(1);
+    }
+    let poses = views
+        .iter()
+        .map(|&(azimuth, elevation)| {
+            let (a, e) = (azimuth.to_radians(), elevation.to_radians());
+            let direction = (e1 * a.cos() + e2 * a.sin()) * e.cos() + up * e.sin();
+            Pose::look_at(centre + direction * distance, centre, up)
+        })
+        .collect::<std::result::Result<Vec<Pose>, _>>()?;
+
+    let mut chosen = 0;
+    let mut shown = Vec::new();
+    if poses.len() > 1 {
+        let height = ((SEARCH_WIDTH * k.height) as f64 / k.width as f64)
+            .round()
+            .max(1.0) as usize;
+        let small = Intrinsics::from_fov_x(FOV_X_DEGREES, SEARCH_WIDTH, height)?;
+        let request = mask_request(small, target.mask.clone(), Pruning::ObjectOnly);
+        let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
+        let tensor = Tensor::from_data(TensorData::new(flat, [poses.len(), 6]), (device, dtype));
+        let images = host(render(uploaded, tensor, &request)?.images)?;
+        let per_view = small.width * small.height;
+        shown = images
+            .chunks_exact(per_view)
+            .map(|image| image.iter().sum::<f64>() / per_view as f64)
+            .collect::<Vec<f64>>();
+        let best = (0..shown.len())
+            .max_by(|&a, &b| shown[a].total_cmp(&shown[b]))
+            .unwrap_or(0);
+        if shown[0] < KEEP_PREFERRED * shown[best] {
+            chosen = best;
+        }
+    }
+    let pose = poses[chosen];
+    let (azimuth_degrees, elevation_degrees) = views[chosen];
+    let report = CameraReport {
+        eye: pose.0[3..6].try_into().expect("3 values"),
+        look_at: centre.to_array(),
+        up: up.to_array(),
+        up_from,
+        distance,
+        pose: pose.0,
+        fov_x_degrees: FOV_X_DEGREES,
+        azimuth_degrees,
+        elevation_degrees,
+        searched_views: shown.len(),
+        width: k.width,
+        height: k.height,
+    };
+    Ok((pose, report))
+}
+
+/// The RGB render with the mask blended over it as magenta, as PNG bytes, and the share of
+/// pixels whose mask exceeds 0.5. `pixels` is `[H·W·4]`: R, G, B, mask.
+fn highlighted_png(pixels: &[f64], k: &Intrinsics) -> Result<(Vec<u8>, f64)> {
+    let n = k.width * k.height;
+    if pixels.len() != n * 4 {
+        bail!(
+            "the render returned {} values for a {}×{} picture with 4 channels",
+            pixels.len(),
+            k.width,
+            k.height
+        );
+    }
+    let mut rgb = Vec::with_capacity(n * 3);
+    let mut highlighted = 0usize;
+    for px in pixels.chunks_exact(4) {
+        let m = px[3].clamp(0.0, 1.0);
+        if m > 0.5 {
+            highlighted += 1;
+        }
+        for c in 0..3 {
+            let v =
+                px[c].clamp(0.0, 1.0) * (1.0 - HIGHLIGHT * m) + HIGHLIGHT * m * HIGHLIGHT_RGB[c];
+            rgb.push((v.clamp(0.0, 1.0) * 255.0).round() as u8);
+        }
+    }
+    let image = image::RgbImage::from_raw(k.width as u32, k.height as u32, rgb)
+        .ok_or_else(|| anyhow!("the picture has the wrong size"))?;
+    let mut bytes = Cursor::new(Vec::new());
+    image.write_to(&mut bytes, image::ImageFormat::Png)?;
+    Ok((bytes.into_inner(), highlighted as f64 / n as f64))
+}
+
+fn fmt3(v: [f32; 3]) -> String {
+    format!("({:.4}, {:.4}, {:.4})", v[0], v[1], v[2])
+}
+
+/// The human-readable report.
+fn report_text(r: &QueryReport) -> String {
+    let mut s = String::new();
+    s.push_str(&format!(
+        "query {:?} ({} source) matched {:?} in {}\n",
+        r.query,
+        r.source.name(),
+        r.name,
+        r.scene
+    ));
+    s.push_str(&format!(
+        "selected: {} of {} Gaussians ({:.3}%)\n",
+        r.count,
+        r.gaussians,
+        100.0 * r.fraction
+    ));
+    let threshold = r
+        .percentile_threshold
+        .map_or(String::new(), |t| format!(" (percentile threshold {t:.4})"));
+    s.push_str(&format!("candidates: {}{threshold}\n", r.candidates));
+    let sizes: Vec<String> = r.clusters.iter().map(|c| c.to_string()).collect();
+    let eps = r
+        .eps
+        .map_or("no DBSCAN".to_string(), |e| format!("DBSCAN eps {e:.4}"));
+    s.push_str(&format!(
+        "clusters: {} [{}], noise {} ({eps})\n",
+        r.clusters.len(),
+        sizes.join(", "),
+        r.noise
+    ));
+    s.push_str(&format!(
+        "relevancy: min {:.4}, median {:.4}, max {:.4}\n",
+        r.relevancy.min, r.relevancy.median, r.relevancy.max
+    ));
+    s.push_str(&format!("centre: {}\n", fmt3(r.centre)));
+    s.push_str(&format!("extent: {}\n", fmt3(r.extent)));
+    let c = &r.camera;
+    s.push_str(&format!(
+        "camera: eye ({:.4}, {:.4}, {:.4}), distance {:.4}, up ({:.2}, {:.2}, {:.2}) ({}), \
+         azimuth {:.0}°, elevation {:.0}°\n",
+        c.eye[0],
+        c.eye[1],
+        c.eye[2],
+        c.distance,
+        c.up[0],
+        c.up[1],
+        c.up[2],
+        c.up_from,
+        c.azimuth_degrees,
+        c.elevation_degrees
+    ));
+    s.push_str(&format!(
+        "image: {} ({}×{}, {:.1}% of the pixels highlighted)\n",
+        r.image,
+        c.width,
+        c.height,
+        100.0 * r.highlighted_share
+    ));
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn synonyms_parse_and_merge() {
+        let s = parse_synonyms(&["red mug=cup, mug".into(), "red mug=beaker".into()]).unwrap();
+        assert_eq!(s["red mug"], vec!["cup", "mug", "beaker"]);
+        assert!(parse_synonyms(&["no equals".into()]).is_err());
+        assert!(parse_synonyms(&["=x".into()]).is_err());
+    }
+
+    #[test]
+    fn floats_parse_with_counts_checked() {
+        assert_eq!(
+            parse_floats::<4>("1, 2,3,0.5", "--sphere", "").unwrap(),
+            [1.0, 2.0, 3.0, 0.5]
+        );
+        assert!(parse_floats::<4>("1,2,3", "--sphere", "").is_err());
+        assert!(parse_floats::<4>("1,2,3,nan", "--sphere", "").is_err());
+    }
+
+    #[test]
+    fn highlight_blends_magenta() {
+        let k = Intrinsics::from_fov_x(60.0, 2, 1).unwrap();
+        let (png, share) = highlighted_png(&[0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0], &k).unwrap();
+        assert_eq!(share, 0.5);
+        let image = image::load_from_memory(&png).unwrap().to_rgb8();
+        assert_eq!(image.get_pixel(0, 0).0, [153, 31, 122]);
+        assert_eq!(image.get_pixel(1, 0).0, [255, 255, 255]);
+    }
+}

@@ -1,0 +1,474 @@
+//! `splatraj query` end to end: the labels, region and features routes, the text and JSON
+//! reports, the highlighted picture, and clean failures (with suggestions) that write nothing.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use serde_json::{Value, json};
+use splatraj_scene::demo::demo_layout;
+use splatraj_scene::{ReadOptions, Scene, read_scene};
+
+fn splatraj(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_splatraj"))
+        .args(args)
+        .output()
+        .expect("binary runs")
+}
+
+fn stderr(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+fn stdout(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
+fn s(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+/// A failure is one `error:` paragraph, a non-zero exit, and never a panic.
+fn assert_clean_failure(output: &Output, mentions: &[&str]) {
+    let err = stderr(output);
+    assert!(!output.status.success(), "should fail: {err}");
+    assert!(err.starts_with("error: "), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "one paragraph: {err}");
+    assert!(
+        !err.contains("panicked") && !err.contains("internal error"),
+        "{err}"
+    );
+    for m in mentions {
+        assert!(err.contains(m), "{err:?} does not mention {m:?}");
+    }
+}
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("crates/splatraj-scene/tests/data")
+        .join(name)
+}
+
+fn fruit() -> (PathBuf, PathBuf) {
+    (
+        data("fruit_drops_minimal.ply"),
+        data("fruit_drops_minimal.json"),
+    )
+}
+
+fn fruit_scene() -> Scene {
+    let (ply, sidecar) = fruit();
+    let options = ReadOptions {
+        labels: Some(sidecar),
+        ..ReadOptions::default()
+    };
+    read_scene(&ply, &options).unwrap().scene
+}
+
+/// A 50 000-Gaussian demo scene in `dir`.
+fn demo(dir: &Path) -> PathBuf {
+    let ply = dir.join("demo.ply");
+    let out = splatraj(&["scene", "demo", "--gaussians", "50000", "--out", s(&ply)]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    ply
+}
+
+fn json_report(out: &Output) -> Value {
+    assert!(out.status.success(), "{}", stderr(out));
+    serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("stdout is not one JSON object ({e}): {}", stdout(out)))
+}
+
+/// Pixels that are clearly the magenta highlight (red and blue well above green).
+fn magenta_centroid(png: &Path, width: u32, height: u32) -> (f64, f64, usize) {
+    let image = image::open(png).unwrap().to_rgb8();
+    assert_eq!(image.dimensions(), (width, height));
+    let (mut sx, mut sy, mut n) = (0.0, 0.0, 0usize);
+    for (x, y, p) in image.enumerate_pixels() {
+        let [r, g, b] = p.0.map(i32::from);
+        if r - g > 90 && b - g > 60 {
+            sx += f64::from(x);
+            sy += f64::from(y);
+            n += 1;
+        }
+    }
+    assert!(n > 0, "no highlighted pixel in {}", png.display());
+    (sx / n as f64, sy / n as f64, n)
+}
+
+fn assert_in_middle_third(png: &Path, width: u32, height: u32) {
+    let (x, y, n) = magenta_centroid(png, width, height);
+    let (w, h) = (f64::from(width), f64::from(height));
+    assert!(
+        (w / 3.0..2.0 * w / 3.0).contains(&x) && (h / 3.0..2.0 * h / 3.0).contains(&y),
+        "highlight centroid ({x:.1}, {y:.1}) of {n} pixels is not in the middle third of \
+         {width}×{height}"
+    );
+}
+
+#[test]
+fn label_query_counts_exactly_and_pictures_the_object() {
+    let (ply, sidecar) = fruit();
+    let dir = tempfile::tempdir().unwrap();
+    let out = splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--labels",
+        s(&sidecar),
+        "--query",
+        "Category 4",
+        "--out",
+        s(dir.path()),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = stdout(&out);
+    // 1038: counted independently with Python from the sidecar.
+    assert!(text.contains("selected: 1038 of 4721 Gaussians"), "{text}");
+    for key in [
+        "candidates:",
+        "clusters:",
+        "noise",
+        "relevancy:",
+        "centre:",
+        "extent:",
+    ] {
+        assert!(text.contains(key), "{key} missing from {text}");
+    }
+    assert_in_middle_third(&dir.path().join("query.png"), 320, 240);
+
+    // Case and spacing do not matter; --json prints one object.
+    let out = splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--labels",
+        s(&sidecar),
+        "--query",
+        "  category   4 ",
+        "--json",
+        "--width",
+        "160",
+        "--height",
+        "100",
+        "--out",
+        s(dir.path()),
+    ]);
+    let report = json_report(&out);
+    assert_eq!(report["count"], 1038);
+    assert_eq!(report["gaussians"], 4721);
+    assert_eq!(report["name"], "Category 4");
+    assert_eq!(report["source"], "labels");
+    assert_eq!(report["clusters"], json!([1038]));
+    assert!((report["fraction"].as_f64().unwrap() - 1038.0 / 4721.0).abs() < 1e-9);
+    assert_eq!(report["relevancy"]["min"], 1.0);
+    assert!(
+        report["highlighted_share"].as_f64().unwrap() > 0.0,
+        "{report}"
+    );
+    // The selection's centre is the per-axis median of the label's centres.
+    let scene = fruit_scene();
+    let labels = scene.extras.labels.as_ref().unwrap();
+    for k in 0..3 {
+        let mut v: Vec<f32> = (0..scene.len())
+            .filter(|&i| labels.ids[i] == 4)
+            .map(|i| scene.means[i][k])
+            .collect();
+        v.sort_by(f32::total_cmp);
+        let centre = report["centre"][k].as_f64().unwrap();
+        assert!(
+            (centre - f64::from(v[v.len() / 2])).abs() < 0.01,
+            "axis {k}: {centre} vs median {}",
+            v[v.len() / 2]
+        );
+    }
+    assert_in_middle_third(&dir.path().join("query.png"), 160, 100);
+}
+
+#[test]
+fn demo_object_by_name_and_synonym() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = demo(dir.path());
+    let out_dir = dir.path().join("out");
+    let out = splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--query",
+        "coffee cup",
+        "--synonym",
+        "red mug=coffee cup,cup",
+        "--json",
+        "--out",
+        s(&out_dir),
+    ]);
+    let report = json_report(&out);
+    assert_eq!(report["name"], "red mug");
+    // The mask is exactly the label's Gaussians.
+    let scene = read_scene(&ply, &ReadOptions::default()).unwrap().scene;
+    let labels = scene.extras.labels.as_ref().unwrap();
+    let mug_id = demo_layout()
+        .into_iter()
+        .find(|o| o.name == "red mug")
+        .unwrap()
+        .id;
+    let expected = labels.ids.iter().filter(|&&id| id == mug_id).count();
+    assert_eq!(report["count"].as_u64().unwrap() as usize, expected);
+    let mug = demo_layout()
+        .into_iter()
+        .find(|o| o.name == "red mug")
+        .unwrap();
+    for k in 0..3 {
+        let c = report["centre"][k].as_f64().unwrap();
+        assert!(
+            (c - f64::from(mug.center[k])).abs() < f64::from(mug.size[k]) * 0.5,
+            "centre {c} outside the mug's box on axis {k}"
+        );
+    }
+    // Looked at from above, with the preferred view (the mug is in plain sight).
+    assert_eq!(report["camera"]["elevation_degrees"], 30.0);
+    assert_in_middle_third(&out_dir.join("query.png"), 320, 240);
+}
+
+#[test]
+fn region_query_selects_the_box() {
+    let (ply, sidecar) = fruit();
+    let dir = tempfile::tempdir().unwrap();
+    let (min, max) = ([0.5f32, 0.0, -2.3], [0.75f32, 0.15, -2.0]);
+    let spec = format!(
+        "{},{},{},{},{},{}",
+        min[0], min[1], min[2], max[0], max[1], max[2]
+    );
+    let out = splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--labels",
+        s(&sidecar),
+        "--box",
+        &spec,
+        "--query",
+        "left half",
+        "--json",
+        "--out",
+        s(dir.path()),
+    ]);
+    let report = json_report(&out);
+    let scene = fruit_scene();
+    let inside = scene
+        .means
+        .iter()
+        .filter(|m| (0..3).all(|k| min[k] <= m[k] && m[k] <= max[k]))
+        .count();
+    assert!(inside > 0);
+    assert_eq!(report["source"], "region");
+    assert_eq!(report["name"], "left half");
+    assert_eq!(report["count"].as_u64().unwrap() as usize, inside);
+    assert!(dir.path().join("query.png").is_file());
+
+    // A sphere too, and a bad one is refused before anything is read or written.
+    let out = splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--sphere",
+        "0.75,0.11,-2.12,0.05",
+        "--query",
+        "middle",
+        "--json",
+        "--out",
+        s(dir.path()),
+    ]);
+    assert!(json_report(&out)["count"].as_u64().unwrap() > 0);
+    let none = dir.path().join("none");
+    let out = splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--sphere",
+        "0.75,0.11,-2.12",
+        "--query",
+        "middle",
+        "--out",
+        s(&none),
+    ]);
+    assert_clean_failure(&out, &["--sphere", "4"]);
+    assert!(!none.exists());
+}
+
+#[test]
+fn misspelt_label_fails_with_suggestions_and_writes_nothing() {
+    let (ply, sidecar) = fruit();
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("out");
+    let out = splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--labels",
+        s(&sidecar),
+        "--query",
+        "Categroy 4",
+        "--out",
+        s(&out_dir),
+    ]);
+    assert_clean_failure(&out, &["Categroy 4", "closest", "\"Category 4\""]);
+    assert!(!out_dir.exists());
+
+    // No labels and no other data: the error says which options are needed.
+    let out = splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--query",
+        "Category 4",
+        "--out",
+        s(&out_dir),
+    ]);
+    assert_clean_failure(&out, &["--labels", "--phrases", "--box"]);
+    assert!(!out_dir.exists());
+}
+
+/// One-hot features by label (9 labels) plus one dimension for the negatives.
+fn write_features(dir: &Path, scene: &Scene) -> PathBuf {
+    use npyz::WriterBuilder;
+    let labels = scene.extras.labels.as_ref().unwrap();
+    let dim = 10;
+    let path = dir.join("features.npy");
+    let mut bytes = Vec::new();
+    let mut writer = npyz::WriteOptions::<f32>::new()
+        .default_dtype()
+        .shape(&[scene.len() as u64, dim as u64])
+        .writer(&mut bytes)
+        .begin_nd()
+        .unwrap();
+    for &id in &labels.ids {
+        let mut row = vec![0.0f32; dim];
+        row[id as usize] = 1.0;
+        writer.extend(row).unwrap();
+    }
+    writer.finish().unwrap();
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+fn one_hot(k: usize) -> Vec<f32> {
+    let mut v = vec![0.0; 10];
+    v[k] = 1.0;
+    v
+}
+
+#[test]
+fn features_route_selects_the_phrases_label() {
+    let (ply, sidecar) = fruit();
+    let dir = tempfile::tempdir().unwrap();
+    let scene = fruit_scene();
+    let features = write_features(dir.path(), &scene);
+    let table = dir.path().join("table.json");
+    let negative = one_hot(9);
+    std::fs::write(
+        &table,
+        json!({
+            "apple": one_hot(3),
+            "banana": one_hot(5),
+            "object": negative, "things": negative, "stuff": negative, "texture": negative,
+        })
+        .to_string(),
+    )
+    .unwrap();
+    let label3 = scene
+        .extras
+        .labels
+        .as_ref()
+        .unwrap()
+        .ids
+        .iter()
+        .filter(|&&id| id == 3)
+        .count();
+    assert_eq!(label3, 398);
+
+    // Without DBSCAN: exactly label 3, with the same centre as the label query.
+    let query = |extra: &[&str]| {
+        let mut args = vec![
+            "query",
+            "--scene",
+            s(&ply),
+            "--labels",
+            s(&sidecar),
+            "--json",
+            "--out",
+            s(dir.path()),
+        ];
+        args.extend_from_slice(extra);
+        splatraj(&args)
+    };
+    let by_features = json_report(&query(&[
+        "--features",
+        s(&features),
+        "--phrases",
+        s(&table),
+        "--query",
+        "apple",
+        "--no-cluster",
+    ]));
+    assert_eq!(by_features["source"], "features");
+    assert_eq!(by_features["count"], 398);
+    let by_label = json_report(&query(&["--query", "Category 3"]));
+    assert_eq!(by_features["centre"], by_label["centre"]);
+    assert_eq!(by_features["extent"], by_label["extent"]);
+    assert!(by_features["relevancy"]["min"].as_f64().unwrap() > 0.99);
+
+    // With DBSCAN (the default): the main part of label 3.
+    let clustered = json_report(&query(&[
+        "--source",
+        "features",
+        "--features",
+        s(&features),
+        "--phrases",
+        s(&table),
+        "--query",
+        "Apple",
+    ]));
+    let count = clustered["count"].as_u64().unwrap() as usize;
+    assert!(count <= 398 && count as f64 >= 0.9 * 398.0, "{clustered}");
+    assert_eq!(clustered["candidates"], 398);
+    assert!(clustered["eps"].as_f64().unwrap() > 0.0);
+
+    // A phrase not in the table: the error lists the closest phrases.
+    let none = dir.path().join("none");
+    let out = splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--labels",
+        s(&sidecar),
+        "--features",
+        s(&features),
+        "--phrases",
+        s(&table),
+        "--query",
+        "appel",
+        "--out",
+        s(&none),
+    ]);
+    assert_clean_failure(&out, &["appel", "\"apple\""]);
+    assert!(!none.exists());
+
+    // Options of another source are refused rather than ignored.
+    let out = splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--labels",
+        s(&sidecar),
+        "--source",
+        "labels",
+        "--phrases",
+        s(&table),
+        "--query",
+        "apple",
+        "--out",
+        s(&none),
+    ]);
+    assert_clean_failure(&out, &["--phrases", "labels source"]);
+    assert!(!none.exists());
+}
