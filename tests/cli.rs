@@ -1,38 +1,8 @@
 //! The `splatraj` binary end to end: exit codes, JSON output, files written whole.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("crates/splatraj-scene/tests/data")
-        .join(name)
-}
-
-fn splatraj(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_splatraj"))
-        .args(args)
-        .output()
-        .expect("binary runs")
-}
-
-fn stderr(output: &Output) -> String {
-    String::from_utf8_lossy(&output.stderr).into_owned()
-}
-
-/// A failure is one `error:` paragraph, a non-zero exit, and never a panic.
-fn assert_clean_failure(output: &Output, mentions: &[&str]) {
-    let err = stderr(output);
-    assert!(!output.status.success(), "should fail: {err}");
-    assert!(err.starts_with("error: "), "{err}");
-    assert!(
-        !err.contains("panicked") && !err.contains("internal error"),
-        "{err}"
-    );
-    for m in mentions {
-        assert!(err.contains(m), "{err:?} does not mention {m:?}");
-    }
-}
+use common::{assert_clean_failure, fixture, splatraj, stderr};
 
 #[test]
 fn info_json_describes_a_real_scene() {

@@ -1,46 +1,16 @@
 //! `splatraj query` end to end: the labels, region and features routes, the text and JSON
 //! reports, the highlighted picture, and clean failures (with suggestions) that write nothing.
 
+mod common;
+
+use common::{assert_clean_failure, s, splatraj, stderr, stdout};
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 use serde_json::{Value, json};
 use splatraj_scene::demo::demo_layout;
 use splatraj_scene::{ReadOptions, Scene, read_scene};
-
-fn splatraj(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_splatraj"))
-        .args(args)
-        .output()
-        .expect("binary runs")
-}
-
-fn stderr(output: &Output) -> String {
-    String::from_utf8_lossy(&output.stderr).into_owned()
-}
-
-fn stdout(output: &Output) -> String {
-    String::from_utf8_lossy(&output.stdout).into_owned()
-}
-
-fn s(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
-
-/// A failure is one `error:` paragraph, a non-zero exit, and never a panic.
-fn assert_clean_failure(output: &Output, mentions: &[&str]) {
-    let err = stderr(output);
-    assert!(!output.status.success(), "should fail: {err}");
-    assert!(err.starts_with("error: "), "{err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "one paragraph: {err}");
-    assert!(
-        !err.contains("panicked") && !err.contains("internal error"),
-        "{err}"
-    );
-    for m in mentions {
-        assert!(err.contains(m), "{err:?} does not mention {m:?}");
-    }
-}
 
 fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

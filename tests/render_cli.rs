@@ -1,45 +1,18 @@
 //! `splatraj render` and `splatraj bench render` end to end: outputs and their sizes, the
 //! `--grad` JSON, the camera and mask forms, and clean failures that write nothing.
 
+mod common;
+
+use common::{assert_clean_failure, s, splatraj, stderr};
+
 use std::fs::File;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use glam::DVec3;
 use serde_json::{Value, json};
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_scene::demo::{DEMO_UP, DEMO_VIEWPOINT, demo_layout};
-
-fn splatraj(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_splatraj"))
-        .args(args)
-        .output()
-        .expect("binary runs")
-}
-
-fn stderr(output: &Output) -> String {
-    String::from_utf8_lossy(&output.stderr).into_owned()
-}
-
-/// A failure is one `error:` paragraph, a non-zero exit, and never a panic.
-fn assert_clean_failure(output: &Output, mentions: &[&str]) {
-    let err = stderr(output);
-    assert!(!output.status.success(), "should fail: {err}");
-    assert!(err.starts_with("error: "), "{err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "one paragraph: {err}");
-    assert!(
-        !err.contains("panicked") && !err.contains("internal error"),
-        "{err}"
-    );
-    for m in mentions {
-        assert!(err.contains(m), "{err:?} does not mention {m:?}");
-    }
-}
-
-fn s(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
 
 /// A 20 000-Gaussian demo scene in a fresh temporary folder.
 fn demo(dir: &Path) -> PathBuf {
