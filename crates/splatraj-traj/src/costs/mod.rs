@@ -1,12 +1,457 @@
-//! Image costs on rendered object masks `[B, H, W]`, one value per sample `[B]`.
+//! Costs of the SplaTraj objective, one file per cost, behind the [`Cost`] trait.
 //!
-//! Both are plain tensor functions: they run on the mask's device and dtype and differentiate
-//! through burn's autodiff when the mask is tracked. Neither is ever NaN, and for an empty mask
-//! (object out of view) TCE has a zero gradient and TRE a constant one, so that nothing but the
-//! warm-start prior moves a camera that sees nothing (see each function's docs).
+//! Per query window (DESIGN.md "Optimisation problem") the optimiser minimises
+//!
+//! ```text
+//! L = w_tce·TCE + w_tre·TRE + w_up·L_upright + α_k·L_prior,      α_k = α_0·γ^k
+//! ```
+//!
+//! averaged over a batch of B sampled poses. Every cost maps the shared [`CostInputs`] (the
+//! batch's poses Φ `[B, 6]`, the rendered object masks `[B, H, W]` when a render was made, the
+//! step k and the query's [`QueryContext`]) to one unweighted value per sample `[B]`, and says
+//! its own weight at step k. [`WeightedCosts`] sums w_i·cost_i and keeps each term for
+//! `history.csv`.
+//!
+//! - [`tce`]: target centring error (image cost); [`tre`]: target ratio error (image cost);
+//! - [`upright`]: camera up against world up (`up-vector`, the paper's) or horizon tilt (`roll`);
+//! - [`prior`]: the decaying warm-start prior (attracting form; the paper's signs are a typo);
+//! - [`iou`]: bounding-box IoU, a metric only (see that module for why it is not a [`Cost`]).
+//!
+//! Adding a cost is adding a file: a config struct implementing [`Cost`], plus one `Option`
+//! field in [`CostsConfig`] and one line in [`CostsConfig::build`].
+//!
+//! The image costs are also plain tensor functions ([`tce()`], [`tre()`]): they run on the mask's
+//! device and dtype and differentiate through burn's autodiff. None of the costs is ever NaN,
+//! and for an empty mask (object out of view) TCE has a zero gradient and TRE a constant one,
+//! so that nothing but the prior moves a camera that sees nothing (see each function's docs).
 
+pub mod iou;
+pub mod prior;
 pub mod tce;
 pub mod tre;
+pub mod upright;
 
-pub use tce::{MASS_FLOOR, NORM_EPSILON, centroid_offset, tce};
-pub use tre::{DEFAULT_TARGET_RATIO, coverage, tre};
+use burn::tensor::{DType, Tensor, TensorData};
+use serde::{Deserialize, Serialize};
+
+pub use iou::{IOU_THRESHOLD, PixelBox, bbox_iou, bbox_iou_batch, mask_box};
+pub use prior::{PRIOR_EPSILON_FRACTION, PriorCost, default_prior_radius, prior};
+pub use tce::{MASS_FLOOR, NORM_EPSILON, TceCost, centroid_offset, tce};
+pub use tre::{DEFAULT_TARGET_RATIO, TreCost, coverage, tre};
+pub use upright::{UprightCost, UprightMode, upright};
+
+/// Prefix of every config key named in errors: the costs live in the config's `[costs]` table.
+pub const CONFIG_TABLE: &str = "costs";
+
+/// Why costs could not be configured or evaluated.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CostError {
+    /// A config value is out of range; `key` is its full config key (e.g. `costs.prior.gamma`).
+    #[error("`{key}` {reason}")]
+    InvalidConfig {
+        /// Full config key, `costs.<cost>.<field>`.
+        key: String,
+        /// What is wrong and what is allowed.
+        reason: String,
+    },
+    /// The per-query context is unusable (a caller bug or a degenerate object).
+    #[error("cost context: `{field}` {reason}")]
+    InvalidContext {
+        /// Field of [`QueryContext`] or argument name.
+        field: &'static str,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A cost needs the rendered mask but the inputs hold none.
+    #[error("cost `{cost}` needs the rendered object mask, but none was rendered")]
+    MissingMask {
+        /// Name of the cost.
+        cost: &'static str,
+    },
+    /// Tensor shapes or dtypes of the inputs disagree.
+    #[error("cost inputs: {0}")]
+    Shape(String),
+    /// Two costs share a name (their history columns would collide), or none is configured.
+    #[error("costs: {0}")]
+    Set(String),
+}
+
+/// What one query (time window) contributes to the costs, on the host.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct QueryContext {
+    /// Object centre o, world coordinates (the prior pulls the camera toward it).
+    pub object_centre: [f64; 3],
+    /// Prior radius r (> 0): the prior does not pull closer than this; see
+    /// [`default_prior_radius`]. A `radius` in the prior's config overrides it.
+    pub prior_radius: f64,
+    /// World up (any length > 0; normalised where used).
+    pub world_up: [f64; 3],
+    /// Target ratio r_t ∈ (0, 1]: share of the frame the object should cover (TRE).
+    pub target_ratio: f64,
+}
+
+impl QueryContext {
+    /// Checks that every field is finite and in range (called by [`CostInputs::new`]).
+    pub fn validate(&self) -> Result<(), CostError> {
+        let bad = |field, reason: String| Err(CostError::InvalidContext { field, reason });
+        if !self.object_centre.iter().all(|v| v.is_finite()) {
+            return bad(
+                "object_centre",
+                format!("{:?} must be finite", self.object_centre),
+            );
+        }
+        if !(self.prior_radius.is_finite() && self.prior_radius > 0.0) {
+            return bad(
+                "prior_radius",
+                format!("{} must be finite and > 0", self.prior_radius),
+            );
+        }
+        let up = self.world_up;
+        let norm_sq = up.iter().map(|v| v * v).sum::<f64>();
+        if !(up.iter().all(|v| v.is_finite()) && norm_sq > 0.0 && norm_sq.is_finite()) {
+            return bad(
+                "world_up",
+                format!("{up:?} must be finite and non-zero"),
+            );
+        }
+        if !(self.target_ratio > 0.0 && self.target_ratio <= 1.0) {
+            return bad(
+                "target_ratio",
+                format!("{} must be in (0, 1]", self.target_ratio),
+            );
+        }
+        Ok(())
+    }
+
+    /// World up scaled to unit length.
+    pub fn unit_up(&self) -> [f64; 3] {
+        let [x, y, z] = self.world_up;
+        let n = (x * x + y * y + z * z).sqrt();
+        [x / n, y / n, z / n]
+    }
+}
+
+/// Everything a cost may read, for one batch of B samples of one query window.
+///
+/// Built by [`CostInputs::new`], which checks shapes and computes the rotations R_wc once for
+/// all costs. Tensors are cheap handles; costs clone what they consume.
+#[derive(Debug, Clone)]
+pub struct CostInputs {
+    poses: Tensor<2>,
+    rotations: Tensor<3>,
+    masks: Option<Tensor<3>>,
+    step: usize,
+    query: QueryContext,
+}
+
+impl CostInputs {
+    /// Inputs from poses Φ `[B, 6]`, masks `[B, H, W]` (None when nothing was rendered: the
+    /// prior and upright need no render), the optimisation step k and the query's context.
+    /// Masks and poses must share batch size, device and dtype.
+    pub fn new(
+        poses: Tensor<2>,
+        masks: Option<Tensor<3>>,
+        step: usize,
+        query: QueryContext,
+    ) -> Result<Self, CostError> {
+        query.validate()?;
+        let [batch, dim] = poses.dims();
+        if dim != 6 {
+            return Err(CostError::Shape(format!(
+                "poses must be [B, 6], got [{batch}, {dim}]"
+            )));
+        }
+        if let Some(m) = &masks {
+            let [mb, _, _] = m.dims();
+            if mb != batch {
+                return Err(CostError::Shape(format!(
+                    "masks hold {mb} samples, poses {batch}"
+                )));
+            }
+            if m.dtype() != poses.dtype() {
+                return Err(CostError::Shape(format!(
+                    "masks are {:?}, poses {:?} (mixing dtypes in one op panics)",
+                    m.dtype(),
+                    poses.dtype()
+                )));
+            }
+        }
+        let rotations = splatraj_render::camera::rotation_matrices(poses.clone().narrow(1, 0, 3));
+        Ok(Self {
+            poses,
+            rotations,
+            masks,
+            step,
+            query,
+        })
+    }
+
+    /// Batch size B.
+    pub fn batch(&self) -> usize {
+        self.poses.dims()[0]
+    }
+
+    /// Poses Φ `[B, 6]`.
+    pub fn poses(&self) -> &Tensor<2> {
+        &self.poses
+    }
+
+    /// Camera centres c `[B, 3]` (Φ's last three components).
+    pub fn centres(&self) -> Tensor<2> {
+        self.poses.clone().narrow(1, 3, 3)
+    }
+
+    /// Camera-to-world rotations R_wc `[B, 3, 3]` (differentiable Rodrigues of Φ's ω).
+    pub fn rotations(&self) -> &Tensor<3> {
+        &self.rotations
+    }
+
+    /// Column `axis` of R_wc, `[B, 3]`: the camera's x (right, 0), y (down, 1) or z (forward,
+    /// 2) axis in world coordinates.
+    pub fn camera_axis(&self, axis: usize) -> Tensor<2> {
+        let batch = self.batch();
+        self.rotations
+            .clone()
+            .narrow(2, axis, 1)
+            .reshape([batch, 3])
+    }
+
+    /// Rendered object masks `[B, H, W]`, if a render was made.
+    pub fn masks(&self) -> Option<&Tensor<3>> {
+        self.masks.as_ref()
+    }
+
+    /// The masks, or [`CostError::MissingMask`] naming `cost`.
+    pub fn require_masks(&self, cost: &'static str) -> Result<Tensor<3>, CostError> {
+        self.masks.clone().ok_or(CostError::MissingMask { cost })
+    }
+
+    /// Optimisation step k (0 first).
+    pub fn step(&self) -> usize {
+        self.step
+    }
+
+    /// The query's context.
+    pub fn query(&self) -> &QueryContext {
+        &self.query
+    }
+
+    /// A host vector as a `[1, 3]` row on the poses' device and dtype (for broadcasting).
+    pub fn row(&self, v: [f64; 3]) -> Tensor<2> {
+        Tensor::from_data(
+            TensorData::new(v.to_vec(), [1, 3]),
+            (&self.poses.device(), self.poses.dtype()),
+        )
+    }
+
+    /// Dtype of poses (and masks).
+    pub fn dtype(&self) -> DType {
+        self.poses.dtype()
+    }
+}
+
+/// One cost term: a name, a weight from the config, and a per-sample value.
+pub trait Cost: std::fmt::Debug + Send + Sync {
+    /// Name used in logs and as the `history.csv` column (the config table's name).
+    fn name(&self) -> &'static str;
+
+    /// Weight of the term at optimisation step `step` (constant for all but the prior).
+    fn weight(&self, step: usize) -> f64;
+
+    /// Whether [`Cost::evaluate`] reads the rendered mask (so a run with only mask-free costs
+    /// can skip rendering).
+    fn needs_mask(&self) -> bool;
+
+    /// Checks the config values; errors name the full key (`costs.<name>.<field>`).
+    fn validate(&self) -> Result<(), CostError>;
+
+    /// Unweighted cost per sample `[B]`, differentiable w.r.t. the poses and masks.
+    fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError>;
+}
+
+/// Checks a config weight (finite, ≥ 0), naming `costs.<cost>.<field>` on error.
+pub fn check_weight(cost: &str, field: &str, value: f64) -> Result<(), CostError> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(cost, field, format!("= {value} must be finite and ≥ 0")))
+    }
+}
+
+/// An [`CostError::InvalidConfig`] for key `costs.<cost>.<field>`.
+pub fn invalid(cost: &str, field: &str, reason: String) -> CostError {
+    CostError::InvalidConfig {
+        key: format!("{CONFIG_TABLE}.{cost}.{field}"),
+        reason,
+    }
+}
+
+/// The `[costs]` table: one optional sub-table per cost; a cost is on when its table is there.
+///
+/// ```toml
+/// [costs.tce]
+/// weight = 1.0
+/// [costs.upright]
+/// mode = "roll"      # or "up-vector" (default)
+/// [costs.prior]
+/// alpha0 = 1.0
+/// gamma = 0.99
+/// ```
+///
+/// Without a `[costs]` table ([`Default`]) all four optimised costs are on with their default
+/// weights (the paper's L = TCE + TRE + L_upright + α·L_prior); a `[costs]` table lists exactly
+/// the costs that are on (the ablations: prior only, prior + TCE, …). Unknown keys are errors.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CostsConfig {
+    /// Target centring error.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tce: Option<TceCost>,
+    /// Target ratio error.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tre: Option<TreCost>,
+    /// Uprightness.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub upright: Option<UprightCost>,
+    /// Decaying warm-start prior.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prior: Option<PriorCost>,
+}
+
+impl Default for CostsConfig {
+    /// All four costs with their defaults (the paper's objective).
+    fn default() -> Self {
+        Self {
+            tce: Some(TceCost::default()),
+            tre: Some(TreCost::default()),
+            upright: Some(UprightCost::default()),
+            prior: Some(PriorCost::default()),
+        }
+    }
+}
+
+impl CostsConfig {
+    /// Validates every configured cost and collects them, in the order tce, tre, upright, prior.
+    pub fn build(&self) -> Result<WeightedCosts, CostError> {
+        let mut costs: Vec<Box<dyn Cost>> = Vec::new();
+        if let Some(c) = &self.tce {
+            costs.push(Box::new(c.clone()));
+        }
+        if let Some(c) = &self.tre {
+            costs.push(Box::new(c.clone()));
+        }
+        if let Some(c) = &self.upright {
+            costs.push(Box::new(c.clone()));
+        }
+        if let Some(c) = &self.prior {
+            costs.push(Box::new(c.clone()));
+        }
+        WeightedCosts::new(costs)
+    }
+}
+
+/// One evaluated term: its weight at this step and its unweighted value per sample.
+#[derive(Debug, Clone)]
+pub struct CostTerm {
+    /// The cost's name.
+    pub name: &'static str,
+    /// Weight w_i at this step (α_k for the prior).
+    pub weight: f64,
+    /// Unweighted value per sample `[B]`.
+    pub value: Tensor<1>,
+}
+
+/// The weighted sum and its terms, for one batch.
+#[derive(Debug, Clone)]
+pub struct CostTerms {
+    /// Σ_i w_i·cost_i per sample `[B]` (differentiable).
+    pub total: Tensor<1>,
+    /// Each term, in the order of the [`WeightedCosts`].
+    pub terms: Vec<CostTerm>,
+}
+
+impl CostTerms {
+    /// Batch means of each unweighted term, `(name, weight, mean)`, on the host (a history row).
+    pub fn means(&self) -> Vec<(&'static str, f64, f64)> {
+        self.terms
+            .iter()
+            .map(|t| (t.name, t.weight, host_mean(t.value.clone())))
+            .collect()
+    }
+
+    /// Batch mean of the weighted total, on the host.
+    pub fn total_mean(&self) -> f64 {
+        host_mean(self.total.clone())
+    }
+}
+
+fn host_mean(t: Tensor<1>) -> f64 {
+    t.mean()
+        .into_data()
+        .convert::<f64>()
+        .try_to_vec::<f64>()
+        .map(|v| v[0])
+        .unwrap_or(f64::NAN)
+}
+
+/// A set of costs with distinct names, summed with their weights.
+#[derive(Debug)]
+pub struct WeightedCosts {
+    costs: Vec<Box<dyn Cost>>,
+}
+
+impl WeightedCosts {
+    /// Validates each cost; errors when none is given or two share a name.
+    pub fn new(costs: Vec<Box<dyn Cost>>) -> Result<Self, CostError> {
+        if costs.is_empty() {
+            return Err(CostError::Set(format!(
+                "no cost is configured: add at least one `[{CONFIG_TABLE}.<name>]` table"
+            )));
+        }
+        for (i, c) in costs.iter().enumerate() {
+            c.validate()?;
+            if costs[..i].iter().any(|d| d.name() == c.name()) {
+                return Err(CostError::Set(format!("cost `{}` given twice", c.name())));
+            }
+        }
+        Ok(Self { costs })
+    }
+
+    /// The costs, in evaluation order.
+    pub fn costs(&self) -> &[Box<dyn Cost>] {
+        &self.costs
+    }
+
+    /// Names of the terms, in order (the `history.csv` columns).
+    pub fn names(&self) -> Vec<&'static str> {
+        self.costs.iter().map(|c| c.name()).collect()
+    }
+
+    /// Whether any cost reads the rendered mask.
+    pub fn needs_mask(&self) -> bool {
+        self.costs.iter().any(|c| c.needs_mask())
+    }
+
+    /// Every term and Σ_i w_i(k)·cost_i per sample `[B]`.
+    pub fn evaluate(&self, inputs: &CostInputs) -> Result<CostTerms, CostError> {
+        let mut total: Option<Tensor<1>> = None;
+        let mut terms = Vec::with_capacity(self.costs.len());
+        for cost in &self.costs {
+            let weight = cost.weight(inputs.step());
+            let value = cost.evaluate(inputs)?;
+            let weighted = value.clone().mul_scalar(weight);
+            total = Some(match total {
+                Some(t) => t + weighted,
+                None => weighted,
+            });
+            terms.push(CostTerm {
+                name: cost.name(),
+                weight,
+                value,
+            });
+        }
+        // `new` guarantees at least one cost.
+        let total = total.ok_or_else(|| CostError::Set("no cost is configured".into()))?;
+        Ok(CostTerms { total, terms })
+    }
+}

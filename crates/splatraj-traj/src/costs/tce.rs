@@ -16,6 +16,9 @@
 //!   derivative d/√(d² + ε²) is finite everywhere.
 
 use burn::tensor::{Tensor, TensorData};
+use serde::{Deserialize, Serialize};
+
+use super::{Cost, CostError, CostInputs, check_weight};
 
 /// Total mask mass (in pixels) below which the centroid is pulled toward the image centre.
 pub const MASS_FLOOR: f64 = 1e-3;
@@ -55,4 +58,37 @@ pub fn tce(mask: Tensor<3>) -> Tensor<1> {
         .sqrt()
         .sub_scalar(NORM_EPSILON)
         .reshape([batch])
+}
+
+/// TCE as a [`Cost`]: config table `[costs.tce]`, key `weight` (default 1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TceCost {
+    /// Weight w_tce (≥ 0).
+    pub weight: f64,
+}
+
+impl Default for TceCost {
+    /// Weight 1, as in the paper's unweighted sum.
+    fn default() -> Self {
+        Self { weight: 1.0 }
+    }
+}
+
+impl Cost for TceCost {
+    fn name(&self) -> &'static str {
+        "tce"
+    }
+    fn weight(&self, _step: usize) -> f64 {
+        self.weight
+    }
+    fn needs_mask(&self) -> bool {
+        true
+    }
+    fn validate(&self) -> Result<(), CostError> {
+        check_weight(self.name(), "weight", self.weight)
+    }
+    fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
+        Ok(tce(inputs.require_masks(self.name())?))
+    }
 }

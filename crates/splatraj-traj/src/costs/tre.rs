@@ -8,6 +8,9 @@
 //! derivative is sign(0) = 0.
 
 use burn::tensor::Tensor;
+use serde::{Deserialize, Serialize};
+
+use super::{Cost, CostError, CostInputs, check_weight};
 
 /// Target ratio of the frame the object should cover when none is configured.
 pub const DEFAULT_TARGET_RATIO: f64 = 0.15;
@@ -24,4 +27,41 @@ pub fn coverage(mask: Tensor<3>) -> Tensor<1> {
 /// Target ratio error per sample, `[B]`, of mask images `[B, H, W]` for target ratio `target`.
 pub fn tre(mask: Tensor<3>, target: f64) -> Tensor<1> {
     coverage(mask).sub_scalar(target).abs()
+}
+
+/// TRE as a [`Cost`]: config table `[costs.tre]`, key `weight` (default 1). The target ratio
+/// r_t is per query ([`super::QueryContext::target_ratio`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TreCost {
+    /// Weight w_tre (≥ 0).
+    pub weight: f64,
+}
+
+impl Default for TreCost {
+    /// Weight 1, as in the paper's unweighted sum.
+    fn default() -> Self {
+        Self { weight: 1.0 }
+    }
+}
+
+impl Cost for TreCost {
+    fn name(&self) -> &'static str {
+        "tre"
+    }
+    fn weight(&self, _step: usize) -> f64 {
+        self.weight
+    }
+    fn needs_mask(&self) -> bool {
+        true
+    }
+    fn validate(&self) -> Result<(), CostError> {
+        check_weight(self.name(), "weight", self.weight)
+    }
+    fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
+        Ok(tre(
+            inputs.require_masks(self.name())?,
+            inputs.query().target_ratio,
+        ))
+    }
 }

@@ -1,0 +1,127 @@
+//! Occlusion IoU (a metric): how much of the object's bounding box the rest of the scene hides.
+//!
+//! IoU = |B_vis ∩ B_alone| / |B_vis ∪ B_alone| between the pixel bounding box of the object's
+//! visible mask (composited with every Gaussian, so occluders lower it) and that of the object
+//! rendered alone (all other Gaussians removed) from the same pose (DESIGN.md "Metrics"). A
+//! pixel belongs to a mask when its value is ≥ [`IOU_THRESHOLD`]. 1 when nothing hides the
+//! object; a box half hidden along one side gives ½.
+//!
+//! **Empty boxes.** When neither mask has a pixel at the threshold (the object is out of view,
+//! or too thin or transparent to cover half a pixel) the IoU is defined as **0**, not 1: the
+//! metric rewards seeing the object unhidden, and a view without the object shows nothing of it.
+//! When only one box is empty the union is non-empty and the intersection empty, so it is 0 too.
+//! The result is never NaN.
+//!
+//! It is not a [`super::Cost`]: boxes are piecewise constant in the pose (no useful gradient;
+//! the paper reports that optimising IoU directly makes gradient steps jump, its §V), and it
+//! needs a second render (the object alone), which the optimisation loop does not make. So it
+//! is host code, called on the final renders.
+
+use burn::tensor::Tensor;
+
+/// A pixel belongs to a mask when its value is at least this (DESIGN.md: threshold 0.5).
+pub const IOU_THRESHOLD: f64 = 0.5;
+
+/// A pixel bounding box, half-open: columns `x0..x1`, rows `y0..y1` (never empty).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PixelBox {
+    /// First column.
+    pub x0: usize,
+    /// First row.
+    pub y0: usize,
+    /// One past the last column.
+    pub x1: usize,
+    /// One past the last row.
+    pub y1: usize,
+}
+
+impl PixelBox {
+    /// Number of pixels inside.
+    pub fn area(&self) -> usize {
+        (self.x1 - self.x0) * (self.y1 - self.y0)
+    }
+
+    /// The overlap of two boxes, if any.
+    pub fn intersection(&self, other: &PixelBox) -> Option<PixelBox> {
+        let b = PixelBox {
+            x0: self.x0.max(other.x0),
+            y0: self.y0.max(other.y0),
+            x1: self.x1.min(other.x1),
+            y1: self.y1.min(other.y1),
+        };
+        (b.x0 < b.x1 && b.y0 < b.y1).then_some(b)
+    }
+}
+
+/// Bounding box of the pixels ≥ `threshold` of a row-major `[height, width]` mask; None if none.
+///
+/// # Panics
+/// If `mask.len() != width * height`.
+pub fn mask_box(mask: &[f64], width: usize, height: usize, threshold: f64) -> Option<PixelBox> {
+    assert_eq!(mask.len(), width * height, "mask is not {height}×{width}");
+    let mut found: Option<PixelBox> = None;
+    for (j, row) in mask.chunks_exact(width.max(1)).enumerate() {
+        for (i, &v) in row.iter().enumerate() {
+            if v >= threshold {
+                let b = found.get_or_insert(PixelBox {
+                    x0: i,
+                    y0: j,
+                    x1: i + 1,
+                    y1: j + 1,
+                });
+                b.x0 = b.x0.min(i);
+                b.x1 = b.x1.max(i + 1);
+                b.y0 = b.y0.min(j);
+                b.y1 = b.y1.max(j + 1);
+            }
+        }
+    }
+    found
+}
+
+/// Bounding-box IoU of the visible mask and the object-alone mask, both row-major
+/// `[height, width]`, thresholded at [`IOU_THRESHOLD`]; 0 when both boxes are empty (module docs).
+///
+/// # Panics
+/// If either mask's length is not `width * height`.
+pub fn bbox_iou(visible: &[f64], alone: &[f64], width: usize, height: usize) -> f64 {
+    let a = mask_box(visible, width, height, IOU_THRESHOLD);
+    let b = mask_box(alone, width, height, IOU_THRESHOLD);
+    match (a, b) {
+        (Some(a), Some(b)) => {
+            let inter = a.intersection(&b).map_or(0, |i| i.area());
+            let union = a.area() + b.area() - inter;
+            inter as f64 / union as f64
+        }
+        // One or both empty: no overlap (both empty is defined as 0, see module docs).
+        _ => 0.0,
+    }
+}
+
+/// [`bbox_iou`] per sample for batches of masks `[B, H, W]` (read back to the host; no gradient).
+///
+/// # Panics
+/// If the two batches' shapes differ.
+pub fn bbox_iou_batch(visible: Tensor<3>, alone: Tensor<3>) -> Vec<f64> {
+    let dims = visible.dims();
+    assert_eq!(dims, alone.dims(), "visible and alone masks differ in shape");
+    let [batch, height, width] = dims;
+    let host = |t: Tensor<3>| -> Vec<f64> {
+        t.into_data()
+            .convert::<f64>()
+            .try_to_vec::<f64>()
+            .expect("float tensor data converts to f64")
+    };
+    let (v, a) = (host(visible), host(alone));
+    let n = height * width;
+    (0..batch)
+        .map(|b| {
+            bbox_iou(
+                &v[b * n..(b + 1) * n],
+                &a[b * n..(b + 1) * n],
+                width,
+                height,
+            )
+        })
+        .collect()
+}
