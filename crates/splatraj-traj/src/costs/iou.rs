@@ -104,7 +104,11 @@ pub fn bbox_iou(visible: &[f64], alone: &[f64], width: usize, height: usize) -> 
 /// If the two batches' shapes differ.
 pub fn bbox_iou_batch(visible: Tensor<3>, alone: Tensor<3>) -> Vec<f64> {
     let dims = visible.dims();
-    assert_eq!(dims, alone.dims(), "visible and alone masks differ in shape");
+    assert_eq!(
+        dims,
+        alone.dims(),
+        "visible and alone masks differ in shape"
+    );
     let [batch, height, width] = dims;
     let host = |t: Tensor<3>| -> Vec<f64> {
         t.into_data()

@@ -12,9 +12,9 @@
 //! its own weight at step k. [`WeightedCosts`] sums w_i·cost_i and keeps each term for
 //! `history.csv`.
 //!
-//! - [`tce`]: target centring error (image cost); [`tre`]: target ratio error (image cost);
-//! - [`upright`]: camera up against world up (`up-vector`, the paper's) or horizon tilt (`roll`);
-//! - [`prior`]: the decaying warm-start prior (attracting form; the paper's signs are a typo);
+//! - [`mod@tce`]: target centring error (image cost); [`mod@tre`]: target ratio error (image cost);
+//! - [`mod@upright`]: camera up against world up (`up-vector`, the paper's) or horizon tilt (`roll`);
+//! - [`mod@prior`]: the decaying warm-start prior (attracting form; the paper's signs are a typo);
 //! - [`iou`]: bounding-box IoU, a metric only (see that module for why it is not a [`Cost`]).
 //!
 //! Adding a cost is adding a file: a config struct implementing [`Cost`], plus one `Option`
@@ -109,10 +109,7 @@ impl QueryContext {
         let up = self.world_up;
         let norm_sq = up.iter().map(|v| v * v).sum::<f64>();
         if !(up.iter().all(|v| v.is_finite()) && norm_sq > 0.0 && norm_sq.is_finite()) {
-            return bad(
-                "world_up",
-                format!("{up:?} must be finite and non-zero"),
-            );
+            return bad("world_up", format!("{up:?} must be finite and non-zero"));
         }
         if !(self.target_ratio > 0.0 && self.target_ratio <= 1.0) {
             return bad(
@@ -274,7 +271,11 @@ pub fn check_weight(cost: &str, field: &str, value: f64) -> Result<(), CostError
     if value.is_finite() && value >= 0.0 {
         Ok(())
     } else {
-        Err(invalid(cost, field, format!("= {value} must be finite and ≥ 0")))
+        Err(invalid(
+            cost,
+            field,
+            format!("= {value} must be finite and ≥ 0"),
+        ))
     }
 }
 

@@ -100,7 +100,10 @@ pub fn default_prior_radius(
         0.25 * std::f64::consts::PI * length * length
     };
     if area <= 0.0 {
-        return bad("extent", format!("{extent:?} is a point: it has no size to frame"));
+        return bad(
+            "extent",
+            format!("{extent:?} is a point: it has no size to frame"),
+        );
     }
     let frame = 4.0 * (0.5 * fov_x).tan() * (0.5 * fov_y).tan();
     Ok((area / (target_ratio * frame)).sqrt())

@@ -41,10 +41,7 @@ pub fn upright(rotations: Tensor<3>, unit_up: Tensor<2>, mode: UprightMode) -> T
             .sum_dim(1)
             .reshape([batch])
             .add_scalar(1.0),
-        UprightMode::Roll => (column(0) * unit_up)
-            .sum_dim(1)
-            .reshape([batch])
-            .square(),
+        UprightMode::Roll => (column(0) * unit_up).sum_dim(1).reshape([batch]).square(),
     }
 }
 
