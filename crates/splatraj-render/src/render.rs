@@ -189,18 +189,16 @@ pub fn render(
     let binned = started.elapsed();
 
     // used[u] = scene index of the u-th Gaussian some tile needs; lists are renumbered to u.
-    let mut compact_from_scene = vec![u32::MAX; n];
+    let mut is_used = vec![false; n];
     for list in &work {
         for &g in &list.gaussians {
-            compact_from_scene[g as usize] = 0;
+            is_used[g as usize] = true;
         }
     }
-    let mut used = Vec::new();
-    for (g, slot) in compact_from_scene.iter_mut().enumerate() {
-        if *slot == 0 {
-            *slot = used.len() as u32;
-            used.push(g);
-        }
+    let used: Vec<usize> = (0..n).filter(|&g| is_used[g]).collect();
+    let mut compact_from_scene = vec![u32::MAX; n];
+    for (u, &g) in used.iter().enumerate() {
+        compact_from_scene[g] = u as u32;
     }
     for list in &mut work {
         for g in &mut list.gaussians {

@@ -2,31 +2,15 @@
 
 mod common;
 
-use splatraj_scene::{Features, Scene};
+/// Gaussians 1 cm apart with these 2-D features.
+fn small_scene(features: Vec<[f32; 2]>) -> splatraj_scene::Scene {
+    common::scene_with_2d_features(&features, 0.01)
+}
+
 use splatraj_semantic::{
     FeatureInput, FeaturesSource, Matrix, PhraseTable, Relevancy, Scoring, SelectionOptions,
     SemanticError, find_target, select,
 };
-
-fn small_scene(features: Vec<[f32; 2]>) -> Scene {
-    let n = features.len();
-    Scene {
-        means: (0..n).map(|i| [i as f32 * 0.01, 0.0, 0.0]).collect(),
-        scales: vec![[0.01; 3]; n],
-        rotations: vec![[1.0, 0.0, 0.0, 0.0]; n],
-        opacities: vec![1.0; n],
-        sh_degree: 0,
-        sh: vec![0.0; 3 * n],
-        extras: splatraj_scene::Extras {
-            features: Some(Features {
-                names: vec!["f0".into(), "f1".into()],
-                dim: 2,
-                values: features.iter().flatten().copied().collect(),
-            }),
-            ..Default::default()
-        },
-    }
-}
 
 fn source() -> FeaturesSource {
     let phrases = ["apple", "object", "things", "stuff", "texture"];

@@ -1,30 +1,11 @@
 //! LERF relevancy against values worked out by hand.
 
-use splatraj_scene::{Features, Scene};
+mod common;
+
+use common::scene_with_2d_features;
 use splatraj_semantic::sources::TargetSource;
 use splatraj_semantic::vectors::{cosine, pair_softmax};
 use splatraj_semantic::{FeatureInput, FeaturesSource, Matrix, PhraseTable};
-
-/// A scene of `features.len()` Gaussians at the origin with these 2-D features.
-fn scene_2d(features: &[[f32; 2]]) -> Scene {
-    let n = features.len();
-    Scene {
-        means: vec![[0.0; 3]; n],
-        scales: vec![[0.01; 3]; n],
-        rotations: vec![[1.0, 0.0, 0.0, 0.0]; n],
-        opacities: vec![1.0; n],
-        sh_degree: 0,
-        sh: vec![0.0; 3 * n],
-        extras: splatraj_scene::Extras {
-            features: Some(Features {
-                names: vec!["f0".into(), "f1".into()],
-                dim: 2,
-                values: features.iter().flatten().copied().collect(),
-            }),
-            ..Default::default()
-        },
-    }
-}
 
 fn table(rows: &[(&str, [f32; 2])]) -> PhraseTable {
     PhraseTable::new(
@@ -48,7 +29,7 @@ fn one_negative_matches_the_softmax_worked_by_hand() {
     // Gaussian 1: f = (1, 1): cos_q = cos_n = 1/√2, so r = 1/2.
     // Gaussian 2: f = (2, -1), |f| = √5: cos_q = 2/√5, cos_n = -1/√5:
     //   r = 1 / (1 + e^(10·(-1/√5 - 2/√5))) = 1 / (1 + e^(-30/√5)).
-    let scene = scene_2d(&[[3.0, 4.0], [1.0, 1.0], [2.0, -1.0]]);
+    let scene = scene_with_2d_features(&[[3.0, 4.0], [1.0, 1.0], [2.0, -1.0]], 0.0);
     let mut source = FeaturesSource::new(
         FeatureInput::Scene,
         table(&[("red apple", [1.0, 0.0]), ("object", [0.0, 2.0])]),
@@ -72,7 +53,7 @@ fn the_minimum_over_negatives_and_the_temperature_are_used() {
     // f = (1, 0); q = (1, 1)/√2·|·|: cos_q = 1/√2. Negatives: (1, 0) cos 1, (0, 1) cos 0.
     // τ = 2: against (1, 0): 1/(1 + e^(2(1 - 1/√2))); against (0, 1): 1/(1 + e^(2(0 - 1/√2))).
     // The minimum is the first.
-    let scene = scene_2d(&[[1.0, 0.0]]);
+    let scene = scene_with_2d_features(&[[1.0, 0.0]], 0.0);
     let mut source = FeaturesSource::new(
         FeatureInput::Scene,
         table(&[("q", [1.0, 1.0]), ("a", [5.0, 0.0]), ("b", [0.0, 0.5])]),

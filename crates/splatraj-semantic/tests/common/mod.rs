@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
-use splatraj_scene::{ReadOptions, Scene, read_scene};
+use splatraj_scene::{Extras, Features, ReadOptions, Scene, read_scene};
 
 /// The scene crate's fixture folder.
 pub fn data_dir() -> PathBuf {
@@ -74,4 +74,25 @@ pub fn precision_recall(mask: &[f32], truth: &[bool]) -> (f64, f64) {
     let selected = mask.iter().filter(|m| **m > 0.5).count() as f64;
     let positives = truth.iter().filter(|t| **t).count() as f64;
     (tp / selected.max(1.0), tp / positives.max(1.0))
+}
+
+/// A scene with one Gaussian per 2-D feature vector, placed `spacing` apart along x.
+pub fn scene_with_2d_features(features: &[[f32; 2]], spacing: f32) -> Scene {
+    let n = features.len();
+    Scene {
+        means: (0..n).map(|i| [i as f32 * spacing, 0.0, 0.0]).collect(),
+        scales: vec![[0.01; 3]; n],
+        rotations: vec![[1.0, 0.0, 0.0, 0.0]; n],
+        opacities: vec![1.0; n],
+        sh_degree: 0,
+        sh: vec![0.0; 3 * n],
+        extras: Extras {
+            features: Some(Features {
+                names: vec!["f0".into(), "f1".into()],
+                dim: 2,
+                values: features.iter().flatten().copied().collect(),
+            }),
+            ..Default::default()
+        },
+    }
 }
