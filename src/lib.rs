@@ -2,9 +2,11 @@
 //!
 //! This package is the command-line tool and a thin facade over the pipeline's crates:
 //! [`scene`] (files, data model, demo scene) → [`semantic`] (query → the object's Gaussians)
-//! → [`render`] (camera, rasterizer) → [`traj`] (costs; trajectories and optimisers to come).
-//! It adds no logic of its own beyond the CLI, so library users can depend on the crates
-//! directly.
+//! → [`render`] (camera, rasterizer) → [`traj`] (trajectory models, costs, optimisers,
+//! metrics). Of its own it adds only the experiment [`config`] schema (the TOML files of
+//! `splatraj run` and `splatraj pose`), so library users can depend on the crates directly.
+
+pub mod config;
 
 pub use splatraj_render as render;
 pub use splatraj_scene as scene;

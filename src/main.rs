@@ -23,6 +23,10 @@ enum Command {
     Render(commands::render::RenderArgs),
     /// Show what a query selects (labels, region or language features) and picture it.
     Query(commands::query::QueryArgs),
+    /// Optimise a camera trajectory showing each query in turn, and render it (TOML config).
+    Run(commands::run::RunArgs),
+    /// Optimise one camera pose framing one query (ablations, restarts, SGLD samples).
+    Pose(commands::pose::PoseArgs),
     /// Benchmarks.
     #[command(subcommand)]
     Bench(commands::bench::BenchCommand),
@@ -47,6 +51,8 @@ fn main() -> ExitCode {
         Command::Scene(command) => commands::scene::run(command),
         Command::Render(args) => commands::render::run(args),
         Command::Query(args) => commands::query::run(args),
+        Command::Run(args) => commands::run::run(args),
+        Command::Pose(args) => commands::pose::run(args),
         Command::Bench(command) => commands::bench::run(command),
     };
     match result {

@@ -442,3 +442,111 @@ fn features_route_selects_the_phrases_label() {
     assert_clean_failure(&out, &["--phrases", "labels source"]);
     assert!(!none.exists());
 }
+
+/// The semantic crate's LangSplat fixture (see its README).
+fn langsplat_fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("crates/splatraj-semantic/tests/data/langsplat")
+        .join(name)
+}
+
+#[test]
+fn langsplat_route_decodes_latents_and_selects_the_phrases_label() {
+    use npyz::WriterBuilder;
+    use splatraj_semantic::Matrix;
+    let (ply, sidecar) = fruit();
+    let dir = tempfile::tempdir().unwrap();
+    let scene = fruit_scene();
+    let ids = &scene.extras.labels.as_ref().unwrap().ids;
+    // Label 3 gets fixture latent 0, every other label one of latents 1-4; the table holds
+    // PyTorch's decoding of latent 0 as "apple" and of latents 1-4 as the four negatives, so
+    // only label 3 can score above 0.5.
+    let latents = Matrix::from_npy(&langsplat_fixture("latents.npy")).unwrap();
+    let decoded = Matrix::from_npy(&langsplat_fixture("decoded.npy")).unwrap();
+    let mut bytes = Vec::new();
+    let mut writer = npyz::WriteOptions::<f32>::new()
+        .default_dtype()
+        .shape(&[ids.len() as u64, 3])
+        .writer(&mut bytes)
+        .begin_nd()
+        .unwrap();
+    for &id in ids {
+        let k = if id == 3 { 0 } else { 1 + id as usize % 4 };
+        writer.extend(latents.row(k).iter().copied()).unwrap();
+    }
+    writer.finish().unwrap();
+    let latents_path = dir.path().join("latents.npy");
+    std::fs::write(&latents_path, bytes).unwrap();
+    let table = dir.path().join("table.json");
+    std::fs::write(
+        &table,
+        json!({
+            "apple": decoded.row(0), "object": decoded.row(1), "things": decoded.row(2),
+            "stuff": decoded.row(3), "texture": decoded.row(4),
+        })
+        .to_string(),
+    )
+    .unwrap();
+
+    let checkpoint = langsplat_fixture("best_ckpt.pth");
+    let report = json_report(&splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--source",
+        "langsplat",
+        "--latents",
+        s(&latents_path),
+        "--checkpoint",
+        s(&checkpoint),
+        "--phrases",
+        s(&table),
+        "--query",
+        "apple",
+        "--top-fraction",
+        "0.1",
+        "--no-cluster",
+        "--json",
+        "--out",
+        s(dir.path()),
+    ]));
+    assert_eq!(report["source"], "langsplat");
+    assert_eq!(report["count"], 398);
+    assert!(report["relevancy"]["min"].as_f64().unwrap() > 0.5);
+    let by_label = json_report(&splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--labels",
+        s(&sidecar),
+        "--query",
+        "Category 3",
+        "--json",
+        "--out",
+        s(dir.path()),
+    ]));
+    assert_eq!(report["centre"], by_label["centre"]);
+
+    // A broken checkpoint: the error names the option, the file and the key; nothing written.
+    let none = dir.path().join("none");
+    let out = splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--latents",
+        s(&latents_path),
+        "--checkpoint",
+        s(&langsplat_fixture("bad_missing_bias.pth")),
+        "--phrases",
+        s(&table),
+        "--query",
+        "apple",
+        "--out",
+        s(&none),
+    ]);
+    assert_clean_failure(
+        &out,
+        &["--checkpoint", "bad_missing_bias.pth", "decoder.2.bias"],
+    );
+    assert!(!none.exists());
+}

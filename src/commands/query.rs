@@ -1,9 +1,10 @@
 //! `splatraj query`: what a semantic query selects in a scene, as text (or JSON) and as a
 //! picture.
 //!
-//! The query goes through one of the semantic sources (labels, a region, or per-Gaussian
-//! language features scored against a phrase table) and the selection (percentile, floor,
-//! DBSCAN) of `splatraj-semantic`. The command prints the counts, clusters, relevancy spread,
+//! The query goes through one of the semantic sources (labels, a region, per-Gaussian
+//! language features scored against a phrase table, or LangSplat latents decoded by the
+//! scene's autoencoder checkpoint and then scored as features) and the selection (percentile,
+//! floor, DBSCAN) of `splatraj-semantic`. The command prints the counts, clusters, relevancy spread,
 //! centre and extent, and renders `query.png`: the RGB render from a camera that looks at the
 //! selection's centre from 30° above the horizontal (`--elevation`), at a distance where its extent fills
 //! about a third of the frame, with the selected Gaussians tinted magenta. Every input is read
@@ -11,7 +12,7 @@
 
 use std::collections::BTreeMap;
 use std::io::Cursor;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 use anyhow::{Context, Result, anyhow, bail};
@@ -25,10 +26,8 @@ use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, rend
 use splatraj_scene::atomic::write_atomically;
 use splatraj_scene::{Scene, guess_up_axis, read_scene};
 use splatraj_semantic::selection::{DEFAULT_FLOOR, DEFAULT_TOP_FRACTION};
-use splatraj_semantic::vectors::DEFAULT_TEMPERATURE;
 use splatraj_semantic::{
-    ClusterOptions, FeatureInput, FeaturesSource, LabelsSource, PhraseTable, Region, RegionSource,
-    SelectionOptions, Target, TargetSource, find_target, read_feature_sidecar,
+    ClusterOptions, Region, RegionSpec, SelectionOptions, Target, TargetsConfig, find_target,
 };
 
 use super::render::{host, mask_request, pose_tensor};
@@ -59,9 +58,9 @@ pub struct QueryArgs {
     /// phrase table (features).
     #[arg(long)]
     query: String,
-    /// Target source; by default `region` when --box/--sphere is given, `features` when
-    /// --phrases or --features is given, else `labels` when the scene has labels, else
-    /// `features` when it has feature vectors and a phrase table is given.
+    /// Target source; by default `region` when --box/--sphere is given, `langsplat` when
+    /// --latents or --checkpoint is given, `features` when --phrases or --features is given,
+    /// else `labels` when the scene has labels.
     #[arg(long, value_enum)]
     source: Option<SourceKind>,
     /// labels: synonyms of a label, `NAME=ALT1,ALT2` (repeatable).
@@ -81,20 +80,28 @@ pub struct QueryArgs {
     /// the scene's own feature properties.
     #[arg(long, value_name = "SIDECAR")]
     features: Option<PathBuf>,
-    /// features: phrase table of text embeddings (.json, .npy with --phrase-names, or
-    /// .safetensors).
+    /// features, langsplat: phrase table of text embeddings (.json, .npy with
+    /// --phrase-names, or .safetensors).
     #[arg(long, value_name = "TABLE")]
     phrases: Option<PathBuf>,
-    /// features: phrases of an .npy (or .safetensors) table, one per line in row order.
+    /// features, langsplat: phrases of an .npy (or .safetensors) table, one per line in row
+    /// order.
     #[arg(long, value_name = "FILE.txt")]
     phrase_names: Option<PathBuf>,
-    /// features: canonical negative phrase (repeatable; default: object, things, stuff,
-    /// texture).
+    /// features, langsplat: canonical negative phrase (repeatable; default: object, things,
+    /// stuff, texture).
     #[arg(long)]
     negative: Vec<String>,
-    /// features: temperature of the relevancy softmax.
-    #[arg(long, default_value_t = DEFAULT_TEMPERATURE)]
-    temperature: f32,
+    /// features, langsplat: temperature of the relevancy softmax [default: 10].
+    #[arg(long)]
+    temperature: Option<f32>,
+    /// langsplat: per-Gaussian LangSplat latents, `[N, 3]` (.npy), decoded by --checkpoint.
+    #[arg(long, value_name = "LATENTS.npy")]
+    latents: Option<PathBuf>,
+    /// langsplat: the scene's LangSplat autoencoder checkpoint (PyTorch state dict,
+    /// e.g. best_ckpt.pth); decoded on --backend's device.
+    #[arg(long, value_name = "CKPT.pth")]
+    checkpoint: Option<PathBuf>,
     /// Fraction (0, 1] of all Gaussians kept by the relevancy percentile (features).
     #[arg(long, default_value_t = DEFAULT_TOP_FRACTION)]
     top_fraction: f32,
@@ -140,14 +147,22 @@ pub enum SourceKind {
     Region,
     /// Per-Gaussian language features and a phrase table.
     Features,
+    /// LangSplat latents decoded by the scene's autoencoder, then as features.
+    Langsplat,
 }
 
 impl SourceKind {
     fn name(self) -> &'static str {
+        self.config().name()
+    }
+
+    /// The same kind in the semantic crate's config.
+    fn config(self) -> splatraj_semantic::SourceKind {
         match self {
-            SourceKind::Labels => "labels",
-            SourceKind::Region => "region",
-            SourceKind::Features => "features",
+            SourceKind::Labels => splatraj_semantic::SourceKind::Labels,
+            SourceKind::Region => splatraj_semantic::SourceKind::Region,
+            SourceKind::Features => splatraj_semantic::SourceKind::Features,
+            SourceKind::Langsplat => splatraj_semantic::SourceKind::Langsplat,
         }
     }
 }
@@ -238,22 +253,33 @@ pub fn run(args: QueryArgs) -> Result<()> {
     }
     let scene = loaded.scene;
     let kind = choose_source(&args, &scene, region.is_some())?;
-    let source: Box<dyn TargetSource> = match kind {
-        SourceKind::Labels => Box::new(LabelsSource {
-            synonyms,
-            ..LabelsSource::default()
-        }),
-        SourceKind::Region => {
-            let region = region.expect("checked by choose_source");
-            Box::new(RegionSource::single(args.query.trim(), region))
-        }
-        SourceKind::Features => Box::new(features_source(&args)?),
+    // The command line fills the same `[targets]` table a run config holds, so both build
+    // their source through one path; paths stay relative to the working directory.
+    let config = TargetsConfig {
+        source: kind.config(),
+        synonyms,
+        regions: region
+            .map(|r| BTreeMap::from([(args.query.trim().to_string(), r)]))
+            .unwrap_or_default(),
+        features: args.features.clone(),
+        phrases: args.phrases.clone(),
+        phrase_names: args.phrase_names.clone(),
+        negatives: (!args.negative.is_empty()).then(|| args.negative.clone()),
+        temperature: args.temperature,
+        latents: args.latents.clone(),
+        checkpoint: args.checkpoint.clone(),
+        selection: SelectionOptions {
+            top_fraction: args.top_fraction,
+            floor: args.floor,
+            cluster: (!args.no_cluster).then(ClusterOptions::default),
+        },
+        label_names: BTreeMap::new(),
     };
-    let options = SelectionOptions {
-        top_fraction: args.top_fraction,
-        floor: args.floor,
-        cluster: (!args.no_cluster).then(ClusterOptions::default),
-    };
+    config.selection.validate_as("--")?;
+    let options = config.selection;
+    let source = config
+        .build_named(Path::new(""), &device, &option_of_key)
+        .with_context(|| format!("{} ({} source)", args.scene.display(), kind.name()))?;
     let target = find_target(source.as_ref(), &scene, &args.query, &options)
         .with_context(|| format!("{} ({} source)", args.scene.display(), source.kind()))?;
 
@@ -323,14 +349,16 @@ pub fn run(args: QueryArgs) -> Result<()> {
 
 /// The source asked for, or the one the inputs point to (see `--source`).
 fn choose_source(args: &QueryArgs, scene: &Scene, has_region: bool) -> Result<SourceKind> {
-    let feature_options = args.phrases.is_some()
-        || args.features.is_some()
+    let phrase_options = args.phrases.is_some()
         || args.phrase_names.is_some()
-        || !args.negative.is_empty();
+        || !args.negative.is_empty()
+        || args.temperature.is_some();
+    let langsplat_options = args.latents.is_some() || args.checkpoint.is_some();
     let kind = match args.source {
         Some(kind) => kind,
         None if has_region => SourceKind::Region,
-        None if feature_options => SourceKind::Features,
+        None if langsplat_options => SourceKind::Langsplat,
+        None if phrase_options || args.features.is_some() => SourceKind::Features,
         None if scene.extras.labels.is_some() => SourceKind::Labels,
         None if scene.extras.features.is_some() => {
             bail!(
@@ -357,8 +385,16 @@ fn choose_source(args: &QueryArgs, scene: &Scene, has_region: bool) -> Result<So
         ),
         (kind != SourceKind::Region && has_region, "--box/--sphere"),
         (
-            kind != SourceKind::Features && feature_options,
-            "--features/--phrases/--phrase-names/--negative",
+            kind != SourceKind::Features && args.features.is_some(),
+            "--features",
+        ),
+        (
+            !matches!(kind, SourceKind::Features | SourceKind::Langsplat) && phrase_options,
+            "--phrases/--phrase-names/--negative/--temperature",
+        ),
+        (
+            kind != SourceKind::Langsplat && langsplat_options,
+            "--latents/--checkpoint",
         ),
     ]
     .into_iter()
@@ -367,7 +403,8 @@ fn choose_source(args: &QueryArgs, scene: &Scene, has_region: bool) -> Result<So
     if !stray.is_empty() {
         bail!(
             "{} do not apply to the {} source (--synonym is for labels, --box/--sphere for \
-             region, --features/--phrases/--phrase-names/--negative for features)",
+             region, --features for features, --phrases/--phrase-names/--negative/--temperature \
+             for features and langsplat, --latents/--checkpoint for langsplat)",
             stray.join(", "),
             kind.name()
         );
@@ -377,57 +414,52 @@ fn choose_source(args: &QueryArgs, scene: &Scene, has_region: bool) -> Result<So
             "the region source needs a region: give --box MINX,MINY,MINZ,MAXX,MAXY,MAXZ or \
              --sphere CX,CY,CZ,R"
         ),
-        SourceKind::Features if args.phrases.is_none() => bail!(
-            "the features source needs text embeddings: give a phrase table with --phrases \
-             TABLE (.json, .npy with --phrase-names, or .safetensors)"
+        SourceKind::Features | SourceKind::Langsplat if args.phrases.is_none() => bail!(
+            "the {} source needs text embeddings: give a phrase table with --phrases TABLE \
+             (.json, .npy with --phrase-names, or .safetensors)",
+            kind.name()
+        ),
+        SourceKind::Langsplat if args.latents.is_none() || args.checkpoint.is_none() => bail!(
+            "the langsplat source needs the per-Gaussian latents (--latents LATENTS.npy, [N, 3]) \
+             and the scene's autoencoder checkpoint (--checkpoint best_ckpt.pth)"
         ),
         _ => {}
     }
     Ok(kind)
 }
 
-/// The features source from the command line's files.
-fn features_source(args: &QueryArgs) -> Result<FeaturesSource> {
-    let table_path = args.phrases.as_deref().expect("checked by choose_source");
-    let table = PhraseTable::read(table_path, args.phrase_names.as_deref())?;
-    let features = match &args.features {
-        Some(path) => FeatureInput::Sidecar(read_feature_sidecar(path)?),
-        None => FeatureInput::Scene,
-    };
-    let mut source = FeaturesSource::new(features, table);
-    if !args.negative.is_empty() {
-        source.negatives = args.negative.clone();
+/// The command-line option that sets a `[targets]` key, for error messages.
+fn option_of_key(key: &str) -> String {
+    let head = key.split('.').next().unwrap_or(key);
+    match head {
+        "synonyms" => "--synonym".to_string(),
+        "regions" => "--box/--sphere".to_string(),
+        "negatives" => "--negative".to_string(),
+        other => format!("--{other}"),
     }
-    source.temperature = args.temperature;
-    Ok(source)
 }
 
 /// `--box` or `--sphere`, parsed and checked.
-fn parse_region(args: &QueryArgs) -> Result<Option<Region>> {
-    let region = match (&args.region_box, &args.sphere) {
-        (Some(text), _) => {
-            let v = parse_floats::<6>(text, "--box", "MINX,MINY,MINZ,MAXX,MAXY,MAXZ")?;
-            Region::Box {
-                min: [v[0], v[1], v[2]],
-                max: [v[3], v[4], v[5]],
-            }
-        }
-        (None, Some(text)) => {
-            let v = parse_floats::<4>(text, "--sphere", "CX,CY,CZ,R")?;
-            Region::Sphere {
-                centre: [v[0], v[1], v[2]],
-                radius: v[3],
-            }
-        }
+fn parse_region(args: &QueryArgs) -> Result<Option<RegionSpec>> {
+    let (spec, key) = match (&args.region_box, &args.sphere) {
+        (Some(text), _) => (
+            RegionSpec::Box(parse_floats::<6>(
+                text,
+                "--box",
+                "MINX,MINY,MINZ,MAXX,MAXY,MAXZ",
+            )?),
+            "--box",
+        ),
+        (None, Some(text)) => (
+            RegionSpec::Sphere(parse_floats::<4>(text, "--sphere", "CX,CY,CZ,R")?),
+            "--sphere",
+        ),
         (None, None) => return Ok(None),
     };
-    let key = if args.region_box.is_some() {
-        "--box"
-    } else {
-        "--sphere"
-    };
-    region.validate(key).map_err(|e| anyhow!("{e}"))?;
-    Ok(Some(region))
+    Region::from(spec)
+        .validate(key)
+        .map_err(|e| anyhow!("{e}"))?;
+    Ok(Some(spec))
 }
 
 /// `N` comma-separated finite numbers.

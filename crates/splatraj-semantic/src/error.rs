@@ -90,6 +90,15 @@ pub enum SemanticError {
         /// What is wrong and the allowed range.
         detail: String,
     },
+    /// A key of the `[targets]` config (or its command-line option) led to an error, e.g. the
+    /// file it names cannot be read; the message names the key, then the error.
+    #[error("{key}: {error}")]
+    Config {
+        /// The key (`targets.phrases`) or option (`--phrases`).
+        key: String,
+        /// What went wrong with it.
+        error: Box<SemanticError>,
+    },
 }
 
 fn no_match_message(what: &str, query: &str, closest: &[String]) -> String {
@@ -123,6 +132,16 @@ impl SemanticError {
         SemanticError::InvalidOption {
             key: key.into(),
             detail: detail.into(),
+        }
+    }
+}
+
+impl SemanticError {
+    /// Wraps `self` as a [`SemanticError::Config`] error of `key`.
+    pub fn in_key(self, key: impl Into<String>) -> Self {
+        SemanticError::Config {
+            key: key.into(),
+            error: Box::new(self),
         }
     }
 }

@@ -3,21 +3,27 @@
 //! SplaTraj grounds each query in the scene as a 0/1 value per Gaussian (paper, "Semantic Map
 //! Extraction"). This crate does that grounding. A [`TargetSource`] turns a query into one
 //! value per Gaussian: [`LabelsSource`] matches label names (case-insensitive, synonyms, ids),
-//! [`RegionSource`] takes a box or a sphere in world coordinates, and [`FeaturesSource`] scores
+//! [`RegionSource`] takes a box or a sphere in world coordinates, [`FeaturesSource`] scores
 //! per-Gaussian language embeddings against a phrase's text embedding with the LERF relevancy
-//! (softmax against canonical negatives, minimum over negatives). [`selection`] then keeps the
-//! top relevancy percentile above a floor, cleans it with DBSCAN in 3D (petal-clustering, with
-//! a radius from k-d tree neighbour distances via kiddo) and returns a [`Target`]: the 0/1
-//! channel, a robust centre and extent for the trajectory prior, and counts for diagnostics.
-//! [`embeddings`] reads the feature sidecars (`.npy`, `.safetensors`) and phrase tables (JSON,
-//! `.npy` + phrases, `.safetensors`).
+//! (softmax against canonical negatives, minimum over negatives), and [`LangsplatSource`]
+//! decodes LangSplat's per-Gaussian 3-d latents to 512-d with the scene's autoencoder decoder
+//! ([`LangsplatDecoder`]: a burn module on the caller's device, weights read from the PyTorch
+//! checkpoint with burn-store's reader) and then scores them as `features`. [`selection`] then
+//! keeps the top relevancy percentile above a floor, cleans it with DBSCAN in 3D
+//! (petal-clustering, with a radius from k-d tree neighbour distances via kiddo) and returns a
+//! [`Target`]: the 0/1 channel, a robust centre and extent for the trajectory prior, and counts
+//! for diagnostics. [`embeddings`] reads the feature sidecars (`.npy`, `.safetensors`) and
+//! phrase tables (JSON, `.npy` + phrases, `.safetensors`). [`config`] is the `[targets]` table
+//! of a config file ([`TargetsConfig`]): which source, its files and options, and the
+//! selection settings, built into a source in one call.
 //!
 //! It does not compute text embeddings (no CLIP model here: phrase tables are precomputed
-//! files), decode LangSplat latents, render anything or read config files: those belong to
-//! other parts of splatraj. It does not depend on burn.
+//! files), render anything or read whole config files (the caller parses the file and hands
+//! over its `[targets]` table): those belong to other parts of splatraj.
 
 #![warn(missing_docs)]
 
+pub mod config;
 pub mod embeddings;
 pub mod error;
 pub mod names;
@@ -25,12 +31,13 @@ pub mod selection;
 pub mod sources;
 pub mod vectors;
 
+pub use config::{RegionSpec, SourceKind, TargetsConfig};
 pub use embeddings::{Matrix, PhraseTable, read_feature_sidecar};
 pub use error::{Result, SemanticError};
 pub use selection::{
     ClusterOptions, EpsRule, KeepClusters, SelectionOptions, Spread, Target, find_target, select,
 };
 pub use sources::{
-    FeatureInput, FeaturesSource, LabelsSource, Region, RegionSource, Relevancy, Scoring,
-    TargetSource,
+    FeatureInput, FeaturesSource, LabelsSource, LangsplatDecoder, LangsplatSource, Region,
+    RegionSource, Relevancy, Scoring, TargetSource,
 };

@@ -21,7 +21,7 @@ use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use ndarray::Array2;
 use petal_clustering::{Dbscan, Fit};
 use petal_neighbors::distance::Euclidean;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use splatraj_scene::Scene;
 
 use crate::error::{Result, SemanticError};
@@ -39,17 +39,23 @@ pub const DEFAULT_EPS_QUANTILE: f32 = 0.9;
 pub const DEFAULT_EPS_FACTOR: f32 = 2.0;
 
 /// How DBSCAN's neighbourhood radius is chosen.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-#[serde(rename_all = "kebab-case")]
+///
+/// In a config: `eps = { fixed = 0.05 }` or `eps = { auto = { quantile = 0.5, factor = 3 } }`
+/// (missing fields of `auto` take their defaults).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum EpsRule {
     /// `factor × quantile_q` over the kept points of the distance to their `neighbour`-th
     /// nearest other point; `neighbour = None` means `min_points − 1`.
     Auto {
         /// Which neighbour (1 = nearest); `None`: `min_points − 1`.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
         neighbour: Option<usize>,
         /// Quantile in [0, 1] of those distances.
+        #[serde(default = "default_eps_quantile")]
         quantile: f32,
         /// Multiplier (> 0).
+        #[serde(default = "default_eps_factor")]
         factor: f32,
     },
     /// A fixed radius in world units.
@@ -66,9 +72,19 @@ impl Default for EpsRule {
     }
 }
 
+fn default_eps_quantile() -> f32 {
+    DEFAULT_EPS_QUANTILE
+}
+
+fn default_eps_factor() -> f32 {
+    DEFAULT_EPS_FACTOR
+}
+
 /// Which DBSCAN clusters make the object.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Default)]
-#[serde(rename_all = "kebab-case")]
+///
+/// In a config: `keep = "largest"` or `keep = { above-fraction = 0.1 }`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum KeepClusters {
     /// Only the largest cluster (the object; other clusters are look-alikes or noise).
     #[default]
@@ -78,8 +94,9 @@ pub enum KeepClusters {
     AboveFraction(f32),
 }
 
-/// DBSCAN settings.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+/// DBSCAN settings (config keys `min-points`, `eps`, `keep`; missing ones take the defaults).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
 pub struct ClusterOptions {
     /// Minimum neighbourhood size of a core point, the point itself included.
     pub min_points: usize,
@@ -99,8 +116,11 @@ impl Default for ClusterOptions {
     }
 }
 
-/// Selection settings.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+/// Selection settings (config keys `top-fraction`, `floor`, `cluster`; missing ones take the
+/// defaults). In a config `cluster` is `false` (no DBSCAN), `true` (default DBSCAN) or a table
+/// of [`ClusterOptions`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
 pub struct SelectionOptions {
     /// Fraction (0, 1] of all Gaussians kept by the relevancy percentile (graded scores only).
     pub top_fraction: f32,
@@ -108,7 +128,71 @@ pub struct SelectionOptions {
     pub floor: f32,
     /// DBSCAN for graded scores (`None`: no clustering); also the settings used when a mask
     /// source asks for clustering (the defaults when `None`).
+    #[serde(with = "cluster_setting")]
     pub cluster: Option<ClusterOptions>,
+}
+
+impl SelectionOptions {
+    /// Checks every value's range; errors name the option by its config key
+    /// (`top-fraction`, `cluster.min-points`, ...).
+    pub fn validate(&self) -> Result<()> {
+        self.validate_as("")
+    }
+
+    /// As [`SelectionOptions::validate`], with `prefix` put before each key in errors
+    /// (`"targets.selection."` for a config file).
+    pub fn validate_as(&self, prefix: &str) -> Result<()> {
+        validate(self).map_err(|e| match e {
+            SemanticError::InvalidOption { key, detail } => {
+                SemanticError::option(format!("{prefix}{key}"), detail)
+            }
+            other => other,
+        })
+    }
+}
+
+/// `cluster = false | true | { ... }`: TOML has no null, so "no DBSCAN" is `false`.
+mod cluster_setting {
+    use std::fmt;
+
+    use serde::de::{self, MapAccess, Visitor};
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    use super::ClusterOptions;
+
+    pub fn serialize<S: Serializer>(
+        value: &Option<ClusterOptions>,
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        match value {
+            None => s.serialize_bool(false),
+            Some(c) => c.serialize(s),
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<Option<ClusterOptions>, D::Error> {
+        struct Setting;
+        impl<'de> Visitor<'de> for Setting {
+            type Value = Option<ClusterOptions>;
+
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("true, false, or a table of DBSCAN options (min-points, eps, keep)")
+            }
+
+            fn visit_bool<E: de::Error>(self, v: bool) -> Result<Self::Value, E> {
+                Ok(v.then(ClusterOptions::default))
+            }
+
+            fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<Self::Value, A::Error> {
+                // Straight into ClusterOptions, so its own messages (unknown key, bad value)
+                // reach the user unchanged.
+                ClusterOptions::deserialize(de::value::MapAccessDeserializer::new(map)).map(Some)
+            }
+        }
+        d.deserialize_any(Setting)
+    }
 }
 
 impl Default for SelectionOptions {
@@ -350,7 +434,7 @@ pub fn select(
 fn validate(o: &SelectionOptions) -> Result<()> {
     if !(o.top_fraction > 0.0 && o.top_fraction <= 1.0) {
         return Err(SemanticError::option(
-            "top_fraction",
+            "top-fraction",
             format!(
                 "{} must be in (0, 1] (0.02 keeps the top 2%)",
                 o.top_fraction
@@ -365,7 +449,10 @@ fn validate(o: &SelectionOptions) -> Result<()> {
     }
     if let Some(c) = &o.cluster {
         if c.min_points == 0 {
-            return Err(SemanticError::option("min_points", "must be at least 1"));
+            return Err(SemanticError::option(
+                "cluster.min-points",
+                "must be at least 1",
+            ));
         }
         match c.eps {
             EpsRule::Auto {
@@ -375,19 +462,19 @@ fn validate(o: &SelectionOptions) -> Result<()> {
             } => {
                 if neighbour == Some(0) {
                     return Err(SemanticError::option(
-                        "eps.neighbour",
+                        "cluster.eps.auto.neighbour",
                         "must be at least 1 (1 = nearest)",
                     ));
                 }
                 if !(0.0..=1.0).contains(&quantile) {
                     return Err(SemanticError::option(
-                        "eps.quantile",
+                        "cluster.eps.auto.quantile",
                         format!("{quantile} must be in [0, 1]"),
                     ));
                 }
                 if !(factor.is_finite() && factor > 0.0) {
                     return Err(SemanticError::option(
-                        "eps.factor",
+                        "cluster.eps.auto.factor",
                         format!("{factor} must be finite and > 0"),
                     ));
                 }
@@ -395,7 +482,7 @@ fn validate(o: &SelectionOptions) -> Result<()> {
             EpsRule::Fixed(e) => {
                 if !(e.is_finite() && e > 0.0) {
                     return Err(SemanticError::option(
-                        "eps",
+                        "cluster.eps.fixed",
                         format!("{e} must be finite and > 0"),
                     ));
                 }
@@ -405,7 +492,7 @@ fn validate(o: &SelectionOptions) -> Result<()> {
             && !(0.0..=1.0).contains(&f)
         {
             return Err(SemanticError::option(
-                "keep.fraction",
+                "cluster.keep.above-fraction",
                 format!("{f} must be in [0, 1]"),
             ));
         }

@@ -6,6 +6,7 @@
 
 pub mod features;
 pub mod labels;
+pub mod langsplat;
 pub mod region;
 
 use serde::Serialize;
@@ -15,6 +16,7 @@ use crate::error::Result;
 
 pub use features::{FeatureInput, FeaturesSource};
 pub use labels::LabelsSource;
+pub use langsplat::{LangsplatDecoder, LangsplatSource};
 pub use region::{Region, RegionSource};
 
 /// How the values of a [`Relevancy`] are to be read by the selection.
@@ -42,9 +44,12 @@ pub struct Relevancy {
     pub scoring: Scoring,
 }
 
-/// A way to turn a text query into per-Gaussian relevancy or selection.
-pub trait TargetSource {
-    /// Short name of the source kind, for messages ("labels", "region", "features").
+/// A way to turn a text query into per-Gaussian relevancy or selection. `Debug` so that a
+/// boxed source can sit in a config or a report; `Send + Sync` so that queries can run on
+/// worker threads.
+pub trait TargetSource: std::fmt::Debug + Send + Sync {
+    /// Short name of the source kind, for messages ("labels", "region", "features",
+    /// "langsplat").
     fn kind(&self) -> &'static str;
 
     /// One value per Gaussian of `scene` for `query`, or an error when the query matches

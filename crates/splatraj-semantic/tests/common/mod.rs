@@ -96,3 +96,21 @@ pub fn scene_with_2d_features(features: &[[f32; 2]], spacing: f32) -> Scene {
         },
     }
 }
+
+/// Writes `[N, dim]` float32 rows as `.npy`.
+pub fn write_npy(path: &std::path::Path, rows: &[Vec<f32>]) {
+    use npyz::WriterBuilder;
+    let dim = rows[0].len();
+    let mut bytes = Vec::new();
+    let mut w = npyz::WriteOptions::<f32>::new()
+        .default_dtype()
+        .shape(&[rows.len() as u64, dim as u64])
+        .writer(&mut bytes)
+        .begin_nd()
+        .unwrap();
+    for r in rows {
+        w.extend(r.iter().copied()).unwrap();
+    }
+    w.finish().unwrap();
+    std::fs::write(path, bytes).unwrap();
+}

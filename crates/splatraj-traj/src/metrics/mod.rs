@@ -1,9 +1,11 @@
 //! Metrics to report, not to optimise (DESIGN.md "Metrics").
 //!
-//! Today: the smoothness of a whole trajectory, [`ldj()`](ldj()) (log dimensionless jerk) on the
-//! camera centre and on the rotation vector. The per-window image metrics (TCE, TRE, IoU) will
-//! join here.
+//! - [`ldj()`](ldj()): smoothness of a whole trajectory (log dimensionless jerk) on the camera
+//!   centre and on the rotation vector;
+//! - [`window`]: per query window TCE, TRE, bounding-box IoU and visibility, on a fixed grid.
 
 pub mod ldj;
+pub mod window;
 
 pub use ldj::{DEFAULT_LDJ_SAMPLES, Smoothness, ldj, pose_ldj, trajectory_ldj};
+pub use window::{WindowMetrics, WindowObject, window_metrics};

@@ -1,11 +1,137 @@
 //! Optimisers: what moves the camera parameters downhill on the costs of [`crate::costs`].
 //!
-//! Today it holds the single-pose optimiser ([`single_pose`]): Φ itself, six numbers, is the
-//! parameter, as in the paper's Table I ablation. Still to come (issue 4): Adam on trajectory
-//! Modules over stratified time samples, and SGLD chains for posterior samples of one pose.
+//! - [`single_pose`]: Φ itself is the parameter (the paper's Table I setting), a batch of
+//!   independent starts at once, stepped by burn's Adam;
+//! - [`trajectory`]: the weights of a trajectory model, stepped by burn's Adam on stratified
+//!   time samples of every query window;
+//! - [`sgld`]: stochastic gradient Langevin dynamics, many chains of one pose at once, for
+//!   samples of the pose posterior ∝ exp(−L/τ);
+//! - [`start`]: starting poses (seeded random ones, or ones that look at each object);
+//! - [`sampling`] and [`units`]: the stratified times and the normalised parameter units the
+//!   loops share.
 
+pub mod sampling;
+pub mod sgld;
 pub mod single_pose;
+pub mod start;
+pub mod trajectory;
+pub mod units;
 
+use burn::tensor::Tensor;
+use splatraj_render::render::{DeviceScene, RenderError, RenderRequest, render};
+
+use crate::costs::{CostError, CostInputs, CostTerms, QueryContext, WeightedCosts};
+use crate::trajectory::TrajectoryError;
+
+pub use sgld::{SgldOptions, SgldResult, SgldSample, sample_poses_sgld};
 pub use single_pose::{
-    HistoryRow, OptimiseError, SinglePoseOptions, SinglePoseResult, optimise_single_pose,
+    HistoryRow, SinglePoseOptions, SinglePoseResult, optimise_poses, optimise_single_pose,
 };
+pub use start::{StartDistribution, object_start_poses, random_start_poses, unwrap_rotation};
+pub use trajectory::{
+    Flow, StopReason, TrajectoryOptions, TrajectoryResult, TrajectoryStep, WindowTarget,
+    optimise_trajectory,
+};
+pub use units::PoseUnits;
+
+/// Why an optimisation could not run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum OptimiseError {
+    /// An option is out of range; `field` names it.
+    #[error("optimiser option `{field}` {reason}")]
+    InvalidOptions {
+        /// Field of the options struct.
+        field: &'static str,
+        /// What is wrong and what is allowed.
+        reason: String,
+    },
+    /// Gradients need the scene on an autodiff device (`Device::flex().autodiff()`).
+    #[error("the scene must live on an autodiff device (`device.autodiff()`) to take gradients")]
+    NotAutodiff,
+    /// A start pose holds NaN or infinite values.
+    #[error("start pose {0:?} is not finite")]
+    StartNotFinite([f64; 6]),
+    /// The costs could not be evaluated (context, shapes, a missing mask).
+    #[error(transparent)]
+    Cost(#[from] CostError),
+    /// The mask could not be rendered (e.g. the target mask's length is not the scene's).
+    #[error(transparent)]
+    Render(#[from] RenderError),
+    /// The start trajectory does not fit its model.
+    #[error(transparent)]
+    Trajectory(#[from] TrajectoryError),
+}
+
+/// Checks Adam's settings (a learning rate named by the caller, β1, β2, ε).
+pub(crate) fn check_adam(
+    lr: (&'static str, f64),
+    beta1: f64,
+    beta2: f64,
+    epsilon: f64,
+) -> Result<(), OptimiseError> {
+    let bad = |field, reason: String| Err(OptimiseError::InvalidOptions { field, reason });
+    if !(lr.1.is_finite() && lr.1 >= 0.0) {
+        return bad(lr.0, format!("= {} must be finite and ≥ 0", lr.1));
+    }
+    for (field, beta) in [("beta1", beta1), ("beta2", beta2)] {
+        if !(0.0..1.0).contains(&beta) {
+            return bad(field, format!("= {beta} must be in [0, 1)"));
+        }
+    }
+    if !(epsilon.is_finite() && epsilon > 0.0) {
+        return bad("epsilon", format!("= {epsilon} must be finite and > 0"));
+    }
+    Ok(())
+}
+
+/// Renders the mask (when `request` is given) at poses Φ `[B, 6]` and evaluates the costs.
+pub(crate) fn evaluate_costs(
+    scene: &DeviceScene,
+    poses: Tensor<2>,
+    request: Option<&RenderRequest>,
+    step: usize,
+    context: &QueryContext,
+    costs: &WeightedCosts,
+) -> Result<CostTerms, OptimiseError> {
+    let masks = match request {
+        Some(request) => {
+            let images = render(scene, poses.clone(), request)?.images;
+            let [batch, height, width, _] = images.dims();
+            Some(images.reshape([batch, height, width]))
+        }
+        None => None,
+    };
+    let inputs = CostInputs::new(poses, masks, step, *context)?;
+    Ok(costs.evaluate(&inputs)?)
+}
+
+/// A tensor's values on the host as f64 (empty if they cannot be read).
+pub(crate) fn host_values<const D: usize>(t: Tensor<D>) -> Vec<f64> {
+    t.into_data()
+        .convert::<f64>()
+        .try_to_vec::<f64>()
+        .unwrap_or_default()
+}
+
+/// Each sample's terms `(name, weight, value)` and weighted total, on the host.
+pub(crate) fn per_sample(terms: &CostTerms) -> Vec<(f64, Vec<(&'static str, f64, f64)>)> {
+    let totals = host_values(terms.total.clone());
+    let values: Vec<Vec<f64>> = terms
+        .terms
+        .iter()
+        .map(|t| host_values(t.value.clone()))
+        .collect();
+    totals
+        .iter()
+        .enumerate()
+        .map(|(b, &total)| {
+            let row = terms
+                .terms
+                .iter()
+                .zip(&values)
+                .map(|(t, v)| (t.name, t.weight, v.get(b).copied().unwrap_or(f64::NAN)))
+                .collect();
+            (total, row)
+        })
+        .collect()
+}

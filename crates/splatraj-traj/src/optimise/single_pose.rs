@@ -2,22 +2,23 @@
 //!
 //! Each step k renders the object's mask at Φ (only if some cost reads it), evaluates the
 //! [`WeightedCosts`] at step k (so the prior's weight α_k decays), backpropagates the total to
-//! Φ and moves Φ with Adam. The best pose seen (lowest total) is returned, with the history.
+//! Φ and moves Φ with burn's Adam. Several starts run at once as one batch `[B, 6]` (the
+//! restarts): the loss is the sum of their totals, so each start gets exactly its own gradient,
+//! and Adam works element by element, so the starts do not interact. The best pose of each
+//! start (lowest total) is returned, with its history.
 //!
-//! **Why a hand-written Adam.** burn's optimisers step Modules through `GradientsParams`; here
-//! the parameter is one `[1, 6]` tensor, so a Module would be plumbing only. More to the point,
-//! burn's Adam takes one learning rate per call, and Φ mixes units: ω in radians, c in scene
-//! units, which want separate step sizes ([`SinglePoseOptions::lr_rotation`],
-//! [`SinglePoseOptions::lr_position`]). And the gradient has to come to the host anyway to
-//! check it is finite before it touches the parameters. So the six numbers, Adam's moments
-//! m and v, and the bias correction live on the host in f64; only the cost graph is on the
-//! device. Adam also suits the problem: its step is about the learning rate whatever the
-//! gradient's scale, so the large (finite) gradient of the prior's guard near the object
-//! centre, or a faint mask at the frame's edge, neither throws the camera away nor stalls it.
+//! **Units.** Φ mixes radians and scene units, which want separate step sizes
+//! ([`SinglePoseOptions::lr_rotation`], [`SinglePoseOptions::lr_position`]); burn's Adam takes
+//! one learning rate. The parameter is held in normalised units ([`PoseUnits`] with
+//! rotation = lr_rotation and position = lr_position) and Adam runs with learning rate 1: since
+//! Adam's step is about the learning rate in each coordinate whatever the gradient's scale,
+//! that is Adam with the two learning rates. It also suits the problem: neither the large
+//! (finite) gradient of the prior's guard near the object centre nor a faint mask at the
+//! frame's edge throws the camera away or stalls it.
 //!
-//! **Staying finite.** A step whose total or gradient is not finite is skipped (counted in
-//! [`SinglePoseResult::skipped_steps`]): Φ and Adam's moments keep their previous values, so
-//! one bad render cannot poison the rest of the run.
+//! **Staying finite.** A step whose total or gradient is not finite (for any start) is
+//! skipped (counted in [`SinglePoseResult::skipped_steps`]): Φ and Adam's moments keep their
+//! previous values, so one bad render cannot poison the rest of the run.
 //!
 //! **Best pose.** The total at step k uses α_k, which decays, so totals of different steps
 //! are not quite comparable; later steps are favoured slightly, which is what one wants of a
@@ -28,37 +29,16 @@
 
 use std::time::{Duration, Instant};
 
+use burn::module::{Module, Param};
+use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderError, RenderRequest, render};
+use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest};
 
-use crate::costs::{CostError, CostInputs, CostTerms, QueryContext, WeightedCosts};
-
-/// Why a single-pose optimisation could not run.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum OptimiseError {
-    /// An option is out of range; `field` names it.
-    #[error("single-pose option `{field}` {reason}")]
-    InvalidOptions {
-        /// Field of [`SinglePoseOptions`].
-        field: &'static str,
-        /// What is wrong and what is allowed.
-        reason: String,
-    },
-    /// Gradients need the scene on an autodiff device (`Device::flex().autodiff()`).
-    #[error("the scene must live on an autodiff device (`device.autodiff()`) to take gradients")]
-    NotAutodiff,
-    /// The start pose holds NaN or infinite values.
-    #[error("start pose {0:?} is not finite")]
-    StartNotFinite([f64; 6]),
-    /// The costs could not be evaluated (context, shapes, a missing mask).
-    #[error(transparent)]
-    Cost(#[from] CostError),
-    /// The mask could not be rendered (e.g. the target mask's length is not the scene's).
-    #[error(transparent)]
-    Render(#[from] RenderError),
-}
+use super::units::PoseUnits;
+use super::{OptimiseError, check_adam, evaluate_costs, host_values, per_sample};
+use crate::costs::{QueryContext, WeightedCosts};
 
 /// Settings of [`optimise_single_pose`]; the defaults suit scenes in metres.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -97,27 +77,31 @@ impl Default for SinglePoseOptions {
 impl SinglePoseOptions {
     /// Checks every field's range; errors name the field.
     pub fn validate(&self) -> Result<(), OptimiseError> {
-        let bad = |field, reason: String| Err(OptimiseError::InvalidOptions { field, reason });
         for (field, lr) in [
             ("lr_rotation", self.lr_rotation),
             ("lr_position", self.lr_position),
         ] {
-            if !(lr.is_finite() && lr >= 0.0) {
-                return bad(field, format!("= {lr} must be finite and ≥ 0"));
+            if !(lr.is_finite() && lr > 0.0) {
+                return Err(OptimiseError::InvalidOptions {
+                    field,
+                    reason: format!("= {lr} must be finite and > 0"),
+                });
             }
         }
-        for (field, beta) in [("beta1", self.beta1), ("beta2", self.beta2)] {
-            if !(0.0..1.0).contains(&beta) {
-                return bad(field, format!("= {beta} must be in [0, 1)"));
-            }
+        check_adam(
+            ("lr_rotation", self.lr_rotation),
+            self.beta1,
+            self.beta2,
+            self.epsilon,
+        )
+    }
+
+    /// The normalised units in which Adam's unit learning rate is these two rates.
+    pub fn units(&self) -> PoseUnits {
+        PoseUnits {
+            rotation: self.lr_rotation,
+            position: self.lr_position,
         }
-        if !(self.epsilon.is_finite() && self.epsilon > 0.0) {
-            return bad(
-                "epsilon",
-                format!("= {} must be finite and > 0", self.epsilon),
-            );
-        }
-        Ok(())
     }
 }
 
@@ -157,6 +141,12 @@ pub struct SinglePoseResult {
     pub elapsed: Duration,
 }
 
+/// The poses being optimised, in normalised units `[B, 6]`: the Module burn's Adam steps.
+#[derive(Module, Debug)]
+struct PoseBatch {
+    poses: Param<Tensor<2>>,
+}
+
 /// Optimises one pose Φ from `start` on `costs` for the object whose per-Gaussian mask is
 /// `target_mask` (one value per Gaussian of `scene`), rendered with `intrinsics`.
 ///
@@ -171,142 +161,130 @@ pub fn optimise_single_pose(
     start: Pose,
     options: &SinglePoseOptions,
 ) -> Result<SinglePoseResult, OptimiseError> {
+    let mut results = optimise_poses(
+        scene,
+        target_mask,
+        context,
+        costs,
+        intrinsics,
+        &[start],
+        options,
+    )?;
+    Ok(results.remove(0))
+}
+
+/// [`optimise_single_pose`] from several starts at once (one batched render per step); one
+/// result per start, in order. Callers keep the best with [`SinglePoseResult::total`].
+pub fn optimise_poses(
+    scene: &DeviceScene,
+    target_mask: &[f32],
+    context: &QueryContext,
+    costs: &WeightedCosts,
+    intrinsics: &Intrinsics,
+    starts: &[Pose],
+    options: &SinglePoseOptions,
+) -> Result<Vec<SinglePoseResult>, OptimiseError> {
     options.validate()?;
     context.validate()?;
-    if !start.0.iter().all(|v| v.is_finite()) {
-        return Err(OptimiseError::StartNotFinite(start.0));
+    if starts.is_empty() {
+        return Err(OptimiseError::InvalidOptions {
+            field: "starts",
+            reason: "at least one start pose is needed".into(),
+        });
+    }
+    if let Some(bad) = starts.iter().find(|s| !s.0.iter().all(|v| v.is_finite())) {
+        return Err(OptimiseError::StartNotFinite(bad.0));
     }
     let device = scene.geometry.means.device();
     if !device.is_autodiff() {
         return Err(OptimiseError::NotAutodiff);
     }
     let dtype = scene.geometry.means.dtype();
+    let units = options.units();
+    let batch = starts.len();
     // The mask is rendered only when a cost reads it (the prior-only ablation needs none), and
     // pruned to the object: the same image and gradient for a fraction of the work.
     let request = costs.needs_mask().then(|| RenderRequest {
         pruning: Pruning::ObjectOnly,
         ..RenderRequest::new(*intrinsics, vec![Channel::Mask(target_mask.to_vec())])
     });
-    let evaluate = |params: &[f64; 6], step: usize, grad: bool| {
-        let phi =
-            Tensor::<2>::from_data(TensorData::new(params.to_vec(), [1, 6]), (&device, dtype));
-        let phi = if grad { phi.require_grad() } else { phi };
-        let terms = evaluate_costs(scene, phi.clone(), request.as_ref(), step, context, costs)?;
-        Ok::<_, OptimiseError>((phi, terms))
+    let to_tensor = |rows: &[[f64; 6]]| {
+        let flat: Vec<f64> = rows.iter().flat_map(|p| units.normalise(p)).collect();
+        Tensor::<2>::from_data(TensorData::new(flat, [rows.len(), 6]), (&device, dtype))
     };
+    let from_tensor = |t: Tensor<2>| -> Vec<[f64; 6]> {
+        host_values(t)
+            .chunks_exact(6)
+            .map(|r| units.denormalise(&r.try_into().expect("rows of six")))
+            .collect()
+    };
+    let start_rows: Vec<[f64; 6]> = starts.iter().map(|p| p.0).collect();
+    let mut module = PoseBatch {
+        poses: Param::from_tensor(to_tensor(&start_rows)),
+    };
+    let mut optim = AdamConfig::new()
+        .with_beta_1(options.beta1 as f32)
+        .with_beta_2(options.beta2 as f32)
+        .with_epsilon(options.epsilon as f32)
+        .init();
 
     let started = Instant::now();
-    let lr: [f64; 6] = std::array::from_fn(|i| {
-        if i < 3 {
-            options.lr_rotation
-        } else {
-            options.lr_position
-        }
-    });
-    let mut params = start.0;
-    let (mut m, mut v) = ([0.0f64; 6], [0.0f64; 6]);
-    let mut updates = 0i32; // Adam's t: bias correction counts applied updates only.
     let mut skipped_steps = 0;
-    let mut history = Vec::with_capacity(options.iterations + 1);
-    // Index into `history` of the best finite evaluation so far.
-    let mut best: Option<usize> = None;
-    let consider = |history: &[HistoryRow], best: &mut Option<usize>| {
-        let last = history.len() - 1;
-        let total = history[last].total;
-        if total.is_finite() && best.is_none_or(|b| total < history[b].total) {
-            *best = Some(last);
-        }
-    };
-
-    for step in 0..options.iterations {
-        let evaluated = params;
-        let (phi, terms) = evaluate(&params, step, true)?;
-        let total = terms.total_mean();
-        let means = terms.means();
-        let grads = terms.total.mean().backward();
-        // No gradient at all means no cost depends on Φ here: a zero step.
-        let grad = phi
-            .grad(&grads)
-            .map(host_values)
-            .unwrap_or_else(|| vec![0.0; 6]);
-        let finite = total.is_finite() && grad.len() == 6 && grad.iter().all(|g| g.is_finite());
-        if finite {
-            updates += 1;
-            let bc1 = 1.0 - options.beta1.powi(updates);
-            let bc2 = 1.0 - options.beta2.powi(updates);
-            for i in 0..6 {
-                m[i] = options.beta1 * m[i] + (1.0 - options.beta1) * grad[i];
-                v[i] = options.beta2 * v[i] + (1.0 - options.beta2) * grad[i] * grad[i];
-                let m_hat = m[i] / bc1;
-                let v_hat = v[i] / bc2;
-                params[i] -= lr[i] * m_hat / (v_hat.sqrt() + options.epsilon);
+    let mut histories: Vec<Vec<HistoryRow>> =
+        vec![Vec::with_capacity(options.iterations + 1); batch];
+    for step in 0..=options.iterations {
+        let last = step == options.iterations;
+        let normalised = module.poses.val();
+        let evaluated = from_tensor(normalised.clone());
+        let poses = units.to_scene(normalised.clone());
+        let terms = evaluate_costs(scene, poses, request.as_ref(), step, context, costs)?;
+        let samples = per_sample(&terms);
+        let mut updated = false;
+        if !last {
+            let grads = terms.total.sum().backward();
+            let grad = normalised.grad(&grads).map(host_values);
+            let finite = samples.iter().all(|(t, _)| t.is_finite())
+                && grad
+                    .as_ref()
+                    .is_none_or(|g| g.iter().all(|v| v.is_finite()));
+            if finite {
+                let grads = GradientsParams::from_grads(grads, &module);
+                module = optim.step(1.0, module, grads);
+                updated = true;
+            } else {
+                skipped_steps += 1;
             }
-        } else {
-            skipped_steps += 1;
         }
-        history.push(HistoryRow {
-            step,
-            pose: Pose(evaluated),
-            total,
-            terms: means,
-            updated: finite,
-        });
-        consider(&history, &mut best);
+        for (b, (total, row)) in samples.into_iter().enumerate() {
+            histories[b].push(HistoryRow {
+                step,
+                pose: Pose(evaluated[b]),
+                total,
+                terms: row,
+                updated,
+            });
+        }
     }
-
-    // The last update's result has not been evaluated yet: it may be the best.
-    let step = options.iterations;
-    let (_, terms) = evaluate(&params, step, false)?;
-    let total = terms.total_mean();
-    let means = terms.means();
-    history.push(HistoryRow {
-        step,
-        pose: Pose(params),
-        total,
-        terms: means,
-        updated: false,
-    });
-    consider(&history, &mut best);
-
-    // A run whose every evaluation was non-finite still answers: the start, with its values.
-    let best = &history[best.unwrap_or(0)];
-    Ok(SinglePoseResult {
-        pose: best.pose,
-        total: best.total,
-        terms: best.terms.clone(),
-        best_step: best.step,
-        last_pose: Pose(params),
-        history,
-        skipped_steps,
-        elapsed: started.elapsed(),
-    })
-}
-
-/// Renders the mask (when `request` is given) and evaluates the costs at Φ `[1, 6]`.
-fn evaluate_costs(
-    scene: &DeviceScene,
-    phi: Tensor<2>,
-    request: Option<&RenderRequest>,
-    step: usize,
-    context: &QueryContext,
-    costs: &WeightedCosts,
-) -> Result<CostTerms, OptimiseError> {
-    let masks = match request {
-        Some(request) => {
-            let images = render(scene, phi.clone(), request)?.images;
-            let [batch, height, width, _] = images.dims();
-            Some(images.reshape([batch, height, width]))
-        }
-        None => None,
-    };
-    let inputs = CostInputs::new(phi, masks, step, *context)?;
-    Ok(costs.evaluate(&inputs)?)
-}
-
-/// A tensor's values on the host as f64.
-fn host_values<const D: usize>(t: Tensor<D>) -> Vec<f64> {
-    t.into_data()
-        .convert::<f64>()
-        .try_to_vec::<f64>()
-        .unwrap_or_default()
+    let elapsed = started.elapsed();
+    Ok(histories
+        .into_iter()
+        .map(|history| {
+            // A run whose every evaluation was non-finite still answers: the start.
+            let best = (0..history.len())
+                .filter(|&i| history[i].total.is_finite())
+                .min_by(|&a, &b| history[a].total.total_cmp(&history[b].total))
+                .unwrap_or(0);
+            let best_row = &history[best];
+            SinglePoseResult {
+                pose: best_row.pose,
+                total: best_row.total,
+                terms: best_row.terms.clone(),
+                best_step: best_row.step,
+                last_pose: history[history.len() - 1].pose,
+                skipped_steps,
+                elapsed,
+                history,
+            }
+        })
+        .collect())
 }

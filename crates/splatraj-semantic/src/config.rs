@@ -1,0 +1,389 @@
+//! The `[targets]` table of a config file: which source grounds the queries, and its options.
+//!
+//! ```toml
+//! [targets]
+//! source = "features"              # labels | region | features | langsplat
+//! phrases = "clip_table.json"      # relative paths are read from the config file's folder
+//! negatives = ["object", "things", "stuff", "texture"]
+//! temperature = 10
+//!
+//! [targets.selection]
+//! top-fraction = 0.02
+//! floor = 0.5
+//! cluster = { min-points = 5, eps = { auto = { quantile = 0.9, factor = 2 } }, keep = "largest" }
+//! ```
+//!
+//! Keys by source (a key of another source is an error, not silently ignored):
+//! - `labels`: `label-names = { "3" = "apple" }` (id → name, adding to the scene's names),
+//!   `synonyms = { "red mug" = ["cup", "mug"] }`;
+//! - `region`: `regions = { shelf = { box = [x0, y0, z0, x1, y1, z1] }, ball = { sphere = [cx, cy, cz, r] } }`;
+//! - `features`: `features` (`.npy`/`.safetensors` `[N, D]`; default: the scene's own feature
+//!   properties), `phrases` (phrase table: `.json`, `.npy` with `phrase-names`, `.safetensors`),
+//!   `phrase-names`, `negatives`, `temperature`;
+//! - `langsplat`: `latents` (`.npy` `[N, 3]`), `checkpoint` (LangSplat `.pth`), and the phrase
+//!   keys of `features`.
+//!
+//! `[targets.selection]` holds [`SelectionOptions`] for every source.
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use burn::tensor::Device;
+use serde::{Deserialize, Serialize};
+
+use crate::embeddings::{PhraseTable, read_feature_sidecar};
+use crate::error::{Result, SemanticError};
+use crate::selection::SelectionOptions;
+use crate::sources::{
+    FeatureInput, FeaturesSource, LabelsSource, LangsplatDecoder, LangsplatSource, Region,
+    RegionSource, TargetSource,
+};
+use crate::vectors::{DEFAULT_NEGATIVES, DEFAULT_TEMPERATURE};
+
+/// The kinds of target source.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SourceKind {
+    /// Per-Gaussian label ids with names ([`LabelsSource`]).
+    #[default]
+    Labels,
+    /// Named boxes and spheres ([`RegionSource`]).
+    Region,
+    /// Per-Gaussian embeddings and a phrase table ([`FeaturesSource`]).
+    Features,
+    /// LangSplat latents decoded by the checkpoint's decoder, then as `features`.
+    Langsplat,
+}
+
+impl SourceKind {
+    /// All kinds, in documentation order.
+    pub const ALL: [SourceKind; 4] = [
+        SourceKind::Labels,
+        SourceKind::Region,
+        SourceKind::Features,
+        SourceKind::Langsplat,
+    ];
+
+    /// The name used in configs and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            SourceKind::Labels => "labels",
+            SourceKind::Region => "region",
+            SourceKind::Features => "features",
+            SourceKind::Langsplat => "langsplat",
+        }
+    }
+}
+
+impl fmt::Display for SourceKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for SourceKind {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        SourceKind::ALL
+            .into_iter()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| {
+                format!("unknown source {s:?}: use labels, region, features or langsplat")
+            })
+    }
+}
+
+/// A region as written in a config: `{ box = [x0, y0, z0, x1, y1, z1] }` (two opposite corners)
+/// or `{ sphere = [cx, cy, cz, r] }`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+pub enum RegionSpec {
+    /// Axis-aligned box: smallest corner then largest corner.
+    Box([f32; 6]),
+    /// Ball: centre then radius.
+    Sphere([f32; 4]),
+}
+
+impl From<RegionSpec> for Region {
+    fn from(spec: RegionSpec) -> Region {
+        match spec {
+            RegionSpec::Box(v) => Region::Box {
+                min: [v[0], v[1], v[2]],
+                max: [v[3], v[4], v[5]],
+            },
+            RegionSpec::Sphere(v) => Region::Sphere {
+                centre: [v[0], v[1], v[2]],
+                radius: v[3],
+            },
+        }
+    }
+}
+
+/// The `[targets]` table: the source that grounds queries and its options (see the module
+/// docs for the keys). The default is the `labels` source with default selection.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
+pub struct TargetsConfig {
+    /// Which source turns a query into per-Gaussian values.
+    pub source: SourceKind,
+    /// labels: label id (written as a string key) → name, adding to or replacing the names
+    /// the scene carries.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub label_names: BTreeMap<String, String>,
+    /// labels: label name → other words that mean it.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub synonyms: BTreeMap<String, Vec<String>>,
+    /// region: regions by name; a query names one.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub regions: BTreeMap<String, RegionSpec>,
+    /// features: per-Gaussian feature sidecar `[N, D]`; `None`: the scene's own features.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub features: Option<PathBuf>,
+    /// features, langsplat: phrase table of text embeddings.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub phrases: Option<PathBuf>,
+    /// features, langsplat: phrases of an `.npy` (or `.safetensors`) table, one per line.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub phrase_names: Option<PathBuf>,
+    /// features, langsplat: canonical negative phrases (default: object, things, stuff,
+    /// texture).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub negatives: Option<Vec<String>>,
+    /// features, langsplat: temperature of the relevancy softmax (default 10).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub temperature: Option<f32>,
+    /// langsplat: per-Gaussian 3-d latents `[N, 3]` (`.npy`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub latents: Option<PathBuf>,
+    /// langsplat: the LangSplat autoencoder checkpoint (`.pth`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub checkpoint: Option<PathBuf>,
+    /// Percentile, floor and DBSCAN settings.
+    pub selection: SelectionOptions,
+}
+
+/// Which sources each optional key applies to, for refusing stray keys.
+const KEY_SOURCES: [(&str, &[SourceKind]); 10] = [
+    ("label-names", &[SourceKind::Labels]),
+    ("synonyms", &[SourceKind::Labels]),
+    ("regions", &[SourceKind::Region]),
+    ("features", &[SourceKind::Features]),
+    ("phrases", &[SourceKind::Features, SourceKind::Langsplat]),
+    (
+        "phrase-names",
+        &[SourceKind::Features, SourceKind::Langsplat],
+    ),
+    ("negatives", &[SourceKind::Features, SourceKind::Langsplat]),
+    (
+        "temperature",
+        &[SourceKind::Features, SourceKind::Langsplat],
+    ),
+    ("latents", &[SourceKind::Langsplat]),
+    ("checkpoint", &[SourceKind::Langsplat]),
+];
+
+impl TargetsConfig {
+    /// Reads the source's files (paths relative to `base_dir`, the config file's folder) and
+    /// builds it; the `langsplat` decoder runs on `device`. Errors name the key
+    /// (`targets.phrases`) and, for file errors, the file.
+    pub fn build(&self, base_dir: &Path, device: &Device) -> Result<Box<dyn TargetSource>> {
+        self.build_named(base_dir, device, &|k| format!("targets.{k}"))
+    }
+
+    /// As [`TargetsConfig::build`], with `key` turning each config key (`phrases`,
+    /// `regions.shelf`) into the name errors use (e.g. a command-line option).
+    pub fn build_named(
+        &self,
+        base_dir: &Path,
+        device: &Device,
+        key: &dyn Fn(&str) -> String,
+    ) -> Result<Box<dyn TargetSource>> {
+        self.refuse_stray_keys(key)?;
+        let resolve = |p: &Path| -> PathBuf {
+            if p.is_absolute() {
+                p.to_path_buf()
+            } else {
+                base_dir.join(p)
+            }
+        };
+        Ok(match self.source {
+            SourceKind::Labels => {
+                let mut names = BTreeMap::new();
+                for (id, name) in &self.label_names {
+                    let parsed = id.trim().parse::<i32>().map_err(|_| {
+                        SemanticError::option(
+                            key(&format!("label-names.{id:?}")),
+                            format!("{id:?} is not a label id (an integer)"),
+                        )
+                    })?;
+                    names.insert(parsed, name.clone());
+                }
+                Box::new(LabelsSource {
+                    names,
+                    synonyms: self.synonyms.clone(),
+                    cluster: false,
+                })
+            }
+            SourceKind::Region => {
+                if self.regions.is_empty() {
+                    return Err(SemanticError::option(
+                        key("regions"),
+                        "the region source needs at least one region, e.g. regions = { shelf = \
+                         { box = [x0, y0, z0, x1, y1, z1] } }",
+                    ));
+                }
+                let mut regions = BTreeMap::new();
+                for (name, spec) in &self.regions {
+                    let region = Region::from(*spec);
+                    region.validate(&key(&format!("regions.{name}")))?;
+                    regions.insert(name.clone(), region);
+                }
+                Box::new(RegionSource { regions })
+            }
+            SourceKind::Features => {
+                let features = match &self.features {
+                    Some(p) => FeatureInput::Sidecar(
+                        read_feature_sidecar(&resolve(p)).map_err(|e| e.in_key(key("features")))?,
+                    ),
+                    None => FeatureInput::Scene,
+                };
+                Box::new(self.features_source(features, &resolve, key)?)
+            }
+            SourceKind::Langsplat => {
+                // Checked before the (slow) decoding, which would be wasted without it.
+                self.phrases_key(key)?;
+                let required = |name: &str, value: &Option<PathBuf>, what: &str| {
+                    value.as_deref().map(&resolve).ok_or_else(|| {
+                        SemanticError::option(
+                            key(name),
+                            format!("the langsplat source needs {what}"),
+                        )
+                    })
+                };
+                let checkpoint = required(
+                    "checkpoint",
+                    &self.checkpoint,
+                    "the scene's LangSplat autoencoder checkpoint (best_ckpt.pth)",
+                )?;
+                let latents = required(
+                    "latents",
+                    &self.latents,
+                    "the per-Gaussian latents ([N, 3], .npy)",
+                )?;
+                // The latents file is read before the (larger) checkpoint is decoded onto
+                // the device, so that a wrong path fails fast.
+                let latents =
+                    read_feature_sidecar(&latents).map_err(|e| e.in_key(key("latents")))?;
+                let decoder = LangsplatDecoder::from_checkpoint(&checkpoint, device)
+                    .map_err(|e| e.in_key(key("checkpoint")))?;
+                let decoded = decoder
+                    .decode(&latents)
+                    .map_err(|e| e.in_key(key("latents")))?;
+                Box::new(LangsplatSource {
+                    features: self.features_source(
+                        FeatureInput::Sidecar(decoded),
+                        &resolve,
+                        key,
+                    )?,
+                })
+            }
+        })
+    }
+
+    /// The selection options, checked; errors name `targets.selection.<key>`.
+    pub fn selection(&self) -> Result<SelectionOptions> {
+        self.selection.validate_as("targets.selection.")?;
+        Ok(self.selection)
+    }
+
+    /// A key set for a source it does not apply to is an error: it would be silently ignored.
+    fn refuse_stray_keys(&self, key: &dyn Fn(&str) -> String) -> Result<()> {
+        for (name, sources) in KEY_SOURCES {
+            let set = match name {
+                "label-names" => !self.label_names.is_empty(),
+                "synonyms" => !self.synonyms.is_empty(),
+                "regions" => !self.regions.is_empty(),
+                "features" => self.features.is_some(),
+                "phrases" => self.phrases.is_some(),
+                "phrase-names" => self.phrase_names.is_some(),
+                "negatives" => self.negatives.is_some(),
+                "temperature" => self.temperature.is_some(),
+                "latents" => self.latents.is_some(),
+                "checkpoint" => self.checkpoint.is_some(),
+                _ => false,
+            };
+            if set && !sources.contains(&self.source) {
+                let names: Vec<&str> = sources.iter().map(|s| s.name()).collect();
+                return Err(SemanticError::option(
+                    key(name),
+                    format!(
+                        "applies to the {} source only, but the source is {}",
+                        names.join(" and "),
+                        self.source
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The `phrases` path, or the error saying it is needed.
+    fn phrases_key(&self, key: &dyn Fn(&str) -> String) -> Result<&Path> {
+        self.phrases.as_deref().ok_or_else(|| {
+            SemanticError::option(
+                key("phrases"),
+                format!(
+                    "the {} source needs a phrase table of text embeddings (.json, .npy with \
+                     phrase-names, or .safetensors)",
+                    self.source
+                ),
+            )
+        })
+    }
+
+    /// The phrase table, negatives and temperature around `features`, checked now so that a
+    /// bad negative or temperature fails before any query.
+    pub(crate) fn features_source(
+        &self,
+        features: FeatureInput,
+        resolve: &dyn Fn(&Path) -> PathBuf,
+        key: &dyn Fn(&str) -> String,
+    ) -> Result<FeaturesSource> {
+        let phrases = self.phrases_key(key)?;
+        let phrase_names = self.phrase_names.as_deref().map(resolve);
+        let table = PhraseTable::read(&resolve(phrases), phrase_names.as_deref())
+            .map_err(|e| e.in_key(key("phrases")))?;
+        let negatives = match &self.negatives {
+            Some(n) => n.clone(),
+            None => DEFAULT_NEGATIVES.iter().map(|s| s.to_string()).collect(),
+        };
+        if negatives.is_empty() {
+            return Err(SemanticError::option(
+                key("negatives"),
+                "at least one canonical negative phrase is needed: without one every relevancy \
+                 is 1 and nothing can be told apart",
+            ));
+        }
+        for n in &negatives {
+            table
+                .get(n, "canonical negative phrase")
+                .map_err(|e| e.in_key(key("negatives")))?;
+        }
+        let temperature = self.temperature.unwrap_or(DEFAULT_TEMPERATURE);
+        if !(temperature.is_finite() && temperature > 0.0) {
+            return Err(SemanticError::option(
+                key("temperature"),
+                format!("{temperature} must be finite and > 0"),
+            ));
+        }
+        Ok(FeaturesSource {
+            features,
+            table,
+            negatives,
+            temperature,
+        })
+    }
+}

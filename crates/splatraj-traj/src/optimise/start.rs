@@ -1,0 +1,166 @@
+//! Starting poses: seeded random cameras looking at the scene's centre, or cameras that
+//! already look at each query's object.
+//!
+//! **Random** ([`random_start_poses`]). The distribution ([`StartDistribution`], config table `[start]`): with m the centre and h
+//! the half-extent of the scene's robust bounding box,
+//! - the camera centre is uniform in the box m ± `spread`·h (per axis);
+//! - the camera looks at m, upright (image up toward world up); when the centre falls within
+//!   1e-3·‖h‖ of m, or the view would be straight up or down, it looks along a uniformly random
+//!   horizontal direction instead.
+//!
+//! The spread defaults to 0.5: inside a room (the demo) the cameras stay well inside the walls;
+//! around an object capture they start inside the capture volume and the prior pulls them out
+//! to their working distance. The same seed gives the same poses.
+//!
+//! **Objects** ([`object_start_poses`]): one pose per query, at the query's prior radius from
+//! its object, looking at it from [`OBJECT_START_ELEVATION_DEGREES`] above the horizontal, on
+//! the side that faces the scene's centre (inside a room that is the open side; around an
+//! object capture, the side the capture cameras were on is unknown, so it is a guess). Restart
+//! k > 0 turns each azimuth by a seeded uniform angle in ±`jitter` degrees. It is the pose the
+//! prior pulls toward, made explicit, so the image costs are in play from the first step. Its
+//! poses are meant for a piecewise-constant fit per window (the caller fits the model).
+
+use glam::DVec3;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use splatraj_render::camera::Pose;
+
+use super::OptimiseError;
+
+/// How random starts are drawn (see the module docs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StartDistribution {
+    /// Fraction of the half-extent within which camera centres are drawn, in (0, 1]. Default 0.5.
+    pub spread: f64,
+}
+
+impl Default for StartDistribution {
+    /// Spread 0.5.
+    fn default() -> Self {
+        Self { spread: 0.5 }
+    }
+}
+
+/// `count` random start poses in the box `centre ± half_extent` (see the module docs).
+pub fn random_start_poses(
+    centre: [f64; 3],
+    half_extent: [f64; 3],
+    world_up: [f64; 3],
+    distribution: &StartDistribution,
+    count: usize,
+    seed: u64,
+) -> Result<Vec<Pose>, OptimiseError> {
+    let spread = distribution.spread;
+    if !(spread > 0.0 && spread <= 1.0) {
+        return Err(OptimiseError::InvalidOptions {
+            field: "spread",
+            reason: format!("= {spread} must be in (0, 1]"),
+        });
+    }
+    let (m, h, up) = (
+        DVec3::from(centre),
+        DVec3::from(half_extent).abs(),
+        DVec3::from(world_up).normalize_or_zero(),
+    );
+    if !(m.is_finite() && h.is_finite() && up != DVec3::ZERO && up.is_finite()) {
+        return Err(OptimiseError::InvalidOptions {
+            field: "scene bounds",
+            reason: format!("centre {m}, half-extent {h} and up {up} must be finite, up non-zero"),
+        });
+    }
+    // Two horizontal axes, for the fallback viewing direction.
+    let side = up.any_orthonormal_vector();
+    let front = up.cross(side);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut poses = Vec::with_capacity(count);
+    for _ in 0..count {
+        let offset = DVec3::new(
+            rng.random_range(-1.0..=1.0),
+            rng.random_range(-1.0..=1.0),
+            rng.random_range(-1.0..=1.0),
+        ) * h
+            * spread;
+        let eye = m + offset;
+        let azimuth = rng.random_range(0.0..std::f64::consts::TAU);
+        let horizontal = side * azimuth.cos() + front * azimuth.sin();
+        let towards_centre = Pose::look_at(eye, m, up).ok();
+        let near_centre = offset.length() <= 1e-3 * h.length();
+        let pose = match towards_centre {
+            Some(p) if !near_centre => p,
+            _ => Pose::look_at(eye, eye + horizontal, up).expect("horizontal view is not along up"),
+        };
+        poses.push(pose);
+    }
+    Ok(poses)
+}
+
+/// Elevation of the object starts' viewing direction above the horizontal, degrees.
+pub const OBJECT_START_ELEVATION_DEGREES: f64 = 30.0;
+
+/// One start pose per object `(centre, prior radius)` (see the module docs); restart `restart`
+/// (0: no jitter) with azimuth jitter ±`jitter_degrees`.
+pub fn object_start_poses(
+    objects: &[([f64; 3], f64)],
+    scene_centre: [f64; 3],
+    world_up: [f64; 3],
+    jitter_degrees: f64,
+    restart: usize,
+    seed: u64,
+) -> Result<Vec<Pose>, OptimiseError> {
+    let up = DVec3::from(world_up).normalize_or_zero();
+    if up == DVec3::ZERO || !up.is_finite() {
+        return Err(OptimiseError::InvalidOptions {
+            field: "world_up",
+            reason: format!("{world_up:?} must be finite and non-zero"),
+        });
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ (restart as u64).wrapping_mul(0x9E37_79B9));
+    let elevation = OBJECT_START_ELEVATION_DEGREES.to_radians();
+    objects
+        .iter()
+        .map(|&(centre, radius)| {
+            let o = DVec3::from(centre);
+            let to_middle = DVec3::from(scene_centre) - o;
+            let horizontal = (to_middle - up * to_middle.dot(up)).normalize_or_zero();
+            // An object at the middle has no preferred side: any horizontal direction will do.
+            let horizontal = if horizontal == DVec3::ZERO {
+                up.any_orthonormal_vector()
+            } else {
+                horizontal
+            };
+            let turn = if restart == 0 {
+                0.0
+            } else {
+                rng.random_range(-jitter_degrees..=jitter_degrees)
+                    .to_radians()
+            };
+            let side = up.cross(horizontal);
+            let direction = horizontal * turn.cos() + side * turn.sin();
+            let eye = o + (direction * elevation.cos() + up * elevation.sin()) * radius;
+            Pose::look_at(eye, o, up).map_err(|e| OptimiseError::InvalidOptions {
+                field: "objects",
+                reason: format!("no start pose for the object at {centre:?}: {e}"),
+            })
+        })
+        .collect()
+}
+
+/// ω rewritten as the equivalent rotation vector nearest `previous` (ω and ω·(1 − 2π/|ω|)
+/// are the same rotation), so that fitting a model through consecutive poses does not swing
+/// through a full turn.
+pub fn unwrap_rotation(previous: [f64; 3], omega: [f64; 3]) -> [f64; 3] {
+    let w = DVec3::from(omega);
+    let theta = w.length();
+    if theta < 1e-9 {
+        return omega;
+    }
+    let p = DVec3::from(previous);
+    let candidates = [-1.0, 0.0, 1.0].map(|k: f64| w * (1.0 + k * std::f64::consts::TAU / theta));
+    candidates
+        .into_iter()
+        .min_by(|a, b| a.distance_squared(p).total_cmp(&b.distance_squared(p)))
+        .expect("three candidates")
+        .to_array()
+}

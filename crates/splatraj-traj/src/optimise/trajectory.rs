@@ -1,0 +1,319 @@
+//! Trajectory optimisation: burn's Adam on the weights W of a [`Trajectory`], through the
+//! renderer, on stratified samples of every query window.
+//!
+//! Each step k, for every query window i (DESIGN.md "Optimisation problem"):
+//! 1. draw S times stratified inside T_i ([`super::sampling`]);
+//! 2. poses Φ(t) = Ψ(t)·W `[S, 6]` (one matmul, differentiable in W);
+//! 3. render the window's object mask at all S poses in one batched, object-pruned render;
+//! 4. evaluate the [`WeightedCosts`] at step k and average over the S samples.
+//!
+//! The loss is the mean over windows of those averages, the Monte Carlo estimate of
+//! (1/n)·Σ_i n·∫_{T_i} L dt; one backward pass gives ∂loss/∂W, and burn's Adam steps W.
+//! W is held in normalised units ([`PoseUnits`]), so one learning rate moves rotations in
+//! radians and positions in `position` scene units.
+//!
+//! As in the single-pose loop, a step whose loss or gradient is not finite is skipped (W and
+//! Adam's state unchanged) and counted; the best weights seen (lowest sampled loss) are kept.
+//! The sampled loss is noisy, so "best" is judged on the estimate; later steps are slightly
+//! favoured because the prior's weight decays. An observer sees every step and may stop the
+//! run (Ctrl-C, a time budget): the best trajectory so far is still returned.
+
+use std::time::{Duration, Instant};
+
+use burn::optim::{AdamConfig, GradientsParams};
+use burn::tensor::{Tensor, TensorData};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use splatraj_render::camera::Intrinsics;
+use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest};
+
+use super::units::PoseUnits;
+use super::{OptimiseError, check_adam, evaluate_costs, host_values, sampling};
+use crate::costs::{QueryContext, WeightedCosts};
+use crate::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord};
+
+/// One query window's object: its per-Gaussian mask and cost context.
+#[derive(Debug, Clone)]
+pub struct WindowTarget {
+    /// Name shown in logs and metrics (the query).
+    pub name: String,
+    /// One value per Gaussian of the scene: 1 for the object's Gaussians.
+    pub mask: Vec<f32>,
+    /// Object centre, prior radius, world up, target ratio.
+    pub context: QueryContext,
+}
+
+/// Settings of [`optimise_trajectory`] (the config's `[optimiser]` table).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrajectoryOptions {
+    /// Adam steps (each renders `samples_per_window` poses per window). Default 200 (the paper).
+    pub iterations: usize,
+    /// Stratified time samples per window per step (≥ 1). Default 4.
+    pub samples_per_window: usize,
+    /// Adam learning rate in normalised units (radians; `position_unit` scene units). Default 0.02.
+    pub learning_rate: f64,
+    /// Adam's β1 ∈ [0, 1). Default 0.9.
+    pub beta1: f64,
+    /// Adam's β2 ∈ [0, 1). Default 0.999.
+    pub beta2: f64,
+    /// Adam's ε > 0. Default 1e-8.
+    pub epsilon: f64,
+    /// Scene units per normalised position unit: a step of `learning_rate` moves the camera
+    /// about `learning_rate × position_unit`. Default (None): the mean prior radius of the
+    /// windows, so the step scales with the objects' working distance.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub position_unit: Option<f64>,
+    /// Stop after this many seconds (the best trajectory so far is returned). Default: none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub time_limit_s: Option<f64>,
+}
+
+impl Default for TrajectoryOptions {
+    /// 200 iterations, 4 samples per window, learning rate 0.02, β = (0.9, 0.999), ε = 1e-8.
+    fn default() -> Self {
+        Self {
+            iterations: 200,
+            samples_per_window: 4,
+            learning_rate: 0.02,
+            beta1: 0.9,
+            beta2: 0.999,
+            epsilon: 1e-8,
+            position_unit: None,
+            time_limit_s: None,
+        }
+    }
+}
+
+impl TrajectoryOptions {
+    /// Checks every field; errors name the field.
+    pub fn validate(&self) -> Result<(), OptimiseError> {
+        if self.samples_per_window == 0 {
+            return Err(OptimiseError::InvalidOptions {
+                field: "samples_per_window",
+                reason: "must be at least 1".into(),
+            });
+        }
+        for (field, value) in [
+            ("position_unit", self.position_unit),
+            ("time_limit_s", self.time_limit_s),
+        ] {
+            if let Some(v) = value
+                && !(v.is_finite() && v > 0.0)
+            {
+                return Err(OptimiseError::InvalidOptions {
+                    field,
+                    reason: format!("= {v} must be finite and > 0"),
+                });
+            }
+        }
+        check_adam(
+            ("learning_rate", self.learning_rate),
+            self.beta1,
+            self.beta2,
+            self.epsilon,
+        )
+    }
+
+    /// The normalised units for `windows`: `position_unit`, or their mean prior radius.
+    pub fn units(&self, windows: &[WindowTarget]) -> PoseUnits {
+        let mean_radius = windows.iter().map(|w| w.context.prior_radius).sum::<f64>()
+            / windows.len().max(1) as f64;
+        PoseUnits::with_position(self.position_unit.unwrap_or(mean_radius))
+    }
+}
+
+/// What the observer may tell the loop after a step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Flow {
+    /// Go on.
+    Continue,
+    /// Stop now and return the best trajectory so far.
+    Stop,
+}
+
+/// Why the loop ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StopReason {
+    /// All iterations ran.
+    Finished,
+    /// The observer asked to stop (e.g. Ctrl-C), or the time limit was reached.
+    Interrupted,
+}
+
+/// One step of a trajectory optimisation (a `history.csv` row).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrajectoryStep {
+    /// Step k (0 first).
+    pub step: usize,
+    /// Time since the loop started.
+    pub elapsed: Duration,
+    /// Sampled loss: mean over windows of each window's mean weighted total.
+    pub total: f64,
+    /// Per window, each term as `(name, weight at k, unweighted mean over the samples)`.
+    pub windows: Vec<Vec<(&'static str, f64, f64)>>,
+    /// Whether Adam updated W after this evaluation (false when the step was skipped).
+    pub updated: bool,
+    /// Lowest sampled loss so far (this step included).
+    pub best_total: f64,
+}
+
+/// What [`optimise_trajectory`] found.
+#[derive(Debug, Clone)]
+pub struct TrajectoryResult {
+    /// The best trajectory seen (lowest sampled loss), in scene units.
+    pub best: TrajectoryRecord,
+    /// Its sampled loss.
+    pub best_total: f64,
+    /// The step at which it was evaluated.
+    pub best_step: usize,
+    /// One row per step run.
+    pub history: Vec<TrajectoryStep>,
+    /// Steps skipped because the loss or the gradient was not finite.
+    pub skipped_steps: usize,
+    /// Whether all iterations ran.
+    pub stop: StopReason,
+    /// Wall time of the loop.
+    pub elapsed: Duration,
+}
+
+/// Optimises `start` (any model, weights in scene units) on the costs of every window.
+///
+/// `scene` must live on an autodiff device; the trajectory takes its device and dtype. `seed`
+/// drives the stratified sampling. `observer` sees each step and may stop the loop, as does
+/// `options.time_limit_s`.
+#[allow(clippy::too_many_arguments)]
+pub fn optimise_trajectory(
+    scene: &DeviceScene,
+    windows: &[WindowTarget],
+    costs: &WeightedCosts,
+    intrinsics: &Intrinsics,
+    start: &TrajectoryRecord,
+    options: &TrajectoryOptions,
+    seed: u64,
+    observer: &mut dyn FnMut(&TrajectoryStep) -> Flow,
+) -> Result<TrajectoryResult, OptimiseError> {
+    options.validate()?;
+    if windows.is_empty() {
+        return Err(OptimiseError::InvalidOptions {
+            field: "windows",
+            reason: "at least one query is needed".into(),
+        });
+    }
+    for w in windows {
+        w.context.validate()?;
+    }
+    let units = options.units(windows);
+    units.validate()?;
+    let device = scene.geometry.means.device();
+    if !device.is_autodiff() {
+        return Err(OptimiseError::NotAutodiff);
+    }
+    let dtype = scene.geometry.means.dtype();
+    let normalised: Vec<_> = start.weights.iter().map(|w| units.normalise(w)).collect();
+    let mut module = Trajectory::from_weights(start.model.clone(), &normalised, &device, dtype)?;
+    let requests: Vec<Option<RenderRequest>> = windows
+        .iter()
+        .map(|w| {
+            costs.needs_mask().then(|| RenderRequest {
+                pruning: Pruning::ObjectOnly,
+                ..RenderRequest::new(*intrinsics, vec![Channel::Mask(w.mask.clone())])
+            })
+        })
+        .collect();
+    let mut optim = AdamConfig::new()
+        .with_beta_1(options.beta1 as f32)
+        .with_beta_2(options.beta2 as f32)
+        .with_epsilon(options.epsilon as f32)
+        .init();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let started = Instant::now();
+    let n = windows.len();
+    let mut history = Vec::with_capacity(options.iterations);
+    let mut best: Option<(f64, usize, Vec<[f64; 6]>)> = None;
+    let mut skipped_steps = 0;
+    let mut stop = StopReason::Finished;
+
+    for step in 0..options.iterations {
+        let mut loss: Option<Tensor<1>> = None;
+        let mut window_terms = Vec::with_capacity(n);
+        for (i, (window, request)) in windows.iter().zip(&requests).enumerate() {
+            let times =
+                sampling::stratified_times(i, n, options.samples_per_window, Some(&mut rng));
+            let times = Tensor::<1>::from_data(
+                TensorData::new(times, [options.samples_per_window]),
+                (&device, dtype),
+            );
+            let poses = units.to_scene(module.forward(times)); // [S, 6]
+            let terms =
+                evaluate_costs(scene, poses, request.as_ref(), step, &window.context, costs)?;
+            window_terms.push(terms.means());
+            let mean = terms.total.mean();
+            loss = Some(match loss {
+                Some(l) => l + mean,
+                None => mean,
+            });
+        }
+        let loss = loss.expect("at least one window").div_scalar(n as f64);
+        let total = host_values(loss.clone())
+            .first()
+            .copied()
+            .unwrap_or(f64::NAN);
+        // Weights before the update: they are what `total` was measured at.
+        let evaluated = module.host_weights();
+        let grads = loss.backward();
+        let grad = module.weights.val().grad(&grads).map(host_values);
+        let finite = total.is_finite()
+            && grad
+                .as_ref()
+                .is_none_or(|g| g.iter().all(|v| v.is_finite()));
+        if finite {
+            let grads = GradientsParams::from_grads(grads, &module);
+            module = optim.step(options.learning_rate, module, grads);
+        } else {
+            skipped_steps += 1;
+        }
+        if total.is_finite() && best.as_ref().is_none_or(|(b, _, _)| total < *b) {
+            best = Some((total, step, evaluated));
+        }
+        let row = TrajectoryStep {
+            step,
+            elapsed: started.elapsed(),
+            total,
+            windows: window_terms,
+            updated: finite,
+            best_total: best.as_ref().map_or(f64::NAN, |b| b.0),
+        };
+        let out_of_time = options
+            .time_limit_s
+            .is_some_and(|limit| row.elapsed.as_secs_f64() >= limit);
+        let flow = if out_of_time {
+            Flow::Stop
+        } else {
+            observer(&row)
+        };
+        history.push(row);
+        if flow == Flow::Stop {
+            stop = StopReason::Interrupted;
+            break;
+        }
+    }
+
+    let model: TrajectoryModel = module.model().clone();
+    let (best_total, best_step, weights) =
+        best.unwrap_or_else(|| (f64::NAN, 0, module.host_weights()));
+    Ok(TrajectoryResult {
+        best: TrajectoryRecord {
+            model,
+            weights: weights.iter().map(|w| units.denormalise(w)).collect(),
+        },
+        best_total,
+        best_step,
+        history,
+        skipped_steps,
+        stop,
+        elapsed: started.elapsed(),
+    })
+}

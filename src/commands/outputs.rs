@@ -1,0 +1,163 @@
+//! The run folder and its files: every file is written whole or not at all.
+//!
+//! `runs/<name>/<timestamp>/` is created fresh (never reused: a second run in the same second
+//! gets a `-2` suffix). Files go through `write_atomically` (temporary name, then rename), so
+//! an interrupted run leaves complete files or none.
+
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use anyhow::{Context, Result};
+use burn::tensor::{Tensor, TensorData};
+use image::{ImageBuffer, Rgb};
+use serde::Serialize;
+use splatraj_render::camera::Intrinsics;
+use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render};
+use splatraj_scene::atomic::write_atomically;
+
+use super::render::host;
+
+/// Creates a fresh `<runs_dir>/<name>/<UTC timestamp>/` folder.
+pub fn create_run_dir(runs_dir: &Path, name: &str) -> Result<PathBuf> {
+    let parent = runs_dir.join(name);
+    std::fs::create_dir_all(&parent)
+        .with_context(|| format!("cannot create {}", parent.display()))?;
+    let stamp = utc_timestamp(SystemTime::now());
+    for attempt in 1..1000 {
+        let dir = if attempt == 1 {
+            parent.join(&stamp)
+        } else {
+            parent.join(format!("{stamp}-{attempt}"))
+        };
+        match std::fs::create_dir(&dir) {
+            Ok(()) => return Ok(dir),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(e).with_context(|| format!("cannot create {}", dir.display())),
+        }
+    }
+    anyhow::bail!(
+        "cannot find a fresh run folder name under {}",
+        parent.display()
+    )
+}
+
+/// `YYYY-MM-DDTHH-MM-SSZ` (UTC; dashes so the name is valid on every file system).
+pub fn utc_timestamp(time: SystemTime) -> String {
+    let secs = time
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
+    let (days, rem) = (secs / 86_400, secs % 86_400);
+    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
+    let z = days as i64 + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02}T{:02}-{:02}-{:02}Z",
+        rem / 3600,
+        (rem % 3600) / 60,
+        rem % 60
+    )
+}
+
+/// Writes bytes to `path` atomically.
+pub fn write_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomically(path, |w| w.write_all(bytes))
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Writes `value` as pretty JSON to `path` atomically.
+pub fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
+    let text = serde_json::to_string_pretty(value)?;
+    write_bytes(path, format!("{text}\n").as_bytes())
+}
+
+/// Writes a CSV (header, then rows of numbers or words) to `path` atomically.
+pub fn write_csv(path: &Path, header: &[String], rows: &[Vec<String>]) -> Result<()> {
+    let mut text = header.join(",");
+    text.push('\n');
+    for row in rows {
+        text.push_str(&row.join(","));
+        text.push('\n');
+    }
+    write_bytes(path, text.as_bytes())
+}
+
+/// One frame to render: its pose and the object mask to tint (if any).
+pub struct FrameSpec<'a> {
+    /// Φ = [ω, c].
+    pub pose: [f64; 6],
+    /// Per-Gaussian mask of the object to tint.
+    pub tint: Option<&'a [f32]>,
+}
+
+/// Tint colour and strength of the mask overlay.
+const TINT_RGB: [f64; 3] = [1.0, 0.2, 0.8];
+const TINT_ALPHA: f64 = 0.45;
+
+/// Renders `frames` and writes them as `frame_NNNN.png` into `dir`; `progress` is told after
+/// each frame.
+pub fn write_frames(
+    scene: &DeviceScene,
+    intrinsics: &Intrinsics,
+    frames: &[FrameSpec<'_>],
+    dir: &Path,
+    progress: &mut dyn FnMut(usize),
+) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    for (index, frame) in frames.iter().enumerate() {
+        let png = frame_png(scene, intrinsics, frame)?;
+        write_bytes(&dir.join(format!("frame_{index:04}.png")), &png)?;
+        progress(index + 1);
+    }
+    Ok(())
+}
+
+/// One frame as PNG bytes: the RGB render, with the object tinted where asked.
+pub fn frame_png(
+    scene: &DeviceScene,
+    intrinsics: &Intrinsics,
+    frame: &FrameSpec<'_>,
+) -> Result<Vec<u8>> {
+    let device = scene.geometry.means.device();
+    let dtype = scene.geometry.means.dtype();
+    let (w, h) = (intrinsics.width, intrinsics.height);
+    let mut channels = vec![Channel::Rgb];
+    if let Some(mask) = frame.tint {
+        channels.push(Channel::Mask(mask.to_vec()));
+    }
+    let pose = Tensor::<2>::from_data(
+        TensorData::new(frame.pose.to_vec(), [1, 6]),
+        (&device, dtype),
+    );
+    let images = render(scene, pose, &RenderRequest::new(*intrinsics, channels))?.images;
+    let c = images.dims()[3];
+    let values = host(images)?; // [1, H, W, C]
+    let mut buffer = ImageBuffer::<Rgb<u8>, Vec<u8>>::new(w as u32, h as u32);
+    for (p, px) in buffer.pixels_mut().enumerate() {
+        let v = &values[p * c..(p + 1) * c];
+        // The mask channel (4th) is the object's composited alpha: tint in proportion.
+        let tint = if c == 4 {
+            TINT_ALPHA * v[3].clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let rgb: [u8; 3] = std::array::from_fn(|k| {
+            let mixed = (1.0 - tint) * v[k] + tint * TINT_RGB[k];
+            (mixed.clamp(0.0, 1.0) * 255.0).round() as u8
+        });
+        *px = Rgb(rgb);
+    }
+    let mut png = Vec::new();
+    buffer
+        .write_to(&mut Cursor::new(&mut png), image::ImageFormat::Png)
+        .context("PNG encoding")?;
+    Ok(png)
+}

@@ -1,0 +1,628 @@
+//! The experiment config (`splatraj run` and `splatraj pose`): one TOML schema, every knob.
+//!
+//! ```toml
+//! name = "demo"            # runs/<name>/<timestamp>/
+//! seed = 7
+//! backend = "flex"         # flex (= cpu) | ndarray | wgpu, among those compiled in
+//! precision = "f32"        # f32 | f64
+//!
+//! [scene]                  # a file, or the built-in demo room
+//! demo = { gaussians = 30000, seed = 7 }    # or: path = "scene.ply", labels = "labels.json"
+//!
+//! [targets]                # how queries become per-Gaussian 0/1 channels (splatraj-semantic)
+//! source = "labels"
+//!
+//! [[queries]]              # one time window each, in order
+//! text = "red mug"
+//! # target_ratio = 0.15   # this window's share of the frame (default: [camera] target_ratio)
+//! # mask = "mug.npy"      # a per-Gaussian 0/1 .npy instead of the target source
+//!
+//! [camera]                 # optimisation camera; [output] sets the final render's size
+//! width = 64
+//! height = 48
+//! fov_x = 60.0
+//!
+//! [trajectory]             # kind = "rbf" | "waypoint" | "polynomial" and its parameters
+//! [costs]                  # tce, tre, upright, prior tables (all four by default)
+//! [optimiser]              # iterations, samples_per_window, learning_rate, position_unit …
+//! [start]                  # kind = "objects" (jitter) | "random" (spread), restarts; or pose = [...], or trajectory = "…"
+//! [output]                 # frames, width, height, mask_overlay, runs_dir …
+//! [pose]                   # `splatraj pose`: query, ablation; [pose.optimiser]: its Adam
+//! [sgld]                   # `splatraj pose --sgld`: Langevin settings
+//! ```
+//!
+//! Unknown keys are errors (every table denies them), as are out-of-range values; both name
+//! the key. `--set key=value` edits the parsed TOML before it is checked, so an override is
+//! checked exactly like the file (`--set optimiser.iterations=50`, `--set queries.0.text=lamp`).
+//! Relative paths are relative to the config file's folder.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use serde::{Deserialize, Serialize};
+use splatraj_render::backend::{BackendKind, Precision};
+use splatraj_render::camera::Intrinsics;
+use splatraj_semantic::TargetsConfig;
+use splatraj_traj::costs::{CostsConfig, DEFAULT_TARGET_RATIO};
+use splatraj_traj::optimise::{
+    SgldOptions, SinglePoseOptions, StartDistribution, TrajectoryOptions,
+};
+use splatraj_traj::trajectory::TrajectoryModel;
+
+/// The whole config file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// Run name: outputs go to `<output.runs_dir>/<name>/<timestamp>/`.
+    pub name: String,
+    /// Seed of everything random (starts, time samples, SGLD noise).
+    #[serde(default)]
+    pub seed: u64,
+    /// Tensor backend.
+    #[serde(default = "default_backend")]
+    pub backend: BackendKind,
+    /// Float precision of the tensors.
+    #[serde(default)]
+    pub precision: Precision,
+    /// Where the Gaussians come from.
+    pub scene: SceneConfig,
+    /// How queries become per-Gaussian channels.
+    #[serde(default)]
+    pub targets: TargetsConfig,
+    /// The queries, one time window each, in order.
+    pub queries: Vec<QueryConfig>,
+    /// The optimisation camera.
+    #[serde(default)]
+    pub camera: CameraConfig,
+    /// Trajectory model.
+    #[serde(default)]
+    pub trajectory: TrajectoryModel,
+    /// Costs and weights.
+    #[serde(default)]
+    pub costs: CostsConfig,
+    /// Trajectory optimiser.
+    #[serde(default)]
+    pub optimiser: TrajectoryOptions,
+    /// Starting point.
+    #[serde(default)]
+    pub start: StartConfig,
+    /// Outputs.
+    #[serde(default)]
+    pub output: OutputConfig,
+    /// Single-pose optimisation (`splatraj pose`).
+    #[serde(default)]
+    pub pose: PoseConfig,
+    /// SGLD sampling (`splatraj pose --sgld`).
+    #[serde(default)]
+    pub sgld: SgldOptions,
+}
+
+fn default_backend() -> BackendKind {
+    BackendKind::Flex
+}
+
+/// `[scene]`: a file or the built-in demo room (exactly one of `path` and `demo`).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SceneConfig {
+    /// Scene file (INRIA PLY, compressed PLY, SPZ).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub path: Option<PathBuf>,
+    /// The built-in demo room.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub demo: Option<DemoSceneConfig>,
+    /// Label sidecar (Segments.ai JSON or a JSON array of ids).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub labels: Option<PathBuf>,
+    /// Drop invalid Gaussians (with a warning) instead of stopping.
+    pub drop_invalid: bool,
+    /// World up; by default guessed from the scene (the demo's is +z).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub up: Option<[f64; 3]>,
+}
+
+/// `[scene.demo]`: the demo room's generator settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DemoSceneConfig {
+    /// Number of Gaussians.
+    pub gaussians: usize,
+    /// Generator seed.
+    pub seed: u64,
+}
+
+impl Default for DemoSceneConfig {
+    fn default() -> Self {
+        let d = splatraj_scene::demo::DemoConfig::default();
+        Self {
+            gaussians: d.gaussians,
+            seed: d.seed,
+        }
+    }
+}
+
+/// `[[queries]]`: one thing to look at.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct QueryConfig {
+    /// The query (label name, phrase, region name), or a name for a `mask` target.
+    pub text: String,
+    /// Share of the frame the object should cover; default `[camera] target_ratio`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_ratio: Option<f64>,
+    /// A per-Gaussian 0/1 mask (`.npy`, one value per Gaussian) used instead of the source.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mask: Option<PathBuf>,
+}
+
+/// `[camera]`: the optimisation camera (pinhole, principal point at the centre unless given).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CameraConfig {
+    /// Image width in pixels.
+    pub width: usize,
+    /// Image height in pixels.
+    pub height: usize,
+    /// Horizontal field of view, degrees (used unless `fx` is given).
+    pub fov_x: f64,
+    /// Focal lengths and principal point in pixels (all four, or none).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fx: Option<f64>,
+    /// See `fx`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fy: Option<f64>,
+    /// See `fx`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cx: Option<f64>,
+    /// See `fx`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cy: Option<f64>,
+    /// Default target ratio r_t of every query.
+    pub target_ratio: f64,
+}
+
+impl Default for CameraConfig {
+    /// 64 × 48, 60° horizontal, r_t = 0.15.
+    fn default() -> Self {
+        Self {
+            width: 64,
+            height: 48,
+            fov_x: 60.0,
+            fx: None,
+            fy: None,
+            cx: None,
+            cy: None,
+            target_ratio: DEFAULT_TARGET_RATIO,
+        }
+    }
+}
+
+impl CameraConfig {
+    /// The intrinsics at the configured size.
+    pub fn intrinsics(&self) -> Result<Intrinsics> {
+        if self.width == 0 || self.height == 0 {
+            bail!(
+                "`camera.width` and `camera.height` must be ≥ 1, got {}×{}",
+                self.width,
+                self.height
+            );
+        }
+        if !(self.target_ratio > 0.0 && self.target_ratio <= 1.0) {
+            bail!(
+                "`camera.target_ratio` = {} must be in (0, 1]",
+                self.target_ratio
+            );
+        }
+        match (self.fx, self.fy, self.cx, self.cy) {
+            (Some(fx), Some(fy), Some(cx), Some(cy)) => {
+                Intrinsics::new(fx, fy, cx, cy, self.width, self.height)
+                    .context("`camera.fx`/`fy`/`cx`/`cy`")
+            }
+            (None, None, None, None) => {
+                if !(self.fov_x > 0.0 && self.fov_x < 180.0) {
+                    bail!(
+                        "`camera.fov_x` = {} must be in (0, 180) degrees",
+                        self.fov_x
+                    );
+                }
+                Intrinsics::from_fov_x(self.fov_x, self.width, self.height)
+                    .context("`camera.fov_x`")
+            }
+            _ => bail!("`camera`: give all of fx, fy, cx, cy, or none of them (then fov_x)"),
+        }
+    }
+}
+
+/// How starting poses are drawn when no `pose` or `trajectory` is given.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StartKind {
+    /// Each window starts at a camera looking at its object from its prior radius (restarts
+    /// jitter the azimuth by up to ±`jitter` degrees).
+    #[default]
+    Objects,
+    /// Seeded random cameras in the scene looking at its centre (`spread`).
+    Random,
+}
+
+/// `[start]`: where the optimisation starts.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StartConfig {
+    /// Object-facing or random starts.
+    pub kind: StartKind,
+    /// Objects: azimuth jitter of restarts after the first, degrees (≥ 0).
+    pub jitter: f64,
+    /// Random starts: camera centres within `spread` × the scene's half-extent of its centre
+    /// (see `splatraj_traj::optimise::start`), in (0, 1].
+    pub spread: f64,
+    /// Independent random starts; the best result is kept (≥ 1).
+    pub restarts: usize,
+    /// A fixed start pose Φ = [ω, c] (instead of random starts).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pose: Option<[f64; 6]>,
+    /// A `trajectory.json` of an earlier run to start from (re-fitted to `[trajectory]`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub trajectory: Option<PathBuf>,
+}
+
+impl StartConfig {
+    /// The random-start distribution.
+    pub fn distribution(&self) -> StartDistribution {
+        StartDistribution {
+            spread: self.spread,
+        }
+    }
+}
+
+impl Default for StartConfig {
+    fn default() -> Self {
+        Self {
+            kind: StartKind::Objects,
+            jitter: 45.0,
+            spread: StartDistribution::default().spread,
+            restarts: 1,
+            pose: None,
+            trajectory: None,
+        }
+    }
+}
+
+/// Overlay of the target's mask on the output frames.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MaskOverlay {
+    /// Plain RGB frames.
+    #[default]
+    None,
+    /// The current window's object tinted.
+    Tint,
+}
+
+/// `[output]`: what is written and where.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OutputConfig {
+    /// Folder that holds `<name>/<timestamp>/` run folders (relative to the working
+    /// directory, unlike input paths).
+    pub runs_dir: PathBuf,
+    /// Frames rendered along the whole trajectory (0: none).
+    pub frames: usize,
+    /// Frame width in pixels.
+    pub width: usize,
+    /// Frame height in pixels.
+    pub height: usize,
+    /// Mask overlay on the frames.
+    pub mask_overlay: MaskOverlay,
+    /// Poses written to `trajectory.json` (evenly spaced over [0, 1]).
+    pub trajectory_samples: usize,
+    /// Samples per window for the metrics.
+    pub metric_samples: usize,
+    /// Samples of the whole trajectory for LDJ.
+    pub ldj_samples: usize,
+}
+
+impl Default for OutputConfig {
+    fn default() -> Self {
+        Self {
+            runs_dir: PathBuf::from("runs"),
+            frames: 60,
+            width: 320,
+            height: 240,
+            mask_overlay: MaskOverlay::Tint,
+            trajectory_samples: 201,
+            metric_samples: 16,
+            ldj_samples: splatraj_traj::metrics::DEFAULT_LDJ_SAMPLES,
+        }
+    }
+}
+
+impl OutputConfig {
+    /// Checks the counts and sizes; errors name the key.
+    pub fn validate(&self) -> Result<()> {
+        if self.width == 0 || self.height == 0 {
+            bail!("`output.width` and `output.height` must be ≥ 1");
+        }
+        if self.trajectory_samples < 2 {
+            bail!("`output.trajectory_samples` must be ≥ 2");
+        }
+        if self.metric_samples == 0 {
+            bail!("`output.metric_samples` must be ≥ 1");
+        }
+        if self.ldj_samples < splatraj_traj::metrics::ldj::MIN_LDJ_SAMPLES {
+            bail!(
+                "`output.ldj_samples` must be ≥ {}",
+                splatraj_traj::metrics::ldj::MIN_LDJ_SAMPLES
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The paper's single-pose ablations: which image costs join the prior.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Ablation {
+    /// Every cost of `[costs]` as configured.
+    Full,
+    /// The prior alone.
+    Prior,
+    /// Prior and TCE.
+    PriorTce,
+    /// Prior and TRE.
+    PriorTre,
+    /// Prior, TCE and TRE.
+    PriorTceTre,
+}
+
+impl Ablation {
+    /// The costs of `config` restricted to this ablation: TCE and TRE on or off as named, the
+    /// prior on (with its configured weights, or the defaults), upright as configured.
+    pub fn apply(self, config: &CostsConfig) -> CostsConfig {
+        let (tce, tre) = match self {
+            Ablation::Full => return config.clone(),
+            Ablation::Prior => (false, false),
+            Ablation::PriorTce => (true, false),
+            Ablation::PriorTre => (false, true),
+            Ablation::PriorTceTre => (true, true),
+        };
+        CostsConfig {
+            tce: tce.then(|| config.tce.clone().unwrap_or_default()),
+            tre: tre.then(|| config.tre.clone().unwrap_or_default()),
+            upright: config.upright.clone(),
+            prior: Some(config.prior.clone().unwrap_or_default()),
+        }
+    }
+}
+
+/// `[pose]`: single-pose optimisation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PoseConfig {
+    /// Which costs (the paper's Table I ablations).
+    pub ablation: Ablation,
+    /// Which query of `[[queries]]` to frame (0-based).
+    pub query: usize,
+    /// Adam settings (`[pose.optimiser]`).
+    pub optimiser: SinglePoseOptions,
+}
+
+impl Default for PoseConfig {
+    fn default() -> Self {
+        Self {
+            ablation: Ablation::Full,
+            query: 0,
+            optimiser: SinglePoseOptions::default(),
+        }
+    }
+}
+
+impl Config {
+    /// Reads `path` (and the files it `extends`), applies `overrides` (`key=value`), and
+    /// checks the result.
+    pub fn load(path: &Path, overrides: &[String]) -> Result<Config> {
+        let mut value = read_table(path, 0)?;
+        for o in overrides {
+            apply_override(&mut value, o)?;
+        }
+        let config: Config = Config::deserialize(value).map_err(|e| {
+            anyhow::anyhow!("config {}: {}", path.display(), e.message().trim_end())
+        })?;
+        config
+            .validate()
+            .with_context(|| format!("config {}", path.display()))?;
+        Ok(config)
+    }
+
+    /// Range checks that serde cannot express; errors name the key.
+    pub fn validate(&self) -> Result<()> {
+        if self.name.is_empty()
+            || self
+                .name
+                .chars()
+                .any(|c| !(c.is_alphanumeric() || "-_.".contains(c)))
+        {
+            bail!(
+                "`name` = {:?} must be non-empty and use only letters, digits, '-', '_', '.'",
+                self.name
+            );
+        }
+        match (&self.scene.path, &self.scene.demo) {
+            (Some(_), Some(_)) => bail!("`scene`: give `path` or `demo`, not both"),
+            (None, None) => bail!("`scene`: give `path` (a scene file) or `demo = {{}}`"),
+            _ => {}
+        }
+        if let Some(up) = self.scene.up
+            && !(up.iter().all(|v| v.is_finite()) && up.iter().any(|v| *v != 0.0))
+        {
+            bail!("`scene.up` = {up:?} must be finite and non-zero");
+        }
+        if self.queries.is_empty() {
+            bail!("`queries`: at least one `[[queries]]` table is needed");
+        }
+        for (i, q) in self.queries.iter().enumerate() {
+            if let Some(r) = q.target_ratio
+                && !(r > 0.0 && r <= 1.0)
+            {
+                bail!("`queries.{i}.target_ratio` = {r} must be in (0, 1]");
+            }
+        }
+        self.camera.intrinsics()?;
+        self.costs.build().map_err(anyhow::Error::msg)?;
+        self.trajectory
+            .basis()
+            .validate()
+            .map_err(|e| anyhow::anyhow!("`trajectory`: {e}"))?;
+        self.optimiser
+            .validate()
+            .map_err(|e| anyhow::anyhow!("`optimiser`: {e}"))?;
+        if self.start.restarts == 0 {
+            bail!("`start.restarts` must be ≥ 1");
+        }
+        if !(self.start.spread > 0.0 && self.start.spread <= 1.0) {
+            bail!("`start.spread` = {} must be in (0, 1]", self.start.spread);
+        }
+        if !(self.start.jitter.is_finite() && self.start.jitter >= 0.0) {
+            bail!(
+                "`start.jitter` = {} must be finite and ≥ 0 degrees",
+                self.start.jitter
+            );
+        }
+        if self.start.pose.is_some() && self.start.trajectory.is_some() {
+            bail!("`start`: give `pose` or `trajectory`, not both");
+        }
+        if let Some(p) = self.start.pose
+            && !p.iter().all(|v| v.is_finite())
+        {
+            bail!("`start.pose` = {p:?} must be finite");
+        }
+        self.output.validate()?;
+        self.pose
+            .optimiser
+            .validate()
+            .map_err(|e| anyhow::anyhow!("`pose.optimiser`: {e}"))?;
+        if self.pose.query >= self.queries.len() {
+            bail!(
+                "`pose.query` = {} but there are {} queries (0-based)",
+                self.pose.query,
+                self.queries.len()
+            );
+        }
+        self.sgld
+            .validate()
+            .map_err(|e| anyhow::anyhow!("`sgld`: {e}"))?;
+        Ok(())
+    }
+}
+
+/// How many `extends` a config may chain (a cycle ends here with an error).
+const MAX_EXTENDS: usize = 8;
+
+/// Reads a config file as a TOML table, merged over the file its `extends` key names.
+///
+/// `extends = "demo.toml"` (relative to this file) loads that config first; this file's keys
+/// then replace its values, tables merging key by key (so a variant config states only what
+/// differs). The `extends` key itself is not part of the schema.
+fn read_table(path: &Path, depth: usize) -> Result<toml::Table> {
+    if depth > MAX_EXTENDS {
+        bail!(
+            "config {}: more than {MAX_EXTENDS} nested `extends` (a cycle?)",
+            path.display()
+        );
+    }
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read config {}", path.display()))?;
+    let mut table: toml::Table = toml::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("config {} is not valid TOML: {e}", path.display()))?;
+    match table.remove("extends") {
+        None => Ok(table),
+        Some(toml::Value::String(base)) => {
+            let dir = path.parent().unwrap_or(Path::new("."));
+            let mut merged = read_table(&dir.join(&base), depth + 1)
+                .with_context(|| format!("`extends` of {}", path.display()))?;
+            merge(&mut merged, table);
+            Ok(merged)
+        }
+        Some(other) => bail!(
+            "config {}: `extends` must be a file name, got {other}",
+            path.display()
+        ),
+    }
+}
+
+/// Merges `over` into `base`: tables recursively, anything else replaced.
+fn merge(base: &mut toml::Table, over: toml::Table) {
+    for (key, value) in over {
+        match (base.get_mut(&key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),
+            (_, value) => {
+                base.insert(key, value);
+            }
+        }
+    }
+}
+
+/// Sets `key=value` in the TOML table; the value is parsed as TOML (a bare word that is not
+/// valid TOML is taken as a string). Numeric path segments index arrays (`queries.0.text`).
+pub fn apply_override(root: &mut toml::Table, assignment: &str) -> Result<()> {
+    let Some((key, raw)) = assignment.split_once('=') else {
+        bail!("--set {assignment:?}: expected KEY=VALUE, e.g. optimiser.iterations=50");
+    };
+    let key = key.trim();
+    let value: toml::Value = match toml::from_str::<toml::Table>(&format!("v = {raw}")) {
+        Ok(mut t) => t.remove("v").expect("just parsed"),
+        Err(_) => toml::Value::String(raw.trim().to_string()),
+    };
+    let parts: Vec<&str> = key.split('.').collect();
+    if parts.iter().any(|p| p.is_empty()) {
+        bail!("--set {assignment:?}: empty key segment");
+    }
+    let mut tree = toml::Value::Table(std::mem::take(root));
+    let result = set_path(&mut tree, &parts, 0, value, key);
+    if let toml::Value::Table(t) = tree {
+        *root = t;
+    }
+    result
+}
+
+/// Sets `parts[depth..]` below `node` to `value`, creating tables on the way.
+fn set_path(
+    node: &mut toml::Value,
+    parts: &[&str],
+    depth: usize,
+    value: toml::Value,
+    key: &str,
+) -> Result<()> {
+    let part = parts[depth];
+    let here = parts[..=depth].join(".");
+    let last = depth + 1 == parts.len();
+    let child = match node {
+        toml::Value::Table(t) => {
+            if last {
+                t.insert(part.to_string(), value);
+                return Ok(());
+            }
+            t.entry(part.to_string())
+                .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+        }
+        toml::Value::Array(a) => {
+            let i: usize = part
+                .parse()
+                .with_context(|| format!("--set {key}: `{here}` must index a list (0-based)"))?;
+            let len = a.len();
+            let slot = a.get_mut(i).with_context(|| {
+                format!("--set {key}: `{here}` is out of range ({len} entries)")
+            })?;
+            if last {
+                *slot = value;
+                return Ok(());
+            }
+            slot
+        }
+        _ => bail!(
+            "--set {key}: `{}` is a value, not a table",
+            parts[..depth].join(".")
+        ),
+    };
+    set_path(child, parts, depth + 1, value, key)
+}

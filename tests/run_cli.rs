@@ -1,0 +1,200 @@
+//! `splatraj run` and `splatraj pose` end to end on a tiny demo scene: the run folder holds
+//! whole files that read back; bad configs fail cleanly before any folder is made.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{assert_clean_failure, s, splatraj, stderr, stdout};
+use splatraj::traj::trajectory::TrajectoryRecord;
+
+const TINY: &str = r#"
+name = "tiny"
+seed = 3
+[scene]
+demo = { gaussians = 3000, seed = 7 }
+[[queries]]
+text = "red mug"
+[[queries]]
+text = "blue box"
+[camera]
+width = 32
+height = 24
+[optimiser]
+iterations = 3
+samples_per_window = 2
+[output]
+frames = 3
+width = 40
+height = 30
+trajectory_samples = 5
+metric_samples = 2
+ldj_samples = 11
+[pose.optimiser]
+iterations = 3
+[sgld]
+iterations = 4
+burn_in = 1
+thin = 1
+"#;
+
+fn setup(text: &str) -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("tiny.toml");
+    std::fs::write(&config, text).unwrap();
+    (dir, config)
+}
+
+fn runs_set(dir: &Path) -> String {
+    format!("output.runs_dir=\"{}\"", dir.join("runs").display())
+}
+
+fn run_folder(output: &std::process::Output) -> PathBuf {
+    assert!(output.status.success(), "{}", stderr(output));
+    PathBuf::from(stdout(output).lines().last().unwrap().trim())
+}
+
+fn no_partial_files(dir: &Path) {
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let name = entry.unwrap().file_name().to_string_lossy().into_owned();
+        assert!(!name.contains("partial"), "left-over temporary file {name}");
+    }
+}
+
+#[test]
+fn run_writes_a_complete_run_folder() {
+    let (dir, config) = setup(TINY);
+    let out = splatraj(&["run", s(&config), "--quiet", "--set", &runs_set(dir.path())]);
+    let run = run_folder(&out);
+    assert!(run.starts_with(dir.path().join("runs").join("tiny")));
+    no_partial_files(&run);
+
+    let text = std::fs::read_to_string(run.join("trajectory.json")).unwrap();
+    let record: TrajectoryRecord = serde_json::from_str(&text).unwrap();
+    assert_eq!(record.model.name(), "rbf");
+    let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let poses = json["poses"].as_array().unwrap();
+    assert_eq!(poses.len(), 5);
+    assert_eq!(poses[0]["window"], 0);
+    assert_eq!(poses[4]["window"], 1);
+    assert_eq!(json["windows"].as_array().unwrap().len(), 2);
+
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("metrics.json")).unwrap()).unwrap();
+    let windows = metrics["windows"].as_array().unwrap();
+    assert_eq!(windows.len(), 2);
+    assert_eq!(windows[1]["name"], "blue box");
+    for key in ["tce", "tre", "iou", "visible"] {
+        assert!(!windows[0][key].is_null(), "metrics lack {key}");
+    }
+    assert!(metrics["ldj"].is_object());
+    assert_eq!(metrics["run"]["iterations_run"], 3);
+
+    let history = std::fs::read_to_string(run.join("history.csv")).unwrap();
+    let lines: Vec<&str> = history.lines().collect();
+    assert_eq!(lines.len(), 4, "header and three steps");
+    assert!(lines[0].contains("q1_tce") && lines[0].contains("q0_prior"));
+
+    for i in 0..3 {
+        let png = image::open(run.join(format!("frames/frame_{i:04}.png"))).unwrap();
+        assert_eq!((png.width(), png.height()), (40, 30));
+    }
+    let resolved = std::fs::read_to_string(run.join("config.toml")).unwrap();
+    assert!(resolved.contains("iterations = 3"), "{resolved}");
+
+    // The run's trajectory starts another run, re-fitted to another model.
+    let again = splatraj(&[
+        "run",
+        s(&config),
+        "--quiet",
+        "--set",
+        &runs_set(dir.path()),
+        "--set",
+        &format!(
+            "start.trajectory=\"{}\"",
+            run.join("trajectory.json").display()
+        ),
+        "--set",
+        "trajectory.kind=polynomial",
+    ]);
+    let second = run_folder(&again);
+    assert_ne!(second, run, "a fresh folder per run");
+    let record: TrajectoryRecord =
+        serde_json::from_str(&std::fs::read_to_string(second.join("trajectory.json")).unwrap())
+            .unwrap();
+    assert_eq!(record.model.name(), "polynomial");
+}
+
+#[test]
+fn bad_configs_fail_before_any_folder_exists() {
+    for (extra, mention) in [
+        ("\n[start]\nrestart = 2\n", "restart"),
+        ("\n[camera]\nfov_x = 0.0\n", "camera.fov_x"),
+    ] {
+        let (dir, config) =
+            setup(&format!("{TINY}{extra}").replace("[camera]\nwidth = 32\nheight = 24\n", ""));
+        let out = splatraj(&["run", s(&config), "--quiet", "--set", &runs_set(dir.path())]);
+        assert_clean_failure(&out, &[mention]);
+        assert!(
+            !dir.path().join("runs").exists(),
+            "no run folder for a bad config"
+        );
+    }
+    let (dir, config) = setup(&TINY.replace("text = \"blue box\"", "text = \"blue bx\""));
+    let out = splatraj(&["run", s(&config), "--quiet", "--set", &runs_set(dir.path())]);
+    assert_clean_failure(&out, &["blue box"]);
+    assert!(!dir.path().join("runs").exists());
+    let (dir, config) = setup(TINY);
+    let missing = dir.path().join("nope.npy");
+    let out = splatraj(&[
+        "run",
+        s(&config),
+        "--set",
+        &format!("queries.0.mask=\"{}\"", missing.display()),
+        "--set",
+        &runs_set(dir.path()),
+    ]);
+    assert_clean_failure(&out, &["nope.npy"]);
+}
+
+#[test]
+fn pose_runs_ablations_restarts_and_sgld() {
+    let (dir, config) = setup(TINY);
+    let out = splatraj(&[
+        "pose",
+        s(&config),
+        "--quiet",
+        "--set",
+        &runs_set(dir.path()),
+        "--ablation",
+        "prior-tce",
+        "--restarts",
+        "2",
+        "--sgld",
+        "2",
+    ]);
+    let run = run_folder(&out);
+    no_partial_files(&run);
+    let pose: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("pose.json")).unwrap()).unwrap();
+    assert_eq!(pose["ablation"], "prior-tce");
+    assert_eq!(
+        pose["costs"],
+        serde_json::json!(["tce", "upright", "prior"])
+    );
+    assert_eq!(pose["starts"].as_array().unwrap().len(), 2);
+    let best = pose["total"].as_f64().unwrap();
+    for start in pose["starts"].as_array().unwrap() {
+        assert!(start["total"].as_f64().unwrap() >= best);
+    }
+    let samples = std::fs::read_to_string(run.join("sgld_samples.csv")).unwrap();
+    assert_eq!(
+        samples.lines().count(),
+        1 + 2 * 3,
+        "header, 2 chains × 3 kept steps"
+    );
+    assert!(run.join("frame.png").exists());
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(metrics["sgld"]["chains"], 2);
+}
