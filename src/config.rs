@@ -522,7 +522,7 @@ const MAX_EXTENDS: usize = 8;
 ///
 /// `extends = "demo.toml"` (relative to this file) loads that config first; this file's keys
 /// then replace its values, tables merging key by key (so a variant config states only what
-/// differs). The `extends` key itself is not part of the schema.
+/// differs; see [`merge`]). The `extends` key itself is not part of the schema.
 fn read_table(path: &Path, depth: usize) -> Result<toml::Table> {
     if depth > MAX_EXTENDS {
         bail!(
@@ -550,11 +550,17 @@ fn read_table(path: &Path, depth: usize) -> Result<toml::Table> {
     }
 }
 
-/// Merges `over` into `base`: tables recursively, anything else replaced.
+/// Merges `over` into `base`: tables recursively, anything else replaced. A table whose
+/// `kind` differs from the base's (`[trajectory] kind = "waypoint"` over an RBF) replaces it
+/// whole: the other keys belonged to the old kind.
 fn merge(base: &mut toml::Table, over: toml::Table) {
     for (key, value) in over {
         match (base.get_mut(&key), value) {
-            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),
+            (Some(toml::Value::Table(b)), toml::Value::Table(o))
+                if o.get("kind").is_none_or(|k| Some(k) == b.get("kind")) =>
+            {
+                merge(b, o)
+            }
             (_, value) => {
                 base.insert(key, value);
             }

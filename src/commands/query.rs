@@ -435,7 +435,7 @@ fn option_of_key(key: &str) -> String {
         "synonyms" => "--synonym".to_string(),
         "regions" => "--box/--sphere".to_string(),
         "negatives" => "--negative".to_string(),
-        other => format!("--{other}"),
+        other => format!("--{}", other.replace('_', "-")),
     }
 }
 

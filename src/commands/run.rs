@@ -21,9 +21,10 @@ use splatraj_traj::metrics::{
     Smoothness, WindowMetrics, WindowObject, trajectory_ldj, window_metrics,
 };
 use splatraj_traj::optimise::sampling::{window_bounds, window_of};
+use splatraj_traj::optimise::start::START_FIT_SAMPLES;
 use splatraj_traj::optimise::{
     Flow, StopReason, TrajectoryResult, TrajectoryStep, WindowTarget, object_start_poses,
-    optimise_trajectory, random_start_poses, unwrap_rotation,
+    optimise_trajectory, random_start_poses, window_start_trajectory,
 };
 use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord, uniform_times};
 
@@ -315,12 +316,6 @@ fn start_trajectories(
     model: &TrajectoryModel,
 ) -> Result<Vec<TrajectoryRecord>> {
     let (device, dtype) = (&prepared.device, prepared.dtype);
-    // Enough samples for the finest model (100 waypoint segments) to be fitted everywhere.
-    let times = uniform_times(401);
-    let constant = |pose: [f64; 6]| -> Result<TrajectoryRecord> {
-        let poses = vec![pose; times.len()];
-        Ok(Trajectory::fit(model.clone(), &times, &poses, device, dtype)?.record())
-    };
     if let Some(file) = &config.start.trajectory {
         let base = config_path.parent().unwrap_or(Path::new("."));
         let path = resolve(base, file);
@@ -337,30 +332,19 @@ fn start_trajectories(
         let refitted = if &record.model == model {
             loaded
         } else {
-            loaded.refit(model.clone(), times.len())?
+            loaded.refit(model.clone(), START_FIT_SAMPLES)?
         };
         return Ok(vec![refitted.record()]);
     }
-    if let Some(pose) = config.start.pose {
-        return Ok(vec![constant(pose)?]);
-    }
     let n = prepared.windows.len();
-    start_poses(config, prepared, &prepared.windows)?
-        .into_iter()
+    let per_restart = match config.start.pose {
+        Some(pose) => vec![vec![Pose(pose); n]],
+        None => start_poses(config, prepared, &prepared.windows)?,
+    };
+    per_restart
+        .iter()
         .map(|per_window| {
-            // Piecewise constant per window, rotation vectors unwrapped along the sequence.
-            let mut unwrapped: Vec<[f64; 6]> = Vec::with_capacity(n);
-            for p in per_window {
-                let mut pose = p.0;
-                if let Some(prev) = unwrapped.last() {
-                    let w =
-                        unwrap_rotation([prev[0], prev[1], prev[2]], [pose[0], pose[1], pose[2]]);
-                    pose[..3].copy_from_slice(&w);
-                }
-                unwrapped.push(pose);
-            }
-            let poses: Vec<[f64; 6]> = times.iter().map(|&t| unwrapped[window_of(t, n)]).collect();
-            Ok(Trajectory::fit(model.clone(), &times, &poses, device, dtype)?.record())
+            Ok(window_start_trajectory(model.clone(), per_window, device, dtype)?.record())
         })
         .collect()
 }

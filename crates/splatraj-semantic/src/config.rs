@@ -8,18 +8,18 @@
 //! temperature = 10
 //!
 //! [targets.selection]
-//! top-fraction = 0.02
+//! top_fraction = 0.02
 //! floor = 0.5
-//! cluster = { min-points = 5, eps = { auto = { quantile = 0.9, factor = 2 } }, keep = "largest" }
+//! cluster = { min_points = 5, eps = { auto = { quantile = 0.9, factor = 2 } }, keep = "largest" }
 //! ```
 //!
 //! Keys by source (a key of another source is an error, not silently ignored):
-//! - `labels`: `label-names = { "3" = "apple" }` (id → name, adding to the scene's names),
+//! - `labels`: `label_names = { "3" = "apple" }` (id → name, adding to the scene's names),
 //!   `synonyms = { "red mug" = ["cup", "mug"] }`;
 //! - `region`: `regions = { shelf = { box = [x0, y0, z0, x1, y1, z1] }, ball = { sphere = [cx, cy, cz, r] } }`;
 //! - `features`: `features` (`.npy`/`.safetensors` `[N, D]`; default: the scene's own feature
-//!   properties), `phrases` (phrase table: `.json`, `.npy` with `phrase-names`, `.safetensors`),
-//!   `phrase-names`, `negatives`, `temperature`;
+//!   properties), `phrases` (phrase table: `.json`, `.npy` with `phrase_names`, `.safetensors`),
+//!   `phrase_names`, `negatives`, `temperature`;
 //! - `langsplat`: `latents` (`.npy` `[N, 3]`), `checkpoint` (LangSplat `.pth`), and the phrase
 //!   keys of `features`.
 //!
@@ -125,7 +125,7 @@ impl From<RegionSpec> for Region {
 /// The `[targets]` table: the source that grounds queries and its options (see the module
 /// docs for the keys). The default is the `labels` source with default selection.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
-#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
+#[serde(default, rename_all = "snake_case", deny_unknown_fields)]
 pub struct TargetsConfig {
     /// Which source turns a query into per-Gaussian values.
     pub source: SourceKind,
@@ -167,13 +167,13 @@ pub struct TargetsConfig {
 
 /// Which sources each optional key applies to, for refusing stray keys.
 const KEY_SOURCES: [(&str, &[SourceKind]); 10] = [
-    ("label-names", &[SourceKind::Labels]),
+    ("label_names", &[SourceKind::Labels]),
     ("synonyms", &[SourceKind::Labels]),
     ("regions", &[SourceKind::Region]),
     ("features", &[SourceKind::Features]),
     ("phrases", &[SourceKind::Features, SourceKind::Langsplat]),
     (
-        "phrase-names",
+        "phrase_names",
         &[SourceKind::Features, SourceKind::Langsplat],
     ),
     ("negatives", &[SourceKind::Features, SourceKind::Langsplat]),
@@ -215,7 +215,7 @@ impl TargetsConfig {
                 for (id, name) in &self.label_names {
                     let parsed = id.trim().parse::<i32>().map_err(|_| {
                         SemanticError::option(
-                            key(&format!("label-names.{id:?}")),
+                            key(&format!("label_names.{id:?}")),
                             format!("{id:?} is not a label id (an integer)"),
                         )
                     })?;
@@ -303,12 +303,12 @@ impl TargetsConfig {
     fn refuse_stray_keys(&self, key: &dyn Fn(&str) -> String) -> Result<()> {
         for (name, sources) in KEY_SOURCES {
             let set = match name {
-                "label-names" => !self.label_names.is_empty(),
+                "label_names" => !self.label_names.is_empty(),
                 "synonyms" => !self.synonyms.is_empty(),
                 "regions" => !self.regions.is_empty(),
                 "features" => self.features.is_some(),
                 "phrases" => self.phrases.is_some(),
-                "phrase-names" => self.phrase_names.is_some(),
+                "phrase_names" => self.phrase_names.is_some(),
                 "negatives" => self.negatives.is_some(),
                 "temperature" => self.temperature.is_some(),
                 "latents" => self.latents.is_some(),

@@ -43,7 +43,7 @@ pub const DEFAULT_EPS_FACTOR: f32 = 2.0;
 /// In a config: `eps = { fixed = 0.05 }` or `eps = { auto = { quantile = 0.5, factor = 3 } }`
 /// (missing fields of `auto` take their defaults).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum EpsRule {
     /// `factor × quantile_q` over the kept points of the distance to their `neighbour`-th
     /// nearest other point; `neighbour = None` means `min_points − 1`.
@@ -84,7 +84,7 @@ fn default_eps_factor() -> f32 {
 ///
 /// In a config: `keep = "largest"` or `keep = { above-fraction = 0.1 }`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum KeepClusters {
     /// Only the largest cluster (the object; other clusters are look-alikes or noise).
     #[default]
@@ -94,9 +94,9 @@ pub enum KeepClusters {
     AboveFraction(f32),
 }
 
-/// DBSCAN settings (config keys `min-points`, `eps`, `keep`; missing ones take the defaults).
+/// DBSCAN settings (config keys `min_points`, `eps`, `keep`; missing ones take the defaults).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
+#[serde(default, rename_all = "snake_case", deny_unknown_fields)]
 pub struct ClusterOptions {
     /// Minimum neighbourhood size of a core point, the point itself included.
     pub min_points: usize,
@@ -116,11 +116,11 @@ impl Default for ClusterOptions {
     }
 }
 
-/// Selection settings (config keys `top-fraction`, `floor`, `cluster`; missing ones take the
+/// Selection settings (config keys `top_fraction`, `floor`, `cluster`; missing ones take the
 /// defaults). In a config `cluster` is `false` (no DBSCAN), `true` (default DBSCAN) or a table
 /// of [`ClusterOptions`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
+#[serde(default, rename_all = "snake_case", deny_unknown_fields)]
 pub struct SelectionOptions {
     /// Fraction (0, 1] of all Gaussians kept by the relevancy percentile (graded scores only).
     pub top_fraction: f32,
@@ -134,7 +134,7 @@ pub struct SelectionOptions {
 
 impl SelectionOptions {
     /// Checks every value's range; errors name the option by its config key
-    /// (`top-fraction`, `cluster.min-points`, ...).
+    /// (`top_fraction`, `cluster.min_points`, ...).
     pub fn validate(&self) -> Result<()> {
         self.validate_as("")
     }
@@ -178,7 +178,7 @@ mod cluster_setting {
             type Value = Option<ClusterOptions>;
 
             fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-                f.write_str("true, false, or a table of DBSCAN options (min-points, eps, keep)")
+                f.write_str("true, false, or a table of DBSCAN options (min_points, eps, keep)")
             }
 
             fn visit_bool<E: de::Error>(self, v: bool) -> Result<Self::Value, E> {
@@ -434,7 +434,7 @@ pub fn select(
 fn validate(o: &SelectionOptions) -> Result<()> {
     if !(o.top_fraction > 0.0 && o.top_fraction <= 1.0) {
         return Err(SemanticError::option(
-            "top-fraction",
+            "top_fraction",
             format!(
                 "{} must be in (0, 1] (0.02 keeps the top 2%)",
                 o.top_fraction
@@ -450,7 +450,7 @@ fn validate(o: &SelectionOptions) -> Result<()> {
     if let Some(c) = &o.cluster {
         if c.min_points == 0 {
             return Err(SemanticError::option(
-                "cluster.min-points",
+                "cluster.min_points",
                 "must be at least 1",
             ));
         }

@@ -47,7 +47,7 @@ fn labels_example_selects_a_label_through_its_synonym_and_a_config_name() {
         r#"
 [targets]
 source = "labels"
-label-names = { "3" = "apple" }
+label_names = { "3" = "apple" }
 synonyms = { "apple" = ["pomme", "red fruit"] }
 "#,
     )
@@ -140,7 +140,7 @@ negatives = ["object", "thing"]
 temperature = 10
 
 [targets.selection]
-top-fraction = 0.2
+top_fraction = 0.2
 floor = 0.9
 cluster = false
 "#,
@@ -177,7 +177,7 @@ negatives = ["object"]
 temperature = 5.0
 
 [targets.selection]
-top-fraction = 0.05
+top_fraction = 0.05
 "#,
     )
     .unwrap();
@@ -186,7 +186,7 @@ top-fraction = 0.05
     assert_eq!(c.checkpoint, Some(PathBuf::from("lang/best_ckpt.pth")));
     assert_eq!(c.negatives, Some(vec!["object".to_string()]));
     assert_eq!(c.selection().unwrap().top_fraction, 0.05);
-    // Only top-fraction was given: the rest keeps its defaults.
+    // Only top_fraction was given: the rest keeps its defaults.
     assert_eq!(c.selection.cluster, Some(ClusterOptions::default()));
 }
 
@@ -196,7 +196,7 @@ fn selection_table_spells_every_dbscan_option() {
         r#"
 [targets.selection]
 floor = 0.6
-cluster = { min-points = 8, eps = { fixed = 0.05 }, keep = { above-fraction = 0.1 } }
+cluster = { min_points = 8, eps = { fixed = 0.05 }, keep = { above_fraction = 0.1 } }
 "#,
     )
     .unwrap();
@@ -237,7 +237,7 @@ fn configs_survive_a_toml_round_trip() {
 source = "region"
 regions = { shelf = { box = [0, 0, 0, 1, 1, 1] } }
 [targets.selection]
-cluster = { eps = { fixed = 0.5 }, keep = { above-fraction = 0.2 } }
+cluster = { eps = { fixed = 0.5 }, keep = { above_fraction = 0.2 } }
 "#,
     )
     .unwrap();
@@ -268,12 +268,12 @@ fn unknown_keys_and_bad_values_name_the_key() {
             &["temperature", "hot"][..],
         ),
         (
-            "[targets.selection]\ntop_fraction = 0.1\n",
-            &["top_fraction", "top-fraction"][..],
+            "[targets.selection]\ntopfraction = 0.1\n",
+            &["topfraction", "top_fraction"][..],
         ),
         (
             "[targets.selection]\ncluster = { min-pts = 3 }\n",
-            &["min-pts", "min-points"][..],
+            &["min-pts", "min_points"][..],
         ),
         (
             "[targets.selection]\ncluster = 3\n",
@@ -302,11 +302,11 @@ fn unknown_keys_and_bad_values_name_the_key() {
 #[test]
 fn out_of_range_selection_values_name_their_key() {
     for (text, key) in [
-        ("top-fraction = 3", "targets.selection.top-fraction"),
+        ("top_fraction = 3", "targets.selection.top_fraction"),
         ("floor = 1.0", "targets.selection.floor"),
         (
-            "cluster = { min-points = 0 }",
-            "targets.selection.cluster.min-points",
+            "cluster = { min_points = 0 }",
+            "targets.selection.cluster.min_points",
         ),
         (
             "cluster = { eps = { auto = { factor = -1 } } }",
@@ -321,8 +321,8 @@ fn out_of_range_selection_values_name_their_key() {
             "targets.selection.cluster.eps.fixed",
         ),
         (
-            "cluster = { keep = { above-fraction = 1.5 } }",
-            "targets.selection.cluster.keep.above-fraction",
+            "cluster = { keep = { above_fraction = 1.5 } }",
+            "targets.selection.cluster.keep.above_fraction",
         ),
     ] {
         let c = parse(&format!("[targets.selection]\n{text}\n")).unwrap();
@@ -393,8 +393,8 @@ fn build_errors_name_the_key() {
             &["targets.regions.ball", "radius"][..],
         ),
         (
-            "[targets]\nlabel-names = { three = \"apple\" }\n",
-            &["targets.label-names", "three", "integer"][..],
+            "[targets]\nlabel_names = { three = \"apple\" }\n",
+            &["targets.label_names", "three", "integer"][..],
         ),
     ] {
         let err = build(text);

@@ -148,7 +148,7 @@ fn equal_relevancies_empty_scenes_and_bad_options_are_errors() {
         },
     )
     .unwrap_err();
-    assert!(err.to_string().contains("top-fraction"), "{err}");
+    assert!(err.to_string().contains("top_fraction"), "{err}");
     // Too few candidates for DBSCAN's min_points: a clear error, not an empty target.
     let err = select(&scene, "x", &rel, &SelectionOptions::default()).unwrap_err();
     assert!(err.to_string().contains("min_points"), "{err}");

@@ -224,7 +224,7 @@ checkpoint = "{}"
 phrases = "table.json"
 
 [targets.selection]
-top-fraction = 0.6
+top_fraction = 0.6
 cluster = false
 "#,
         fixture("best_ckpt.pth").display()

@@ -27,7 +27,10 @@ pub use sgld::{SgldOptions, SgldResult, SgldSample, sample_poses_sgld};
 pub use single_pose::{
     HistoryRow, SinglePoseOptions, SinglePoseResult, optimise_poses, optimise_single_pose,
 };
-pub use start::{StartDistribution, object_start_poses, random_start_poses, unwrap_rotation};
+pub use start::{
+    StartDistribution, object_start_poses, random_start_poses, unwrap_rotation,
+    window_start_trajectory,
+};
 pub use trajectory::{
     Flow, StopReason, TrajectoryOptions, TrajectoryResult, TrajectoryStep, WindowTarget,
     optimise_trajectory,

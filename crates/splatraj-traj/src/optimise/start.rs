@@ -13,12 +13,14 @@
 //! to their working distance. The same seed gives the same poses.
 //!
 //! **Objects** ([`object_start_poses`]): one pose per query, at the query's prior radius from
-//! its object, looking at it from [`OBJECT_START_ELEVATION_DEGREES`] above the horizontal, on
-//! the side that faces the scene's centre (inside a room that is the open side; around an
-//! object capture, the side the capture cameras were on is unknown, so it is a guess). Restart
-//! k > 0 turns each azimuth by a seeded uniform angle in ±`jitter` degrees. It is the pose the
-//! prior pulls toward, made explicit, so the image costs are in play from the first step. Its
-//! poses are meant for a piecewise-constant fit per window (the caller fits the model).
+//! its object, looking at it from [`OBJECT_START_ELEVATION_DEGREES`] above the horizontal. All
+//! objects are seen from the same horizontal direction: from the objects' mean centre toward
+//! the scene's centre (inside a room, the open side), so consecutive windows differ by a
+//! translation more than a turn, and the trajectory between them stays short; an object
+//! capture's camera side is unknown, so there it is a guess. Restart k > 0 turns that common
+//! azimuth by a seeded uniform angle in ±`jitter` degrees. It is the pose the prior pulls
+//! toward, made explicit, so the image costs are in play from the first step. Its poses are
+//! meant for a piecewise-constant fit per window (the caller fits the model).
 
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
@@ -26,7 +28,11 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use splatraj_render::camera::Pose;
 
+use burn::tensor::{DType, Device};
+
 use super::OptimiseError;
+use super::sampling::window_of;
+use crate::trajectory::{Trajectory, TrajectoryModel, uniform_times};
 
 /// How random starts are drawn (see the module docs).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -116,28 +122,32 @@ pub fn object_start_poses(
             reason: format!("{world_up:?} must be finite and non-zero"),
         });
     }
+    if objects.is_empty() {
+        return Ok(Vec::new());
+    }
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ (restart as u64).wrapping_mul(0x9E37_79B9));
     let elevation = OBJECT_START_ELEVATION_DEGREES.to_radians();
+    let mean = objects.iter().map(|(c, _)| DVec3::from(*c)).sum::<DVec3>() / objects.len() as f64;
+    let to_middle = DVec3::from(scene_centre) - mean;
+    let horizontal = (to_middle - up * to_middle.dot(up)).normalize_or_zero();
+    // Objects around the middle have no preferred side: any horizontal direction will do.
+    let horizontal = if horizontal == DVec3::ZERO || !horizontal.is_finite() {
+        up.any_orthonormal_vector()
+    } else {
+        horizontal
+    };
+    let turn = if restart == 0 {
+        0.0
+    } else {
+        rng.random_range(-jitter_degrees..=jitter_degrees)
+            .to_radians()
+    };
+    let side = up.cross(horizontal);
+    let direction = horizontal * turn.cos() + side * turn.sin();
     objects
         .iter()
         .map(|&(centre, radius)| {
             let o = DVec3::from(centre);
-            let to_middle = DVec3::from(scene_centre) - o;
-            let horizontal = (to_middle - up * to_middle.dot(up)).normalize_or_zero();
-            // An object at the middle has no preferred side: any horizontal direction will do.
-            let horizontal = if horizontal == DVec3::ZERO {
-                up.any_orthonormal_vector()
-            } else {
-                horizontal
-            };
-            let turn = if restart == 0 {
-                0.0
-            } else {
-                rng.random_range(-jitter_degrees..=jitter_degrees)
-                    .to_radians()
-            };
-            let side = up.cross(horizontal);
-            let direction = horizontal * turn.cos() + side * turn.sin();
             let eye = o + (direction * elevation.cos() + up * elevation.sin()) * radius;
             Pose::look_at(eye, o, up).map_err(|e| OptimiseError::InvalidOptions {
                 field: "objects",
@@ -163,4 +173,31 @@ pub fn unwrap_rotation(previous: [f64; 3], omega: [f64; 3]) -> [f64; 3] {
         .min_by(|a, b| a.distance_squared(p).total_cmp(&b.distance_squared(p)))
         .expect("three candidates")
         .to_array()
+}
+
+/// Samples of [0, 1] used to fit a start trajectory (enough for the finest model, 100 waypoint
+/// segments, to get several samples per segment).
+pub const START_FIT_SAMPLES: usize = 401;
+
+/// The trajectory of `model` closest (least squares) to holding `per_window[i]` throughout
+/// window i; rotation vectors are unwrapped along the sequence first ([`unwrap_rotation`]).
+pub fn window_start_trajectory(
+    model: TrajectoryModel,
+    per_window: &[Pose],
+    device: &Device,
+    dtype: DType,
+) -> Result<Trajectory, OptimiseError> {
+    let n = per_window.len();
+    let mut unwrapped: Vec<[f64; 6]> = Vec::with_capacity(n);
+    for p in per_window {
+        let mut pose = p.0;
+        if let Some(prev) = unwrapped.last() {
+            let w = unwrap_rotation([prev[0], prev[1], prev[2]], [pose[0], pose[1], pose[2]]);
+            pose[..3].copy_from_slice(&w);
+        }
+        unwrapped.push(pose);
+    }
+    let times = uniform_times(START_FIT_SAMPLES);
+    let poses: Vec<[f64; 6]> = times.iter().map(|&t| unwrapped[window_of(t, n)]).collect();
+    Ok(Trajectory::fit(model, &times, &poses, device, dtype)?)
 }
