@@ -53,7 +53,14 @@ pub fn interrupt_flag() -> Arc<AtomicBool> {
     let handler_flag = flag.clone();
     // A second registration (tests calling twice in one process) fails; the run still works,
     // only without the clean stop.
-    if let Err(e) = ctrlc::set_handler(move || handler_flag.store(true, Ordering::SeqCst)) {
+    // The first Ctrl-C asks for a clean stop; a second one quits at once (files already
+    // written are whole, the others are not there).
+    let on_signal = move || {
+        if handler_flag.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+    };
+    if let Err(e) = ctrlc::set_handler(on_signal) {
         tracing::warn!("Ctrl-C will not stop the run cleanly: {e}");
     }
     flag

@@ -336,8 +336,8 @@ impl TargetsConfig {
             SemanticError::option(
                 key("phrases"),
                 format!(
-                    "the {} source needs a phrase table of text embeddings (.json, .npy with \
-                     phrase-names, or .safetensors)",
+                    "the {} source needs a phrase table of text embeddings (.json, .npy with its \
+                     phrase names file, or .safetensors)",
                     self.source
                 ),
             )

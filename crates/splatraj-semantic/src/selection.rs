@@ -82,7 +82,7 @@ fn default_eps_factor() -> f32 {
 
 /// Which DBSCAN clusters make the object.
 ///
-/// In a config: `keep = "largest"` or `keep = { above-fraction = 0.1 }`.
+/// In a config: `keep = "largest"` or `keep = { above_fraction = 0.1 }`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum KeepClusters {
@@ -492,7 +492,7 @@ fn validate(o: &SelectionOptions) -> Result<()> {
             && !(0.0..=1.0).contains(&f)
         {
             return Err(SemanticError::option(
-                "cluster.keep.above-fraction",
+                "cluster.keep.above_fraction",
                 format!("{f} must be in [0, 1]"),
             ));
         }

@@ -17,8 +17,9 @@ pub mod start;
 pub mod trajectory;
 pub mod units;
 
-use burn::tensor::Tensor;
-use splatraj_render::render::{DeviceScene, RenderError, RenderRequest, render};
+use burn::tensor::{DType, Device, Tensor};
+use splatraj_render::camera::{Intrinsics, Pose};
+use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderError, RenderRequest, render};
 
 use crate::costs::{CostError, CostInputs, CostTerms, QueryContext, WeightedCosts};
 use crate::trajectory::TrajectoryError;
@@ -87,6 +88,40 @@ pub(crate) fn check_adam(
     Ok(())
 }
 
+/// The scene's device (checked to be autodiff) and dtype, and the object mask request: pruned
+/// to the object (same image and gradient for a fraction of the work), or None when no cost
+/// reads the mask (the prior-only ablation renders nothing).
+pub(crate) fn gradient_setup(
+    scene: &DeviceScene,
+    costs: &WeightedCosts,
+    intrinsics: &Intrinsics,
+    target_mask: &[f32],
+) -> Result<(Device, DType, Option<RenderRequest>), OptimiseError> {
+    let device = scene.geometry.means.device();
+    if !device.is_autodiff() {
+        return Err(OptimiseError::NotAutodiff);
+    }
+    let request = costs.needs_mask().then(|| RenderRequest {
+        pruning: Pruning::ObjectOnly,
+        ..RenderRequest::new(*intrinsics, vec![Channel::Mask(target_mask.to_vec())])
+    });
+    Ok((device, scene.geometry.means.dtype(), request))
+}
+
+/// Checks a batch of start poses: at least one (`field` names the batch), all finite.
+pub(crate) fn check_starts(starts: &[Pose], field: &'static str) -> Result<(), OptimiseError> {
+    if starts.is_empty() {
+        return Err(OptimiseError::InvalidOptions {
+            field,
+            reason: "at least one start pose is needed".into(),
+        });
+    }
+    match starts.iter().find(|s| !s.0.iter().all(|v| v.is_finite())) {
+        Some(bad) => Err(OptimiseError::StartNotFinite(bad.0)),
+        None => Ok(()),
+    }
+}
+
 /// Renders the mask (when `request` is given) at poses Φ `[B, 6]` and evaluates the costs.
 pub(crate) fn evaluate_costs(
     scene: &DeviceScene,
@@ -116,8 +151,11 @@ pub(crate) fn host_values<const D: usize>(t: Tensor<D>) -> Vec<f64> {
         .unwrap_or_default()
 }
 
-/// Each sample's terms `(name, weight, value)` and weighted total, on the host.
-pub(crate) fn per_sample(terms: &CostTerms) -> Vec<(f64, Vec<(&'static str, f64, f64)>)> {
+/// One sample's terms as `(name, weight, unweighted value)`.
+pub(crate) type TermRow = Vec<(&'static str, f64, f64)>;
+
+/// Each sample's weighted total and terms, on the host.
+pub(crate) fn per_sample(terms: &CostTerms) -> Vec<(f64, TermRow)> {
     let totals = host_values(terms.total.clone());
     let values: Vec<Vec<f64>> = terms
         .terms

@@ -23,10 +23,10 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest};
+use splatraj_render::render::DeviceScene;
 
 use super::units::PoseUnits;
-use super::{OptimiseError, evaluate_costs, host_values, per_sample};
+use super::{OptimiseError, check_starts, evaluate_costs, gradient_setup, host_values, per_sample};
 use crate::costs::{QueryContext, WeightedCosts};
 
 /// Settings of [`sample_poses_sgld`] (the config's `[sgld]` table).
@@ -129,24 +129,8 @@ pub fn sample_poses_sgld(
     options.validate()?;
     units.validate()?;
     context.validate()?;
-    if starts.is_empty() {
-        return Err(OptimiseError::InvalidOptions {
-            field: "chains",
-            reason: "at least one chain is needed".into(),
-        });
-    }
-    if let Some(bad) = starts.iter().find(|s| !s.0.iter().all(|v| v.is_finite())) {
-        return Err(OptimiseError::StartNotFinite(bad.0));
-    }
-    let device = scene.geometry.means.device();
-    if !device.is_autodiff() {
-        return Err(OptimiseError::NotAutodiff);
-    }
-    let dtype = scene.geometry.means.dtype();
-    let request = costs.needs_mask().then(|| RenderRequest {
-        pruning: Pruning::ObjectOnly,
-        ..RenderRequest::new(*intrinsics, vec![Channel::Mask(target_mask.to_vec())])
-    });
+    check_starts(starts, "chains")?;
+    let (device, dtype, request) = gradient_setup(scene, costs, intrinsics, target_mask)?;
     let chains = starts.len();
     let mut theta: Vec<[f64; 6]> = starts.iter().map(|p| units.normalise(&p.0)).collect();
     let noise = Normal::new(0.0, (options.step_size * options.temperature).sqrt())
@@ -168,7 +152,7 @@ pub fn sample_poses_sgld(
             .grad(&grads)
             .map(host_values)
             .unwrap_or_else(|| vec![0.0; chains * 6]);
-        if step >= options.burn_in && (step - options.burn_in) % options.thin == 0 {
+        if step >= options.burn_in && (step - options.burn_in).is_multiple_of(options.thin) {
             for (chain, (t, &total)) in theta.iter().zip(&totals).enumerate() {
                 samples.push(SgldSample {
                     chain,

@@ -34,10 +34,13 @@ use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest};
+use splatraj_render::render::DeviceScene;
 
 use super::units::PoseUnits;
-use super::{OptimiseError, check_adam, evaluate_costs, host_values, per_sample};
+use super::{
+    OptimiseError, check_adam, check_starts, evaluate_costs, gradient_setup, host_values,
+    per_sample,
+};
 use crate::costs::{QueryContext, WeightedCosts};
 
 /// Settings of [`optimise_single_pose`]; the defaults suit scenes in metres.
@@ -186,28 +189,9 @@ pub fn optimise_poses(
 ) -> Result<Vec<SinglePoseResult>, OptimiseError> {
     options.validate()?;
     context.validate()?;
-    if starts.is_empty() {
-        return Err(OptimiseError::InvalidOptions {
-            field: "starts",
-            reason: "at least one start pose is needed".into(),
-        });
-    }
-    if let Some(bad) = starts.iter().find(|s| !s.0.iter().all(|v| v.is_finite())) {
-        return Err(OptimiseError::StartNotFinite(bad.0));
-    }
-    let device = scene.geometry.means.device();
-    if !device.is_autodiff() {
-        return Err(OptimiseError::NotAutodiff);
-    }
-    let dtype = scene.geometry.means.dtype();
+    check_starts(starts, "starts")?;
+    let (device, dtype, request) = gradient_setup(scene, costs, intrinsics, target_mask)?;
     let units = options.units();
-    let batch = starts.len();
-    // The mask is rendered only when a cost reads it (the prior-only ablation needs none), and
-    // pruned to the object: the same image and gradient for a fraction of the work.
-    let request = costs.needs_mask().then(|| RenderRequest {
-        pruning: Pruning::ObjectOnly,
-        ..RenderRequest::new(*intrinsics, vec![Channel::Mask(target_mask.to_vec())])
-    });
     let to_tensor = |rows: &[[f64; 6]]| {
         let flat: Vec<f64> = rows.iter().flat_map(|p| units.normalise(p)).collect();
         Tensor::<2>::from_data(TensorData::new(flat, [rows.len(), 6]), (&device, dtype))
@@ -231,7 +215,7 @@ pub fn optimise_poses(
     let started = Instant::now();
     let mut skipped_steps = 0;
     let mut histories: Vec<Vec<HistoryRow>> =
-        vec![Vec::with_capacity(options.iterations + 1); batch];
+        vec![Vec::with_capacity(options.iterations + 1); starts.len()];
     for step in 0..=options.iterations {
         let last = step == options.iterations;
         let normalised = module.poses.val();

@@ -26,10 +26,10 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use splatraj_render::camera::Intrinsics;
-use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest};
+use splatraj_render::render::{DeviceScene, RenderRequest};
 
 use super::units::PoseUnits;
-use super::{OptimiseError, check_adam, evaluate_costs, host_values, sampling};
+use super::{OptimiseError, check_adam, evaluate_costs, gradient_setup, host_values, sampling};
 use crate::costs::{QueryContext, WeightedCosts};
 use crate::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord};
 
@@ -207,22 +207,14 @@ pub fn optimise_trajectory(
     }
     let units = options.units(windows);
     units.validate()?;
-    let device = scene.geometry.means.device();
-    if !device.is_autodiff() {
-        return Err(OptimiseError::NotAutodiff);
-    }
-    let dtype = scene.geometry.means.dtype();
+    let setups = windows
+        .iter()
+        .map(|w| gradient_setup(scene, costs, intrinsics, &w.mask))
+        .collect::<Result<Vec<_>, _>>()?;
+    let (device, dtype) = (setups[0].0.clone(), setups[0].1);
+    let requests: Vec<Option<RenderRequest>> = setups.into_iter().map(|s| s.2).collect();
     let normalised: Vec<_> = start.weights.iter().map(|w| units.normalise(w)).collect();
     let mut module = Trajectory::from_weights(start.model.clone(), &normalised, &device, dtype)?;
-    let requests: Vec<Option<RenderRequest>> = windows
-        .iter()
-        .map(|w| {
-            costs.needs_mask().then(|| RenderRequest {
-                pruning: Pruning::ObjectOnly,
-                ..RenderRequest::new(*intrinsics, vec![Channel::Mask(w.mask.clone())])
-            })
-        })
-        .collect();
     let mut optim = AdamConfig::new()
         .with_beta_1(options.beta1 as f32)
         .with_beta_2(options.beta2 as f32)
