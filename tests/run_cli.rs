@@ -198,3 +198,71 @@ fn pose_runs_ablations_restarts_and_sgld() {
         serde_json::from_str(&std::fs::read_to_string(run.join("metrics.json")).unwrap()).unwrap();
     assert_eq!(metrics["sgld"]["chains"], 2);
 }
+
+/// `--check` reads every input and grounds every query, then stops: here with the `region`
+/// source and with a per-Gaussian mask file, both naming the demo's red mug.
+#[test]
+fn region_sources_and_mask_files_ground_queries() {
+    let queries = "[[queries]]\ntext = \"red mug\"\n[[queries]]\ntext = \"blue box\"\n";
+    assert!(TINY.contains(queries));
+    let region = TINY.replace(
+        queries,
+        "[targets]\nsource = \"region\"\nregions = { mug = { sphere = [0.307, -0.22, 0.797, 0.1] } }\n[[queries]]\ntext = \"mug\"\n",
+    );
+    let (dir, config) = setup(&region);
+    let out = splatraj(&["run", s(&config), "--check", "--set", &runs_set(dir.path())]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("query 0: \"mug\""),
+        "{}",
+        stderr(&out)
+    );
+    assert!(!dir.path().join("runs").exists(), "--check writes nothing");
+
+    // The red mug's Gaussians as a 0/1 .npy, from the same demo scene.
+    let scene = splatraj::scene::demo::demo_scene(&splatraj::scene::demo::DemoConfig {
+        seed: 7,
+        gaussians: 3000,
+    })
+    .unwrap();
+    let labels = scene.extras.labels.as_ref().unwrap();
+    let mug = splatraj::scene::demo::demo_layout()
+        .into_iter()
+        .find(|o| o.name == "red mug")
+        .unwrap();
+    let mask: Vec<f32> = labels
+        .ids
+        .iter()
+        .map(|&id| f32::from(u8::from(id == mug.id)))
+        .collect();
+    let count = mask.iter().filter(|&&m| m > 0.0).count();
+    let path = dir.path().join("mug.npy");
+    {
+        use npyz::WriterBuilder;
+        let mut bytes = Vec::new();
+        let mut writer = npyz::WriteOptions::<f32>::new()
+            .default_dtype()
+            .shape(&[mask.len() as u64])
+            .writer(&mut bytes)
+            .begin_nd()
+            .unwrap();
+        writer.extend(mask.iter().copied()).unwrap();
+        writer.finish().unwrap();
+        std::fs::write(&path, bytes).unwrap();
+    }
+    let out = splatraj(&[
+        "run",
+        s(&config),
+        "--check",
+        "--set",
+        "queries.0.mask=\"mug.npy\"",
+        "--set",
+        &runs_set(dir.path()),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains(&format!("→ {count} Gaussians")),
+        "the mask's {count} Gaussians: {}",
+        stderr(&out)
+    );
+}
