@@ -34,7 +34,7 @@ pub struct Prepared {
     pub windows: Vec<WindowTarget>,
     /// The selected Gaussians of each query (counts for the report).
     pub selected: Vec<usize>,
-    /// Plain device (renders without gradients) and its autodiff twin.
+    /// The plain device (frames, metrics); `autodiff_scene` wraps it for optimisation.
     pub device: Device,
     /// Float dtype of every tensor.
     pub dtype: DType,
