@@ -45,7 +45,7 @@ use splatraj_render::camera::Intrinsics;
 use splatraj_semantic::TargetsConfig;
 use splatraj_traj::costs::{CostsConfig, DEFAULT_TARGET_RATIO};
 use splatraj_traj::optimise::{
-    SgldOptions, SinglePoseOptions, StartDistribution, TrajectoryOptions,
+    ObjectView, SgldOptions, SinglePoseOptions, StartDistribution, TrajectoryOptions,
 };
 use splatraj_traj::trajectory::TrajectoryModel;
 
@@ -253,6 +253,9 @@ pub struct StartConfig {
     pub kind: StartKind,
     /// Objects: azimuth jitter of restarts after the first, degrees (≥ 0).
     pub jitter: f64,
+    /// Objects: elevation of the view above the horizontal, degrees, in (−90, 90); a flat
+    /// scene seen from its front wants a steep one.
+    pub elevation: f64,
     /// Random starts: camera centres within `spread` × the scene's half-extent of its centre
     /// (see `splatraj_traj::optimise::start`), in (0, 1].
     pub spread: f64,
@@ -267,6 +270,14 @@ pub struct StartConfig {
 }
 
 impl StartConfig {
+    /// How object starts look at their objects.
+    pub fn object_view(&self) -> ObjectView {
+        ObjectView {
+            elevation_degrees: self.elevation,
+            jitter_degrees: self.jitter,
+        }
+    }
+
     /// The random-start distribution.
     pub fn distribution(&self) -> StartDistribution {
         StartDistribution {
@@ -279,7 +290,8 @@ impl Default for StartConfig {
     fn default() -> Self {
         Self {
             kind: StartKind::Objects,
-            jitter: 45.0,
+            jitter: ObjectView::default().jitter_degrees,
+            elevation: ObjectView::default().elevation_degrees,
             spread: StartDistribution::default().spread,
             restarts: 1,
             pose: None,
@@ -486,6 +498,12 @@ impl Config {
             bail!(
                 "`start.jitter` = {} must be finite and ≥ 0 degrees",
                 self.start.jitter
+            );
+        }
+        if !(self.start.elevation.abs() < 90.0) {
+            bail!(
+                "`start.elevation` = {} must be in (−90, 90) degrees",
+                self.start.elevation
             );
         }
         if self.start.pose.is_some() && self.start.trajectory.is_some() {

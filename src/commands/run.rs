@@ -377,7 +377,7 @@ pub fn start_poses(
                         &objects,
                         centre,
                         prepared.up,
-                        config.start.jitter,
+                        config.start.object_view(),
                         r,
                         config.seed,
                     )

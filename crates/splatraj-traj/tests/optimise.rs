@@ -16,7 +16,7 @@ use splatraj_traj::costs::{
 use splatraj_traj::metrics::{WindowMetrics, WindowObject, window_metrics};
 use splatraj_traj::optimise::sampling::{stratified_times, window_bounds, window_of};
 use splatraj_traj::optimise::{
-    Flow, PoseUnits, SgldOptions, SinglePoseOptions, StartDistribution, StopReason,
+    Flow, ObjectView, PoseUnits, SgldOptions, SinglePoseOptions, StartDistribution, StopReason,
     TrajectoryOptions, WindowTarget, object_start_poses, optimise_poses, optimise_trajectory,
     random_start_poses, sample_poses_sgld, window_start_trajectory,
 };
@@ -273,8 +273,15 @@ fn trajectory_frames_two_objects_in_turn() {
         .iter()
         .map(|w| (w.context.object_centre, w.context.prior_radius))
         .collect();
-    let per_window =
-        object_start_poses(&objects, middle, DEMO_UP.map(f64::from), 45.0, 0, 1).unwrap();
+    let per_window = object_start_poses(
+        &objects,
+        middle,
+        DEMO_UP.map(f64::from),
+        ObjectView::default(),
+        0,
+        1,
+    )
+    .unwrap();
     let start = window_start_trajectory(model, &per_window, &device, DType::F32)
         .unwrap()
         .record();

@@ -29,7 +29,7 @@ pub use single_pose::{
     HistoryRow, SinglePoseOptions, SinglePoseResult, optimise_poses, optimise_single_pose,
 };
 pub use start::{
-    StartDistribution, object_start_poses, random_start_poses, unwrap_rotation,
+    ObjectView, StartDistribution, object_start_poses, random_start_poses, unwrap_rotation,
     window_start_trajectory,
 };
 pub use trajectory::{

@@ -13,7 +13,7 @@
 //! to their working distance. The same seed gives the same poses.
 //!
 //! **Objects** ([`object_start_poses`]): one pose per query, at the query's prior radius from
-//! its object, looking at it from [`OBJECT_START_ELEVATION_DEGREES`] above the horizontal. All
+//! its object, looking at it from `elevation` degrees above the horizontal (default 30). All
 //! objects are seen from the same horizontal direction: from the objects' mean centre toward
 //! the scene's centre (inside a room, the open side), so consecutive windows differ by a
 //! translation more than a turn, and the trajectory between them stays short; an object
@@ -102,19 +102,48 @@ pub fn random_start_poses(
     Ok(poses)
 }
 
-/// Elevation of the object starts' viewing direction above the horizontal, degrees.
+/// Default elevation of the object starts' viewing direction above the horizontal, degrees.
 pub const OBJECT_START_ELEVATION_DEGREES: f64 = 30.0;
 
+/// How object starts look at their objects.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObjectView {
+    /// Elevation of the viewing direction above the horizontal, degrees, in (−90, 90).
+    pub elevation_degrees: f64,
+    /// Azimuth jitter of restarts after the first, ± degrees (≥ 0).
+    pub jitter_degrees: f64,
+}
+
+impl Default for ObjectView {
+    /// 30° elevation, ±45° jitter.
+    fn default() -> Self {
+        Self {
+            elevation_degrees: OBJECT_START_ELEVATION_DEGREES,
+            jitter_degrees: 45.0,
+        }
+    }
+}
+
 /// One start pose per object `(centre, prior radius)` (see the module docs); restart `restart`
-/// (0: no jitter) with azimuth jitter ±`jitter_degrees`.
+/// (0: no jitter).
 pub fn object_start_poses(
     objects: &[([f64; 3], f64)],
     scene_centre: [f64; 3],
     world_up: [f64; 3],
-    jitter_degrees: f64,
+    view: ObjectView,
     restart: usize,
     seed: u64,
 ) -> Result<Vec<Pose>, OptimiseError> {
+    if !(view.elevation_degrees.abs() < 90.0 && view.jitter_degrees.is_finite()) {
+        return Err(OptimiseError::InvalidOptions {
+            field: "elevation",
+            reason: format!(
+                "= {}° must be in (−90°, 90°) (a view along up has no horizon)",
+                view.elevation_degrees
+            ),
+        });
+    }
+    let jitter_degrees = view.jitter_degrees.abs();
     let up = DVec3::from(world_up).normalize_or_zero();
     if up == DVec3::ZERO || !up.is_finite() {
         return Err(OptimiseError::InvalidOptions {
@@ -126,7 +155,7 @@ pub fn object_start_poses(
         return Ok(Vec::new());
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ (restart as u64).wrapping_mul(0x9E37_79B9));
-    let elevation = OBJECT_START_ELEVATION_DEGREES.to_radians();
+    let elevation = view.elevation_degrees.to_radians();
     let mean = objects.iter().map(|(c, _)| DVec3::from(*c)).sum::<DVec3>() / objects.len() as f64;
     let to_middle = DVec3::from(scene_centre) - mean;
     let horizontal = (to_middle - up * to_middle.dot(up)).normalize_or_zero();
