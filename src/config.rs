@@ -500,7 +500,7 @@ impl Config {
                 self.start.jitter
             );
         }
-        if !(self.start.elevation.abs() < 90.0) {
+        if self.start.elevation.is_nan() || self.start.elevation.abs() >= 90.0 {
             bail!(
                 "`start.elevation` = {} must be in (−90, 90) degrees",
                 self.start.elevation
