@@ -7,9 +7,10 @@
 //! the kept samples. Outputs go to a fresh `runs/<name>/<timestamp>/`: `config.toml`,
 //! `pose.json` (best pose and every start's result), `history.csv`, `metrics.json` (TCE, TRE,
 //! IoU of the best pose at the output resolution), `frame.png`, and with `--sgld`
-//! `sgld_samples.csv`.
+//! `sgld_samples.csv`. Ctrl-C during the optimisation stops it and keeps each start's best.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::Ordering;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -18,10 +19,12 @@ use serde::Serialize;
 use splatraj::config::{Ablation, Config, MaskOverlay};
 use splatraj_render::camera::Pose;
 use splatraj_traj::metrics::{WindowMetrics, WindowObject, window_metrics};
-use splatraj_traj::optimise::{PoseUnits, SinglePoseResult, optimise_poses, sample_poses_sgld};
+use splatraj_traj::optimise::{
+    Flow, PoseUnits, SinglePoseResult, StopReason, optimise_poses_observed, sample_poses_sgld,
+};
 
 use super::outputs::{FrameSpec, create_run_dir, frame_png, write_bytes, write_csv, write_json};
-use super::run::{progress_bar, start_poses};
+use super::run::{interrupt_flag, progress_bar, start_poses};
 use super::setup::prepare;
 
 /// Arguments of `splatraj pose`.
@@ -68,6 +71,8 @@ struct PoseFile {
     /// Its 4×4 world-to-camera matrix, row-major.
     world_to_camera: [[f64; 4]; 4],
     total: f64,
+    /// `finished`, or `interrupted` by Ctrl-C.
+    stop: StopReason,
     starts: Vec<StartReport>,
     skipped_steps: usize,
     optimisation_s: f64,
@@ -142,7 +147,9 @@ pub fn run(args: PoseArgs) -> Result<()> {
 
     let scene = prepared.autodiff_scene();
     let started = Instant::now();
-    let results = optimise_poses(
+    let interrupted = interrupt_flag();
+    let bar = progress_bar(config.pose.optimiser.iterations as u64, args.quiet);
+    let results = optimise_poses_observed(
         &scene,
         &window.mask,
         &window.context,
@@ -150,7 +157,20 @@ pub fn run(args: PoseArgs) -> Result<()> {
         &prepared.intrinsics,
         &starts,
         &config.pose.optimiser,
+        &mut |step, lowest| {
+            bar.set_position(step as u64 + 1);
+            bar.set_message(format!("best {lowest:.4}"));
+            if interrupted.load(Ordering::SeqCst) {
+                Flow::Stop
+            } else {
+                Flow::Continue
+            }
+        },
     )?;
+    bar.finish_and_clear();
+    if results[0].stop == StopReason::Interrupted {
+        eprintln!("stopped early: writing the best pose so far");
+    }
     let optimisation_s = started.elapsed().as_secs_f64();
     let best: &SinglePoseResult = results
         .iter()
@@ -218,7 +238,8 @@ pub fn run(args: PoseArgs) -> Result<()> {
     drop(scene);
 
     let m = best.pose.world_to_camera();
-    let iterations = config.pose.optimiser.iterations.max(1);
+    // Steps actually run (fewer than configured after Ctrl-C); the last row is the final evaluation.
+    let iterations = best.history.len().saturating_sub(1).max(1);
     write_json(
         &dir.join("pose.json"),
         &PoseFile {
@@ -228,6 +249,7 @@ pub fn run(args: PoseArgs) -> Result<()> {
             pose: best.pose.0,
             world_to_camera: std::array::from_fn(|r| std::array::from_fn(|c| m.col(c)[r])),
             total: best.total,
+            stop: best.stop,
             starts: results
                 .iter()
                 .zip(&starts)

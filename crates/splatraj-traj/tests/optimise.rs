@@ -17,8 +17,8 @@ use splatraj_traj::metrics::{WindowMetrics, WindowObject, window_metrics};
 use splatraj_traj::optimise::sampling::{stratified_times, window_bounds, window_of};
 use splatraj_traj::optimise::{
     Flow, ObjectView, PoseUnits, SgldOptions, SinglePoseOptions, StartDistribution, StopReason,
-    TrajectoryOptions, WindowTarget, object_start_poses, optimise_poses, optimise_trajectory,
-    random_start_poses, sample_poses_sgld, window_start_trajectory,
+    TrajectoryOptions, WindowTarget, object_start_poses, optimise_poses, optimise_poses_observed,
+    optimise_trajectory, random_start_poses, sample_poses_sgld, window_start_trajectory,
 };
 use splatraj_traj::trajectory::{Rbf, Trajectory, TrajectoryModel, uniform_times};
 
@@ -125,6 +125,30 @@ fn batched_starts_match_separate_runs() {
     ];
     let together =
         optimise_poses(&on_device, &mask, &context, &costs, &k, &starts, &options).unwrap();
+    // An observer that stops after step 1 leaves two evaluated rows per start.
+    let stopped = optimise_poses_observed(
+        &on_device,
+        &mask,
+        &context,
+        &costs,
+        &k,
+        &starts,
+        &options,
+        &mut |step, lowest| {
+            assert!(lowest.is_finite());
+            if step == 1 {
+                Flow::Stop
+            } else {
+                Flow::Continue
+            }
+        },
+    )
+    .unwrap();
+    for r in &stopped {
+        assert_eq!(r.stop, StopReason::Interrupted);
+        assert_eq!(r.history.len(), 2);
+    }
+    assert!(together.iter().all(|r| r.stop == StopReason::Finished));
     for (b, start) in starts.iter().enumerate() {
         let alone =
             optimise_poses(&on_device, &mask, &context, &costs, &k, &[*start], &options).unwrap();

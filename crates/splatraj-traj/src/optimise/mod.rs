@@ -26,7 +26,8 @@ use crate::trajectory::TrajectoryError;
 
 pub use sgld::{SgldOptions, SgldResult, SgldSample, sample_poses_sgld};
 pub use single_pose::{
-    HistoryRow, SinglePoseOptions, SinglePoseResult, optimise_poses, optimise_single_pose,
+    HistoryRow, SinglePoseOptions, SinglePoseResult, optimise_poses, optimise_poses_observed,
+    optimise_single_pose,
 };
 pub use start::{
     ObjectView, StartDistribution, object_start_poses, random_start_poses, unwrap_rotation,

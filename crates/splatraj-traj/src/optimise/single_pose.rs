@@ -36,6 +36,7 @@ use serde::{Deserialize, Serialize};
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::render::DeviceScene;
 
+use super::trajectory::{Flow, StopReason};
 use super::units::PoseUnits;
 use super::{
     OptimiseError, check_adam, check_starts, evaluate_costs, gradient_setup, host_values,
@@ -142,6 +143,8 @@ pub struct SinglePoseResult {
     pub skipped_steps: usize,
     /// Wall time of the whole optimisation.
     pub elapsed: Duration,
+    /// Whether all iterations ran.
+    pub stop: StopReason,
 }
 
 /// The poses being optimised, in normalised units `[B, 6]`: the Module burn's Adam steps.
@@ -187,6 +190,31 @@ pub fn optimise_poses(
     starts: &[Pose],
     options: &SinglePoseOptions,
 ) -> Result<Vec<SinglePoseResult>, OptimiseError> {
+    optimise_poses_observed(
+        scene,
+        target_mask,
+        context,
+        costs,
+        intrinsics,
+        starts,
+        options,
+        &mut |_, _| Flow::Continue,
+    )
+}
+
+/// [`optimise_poses`] with an observer told `(step, lowest total so far over all starts)`
+/// after each step; [`Flow::Stop`] ends the loop (each start keeps its best so far).
+#[allow(clippy::too_many_arguments)]
+pub fn optimise_poses_observed(
+    scene: &DeviceScene,
+    target_mask: &[f32],
+    context: &QueryContext,
+    costs: &WeightedCosts,
+    intrinsics: &Intrinsics,
+    starts: &[Pose],
+    options: &SinglePoseOptions,
+    observer: &mut dyn FnMut(usize, f64) -> Flow,
+) -> Result<Vec<SinglePoseResult>, OptimiseError> {
     options.validate()?;
     context.validate()?;
     check_starts(starts, "starts")?;
@@ -216,6 +244,8 @@ pub fn optimise_poses(
     let mut skipped_steps = 0;
     let mut histories: Vec<Vec<HistoryRow>> =
         vec![Vec::with_capacity(options.iterations + 1); starts.len()];
+    let mut lowest = f64::INFINITY;
+    let mut stop = StopReason::Finished;
     for step in 0..=options.iterations {
         let last = step == options.iterations;
         let normalised = module.poses.val();
@@ -240,6 +270,9 @@ pub fn optimise_poses(
             }
         }
         for (b, (total, row)) in samples.into_iter().enumerate() {
+            if total.is_finite() {
+                lowest = lowest.min(total);
+            }
             histories[b].push(HistoryRow {
                 step,
                 pose: Pose(evaluated[b]),
@@ -247,6 +280,10 @@ pub fn optimise_poses(
                 terms: row,
                 updated,
             });
+        }
+        if !last && observer(step, lowest) == Flow::Stop {
+            stop = StopReason::Interrupted;
+            break;
         }
     }
     let elapsed = started.elapsed();
@@ -267,6 +304,7 @@ pub fn optimise_poses(
                 last_pose: history[history.len() - 1].pose,
                 skipped_steps,
                 elapsed,
+                stop,
                 history,
             }
         })
