@@ -238,8 +238,10 @@ pub fn run(args: PoseArgs) -> Result<()> {
     drop(scene);
 
     let m = best.pose.world_to_camera();
-    // Steps actually run (fewer than configured after Ctrl-C); the last row is the final evaluation.
-    let iterations = best.history.len().saturating_sub(1).max(1);
+    // Steps actually run (fewer than configured after Ctrl-C); a finished run's last row is the
+    // evaluation after the last update, not a step.
+    let finished = usize::from(best.stop == StopReason::Finished);
+    let iterations = best.history.len().saturating_sub(finished).max(1);
     write_json(
         &dir.join("pose.json"),
         &PoseFile {
