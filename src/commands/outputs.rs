@@ -4,19 +4,16 @@
 //! gets a `-2` suffix). Files go through `write_atomically` (temporary name, then rename), so
 //! an interrupted run leaves complete files or none.
 
-use std::io::Cursor;
 use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
 
 use anyhow::{Context, Result};
-use burn::tensor::{Tensor, TensorData};
-use image::{ImageBuffer, Rgb};
 use serde::Serialize;
-use splatraj_render::camera::Intrinsics;
+use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render};
 use splatraj_scene::atomic::write_atomically;
 
-use super::render::host;
+use super::render::{encode_png_rgb, highlight, host, pose_tensor};
 
 /// Creates a fresh `<runs_dir>/<name>/<UTC timestamp>/` folder.
 pub fn create_run_dir(runs_dir: &Path, name: &str) -> Result<PathBuf> {
@@ -98,8 +95,8 @@ pub struct FrameSpec<'a> {
     pub tint: Option<&'a [f32]>,
 }
 
-/// Tint colour and strength of the mask overlay.
-const TINT_RGB: [f64; 3] = [1.0, 0.2, 0.8];
+/// Strength of the mask overlay's tint (lighter than `query`'s, so the object stays legible
+/// in a sequence).
 const TINT_ALPHA: f64 = 0.45;
 
 /// Renders `frames` and writes them as `frame_NNNN.png` into `dir`; `progress` is told after
@@ -128,36 +125,17 @@ pub fn frame_png(
 ) -> Result<Vec<u8>> {
     let device = scene.geometry.means.device();
     let dtype = scene.geometry.means.dtype();
-    let (w, h) = (intrinsics.width, intrinsics.height);
     let mut channels = vec![Channel::Rgb];
     if let Some(mask) = frame.tint {
         channels.push(Channel::Mask(mask.to_vec()));
     }
-    let pose = Tensor::<2>::from_data(
-        TensorData::new(frame.pose.to_vec(), [1, 6]),
-        (&device, dtype),
-    );
+    let pose = pose_tensor(&Pose(frame.pose), &device, dtype);
     let images = render(scene, pose, &RenderRequest::new(*intrinsics, channels))?.images;
-    let c = images.dims()[3];
-    let values = host(images)?; // [1, H, W, C]
-    let mut buffer = ImageBuffer::<Rgb<u8>, Vec<u8>>::new(w as u32, h as u32);
-    for (p, px) in buffer.pixels_mut().enumerate() {
-        let v = &values[p * c..(p + 1) * c];
-        // The mask channel (4th) is the object's composited alpha: tint in proportion.
-        let tint = if c == 4 {
-            TINT_ALPHA * v[3].clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let rgb: [u8; 3] = std::array::from_fn(|k| {
-            let mixed = (1.0 - tint) * v[k] + tint * TINT_RGB[k];
-            (mixed.clamp(0.0, 1.0) * 255.0).round() as u8
-        });
-        *px = Rgb(rgb);
-    }
-    let mut png = Vec::new();
-    buffer
-        .write_to(&mut Cursor::new(&mut png), image::ImageFormat::Png)
-        .context("PNG encoding")?;
-    Ok(png)
+    let values = host(images)?; // [1, H, W, 3 or 4]
+    let rgb = if frame.tint.is_some() {
+        highlight(&values, TINT_ALPHA)
+    } else {
+        values
+    };
+    encode_png_rgb(&rgb, intrinsics)
 }

@@ -11,7 +11,6 @@
 //! and checked, and the picture rendered, before the file is written (whole or not at all).
 
 use std::collections::BTreeMap;
-use std::io::Cursor;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
@@ -30,7 +29,7 @@ use splatraj_semantic::{
     ClusterOptions, Region, RegionSpec, SelectionOptions, Target, TargetsConfig, find_target,
 };
 
-use super::render::{host, mask_request, pose_tensor};
+use super::render::{encode_png_rgb, highlight, host, mask_request, pose_tensor};
 use super::scene::ReadArgs;
 
 /// Horizontal field of view of the diagnostic camera, degrees.
@@ -41,8 +40,6 @@ const DEFAULT_ELEVATION_DEGREES: f64 = 30.0;
 const FRAME_SHARE: f64 = 1.0 / 3.0;
 /// Opacity of the highlight.
 const HIGHLIGHT: f64 = 0.6;
-/// Highlight colour (magenta).
-const HIGHLIGHT_RGB: [f64; 3] = [1.0, 0.2, 0.8];
 /// Name of the picture written into `--out`.
 const IMAGE_NAME: &str = "query.png";
 
@@ -646,24 +643,9 @@ fn highlighted_png(pixels: &[f64], k: &Intrinsics) -> Result<(Vec<u8>, f64)> {
             k.height
         );
     }
-    let mut rgb = Vec::with_capacity(n * 3);
-    let mut highlighted = 0usize;
-    for px in pixels.chunks_exact(4) {
-        let m = px[3].clamp(0.0, 1.0);
-        if m > 0.5 {
-            highlighted += 1;
-        }
-        for c in 0..3 {
-            let v =
-                px[c].clamp(0.0, 1.0) * (1.0 - HIGHLIGHT * m) + HIGHLIGHT * m * HIGHLIGHT_RGB[c];
-            rgb.push((v.clamp(0.0, 1.0) * 255.0).round() as u8);
-        }
-    }
-    let image = image::RgbImage::from_raw(k.width as u32, k.height as u32, rgb)
-        .ok_or_else(|| anyhow!("the picture has the wrong size"))?;
-    let mut bytes = Cursor::new(Vec::new());
-    image.write_to(&mut bytes, image::ImageFormat::Png)?;
-    Ok((bytes.into_inner(), highlighted as f64 / n as f64))
+    let highlighted = pixels.chunks_exact(4).filter(|px| px[3] > 0.5).count();
+    let png = encode_png_rgb(&highlight(pixels, HIGHLIGHT), k)?;
+    Ok((png, highlighted as f64 / n as f64))
 }
 
 fn fmt3(v: [f32; 3]) -> String {

@@ -589,7 +589,23 @@ fn to_u8(v: f64) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0).round() as u8
 }
 
-fn encode_png_rgb(rgb: &[f64], k: &Intrinsics) -> Result<Vec<u8>> {
+/// Colour of the object highlight in pictures (magenta).
+pub const HIGHLIGHT_RGB: [f64; 3] = [1.0, 0.2, 0.8];
+
+/// RGB values `[H·W·3]` from an RGB + mask render `[H·W·4]`, the masked pixels tinted with
+/// [`HIGHLIGHT_RGB`] in proportion to the mask (`strength` at a full mask).
+pub fn highlight(pixels: &[f64], strength: f64) -> Vec<f64> {
+    pixels
+        .chunks_exact(4)
+        .flat_map(|px| {
+            let m = strength * px[3].clamp(0.0, 1.0);
+            (0..3).map(move |c| px[c].clamp(0.0, 1.0) * (1.0 - m) + m * HIGHLIGHT_RGB[c])
+        })
+        .collect()
+}
+
+/// PNG bytes of RGB values `[H·W·3]` in [0, 1] at the size of `k`.
+pub fn encode_png_rgb(rgb: &[f64], k: &Intrinsics) -> Result<Vec<u8>> {
     let pixels: Vec<u8> = rgb.iter().map(|&v| to_u8(v)).collect();
     let image = image::RgbImage::from_raw(k.width as u32, k.height as u32, pixels)
         .ok_or_else(|| anyhow!("RGB render has the wrong size"))?;
