@@ -61,6 +61,19 @@ pub struct Composited {
     pub images: Tensor<4>,
     /// Accumulated opacity 1 − T_final. `[B, H, W]`
     pub alpha: Tensor<3>,
+    /// How much work the pass had (the same for both rasterizers).
+    pub stats: RenderStats,
+}
+
+/// Size of a render's compositing work, for benchmarks (ns per pixel–Gaussian pair).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RenderStats {
+    /// (pose, tile) pairs with a non-empty list.
+    pub tiles: usize,
+    /// Tile–Gaussian pairs over the batch (sum of list lengths); × 256 gives pixel–Gaussian pairs.
+    pub pairs: usize,
+    /// Distinct Gaussians some tile uses.
+    pub gaussians_used: usize,
 }
 
 /// Composites `work` (from [`crate::tiles::bin_tiles`]) into full images.
@@ -130,6 +143,11 @@ pub fn composite(
     Composited {
         images: image.narrow(3, 0, channels),
         alpha,
+        stats: RenderStats {
+            tiles: work.len(),
+            pairs: work.iter().map(|w| w.gaussians.len()).sum(),
+            gaussians_used: n,
+        },
     }
 }
 

@@ -9,7 +9,7 @@ use splatraj_scene::Scene;
 
 use crate::camera::Intrinsics;
 use crate::project::{NEAR_PLANE, SceneTensors, project_with_near, radii_and_visibility};
-use crate::rasterize::{CompositeOptions, Composited, SplatInputs, composite};
+use crate::rasterize::{CompositeOptions, Composited, RenderStats, SplatInputs, composite};
 use crate::sh::{ShTensors, sh_colours};
 use crate::tiles::{ScreenData, TileGrid, TileSelection, bin_tiles};
 
@@ -52,6 +52,31 @@ pub enum Pruning {
     ObjectOnly,
 }
 
+/// Which implementation composites the tiles; both follow the same rules (DESIGN.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Rasterizer {
+    /// One burn operation with a hand-written forward and backward (fast; the default).
+    #[default]
+    Fused,
+    /// Chunked burn tensor ops: the readable specification and the yardstick of the tests.
+    Tensor,
+}
+
+impl std::str::FromStr for Rasterizer {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "fused" => Ok(Rasterizer::Fused),
+            "tensor" => Ok(Rasterizer::Tensor),
+            other => Err(format!(
+                "unknown rasterizer `{other}`: expected `fused` or `tensor`"
+            )),
+        }
+    }
+}
+
 /// What to render.
 #[derive(Debug, Clone)]
 pub struct RenderRequest {
@@ -63,8 +88,10 @@ pub struct RenderRequest {
     pub pruning: Pruning,
     /// Near plane (camera z); Gaussians at or behind it are culled.
     pub near: f64,
-    /// How compositing is chunked (does not change the result).
+    /// How the tensor path chunks compositing (does not change the result).
     pub composite: CompositeOptions,
+    /// Which compositing implementation runs.
+    pub rasterizer: Rasterizer,
 }
 
 impl RenderRequest {
@@ -76,6 +103,7 @@ impl RenderRequest {
             pruning: Pruning::None,
             near: NEAR_PLANE,
             composite: CompositeOptions::default(),
+            rasterizer: Rasterizer::default(),
         }
     }
 }
@@ -214,6 +242,7 @@ pub fn render(
         return Ok(Composited {
             images: images + zero.clone().reshape([1, 1, 1, 1]),
             alpha: alpha + zero.reshape([1, 1, 1]),
+            stats: RenderStats::default(),
         });
     }
     let u = used.len();
