@@ -3,11 +3,13 @@
 //! This package is the command-line tool and a thin facade over the pipeline's crates:
 //! [`scene`] (files, data model, demo scene) → [`semantic`] (query → the object's Gaussians)
 //! → [`render`] (camera, rasterizer) → [`traj`] (trajectory models, costs, optimisers,
-//! metrics). Of its own it adds only the experiment [`config`] schema (the TOML files of
-//! `splatraj run` and `splatraj pose`), so library users can depend on the crates directly.
+//! metrics) → [`experiment`] (the config schema, [`experiment::Experiment`]: prepare, run,
+//! evaluate, write). Library users can depend on the crates directly.
 
-pub mod config;
+#![warn(missing_docs)]
 
+pub use splatraj_experiment as experiment;
+pub use splatraj_experiment::config;
 pub use splatraj_render as render;
 pub use splatraj_scene as scene;
 pub use splatraj_semantic as semantic;

@@ -1,5 +1,6 @@
 //! The `splatraj` command line.
 
+mod cli;
 mod commands;
 
 use std::process::ExitCode;

@@ -405,6 +405,8 @@ fn bench_render_tiny_configuration() {
         "1",
         "--threads",
         "1",
+        "--rasterizer",
+        "tensor",
         "--json",
     ]);
     assert!(out.status.success(), "{}", stderr(&out));

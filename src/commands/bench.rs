@@ -1,11 +1,14 @@
-//! `splatraj bench render`: time the object-mask pass, forward and forward + backward.
+//! `splatraj bench render`: time the object-mask pass, forward and forward + backward, with
+//! each rasterizer.
 //!
-//! Each configuration (scene, resolution, pruning) runs in a fresh child process of this
-//! binary (hidden `--one` flag), so that the peak memory it reports (VmHWM of
+//! Each configuration (scene, resolution, pruning, rasterizer) runs in a fresh child process
+//! of this binary (hidden `--one` flag), so that the peak memory it reports (VmHWM of
 //! /proc/self/status, a process-wide high-water mark) belongs to that configuration alone.
-//! The loss is TCE + TRE of the mask, as in the optimiser. The camera frames one object so
-//! that it covers about the target ratio of the frame: the distance comes from the object's
-//! size and the field of view, then two corrections from measured coverage (coverage ∝ 1/d²).
+//! The loss is TCE + TRE of the mask through the optimiser's own loss path
+//! (`splatraj::experiment::probe`). The scenes and cameras are
+//! `splatraj::experiment::bench_scenes`. Per configuration the table gives, for each
+//! rasterizer, ms and ns per pixel–Gaussian pair (time / (tile–Gaussian pairs × 256)), and the
+//! fused rasterizer's speed-up over the tensor one.
 
 use std::path::PathBuf;
 use std::process::Command;
@@ -14,18 +17,15 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, anyhow, bail};
 use clap::{Args, Subcommand};
-use glam::DVec3;
 use serde::{Deserialize, Serialize};
+use splatraj::experiment::bench_scenes::{demo_bench_scene, file_bench_scene};
+use splatraj::experiment::probe::{MaskProbe, median_ms};
 use splatraj_render::backend::BackendKind;
-use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::render::{DeviceScene, Pruning};
-use splatraj_scene::demo::{DEMO_VIEWPOINT, DemoConfig, demo_layout, demo_scene};
-use splatraj_scene::{ReadOptions, Scene, guess_up_axis, read_scene};
+use splatraj_render::camera::Intrinsics;
+use splatraj_render::render::{Pruning, Rasterizer};
 use splatraj_traj::costs::DEFAULT_TARGET_RATIO;
 
-use super::render::{
-    DtypeArg, forward_backward, forward_loss, mask_request, median_ms, pose_tensor,
-};
+use crate::cli::DtypeArg;
 
 /// The `bench` subcommands.
 #[derive(Debug, Subcommand)]
@@ -62,6 +62,9 @@ pub struct BenchRenderArgs {
     /// Float precision.
     #[arg(long, value_enum, default_value_t = DtypeArg::F32)]
     dtype: DtypeArg,
+    /// Rasterizers to time on every configuration (fused, tensor).
+    #[arg(long, value_delimiter = ',', default_values = ["fused", "tensor"], value_parser = Rasterizer::from_str)]
+    rasterizer: Vec<Rasterizer>,
     /// Demo object the camera frames.
     #[arg(long, default_value = "red mug")]
     object: String,
@@ -78,8 +81,8 @@ pub struct BenchRenderArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     json: bool,
-    /// Internal: run one configuration (`demo:N:RES:PRUNING` or `scene:RES:PRUNING`) in this
-    /// process and print its result as one JSON line.
+    /// Internal: run one configuration (`demo:N:RES:PRUNING:RASTERIZER` or
+    /// `scene:RES:PRUNING:RASTERIZER`) in this process and print its result as one JSON line.
     #[arg(long, hide = true)]
     one: Option<String>,
 }
@@ -121,26 +124,33 @@ struct Config {
     source: Source,
     resolution: usize,
     pruning: Pruning,
+    rasterizer: Rasterizer,
 }
 
 impl Config {
     fn spec(&self) -> String {
         let pruning = pruning_name(self.pruning);
+        let rasterizer = rasterizer_name(self.rasterizer);
         match self.source {
-            Source::Demo(n) => format!("demo:{n}:{}:{pruning}", self.resolution),
-            Source::File => format!("scene:{}:{pruning}", self.resolution),
+            Source::Demo(n) => format!("demo:{n}:{}:{pruning}:{rasterizer}", self.resolution),
+            Source::File => format!("scene:{}:{pruning}:{rasterizer}", self.resolution),
         }
     }
 
     fn parse(spec: &str) -> Result<Self> {
         let parts: Vec<&str> = spec.split(':').collect();
-        let bad = || anyhow!("--one {spec:?}: expected demo:N:RES:PRUNING or scene:RES:PRUNING");
+        let bad = || {
+            anyhow!(
+                "--one {spec:?}: expected demo:N:RES:PRUNING:RASTERIZER or \
+                 scene:RES:PRUNING:RASTERIZER"
+            )
+        };
         let (source, rest) = match parts.as_slice() {
             ["demo", n, rest @ ..] => (Source::Demo(n.parse().map_err(|_| bad())?), rest),
             ["scene", rest @ ..] => (Source::File, rest),
             _ => return Err(bad()),
         };
-        let [resolution, pruning] = rest else {
+        let [resolution, pruning, rasterizer] = rest else {
             return Err(bad());
         };
         Ok(Config {
@@ -151,7 +161,15 @@ impl Config {
                 "none" => Pruning::None,
                 _ => return Err(bad()),
             },
+            rasterizer: rasterizer.parse().map_err(|_| bad())?,
         })
+    }
+}
+
+fn rasterizer_name(rasterizer: Rasterizer) -> &'static str {
+    match rasterizer {
+        Rasterizer::Fused => "fused",
+        Rasterizer::Tensor => "tensor",
     }
 }
 
@@ -169,6 +187,9 @@ struct Row {
     gaussians: usize,
     resolution: usize,
     pruning: String,
+    rasterizer: String,
+    /// Tile–Gaussian pairs of the pass (× 256: pixel–Gaussian pairs).
+    pairs: usize,
     /// Gaussians in the object mask.
     object_gaussians: usize,
     /// Measured mask mean (share of the frame the object covers).
@@ -230,11 +251,14 @@ fn run_all(args: &BenchRenderArgs) -> Result<()> {
     for source in &sources {
         for &resolution in &args.resolutions {
             for pruning in [Pruning::ObjectOnly, Pruning::None] {
-                configs.push(Config {
-                    source: source.clone(),
-                    resolution,
-                    pruning,
-                });
+                for &rasterizer in &args.rasterizer {
+                    configs.push(Config {
+                        source: source.clone(),
+                        resolution,
+                        pruning,
+                        rasterizer,
+                    });
+                }
             }
         }
     }
@@ -262,6 +286,7 @@ fn run_all(args: &BenchRenderArgs) -> Result<()> {
         child.args(["--repeats", &args.repeats.to_string()]);
         child.args(["--backend", &args.backend.to_string()]);
         child.args(["--dtype", &format!("{:?}", args.dtype).to_lowercase()]);
+        child.args(["--rasterizer", rasterizer_name(config.rasterizer)]);
         child.args(["--object", &args.object]);
         child.args(["--target-ratio", &args.target_ratio.to_string()]);
         child.args(["--fov", &args.fov.to_string()]);
@@ -326,6 +351,8 @@ fn skipped_row(config: &Config, args: &BenchRenderArgs, why: &str) -> Row {
         },
         resolution: config.resolution,
         pruning: pruning_name(config.pruning).into(),
+        rasterizer: rasterizer_name(config.rasterizer).into(),
+        pairs: 0,
         object_gaussians: 0,
         coverage: f64::NAN,
         tce: f64::NAN,
@@ -354,7 +381,7 @@ fn source_name(source: &Source, args: &BenchRenderArgs) -> String {
 fn table(report: &Report) -> String {
     let mut out = format!(
         "mask pass (render + TCE + TRE), backend {}, {}, median of {}, rayon pool {} threads on \
-         {} cores, target coverage {:.2}\n",
+         {} cores, target coverage {:.2}; ns/pair = time / (tile–Gaussian pairs × 256)\n",
         report.backend,
         report.dtype,
         report.repeats,
@@ -363,106 +390,147 @@ fn table(report: &Report) -> String {
         report.target_ratio
     );
     out += &format!(
-        "{:<24} {:>9} {:>5} {:>7} {:>8} {:>9} {:>10} {:>13} {:>8} {:>8} {:>8}\n",
+        "{:<20} {:>9} {:>4} {:>7} {:>7} {:>7} {:>6} {:>9} {:>8} {:>11} {:>9} {:>7} {:>7} {:>6}\n",
         "scene",
         "gaussians",
         "res",
         "pruning",
+        "raster",
         "object",
-        "coverage",
+        "cover",
+        "pairs",
         "fwd ms",
         "fwd+bwd ms",
-        "setup MB",
-        "peak MB",
-        "cpu/wall"
+        "ns/pair",
+        "setupMB",
+        "peakMB",
+        "cpu/w"
     );
     let mb = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.0}"));
+    let ns = |ms: f64, pairs: usize| 1e6 * ms / (pairs.max(1) as f64 * 256.0);
     for row in &report.rows {
         if let Some(why) = &row.skipped {
             out += &format!(
-                "{:<24} {:>9} {:>5} {:>7}   skipped ({why})\n",
-                row.scene, row.gaussians, row.resolution, row.pruning
+                "{:<20} {:>9} {:>4} {:>7} {:>7}   skipped ({why})\n",
+                row.scene, row.gaussians, row.resolution, row.pruning, row.rasterizer
             );
             continue;
         }
         out += &format!(
-            "{:<24} {:>9} {:>5} {:>7} {:>8} {:>9.3} {:>10.1} {:>13.1} {:>8} {:>8} {:>8}\n",
+            "{:<20} {:>9} {:>4} {:>7} {:>7} {:>7} {:>6.3} {:>9} {:>8.1} {:>11.1} {:>4.2}/{:<4.2} {:>7} {:>7} {:>6}\n",
             row.scene,
             row.gaussians,
             row.resolution,
             row.pruning,
+            row.rasterizer,
             row.object_gaussians,
             row.coverage,
+            row.pairs,
             row.forward_ms,
             row.forward_backward_ms,
+            ns(row.forward_ms, row.pairs),
+            ns(row.forward_backward_ms, row.pairs),
             mb(row.setup_peak_mb),
             mb(row.peak_mb),
             row.cpu_per_wall.map_or("-".into(), |v| format!("{v:.2}")),
         );
     }
+    let speedups = speedups(&report.rows);
+    if !speedups.is_empty() {
+        out += "fused speed-up over tensor (fwd, fwd+bwd):\n";
+        for (key, fwd, bwd) in speedups {
+            out += &format!("  {key}: {fwd:.2}×, {bwd:.2}×\n");
+        }
+    }
     out
 }
 
-/// A scene, its object mask and a camera framing the object.
-struct Setup {
-    name: String,
-    scene: Scene,
-    mask: Vec<f32>,
-    pose: Pose,
+/// For each configuration timed with both rasterizers: tensor time / fused time.
+fn speedups(rows: &[Row]) -> Vec<(String, f64, f64)> {
+    let key = |r: &Row| {
+        format!(
+            "{} {} {}² {}",
+            r.scene, r.gaussians, r.resolution, r.pruning
+        )
+    };
+    fn timed<'a>(rows: &'a [Row], name: &'static str) -> impl Iterator<Item = &'a Row> {
+        rows.iter()
+            .filter(move |r| r.skipped.is_none() && r.rasterizer == name)
+    }
+    timed(rows, "fused")
+        .filter_map(|f| {
+            let t = timed(rows, "tensor").find(|t| key(t) == key(f))?;
+            Some((
+                key(f),
+                t.forward_ms / f.forward_ms,
+                t.forward_backward_ms / f.forward_backward_ms,
+            ))
+        })
+        .collect()
 }
 
 /// Runs one configuration in this process.
 fn run_one(args: &BenchRenderArgs, config: &Config) -> Result<Row> {
     let device = args.backend.device()?;
-    let autodiff = device.clone().autodiff();
     let dtype = args.dtype.precision().dtype();
-    let target = args.target_ratio;
     let intrinsics = Intrinsics::from_fov_x(args.fov, config.resolution, config.resolution)?;
     // Camera placement is calibrated at 64² so every resolution sees the same view.
     let calibration = Intrinsics::from_fov_x(args.fov, 64, 64)?;
-
+    let ratio = args.target_ratio;
     let setup = match config.source {
-        Source::Demo(n) => demo_setup(args, n, &calibration, &device)?,
+        Source::Demo(n) => demo_bench_scene(&args.object, n, ratio, &calibration, &device)?,
         Source::File => {
             let path = args
                 .scene
                 .as_ref()
                 .ok_or_else(|| anyhow!("--one scene:… needs --scene"))?;
-            file_setup(args, path, &calibration, &device)?
+            file_bench_scene(path, ratio, &calibration, &device)?
         }
     };
-    let plain_scene = DeviceScene::new(&setup.scene, &device, dtype);
-    let ad_scene = DeviceScene::new(&setup.scene, &autodiff, dtype);
-    let request = mask_request(intrinsics, setup.mask.clone(), config.pruning);
+    let mut probe = MaskProbe::new(
+        &setup.scene,
+        (&device, dtype),
+        setup.mask.clone(),
+        ratio,
+        intrinsics,
+        config.rasterizer,
+    )?;
+    probe.prune = config.pruning == Pruning::ObjectOnly;
     let setup_peak_mb = peak_mb();
 
     // Warm-up (first-call allocations), which also gives the costs reported.
-    let result = forward_backward(&ad_scene, &setup.pose, &request, target, &autodiff, dtype)?;
-    forward_loss(&plain_scene, &setup.pose, &request, target, &device, dtype)?;
+    let result = probe.forward_backward(&setup.pose)?;
+    probe.forward(&setup.pose)?;
 
     let cpu_before = cpu_seconds();
     let wall = Instant::now();
-    let forward_ms = median_ms(args.repeats, || {
-        forward_loss(&plain_scene, &setup.pose, &request, target, &device, dtype).map(|_| ())
-    })?;
+    let forward_ms = median_ms(args.repeats, || probe.forward(&setup.pose).map(|_| ()))?;
     let forward_backward_ms = median_ms(args.repeats, || {
-        forward_backward(&ad_scene, &setup.pose, &request, target, &autodiff, dtype).map(|_| ())
+        probe.forward_backward(&setup.pose).map(|_| ())
     })?;
     let wall_s = wall.elapsed().as_secs_f64();
     let cpu_per_wall = match (cpu_before, cpu_seconds()) {
         (Some(a), Some(b)) if wall_s > 0.0 => Some((b - a) / wall_s),
         _ => None,
     };
-
+    let term = |name: &str| {
+        result
+            .terms
+            .iter()
+            .find(|t| t.0 == name)
+            .map_or(f64::NAN, |t| t.2)
+    };
     Ok(Row {
         scene: setup.name,
         gaussians: setup.scene.len(),
         resolution: config.resolution,
         pruning: pruning_name(config.pruning).into(),
+        rasterizer: rasterizer_name(config.rasterizer).into(),
+        pairs: result.stats.map_or(0, |s| s.pairs),
         object_gaussians: setup.mask.iter().filter(|&&m| m != 0.0).count(),
-        coverage: result.coverage,
-        tce: result.tce,
-        tre: result.tre,
+        coverage: result.coverage.unwrap_or(0.0),
+        tce: term("tce"),
+        tre: term("tre"),
         forward_ms,
         forward_backward_ms,
         setup_peak_mb,
@@ -470,141 +538,6 @@ fn run_one(args: &BenchRenderArgs, config: &Config) -> Result<Row> {
         cpu_per_wall,
         rayon_threads: rayon::current_num_threads(),
         skipped: None,
-    })
-}
-
-/// Measured coverage of `mask` from `pose` (forward only, pruned, at the calibration size).
-fn measure_coverage(
-    scene: &Scene,
-    mask: &[f32],
-    pose: &Pose,
-    intrinsics: &Intrinsics,
-    device: &burn::tensor::Device,
-) -> Result<f64> {
-    let dtype = burn::tensor::DType::F32;
-    let uploaded = DeviceScene::new(scene, device, dtype);
-    let request = mask_request(*intrinsics, mask.to_vec(), Pruning::ObjectOnly);
-    let out =
-        splatraj_render::render::render(&uploaded, pose_tensor(pose, device, dtype), &request)?;
-    let sum = super::render::host(out.images.sum())?[0];
-    Ok(sum / (intrinsics.width * intrinsics.height) as f64)
-}
-
-/// Distance at which a silhouette of `area` m² covers `ratio` of a frame.
-fn framing_distance(area: f64, ratio: f64, k: &Intrinsics) -> f64 {
-    // Pixel area = area · fx · fy / d², frame = W · H.
-    (area * k.fx * k.fy / (ratio * (k.width * k.height) as f64)).sqrt()
-}
-
-fn demo_setup(
-    args: &BenchRenderArgs,
-    gaussians: usize,
-    calibration: &Intrinsics,
-    device: &burn::tensor::Device,
-) -> Result<Setup> {
-    let layout = demo_layout();
-    let object = layout
-        .iter()
-        .find(|o| o.name.eq_ignore_ascii_case(args.object.trim()))
-        .ok_or_else(|| {
-            anyhow!(
-                "--object {:?} is not a demo object; available: {}",
-                args.object,
-                layout.iter().map(|o| o.name).collect::<Vec<_>>().join(", ")
-            )
-        })?;
-    let scene = demo_scene(&DemoConfig {
-        gaussians,
-        ..DemoConfig::default()
-    })?;
-    let ids = &scene
-        .extras
-        .labels
-        .as_ref()
-        .ok_or_else(|| anyhow!("the demo scene has no labels"))?
-        .ids;
-    let mask: Vec<f32> = ids
-        .iter()
-        .map(|&id| if id == object.id { 1.0 } else { 0.0 })
-        .collect();
-    let centre = DVec3::from_array(object.center.map(f64::from));
-    let size = object.size.map(f64::from);
-    // Silhouette ≈ a disc whose radius is half the geometric mean of the box's edges.
-    let radius = 0.5 * (size[0] * size[1] * size[2]).cbrt();
-    let area = std::f64::consts::PI * radius * radius;
-    // View from the demo's standing viewpoint, the way a person would look at the object.
-    let direction = (DVec3::from_array(DEMO_VIEWPOINT.map(f64::from)) - centre).normalize();
-    let mut distance = framing_distance(area, args.target_ratio, calibration);
-    let pose_at = |d: f64| Pose::look_at(centre + direction * d, centre, DVec3::Z);
-    for _ in 0..2 {
-        let coverage = measure_coverage(&scene, &mask, &pose_at(distance)?, calibration, device)?;
-        tracing::debug!(distance, coverage, "camera distance calibration");
-        if coverage > 0.0 {
-            distance *= (coverage / args.target_ratio).sqrt();
-        }
-    }
-    Ok(Setup {
-        name: "demo".into(),
-        pose: pose_at(distance)?,
-        scene,
-        mask,
-    })
-}
-
-fn file_setup(
-    args: &BenchRenderArgs,
-    path: &std::path::Path,
-    calibration: &Intrinsics,
-    device: &burn::tensor::Device,
-) -> Result<Setup> {
-    let scene = read_scene(path, &ReadOptions::default())?.scene;
-    let bounds = scene
-        .robust_bounds(0.02)
-        .ok_or_else(|| anyhow!("{} holds no Gaussian", path.display()))?;
-    let centre = DVec3::from_array(bounds.center().map(f64::from));
-    let up = guess_up_axis(&scene).map_or(DVec3::Z, |g| DVec3::from_array(g.up.map(f64::from)));
-    // As the preview example: outside the robust bounds' sphere, 30° around up, 25° above.
-    let half = DVec3::from_array(bounds.size().map(f64::from)).length() * 0.5;
-    let (tan_x, _) = calibration.tan_half_fov();
-    let distance = half.max(1e-3) / tan_x.atan().sin();
-    let helper = if up.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
-    let e1 = (helper - up * helper.dot(up)).normalize();
-    let e2 = up.cross(e1);
-    let (az, el) = (30f64.to_radians(), 25f64.to_radians());
-    let direction = (e1 * az.cos() + e2 * az.sin()) * el.cos() + up * el.sin();
-    let pose = Pose::look_at(centre + direction * distance, centre, up)?;
-    // The object: Gaussians within ρ of the centre, ρ sized for the target coverage, then
-    // corrected from measured coverage (real scenes are not uniformly dense).
-    let mut rho = framing_distance(1.0, args.target_ratio, calibration).recip() * distance
-        / std::f64::consts::PI.sqrt();
-    let sphere = |rho: f64| -> Vec<f32> {
-        scene
-            .means
-            .iter()
-            .map(|m| {
-                let d = DVec3::from_array(m.map(f64::from)) - centre;
-                if d.length() <= rho { 1.0 } else { 0.0 }
-            })
-            .collect()
-    };
-    for _ in 0..4 {
-        let coverage = measure_coverage(&scene, &sphere(rho), &pose, calibration, device)?;
-        tracing::debug!(rho, coverage, distance, "object sphere calibration");
-        let factor = if coverage > 0.0 {
-            (args.target_ratio / coverage).sqrt().clamp(0.5, 2.0)
-        } else {
-            2.0
-        };
-        rho *= factor;
-    }
-    let mask = sphere(rho);
-    Ok(Setup {
-        name: path
-            .file_name()
-            .map_or_else(|| "scene".into(), |n| n.to_string_lossy().into_owned()),
-        scene,
-        mask,
-        pose,
     })
 }
 

@@ -1,10 +1,8 @@
 //! One module per top-level subcommand.
 
 pub mod bench;
-pub mod outputs;
 pub mod pose;
 pub mod query;
 pub mod render;
 pub mod run;
 pub mod scene;
-pub mod setup;

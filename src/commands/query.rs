@@ -15,31 +15,25 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 use anyhow::{Context, Result, anyhow, bail};
-use burn::tensor::{DType, Device, Tensor, TensorData};
 use clap::{Args, ValueEnum};
-use glam::DVec3;
 use serde::Serialize;
+use splatraj::experiment::outputs::write_bytes;
+use splatraj::experiment::views::{
+    CameraReport, FOV_X_DEGREES, ViewOptions, diagnostic_camera, highlighted_picture,
+};
 use splatraj_render::backend::{BackendKind, Precision};
-use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, render};
-use splatraj_scene::atomic::write_atomically;
-use splatraj_scene::{Scene, guess_up_axis, read_scene};
+use splatraj_render::camera::Intrinsics;
+use splatraj_render::render::DeviceScene;
+use splatraj_scene::Scene;
 use splatraj_semantic::selection::{DEFAULT_FLOOR, DEFAULT_TOP_FRACTION};
 use splatraj_semantic::{
-    ClusterOptions, Region, RegionSpec, SelectionOptions, Target, TargetsConfig, find_target,
+    ClusterOptions, Region, RegionSpec, SelectionOptions, TargetsConfig, find_target,
 };
 
-use super::render::{encode_png_rgb, highlight, host, mask_request, pose_tensor};
-use super::scene::ReadArgs;
+use crate::cli::ReadArgs;
 
-/// Horizontal field of view of the diagnostic camera, degrees.
-const FOV_X_DEGREES: f64 = 60.0;
 /// Default elevation of the viewing direction above the horizontal, degrees.
 const DEFAULT_ELEVATION_DEGREES: f64 = 30.0;
-/// Share of the frame's smaller side the selection's extent should span.
-const FRAME_SHARE: f64 = 1.0 / 3.0;
-/// Opacity of the highlight.
-const HIGHLIGHT: f64 = 0.6;
 /// Name of the picture written into `--out`.
 const IMAGE_NAME: &str = "query.png";
 
@@ -164,32 +158,6 @@ impl SourceKind {
     }
 }
 
-/// The diagnostic camera.
-#[derive(Debug, Clone, Serialize)]
-struct CameraReport {
-    /// Camera centre.
-    eye: [f64; 3],
-    /// Point looked at (the selection's centre).
-    look_at: [f64; 3],
-    /// World up used (guessed, or +z).
-    up: [f64; 3],
-    /// Whether `up` came from the scene (`guess`) or the fallback (`default`).
-    up_from: &'static str,
-    /// Distance from the eye to the centre.
-    distance: f64,
-    /// Φ = [ω, c].
-    pose: [f64; 6],
-    fov_x_degrees: f64,
-    /// Azimuth of the view from the preferred one (toward the scene's middle), degrees.
-    azimuth_degrees: f64,
-    /// Elevation of the view above the horizontal, degrees.
-    elevation_degrees: f64,
-    /// Views compared by their visible mask (0: no search).
-    searched_views: usize,
-    width: usize,
-    height: usize,
-}
-
 /// What `query --json` prints.
 #[derive(Debug, Serialize)]
 struct QueryReport {
@@ -240,15 +208,7 @@ pub fn run(args: QueryArgs) -> Result<()> {
     let device = args.backend.device()?;
     let dtype = Precision::F32.dtype();
 
-    let loaded = read_scene(&args.scene, &args.read.options())?;
-    if loaded.dropped > 0 {
-        eprintln!(
-            "warning: {}: dropped {} invalid Gaussians",
-            args.scene.display(),
-            loaded.dropped
-        );
-    }
-    let scene = loaded.scene;
+    let scene = args.read.load(&args.scene)?.scene;
     let kind = choose_source(&args, &scene, region.is_some())?;
     // The command line fills the same `[targets]` table a run config holds, so both build
     // their source through one path; paths stay relative to the working directory.
@@ -281,33 +241,17 @@ pub fn run(args: QueryArgs) -> Result<()> {
         .with_context(|| format!("{} ({} source)", args.scene.display(), source.kind()))?;
 
     let uploaded = DeviceScene::new(&scene, &device, dtype);
-    let (pose, camera) = diagnostic_camera(
-        &scene,
-        &uploaded,
-        &target,
-        &intrinsics,
-        ViewOptions {
-            elevation_degrees: args.elevation,
-            search: !args.fixed_view,
-        },
-        (&device, dtype),
-    )?;
-    let request = RenderRequest {
-        pruning: Pruning::None,
-        ..RenderRequest::new(
-            intrinsics,
-            vec![Channel::Rgb, Channel::Mask(target.mask.clone())],
-        )
+    let view = ViewOptions {
+        elevation_degrees: args.elevation,
+        search: !args.fixed_view,
     };
-    let out = render(&uploaded, pose_tensor(&pose, &device, dtype), &request)?;
-    let pixels = host(out.images)?;
-    let (png, highlighted_share) = highlighted_png(&pixels, &intrinsics)?;
+    let (pose, camera) = diagnostic_camera(&scene, &uploaded, &target, &intrinsics, view)?;
+    let (png, highlighted_share) = highlighted_picture(&uploaded, &target, &pose, &intrinsics)?;
 
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create the output folder {}", args.out.display()))?;
     let path = args.out.join(IMAGE_NAME);
-    write_atomically(&path, |w| w.write_all(&png))
-        .with_context(|| format!("cannot write {}", path.display()))?;
+    write_bytes(&path, &png)?;
 
     let report = QueryReport {
         scene: args.scene.display().to_string(),
@@ -503,151 +447,6 @@ fn parse_synonyms(items: &[String]) -> Result<BTreeMap<String, Vec<String>>> {
     Ok(synonyms)
 }
 
-/// Azimuths tried around the preferred view, degrees (0 first: the preferred one).
-const AZIMUTHS: [f64; 8] = [0.0, 45.0, -45.0, 90.0, -90.0, 135.0, -135.0, 180.0];
-/// The preferred view is kept while it shows at least this share of the best view's mask.
-const KEEP_PREFERRED: f64 = 0.5;
-/// Width of the low-resolution mask renders that compare the views.
-const SEARCH_WIDTH: usize = 64;
-
-/// How the diagnostic view is chosen.
-#[derive(Debug, Clone, Copy)]
-struct ViewOptions {
-    /// Preferred elevation above the horizontal, degrees.
-    elevation_degrees: f64,
-    /// Try other views when the selection is hidden in the preferred one.
-    search: bool,
-}
-
-/// A camera looking at the target's centre at the distance where the target's extent spans
-/// `FRAME_SHARE` of the frame's smaller side.
-///
-/// The preferred view looks down from `elevation_degrees` above the horizontal (w.r.t. the
-/// guessed up axis, else +z), from the side of the scene's middle, so that in a room the
-/// camera stands on the room's side of the object rather than behind a wall. Guessed axes
-/// can be wrong and objects hidden, so unless `search` is off, the mask is also rendered
-/// (small, pruned to the object) from other azimuths and from below, and the preferred view
-/// gives way to the one that shows the most of the selection when it shows less than half
-/// of that.
-fn diagnostic_camera(
-    scene: &Scene,
-    uploaded: &DeviceScene,
-    target: &Target,
-    k: &Intrinsics,
-    view: ViewOptions,
-    (device, dtype): (&Device, DType),
-) -> Result<(Pose, CameraReport)> {
-    let ViewOptions {
-        elevation_degrees,
-        search,
-    } = view;
-    let guess = guess_up_axis(scene);
-    let (up, up_from) = match guess {
-        Some(g) => (DVec3::from_array(g.up.map(f64::from)).normalize(), "guess"),
-        None => (DVec3::Z, "default"),
-    };
-    let centre = DVec3::from_array(target.centre.map(f64::from));
-    let bounds = scene
-        .robust_bounds(0.02)
-        .ok_or_else(|| anyhow!("the scene holds no Gaussian"))?;
-    let scene_centre = DVec3::from_array(bounds.center().map(f64::from));
-    let scene_size = DVec3::from_array(bounds.size().map(f64::from)).length();
-
-    // Horizontal part of "toward the scene's middle"; any horizontal axis when the target
-    // is in the middle.
-    let to_middle = scene_centre - centre;
-    let mut e1 = to_middle - up * to_middle.dot(up);
-    if e1.length() < 1e-6 * scene_size.max(1e-9) {
-        let helper = if up.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
-        e1 = helper - up * helper.dot(up);
-    }
-    let e1 = e1.normalize();
-    let e2 = up.cross(e1);
-
-    // The extent's diagonal, floored so that a single Gaussian still gets a sensible view.
-    let size = DVec3::from_array(target.extent.map(f64::from))
-        .length()
-        .max(scene_size * 0.01)
-        .max(1e-3);
-    let focal = k.fx.min(k.fy);
-    let pixels = (k.width.min(k.height) as f64) * FRAME_SHARE;
-    let distance = focal * size / pixels;
-
-    let mut views: Vec<(f64, f64)> = AZIMUTHS.iter().map(|&a| (a, elevation_degrees)).collect();
-    if elevation_degrees != 0.0 {
-        views.extend(AZIMUTHS.iter().map(|&a| (a, -elevation_degrees)));
-    }
-    if !search {
-        views.truncate(1);
-    }
-    let poses = views
-        .iter()
-        .map(|&(azimuth, elevation)| {
-            let (a, e) = (azimuth.to_radians(), elevation.to_radians());
-            let direction = (e1 * a.cos() + e2 * a.sin()) * e.cos() + up * e.sin();
-            Pose::look_at(centre + direction * distance, centre, up)
-        })
-        .collect::<std::result::Result<Vec<Pose>, _>>()?;
-
-    let mut chosen = 0;
-    let mut shown = Vec::new();
-    if poses.len() > 1 {
-        let height = ((SEARCH_WIDTH * k.height) as f64 / k.width as f64)
-            .round()
-            .max(1.0) as usize;
-        let small = Intrinsics::from_fov_x(FOV_X_DEGREES, SEARCH_WIDTH, height)?;
-        let request = mask_request(small, target.mask.clone(), Pruning::ObjectOnly);
-        let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
-        let tensor = Tensor::from_data(TensorData::new(flat, [poses.len(), 6]), (device, dtype));
-        let images = host(render(uploaded, tensor, &request)?.images)?;
-        let per_view = small.width * small.height;
-        shown = images
-            .chunks_exact(per_view)
-            .map(|image| image.iter().sum::<f64>() / per_view as f64)
-            .collect::<Vec<f64>>();
-        let best = (0..shown.len())
-            .max_by(|&a, &b| shown[a].total_cmp(&shown[b]))
-            .unwrap_or(0);
-        if shown[0] < KEEP_PREFERRED * shown[best] {
-            chosen = best;
-        }
-    }
-    let pose = poses[chosen];
-    let (azimuth_degrees, elevation_degrees) = views[chosen];
-    let report = CameraReport {
-        eye: pose.0[3..6].try_into().expect("3 values"),
-        look_at: centre.to_array(),
-        up: up.to_array(),
-        up_from,
-        distance,
-        pose: pose.0,
-        fov_x_degrees: FOV_X_DEGREES,
-        azimuth_degrees,
-        elevation_degrees,
-        searched_views: shown.len(),
-        width: k.width,
-        height: k.height,
-    };
-    Ok((pose, report))
-}
-
-/// The RGB render with the mask blended over it as magenta, as PNG bytes, and the share of
-/// pixels whose mask exceeds 0.5. `pixels` is `[H·W·4]`: R, G, B, mask.
-fn highlighted_png(pixels: &[f64], k: &Intrinsics) -> Result<(Vec<u8>, f64)> {
-    let n = k.width * k.height;
-    if pixels.len() != n * 4 {
-        bail!(
-            "the render returned {} values for a {}×{} picture with 4 channels",
-            pixels.len(),
-            k.width,
-            k.height
-        );
-    }
-    let highlighted = pixels.chunks_exact(4).filter(|px| px[3] > 0.5).count();
-    let png = encode_png_rgb(&highlight(pixels, HIGHLIGHT), k)?;
-    Ok((png, highlighted as f64 / n as f64))
-}
-
 fn fmt3(v: [f32; 3]) -> String {
     format!("({:.4}, {:.4}, {:.4})", v[0], v[1], v[2])
 }
@@ -733,15 +532,5 @@ mod tests {
         );
         assert!(parse_floats::<4>("1,2,3", "--sphere", "").is_err());
         assert!(parse_floats::<4>("1,2,3,nan", "--sphere", "").is_err());
-    }
-
-    #[test]
-    fn highlight_blends_magenta() {
-        let k = Intrinsics::from_fov_x(60.0, 2, 1).unwrap();
-        let (png, share) = highlighted_png(&[0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0], &k).unwrap();
-        assert_eq!(share, 0.5);
-        let image = image::load_from_memory(&png).unwrap().to_rgb8();
-        assert_eq!(image.get_pixel(0, 0).0, [153, 31, 122]);
-        assert_eq!(image.get_pixel(1, 0).0, [255, 255, 255]);
     }
 }

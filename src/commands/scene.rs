@@ -4,14 +4,13 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
-use clap::{Args, Subcommand};
+use clap::Subcommand;
 use serde::Serialize;
 use splatraj_scene::demo::{DemoConfig, demo_scene};
 use splatraj_scene::formats::LoadedScene;
-use splatraj_scene::{
-    Bounds, InvalidPolicy, ReadOptions, Scene, SceneFormat, UpGuess, guess_up_axis, read_scene,
-    write_inria_ply,
-};
+use splatraj_scene::{Bounds, Scene, SceneFormat, UpGuess, guess_up_axis, write_inria_ply};
+
+use crate::cli::ReadArgs;
 
 /// The `scene` subcommands.
 #[derive(Debug, Subcommand)]
@@ -49,37 +48,11 @@ pub enum SceneCommand {
     },
 }
 
-/// Options shared by the subcommands that read a scene.
-#[derive(Debug, Args)]
-pub struct ReadArgs {
-    /// Ground-truth label sidecar (SuperSplat/Segments.ai JSON, or a JSON array of ids).
-    #[arg(long)]
-    labels: Option<PathBuf>,
-    /// Drop Gaussians with invalid values (NaN, zero scale, zero quaternion) with a warning,
-    /// instead of stopping with an error.
-    #[arg(long)]
-    drop_invalid: bool,
-}
-
-impl ReadArgs {
-    /// The scene reader's options these flags ask for.
-    pub(crate) fn options(&self) -> ReadOptions {
-        ReadOptions {
-            invalid: if self.drop_invalid {
-                InvalidPolicy::Drop
-            } else {
-                InvalidPolicy::Reject
-            },
-            labels: self.labels.clone(),
-        }
-    }
-}
-
 /// Runs one `scene` subcommand.
 pub fn run(command: SceneCommand) -> Result<()> {
     match command {
         SceneCommand::Info { file, read, json } => {
-            let loaded = load(&file, &read)?;
+            let loaded = read.load(&file)?;
             let info = SceneInfo::new(&file, &loaded);
             if json {
                 println!("{}", serde_json::to_string_pretty(&info)?);
@@ -92,7 +65,7 @@ pub fn run(command: SceneCommand) -> Result<()> {
             output,
             read,
         } => {
-            let loaded = load(&input, &read)?;
+            let loaded = read.load(&input)?;
             write_inria_ply(&loaded.scene, &output)?;
             eprintln!(
                 "wrote {} Gaussians (SH degree {}) to {}",
@@ -116,18 +89,6 @@ pub fn run(command: SceneCommand) -> Result<()> {
         }
     }
     Ok(())
-}
-
-fn load(path: &Path, read: &ReadArgs) -> Result<LoadedScene> {
-    let loaded = read_scene(path, &read.options())?;
-    if loaded.dropped > 0 {
-        eprintln!(
-            "warning: {}: dropped {} invalid Gaussians",
-            path.display(),
-            loaded.dropped
-        );
-    }
-    Ok(loaded)
 }
 
 /// What `scene info` reports.

@@ -7,6 +7,10 @@
 
 pub mod backend;
 pub mod camera;
+pub mod camera_file;
+pub mod host;
+pub mod images;
+pub mod orbit;
 pub mod project;
 pub mod rasterize;
 pub mod reference;

@@ -6,6 +6,8 @@
 //! errors, a guess of the scene's up axis, and the procedural demo scene. It does not render,
 //! select objects or depend on burn: those live in the crates further down the pipeline.
 
+#![warn(missing_docs)]
+
 pub mod atomic;
 pub mod demo;
 pub mod error;
@@ -17,5 +19,5 @@ pub mod validate;
 pub use error::{Result, SceneError};
 pub use formats::{ReadOptions, SceneFormat, read_scene, write_inria_ply};
 pub use scene::{Bounds, Extras, Features, Labels, NamedProperty, SH_C0, Scene};
-pub use up_axis::{UpGuess, guess_up_axis};
+pub use up_axis::{ResolvedUp, UpGuess, UpSource, guess_up_axis, resolve_up};
 pub use validate::InvalidPolicy;

@@ -174,3 +174,61 @@ fn snap_to_axis(v: Vec3, max_angle: f32) -> Vec3 {
         v
     }
 }
+
+/// Where a resolved world up came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum UpSource {
+    /// Given by the user (a config's `scene.up`).
+    Config,
+    /// The built-in demo room's known up ([`crate::demo::DEMO_UP`]).
+    Demo,
+    /// Guessed from the scene ([`guess_up_axis`]).
+    Guess,
+    /// Nothing to go on: +z.
+    Default,
+}
+
+impl UpSource {
+    /// The name used in logs: `config`, `demo`, `guess` or `default`.
+    pub fn name(self) -> &'static str {
+        match self {
+            UpSource::Config => "config",
+            UpSource::Demo => "demo",
+            UpSource::Guess => "guess",
+            UpSource::Default => "default",
+        }
+    }
+}
+
+/// World up (unit length, f64) and where it came from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResolvedUp {
+    /// Unit world up.
+    pub up: [f64; 3],
+    /// Its origin.
+    pub source: UpSource,
+}
+
+/// The one rule for world up: an explicit `given` (any non-zero length) wins, then the demo
+/// room's known up when `is_demo`, then [`guess_up_axis`], then +z (with a warning).
+pub fn resolve_up(given: Option<[f64; 3]>, is_demo: bool, scene: &Scene) -> ResolvedUp {
+    let (up, source) = match given {
+        Some(up) => (up, UpSource::Config),
+        None if is_demo => (crate::demo::DEMO_UP.map(f64::from), UpSource::Demo),
+        None => match guess_up_axis(scene) {
+            Some(g) => (g.up.map(f64::from), UpSource::Guess),
+            None => {
+                tracing::warn!("could not guess world up; using +z (set scene.up)");
+                ([0.0, 0.0, 1.0], UpSource::Default)
+            }
+        },
+    };
+    let norm = up.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let up = if norm > 0.0 && norm.is_finite() {
+        up.map(|v| v / norm)
+    } else {
+        [0.0, 0.0, 1.0]
+    };
+    ResolvedUp { up, source }
+}

@@ -26,6 +26,7 @@
 pub mod config;
 pub mod embeddings;
 pub mod error;
+pub mod mask_file;
 pub mod names;
 pub mod selection;
 pub mod sources;
@@ -34,10 +35,11 @@ pub mod vectors;
 pub use config::{RegionSpec, SourceKind, TargetsConfig};
 pub use embeddings::{Matrix, PhraseTable, read_feature_sidecar};
 pub use error::{Result, SemanticError};
+pub use mask_file::read_mask_file;
 pub use selection::{
     ClusterOptions, EpsRule, KeepClusters, SelectionOptions, Spread, Target, find_target, select,
 };
 pub use sources::{
     FeatureInput, FeaturesSource, LabelsSource, LangsplatDecoder, LangsplatSource, Region,
-    RegionSource, Relevancy, Scoring, TargetSource,
+    RegionSource, Relevancy, Scoring, TargetSource, label_mask,
 };

@@ -11,6 +11,8 @@
 //! on a fixed time grid, LDJ smoothness). It renders only by calling `splatraj-render`; it does
 //! not read scenes or configs, pick objects, or write files: the `splatraj` CLI does that.
 
+#![warn(missing_docs)]
+
 pub mod costs;
 pub mod metrics;
 pub mod optimise;

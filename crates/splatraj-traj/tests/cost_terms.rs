@@ -427,6 +427,7 @@ fn weighted_sum_equals_hand_weighted_terms() {
             gamma: 0.9,
             radius: None,
         }),
+        custom: Default::default(),
     };
     let costs = config.build().unwrap();
     assert!(costs.needs_mask());

@@ -16,13 +16,23 @@ use splatraj_traj::costs::{
 use splatraj_traj::metrics::{WindowMetrics, WindowObject, window_metrics};
 use splatraj_traj::optimise::sampling::{stratified_times, window_bounds, window_of};
 use splatraj_traj::optimise::{
-    Flow, ObjectView, PoseUnits, SgldOptions, SinglePoseOptions, StartDistribution, StopReason,
-    TrajectoryOptions, WindowTarget, object_start_poses, optimise_poses, optimise_poses_observed,
-    optimise_trajectory, random_start_poses, sample_poses_sgld, window_start_trajectory,
+    Flow, ObjectView, PoseUnits, Problem, SgldOptions, SinglePoseOptions, StartDistribution,
+    StopReason, TrajectoryOptions, WindowTarget, object_start_poses, optimise_poses,
+    optimise_poses_observed, optimise_trajectory, random_start_poses, sample_poses_sgld,
+    window_start_trajectory,
 };
 use splatraj_traj::trajectory::{Rbf, Trajectory, TrajectoryModel, uniform_times};
 
 const TARGET_RATIO: f64 = 0.15;
+
+/// One window holding `mask` and `context` (a single-pose problem's window).
+fn one_window(mask: &[f32], context: &QueryContext) -> [WindowTarget; 1] {
+    [WindowTarget {
+        name: "object".into(),
+        mask: mask.to_vec(),
+        context: *context,
+    }]
+}
 
 fn scene() -> Scene {
     demo_scene(&DemoConfig {
@@ -75,6 +85,7 @@ fn roll_only() -> WeightedCosts {
             mode: UprightMode::Roll,
         }),
         prior: None,
+        custom: Default::default(),
     }
     .build()
     .unwrap()
@@ -123,15 +134,15 @@ fn batched_starts_match_separate_runs() {
         Pose::look_at(centre + DVec3::new(0.1, -0.9, 0.4), centre, up).unwrap(),
         Pose::look_at(centre + DVec3::new(-0.7, 0.2, 0.3), centre, up).unwrap(),
     ];
-    let together =
-        optimise_poses(&on_device, &mask, &context, &costs, &k, &starts, &options).unwrap();
+    let together = optimise_poses(
+        &Problem::new(&on_device, &one_window(&mask, &context), &costs, k),
+        &starts,
+        &options,
+    )
+    .unwrap();
     // An observer that stops after step 1 leaves two evaluated rows per start.
     let stopped = optimise_poses_observed(
-        &on_device,
-        &mask,
-        &context,
-        &costs,
-        &k,
+        &Problem::new(&on_device, &one_window(&mask, &context), &costs, k),
         &starts,
         &options,
         &mut |step, lowest| {
@@ -150,8 +161,12 @@ fn batched_starts_match_separate_runs() {
     }
     assert!(together.iter().all(|r| r.stop == StopReason::Finished));
     for (b, start) in starts.iter().enumerate() {
-        let alone =
-            optimise_poses(&on_device, &mask, &context, &costs, &k, &[*start], &options).unwrap();
+        let alone = optimise_poses(
+            &Problem::new(&on_device, &one_window(&mask, &context), &costs, k),
+            &[*start],
+            &options,
+        )
+        .unwrap();
         for (x, y) in together[b].history.iter().zip(&alone[0].history) {
             assert!(
                 (x.total - y.total).abs() < 1e-9,
@@ -191,11 +206,12 @@ fn sgld_samples_match_the_closed_form_roll_variance() {
         temperature: 0.01,
     };
     let result = sample_poses_sgld(
-        &on_device,
-        &mask,
-        &context,
-        &costs,
-        &intrinsics(),
+        &Problem::new(
+            &on_device,
+            &one_window(&mask, &context),
+            &costs,
+            intrinsics(),
+        ),
         &vec![start; chains],
         PoseUnits::with_position(1.0),
         &options,
@@ -254,11 +270,12 @@ fn sgld_at_low_temperature_descends() {
         temperature: 1e-9,
     };
     let result = sample_poses_sgld(
-        &on_device,
-        &mask,
-        &context,
-        &costs,
-        &intrinsics(),
+        &Problem::new(
+            &on_device,
+            &one_window(&mask, &context),
+            &costs,
+            intrinsics(),
+        ),
         &[start],
         PoseUnits::with_position(1.0),
         &options,
@@ -326,10 +343,7 @@ fn trajectory_frames_two_objects_in_turn() {
     };
     let mut steps = 0;
     let result = optimise_trajectory(
-        &on_device,
-        &windows,
-        &costs,
-        &k,
+        &Problem::new(&on_device, &windows, &costs, k),
         &start,
         &options,
         5,
@@ -359,6 +373,7 @@ fn trajectory_frames_two_objects_in_turn() {
                     mask: &w.mask,
                     alone: &alone,
                     target_ratio: TARGET_RATIO,
+                    rasterizer: Default::default(),
                 };
                 window_metrics(&scene_plain, &object, i, 2, 8, &k, &|t: &[f64]| {
                     trajectory.poses_at(t)
@@ -424,10 +439,7 @@ fn observer_can_stop_the_trajectory_loop() {
     let on_device = DeviceScene::new(&scene, &device, DType::F32);
     let costs = CostsConfig::default().build().unwrap();
     let result = optimise_trajectory(
-        &on_device,
-        &windows,
-        &costs,
-        &k,
+        &Problem::new(&on_device, &windows, &costs, k),
         &record,
         &TrajectoryOptions::default(),
         1,
@@ -500,8 +512,12 @@ fn many_random_and_degenerate_starts_stay_finite() {
         iterations: 4,
         ..SinglePoseOptions::default()
     };
-    let results =
-        optimise_poses(&on_device, &mask, &context, &costs, &k, &starts, &options).unwrap();
+    let results = optimise_poses(
+        &Problem::new(&on_device, &one_window(&mask, &context), &costs, k),
+        &starts,
+        &options,
+    )
+    .unwrap();
     assert_eq!(results.len(), starts.len());
     for (s, r) in results.iter().enumerate() {
         assert_eq!(

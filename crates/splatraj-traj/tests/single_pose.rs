@@ -10,9 +10,20 @@ use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render};
 use splatraj_scene::Scene;
 use splatraj_scene::demo::{DEMO_UP, DemoConfig, DemoObject, demo_layout, demo_scene};
 use splatraj_traj::costs::{CostsConfig, QueryContext, default_prior_radius, tce, tre};
-use splatraj_traj::optimise::{SinglePoseOptions, SinglePoseResult, optimise_single_pose};
+use splatraj_traj::optimise::{
+    Problem, SinglePoseOptions, SinglePoseResult, WindowTarget, optimise_single_pose,
+};
 
 const TARGET_RATIO: f64 = 0.15;
+
+/// One window holding `mask` and `context` (a single-pose problem's window).
+fn one_window(mask: &[f32], context: &QueryContext) -> [WindowTarget; 1] {
+    [WindowTarget {
+        name: "object".into(),
+        mask: mask.to_vec(),
+        context: *context,
+    }]
+}
 
 /// The 30 000-Gaussian demo scene, the blue box's layout entry and its 0/1 Gaussian mask.
 fn setup() -> (Scene, DemoObject, Vec<f32>) {
@@ -79,11 +90,12 @@ fn run(start: Pose, iterations: usize) -> (SinglePoseResult, Scene, DemoObject, 
         ..SinglePoseOptions::default()
     };
     let result = optimise_single_pose(
-        &on_device,
-        &mask,
-        &context(&object, &k),
-        &costs,
-        &k,
+        &Problem::new(
+            &on_device,
+            &one_window(&mask, &context(&object, &k)),
+            &costs,
+            k,
+        ),
         start,
         &options,
     )
@@ -216,11 +228,12 @@ fn bad_options_and_plain_devices_are_errors() {
     let call = |device: &Device, options: &SinglePoseOptions| {
         let on_device = DeviceScene::new(&scene, device, DType::F32);
         optimise_single_pose(
-            &on_device,
-            &mask,
-            &context(&object, &k),
-            &costs,
-            &k,
+            &Problem::new(
+                &on_device,
+                &one_window(&mask, &context(&object, &k)),
+                &costs,
+                k,
+            ),
             start,
             options,
         )

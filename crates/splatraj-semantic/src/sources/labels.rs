@@ -150,3 +150,30 @@ impl TargetSource for LabelsSource {
         })
     }
 }
+
+/// The 0/1 mask of the Gaussians a label query names, by the [`LabelsSource`] rule (name
+/// ignoring case and repeated spaces, all ids sharing it, or an id). When nothing matches, the
+/// error lists every label name, closest first.
+pub fn label_mask(scene: &Scene, query: &str) -> Result<Vec<f32>> {
+    match LabelsSource::default().relevancy(scene, query) {
+        Ok(r) => Ok(r.values),
+        Err(SemanticError::NoMatch { what, query, .. }) => {
+            let labels = scene.extras.labels.as_ref();
+            let all: Vec<&str> = labels
+                .map(|l| l.names.values().map(String::as_str).collect())
+                .unwrap_or_default();
+            let mut closest = names::closest(&query, all, usize::MAX);
+            if closest.is_empty() {
+                closest = labels
+                    .map(|l| l.counts().keys().map(|id| id.to_string()).collect())
+                    .unwrap_or_default();
+            }
+            Err(SemanticError::NoMatch {
+                what,
+                query,
+                closest,
+            })
+        }
+        Err(e) => Err(e),
+    }
+}

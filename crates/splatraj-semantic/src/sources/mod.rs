@@ -15,7 +15,7 @@ use splatraj_scene::Scene;
 use crate::error::Result;
 
 pub use features::{FeatureInput, FeaturesSource};
-pub use labels::LabelsSource;
+pub use labels::{LabelsSource, label_mask};
 pub use langsplat::{LangsplatDecoder, LangsplatSource};
 pub use region::{Region, RegionSource};
 

@@ -111,10 +111,7 @@ pub fn bbox_iou_batch(visible: Tensor<3>, alone: Tensor<3>) -> Vec<f64> {
     );
     let [batch, height, width] = dims;
     let host = |t: Tensor<3>| -> Vec<f64> {
-        t.into_data()
-            .convert::<f64>()
-            .try_to_vec::<f64>()
-            .expect("float tensor data converts to f64")
+        splatraj_render::host::to_host(t).expect("float tensor data converts to f64")
     };
     let (v, a) = (host(visible), host(alone));
     let n = height * width;

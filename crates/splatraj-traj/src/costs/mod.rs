@@ -17,8 +17,14 @@
 //! - [`mod@prior`]: the decaying warm-start prior (attracting form; the paper's signs are a typo);
 //! - [`iou`]: bounding-box IoU, a metric only (see that module for why it is not a [`Cost`]).
 //!
-//! Adding a cost is adding a file: a config struct implementing [`Cost`], plus one `Option`
-//! field in [`CostsConfig`] and one line in [`CostsConfig::build`].
+//! **Extending.** A cost is a config struct (serde, its weights and parameters) implementing
+//! [`CostConfig`] (`init()` builds the cost, burn's `XConfig` → `init()` style) and a [`Cost`]
+//! (a tensor function of the [`CostInputs`]: poses, and the rendered channels it declares in
+//! [`Cost::channels`]). A crate outside splatraj registers it under a name in a
+//! [`CostRegistry`]; a config then turns it on with a `[costs.custom.<name>]` table, and
+//! [`CostsConfig::build_with`] builds it after the built-in costs. The built-in costs are the
+//! same kind of struct, with a typed field each in [`CostsConfig`] (so a typo in their keys is
+//! caught when the file is parsed).
 //!
 //! The image costs are also plain tensor functions ([`tce()`], [`tre()`]): they run on the mask's
 //! device and dtype and differentiate through burn's autodiff. None of the costs is ever NaN,
@@ -27,15 +33,19 @@
 
 pub mod iou;
 pub mod prior;
+pub mod registry;
 pub mod tce;
 pub mod tre;
 pub mod upright;
+
+use std::collections::BTreeMap;
 
 use burn::tensor::{DType, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 
 pub use iou::{IOU_THRESHOLD, PixelBox, bbox_iou, bbox_iou_batch, mask_box};
 pub use prior::{PRIOR_EPSILON_FRACTION, PriorCost, default_prior_radius, prior};
+pub use registry::{CostConfig, CostRegistry};
 pub use tce::{MASS_FLOOR, NORM_EPSILON, TceCost, centroid_offset, tce};
 pub use tre::{DEFAULT_TARGET_RATIO, TreCost, coverage, tre};
 pub use upright::{UprightCost, UprightMode, upright};
@@ -67,6 +77,15 @@ pub enum CostError {
     MissingMask {
         /// Name of the cost.
         cost: &'static str,
+    },
+    /// A cost reads a rendered channel the inputs do not hold (it did not declare it in
+    /// [`Cost::channels`]).
+    #[error("cost `{cost}` needs the rendered {channel:?} channel, but none was rendered")]
+    MissingChannel {
+        /// Name of the cost.
+        cost: &'static str,
+        /// The channel.
+        channel: ImageChannel,
     },
     /// Tensor shapes or dtypes of the inputs disagree.
     #[error("cost inputs: {0}")]
@@ -137,8 +156,22 @@ pub struct CostInputs {
     poses: Tensor<2>,
     rotations: Tensor<3>,
     masks: Option<Tensor<3>>,
+    depth: Option<Tensor<3>>,
+    rgb: Option<Tensor<4>>,
     step: usize,
     query: QueryContext,
+}
+
+/// A rendered channel a cost can read (see [`Cost::channels`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum ImageChannel {
+    /// The query's object mask `[B, H, W]` (a pruned render when it is the only channel).
+    Mask,
+    /// Composited camera depth `[B, H, W]` of the whole scene (Σ z·α·T; divide by the
+    /// coverage for the expected depth).
+    Depth,
+    /// Colour `[B, H, W, 3]` of the whole scene.
+    Rgb,
 }
 
 impl CostInputs {
@@ -178,8 +211,38 @@ impl CostInputs {
             poses,
             rotations,
             masks,
+            depth: None,
+            rgb: None,
             step,
             query,
+        })
+    }
+
+    /// Adds the rendered depth `[B, H, W]`.
+    pub fn with_depth(mut self, depth: Tensor<3>) -> Self {
+        self.depth = Some(depth);
+        self
+    }
+
+    /// Adds the rendered colour `[B, H, W, 3]`.
+    pub fn with_rgb(mut self, rgb: Tensor<4>) -> Self {
+        self.rgb = Some(rgb);
+        self
+    }
+
+    /// Rendered depth `[B, H, W]`, or [`CostError::MissingChannel`] naming `cost`.
+    pub fn require_depth(&self, cost: &'static str) -> Result<Tensor<3>, CostError> {
+        self.depth.clone().ok_or(CostError::MissingChannel {
+            cost,
+            channel: ImageChannel::Depth,
+        })
+    }
+
+    /// Rendered colour `[B, H, W, 3]`, or [`CostError::MissingChannel`] naming `cost`.
+    pub fn require_rgb(&self, cost: &'static str) -> Result<Tensor<4>, CostError> {
+        self.rgb.clone().ok_or(CostError::MissingChannel {
+            cost,
+            channel: ImageChannel::Rgb,
         })
     }
 
@@ -255,9 +318,11 @@ pub trait Cost: std::fmt::Debug + Send + Sync {
     /// Weight of the term at optimisation step `step` (constant for all but the prior).
     fn weight(&self, step: usize) -> f64;
 
-    /// Whether [`Cost::evaluate`] reads the rendered mask (so a run with only mask-free costs
-    /// can skip rendering).
-    fn needs_mask(&self) -> bool;
+    /// The rendered channels [`Cost::evaluate`] reads (none: the cost reads only the poses,
+    /// and a run whose costs all say so renders nothing).
+    fn channels(&self) -> &'static [ImageChannel] {
+        &[]
+    }
 
     /// Checks the config values; errors name the full key (`costs.<name>.<field>`).
     fn validate(&self) -> Result<(), CostError>;
@@ -317,6 +382,10 @@ pub struct CostsConfig {
     /// Decaying warm-start prior.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub prior: Option<PriorCost>,
+    /// Costs registered by other crates ([`CostRegistry`]), by name: `[costs.custom.<name>]`
+    /// holds that cost's config table.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub custom: BTreeMap<String, toml::Value>,
 }
 
 impl Default for CostsConfig {
@@ -327,13 +396,20 @@ impl Default for CostsConfig {
             tre: Some(TreCost::default()),
             upright: Some(UprightCost::default()),
             prior: Some(PriorCost::default()),
+            custom: BTreeMap::new(),
         }
     }
 }
 
 impl CostsConfig {
     /// Validates every configured cost and collects them, in the order tce, tre, upright, prior.
+    /// A `custom` cost is an error here: build those with [`CostsConfig::build_with`].
     pub fn build(&self) -> Result<WeightedCosts, CostError> {
+        self.build_with(&CostRegistry::default())
+    }
+
+    /// [`CostsConfig::build`], then the `custom` costs (in name order) from `registry`.
+    pub fn build_with(&self, registry: &CostRegistry) -> Result<WeightedCosts, CostError> {
         let mut costs: Vec<Box<dyn Cost>> = Vec::new();
         if let Some(c) = &self.tce {
             costs.push(Box::new(c.clone()));
@@ -346,6 +422,9 @@ impl CostsConfig {
         }
         if let Some(c) = &self.prior {
             costs.push(Box::new(c.clone()));
+        }
+        for (name, table) in &self.custom {
+            costs.push(registry.build(name, table)?);
         }
         WeightedCosts::new(costs)
     }
@@ -387,12 +466,7 @@ impl CostTerms {
 }
 
 fn host_mean(t: Tensor<1>) -> f64 {
-    t.mean()
-        .into_data()
-        .convert::<f64>()
-        .try_to_vec::<f64>()
-        .map(|v| v[0])
-        .unwrap_or(f64::NAN)
+    splatraj_render::host::scalar(t.mean())
 }
 
 /// A set of costs with distinct names, summed with their weights.
@@ -430,7 +504,19 @@ impl WeightedCosts {
 
     /// Whether any cost reads the rendered mask.
     pub fn needs_mask(&self) -> bool {
-        self.costs.iter().any(|c| c.needs_mask())
+        self.channels().contains(&ImageChannel::Mask)
+    }
+
+    /// Every channel some cost reads, sorted, each once.
+    pub fn channels(&self) -> Vec<ImageChannel> {
+        let mut all: Vec<ImageChannel> = self
+            .costs
+            .iter()
+            .flat_map(|c| c.channels().iter().copied())
+            .collect();
+        all.sort();
+        all.dedup();
+        all
     }
 
     /// Every term and Σ_i w_i(k)·cost_i per sample `[B]`.

@@ -24,7 +24,7 @@
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostError, CostInputs, check_weight, invalid};
+use super::{Cost, CostError, CostInputs, ImageChannel, check_weight, invalid};
 
 /// ε of the guarded distance √(‖o − c‖² + ε²), as a fraction of the prior radius r.
 pub const PRIOR_EPSILON_FRACTION: f64 = 1e-3;
@@ -153,8 +153,8 @@ impl Cost for PriorCost {
     fn weight(&self, step: usize) -> f64 {
         self.alpha(step)
     }
-    fn needs_mask(&self) -> bool {
-        false
+    fn channels(&self) -> &'static [ImageChannel] {
+        &[]
     }
     fn validate(&self) -> Result<(), CostError> {
         check_weight(self.name(), "alpha0", self.alpha0)?;

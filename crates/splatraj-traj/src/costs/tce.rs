@@ -18,7 +18,7 @@
 use burn::tensor::{Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostError, CostInputs, check_weight};
+use super::{Cost, CostError, CostInputs, ImageChannel, check_weight};
 
 /// Total mask mass (in pixels) below which the centroid is pulled toward the image centre.
 pub const MASS_FLOOR: f64 = 1e-3;
@@ -82,8 +82,8 @@ impl Cost for TceCost {
     fn weight(&self, _step: usize) -> f64 {
         self.weight
     }
-    fn needs_mask(&self) -> bool {
-        true
+    fn channels(&self) -> &'static [ImageChannel] {
+        &[ImageChannel::Mask]
     }
     fn validate(&self) -> Result<(), CostError> {
         check_weight(self.name(), "weight", self.weight)

@@ -10,7 +10,7 @@
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostError, CostInputs, check_weight};
+use super::{Cost, CostError, CostInputs, ImageChannel, check_weight};
 
 /// Target ratio of the frame the object should cover when none is configured.
 pub const DEFAULT_TARGET_RATIO: f64 = 0.15;
@@ -52,8 +52,8 @@ impl Cost for TreCost {
     fn weight(&self, _step: usize) -> f64 {
         self.weight
     }
-    fn needs_mask(&self) -> bool {
-        true
+    fn channels(&self) -> &'static [ImageChannel] {
+        &[ImageChannel::Mask]
     }
     fn validate(&self) -> Result<(), CostError> {
         check_weight(self.name(), "weight", self.weight)

@@ -18,7 +18,7 @@
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostError, CostInputs, check_weight};
+use super::{Cost, CostError, CostInputs, ImageChannel, check_weight};
 
 /// Which uprightness cost (config `mode`, kebab-case).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -73,8 +73,8 @@ impl Cost for UprightCost {
     fn weight(&self, _step: usize) -> f64 {
         self.weight
     }
-    fn needs_mask(&self) -> bool {
-        false
+    fn channels(&self) -> &'static [ImageChannel] {
+        &[]
     }
     fn validate(&self) -> Result<(), CostError> {
         check_weight(self.name(), "weight", self.weight)

@@ -7,10 +7,13 @@
 //! counts as showing the object when its visible mask has a pixel at or above the IoU threshold
 //! (0.5); the window's `visible` is true when every sample shows it.
 
-use burn::tensor::{Tensor, TensorData};
+use burn::tensor::Tensor;
 use serde::Serialize;
-use splatraj_render::camera::Intrinsics;
-use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderError, RenderRequest, render};
+use splatraj_render::camera::{Intrinsics, Pose as CameraPose};
+use splatraj_render::host::{OnDevice, to_host};
+use splatraj_render::render::{
+    Channel, DeviceScene, Pruning, Rasterizer, RenderError, RenderRequest, render,
+};
 
 use crate::costs::{IOU_THRESHOLD, bbox_iou_batch, coverage, mask_box, tce, tre};
 use crate::optimise::sampling::stratified_times;
@@ -54,6 +57,8 @@ pub struct WindowObject<'a> {
     pub alone: &'a DeviceScene,
     /// Target ratio r_t of TRE.
     pub target_ratio: f64,
+    /// Which rasterizer renders the masks.
+    pub rasterizer: Rasterizer,
 }
 
 /// Metrics of window `index` of `windows`, at the poses `pose_at` gives for the grid times.
@@ -68,13 +73,12 @@ pub fn window_metrics(
 ) -> Result<WindowMetrics, RenderError> {
     let times = stratified_times(index, windows, samples.max(1), None);
     let poses = pose_at(&times);
-    let device = scene.geometry.means.device();
-    let dtype = scene.geometry.means.dtype();
-    let flat: Vec<f64> = poses.iter().flatten().copied().collect();
-    let poses = Tensor::<2>::from_data(TensorData::new(flat, [times.len(), 6]), (&device, dtype));
+    let poses: Vec<CameraPose> = poses.into_iter().map(CameraPose).collect();
+    let poses = scene.poses(&poses);
     let mask_of = |scene: &DeviceScene, mask: Vec<f32>| -> Result<Tensor<3>, RenderError> {
         let request = RenderRequest {
             pruning: Pruning::ObjectOnly,
+            rasterizer: object.rasterizer,
             ..RenderRequest::new(*intrinsics, vec![Channel::Mask(mask)])
         };
         let images = render(scene, poses.clone(), &request)?.images;
@@ -83,12 +87,7 @@ pub fn window_metrics(
     };
     let visible = mask_of(scene, object.mask.to_vec())?;
     let alone = mask_of(object.alone, vec![1.0; object.alone.len()])?;
-    let host = |t: Tensor<1>| -> Vec<f64> {
-        t.into_data()
-            .convert::<f64>()
-            .try_to_vec::<f64>()
-            .unwrap_or_default()
-    };
+    let host = |t: Tensor<1>| -> Vec<f64> { to_host(t).unwrap_or_default() };
     let tces = host(tce(visible.clone()));
     let tres = host(tre(visible.clone(), object.target_ratio));
     let coverages = host(coverage(visible.clone()));

@@ -10,6 +10,7 @@
 //! - [`sampling`] and [`units`]: the stratified times and the normalised parameter units the
 //!   loops share.
 
+pub mod problem;
 pub mod sampling;
 pub mod sgld;
 pub mod single_pose;
@@ -17,13 +18,14 @@ pub mod start;
 pub mod trajectory;
 pub mod units;
 
-use burn::tensor::{DType, Device, Tensor};
-use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderError, RenderRequest, render};
+use burn::tensor::Tensor;
+use splatraj_render::camera::Pose;
+use splatraj_render::render::RenderError;
 
-use crate::costs::{CostError, CostInputs, CostTerms, QueryContext, WeightedCosts};
+use crate::costs::{CostError, CostTerms};
 use crate::trajectory::TrajectoryError;
 
+pub use problem::{Evaluated, PoseLoss, Problem};
 pub use sgld::{SgldOptions, SgldResult, SgldSample, sample_poses_sgld};
 pub use single_pose::{
     HistoryRow, SinglePoseOptions, SinglePoseResult, optimise_poses, optimise_poses_observed,
@@ -65,6 +67,9 @@ pub enum OptimiseError {
     /// The start trajectory does not fit its model.
     #[error(transparent)]
     Trajectory(#[from] TrajectoryError),
+    /// A tensor could not be read back to the host.
+    #[error("{0}")]
+    ReadBack(String),
 }
 
 /// Checks Adam's settings (a learning rate named by the caller, β1, β2, ε).
@@ -89,26 +94,6 @@ pub(crate) fn check_adam(
     Ok(())
 }
 
-/// The scene's device (checked to be autodiff) and dtype, and the object mask request: pruned
-/// to the object (same image and gradient for a fraction of the work), or None when no cost
-/// reads the mask (the prior-only ablation renders nothing).
-pub(crate) fn gradient_setup(
-    scene: &DeviceScene,
-    costs: &WeightedCosts,
-    intrinsics: &Intrinsics,
-    target_mask: &[f32],
-) -> Result<(Device, DType, Option<RenderRequest>), OptimiseError> {
-    let device = scene.geometry.means.device();
-    if !device.is_autodiff() {
-        return Err(OptimiseError::NotAutodiff);
-    }
-    let request = costs.needs_mask().then(|| RenderRequest {
-        pruning: Pruning::ObjectOnly,
-        ..RenderRequest::new(*intrinsics, vec![Channel::Mask(target_mask.to_vec())])
-    });
-    Ok((device, scene.geometry.means.dtype(), request))
-}
-
 /// Checks a batch of start poses: at least one (`field` names the batch), all finite.
 pub(crate) fn check_starts(starts: &[Pose], field: &'static str) -> Result<(), OptimiseError> {
     if starts.is_empty() {
@@ -123,33 +108,9 @@ pub(crate) fn check_starts(starts: &[Pose], field: &'static str) -> Result<(), O
     }
 }
 
-/// Renders the mask (when `request` is given) at poses Φ `[B, 6]` and evaluates the costs.
-pub(crate) fn evaluate_costs(
-    scene: &DeviceScene,
-    poses: Tensor<2>,
-    request: Option<&RenderRequest>,
-    step: usize,
-    context: &QueryContext,
-    costs: &WeightedCosts,
-) -> Result<CostTerms, OptimiseError> {
-    let masks = match request {
-        Some(request) => {
-            let images = render(scene, poses.clone(), request)?.images;
-            let [batch, height, width, _] = images.dims();
-            Some(images.reshape([batch, height, width]))
-        }
-        None => None,
-    };
-    let inputs = CostInputs::new(poses, masks, step, *context)?;
-    Ok(costs.evaluate(&inputs)?)
-}
-
 /// A tensor's values on the host as f64 (empty if they cannot be read).
 pub(crate) fn host_values<const D: usize>(t: Tensor<D>) -> Vec<f64> {
-    t.into_data()
-        .convert::<f64>()
-        .try_to_vec::<f64>()
-        .unwrap_or_default()
+    splatraj_render::host::to_host(t).unwrap_or_default()
 }
 
 /// One sample's terms as `(name, weight, unweighted value)`.

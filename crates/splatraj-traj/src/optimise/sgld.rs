@@ -22,12 +22,10 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
-use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::render::DeviceScene;
+use splatraj_render::camera::Pose;
 
 use super::units::PoseUnits;
-use super::{OptimiseError, check_starts, evaluate_costs, gradient_setup, host_values, per_sample};
-use crate::costs::{QueryContext, WeightedCosts};
+use super::{OptimiseError, Problem, check_starts, host_values, per_sample};
 
 /// Settings of [`sample_poses_sgld`] (the config's `[sgld]` table).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -110,17 +108,12 @@ pub struct SgldResult {
     pub elapsed: Duration,
 }
 
-/// Runs one SGLD chain from each of `starts` on the costs of one object.
+/// Runs one SGLD chain from each of `starts` on the costs of `problem`'s one window.
 ///
-/// Same inputs as [`super::optimise_poses`]; `units` sets the normalised units and `seed` the
-/// noise. `scene` must live on an autodiff device.
-#[allow(clippy::too_many_arguments)]
+/// Same problem as [`super::optimise_poses`]; `units` sets the normalised units and `seed` the
+/// noise. `problem.scene` must live on an autodiff device.
 pub fn sample_poses_sgld(
-    scene: &DeviceScene,
-    target_mask: &[f32],
-    context: &QueryContext,
-    costs: &WeightedCosts,
-    intrinsics: &Intrinsics,
+    problem: &Problem<'_>,
     starts: &[Pose],
     units: PoseUnits,
     options: &SgldOptions,
@@ -128,9 +121,10 @@ pub fn sample_poses_sgld(
 ) -> Result<SgldResult, OptimiseError> {
     options.validate()?;
     units.validate()?;
-    context.validate()?;
+    problem.single()?;
     check_starts(starts, "chains")?;
-    let (device, dtype, request) = gradient_setup(scene, costs, intrinsics, target_mask)?;
+    let (device, dtype) = problem.gradient_setup()?;
+    let request = problem.request(0);
     let chains = starts.len();
     let mut theta: Vec<[f64; 6]> = starts.iter().map(|p| units.normalise(&p.0)).collect();
     let noise = Normal::new(0.0, (options.step_size * options.temperature).sqrt())
@@ -145,7 +139,7 @@ pub fn sample_poses_sgld(
             Tensor::<2>::from_data(TensorData::new(flat, [chains, 6]), (&device, dtype))
                 .require_grad();
         let poses = units.to_scene(normalised.clone());
-        let terms = evaluate_costs(scene, poses, request.as_ref(), step, context, costs)?;
+        let terms = problem.evaluate(0, poses, step, request.as_ref())?.terms;
         let totals: Vec<f64> = per_sample(&terms).into_iter().map(|(t, _)| t).collect();
         let grads = terms.total.sum().backward();
         let grad = normalised

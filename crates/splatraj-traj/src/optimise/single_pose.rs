@@ -33,16 +33,11 @@ use burn::module::{Module, Param};
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Tensor, TensorData};
 use serde::{Deserialize, Serialize};
-use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::render::DeviceScene;
+use splatraj_render::camera::Pose;
 
 use super::trajectory::{Flow, StopReason};
 use super::units::PoseUnits;
-use super::{
-    OptimiseError, check_adam, check_starts, evaluate_costs, gradient_setup, host_values,
-    per_sample,
-};
-use crate::costs::{QueryContext, WeightedCosts};
+use super::{OptimiseError, Problem, check_adam, check_starts, host_values, per_sample};
 
 /// Settings of [`optimise_single_pose`]; the defaults suit scenes in metres.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -153,72 +148,44 @@ struct PoseBatch {
     poses: Param<Tensor<2>>,
 }
 
-/// Optimises one pose Φ from `start` on `costs` for the object whose per-Gaussian mask is
-/// `target_mask` (one value per Gaussian of `scene`), rendered with `intrinsics`.
+/// Optimises one pose Φ from `start` on the costs of `problem`'s one window (its object's
+/// mask and context), rendered with its camera.
 ///
-/// `scene` must live on an autodiff device; Φ takes its device and dtype. See the module docs
-/// for the algorithm, the skipping of non-finite steps and the choice of the best pose.
+/// `problem.scene` must live on an autodiff device; Φ takes its device and dtype. See the
+/// module docs for the algorithm, the skipping of non-finite steps and the choice of the best
+/// pose.
 pub fn optimise_single_pose(
-    scene: &DeviceScene,
-    target_mask: &[f32],
-    context: &QueryContext,
-    costs: &WeightedCosts,
-    intrinsics: &Intrinsics,
+    problem: &Problem<'_>,
     start: Pose,
     options: &SinglePoseOptions,
 ) -> Result<SinglePoseResult, OptimiseError> {
-    let mut results = optimise_poses(
-        scene,
-        target_mask,
-        context,
-        costs,
-        intrinsics,
-        &[start],
-        options,
-    )?;
+    let mut results = optimise_poses(problem, &[start], options)?;
     Ok(results.remove(0))
 }
 
 /// [`optimise_single_pose`] from several starts at once (one batched render per step); one
 /// result per start, in order. Callers keep the best with [`SinglePoseResult::total`].
 pub fn optimise_poses(
-    scene: &DeviceScene,
-    target_mask: &[f32],
-    context: &QueryContext,
-    costs: &WeightedCosts,
-    intrinsics: &Intrinsics,
+    problem: &Problem<'_>,
     starts: &[Pose],
     options: &SinglePoseOptions,
 ) -> Result<Vec<SinglePoseResult>, OptimiseError> {
-    optimise_poses_observed(
-        scene,
-        target_mask,
-        context,
-        costs,
-        intrinsics,
-        starts,
-        options,
-        &mut |_, _| Flow::Continue,
-    )
+    optimise_poses_observed(problem, starts, options, &mut |_, _| Flow::Continue)
 }
 
 /// [`optimise_poses`] with an observer told `(step, lowest total so far over all starts)`
 /// after each step; [`Flow::Stop`] ends the loop (each start keeps its best so far).
-#[allow(clippy::too_many_arguments)]
 pub fn optimise_poses_observed(
-    scene: &DeviceScene,
-    target_mask: &[f32],
-    context: &QueryContext,
-    costs: &WeightedCosts,
-    intrinsics: &Intrinsics,
+    problem: &Problem<'_>,
     starts: &[Pose],
     options: &SinglePoseOptions,
     observer: &mut dyn FnMut(usize, f64) -> Flow,
 ) -> Result<Vec<SinglePoseResult>, OptimiseError> {
     options.validate()?;
-    context.validate()?;
+    problem.single()?;
     check_starts(starts, "starts")?;
-    let (device, dtype, request) = gradient_setup(scene, costs, intrinsics, target_mask)?;
+    let (device, dtype) = problem.gradient_setup()?;
+    let request = problem.request(0);
     let units = options.units();
     let to_tensor = |rows: &[[f64; 6]]| {
         let flat: Vec<f64> = rows.iter().flat_map(|p| units.normalise(p)).collect();
@@ -251,7 +218,7 @@ pub fn optimise_poses_observed(
         let normalised = module.poses.val();
         let evaluated = from_tensor(normalised.clone());
         let poses = units.to_scene(normalised.clone());
-        let terms = evaluate_costs(scene, poses, request.as_ref(), step, context, costs)?;
+        let terms = problem.evaluate(0, poses, step, request.as_ref())?.terms;
         let samples = per_sample(&terms);
         let mut updated = false;
         if !last {

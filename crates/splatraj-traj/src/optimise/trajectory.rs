@@ -25,12 +25,11 @@ use burn::tensor::{Tensor, TensorData};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-use splatraj_render::camera::Intrinsics;
-use splatraj_render::render::{DeviceScene, RenderRequest};
+use splatraj_render::render::RenderRequest;
 
 use super::units::PoseUnits;
-use super::{OptimiseError, check_adam, evaluate_costs, gradient_setup, host_values, sampling};
-use crate::costs::{QueryContext, WeightedCosts};
+use super::{OptimiseError, Problem, check_adam, host_values, sampling};
+use crate::costs::QueryContext;
 use crate::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord};
 
 /// One query window's object: its per-Gaussian mask and cost context.
@@ -179,40 +178,26 @@ pub struct TrajectoryResult {
     pub elapsed: Duration,
 }
 
-/// Optimises `start` (any model, weights in scene units) on the costs of every window.
+/// Optimises `start` (any model, weights in scene units) on the costs of every window of
+/// `problem`.
 ///
-/// `scene` must live on an autodiff device; the trajectory takes its device and dtype. `seed`
-/// drives the stratified sampling. `observer` sees each step and may stop the loop, as does
-/// `options.time_limit_s`.
-#[allow(clippy::too_many_arguments)]
+/// `problem.scene` must live on an autodiff device; the trajectory takes its device and dtype.
+/// `seed` drives the stratified sampling. `observer` sees each step and may stop the loop, as
+/// does `options.time_limit_s`.
 pub fn optimise_trajectory(
-    scene: &DeviceScene,
-    windows: &[WindowTarget],
-    costs: &WeightedCosts,
-    intrinsics: &Intrinsics,
+    problem: &Problem<'_>,
     start: &TrajectoryRecord,
     options: &TrajectoryOptions,
     seed: u64,
     observer: &mut dyn FnMut(&TrajectoryStep) -> Flow,
 ) -> Result<TrajectoryResult, OptimiseError> {
     options.validate()?;
-    if windows.is_empty() {
-        return Err(OptimiseError::InvalidOptions {
-            field: "windows",
-            reason: "at least one query is needed".into(),
-        });
-    }
-    for w in windows {
-        w.context.validate()?;
-    }
+    let (device, dtype) = problem.gradient_setup()?;
+    let windows = problem.windows;
     let units = options.units(windows);
     units.validate()?;
-    let setups = windows
-        .iter()
-        .map(|w| gradient_setup(scene, costs, intrinsics, &w.mask))
-        .collect::<Result<Vec<_>, _>>()?;
-    let (device, dtype) = (setups[0].0.clone(), setups[0].1);
-    let requests: Vec<Option<RenderRequest>> = setups.into_iter().map(|s| s.2).collect();
+    let requests: Vec<Option<RenderRequest>> =
+        (0..windows.len()).map(|i| problem.request(i)).collect();
     let normalised: Vec<_> = start.weights.iter().map(|w| units.normalise(w)).collect();
     let mut module = Trajectory::from_weights(start.model.clone(), &normalised, &device, dtype)?;
     let mut optim = AdamConfig::new()
@@ -231,7 +216,7 @@ pub fn optimise_trajectory(
     for step in 0..options.iterations {
         let mut loss: Option<Tensor<1>> = None;
         let mut window_terms = Vec::with_capacity(n);
-        for (i, (window, request)) in windows.iter().zip(&requests).enumerate() {
+        for (i, request) in requests.iter().enumerate() {
             let times =
                 sampling::stratified_times(i, n, options.samples_per_window, Some(&mut rng));
             let times = Tensor::<1>::from_data(
@@ -239,8 +224,7 @@ pub fn optimise_trajectory(
                 (&device, dtype),
             );
             let poses = units.to_scene(module.forward(times)); // [S, 6]
-            let terms =
-                evaluate_costs(scene, poses, request.as_ref(), step, &window.context, costs)?;
+            let terms = problem.evaluate(i, poses, step, request.as_ref())?.terms;
             window_terms.push(terms.means());
             let mean = terms.total.mean();
             loss = Some(match loss {

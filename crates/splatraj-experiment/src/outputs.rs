@@ -10,10 +10,10 @@ use std::time::{SystemTime, UNIX_EPOCH};
 use anyhow::{Context, Result};
 use serde::Serialize;
 use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render};
+use splatraj_render::host::{OnDevice, to_host};
+use splatraj_render::images::{highlight, png_rgb};
+use splatraj_render::render::{Channel, DeviceScene, Rasterizer, RenderRequest, render};
 use splatraj_scene::atomic::write_atomically;
-
-use super::render::{encode_png_rgb, highlight, host, pose_tensor};
 
 /// Creates a fresh `<runs_dir>/<name>/<UTC timestamp>/` folder.
 pub fn create_run_dir(runs_dir: &Path, name: &str) -> Result<PathBuf> {
@@ -103,14 +103,14 @@ const TINT_ALPHA: f64 = 0.45;
 /// each frame.
 pub fn write_frames(
     scene: &DeviceScene,
-    intrinsics: &Intrinsics,
+    camera: (&Intrinsics, Rasterizer),
     frames: &[FrameSpec<'_>],
     dir: &Path,
     progress: &mut dyn FnMut(usize),
 ) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     for (index, frame) in frames.iter().enumerate() {
-        let png = frame_png(scene, intrinsics, frame)?;
+        let png = frame_png(scene, camera, frame)?;
         write_bytes(&dir.join(format!("frame_{index:04}.png")), &png)?;
         progress(index + 1);
     }
@@ -120,22 +120,38 @@ pub fn write_frames(
 /// One frame as PNG bytes: the RGB render, with the object tinted where asked.
 pub fn frame_png(
     scene: &DeviceScene,
-    intrinsics: &Intrinsics,
+    (intrinsics, rasterizer): (&Intrinsics, Rasterizer),
     frame: &FrameSpec<'_>,
 ) -> Result<Vec<u8>> {
-    let device = scene.geometry.means.device();
-    let dtype = scene.geometry.means.dtype();
     let mut channels = vec![Channel::Rgb];
     if let Some(mask) = frame.tint {
         channels.push(Channel::Mask(mask.to_vec()));
     }
-    let pose = pose_tensor(&Pose(frame.pose), &device, dtype);
-    let images = render(scene, pose, &RenderRequest::new(*intrinsics, channels))?.images;
-    let values = host(images)?; // [1, H, W, 3 or 4]
+    let pose = scene.poses(&[Pose(frame.pose)]);
+    let request = RenderRequest {
+        rasterizer,
+        ..RenderRequest::new(*intrinsics, channels)
+    };
+    let images = render(scene, pose, &request)?.images;
+    let values = to_host(images)?; // [1, H, W, 3 or 4]
     let rgb = if frame.tint.is_some() {
         highlight(&values, TINT_ALPHA)
     } else {
         values
     };
-    encode_png_rgb(&rgb, intrinsics)
+    Ok(png_rgb(&rgb, intrinsics)?)
+}
+
+/// `.npy` bytes of float32 values with the given shape.
+pub fn npy_f32(values: &[f64], shape: &[u64]) -> Result<Vec<u8>> {
+    use npyz::WriterBuilder;
+    let mut bytes = Vec::new();
+    let mut writer = npyz::WriteOptions::<f32>::new()
+        .default_dtype()
+        .shape(shape)
+        .writer(&mut bytes)
+        .begin_nd()?;
+    writer.extend(values.iter().map(|&v| v as f32))?;
+    writer.finish()?;
+    Ok(bytes)
 }

@@ -5,6 +5,7 @@
 //! seed = 7
 //! backend = "flex"         # flex (= cpu) | ndarray | wgpu, among those compiled in
 //! precision = "f32"        # f32 | f64
+//! rasterizer = "fused"     # fused (default) | tensor: which compositing every render uses
 //!
 //! [scene]                  # a file, or the built-in demo room
 //! demo = { gaussians = 30000, seed = 7 }    # or: path = "scene.ply", labels = "labels.json"
@@ -23,7 +24,8 @@
 //! fov_x = 60.0
 //!
 //! [trajectory]             # kind = "rbf" | "waypoint" | "polynomial" and its parameters
-//! [costs]                  # tce, tre, upright, prior tables (all four by default)
+//! [costs]                  # tce, tre, upright, prior tables (all four by default);
+//!                          # [costs.custom.<name>]: a cost registered in `Extensions`
 //! [optimiser]              # iterations, samples_per_window, learning_rate, position_unit …
 //! [start]                  # kind = "objects" (jitter) | "random" (spread), restarts; or pose = [...], or trajectory = "…"
 //! [output]                 # frames, width, height, mask_overlay, runs_dir …
@@ -34,7 +36,7 @@
 //! Unknown keys are errors (every table denies them), as are out-of-range values; both name
 //! the key. `--set key=value` edits the parsed TOML before it is checked, so an override is
 //! checked exactly like the file (`--set optimiser.iterations=50`, `--set queries.0.text=lamp`).
-//! Relative paths are relative to the config file's folder.
+//! Relative paths are relative to the config file's folder ([`Config::base_dir`]).
 
 use std::path::{Path, PathBuf};
 
@@ -42,12 +44,15 @@ use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 use splatraj_render::backend::{BackendKind, Precision};
 use splatraj_render::camera::Intrinsics;
+use splatraj_render::render::Rasterizer;
 use splatraj_semantic::TargetsConfig;
 use splatraj_traj::costs::{CostsConfig, DEFAULT_TARGET_RATIO};
 use splatraj_traj::optimise::{
     ObjectView, SgldOptions, SinglePoseOptions, StartDistribution, TrajectoryOptions,
 };
 use splatraj_traj::trajectory::TrajectoryModel;
+
+use crate::extensions::Extensions;
 
 /// The whole config file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -64,6 +69,10 @@ pub struct Config {
     /// Float precision of the tensors.
     #[serde(default)]
     pub precision: Precision,
+    /// Which rasterizer composites every render of the run (`fused`, the default, or
+    /// `tensor`, the readable specification).
+    #[serde(default)]
+    pub rasterizer: Rasterizer,
     /// Where the Gaussians come from.
     pub scene: SceneConfig,
     /// How queries become per-Gaussian channels.
@@ -95,6 +104,13 @@ pub struct Config {
     /// SGLD sampling (`splatraj pose --sgld`).
     #[serde(default)]
     pub sgld: SgldOptions,
+    /// Folder that relative input paths are resolved against: the config file's folder when
+    /// loaded by [`Config::load`], else the working directory. Not part of the file.
+    #[serde(skip)]
+    pub base_dir: PathBuf,
+    /// The file it was loaded from (for messages); empty when built in code.
+    #[serde(skip)]
+    pub path: PathBuf,
 }
 
 fn default_backend() -> BackendKind {
@@ -372,7 +388,7 @@ impl OutputConfig {
 }
 
 /// The paper's single-pose ablations: which image costs join the prior.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Ablation {
     /// Every cost of `[costs]` as configured.
@@ -388,6 +404,26 @@ pub enum Ablation {
 }
 
 impl Ablation {
+    /// Every ablation, in the order of the paper's table.
+    pub const ALL: [Ablation; 5] = [
+        Ablation::Full,
+        Ablation::Prior,
+        Ablation::PriorTce,
+        Ablation::PriorTre,
+        Ablation::PriorTceTre,
+    ];
+
+    /// The name used in configs and on the command line (`prior-tce`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            Ablation::Full => "full",
+            Ablation::Prior => "prior",
+            Ablation::PriorTce => "prior-tce",
+            Ablation::PriorTre => "prior-tre",
+            Ablation::PriorTceTre => "prior-tce-tre",
+        }
+    }
+
     /// The costs of `config` restricted to this ablation: TCE and TRE on or off as named, the
     /// prior on (with its configured weights, or the defaults), upright as configured.
     pub fn apply(self, config: &CostsConfig) -> CostsConfig {
@@ -403,7 +439,22 @@ impl Ablation {
             tre: tre.then(|| config.tre.clone().unwrap_or_default()),
             upright: config.upright.clone(),
             prior: Some(config.prior.clone().unwrap_or_default()),
+            custom: config.custom.clone(),
         }
+    }
+}
+
+impl std::str::FromStr for Ablation {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Ablation::ALL
+            .into_iter()
+            .find(|a| a.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<&str> = Ablation::ALL.iter().map(|a| a.name()).collect();
+                format!("unknown ablation `{s}`: expected one of {}", names.join(", "))
+            })
     }
 }
 
@@ -431,23 +482,59 @@ impl Default for PoseConfig {
 
 impl Config {
     /// Reads `path` (and the files it `extends`), applies `overrides` (`key=value`), and
-    /// checks the result.
+    /// checks the result with the built-in costs only.
     pub fn load(path: &Path, overrides: &[String]) -> Result<Config> {
+        Self::load_with(path, overrides, &Extensions::default())
+    }
+
+    /// [`Config::load`] for a config that may name the costs registered in `extensions`.
+    pub fn load_with(path: &Path, overrides: &[String], extensions: &Extensions) -> Result<Config> {
         let mut value = read_table(path, 0)?;
         for o in overrides {
             apply_override(&mut value, o)?;
         }
-        let config: Config = Config::deserialize(value).map_err(|e| {
+        let mut config: Config = Config::deserialize(value).map_err(|e| {
             anyhow::anyhow!("config {}: {}", path.display(), e.message().trim_end())
         })?;
+        config.base_dir = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."))
+            .to_path_buf();
+        config.path = path.to_path_buf();
         config
-            .validate()
+            .validate_with(extensions)
             .with_context(|| format!("config {}", path.display()))?;
         Ok(config)
     }
 
-    /// Range checks that serde cannot express; errors name the key.
+    /// A config from TOML text (no `extends`), checked with `extensions`; relative paths are
+    /// resolved against `base_dir`.
+    pub fn from_toml(text: &str, base_dir: &Path, extensions: &Extensions) -> Result<Config> {
+        let mut config: Config = toml::from_str(text)
+            .map_err(|e| anyhow::anyhow!("config: {}", e.message().trim_end()))?;
+        config.base_dir = base_dir.to_path_buf();
+        config.validate_with(extensions).context("config")?;
+        Ok(config)
+    }
+
+    /// `p` resolved against [`Config::base_dir`] (absolute paths unchanged).
+    pub fn resolve(&self, p: &Path) -> PathBuf {
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            self.base_dir.join(p)
+        }
+    }
+
+    /// Range checks that serde cannot express, with the built-in costs only; errors name the
+    /// key.
     pub fn validate(&self) -> Result<()> {
+        self.validate_with(&Extensions::default())
+    }
+
+    /// [`Config::validate`] for a config that may name the costs registered in `extensions`.
+    pub fn validate_with(&self, extensions: &Extensions) -> Result<()> {
         if self.name.is_empty()
             || self
                 .name
@@ -480,7 +567,9 @@ impl Config {
             }
         }
         self.camera.intrinsics()?;
-        self.costs.build().map_err(anyhow::Error::msg)?;
+        self.costs
+            .build_with(&extensions.costs)
+            .map_err(anyhow::Error::msg)?;
         self.trajectory
             .basis()
             .validate()

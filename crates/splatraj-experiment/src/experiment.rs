@@ -1,0 +1,222 @@
+//! [`Experiment`]: a config made concrete. [`Experiment::prepare`] reads and checks every
+//! input (scene, world up, one target per query, its time window and prior radius) before
+//! anything runs or any file is written, so a bad file or query fails with nothing written.
+
+use anyhow::{Context, Result, bail};
+use burn::tensor::{DType, Device};
+use splatraj_render::camera::Intrinsics;
+use splatraj_render::render::DeviceScene;
+use splatraj_scene::demo::{DemoConfig, demo_scene};
+use splatraj_scene::{InvalidPolicy, ReadOptions, ResolvedUp, Scene, read_scene, resolve_up};
+use splatraj_semantic::{Relevancy, Scoring, Target, read_mask_file, select};
+use splatraj_traj::costs::{QueryContext, WeightedCosts, default_prior_radius};
+use splatraj_traj::optimise::WindowTarget;
+
+use crate::config::Config;
+use crate::extensions::Extensions;
+
+/// Everything loaded and checked for a run of one config.
+#[derive(Debug)]
+pub struct Experiment {
+    /// The config it was prepared from.
+    pub config: Config,
+    /// The registries its costs are built from.
+    pub extensions: Extensions,
+    /// The scene on the host.
+    pub scene: Scene,
+    /// Where it came from (a path, or `demo (…)`).
+    pub scene_name: String,
+    /// World up (unit length) and where it came from.
+    pub up: ResolvedUp,
+    /// Centre and half-extent of the scene's robust bounding box (random starts).
+    pub bounds: ([f64; 3], [f64; 3]),
+    /// One target per query, in order: its window's object mask and cost context.
+    pub windows: Vec<WindowTarget>,
+    /// The selected Gaussians of each query (counts for the report).
+    pub selected: Vec<usize>,
+    /// The plain device (frames, metrics); [`Experiment::autodiff_scene`] wraps it.
+    pub device: Device,
+    /// Float dtype of every tensor.
+    pub dtype: DType,
+    /// The optimisation camera.
+    pub intrinsics: Intrinsics,
+}
+
+impl Experiment {
+    /// Loads the scene, resolves world up and grounds every query, with the built-in costs.
+    pub fn prepare(config: &Config) -> Result<Self> {
+        Self::prepare_with(config, &Extensions::default())
+    }
+
+    /// [`Experiment::prepare`] for a config that may use the costs of `extensions`.
+    pub fn prepare_with(config: &Config, extensions: &Extensions) -> Result<Self> {
+        let (scene, scene_name) = load_scene(config)?;
+        if scene.is_empty() {
+            bail!("scene {scene_name} has no Gaussians");
+        }
+        let up = resolve_up(config.scene.up, config.scene.demo.is_some(), &scene);
+        let bounds = scene
+            .robust_bounds(0.02)
+            .or_else(|| scene.bounds())
+            .context("the scene's bounds are not finite")?;
+        let centre: [f64; 3] =
+            std::array::from_fn(|i| 0.5 * (bounds.min[i] + bounds.max[i]) as f64);
+        let half: [f64; 3] =
+            std::array::from_fn(|i| 0.5 * (bounds.max[i] - bounds.min[i]) as f64);
+        let device = config.backend.device()?;
+        let intrinsics = config.camera.intrinsics()?;
+        let mut experiment = Experiment {
+            config: config.clone(),
+            extensions: extensions.clone(),
+            scene,
+            scene_name,
+            up,
+            bounds: (centre, half),
+            windows: Vec::new(),
+            selected: Vec::new(),
+            device,
+            dtype: config.precision.dtype(),
+            intrinsics,
+        };
+        experiment.ground_queries()?;
+        Ok(experiment)
+    }
+
+    /// One target per query: from its mask file or the `[targets]` source.
+    fn ground_queries(&mut self) -> Result<()> {
+        let config = &self.config;
+        let at = || format!("config {}", config.path.display());
+        let selection = config
+            .targets
+            .selection()
+            .map_err(|e| anyhow::anyhow!("{}: {e}", at()))?;
+        let source = if config.queries.iter().any(|q| q.mask.is_none()) {
+            Some(
+                config
+                    .targets
+                    .build(&config.base_dir, &self.device)
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", at()))?,
+            )
+        } else {
+            None
+        };
+        let (tx, ty) = self.intrinsics.tan_half_fov();
+        let (fov_x, fov_y) = (2.0 * tx.atan(), 2.0 * ty.atan());
+        let half = self.bounds.1;
+        for (i, query) in config.queries.iter().enumerate() {
+            let target: Target = match (&query.mask, &source) {
+                (Some(mask), _) => {
+                    let path = config.resolve(mask);
+                    let values = read_mask_file(&path, self.scene.len())?;
+                    let relevancy = Relevancy {
+                        name: query.text.clone(),
+                        values,
+                        scoring: Scoring::Mask { cluster: false },
+                    };
+                    select(&self.scene, &query.text, &relevancy, &selection)
+                        .with_context(|| format!("`queries.{i}.mask` ({})", path.display()))?
+                }
+                (None, Some(source)) => splatraj_semantic::find_target(
+                    source.as_ref(),
+                    &self.scene,
+                    &query.text,
+                    &selection,
+                )
+                .with_context(|| format!("`queries.{i}.text` = {:?}", query.text))?,
+                (None, None) => unreachable!("a source is built whenever a query has no mask"),
+            };
+            let target_ratio = query.target_ratio.unwrap_or(config.camera.target_ratio);
+            let extent = target.extent.map(f64::from);
+            let prior_radius = default_prior_radius(extent, fov_x, fov_y, target_ratio)
+                .or_else(|_| {
+                    // A single Gaussian (or a flat point set) has no extent to frame: fall
+                    // back to its scale in the scene.
+                    default_prior_radius([half[0] * 0.05; 3], fov_x, fov_y, target_ratio)
+                })
+                .with_context(|| format!("`queries.{i}`: prior radius"))?;
+            self.selected.push(target.count);
+            self.windows.push(WindowTarget {
+                name: query.text.clone(),
+                mask: target.mask,
+                context: QueryContext {
+                    object_centre: target.centre.map(f64::from),
+                    prior_radius,
+                    world_up: self.up.up,
+                    target_ratio,
+                },
+            });
+        }
+        Ok(())
+    }
+
+    /// The costs of `[costs]` (built-in and registered ones).
+    pub fn costs(&self) -> Result<WeightedCosts> {
+        self.config
+            .costs
+            .build_with(&self.extensions.costs)
+            .map_err(anyhow::Error::msg)
+    }
+
+    /// The scene on the autodiff device (for optimisation).
+    pub fn autodiff_scene(&self) -> DeviceScene {
+        DeviceScene::new(&self.scene, &self.device.clone().autodiff(), self.dtype)
+    }
+
+    /// The scene on the plain device (for frames and metrics).
+    pub fn plain_scene(&self) -> DeviceScene {
+        DeviceScene::new(&self.scene, &self.device, self.dtype)
+    }
+
+    /// Window `i`'s object alone (its Gaussians only), on the plain device.
+    pub fn object_alone(&self, i: usize) -> DeviceScene {
+        let keep: Vec<bool> = self.windows[i].mask.iter().map(|&m| m != 0.0).collect();
+        let mut alone = self.scene.clone();
+        alone.retain(&keep);
+        DeviceScene::new(&alone, &self.device, self.dtype)
+    }
+
+    /// The output camera: the optimisation camera at `[output]`'s size.
+    pub fn output_intrinsics(&self) -> Result<Intrinsics> {
+        Ok(self
+            .intrinsics
+            .rescaled(self.config.output.width, self.config.output.height)?)
+    }
+}
+
+fn load_scene(config: &Config) -> Result<(Scene, String)> {
+    if let Some(demo) = &config.scene.demo {
+        let scene = demo_scene(&DemoConfig {
+            seed: demo.seed,
+            gaussians: demo.gaussians,
+        })
+        .context("`scene.demo`")?;
+        return Ok((
+            scene,
+            format!("demo (seed {}, {} Gaussians)", demo.seed, demo.gaussians),
+        ));
+    }
+    let path = config.resolve(
+        config
+            .scene
+            .path
+            .as_deref()
+            .context("`scene`: give `path` (a scene file) or `demo = {}`")?,
+    );
+    let options = ReadOptions {
+        invalid: if config.scene.drop_invalid {
+            InvalidPolicy::Drop
+        } else {
+            InvalidPolicy::Reject
+        },
+        labels: config.scene.labels.as_ref().map(|l| config.resolve(l)),
+    };
+    let loaded = read_scene(&path, &options)?;
+    if loaded.dropped > 0 {
+        tracing::warn!(
+            "dropped {} invalid Gaussians from {}",
+            loaded.dropped,
+            path.display()
+        );
+    }
+    Ok((loaded.scene, path.display().to_string()))
+}

@@ -1,0 +1,43 @@
+//! Experiments for splatraj: a config file made into runs, as a library.
+//!
+//! [`config`] is the TOML schema of `splatraj run` and `splatraj pose` (every knob, `extends`,
+//! `--set` overrides). [`Experiment::prepare`] reads and checks the scene, world up, one
+//! target per query, their windows and prior radii; then [`Experiment::run_trajectory`] (the
+//! paper's method, restarts included), [`Experiment::evaluate`] (per-window metrics, LDJ),
+//! [`Experiment::optimise_pose`] (the single-pose ablations, restarts as one batch) and
+//! [`Experiment::sample_posterior`] (SGLD) do the work, telling an [`Observer`] of each step
+//! (which may stop them, keeping the best so far). [`records`] and [`outputs`] turn results
+//! into the run folder's files, each written whole or not at all. [`Extensions`] carries what
+//! another crate adds (its own costs), and [`probe`], [`views`], [`io`] serve the smaller
+//! commands (`render --grad`, `bench`, `query`).
+//!
+//! ```ignore
+//! let config = Config::load(Path::new("configs/demo.toml"), &[])?;
+//! let experiment = Experiment::prepare(&config)?;
+//! let run = experiment.run_trajectory(&mut observer::quiet())?;
+//! let trajectory = experiment.trajectory(&run.best().best)?;
+//! let metrics = experiment.evaluate(&trajectory)?;
+//! ```
+
+#![warn(missing_docs)]
+
+pub mod bench_scenes;
+pub mod config;
+pub mod experiment;
+pub mod extensions;
+pub mod io;
+pub mod observer;
+pub mod outputs;
+pub mod pose_run;
+pub mod probe;
+pub mod records;
+pub mod starts;
+pub mod trajectory_run;
+pub mod views;
+
+pub use config::Config;
+pub use experiment::Experiment;
+pub use extensions::Extensions;
+pub use observer::{Flow, Observer, Progress};
+pub use pose_run::{PoseRun, Posterior};
+pub use trajectory_run::{Evaluation, TrajectoryRun};

@@ -1,0 +1,57 @@
+//! Progress reports from the long loops of an [`crate::Experiment`], and the answer that stops
+//! them (Ctrl-C, a time budget, a test).
+
+pub use splatraj_traj::optimise::Flow;
+
+/// Where a loop is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Progress {
+    /// A trajectory optimisation step finished.
+    Trajectory {
+        /// Restart (0-based) and how many there are.
+        restart: usize,
+        /// Restarts in all.
+        restarts: usize,
+        /// Step (0-based) of this restart.
+        step: usize,
+        /// Steps per restart.
+        steps: usize,
+        /// Sampled loss of this step.
+        total: f64,
+        /// Lowest sampled loss of this restart so far.
+        best: f64,
+    },
+    /// A batched single-pose step finished.
+    Pose {
+        /// Step (0-based).
+        step: usize,
+        /// Steps in all.
+        steps: usize,
+        /// Lowest total so far over all starts.
+        best: f64,
+    },
+    /// A frame was rendered.
+    Frame {
+        /// Frames done.
+        done: usize,
+        /// Frames in all.
+        frames: usize,
+    },
+}
+
+/// Told of every step; [`Flow::Stop`] ends the loop, keeping the best so far.
+pub trait Observer {
+    /// One step finished.
+    fn progress(&mut self, progress: &Progress) -> Flow;
+}
+
+impl<F: FnMut(&Progress) -> Flow> Observer for F {
+    fn progress(&mut self, progress: &Progress) -> Flow {
+        self(progress)
+    }
+}
+
+/// An observer that never stops anything.
+pub fn quiet() -> impl Observer {
+    |_: &Progress| Flow::Continue
+}

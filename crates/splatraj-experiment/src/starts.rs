@@ -1,0 +1,93 @@
+//! Where the optimisations start: an earlier trajectory, a fixed pose, or object-facing or
+//! random poses per restart (`[start]`).
+
+use anyhow::{Context, Result};
+use splatraj_render::camera::Pose;
+use splatraj_traj::optimise::start::START_FIT_SAMPLES;
+use splatraj_traj::optimise::{
+    WindowTarget, object_start_poses, random_start_poses, window_start_trajectory,
+};
+use splatraj_traj::trajectory::{Trajectory, TrajectoryRecord};
+
+use crate::config::StartKind;
+use crate::experiment::Experiment;
+
+impl Experiment {
+    /// The starting trajectories of `[start]`: one re-fitted from `start.trajectory`, one
+    /// holding `start.pose`, or one per restart from object-facing or random poses, all in
+    /// the `[trajectory]` model with one window per query.
+    pub fn start_trajectories(&self) -> Result<Vec<TrajectoryRecord>> {
+        let config = &self.config;
+        let model = config.trajectory.clone().with_windows(self.windows.len());
+        let (device, dtype) = (&self.device, self.dtype);
+        if let Some(file) = &config.start.trajectory {
+            let path = config.resolve(file);
+            let text = std::fs::read_to_string(&path)
+                .with_context(|| format!("`start.trajectory`: cannot read {}", path.display()))?;
+            let record: TrajectoryRecord = serde_json::from_str(&text).with_context(|| {
+                format!(
+                    "`start.trajectory`: {} is not a trajectory.json (needs `model` and `weights`)",
+                    path.display()
+                )
+            })?;
+            let loaded = Trajectory::from_record(&record, device, dtype)
+                .with_context(|| format!("`start.trajectory`: {}", path.display()))?;
+            let refitted = if record.model == model {
+                loaded
+            } else {
+                loaded.refit(model, START_FIT_SAMPLES)?
+            };
+            return Ok(vec![refitted.record()]);
+        }
+        let n = self.windows.len();
+        let per_restart = match config.start.pose {
+            Some(pose) => vec![vec![Pose(pose); n]],
+            None => self.start_poses(&self.windows)?,
+        };
+        per_restart
+            .iter()
+            .map(|per_window| {
+                Ok(window_start_trajectory(model.clone(), per_window, device, dtype)?.record())
+            })
+            .collect()
+    }
+
+    /// For each restart, one start pose per window in `windows` (object-facing or random; a
+    /// random start is the same pose for every window).
+    pub fn start_poses(&self, windows: &[WindowTarget]) -> Result<Vec<Vec<Pose>>> {
+        let config = &self.config;
+        let (centre, half) = self.bounds;
+        let restarts = config.start.restarts;
+        Ok(match config.start.kind {
+            StartKind::Objects => {
+                let objects: Vec<([f64; 3], f64)> = windows
+                    .iter()
+                    .map(|w| (w.context.object_centre, w.context.prior_radius))
+                    .collect();
+                (0..restarts)
+                    .map(|r| {
+                        object_start_poses(
+                            &objects,
+                            centre,
+                            self.up.up,
+                            config.start.object_view(),
+                            r,
+                            config.seed,
+                        )
+                    })
+                    .collect::<Result<_, _>>()?
+            }
+            StartKind::Random => random_start_poses(
+                centre,
+                half,
+                self.up.up,
+                &config.start.distribution(),
+                restarts,
+                config.seed,
+            )?
+            .into_iter()
+            .map(|p| vec![p; windows.len()])
+            .collect(),
+        })
+    }
+}

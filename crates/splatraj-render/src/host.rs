@@ -1,0 +1,65 @@
+//! Moving values between the host and a device: one read-back helper, pose tensors, and the
+//! device and dtype a [`DeviceScene`] lives on.
+//!
+//! Every part of splatraj that reads a tensor back (costs for a history row, metrics, images,
+//! gradients) goes through [`to_host`], so there is one conversion rule: any float dtype is
+//! read as f64.
+
+use burn::tensor::{DType, Device, Tensor, TensorData};
+
+use crate::camera::Pose;
+use crate::render::DeviceScene;
+
+/// A tensor could not be read back to the host.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("reading a tensor back to the host: {0}")]
+pub struct ReadBackError(pub String);
+
+/// The values of a float tensor on the host as f64, in row-major order.
+pub fn to_host<const D: usize>(t: Tensor<D>) -> Result<Vec<f64>, ReadBackError> {
+    t.into_data()
+        .convert::<f64>()
+        .try_to_vec::<f64>()
+        .map_err(|e| ReadBackError(format!("{e:?}")))
+}
+
+/// The single value of a one-element tensor (or NaN if it cannot be read).
+pub fn scalar<const D: usize>(t: Tensor<D>) -> f64 {
+    to_host(t)
+        .ok()
+        .and_then(|v| v.first().copied())
+        .unwrap_or(f64::NAN)
+}
+
+/// Poses Φ as a `[B, 6]` tensor on `device` in `dtype`.
+pub fn poses_tensor(poses: &[Pose], device: &Device, dtype: DType) -> Tensor<2> {
+    let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
+    Tensor::from_data(TensorData::new(flat, [poses.len(), 6]), (device, dtype))
+}
+
+/// One pose Φ as a `[1, 6]` tensor.
+pub fn pose_tensor(pose: &Pose, device: &Device, dtype: DType) -> Tensor<2> {
+    poses_tensor(std::slice::from_ref(pose), device, dtype)
+}
+
+/// Where a scene lives: the device (plain or autodiff) and float dtype of its tensors.
+pub trait OnDevice {
+    /// The device of the scene's tensors.
+    fn device(&self) -> Device;
+    /// The float dtype of the scene's tensors.
+    fn dtype(&self) -> DType;
+    /// Poses Φ `[B, 6]` on the scene's device, in its dtype.
+    fn poses(&self, poses: &[Pose]) -> Tensor<2> {
+        poses_tensor(poses, &self.device(), self.dtype())
+    }
+}
+
+impl OnDevice for DeviceScene {
+    fn device(&self) -> Device {
+        self.geometry.means.device()
+    }
+
+    fn dtype(&self) -> DType {
+        self.geometry.means.dtype()
+    }
+}

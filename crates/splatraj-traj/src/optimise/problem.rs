@@ -1,0 +1,261 @@
+//! [`Problem`]: what every optimiser works on, and the one loss path.
+//!
+//! A problem is a scene on a device, the query windows (each object's per-Gaussian mask and
+//! cost context), the weighted costs, and how to render (intrinsics, rasterizer). Its
+//! [`Problem::evaluate`] renders exactly the channels the costs declare ([`Cost::channels`]:
+//! a mask-only pass is pruned to the object, which is exact; nothing is rendered when no cost
+//! reads an image) and evaluates the costs. The trajectory optimiser, the single-pose
+//! optimiser, SGLD, `splatraj render --grad` and `splatraj bench` all compute their loss there.
+//!
+//! [`Cost::channels`]: crate::costs::Cost::channels
+
+use burn::tensor::{DType, Device, Tensor};
+use splatraj_render::camera::{Intrinsics, Pose};
+use splatraj_render::host::{OnDevice, to_host};
+use splatraj_render::rasterize::RenderStats;
+use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
+
+use super::{OptimiseError, WindowTarget, per_sample};
+use crate::costs::{CostInputs, CostTerms, ImageChannel, WeightedCosts, coverage};
+
+/// A scene, its query windows, the costs and the camera: the arguments every optimiser shares.
+#[derive(Debug, Clone, Copy)]
+pub struct Problem<'a> {
+    /// The scene, uploaded to the device the optimisation runs on (an autodiff device for
+    /// gradients); poses take its device and dtype.
+    pub scene: &'a DeviceScene,
+    /// The query windows in time order (one for a single-pose problem).
+    pub windows: &'a [WindowTarget],
+    /// The weighted costs.
+    pub costs: &'a WeightedCosts,
+    /// The optimisation camera.
+    pub intrinsics: Intrinsics,
+    /// Which rasterizer composites the renders.
+    pub rasterizer: Rasterizer,
+    /// Prune a mask-only pass to the object (exact: same image and gradient; on by default,
+    /// off only to measure what pruning saves).
+    pub prune: bool,
+}
+
+/// One evaluation: the cost terms and the object mask when one was rendered.
+#[derive(Debug, Clone)]
+pub struct Evaluated {
+    /// Each term and the weighted total per sample.
+    pub terms: CostTerms,
+    /// Rendered object masks `[B, H, W]`, when a cost asked for them.
+    pub masks: Option<Tensor<3>>,
+    /// How much compositing work the render had (None when nothing was rendered).
+    pub stats: Option<RenderStats>,
+}
+
+/// The loss of one pose on the host (`render --grad`, `bench`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoseLoss {
+    /// Weighted total.
+    pub total: f64,
+    /// Each term as `(name, weight, unweighted value)`.
+    pub terms: Vec<(&'static str, f64, f64)>,
+    /// d total / dΦ when asked for (None on a plain device).
+    pub grad_pose: Option<Vec<f64>>,
+    /// Share of the frame the object's mask covers, when a mask was rendered.
+    pub coverage: Option<f64>,
+    /// How much compositing work the render had (None when nothing was rendered).
+    pub stats: Option<RenderStats>,
+}
+
+impl<'a> Problem<'a> {
+    /// A problem rendered with the default rasterizer.
+    pub fn new(
+        scene: &'a DeviceScene,
+        windows: &'a [WindowTarget],
+        costs: &'a WeightedCosts,
+        intrinsics: Intrinsics,
+    ) -> Self {
+        Self {
+            scene,
+            windows,
+            costs,
+            intrinsics,
+            rasterizer: Rasterizer::default(),
+            prune: true,
+        }
+    }
+
+    /// The same problem with another rasterizer.
+    pub fn with_rasterizer(mut self, rasterizer: Rasterizer) -> Self {
+        self.rasterizer = rasterizer;
+        self
+    }
+
+    /// The single-window problem of window `index`.
+    pub fn window(&self, index: usize) -> Result<Problem<'a>, OptimiseError> {
+        let windows =
+            self.windows
+                .get(index..=index)
+                .ok_or_else(|| OptimiseError::InvalidOptions {
+                    field: "window",
+                    reason: format!("= {index}, but there are {} windows", self.windows.len()),
+                })?;
+        Ok(Problem { windows, ..*self })
+    }
+
+    /// The one window of a single-pose problem.
+    pub fn single(&self) -> Result<&'a WindowTarget, OptimiseError> {
+        match self.windows {
+            [w] => Ok(w),
+            _ => Err(OptimiseError::InvalidOptions {
+                field: "windows",
+                reason: format!(
+                    "a single-pose problem has exactly one window, got {} (use Problem::window)",
+                    self.windows.len()
+                ),
+            }),
+        }
+    }
+
+    /// The render request for window `index`: the channels the costs read, pruned to the
+    /// object when the mask is the only one; None when no cost reads an image.
+    pub fn request(&self, index: usize) -> Option<RenderRequest> {
+        let needed = self.costs.channels();
+        if needed.is_empty() {
+            return None;
+        }
+        let channels = needed
+            .iter()
+            .map(|c| match c {
+                ImageChannel::Mask => Channel::Mask(self.windows[index].mask.clone()),
+                ImageChannel::Depth => Channel::Depth,
+                ImageChannel::Rgb => Channel::Rgb,
+            })
+            .collect();
+        let mut request = RenderRequest::new(self.intrinsics, channels);
+        if self.prune && needed == [ImageChannel::Mask] {
+            request.pruning = Pruning::ObjectOnly;
+        }
+        request.rasterizer = self.rasterizer;
+        Some(request)
+    }
+
+    /// The scene's device (checked to be autodiff) and dtype, and that every window's
+    /// context is valid: what a gradient loop needs before it starts.
+    pub(crate) fn gradient_setup(&self) -> Result<(Device, DType), OptimiseError> {
+        let device = self.scene.device();
+        if !device.is_autodiff() {
+            return Err(OptimiseError::NotAutodiff);
+        }
+        if self.windows.is_empty() {
+            return Err(OptimiseError::InvalidOptions {
+                field: "windows",
+                reason: "at least one query is needed".into(),
+            });
+        }
+        for w in self.windows {
+            w.context.validate()?;
+        }
+        Ok((device, self.scene.dtype()))
+    }
+
+    /// Renders what the costs read at poses Φ `[B, 6]` for window `index` and evaluates the
+    /// costs at optimisation step `step`.
+    pub fn evaluate(
+        &self,
+        index: usize,
+        poses: Tensor<2>,
+        step: usize,
+        request: Option<&RenderRequest>,
+    ) -> Result<Evaluated, OptimiseError> {
+        let window = &self.windows[index];
+        let owned;
+        let request = match request {
+            Some(r) => Some(r),
+            None => {
+                owned = self.request(index);
+                owned.as_ref()
+            }
+        };
+        let Some(request) = request else {
+            let inputs = CostInputs::new(poses, None, step, window.context)?;
+            let terms = self.costs.evaluate(&inputs)?;
+            return Ok(Evaluated {
+                terms,
+                masks: None,
+                stats: None,
+            });
+        };
+        let rendered = render(self.scene, poses.clone(), request)?;
+        let images = rendered.images;
+        let [batch, height, width, _] = images.dims();
+        let mut masks = None;
+        let (mut depth, mut rgb) = (None, None);
+        let mut offset = 0;
+        for channel in &request.channels {
+            let w = channel.width();
+            let part = images.clone().narrow(3, offset, w);
+            offset += w;
+            match channel {
+                Channel::Mask(_) => masks = Some(part.reshape([batch, height, width])),
+                Channel::Depth => depth = Some(part.reshape([batch, height, width])),
+                Channel::Rgb => rgb = Some(part),
+                Channel::Features { .. } => {}
+            }
+        }
+        let mut inputs = CostInputs::new(poses, masks.clone(), step, window.context)?;
+        if let Some(d) = depth {
+            inputs = inputs.with_depth(d);
+        }
+        if let Some(c) = rgb {
+            inputs = inputs.with_rgb(c);
+        }
+        let terms = self.costs.evaluate(&inputs)?;
+        Ok(Evaluated {
+            terms,
+            masks,
+            stats: Some(rendered.stats),
+        })
+    }
+
+    /// The loss of `pose` for window `index` (step 0), read back to the host, and its
+    /// gradient d total / dΦ when `gradient` is set (the scene must then be on an autodiff
+    /// device). Everything is read back, so a timing of this call is complete.
+    pub fn loss_at(
+        &self,
+        index: usize,
+        pose: &Pose,
+        gradient: bool,
+    ) -> Result<PoseLoss, OptimiseError> {
+        if gradient && !self.scene.device().is_autodiff() {
+            return Err(OptimiseError::NotAutodiff);
+        }
+        let mut poses = self.scene.poses(std::slice::from_ref(pose));
+        if gradient {
+            poses = poses.require_grad();
+        }
+        let evaluated = self.evaluate(index, poses.clone(), 0, None)?;
+        let coverage = match &evaluated.masks {
+            Some(m) => Some(read(coverage(m.clone()))?[0]),
+            None => None,
+        };
+        let grad_pose = if gradient {
+            let grads = evaluated.terms.total.clone().sum().backward();
+            // No gradient at all means nothing in the graph depended on the pose.
+            Some(match poses.grad(&grads) {
+                Some(g) => read(g)?,
+                None => vec![0.0; 6],
+            })
+        } else {
+            None
+        };
+        let (total, terms) = per_sample(&evaluated.terms).remove(0);
+        Ok(PoseLoss {
+            total,
+            terms,
+            grad_pose,
+            coverage,
+            stats: evaluated.stats,
+        })
+    }
+}
+
+fn read<const D: usize>(t: Tensor<D>) -> Result<Vec<f64>, OptimiseError> {
+    to_host(t).map_err(|e| OptimiseError::ReadBack(e.to_string()))
+}

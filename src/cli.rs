@@ -1,0 +1,137 @@
+//! What the commands share on the command line: scene-reading flags, the progress bar and
+//! the Ctrl-C flag. (Pipeline work lives in the library crates; commands do not import each
+//! other.)
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use anyhow::Result;
+use clap::Args;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use splatraj::experiment::observer::{Flow, Observer, Progress};
+use splatraj_scene::formats::LoadedScene;
+use splatraj_scene::{InvalidPolicy, ReadOptions, read_scene};
+
+/// Options shared by the subcommands that read a scene.
+#[derive(Debug, Args)]
+pub struct ReadArgs {
+    /// Ground-truth label sidecar (SuperSplat/Segments.ai JSON, or a JSON array of ids).
+    #[arg(long)]
+    labels: Option<PathBuf>,
+    /// Drop Gaussians with invalid values (NaN, zero scale, zero quaternion) with a warning,
+    /// instead of stopping with an error.
+    #[arg(long)]
+    drop_invalid: bool,
+}
+
+impl ReadArgs {
+    /// The scene reader's options these flags ask for.
+    pub fn options(&self) -> ReadOptions {
+        ReadOptions {
+            invalid: if self.drop_invalid {
+                InvalidPolicy::Drop
+            } else {
+                InvalidPolicy::Reject
+            },
+            labels: self.labels.clone(),
+        }
+    }
+
+    /// Reads `path` with these options, warning about dropped Gaussians.
+    pub fn load(&self, path: &Path) -> Result<LoadedScene> {
+        let loaded = read_scene(path, &self.options())?;
+        if loaded.dropped > 0 {
+            eprintln!(
+                "warning: {}: dropped {} invalid Gaussians",
+                path.display(),
+                loaded.dropped
+            );
+        }
+        Ok(loaded)
+    }
+}
+
+/// Set by Ctrl-C: the optimisation stops at the end of the current step.
+pub fn interrupt_flag() -> Arc<AtomicBool> {
+    let flag = Arc::new(AtomicBool::new(false));
+    let handler_flag = flag.clone();
+    // The first Ctrl-C asks for a clean stop; a second one quits at once (files already
+    // written are whole, the others are not there). A second registration (tests calling
+    // twice in one process) fails; the run still works, only without the clean stop.
+    let on_signal = move || {
+        if handler_flag.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+    };
+    if let Err(e) = ctrlc::set_handler(on_signal) {
+        tracing::warn!("Ctrl-C will not stop the run cleanly: {e}");
+    }
+    flag
+}
+
+/// A progress bar on stderr (hidden when `quiet` or when stderr is not a terminal).
+pub fn progress_bar(len: u64, quiet: bool) -> ProgressBar {
+    let bar = ProgressBar::new(len);
+    if quiet {
+        bar.set_draw_target(ProgressDrawTarget::hidden());
+    }
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise} < {eta_precise}] {bar:30} {pos}/{len} {msg}",
+        )
+        .expect("valid template"),
+    );
+    bar
+}
+
+/// An observer that draws `bar` and stops once Ctrl-C set `interrupted`.
+pub fn bar_observer(bar: &ProgressBar, interrupted: Arc<AtomicBool>) -> impl Observer + '_ {
+    move |p: &Progress| {
+        match *p {
+            Progress::Trajectory {
+                restart,
+                restarts,
+                step,
+                steps,
+                total,
+                best,
+            } => {
+                bar.set_position((restart * steps + step + 1) as u64);
+                bar.set_message(format!(
+                    "start {}/{restarts}  cost {total:.4}  best {best:.4}",
+                    restart + 1
+                ));
+            }
+            Progress::Pose { step, best, .. } => {
+                bar.set_position(step as u64 + 1);
+                bar.set_message(format!("best {best:.4}"));
+            }
+            Progress::Frame { done, .. } => bar.set_position(done as u64),
+        }
+        if interrupted.load(Ordering::SeqCst) {
+            Flow::Stop
+        } else {
+            Flow::Continue
+        }
+    }
+}
+
+/// Float precision on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum DtypeArg {
+    /// 32-bit floats.
+    F32,
+    /// 64-bit floats (CPU backends).
+    F64,
+}
+
+impl DtypeArg {
+    /// The render precision.
+    pub fn precision(self) -> splatraj_render::backend::Precision {
+        match self {
+            DtypeArg::F32 => splatraj_render::backend::Precision::F32,
+            DtypeArg::F64 => splatraj_render::backend::Precision::F64,
+        }
+    }
+}
