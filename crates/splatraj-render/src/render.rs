@@ -8,6 +8,7 @@ use burn::tensor::{DType, Device, Int, Tensor, TensorData};
 use splatraj_scene::Scene;
 
 use crate::camera::Intrinsics;
+use crate::fused::{CompositePlan, composite_fused};
 use crate::project::{NEAR_PLANE, SceneTensors, project_with_near, radii_and_visibility};
 use crate::rasterize::{CompositeOptions, Composited, RenderStats, SplatInputs, composite};
 use crate::sh::{ShTensors, sh_colours};
@@ -289,7 +290,10 @@ pub fn render(
         values,
     };
     let prepared = started.elapsed();
-    let composited = composite(&inputs, &work, u, batch, &grid, request.composite);
+    let composited = match request.rasterizer {
+        Rasterizer::Fused => composite_fused(&inputs, CompositePlan::new(&work, u, batch, grid)),
+        Rasterizer::Tensor => composite(&inputs, &work, u, batch, &grid, request.composite),
+    };
     // Stage times of the forward graph (backends may defer work, so they are indicative).
     tracing::debug!(
         decide_ms = decided.as_secs_f64() * 1e3,
@@ -298,7 +302,7 @@ pub fn render(
         composite_ms = (started.elapsed() - prepared).as_secs_f64() * 1e3,
         gaussians_used = u,
         tiles = work.len(),
-        pairs = work.iter().map(|w| w.gaussians.len()).sum::<usize>(),
+        pairs = composited.stats.pairs,
         "render"
     );
     Ok(composited)

@@ -1,0 +1,56 @@
+//! The integer side of a fused compositing pass: which rows each (pose, tile) composites.
+
+use crate::tiles::{TILE_SIZE, TileGrid, TileWork};
+
+/// Tile lists of a batch, flattened: work tile `w` composites rows
+/// `rows[starts[w]..starts[w + 1]]` (row = pose · U + Gaussian) front to back.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CompositePlan {
+    /// The image tiling.
+    pub grid: TileGrid,
+    /// Poses in the batch.
+    pub batch: usize,
+    /// Pose of each work tile. `[work]`
+    pub batches: Vec<usize>,
+    /// Tile index (row-major) of each work tile. `[work]`
+    pub tiles: Vec<usize>,
+    /// Offsets into `rows`. `[work + 1]`
+    pub starts: Vec<usize>,
+    /// Input rows, list after list. `[pairs]`
+    pub rows: Vec<u32>,
+}
+
+impl CompositePlan {
+    /// Flattens `work` (lists of per-pose Gaussian indices `u < n`) into input rows b·n + u.
+    pub fn new(work: &[TileWork], n: usize, batch: usize, grid: TileGrid) -> Self {
+        let mut starts = Vec::with_capacity(work.len() + 1);
+        let mut rows = Vec::with_capacity(work.iter().map(|w| w.gaussians.len()).sum());
+        starts.push(0);
+        for w in work {
+            let base = (w.batch * n) as u32;
+            rows.extend(w.gaussians.iter().map(|&g| base + g));
+            starts.push(rows.len());
+        }
+        CompositePlan {
+            grid,
+            batch,
+            batches: work.iter().map(|w| w.batch).collect(),
+            tiles: work.iter().map(|w| w.tile).collect(),
+            starts,
+            rows,
+        }
+    }
+
+    /// The rows work tile `w` composites, front to back.
+    pub fn list(&self, w: usize) -> &[u32] {
+        &self.rows[self.starts[w]..self.starts[w + 1]]
+    }
+
+    /// Pixel coordinates of the top-left corner of `tile`.
+    pub fn tile_origin(&self, tile: usize) -> (usize, usize) {
+        (
+            (tile % self.grid.tiles_x) * TILE_SIZE,
+            (tile / self.grid.tiles_x) * TILE_SIZE,
+        )
+    }
+}

@@ -1,0 +1,483 @@
+//! The fused compositing op against the tensor path (its specification) in f64: images and the
+//! gradients of all four inputs, on hand-built screen-space Gaussians that hit every rule, and
+//! the pose gradient of full renders against the tensor path and finite differences.
+
+mod common;
+
+use burn::tensor::{DType, Device, Tensor, TensorData};
+use common::{host, pose_tensor};
+use glam::DVec3;
+use splatraj_render::camera::{Intrinsics, Pose};
+use splatraj_render::fused::{CompositePlan, composite_fused};
+use splatraj_render::rasterize::{CompositeOptions, MIN_ALPHA, SplatInputs, composite};
+use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
+use splatraj_render::tiles::{TileGrid, TileWork};
+use splatraj_scene::Scene;
+
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.next()
+    }
+}
+
+/// Host-side screen-space Gaussians of a batch, rows b·n + g.
+struct Splats {
+    means: Vec<f64>,
+    conics: Vec<f64>,
+    opacities: Vec<f64>,
+    values: Vec<f64>,
+    channels: usize,
+}
+
+impl Splats {
+    fn push(&mut self, mean: [f64; 2], cov: [f64; 3], opacity: f64, rng: &mut Rng) {
+        let [a, b, c] = cov;
+        let det = a * c - b * b;
+        self.means.extend(mean);
+        self.conics.extend([c / det, -b / det, a / det]);
+        self.opacities.push(opacity);
+        for _ in 0..self.channels {
+            self.values.push(rng.range(-1.0, 1.0));
+        }
+    }
+}
+
+/// A 37×21 image (partial tiles on both axes), two poses, and per pose, front to back: an
+/// opaque stack that stops pixels early (α clamped at 0.99, and
+/// exactly 0.99 at a pixel centre), Gaussians with α just above and just below 1/255 at pixel
+/// centres, and a stack that brings one pixel's T to just below 1e-4 (it stops there) and
+/// another's to just above (it does not); then random Gaussians (some beyond the border). Lists run in depth order = row order, with one
+/// long list (more than one tensor-path chunk) and empty tiles (nothing in the second pose's
+/// last tile).
+fn hard_case(channels: usize) -> (Splats, Vec<TileWork>, TileGrid, usize, usize) {
+    let grid = TileGrid::new(37, 21);
+    let batch = 2;
+    let mut rng = Rng(0x5eed);
+    let mut s = Splats {
+        means: vec![],
+        conics: vec![],
+        opacities: vec![],
+        values: vec![],
+        channels,
+    };
+    let mut per_pose = Vec::new();
+    for _ in 0..batch {
+        let start = s.opacities.len();
+        // α exactly 0.99 at pixel (5, 5) of tile 0 (o = 0.99, power 0), then α clamped.
+        s.push([5.5, 5.5], [4.0, 0.0, 4.0], 0.99, &mut rng);
+        s.push([6.0, 5.0], [9.0, 1.0, 4.0], 1.0, &mut rng);
+        // α = 1/255 ± 1e-9 at the centre of pixel (20, 10).
+        s.push([20.5, 10.5], [0.5, 0.0, 0.5], MIN_ALPHA + 1e-9, &mut rng);
+        s.push([20.5, 10.5], [0.5, 0.0, 0.5], MIN_ALPHA - 1e-9, &mut rng);
+        // T boundary at pixel (30, 3): after 0.9 and 0.99, T = 1e-3; a third α of 0.9 gives
+        // T = 1e-4·(1 − 1e-7) (stops), at pixel (33, 3) α = 0.9·(1 − 2e-7)… gives T just above.
+        for (x, o) in [(30.5, 0.9), (30.5, 0.99), (30.5, 0.9 + 1e-8)] {
+            s.push([x, 3.5], [0.4, 0.0, 0.4], o, &mut rng);
+        }
+        for (x, o) in [(33.5, 0.9), (33.5, 0.99), (33.5, 0.9 - 1e-7)] {
+            s.push([x, 3.5], [0.4, 0.0, 0.4], o, &mut rng);
+        }
+        // Behind the hand-placed ones (later rows are further back).
+        for _ in 0..150 {
+            let mean = [rng.range(-4.0, 40.0), rng.range(-4.0, 24.0)];
+            let (sx, sy, rho) = (
+                rng.range(0.6, 6.0),
+                rng.range(0.6, 6.0),
+                rng.range(-0.8, 0.8),
+            );
+            let cov = [sx * sx, rho * sx * sy, sy * sy];
+            s.push(mean, cov, rng.range(0.02, 1.0), &mut rng);
+        }
+        per_pose.push((start, s.opacities.len()));
+    }
+    let n = per_pose[0].1 - per_pose[0].0;
+    // Lists: a Gaussian goes into every tile its 3σ box touches, front to back = row order.
+    let mut work = Vec::new();
+    for b in 0..batch {
+        for tile in 0..grid.len() {
+            if b == 1 && tile == grid.len() - 1 {
+                continue; // an empty tile
+            }
+            let (tx, ty) = (tile % grid.tiles_x, tile / grid.tiles_x);
+            let gaussians: Vec<u32> = (0..n)
+                .filter(|&g| {
+                    let row = b * n + g;
+                    let [a, bb, c] = [
+                        s.conics[3 * row],
+                        s.conics[3 * row + 1],
+                        s.conics[3 * row + 2],
+                    ];
+                    // Σ = conic⁻¹; 3.5σ along the major axis: everything outside has α < 1/255,
+                    // so the lists hold every Gaussian that counts (the brute force below).
+                    let det = a * c - bb * bb;
+                    let (sxx, sxy, syy) = (c / det, -bb / det, a / det);
+                    let mid = 0.5 * (sxx + syy);
+                    let lambda = mid + (mid * mid - (sxx * syy - sxy * sxy)).max(0.0).sqrt();
+                    let radius = 3.5 * lambda.sqrt() + 1.0;
+                    let (xs, ys) = grid.touched(s.means[2 * row], s.means[2 * row + 1], radius);
+                    xs.contains(&tx) && ys.contains(&ty)
+                })
+                .map(|g| g as u32)
+                .collect();
+            if !gaussians.is_empty() {
+                work.push(TileWork {
+                    batch: b,
+                    tile,
+                    gaussians,
+                });
+            }
+        }
+    }
+    (s, work, grid, n, batch)
+}
+
+fn tensor(values: &[f64], shape: Vec<usize>, device: &Device) -> Tensor<2> {
+    let rows = shape[0];
+    let cols = values.len() / rows.max(1);
+    Tensor::from_data(
+        TensorData::new(values.to_vec(), [rows, cols]),
+        (device, DType::F64),
+    )
+}
+
+/// Images, alpha and the gradients of Σ w·image + Σ w'·alpha w.r.t. the four inputs.
+fn composite_and_gradients(rasterizer: Rasterizer, chunk: usize) -> Vec<Vec<f64>> {
+    let (s, work, grid, n, batch) = hard_case(3);
+    let device = Device::flex().autodiff();
+    let rows = s.opacities.len();
+    let means = tensor(&s.means, vec![rows, 2], &device).require_grad();
+    let conics = tensor(&s.conics, vec![rows, 3], &device).require_grad();
+    let opacities = Tensor::<1>::from_data(
+        TensorData::new(s.opacities.clone(), [rows]),
+        (&device, DType::F64),
+    )
+    .require_grad();
+    let values = tensor(&s.values, vec![rows, s.channels], &device).require_grad();
+    let inputs = SplatInputs {
+        means_2d: means.clone(),
+        conics: conics.clone(),
+        opacities: opacities.clone(),
+        values: values.clone(),
+    };
+    let out = match rasterizer {
+        Rasterizer::Fused => composite_fused(&inputs, CompositePlan::new(&work, n, batch, grid)),
+        Rasterizer::Tensor => composite(
+            &inputs,
+            &work,
+            n,
+            batch,
+            &grid,
+            CompositeOptions {
+                chunk,
+                tile_group: 3,
+            },
+        ),
+    };
+    let count = batch * grid.height * grid.width;
+    let w_image: Vec<f64> = (0..count * 3)
+        .map(|i| ((i * 7919) % 23) as f64 / 23.0 - 0.4)
+        .collect();
+    let w_alpha: Vec<f64> = (0..count)
+        .map(|i| ((i * 104729) % 19) as f64 / 19.0 - 0.5)
+        .collect();
+    let w_image = Tensor::<4>::from_data(
+        TensorData::new(w_image, [batch, grid.height, grid.width, 3]),
+        (&device, DType::F64),
+    );
+    let w_alpha = Tensor::<3>::from_data(
+        TensorData::new(w_alpha, [batch, grid.height, grid.width]),
+        (&device, DType::F64),
+    );
+    let loss = (out.images.clone() * w_image).sum() + (out.alpha.clone() * w_alpha).sum();
+    let grads = loss.backward();
+    vec![
+        host(out.images),
+        host(out.alpha),
+        host(means.grad(&grads).unwrap()),
+        host(conics.grad(&grads).unwrap()),
+        host(opacities.grad(&grads).unwrap()),
+        host(values.grad(&grads).unwrap()),
+    ]
+}
+
+/// Largest |a − b| / max(1, |b|).
+fn relative_error(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .fold(0.0, |m, (x, y)| m.max((x - y).abs() / y.abs().max(1.0)))
+}
+
+#[test]
+fn fused_matches_the_tensor_path_on_every_rule() {
+    let names = [
+        "images",
+        "alpha",
+        "v_means",
+        "v_conics",
+        "v_opacities",
+        "v_values",
+    ];
+    let fused = composite_and_gradients(Rasterizer::Fused, 0);
+    // Chunks of 8 split the long lists into many pieces; 128 is the default.
+    for chunk in [8, 128] {
+        let tensor = composite_and_gradients(Rasterizer::Tensor, chunk);
+        for (i, name) in names.iter().enumerate() {
+            let tolerance = if i < 2 { 1e-10 } else { 1e-8 };
+            let error = relative_error(&fused[i], &tensor[i]);
+            assert!(
+                error <= tolerance,
+                "{name} (chunk {chunk}): error {error:e}"
+            );
+        }
+    }
+    let (s, work, grid, n, _) = hard_case(3);
+    assert!(
+        work.iter().any(|w| w.gaussians.len() > 128),
+        "a list longer than one chunk"
+    );
+    assert!(work.len() < 2 * grid.len(), "an empty tile");
+    let _ = (s, n);
+    // The rules were hit: the image has opaque pixels, and gradients are not trivially zero.
+    assert!(fused[1].iter().any(|&a| a > 0.999), "some pixel is opaque");
+    for (i, name) in names.iter().enumerate().skip(2) {
+        assert!(
+            fused[i].iter().any(|&g| g.abs() > 1e-6),
+            "{name} is not all zero"
+        );
+    }
+}
+
+#[test]
+fn rule_edges_are_decided_as_specified() {
+    // Pixel values checked against a hand computation of the same rules.
+    let (s, work, grid, n, batch) = hard_case(1);
+    let device = Device::flex();
+    let rows = s.opacities.len();
+    let inputs = SplatInputs {
+        means_2d: tensor(&s.means, vec![rows, 2], &device),
+        conics: tensor(&s.conics, vec![rows, 3], &device),
+        opacities: Tensor::from_data(
+            TensorData::new(s.opacities.clone(), [rows]),
+            (&device, DType::F64),
+        ),
+        values: tensor(&s.values, vec![rows, 1], &device),
+    };
+    let out = composite_fused(&inputs, CompositePlan::new(&work, n, batch, grid));
+    let image = host(out.images);
+    let alpha = host(out.alpha);
+    // Brute force over all n Gaussians of pose 0 in row order (the lists' order), one pixel.
+    let brute = |x: usize, y: usize| -> (f64, f64) {
+        let (mut t, mut value) = (1.0f64, 0.0);
+        for g in 0..n {
+            let dx = x as f64 + 0.5 - s.means[2 * g];
+            let dy = y as f64 + 0.5 - s.means[2 * g + 1];
+            let [a, b, c] = [s.conics[3 * g], s.conics[3 * g + 1], s.conics[3 * g + 2]];
+            let power = (-0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy).min(0.0);
+            let alpha = (s.opacities[g] * power.exp()).min(0.99);
+            if alpha < 1.0 / 255.0 {
+                continue;
+            }
+            if t * (1.0 - alpha) < 1e-4 {
+                break;
+            }
+            value += s.values[g] * alpha * t;
+            t *= 1.0 - alpha;
+        }
+        (value, 1.0 - t)
+    };
+    for (x, y) in [(5, 5), (20, 10), (30, 3), (33, 3), (0, 0), (36, 20)] {
+        let pixel = y * grid.width + x;
+        let (value, a) = brute(x, y);
+        assert!(
+            (image[pixel] - value).abs() < 1e-12,
+            "pixel ({x}, {y}): {} vs {value}",
+            image[pixel]
+        );
+        assert!((alpha[pixel] - a).abs() < 1e-12, "pixel ({x}, {y}) alpha");
+    }
+}
+
+/// A small scene in front of the camera (the rasterizer test's layout, fewer Gaussians).
+fn scene() -> (Scene, Vec<f32>) {
+    let mut rng = Rng(99);
+    let mut scene = Scene {
+        sh_degree: 1,
+        ..Default::default()
+    };
+    let mut mask = Vec::new();
+    for i in 0..80 {
+        scene.means.push([
+            rng.range(-1.5, 1.5) as f32,
+            rng.range(2.0, 6.0) as f32,
+            rng.range(-1.0, 1.0) as f32,
+        ]);
+        scene.scales.push([
+            rng.range(0.02, 0.3) as f32,
+            rng.range(0.02, 0.3) as f32,
+            rng.range(0.01, 0.1) as f32,
+        ]);
+        let q = [
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+        ];
+        let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+        scene.rotations.push(q.map(|v| (v / norm) as f32));
+        scene.opacities.push(rng.range(0.2, 1.0) as f32);
+        for _ in 0..12 {
+            scene.sh.push(rng.range(-1.0, 1.0) as f32);
+        }
+        mask.push(if i % 3 == 0 { 1.0 } else { 0.0 });
+    }
+    (scene, mask)
+}
+
+fn poses() -> Vec<Pose> {
+    vec![
+        Pose::look_at(
+            DVec3::new(0.1, -0.2, 0.15),
+            DVec3::new(0.0, 4.0, 0.0),
+            DVec3::Z,
+        )
+        .unwrap(),
+        Pose::look_at(
+            DVec3::new(-0.4, 0.3, 0.4),
+            DVec3::new(0.2, 4.0, -0.1),
+            DVec3::Z,
+        )
+        .unwrap(),
+        Pose::look_at(
+            DVec3::new(0.6, 0.0, -0.2),
+            DVec3::new(-0.3, 3.5, 0.2),
+            DVec3::Z,
+        )
+        .unwrap(),
+    ]
+}
+
+/// Weighted sum of [RGB, depth, mask] images of a batch, and its pose gradient.
+fn render_loss(
+    rasterizer: Rasterizer,
+    pruning: Pruning,
+    channels: Vec<Channel>,
+) -> (Vec<f64>, Vec<f64>) {
+    let (scene, _) = scene();
+    let k = Intrinsics::new(30.0, 32.0, 21.0, 13.5, 40, 28).unwrap();
+    let device = Device::flex().autodiff();
+    let uploaded = DeviceScene::new(&scene, &device, DType::F64);
+    let poses = pose_tensor(&poses(), &device, DType::F64).require_grad();
+    let mut request = RenderRequest::new(k, channels);
+    request.rasterizer = rasterizer;
+    request.pruning = pruning;
+    let out = render(&uploaded, poses.clone(), &request).unwrap();
+    let [b, h, w, c] = out.images.dims();
+    let weights: Vec<f64> = (0..b * h * w * c)
+        .map(|i| ((i * 31) % 17) as f64 / 17.0 - 0.3)
+        .collect();
+    let weights = Tensor::<4>::from_data(
+        TensorData::new(weights, [b, h, w, c]),
+        (&device, DType::F64),
+    );
+    let grads = ((out.images.clone() * weights).sum() + out.alpha.sum()).backward();
+    (host(out.images), host(poses.grad(&grads).unwrap()))
+}
+
+#[test]
+fn pose_gradients_of_fused_and_tensor_renders_agree() {
+    let (_, mask) = scene();
+    for (pruning, channels) in [
+        (
+            Pruning::None,
+            vec![Channel::Rgb, Channel::Depth, Channel::Mask(mask.clone())],
+        ),
+        (Pruning::ObjectOnly, vec![Channel::Mask(mask.clone())]),
+    ] {
+        let (image_f, grad_f) = render_loss(Rasterizer::Fused, pruning, channels.clone());
+        let (image_t, grad_t) = render_loss(Rasterizer::Tensor, pruning, channels);
+        assert!(
+            relative_error(&image_f, &image_t) < 1e-10,
+            "{pruning:?}: images"
+        );
+        assert!(
+            relative_error(&grad_f, &grad_t) < 1e-8,
+            "{pruning:?}: pose gradients {grad_f:?} vs {grad_t:?}"
+        );
+        assert!(grad_f.iter().any(|g| g.abs() > 1e-4));
+    }
+}
+
+#[test]
+fn fused_pose_gradient_matches_finite_differences() {
+    let (scene, mask) = scene();
+    let k = Intrinsics::new(30.0, 32.0, 21.0, 13.5, 40, 28).unwrap();
+    let weights: Vec<f64> = (0..k.width * k.height * 4)
+        .map(|i| ((i * 31) % 17) as f64 / 17.0 - 0.3)
+        .collect();
+    let loss = |device: &Device, poses: Tensor<2>| {
+        let uploaded = DeviceScene::new(&scene, device, DType::F64);
+        let request = RenderRequest::new(k, vec![Channel::Rgb, Channel::Mask(mask.clone())]);
+        assert_eq!(
+            request.rasterizer,
+            Rasterizer::Fused,
+            "fused is the default"
+        );
+        let out = render(&uploaded, poses, &request).unwrap();
+        let w = Tensor::<4>::from_data(
+            TensorData::new(weights.clone(), [1, k.height, k.width, 4]),
+            (device, DType::F64),
+        );
+        (out.images * w).sum()
+    };
+    let base = poses()[0];
+    let device = Device::flex().autodiff();
+    let poses = pose_tensor(&[base], &device, DType::F64).require_grad();
+    let grads = loss(&device, poses.clone()).backward();
+    let grad = host(poses.grad(&grads).unwrap());
+    let plain = Device::flex();
+    let value = |p: Pose| loss(&plain, pose_tensor(&[p], &plain, DType::F64)).into_scalar::<f64>();
+    for (i, autodiff) in grad.iter().enumerate() {
+        let h = 1e-6;
+        let (mut plus, mut minus) = (base, base);
+        plus.0[i] += h;
+        minus.0[i] -= h;
+        let fd = (value(plus) - value(minus)) / (2.0 * h);
+        let error = (autodiff - fd).abs() / fd.abs().max(1e-3);
+        assert!(
+            error <= 1e-4,
+            "Φ[{i}]: fused {autodiff} vs finite differences {fd} ({error})"
+        );
+    }
+}
+
+#[test]
+fn fused_is_deterministic_across_thread_counts() {
+    let (_, mask) = scene();
+    let run = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| {
+                render_loss(
+                    Rasterizer::Fused,
+                    Pruning::None,
+                    vec![Channel::Rgb, Channel::Mask(mask.clone())],
+                )
+            })
+    };
+    let one = run(1);
+    for threads in [2, 3] {
+        let other = run(threads);
+        assert_eq!(one.0, other.0, "images with {threads} threads");
+        assert_eq!(one.1, other.1, "gradients with {threads} threads");
+    }
+}
