@@ -8,6 +8,7 @@
 pub mod backend;
 pub mod camera;
 pub mod camera_file;
+pub mod decide;
 pub mod fused;
 pub mod host;
 pub mod images;

@@ -20,6 +20,7 @@ use glam::{DMat3, DQuat, DVec3};
 use splatraj_scene::Scene;
 
 use crate::camera::{Intrinsics, rotation_matrices};
+use crate::decide::cull_and_radius;
 
 /// Default near plane (camera z, scene units): Gaussians with z ≤ this are culled.
 pub const NEAR_PLANE: f64 = 0.01;
@@ -116,7 +117,7 @@ impl SceneTensors {
 }
 
 /// Σ = R S Sᵀ Rᵀ, row-major, in f64. `rotation` is (w, x, y, z), normalised here.
-fn world_covariance(scale: [f32; 3], rotation: [f32; 4]) -> [f64; 9] {
+pub(crate) fn world_covariance(scale: [f32; 3], rotation: [f32; 4]) -> [f64; 9] {
     let [w, x, y, z] = rotation.map(f64::from);
     let q = DQuat::from_xyzw(x, y, z, w);
     let q = if q.length_squared() > 0.0 {
@@ -245,28 +246,14 @@ pub fn project_with_near(
 pub fn radii_and_visibility(projected: &Projected, near: f64) -> (Vec<f32>, Vec<bool>) {
     let depth = to_f64(&projected.depth);
     let cov = to_f64(&projected.cov_2d);
-    let mut radii = Vec::with_capacity(depth.len());
-    let mut visible = Vec::with_capacity(depth.len());
-    for (z, abc) in depth.iter().zip(cov.chunks_exact(3)) {
-        let (a, b, c) = (abc[0], abc[1], abc[2]);
-        let trace = a + c;
-        let det = a * c - b * b;
-        let det_n = det / (trace * trace);
-        let ok = *z > near
-            && trace.is_finite()
-            && b.is_finite()
-            && trace > 0.0
-            && det_n > NORMALISED_DET_FLOOR;
-        if ok {
-            let mid = 0.5 * trace;
-            let lambda_max = mid + (mid * mid - det).max(0.0).sqrt();
-            radii.push((3.0 * lambda_max.sqrt()).ceil() as f32);
-        } else {
-            radii.push(0.0);
-        }
-        visible.push(ok);
-    }
-    (radii, visible)
+    depth
+        .iter()
+        .zip(cov.chunks_exact(3))
+        .map(|(&z, abc)| {
+            let (visible, radius) = cull_and_radius(z, abc[0], abc[1], abc[2], near);
+            (radius, visible)
+        })
+        .unzip()
 }
 
 /// Tensor values as f64 on the host (flattened, row-major).

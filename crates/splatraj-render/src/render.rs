@@ -4,12 +4,15 @@
 //! mask pass with [`Pruning::ObjectOnly`] visits only the tiles the object touches and the
 //! Gaussians in front of its last one there (exact: same image and gradient).
 
+use std::sync::Arc;
+
 use burn::tensor::{DType, Device, Int, Tensor, TensorData};
 use splatraj_scene::Scene;
 
-use crate::camera::Intrinsics;
+use crate::camera::{Intrinsics, Pose};
+use crate::decide::{HostGeometry, decide};
 use crate::fused::{CompositePlan, composite_fused};
-use crate::project::{NEAR_PLANE, SceneTensors, project_with_near, radii_and_visibility};
+use crate::project::{NEAR_PLANE, SceneTensors, project_with_near};
 use crate::rasterize::{CompositeOptions, Composited, RenderStats, SplatInputs, composite};
 use crate::sh::{ShTensors, sh_colours};
 use crate::tiles::{ScreenData, TileGrid, TileSelection, bin_tiles};
@@ -137,6 +140,8 @@ pub struct DeviceScene {
     pub geometry: SceneTensors,
     /// SH coefficients (uploaded once, used only by RGB passes).
     pub sh: ShTensors,
+    /// Host copy of the geometry for the per-pass decisions (shared between clones).
+    pub host: Arc<HostGeometry>,
 }
 
 impl DeviceScene {
@@ -145,6 +150,7 @@ impl DeviceScene {
         DeviceScene {
             geometry: SceneTensors::new(scene, None, device, dtype),
             sh: ShTensors::new(scene, None, device, dtype),
+            host: Arc::new(HostGeometry::new(scene)),
         }
     }
 
@@ -201,7 +207,17 @@ pub fn render(
     // differentiable pass on only the Gaussians some tile uses.
     let grid = TileGrid::new(request.intrinsics.width, request.intrinsics.height);
     let started = std::time::Instant::now();
-    let decisions = decide(scene, &poses, request);
+    let host_poses: Vec<Pose> = poses
+        .clone()
+        .without_autodiff()
+        .into_data()
+        .convert::<f64>()
+        .try_to_vec::<f64>()
+        .expect("poses read back as f64")
+        .chunks_exact(6)
+        .map(|p| Pose([p[0], p[1], p[2], p[3], p[4], p[5]]))
+        .collect();
+    let decisions = decide(&scene.host, &host_poses, &request.intrinsics, request.near);
     let decided = started.elapsed();
     let screen = ScreenData {
         n,
@@ -308,47 +324,6 @@ pub fn render(
     Ok(composited)
 }
 
-/// Gaussians per block of the decision pass: bounds its memory on very large scenes.
-const DECISION_BLOCK: usize = 1 << 17;
-
-/// Host-side screen data of every Gaussian for every pose, flat `[B · N]`, without gradient.
-struct Decisions {
-    means_2d: Vec<f32>,
-    depth: Vec<f32>,
-    radii: Vec<f32>,
-    visible: Vec<bool>,
-}
-
-/// Projects all Gaussians block by block, off the autodiff graph, and pulls the cull data.
-fn decide(scene: &DeviceScene, poses: &Tensor<2>, request: &RenderRequest) -> Decisions {
-    let n = scene.len();
-    let [batch, _] = poses.dims();
-    let poses = poses.clone().without_autodiff();
-    let mut decisions = Decisions {
-        means_2d: vec![0.0; 2 * batch * n],
-        depth: vec![0.0; batch * n],
-        radii: vec![0.0; batch * n],
-        visible: vec![false; batch * n],
-    };
-    for start in (0..n).step_by(DECISION_BLOCK) {
-        let len = DECISION_BLOCK.min(n - start);
-        let block = scene.geometry.narrow(start, len).without_autodiff();
-        let projected = project_with_near(&block, poses.clone(), &request.intrinsics, request.near);
-        let (radii, visible) = radii_and_visibility(&projected, request.near);
-        let means = host_f32(&projected.means_2d);
-        let depth = host_f32(&projected.depth);
-        for b in 0..batch {
-            let (from, to) = (b * len, b * n + start);
-            decisions.radii[to..to + len].copy_from_slice(&radii[from..from + len]);
-            decisions.visible[to..to + len].copy_from_slice(&visible[from..from + len]);
-            decisions.depth[to..to + len].copy_from_slice(&depth[from..from + len]);
-            decisions.means_2d[2 * to..2 * (to + len)]
-                .copy_from_slice(&means[2 * from..2 * (from + len)]);
-        }
-    }
-    decisions
-}
-
 /// A per-Gaussian constant channel repeated over the batch. `[B, N, dim]`
 fn per_gaussian(
     values: &[f32],
@@ -361,10 +336,4 @@ fn per_gaussian(
     Tensor::<2>::from_data(TensorData::new(values.to_vec(), [n, dim]), (device, dtype))
         .unsqueeze_dim::<3>(0)
         .repeat_dim(0, batch)
-}
-
-fn host_f32<const D: usize>(t: &Tensor<D>) -> Vec<f32> {
-    t.to_data()
-        .try_to_vec_as::<f32>()
-        .expect("float tensor converts to f32")
 }

@@ -127,29 +127,57 @@ fn bin_one_pose(
     selection: TileSelection,
 ) -> Vec<TileWork> {
     let n = screen.n;
-    let mut lists: Vec<Vec<(f32, u32)>> = vec![Vec::new(); grid.len()];
-    for g in 0..n {
-        let i = b * n + g;
-        if !screen.visible[i] || screen.radii[i] <= 0.0 {
-            continue;
-        }
-        let (u, v) = (
-            screen.means_2d[2 * i] as f64,
-            screen.means_2d[2 * i + 1] as f64,
-        );
-        let (xs, ys) = grid.touched(u, v, screen.radii[i] as f64);
-        for ty in ys {
-            for tx in xs.clone() {
-                lists[ty * grid.tiles_x + tx].push((screen.depth[i], g as u32));
+    // Tile rectangle [x0, x1) × [y0, y1) of every visible Gaussian, computed once.
+    let rects: Vec<[u16; 4]> = (0..n)
+        .into_par_iter()
+        .map(|g| {
+            let i = b * n + g;
+            if !screen.visible[i] || screen.radii[i] <= 0.0 {
+                return [0; 4];
             }
+            let (u, v) = (
+                screen.means_2d[2 * i] as f64,
+                screen.means_2d[2 * i + 1] as f64,
+            );
+            let (xs, ys) = grid.touched(u, v, screen.radii[i] as f64);
+            [xs.start, xs.end, ys.start, ys.end].map(|t| t as u16)
+        })
+        .collect();
+    let tiles_of = |g: usize| {
+        let [x0, x1, y0, y1] = rects[g].map(usize::from);
+        (y0..y1).flat_map(move |ty| (x0..x1).map(move |tx| ty * grid.tiles_x + tx))
+    };
+    // A mask pass needs only the tiles its object touches.
+    let wanted: Vec<bool> = match selection {
+        TileSelection::All => vec![true; grid.len()],
+        TileSelection::Object(in_object) => {
+            let mut wanted = vec![false; grid.len()];
+            for g in (0..n).filter(|&g| in_object[g]) {
+                for tile in tiles_of(g) {
+                    wanted[tile] = true;
+                }
+            }
+            wanted
+        }
+    };
+    // Gaussians that touch a wanted tile, front to back (ties by index), sorted once for all
+    // tiles: pushing them in this order leaves every list sorted. (depth, index) is one u64.
+    let mut order: Vec<u64> = (0..n)
+        .filter(|&g| tiles_of(g).any(|tile| wanted[tile]))
+        .map(|g| (u64::from(ordered_bits(screen.depth[b * n + g])) << 32) | g as u64)
+        .collect();
+    order.par_sort_unstable();
+    let mut lists: Vec<Vec<u32>> = vec![Vec::new(); grid.len()];
+    for key in order {
+        let g = key as u32; // the low 32 bits
+        for tile in tiles_of(g as usize).filter(|&tile| wanted[tile]) {
+            lists[tile].push(g);
         }
     }
     lists
         .into_iter()
         .enumerate()
-        .filter_map(|(tile, mut list)| {
-            list.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            let mut gaussians: Vec<u32> = list.into_iter().map(|(_, g)| g).collect();
+        .filter_map(|(tile, mut gaussians)| {
             if let TileSelection::Object(in_object) = selection {
                 let last = gaussians.iter().rposition(|&g| in_object[g as usize])?;
                 gaussians.truncate(last + 1);
@@ -161,4 +189,14 @@ fn bin_one_pose(
             })
         })
         .collect()
+}
+
+/// The bits of `x` as a u32 that orders like the float itself (negative values included).
+fn ordered_bits(x: f32) -> u32 {
+    let bits = x.to_bits();
+    if bits >> 31 == 1 {
+        !bits
+    } else {
+        bits | 0x8000_0000
+    }
 }

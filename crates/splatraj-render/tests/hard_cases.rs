@@ -8,7 +8,7 @@ use common::{host, ref_camera};
 use glam::DVec3;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::reference::{RefChannels, render_reference};
-use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, render};
+use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
 use splatraj_scene::Scene;
 
 fn push(scene: &mut Scene, mean: [f32; 3], scale: [f32; 3], opacity: f32) {
@@ -65,12 +65,49 @@ struct Output {
     grad: Vec<f64>,
 }
 
+/// Renders the three poses with both rasterizers; both must give the same result, returned once.
 fn run(
     scene: &Scene,
     channels: Vec<Channel>,
     pruning: Pruning,
     k: Intrinsics,
     dtype: DType,
+) -> Output {
+    let fused = run_with(
+        scene,
+        channels.clone(),
+        pruning,
+        k,
+        dtype,
+        Rasterizer::Fused,
+    );
+    let tensor = run_with(scene, channels, pruning, k, dtype, Rasterizer::Tensor);
+    let tolerance = if dtype == DType::F64 { 1e-9 } else { 2e-3 };
+    for (name, a, b) in [
+        ("images", &fused.images, &tensor.images),
+        ("alpha", &fused.alpha, &tensor.alpha),
+        ("pose gradient", &fused.grad, &tensor.grad),
+    ] {
+        let error = a
+            .iter()
+            .zip(b.iter())
+            .fold(0.0f64, |m, (x, y)| m.max((x - y).abs() / y.abs().max(1.0)));
+        // NaN compares false: a non-finite value on one path only fails here too.
+        assert!(
+            error <= tolerance || a.iter().chain(b.iter()).any(|v| !v.is_finite()),
+            "{dtype:?} {pruning:?}: fused and tensor {name} differ by {error}"
+        );
+    }
+    fused
+}
+
+fn run_with(
+    scene: &Scene,
+    channels: Vec<Channel>,
+    pruning: Pruning,
+    k: Intrinsics,
+    dtype: DType,
+    rasterizer: Rasterizer,
 ) -> Output {
     let device = Device::flex().autodiff();
     let uploaded = DeviceScene::new(scene, &device, dtype);
@@ -79,6 +116,7 @@ fn run(
         Tensor::<2>::from_data(TensorData::new(flat, [3, 6]), (&device, dtype)).require_grad();
     let mut request = RenderRequest::new(k, channels);
     request.pruning = pruning;
+    request.rasterizer = rasterizer;
     let out = render(&uploaded, poses.clone(), &request).unwrap();
     let grads = (out.images.clone().sum() + out.alpha.clone().sum()).backward();
     Output {
@@ -250,16 +288,19 @@ fn a_million_gaussians_render_in_bounded_blocks() {
         (&device, DType::F32),
     )
     .require_grad();
-    let mut request = RenderRequest::new(k, vec![Channel::Mask(mask)]);
-    request.pruning = Pruning::ObjectOnly;
-    let out = render(&uploaded, poses.clone(), &request).unwrap();
-    let coverage = out.images.clone().mean().into_scalar::<f64>();
-    let grads = out.images.sum().backward();
-    let grad = host(poses.grad(&grads).unwrap());
-    // The object is a 0.4 × 0.4 square at depth 5: 3.2 × 3.2 pixels of 64 × 64, nearly opaque.
-    assert!(
-        coverage > 0.5 * 10.24 / 4096.0 && coverage < 2.0 * 10.24 / 4096.0,
-        "coverage {coverage}"
-    );
-    assert!(grad.iter().all(|g| g.is_finite()));
+    for rasterizer in [Rasterizer::Fused, Rasterizer::Tensor] {
+        let mut request = RenderRequest::new(k, vec![Channel::Mask(mask.clone())]);
+        request.pruning = Pruning::ObjectOnly;
+        request.rasterizer = rasterizer;
+        let out = render(&uploaded, poses.clone(), &request).unwrap();
+        let coverage = out.images.clone().mean().into_scalar::<f64>();
+        let grads = out.images.sum().backward();
+        let grad = host(poses.grad(&grads).unwrap());
+        // The object is a 0.4 × 0.4 square at depth 5: 3.2 × 3.2 pixels of 64 × 64, nearly opaque.
+        assert!(
+            coverage > 0.5 * 10.24 / 4096.0 && coverage < 2.0 * 10.24 / 4096.0,
+            "{rasterizer:?}: coverage {coverage}"
+        );
+        assert!(grad.iter().all(|g| g.is_finite()), "{rasterizer:?}");
+    }
 }

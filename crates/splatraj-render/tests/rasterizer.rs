@@ -1,6 +1,6 @@
-//! The tensor rasterizer against the independent f64 reference renderer, its pruning and
-//! chunking against the plain render (exactness), and its pose gradient against finite
-//! differences.
+//! Both rasterizers (fused and tensor) against the independent f64 reference renderer, their
+//! pruning and the tensor path's chunking against the plain render (exactness), and their pose
+//! gradients against finite differences.
 
 mod common;
 
@@ -10,7 +10,7 @@ use glam::DVec3;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::rasterize::CompositeOptions;
 use splatraj_render::reference::{RefChannels, render_reference};
-use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, render};
+use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
 use splatraj_scene::Scene;
 
 /// Small deterministic generator (xorshift), so the test needs no rand dependency.
@@ -108,16 +108,26 @@ fn max_diff(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).fold(0.0, |m, (x, y)| m.max((x - y).abs()))
 }
 
-/// Tensor render of [RGB, depth, mask] against the reference, pixel by pixel.
+/// Both rasterizers.
+const RASTERIZERS: [Rasterizer; 2] = [Rasterizer::Fused, Rasterizer::Tensor];
+
+/// Render of [RGB, depth, mask] against the reference, pixel by pixel.
 fn compare_with_reference(dtype: DType, tolerance: f64) {
+    for rasterizer in RASTERIZERS {
+        compare_with_reference_on(dtype, tolerance, rasterizer);
+    }
+}
+
+fn compare_with_reference_on(dtype: DType, tolerance: f64, rasterizer: Rasterizer) {
     let (scene, mask) = test_scene(7);
     let k = intrinsics();
     let device = Device::flex();
     let uploaded = DeviceScene::new(&scene, &device, dtype);
-    let request = RenderRequest::new(
+    let mut request = RenderRequest::new(
         k,
         vec![Channel::Rgb, Channel::Depth, Channel::Mask(mask.clone())],
     );
+    request.rasterizer = rasterizer;
     let out = render(&uploaded, pose_tensor(&[pose()], &device, dtype), &request).unwrap();
     let got = host(out.images); // [1, H, W, 5]
     let reference = render_reference(
@@ -136,7 +146,10 @@ fn compare_with_reference(dtype: DType, tolerance: f64) {
         want.push(reference.masks[0][p]);
     }
     let error = max_diff(&got, &want);
-    assert!(error <= tolerance, "{dtype:?}: max abs difference {error}");
+    assert!(
+        error <= tolerance,
+        "{dtype:?} {rasterizer:?}: max abs difference {error}"
+    );
     let alpha: Vec<f64> = host(out.alpha);
     assert!(max_diff(&alpha, &reference.alpha) <= tolerance);
     // The scene must exercise early termination: some pixel saturated near 1 − 1e-4.
@@ -157,7 +170,11 @@ fn matches_reference_in_f32() {
 }
 
 /// Mask image and pose gradient of Σ w ⊙ mask for a batch of poses.
-fn mask_and_gradient(pruning: Pruning, composite: CompositeOptions) -> (Vec<f64>, Vec<f64>) {
+fn mask_and_gradient(
+    pruning: Pruning,
+    composite: CompositeOptions,
+    rasterizer: Rasterizer,
+) -> (Vec<f64>, Vec<f64>) {
     let (scene, mask) = test_scene(11);
     let device = Device::flex().autodiff();
     let uploaded = DeviceScene::new(&scene, &device, DType::F64);
@@ -174,6 +191,7 @@ fn mask_and_gradient(pruning: Pruning, composite: CompositeOptions) -> (Vec<f64>
     let mut request = RenderRequest::new(intrinsics(), vec![Channel::Mask(mask)]);
     request.pruning = pruning;
     request.composite = composite;
+    request.rasterizer = rasterizer;
     let out = render(&uploaded, poses.clone(), &request).unwrap();
     let [b, h, w, _] = out.images.dims();
     let weights: Vec<f64> = (0..b * h * w)
@@ -190,20 +208,32 @@ fn mask_and_gradient(pruning: Pruning, composite: CompositeOptions) -> (Vec<f64>
 
 #[test]
 fn pruning_and_chunking_are_exact() {
-    let (plain, plain_grad) = mask_and_gradient(Pruning::None, CompositeOptions::default());
+    let (plain, plain_grad) = mask_and_gradient(
+        Pruning::None,
+        CompositeOptions::default(),
+        Rasterizer::Tensor,
+    );
     assert!(plain.iter().any(|&v| v > 0.1), "the object is in view");
     assert!(
         plain_grad.iter().any(|&g| g.abs() > 1e-6),
         "the gradient is not trivially zero"
     );
-    for (pruning, options) in [
-        (Pruning::ObjectOnly, CompositeOptions::default()),
+    let fused = CompositeOptions::default();
+    for (pruning, options, rasterizer) in [
+        (Pruning::None, fused, Rasterizer::Fused),
+        (Pruning::ObjectOnly, fused, Rasterizer::Fused),
+        (
+            Pruning::ObjectOnly,
+            CompositeOptions::default(),
+            Rasterizer::Tensor,
+        ),
         (
             Pruning::None,
             CompositeOptions {
                 chunk: 3,
                 tile_group: 2,
             },
+            Rasterizer::Tensor,
         ),
         (
             Pruning::ObjectOnly,
@@ -211,16 +241,17 @@ fn pruning_and_chunking_are_exact() {
                 chunk: 1,
                 tile_group: 1,
             },
+            Rasterizer::Tensor,
         ),
     ] {
-        let (image, grad) = mask_and_gradient(pruning, options);
+        let (image, grad) = mask_and_gradient(pruning, options, rasterizer);
         assert!(
             max_diff(&image, &plain) < 1e-12,
-            "{pruning:?} {options:?}: image"
+            "{rasterizer:?} {pruning:?} {options:?}: image"
         );
         assert!(
             max_diff(&grad, &plain_grad) < 1e-10,
-            "{pruning:?} {options:?}: gradient {grad:?} vs {plain_grad:?}"
+            "{rasterizer:?} {pruning:?} {options:?}: gradient {grad:?} vs {plain_grad:?}"
         );
     }
 }
@@ -232,34 +263,39 @@ fn pose_gradient_matches_finite_differences() {
     let weights: Vec<f64> = (0..k.width * k.height * 4)
         .map(|i| ((i * 31) % 17) as f64 / 17.0 - 0.3)
         .collect();
-    let loss = |device: &Device, poses: Tensor<2>| {
-        let uploaded = DeviceScene::new(&scene, device, DType::F64);
-        let request = RenderRequest::new(k, vec![Channel::Rgb, Channel::Mask(mask.clone())]);
-        let out = render(&uploaded, poses, &request).unwrap();
-        let w = Tensor::<4>::from_data(
-            TensorData::new(weights.clone(), [1, k.height, k.width, 4]),
-            (device, DType::F64),
-        );
-        (out.images * w).sum()
-    };
-    let base = pose();
-    let device = Device::flex().autodiff();
-    let poses = pose_tensor(&[base], &device, DType::F64).require_grad();
-    let grads = loss(&device, poses.clone()).backward();
-    let grad = host(poses.grad(&grads).unwrap());
-    let plain = Device::flex();
-    let value = |p: Pose| loss(&plain, pose_tensor(&[p], &plain, DType::F64)).into_scalar::<f64>();
-    for (i, autodiff) in grad.iter().enumerate() {
-        let h = 1e-6;
-        let (mut plus, mut minus) = (base, base);
-        plus.0[i] += h;
-        minus.0[i] -= h;
-        let fd = (value(plus) - value(minus)) / (2.0 * h);
-        let error = (autodiff - fd).abs() / fd.abs().max(1e-3);
-        assert!(
-            error <= 1e-4,
-            "Φ[{i}]: autodiff {autodiff} vs finite differences {fd} (relative error {error})"
-        );
+    for rasterizer in RASTERIZERS {
+        let loss = |device: &Device, poses: Tensor<2>| {
+            let uploaded = DeviceScene::new(&scene, device, DType::F64);
+            let mut request =
+                RenderRequest::new(k, vec![Channel::Rgb, Channel::Mask(mask.clone())]);
+            request.rasterizer = rasterizer;
+            let out = render(&uploaded, poses, &request).unwrap();
+            let w = Tensor::<4>::from_data(
+                TensorData::new(weights.clone(), [1, k.height, k.width, 4]),
+                (device, DType::F64),
+            );
+            (out.images * w).sum()
+        };
+        let base = pose();
+        let device = Device::flex().autodiff();
+        let poses = pose_tensor(&[base], &device, DType::F64).require_grad();
+        let grads = loss(&device, poses.clone()).backward();
+        let grad = host(poses.grad(&grads).unwrap());
+        let plain = Device::flex();
+        let value =
+            |p: Pose| loss(&plain, pose_tensor(&[p], &plain, DType::F64)).into_scalar::<f64>();
+        for (i, autodiff) in grad.iter().enumerate() {
+            let h = 1e-6;
+            let (mut plus, mut minus) = (base, base);
+            plus.0[i] += h;
+            minus.0[i] -= h;
+            let fd = (value(plus) - value(minus)) / (2.0 * h);
+            let error = (autodiff - fd).abs() / fd.abs().max(1e-3);
+            assert!(
+                error <= 1e-4,
+                "{rasterizer:?} Φ[{i}]: autodiff {autodiff} vs finite differences {fd} (relative error {error})"
+            );
+        }
     }
 }
 
@@ -271,35 +307,38 @@ fn feature_channels_composite_like_masks() {
     let device = Device::flex();
     let uploaded = DeviceScene::new(&scene, &device, DType::F64);
     let features: Vec<f32> = mask.iter().flat_map(|&m| [m, 1.0 - m]).collect();
-    let request = RenderRequest::new(
-        intrinsics(),
-        vec![
-            Channel::Features {
-                dim: 2,
-                values: features,
-            },
-            Channel::Mask(mask),
-        ],
-    );
-    let out = render(
-        &uploaded,
-        pose_tensor(&[pose()], &device, DType::F64),
-        &request,
-    )
-    .unwrap();
-    let image = host(out.images);
-    let alpha: Vec<f64> = host(out.alpha);
-    for (p, px) in image.chunks(3).enumerate() {
-        assert!(
-            (px[0] - px[2]).abs() < 1e-12,
-            "pixel {p}: feature 0 {} vs mask {}",
-            px[0],
-            px[2]
+    for rasterizer in RASTERIZERS {
+        let mut request = RenderRequest::new(
+            intrinsics(),
+            vec![
+                Channel::Features {
+                    dim: 2,
+                    values: features.clone(),
+                },
+                Channel::Mask(mask.clone()),
+            ],
         );
-        assert!(
-            (px[0] + px[1] - alpha[p]).abs() < 1e-12,
-            "pixel {p}: features do not sum to alpha"
-        );
+        request.rasterizer = rasterizer;
+        let out = render(
+            &uploaded,
+            pose_tensor(&[pose()], &device, DType::F64),
+            &request,
+        )
+        .unwrap();
+        let image = host(out.images);
+        let alpha: Vec<f64> = host(out.alpha);
+        for (p, px) in image.chunks(3).enumerate() {
+            assert!(
+                (px[0] - px[2]).abs() < 1e-12,
+                "pixel {p}: feature 0 {} vs mask {}",
+                px[0],
+                px[2]
+            );
+            assert!(
+                (px[0] + px[1] - alpha[p]).abs() < 1e-12,
+                "pixel {p}: features do not sum to alpha"
+            );
+        }
+        assert!(alpha.iter().any(|&a| a > 0.5));
     }
-    assert!(alpha.iter().any(|&a| a > 0.5));
 }

@@ -122,6 +122,8 @@ struct Splat<E> {
     b: E,
     c: E,
     opacity: E,
+    /// Below this power α < 1/255 for sure (ln(1/(255·o)) less a margin for rounding).
+    skip_below: E,
 }
 
 impl<E: Real> Splat<E> {
@@ -135,18 +137,23 @@ impl<E: Real> Splat<E> {
             b: splats.conics[3 * row + 1],
             c: splats.conics[3 * row + 2],
             opacity: splats.opacities[row],
+            skip_below: E::of(-(255.0 * splats.opacities[row].to_f64()).ln() - 1e-3),
         }
     }
 
-    /// (dx, dy, power before the clamp, e^min(power, 0)) at tile pixel `p`.
+    /// (dx, dy, power before the clamp, e^min(power, 0)) at tile pixel `p`, or `None` where
+    /// α is surely below 1/255 (no exp needed there).
     #[inline(always)]
-    fn at(&self, p: usize) -> (E, E, E, E) {
+    fn at(&self, p: usize) -> Option<(E, E, E, E)> {
         let half = E::of(0.5);
         let dx = E::of((p % TILE_SIZE) as f64 + 0.5) - self.mx;
         let dy = E::of((p / TILE_SIZE) as f64 + 0.5) - self.my;
         let power = -(half * (self.a * dx * dx + self.c * dy * dy)) - self.b * dx * dy;
+        if power < self.skip_below {
+            return None;
+        }
         let clamped = if power > E::ZERO { E::ZERO } else { power };
-        (dx, dy, power, clamped.exp())
+        Some((dx, dy, power, clamped.exp()))
     }
 }
 
@@ -235,7 +242,9 @@ fn forward_tile<E: Real>(splats: &HostSplats<E>, plan: &CompositePlan, w: usize)
             if !open[p] {
                 continue;
             }
-            let (_, _, _, exp_power) = splat.at(p);
+            let Some((_, _, _, exp_power)) = splat.at(p) else {
+                continue;
+            };
             let alpha = clamp_alpha(splat.opacity * exp_power);
             if alpha < min_alpha {
                 continue;
@@ -345,7 +354,9 @@ fn backward_tile<E: Real>(
             if j as u32 >= last[p] {
                 continue;
             }
-            let (dx, dy, power, exp_power) = splat.at(p);
+            let Some((dx, dy, power, exp_power)) = splat.at(p) else {
+                continue;
+            };
             let raw = splat.opacity * exp_power;
             let alpha = clamp_alpha(raw);
             if alpha < min_alpha {
