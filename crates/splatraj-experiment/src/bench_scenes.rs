@@ -112,7 +112,12 @@ pub fn demo_bench_scene(
 
 /// A real scene seen from outside its robust bounds' sphere (30° around up, 25° above), the
 /// object a sphere of Gaussians at its centre sized to cover about `ratio` of the frame.
-pub fn file_bench_scene(path: &Path, ratio: f64, calibration: &Intrinsics, device: &Device) -> Result<BenchScene> {
+pub fn file_bench_scene(
+    path: &Path,
+    ratio: f64,
+    calibration: &Intrinsics,
+    device: &Device,
+) -> Result<BenchScene> {
     let scene = read_scene(path, &ReadOptions::default())?.scene;
     let bounds = scene
         .robust_bounds(0.02)
@@ -125,8 +130,8 @@ pub fn file_bench_scene(path: &Path, ratio: f64, calibration: &Intrinsics, devic
     let pose = Orbit::new(centre, up, DVec3::ZERO, 1.0).pose_degrees(30.0, 25.0, distance)?;
     // The object: Gaussians within ρ of the centre, ρ sized for the target coverage, then
     // corrected from measured coverage (real scenes are not uniformly dense).
-    let mut rho = framing_distance(1.0, ratio, calibration).recip() * distance
-        / std::f64::consts::PI.sqrt();
+    let mut rho =
+        framing_distance(1.0, ratio, calibration).recip() * distance / std::f64::consts::PI.sqrt();
     let sphere = |rho: f64| -> Vec<f32> {
         scene
             .means

@@ -23,7 +23,10 @@
 //! height = 48
 //! fov_x = 60.0
 //!
-//! [trajectory]             # kind = "rbf" | "waypoint" | "polynomial" and its parameters
+//! [trajectory]             # kind = "rbf" | "waypoint" | "polynomial" and its parameters,
+//!                          # or kind = "custom.<name>" and [trajectory.custom.<name>]: a
+//!                          # model registered in `Extensions` (as `source = "custom.<name>"`
+//!                          # and [targets.custom.<name>] for a target source)
 //! [costs]                  # tce, tre, upright, prior tables (all four by default);
 //!                          # [costs.custom.<name>]: a cost registered in `Extensions`
 //! [optimiser]              # iterations, samples_per_window, learning_rate, position_unit …
@@ -453,7 +456,10 @@ impl std::str::FromStr for Ablation {
             .find(|a| a.name() == s)
             .ok_or_else(|| {
                 let names: Vec<&str> = Ablation::ALL.iter().map(|a| a.name()).collect();
-                format!("unknown ablation `{s}`: expected one of {}", names.join(", "))
+                format!(
+                    "unknown ablation `{s}`: expected one of {}",
+                    names.join(", ")
+                )
             })
     }
 }
@@ -487,7 +493,8 @@ impl Config {
         Self::load_with(path, overrides, &Extensions::default())
     }
 
-    /// [`Config::load`] for a config that may name the costs registered in `extensions`.
+    /// [`Config::load`] for a config that may name the costs, trajectory models and target
+    /// sources registered in `extensions`.
     pub fn load_with(path: &Path, overrides: &[String], extensions: &Extensions) -> Result<Config> {
         let mut value = read_table(path, 0)?;
         for o in overrides {
@@ -533,7 +540,8 @@ impl Config {
         self.validate_with(&Extensions::default())
     }
 
-    /// [`Config::validate`] for a config that may name the costs registered in `extensions`.
+    /// [`Config::validate`] for a config that may name the costs, models and sources
+    /// registered in `extensions`.
     pub fn validate_with(&self, extensions: &Extensions) -> Result<()> {
         if self.name.is_empty()
             || self
@@ -571,9 +579,21 @@ impl Config {
             .build_with(&extensions.costs)
             .map_err(anyhow::Error::msg)?;
         self.trajectory
-            .basis()
-            .validate()
+            .build_with(self.queries.len(), &extensions.models)
+            .and_then(|model| model.basis().validate())
             .map_err(|e| anyhow::anyhow!("`trajectory`: {e}"))?;
+        if let splatraj_semantic::SourceKind::Custom(name) = &self.targets.source
+            && !extensions.sources.contains(name)
+        {
+            bail!(
+                "`targets.source` = \"custom.{name}\" names no registered target source \
+                 (registered: {})",
+                match extensions.sources.names() {
+                    n if n.is_empty() => "none".to_string(),
+                    n => n.join(", "),
+                }
+            );
+        }
         self.optimiser
             .validate()
             .map_err(|e| anyhow::anyhow!("`optimiser`: {e}"))?;

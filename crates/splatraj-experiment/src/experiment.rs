@@ -20,7 +20,7 @@ use crate::extensions::Extensions;
 pub struct Experiment {
     /// The config it was prepared from.
     pub config: Config,
-    /// The registries its costs are built from.
+    /// The registries its costs, model and target source are built from.
     pub extensions: Extensions,
     /// The scene on the host.
     pub scene: Scene,
@@ -48,7 +48,8 @@ impl Experiment {
         Self::prepare_with(config, &Extensions::default())
     }
 
-    /// [`Experiment::prepare`] for a config that may use the costs of `extensions`.
+    /// [`Experiment::prepare`] for a config that may use the costs, trajectory models and
+    /// target sources of `extensions`.
     pub fn prepare_with(config: &Config, extensions: &Extensions) -> Result<Self> {
         let (scene, scene_name) = load_scene(config)?;
         if scene.is_empty() {
@@ -61,8 +62,7 @@ impl Experiment {
             .context("the scene's bounds are not finite")?;
         let centre: [f64; 3] =
             std::array::from_fn(|i| 0.5 * (bounds.min[i] + bounds.max[i]) as f64);
-        let half: [f64; 3] =
-            std::array::from_fn(|i| 0.5 * (bounds.max[i] - bounds.min[i]) as f64);
+        let half: [f64; 3] = std::array::from_fn(|i| 0.5 * (bounds.max[i] - bounds.min[i]) as f64);
         let device = config.backend.device()?;
         let intrinsics = config.camera.intrinsics()?;
         let mut experiment = Experiment {
@@ -94,7 +94,7 @@ impl Experiment {
             Some(
                 config
                     .targets
-                    .build(&config.base_dir, &self.device)
+                    .build_with(&config.base_dir, &self.device, &self.extensions.sources)
                     .map_err(|e| anyhow::anyhow!("{}: {e}", at()))?,
             )
         } else {

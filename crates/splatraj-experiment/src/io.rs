@@ -11,8 +11,8 @@ pub fn read_camera_file(path: &Path) -> Result<CameraSpec> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read the camera file {}", path.display()))?;
     // serde names the unknown or missing key and lists the expected ones.
-    let file: CameraFile = serde_json::from_str(&text)
-        .map_err(|e| anyhow!("camera file {}: {e}", path.display()))?;
+    let file: CameraFile =
+        serde_json::from_str(&text).map_err(|e| anyhow!("camera file {}: {e}", path.display()))?;
     file.camera()
         .map_err(|e| anyhow!("camera file {}: {e}", path.display()))
 }

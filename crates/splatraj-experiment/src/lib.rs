@@ -21,6 +21,7 @@
 
 #![warn(missing_docs)]
 
+pub mod bench;
 pub mod bench_scenes;
 pub mod config;
 pub mod experiment;
@@ -30,6 +31,7 @@ pub mod observer;
 pub mod outputs;
 pub mod pose_run;
 pub mod probe;
+pub mod query;
 pub mod records;
 pub mod starts;
 pub mod trajectory_run;

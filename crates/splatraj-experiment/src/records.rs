@@ -126,7 +126,14 @@ fn strings<const N: usize>(names: [&str; N]) -> Vec<String> {
 
 /// `history.csv` of a trajectory run: every cost term of every window per step.
 pub fn trajectory_history(run: &TrajectoryRun, windows: usize) -> Csv {
-    let mut header = strings(["restart", "step", "elapsed_s", "total", "best_total", "updated"]);
+    let mut header = strings([
+        "restart",
+        "step",
+        "elapsed_s",
+        "total",
+        "best_total",
+        "updated",
+    ]);
     for i in 0..windows {
         for name in &run.cost_names {
             header.push(format!("q{i}_{name}"));
@@ -158,7 +165,9 @@ pub fn trajectory_history(run: &TrajectoryRun, windows: usize) -> Csv {
 
 /// `history.csv` of a pose run: every start's pose and terms per step.
 pub fn pose_history(results: &[SinglePoseResult]) -> Csv {
-    let mut header = strings(["start", "step", "total", "updated", "wx", "wy", "wz", "cx", "cy", "cz"]);
+    let mut header = strings([
+        "start", "step", "total", "updated", "wx", "wy", "wz", "cx", "cy", "cz",
+    ]);
     header.extend(results[0].history[0].terms.iter().map(|t| t.0.to_string()));
     let rows = results
         .iter()

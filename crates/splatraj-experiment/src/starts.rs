@@ -7,7 +7,7 @@ use splatraj_traj::optimise::start::START_FIT_SAMPLES;
 use splatraj_traj::optimise::{
     WindowTarget, object_start_poses, random_start_poses, window_start_trajectory,
 };
-use splatraj_traj::trajectory::{Trajectory, TrajectoryRecord};
+use splatraj_traj::trajectory::{TrajectoryModel, TrajectoryRecord};
 
 use crate::config::StartKind;
 use crate::experiment::Experiment;
@@ -18,7 +18,7 @@ impl Experiment {
     /// the `[trajectory]` model with one window per query.
     pub fn start_trajectories(&self) -> Result<Vec<TrajectoryRecord>> {
         let config = &self.config;
-        let model = config.trajectory.clone().with_windows(self.windows.len());
+        let model = self.model()?;
         let (device, dtype) = (&self.device, self.dtype);
         if let Some(file) = &config.start.trajectory {
             let path = config.resolve(file);
@@ -30,7 +30,8 @@ impl Experiment {
                     path.display()
                 )
             })?;
-            let loaded = Trajectory::from_record(&record, device, dtype)
+            let loaded = self
+                .trajectory(&record)
                 .with_context(|| format!("`start.trajectory`: {}", path.display()))?;
             let refitted = if record.model == model {
                 loaded
@@ -50,6 +51,15 @@ impl Experiment {
                 Ok(window_start_trajectory(model.clone(), per_window, device, dtype)?.record())
             })
             .collect()
+    }
+
+    /// The `[trajectory]` model for the experiment's windows (a custom model built from
+    /// [`Extensions::models`](crate::Extensions::models)).
+    pub fn model(&self) -> Result<TrajectoryModel> {
+        self.config
+            .trajectory
+            .build_with(self.windows.len(), &self.extensions.models)
+            .context("`trajectory`")
     }
 
     /// For each restart, one start pose per window in `windows` (object-facing or random; a

@@ -6,10 +6,8 @@ use anyhow::{Context, Result};
 use splatraj_traj::metrics::{
     Smoothness, WindowMetrics, WindowObject, trajectory_ldj, window_metrics,
 };
-use splatraj_traj::optimise::{
-    Flow, Problem, StopReason, TrajectoryResult, optimise_trajectory,
-};
-use splatraj_traj::trajectory::{Trajectory, TrajectoryRecord};
+use splatraj_traj::optimise::{Flow, Problem, StopReason, TrajectoryResult, optimise_trajectory};
+use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord};
 
 use crate::experiment::Experiment;
 use crate::observer::{Observer, Progress};
@@ -105,9 +103,22 @@ impl Experiment {
         })
     }
 
-    /// The trajectory of `record` on the experiment's device.
+    /// The trajectory of `record` (e.g. a `trajectory.json` read back) on the experiment's
+    /// device; a custom model is built from the experiment's registry.
     pub fn trajectory(&self, record: &TrajectoryRecord) -> Result<Trajectory> {
-        Ok(Trajectory::from_record(record, &self.device, self.dtype)?)
+        let model = match &record.model {
+            TrajectoryModel::Custom(c) => {
+                let windows = c.windows.unwrap_or(self.windows.len());
+                record.model.build_with(windows, &self.extensions.models)?
+            }
+            builtin => builtin.clone(),
+        };
+        Ok(Trajectory::from_weights(
+            model,
+            &record.weights,
+            &self.device,
+            self.dtype,
+        )?)
     }
 
     /// Per-window metrics at the output resolution (`output.metric_samples` per window) and
@@ -153,10 +164,7 @@ impl Experiment {
 }
 
 /// An observer that stops when `stop()` says so (e.g. a Ctrl-C flag), after calling `each`.
-pub fn stop_when(
-    mut stop: impl FnMut() -> bool,
-    mut each: impl FnMut(&Progress),
-) -> impl Observer {
+pub fn stop_when(mut stop: impl FnMut() -> bool, mut each: impl FnMut(&Progress)) -> impl Observer {
     move |p: &Progress| {
         each(p);
         if stop() { Flow::Stop } else { Flow::Continue }

@@ -23,6 +23,9 @@
 //! - `langsplat`: `latents` (`.npy` `[N, 3]`), `checkpoint` (LangSplat `.pth`), and the phrase
 //!   keys of `features`.
 //!
+//! - `custom.<name>`: a source another crate registered in a [`SourceRegistry`]; its keys go in
+//!   `[targets.custom.<name>]` (deserialised by its [`crate::sources::SourceConfig`]).
+//!
 //! `[targets.selection]` holds [`SelectionOptions`] for every source.
 
 use std::collections::BTreeMap;
@@ -38,13 +41,14 @@ use crate::error::{Result, SemanticError};
 use crate::selection::SelectionOptions;
 use crate::sources::{
     FeatureInput, FeaturesSource, LabelsSource, LangsplatDecoder, LangsplatSource, Region,
-    RegionSource, TargetSource,
+    RegionSource, SourceContext, SourceRegistry, TargetSource,
 };
 use crate::vectors::{DEFAULT_NEGATIVES, DEFAULT_TEMPERATURE};
 
-/// The kinds of target source.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
+/// The kinds of target source: the built-in ones, or `custom.<name>` for a source registered
+/// in a [`SourceRegistry`].
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
 pub enum SourceKind {
     /// Per-Gaussian label ids with names ([`LabelsSource`]).
     #[default]
@@ -55,10 +59,15 @@ pub enum SourceKind {
     Features,
     /// LangSplat latents decoded by the checkpoint's decoder, then as `features`.
     Langsplat,
+    /// A registered source, by its registered name (configs write `custom.<name>`).
+    Custom(String),
 }
 
+/// How configs name a registered source: `source = "custom.<name>"`.
+pub const CUSTOM_PREFIX: &str = "custom.";
+
 impl SourceKind {
-    /// All kinds, in documentation order.
+    /// The built-in kinds, in documentation order.
     pub const ALL: [SourceKind; 4] = [
         SourceKind::Labels,
         SourceKind::Region,
@@ -66,20 +75,22 @@ impl SourceKind {
         SourceKind::Langsplat,
     ];
 
-    /// The name used in configs and on the command line.
-    pub fn name(self) -> &'static str {
+    /// The name used in configs and on the command line (`custom.<name>` for a registered
+    /// source).
+    pub fn name(&self) -> String {
         match self {
-            SourceKind::Labels => "labels",
-            SourceKind::Region => "region",
-            SourceKind::Features => "features",
-            SourceKind::Langsplat => "langsplat",
+            SourceKind::Labels => "labels".into(),
+            SourceKind::Region => "region".into(),
+            SourceKind::Features => "features".into(),
+            SourceKind::Langsplat => "langsplat".into(),
+            SourceKind::Custom(name) => format!("{CUSTOM_PREFIX}{name}"),
         }
     }
 }
 
 impl fmt::Display for SourceKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
+        f.write_str(&self.name())
     }
 }
 
@@ -87,12 +98,34 @@ impl FromStr for SourceKind {
     type Err = String;
 
     fn from_str(s: &str) -> std::result::Result<Self, String> {
+        if let Some(name) = s.strip_prefix(CUSTOM_PREFIX)
+            && !name.is_empty()
+        {
+            return Ok(SourceKind::Custom(name.to_string()));
+        }
         SourceKind::ALL
             .into_iter()
             .find(|k| k.name() == s)
             .ok_or_else(|| {
-                format!("unknown source {s:?}: use labels, region, features or langsplat")
+                format!(
+                    "unknown source {s:?}: use labels, region, features or langsplat, or \
+                     custom.<name> for a registered source"
+                )
             })
+    }
+}
+
+impl TryFrom<String> for SourceKind {
+    type Error = String;
+
+    fn try_from(s: String) -> std::result::Result<Self, String> {
+        s.parse()
+    }
+}
+
+impl From<SourceKind> for String {
+    fn from(kind: SourceKind) -> String {
+        kind.name()
     }
 }
 
@@ -163,6 +196,10 @@ pub struct TargetsConfig {
     pub checkpoint: Option<PathBuf>,
     /// Percentile, floor and DBSCAN settings.
     pub selection: SelectionOptions,
+    /// custom.<name>: the config table of each registered source, by name; only the one
+    /// `source` names may be given.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub custom: BTreeMap<String, toml::Value>,
 }
 
 /// Which sources each optional key applies to, for refusing stray keys.
@@ -190,15 +227,26 @@ impl TargetsConfig {
     /// builds it; the `langsplat` decoder runs on `device`. Errors name the key
     /// (`targets.phrases`) and, for file errors, the file.
     pub fn build(&self, base_dir: &Path, device: &Device) -> Result<Box<dyn TargetSource>> {
-        self.build_named(base_dir, device, &|k| format!("targets.{k}"))
+        self.build_with(base_dir, device, &SourceRegistry::default())
     }
 
-    /// As [`TargetsConfig::build`], with `key` turning each config key (`phrases`,
+    /// As [`TargetsConfig::build`], for a config that may name a source of `registry`.
+    pub fn build_with(
+        &self,
+        base_dir: &Path,
+        device: &Device,
+        registry: &SourceRegistry,
+    ) -> Result<Box<dyn TargetSource>> {
+        self.build_named(base_dir, device, registry, &|k| format!("targets.{k}"))
+    }
+
+    /// As [`TargetsConfig::build_with`], with `key` turning each config key (`phrases`,
     /// `regions.shelf`) into the name errors use (e.g. a command-line option).
     pub fn build_named(
         &self,
         base_dir: &Path,
         device: &Device,
+        registry: &SourceRegistry,
         key: &dyn Fn(&str) -> String,
     ) -> Result<Box<dyn TargetSource>> {
         self.refuse_stray_keys(key)?;
@@ -209,7 +257,13 @@ impl TargetsConfig {
                 base_dir.join(p)
             }
         };
-        Ok(match self.source {
+        Ok(match &self.source {
+            SourceKind::Custom(name) => {
+                let empty = toml::Value::Table(toml::Table::new());
+                let table = self.custom.get(name).unwrap_or(&empty);
+                let context = SourceContext { base_dir, device };
+                registry.build(name, table, &context, &key(&format!("custom.{name}")))?
+            }
             SourceKind::Labels => {
                 let mut names = BTreeMap::new();
                 for (id, name) in &self.label_names {
@@ -316,12 +370,23 @@ impl TargetsConfig {
                 _ => false,
             };
             if set && !sources.contains(&self.source) {
-                let names: Vec<&str> = sources.iter().map(|s| s.name()).collect();
+                let names: Vec<String> = sources.iter().map(|s| s.name()).collect();
                 return Err(SemanticError::option(
                     key(name),
                     format!(
                         "applies to the {} source only, but the source is {}",
                         names.join(" and "),
+                        self.source
+                    ),
+                ));
+            }
+        }
+        for name in self.custom.keys() {
+            if self.source != SourceKind::Custom(name.clone()) {
+                return Err(SemanticError::option(
+                    key(&format!("custom.{name}")),
+                    format!(
+                        "applies to the source custom.{name} only, but the source is {}",
                         self.source
                     ),
                 ));

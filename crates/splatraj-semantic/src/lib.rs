@@ -41,5 +41,6 @@ pub use selection::{
 };
 pub use sources::{
     FeatureInput, FeaturesSource, LabelsSource, LangsplatDecoder, LangsplatSource, Region,
-    RegionSource, Relevancy, Scoring, TargetSource, label_mask,
+    RegionSource, Relevancy, Scoring, SourceConfig, SourceContext, SourceRegistry, TargetSource,
+    label_mask,
 };

@@ -1,13 +1,15 @@
 //! Target sources: each turns a query into one value per Gaussian.
 //!
-//! One file per source; adding a source is adding a file here that implements
-//! [`TargetSource`]. Selection (thresholds, DBSCAN) is not the sources' job: it lives in
+//! One file per source, each implementing [`TargetSource`]. A crate outside splatraj adds its
+//! own the same way (a [`SourceConfig`] whose `init` builds its [`TargetSource`]) and registers
+//! it in a [`SourceRegistry`]; a config then names it `source = "custom.<name>"`. Selection (thresholds, DBSCAN) is not the sources' job: it lives in
 //! [`crate::selection`] and reads the [`Scoring`] a source declares.
 
 pub mod features;
 pub mod labels;
 pub mod langsplat;
 pub mod region;
+pub mod registry;
 
 use serde::Serialize;
 use splatraj_scene::Scene;
@@ -18,6 +20,7 @@ pub use features::{FeatureInput, FeaturesSource};
 pub use labels::{LabelsSource, label_mask};
 pub use langsplat::{LangsplatDecoder, LangsplatSource};
 pub use region::{Region, RegionSource};
+pub use registry::{SourceConfig, SourceContext, SourceRegistry};
 
 /// How the values of a [`Relevancy`] are to be read by the selection.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]

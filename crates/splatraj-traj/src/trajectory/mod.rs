@@ -14,7 +14,8 @@
 //!   and ψ_k(t) on the host in f64; optionally a tensor evaluation that avoids a host round trip.
 //!   One file per model implements it: [`rbf`] (SplaTraj), [`waypoint`], [`polynomial`].
 //! - [`TrajectoryModel`] is the serialisable choice among them (`kind = "rbf" | "waypoint" |
-//!   "polynomial"` plus that model's parameters), an enum that forwards [`Basis`] to its variant.
+//!   "polynomial"` plus that model's parameters, or `kind = "custom.<name>"` for a model another
+//!   crate registered), an enum that forwards [`Basis`] to its variant.
 //! - [`Trajectory`] is the one burn Module: `weights: Param<Tensor<2>>` `[K, 6]` plus the model
 //!   as a `#[module(skip)]` field (burn 0.22's derive needs Debug + Clone + Send for a skipped
 //!   field and keeps it out of parameter traversal, device moves and records).
@@ -22,9 +23,16 @@
 //! Why not a generic `Trajectory<B: Basis>` or a `Box<dyn Basis>` inside the module: the model is
 //! chosen at run time from the config, and the optimiser, checkpoints and `trajectory.json` want
 //! one concrete, serialisable Module type. A generic would push the dispatch into every caller;
-//! a trait object cannot be (de)serialised without extra machinery. The enum keeps both, at the
-//! price that a new model is one new file implementing [`Basis`] plus one variant line in
-//! [`TrajectoryModel`] (and its two forwarding match arms).
+//! a bare trait object cannot be (de)serialised. The enum keeps both.
+//!
+//! **Extending** (the pattern of the costs): a model is a config struct (serde, its parameters)
+//! implementing [`ModelConfig`] (`init(windows)` builds its [`Basis`]), in a file of its own. A
+//! crate outside splatraj registers it under a name in a [`ModelRegistry`]; a config chooses it
+//! with `[trajectory] kind = "custom.<name>"` and gives its parameters in
+//! `[trajectory.custom.<name>]`. Read from a file, it is a [`TrajectoryModel::Custom`] holding
+//! the name and the table; [`TrajectoryModel::build_with`] builds its basis from the registry
+//! (and sets the window count of the built-in RBF), and `trajectory.json` keeps name, table and
+//! window count so that the same registry reads it back.
 //!
 //! Times outside [0, 1] are accepted: the RBF and polynomial models extend analytically, the
 //! waypoint model holds its first/last segment. Rotation vectors are fitted and interpolated
@@ -33,17 +41,21 @@
 
 pub mod polynomial;
 pub mod rbf;
+pub mod registry;
 pub mod waypoint;
 
 mod lstsq;
 
 use burn::module::{Module, Param};
 use burn::tensor::{DType, Device, Tensor, TensorData};
-use serde::{Deserialize, Serialize};
+use serde::de::Error as _;
+use serde::ser::SerializeMap;
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 pub use lstsq::DEFAULT_RIDGE;
 pub use polynomial::Polynomial;
 pub use rbf::Rbf;
+pub use registry::{CUSTOM_PREFIX, CustomModel, ModelConfig, ModelRegistry};
 pub use waypoint::Waypoint;
 
 /// Number of pose components: rotation vector (3) then camera centre (3).
@@ -74,10 +86,20 @@ pub enum TrajectoryError {
     /// Fitting data is inconsistent (lengths differ, nothing given, or a non-finite value).
     #[error("trajectory fit: {0}")]
     FitData(String),
+    /// A custom model ([`ModelRegistry`]) is unknown, its table is malformed, or its own
+    /// `init` refused it; `key` is the config key at fault.
+    #[error("`{key}` {reason}")]
+    Custom {
+        /// Config key (e.g. `trajectory.custom.hat`).
+        key: String,
+        /// What is wrong and what is allowed.
+        reason: String,
+    },
 }
 
 /// A family of K scalar basis functions ψ_k(t); one implementation per trajectory model.
-pub trait Basis {
+/// `Debug + Send + Sync` so that a built custom basis can sit in the [`Trajectory`] module.
+pub trait Basis: std::fmt::Debug + Send + Sync {
     /// Number of basis functions K (rows of the weight matrix).
     fn count(&self) -> usize;
 
@@ -117,9 +139,9 @@ pub trait Basis {
 /// The trajectory model chosen in the config: which basis, with its parameters.
 ///
 /// Serialised with an internal tag, e.g. TOML `kind = "rbf"`, `centres_per_window = 3`;
-/// unknown keys are errors.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case")]
+/// unknown keys are errors. A registered model is `kind = "custom.<name>"` with its table in
+/// `custom.<name>` (see [`registry`]).
+#[derive(Debug, Clone, PartialEq)]
 pub enum TrajectoryModel {
     /// Squared-exponential RBFs, centres spread over the query windows (SplaTraj).
     Rbf(Rbf),
@@ -127,6 +149,103 @@ pub enum TrajectoryModel {
     Waypoint(Waypoint),
     /// Monomials 1, t, …, t^(N−1) (baseline).
     Polynomial(Polynomial),
+    /// A model registered by another crate ([`ModelRegistry`]).
+    Custom(CustomModel),
+}
+
+/// The built-in models' serde form (the internally tagged enum the derive writes).
+#[derive(Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+enum Builtin {
+    Rbf(Rbf),
+    Waypoint(Waypoint),
+    Polynomial(Polynomial),
+}
+
+impl Serialize for TrajectoryModel {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Self::Rbf(m) => Builtin::Rbf(m.clone()).serialize(serializer),
+            Self::Waypoint(m) => Builtin::Waypoint(m.clone()).serialize(serializer),
+            Self::Polynomial(m) => Builtin::Polynomial(m.clone()).serialize(serializer),
+            Self::Custom(c) => {
+                let mut map = serializer.serialize_map(None)?;
+                map.serialize_entry("kind", &c.kind())?;
+                if let Some(windows) = c.windows {
+                    map.serialize_entry("windows", &windows)?;
+                }
+                let table = toml::Table::from_iter([(c.name.clone(), c.params.clone())]);
+                map.serialize_entry("custom", &table)?;
+                map.end()
+            }
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for TrajectoryModel {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let value = toml::Value::deserialize(deserializer)?;
+        let kind = value.get("kind").and_then(toml::Value::as_str);
+        let custom_name = kind
+            .and_then(|k| k.strip_prefix(CUSTOM_PREFIX))
+            .map(str::to_string);
+        let Some(name) = custom_name else {
+            return Builtin::deserialize(value)
+                .map(|b| match b {
+                    Builtin::Rbf(m) => Self::Rbf(m),
+                    Builtin::Waypoint(m) => Self::Waypoint(m),
+                    Builtin::Polynomial(m) => Self::Polynomial(m),
+                })
+                .map_err(|e| {
+                    let message = e.message().trim_end().to_string();
+                    if message.contains("unknown variant") {
+                        D::Error::custom(format!(
+                            "{message}, or `custom.<name>` for a registered model"
+                        ))
+                    } else {
+                        D::Error::custom(message)
+                    }
+                });
+        };
+        let mut table = match value {
+            toml::Value::Table(t) => t,
+            _ => unreachable!("a value with a `kind` key is a table"),
+        };
+        table.remove("kind");
+        let windows =
+            match table.remove("windows") {
+                None => None,
+                Some(w) => Some(usize::deserialize(w).map_err(|e| {
+                    D::Error::custom(format!("`windows`: {}", e.message().trim_end()))
+                })?),
+            };
+        let mut custom = match table.remove("custom") {
+            None => toml::Table::new(),
+            Some(toml::Value::Table(t)) => t,
+            Some(other) => {
+                return Err(D::Error::custom(format!(
+                    "`custom` must be a table holding `[trajectory.custom.{name}]`, got {other}"
+                )));
+            }
+        };
+        if let Some(key) = table.keys().next() {
+            return Err(D::Error::custom(format!(
+                "unknown field `{key}`: the parameters of `custom.{name}` go in \
+                 `[trajectory.custom.{name}]`"
+            )));
+        }
+        let params = custom
+            .remove(&name)
+            .unwrap_or_else(|| toml::Value::Table(toml::Table::new()));
+        if let Some(other) = custom.keys().next() {
+            return Err(D::Error::custom(format!(
+                "`custom.{other}` is not the chosen model (kind = \"custom.{name}\")"
+            )));
+        }
+        let mut model = CustomModel::new(name, params);
+        model.windows = windows;
+        Ok(Self::Custom(model))
+    }
 }
 
 impl Default for TrajectoryModel {
@@ -143,20 +262,24 @@ impl TrajectoryModel {
             Self::Rbf(b) => b,
             Self::Waypoint(b) => b,
             Self::Polynomial(b) => b,
+            Self::Custom(c) => c.basis(),
         }
     }
 
-    /// The model's config name (`rbf`, `waypoint`, `polynomial`), as in `kind`.
-    pub fn name(&self) -> &'static str {
+    /// The model's config name (`rbf`, `waypoint`, `polynomial`, `custom.<name>`), as in
+    /// `kind`.
+    pub fn name(&self) -> String {
         match self {
-            Self::Rbf(_) => "rbf",
-            Self::Waypoint(_) => "waypoint",
-            Self::Polynomial(_) => "polynomial",
+            Self::Rbf(_) => "rbf".into(),
+            Self::Waypoint(_) => "waypoint".into(),
+            Self::Polynomial(_) => "polynomial".into(),
+            Self::Custom(c) => c.kind(),
         }
     }
 
     /// The same model for `n` query windows: sets the RBF's window count, leaves others as
-    /// they are (their bases do not depend on the queries).
+    /// they are (their bases do not depend on the queries; a custom model's basis is built
+    /// for its windows by [`TrajectoryModel::build_with`]).
     pub fn with_windows(self, n: usize) -> Self {
         match self {
             Self::Rbf(rbf) => Self::Rbf(Rbf { windows: n, ..rbf }),

@@ -1,0 +1,432 @@
+//! One semantic query against a scene, as `splatraj query` runs it: the source chosen from the
+//! inputs given, the same `[targets]` table a run config holds, the selection, a diagnostic
+//! picture of it, and the report (text or JSON).
+//!
+//! This is the command's library half, so its messages name the command-line options
+//! (`--box`, `--phrases`, …) that set each input.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, anyhow, bail};
+use burn::tensor::Device;
+use serde::Serialize;
+use splatraj_render::backend::Precision;
+use splatraj_render::camera::Intrinsics;
+use splatraj_render::render::DeviceScene;
+use splatraj_scene::Scene;
+use splatraj_semantic::{
+    Region, RegionSpec, SelectionOptions, SourceKind, SourceRegistry, Spread, Target,
+    TargetsConfig, find_target,
+};
+
+use crate::views::{CameraReport, ViewOptions, diagnostic_camera, highlighted_picture};
+
+/// What to look for and how: the query, the source (or `None` to choose it from the inputs)
+/// and every source's inputs, the selection and the picture's camera.
+#[derive(Debug, Clone)]
+pub struct QueryRequest {
+    /// A label name or id (labels), any name (region), a phrase of the phrase table (features).
+    pub query: String,
+    /// The source asked for; `None`: see [`QueryRequest::choose_source`].
+    pub source: Option<SourceKind>,
+    /// labels: label name → other words that mean it.
+    pub synonyms: BTreeMap<String, Vec<String>>,
+    /// region: the box or sphere (named after the query).
+    pub region: Option<RegionSpec>,
+    /// features: per-Gaussian feature sidecar; `None`: the scene's own features.
+    pub features: Option<PathBuf>,
+    /// features, langsplat: phrase table of text embeddings.
+    pub phrases: Option<PathBuf>,
+    /// features, langsplat: phrases of an `.npy` (or `.safetensors`) table, one per line.
+    pub phrase_names: Option<PathBuf>,
+    /// features, langsplat: canonical negatives (empty: the defaults).
+    pub negatives: Vec<String>,
+    /// features, langsplat: temperature of the relevancy softmax.
+    pub temperature: Option<f32>,
+    /// langsplat: per-Gaussian latents `[N, 3]`.
+    pub latents: Option<PathBuf>,
+    /// langsplat: the autoencoder checkpoint.
+    pub checkpoint: Option<PathBuf>,
+    /// Percentile, floor and DBSCAN.
+    pub selection: SelectionOptions,
+    /// How the picture's camera looks at the selection.
+    pub view: ViewOptions,
+    /// The picture's camera.
+    pub intrinsics: Intrinsics,
+}
+
+/// What [`QueryRequest::run`] found and drew.
+#[derive(Debug, Clone)]
+pub struct QueryOutcome {
+    /// The source that grounded the query.
+    pub source: SourceKind,
+    /// The selection.
+    pub target: Target,
+    /// The picture's camera.
+    pub camera: CameraReport,
+    /// `query.png`: the RGB render with the selection tinted magenta.
+    pub png: Vec<u8>,
+    /// Share of the picture's pixels where the selection dominates (mask > 0.5).
+    pub highlighted_share: f64,
+}
+
+/// What `query --json` prints (and, as text, `query`).
+#[derive(Debug, Clone, Serialize)]
+pub struct QueryReport {
+    /// The scene file.
+    pub scene: String,
+    /// The source's name.
+    pub source: String,
+    /// The query as given.
+    pub query: String,
+    /// What the query matched (label name, phrase, region name).
+    pub name: String,
+    /// Gaussians in the scene.
+    pub gaussians: usize,
+    /// Gaussians selected.
+    pub count: usize,
+    /// `count / gaussians`.
+    pub fraction: f64,
+    /// Gaussians above the thresholds, before DBSCAN.
+    pub candidates: usize,
+    /// Sizes of the kept clusters.
+    pub clusters: Vec<usize>,
+    /// Candidates DBSCAN called noise.
+    pub noise: usize,
+    /// DBSCAN radius, if it ran.
+    pub eps: Option<f32>,
+    /// Relevancy at the percentile, for graded sources.
+    pub percentile_threshold: Option<f32>,
+    /// Spread of the relevancy over all Gaussians.
+    pub relevancy: Spread,
+    /// Robust centre of the selection.
+    pub centre: [f32; 3],
+    /// Robust extent of the selection.
+    pub extent: [f32; 3],
+    /// The picture's camera.
+    pub camera: CameraReport,
+    /// Share of the picture's pixels where the selection dominates (mask > 0.5).
+    pub highlighted_share: f64,
+    /// Where the picture was written.
+    pub image: String,
+}
+
+impl QueryRequest {
+    /// The source asked for, or the one the inputs point to: `region` with a region,
+    /// `langsplat` with latents or a checkpoint, `features` with phrase or feature inputs, else
+    /// `labels` when the scene has labels. Inputs of another source are refused (they would be
+    /// silently ignored), as is a source without the inputs it needs.
+    pub fn choose_source(&self, scene: &Scene, scene_name: &str) -> Result<SourceKind> {
+        use SourceKind::{Features, Labels, Langsplat, Region};
+        let phrase_options = self.phrases.is_some()
+            || self.phrase_names.is_some()
+            || !self.negatives.is_empty()
+            || self.temperature.is_some();
+        let langsplat_options = self.latents.is_some() || self.checkpoint.is_some();
+        let has_region = self.region.is_some();
+        let kind = match &self.source {
+            Some(kind) => kind.clone(),
+            None if has_region => Region,
+            None if langsplat_options => Langsplat,
+            None if phrase_options || self.features.is_some() => Features,
+            None if scene.extras.labels.is_some() => Labels,
+            None if scene.extras.features.is_some() => bail!(
+                "{scene_name} has per-Gaussian feature vectors but no labels: give a phrase table \
+                 with --phrases TABLE (.json, .npy with --phrase-names, or .safetensors) to query \
+                 them, or --box/--sphere for a region"
+            ),
+            None => bail!(
+                "{scene_name} has neither labels nor feature vectors, so there is nothing to match \
+                 {:?} against: give a label sidecar with --labels SIDECAR.json, feature vectors \
+                 with --features SIDECAR.npy and a phrase table with --phrases TABLE, or a region \
+                 with --box MINX,MINY,MINZ,MAXX,MAXY,MAXZ or --sphere CX,CY,CZ,R",
+                self.query
+            ),
+        };
+        let stray: Vec<&str> = [
+            (kind != Labels && !self.synonyms.is_empty(), "--synonym"),
+            (kind != Region && has_region, "--box/--sphere"),
+            (kind != Features && self.features.is_some(), "--features"),
+            (
+                !matches!(kind, Features | Langsplat) && phrase_options,
+                "--phrases/--phrase-names/--negative/--temperature",
+            ),
+            (
+                kind != Langsplat && langsplat_options,
+                "--latents/--checkpoint",
+            ),
+        ]
+        .into_iter()
+        .filter_map(|(bad, name)| bad.then_some(name))
+        .collect();
+        if !stray.is_empty() {
+            bail!(
+                "{} do not apply to the {kind} source (--synonym is for labels, --box/--sphere for \
+                 region, --features for features, --phrases/--phrase-names/--negative/--temperature \
+                 for features and langsplat, --latents/--checkpoint for langsplat)",
+                stray.join(", ")
+            );
+        }
+        match kind {
+            Region if !has_region => bail!(
+                "the region source needs a region: give --box MINX,MINY,MINZ,MAXX,MAXY,MAXZ or \
+                 --sphere CX,CY,CZ,R"
+            ),
+            Features | Langsplat if self.phrases.is_none() => bail!(
+                "the {kind} source needs text embeddings: give a phrase table with --phrases TABLE \
+                 (.json, .npy with --phrase-names, or .safetensors)"
+            ),
+            Langsplat if self.latents.is_none() || self.checkpoint.is_none() => bail!(
+                "the langsplat source needs the per-Gaussian latents (--latents LATENTS.npy, [N, 3]) \
+                 and the scene's autoencoder checkpoint (--checkpoint best_ckpt.pth)"
+            ),
+            _ => {}
+        }
+        Ok(kind)
+    }
+
+    /// The `[targets]` table a run config would hold for this request with source `kind`.
+    pub fn targets_config(&self, kind: SourceKind) -> TargetsConfig {
+        TargetsConfig {
+            source: kind,
+            synonyms: self.synonyms.clone(),
+            regions: self
+                .region
+                .map(|r| BTreeMap::from([(self.query.trim().to_string(), r)]))
+                .unwrap_or_default(),
+            features: self.features.clone(),
+            phrases: self.phrases.clone(),
+            phrase_names: self.phrase_names.clone(),
+            negatives: (!self.negatives.is_empty()).then(|| self.negatives.clone()),
+            temperature: self.temperature,
+            latents: self.latents.clone(),
+            checkpoint: self.checkpoint.clone(),
+            selection: self.selection,
+            label_names: BTreeMap::new(),
+            custom: BTreeMap::new(),
+        }
+    }
+
+    /// Grounds the query in `scene` (read from `scene_name`) through the `[targets]` path of
+    /// run configs (paths relative to the working directory, a LangSplat decoder on `device`)
+    /// and draws the picture; writes nothing.
+    pub fn run(&self, scene: &Scene, scene_name: &str, device: &Device) -> Result<QueryOutcome> {
+        let kind = self.choose_source(scene, scene_name)?;
+        self.selection.validate_as("--")?;
+        let config = self.targets_config(kind.clone());
+        let registry = SourceRegistry::default();
+        let source = config
+            .build_named(Path::new(""), device, &registry, &option_of_key)
+            .with_context(|| format!("{scene_name} ({kind} source)"))?;
+        let target = find_target(source.as_ref(), scene, &self.query, &self.selection)
+            .with_context(|| format!("{scene_name} ({} source)", source.kind()))?;
+        let uploaded = DeviceScene::new(scene, device, Precision::F32.dtype());
+        let (pose, camera) =
+            diagnostic_camera(scene, &uploaded, &target, &self.intrinsics, self.view)?;
+        let (png, highlighted_share) =
+            highlighted_picture(&uploaded, &target, &pose, &self.intrinsics)?;
+        Ok(QueryOutcome {
+            source: kind,
+            target,
+            camera,
+            png,
+            highlighted_share,
+        })
+    }
+}
+
+impl QueryOutcome {
+    /// The report of a scene of `gaussians` Gaussians read from `scene_name`, its picture
+    /// written to `image`.
+    pub fn report(&self, scene_name: &str, gaussians: usize, image: &Path) -> QueryReport {
+        let t = &self.target;
+        QueryReport {
+            scene: scene_name.to_string(),
+            source: self.source.name(),
+            query: t.query.clone(),
+            name: t.name.clone(),
+            gaussians,
+            count: t.count,
+            fraction: t.count as f64 / gaussians as f64,
+            candidates: t.candidates,
+            clusters: t.clusters.clone(),
+            noise: t.noise,
+            eps: t.eps,
+            percentile_threshold: t.percentile_threshold,
+            relevancy: t.relevancy_spread,
+            centre: t.centre,
+            extent: t.extent,
+            camera: self.camera.clone(),
+            highlighted_share: self.highlighted_share,
+            image: image.display().to_string(),
+        }
+    }
+}
+
+/// The command-line option that sets a `[targets]` key, for error messages.
+pub fn option_of_key(key: &str) -> String {
+    let head = key.split('.').next().unwrap_or(key);
+    match head {
+        "synonyms" => "--synonym".to_string(),
+        "regions" => "--box/--sphere".to_string(),
+        "negatives" => "--negative".to_string(),
+        other => format!("--{}", other.replace('_', "-")),
+    }
+}
+
+/// `--box MINX,MINY,MINZ,MAXX,MAXY,MAXZ` or `--sphere CX,CY,CZ,R` (at most one), parsed and
+/// checked.
+pub fn parse_region(region_box: Option<&str>, sphere: Option<&str>) -> Result<Option<RegionSpec>> {
+    let (spec, key) = match (region_box, sphere) {
+        (Some(text), _) => (
+            RegionSpec::Box(parse_floats::<6>(
+                text,
+                "--box",
+                "MINX,MINY,MINZ,MAXX,MAXY,MAXZ",
+            )?),
+            "--box",
+        ),
+        (None, Some(text)) => (
+            RegionSpec::Sphere(parse_floats::<4>(text, "--sphere", "CX,CY,CZ,R")?),
+            "--sphere",
+        ),
+        (None, None) => return Ok(None),
+    };
+    Region::from(spec)
+        .validate(key)
+        .map_err(|e| anyhow!("{e}"))?;
+    Ok(Some(spec))
+}
+
+/// `N` comma-separated finite numbers; errors name `option` and the expected `form`.
+pub fn parse_floats<const N: usize>(text: &str, option: &str, form: &str) -> Result<[f32; N]> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    if parts.len() != N {
+        bail!(
+            "{option} {text:?}: expected {N} comma-separated numbers {form}, got {}",
+            parts.len()
+        );
+    }
+    let mut values = [0.0f32; N];
+    for (v, p) in values.iter_mut().zip(&parts) {
+        *v = p
+            .parse::<f32>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| anyhow!("{option} {text:?}: {p:?} is not a finite number ({form})"))?;
+    }
+    Ok(values)
+}
+
+/// `NAME=ALT1,ALT2` items into label name → synonyms (repeated names merge).
+pub fn parse_synonyms(items: &[String]) -> Result<BTreeMap<String, Vec<String>>> {
+    let mut synonyms: BTreeMap<String, Vec<String>> = BTreeMap::new();
+    for item in items {
+        let Some((name, alts)) = item.split_once('=') else {
+            bail!("--synonym {item:?}: expected NAME=ALT1,ALT2 (e.g. \"red mug=cup,coffee mug\")");
+        };
+        let name = name.trim();
+        let alts: Vec<String> = alts
+            .split(',')
+            .map(str::trim)
+            .filter(|a| !a.is_empty())
+            .map(String::from)
+            .collect();
+        if name.is_empty() || alts.is_empty() {
+            bail!(
+                "--synonym {item:?}: both the label name and at least one synonym are needed (NAME=ALT1,ALT2)"
+            );
+        }
+        synonyms.entry(name.to_string()).or_default().extend(alts);
+    }
+    Ok(synonyms)
+}
+
+fn fmt3(v: [f32; 3]) -> String {
+    format!("({:.4}, {:.4}, {:.4})", v[0], v[1], v[2])
+}
+
+impl QueryReport {
+    /// The human-readable report, one fact a line.
+    pub fn text(&self) -> String {
+        let r = self;
+        let mut s = String::new();
+        s.push_str(&format!(
+            "query {:?} ({} source) matched {:?} in {}\n",
+            r.query, r.source, r.name, r.scene
+        ));
+        s.push_str(&format!(
+            "selected: {} of {} Gaussians ({:.3}%)\n",
+            r.count,
+            r.gaussians,
+            100.0 * r.fraction
+        ));
+        let threshold = r
+            .percentile_threshold
+            .map_or(String::new(), |t| format!(" (percentile threshold {t:.4})"));
+        s.push_str(&format!("candidates: {}{threshold}\n", r.candidates));
+        let sizes: Vec<String> = r.clusters.iter().map(|c| c.to_string()).collect();
+        let eps = r
+            .eps
+            .map_or("no DBSCAN".to_string(), |e| format!("DBSCAN eps {e:.4}"));
+        s.push_str(&format!(
+            "clusters: {} [{}], noise {} ({eps})\n",
+            r.clusters.len(),
+            sizes.join(", "),
+            r.noise
+        ));
+        s.push_str(&format!(
+            "relevancy: min {:.4}, median {:.4}, max {:.4}\n",
+            r.relevancy.min, r.relevancy.median, r.relevancy.max
+        ));
+        s.push_str(&format!("centre: {}\n", fmt3(r.centre)));
+        s.push_str(&format!("extent: {}\n", fmt3(r.extent)));
+        let c = &r.camera;
+        s.push_str(&format!(
+            "camera: eye ({:.4}, {:.4}, {:.4}), distance {:.4}, up ({:.2}, {:.2}, {:.2}) ({}), \
+             azimuth {:.0}°, elevation {:.0}°\n",
+            c.eye[0],
+            c.eye[1],
+            c.eye[2],
+            c.distance,
+            c.up[0],
+            c.up[1],
+            c.up[2],
+            c.up_from,
+            c.azimuth_degrees,
+            c.elevation_degrees
+        ));
+        s.push_str(&format!(
+            "image: {} ({}×{}, {:.1}% of the pixels highlighted)\n",
+            r.image,
+            c.width,
+            c.height,
+            100.0 * r.highlighted_share
+        ));
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn synonyms_parse_and_merge() {
+        let s = parse_synonyms(&["red mug=cup, mug".into(), "red mug=beaker".into()]).unwrap();
+        assert_eq!(s["red mug"], vec!["cup", "mug", "beaker"]);
+        assert!(parse_synonyms(&["no equals".into()]).is_err());
+        assert!(parse_synonyms(&["=x".into()]).is_err());
+    }
+
+    #[test]
+    fn floats_parse_with_counts_checked() {
+        assert_eq!(
+            parse_floats::<4>("1, 2,3,0.5", "--sphere", "").unwrap(),
+            [1.0, 2.0, 3.0, 0.5]
+        );
+        assert!(parse_floats::<4>("1,2,3", "--sphere", "").is_err());
+        assert!(parse_floats::<4>("1,2,3,nan", "--sphere", "").is_err());
+    }
+}
