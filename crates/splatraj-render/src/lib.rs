@@ -5,6 +5,8 @@
 //! burn tensors. It does not read files or pick objects: it takes a [`splatraj_scene::Scene`]
 //! and per-Gaussian channels from the crates before it in the pipeline.
 
+#![warn(missing_docs)]
+
 pub mod backend;
 pub mod camera;
 pub mod camera_file;
