@@ -10,7 +10,7 @@ use glam::DVec3;
 use splatraj_render::backend::{BackendKind, Precision};
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::reference::{RefChannels, render_reference};
-use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, render};
+use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
 use splatraj_scene::Scene;
 
 /// A 5×4 grid of overlapping Gaussians at depth ~3 in front of a camera looking along +z;
@@ -47,8 +47,12 @@ fn setup() -> (Scene, Vec<f32>, Intrinsics, Pose) {
     (scene, mask, intrinsics, pose)
 }
 
-/// Mask image and d(Σ mask)/dΦ on a backend.
-fn mask_and_gradient(backend: BackendKind, precision: Precision) -> (Vec<f64>, Vec<f64>) {
+/// Mask image and d(Σ mask)/dΦ on a backend with a rasterizer.
+fn mask_and_gradient(
+    backend: BackendKind,
+    precision: Precision,
+    rasterizer: Rasterizer,
+) -> (Vec<f64>, Vec<f64>) {
     let (scene, mask, intrinsics, pose) = setup();
     let device = backend.device().expect("compiled backend").autodiff();
     let dtype = precision.dtype();
@@ -57,6 +61,7 @@ fn mask_and_gradient(backend: BackendKind, precision: Precision) -> (Vec<f64>, V
         .require_grad();
     let mut request = RenderRequest::new(intrinsics, vec![Channel::Mask(mask)]);
     request.pruning = Pruning::ObjectOnly;
+    request.rasterizer = rasterizer;
     let out = render(&uploaded, poses.clone(), &request).unwrap();
     let grads = out.images.clone().sum().backward();
     let image = host(out.images);
@@ -89,7 +94,7 @@ fn compiled_backends_agree_on_image_and_gradient() {
     );
     let reference = reference_mask();
     assert!(reference.iter().any(|&v| v > 0.2), "the object is in view");
-    let (_, flex_grad) = mask_and_gradient(BackendKind::Flex, Precision::F64);
+    let (_, flex_grad) = mask_and_gradient(BackendKind::Flex, Precision::F64, Rasterizer::Tensor);
     assert!(
         flex_grad.iter().any(|g| g.abs() > 1e-3),
         "a gradient to compare"
@@ -100,8 +105,11 @@ fn compiled_backends_agree_on_image_and_gradient() {
         } else {
             &[Precision::F32, Precision::F64]
         };
-        for &precision in precisions {
-            let (image, grad) = mask_and_gradient(backend, precision);
+        for (&precision, rasterizer) in precisions
+            .iter()
+            .flat_map(|p| [(p, Rasterizer::Fused), (p, Rasterizer::Tensor)])
+        {
+            let (image, grad) = mask_and_gradient(backend, precision, rasterizer);
             let tolerance = if precision == Precision::F64 {
                 1e-9
             } else {
@@ -113,13 +121,13 @@ fn compiled_backends_agree_on_image_and_gradient() {
                 .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
             assert!(
                 image_error <= tolerance,
-                "{backend} {precision:?}: image differs by {image_error}"
+                "{backend} {precision:?} {rasterizer:?}: image differs by {image_error}"
             );
             for (k, (got, want)) in grad.iter().zip(&flex_grad).enumerate() {
                 let relative = (got - want).abs() / want.abs().max(1.0);
                 assert!(
                     relative <= 1e-3,
-                    "{backend} {precision:?}: dΦ[{k}] = {got}, flex f64 says {want}"
+                    "{backend} {precision:?} {rasterizer:?}: dΦ[{k}] = {got}, flex f64 tensor says {want}"
                 );
             }
         }
