@@ -20,6 +20,8 @@ pub struct HostGeometry {
     pub means: Vec<[f32; 3]>,
     /// World covariances (xx, xy, xz, yy, yz, zz).
     pub covariances: Vec<[f32; 6]>,
+    /// Largest eigenvalue of each world covariance (the squared largest scale).
+    pub max_variance: Vec<f32>,
 }
 
 impl HostGeometry {
@@ -32,9 +34,15 @@ impl HostGeometry {
                 [s[0], s[1], s[2], s[4], s[5], s[8]].map(|v| v as f32)
             })
             .collect();
+        let max_variance = scene
+            .scales
+            .iter()
+            .map(|s| s.iter().fold(0.0f32, |m, &v| m.max(v * v)))
+            .collect();
         HostGeometry {
             means: scene.means.clone(),
             covariances,
+            max_variance,
         }
     }
 
@@ -78,6 +86,13 @@ pub fn decide(
         visible: vec![false; total],
     };
     let Intrinsics { fx, fy, cx, cy, .. } = *intrinsics;
+    // The tile grid's extent (whole tiles): a square that reaches into the last partial tile
+    // is listed there, as the binning rule says.
+    let grid = crate::tiles::TileGrid::new(intrinsics.width, intrinsics.height);
+    let (width, height) = (
+        (grid.tiles_x * crate::tiles::TILE_SIZE) as f64,
+        (grid.tiles_y * crate::tiles::TILE_SIZE) as f64,
+    );
     let (tan_x, tan_y) = intrinsics.tan_half_fov();
     let (lim_x, lim_y) = (FOV_CLAMP * tan_x, FOV_CLAMP * tan_y);
     const BLOCK: usize = 4096;
@@ -104,6 +119,25 @@ pub fn decide(
                     means_2d[2 * j + 1] = (fy * yz + cy) as f32;
                     depth[j] = z as f32;
                     let (tx, ty) = (xz.clamp(-lim_x, lim_x), yz.clamp(-lim_y, lim_y));
+                    // A bound on the radius from ‖J‖²_F·λ_max(Σ): a Gaussian whose bounding
+                    // square surely misses the tile grid touches no tile, so its covariance is
+                    // not needed (it is marked not visible, which changes no tile list).
+                    let j_norm2 = (fx * fx * (1.0 + tx * tx) + fy * fy * (1.0 + ty * ty))
+                        / (z_safe * z_safe);
+                    let bound = 3.0
+                        * (j_norm2 * f64::from(geometry.max_variance[g]) + LOW_PASS).sqrt()
+                        + 1.0;
+                    let (u, v) = (fx * xz + cx, fy * yz + cy);
+                    if z <= near
+                        || u + bound < 0.0
+                        || v + bound < 0.0
+                        || u - bound > width
+                        || v - bound > height
+                    {
+                        visible[j] = false;
+                        radii[j] = 0.0;
+                        continue;
+                    }
                     let t1 = r0 * (fx / z_safe) + r2 * (-fx * tx / z_safe);
                     let t2 = r1 * (fy / z_safe) + r2 * (-fy * ty / z_safe);
                     let [sxx, sxy, sxz, syy, syz, szz] = geometry.covariances[g].map(f64::from);
