@@ -122,8 +122,8 @@ pub fn decide(
                     // A bound on the radius from ‖J‖²_F·λ_max(Σ): a Gaussian whose bounding
                     // square surely misses the tile grid touches no tile, so its covariance is
                     // not needed (it is marked not visible, which changes no tile list).
-                    let j_norm2 = (fx * fx * (1.0 + tx * tx) + fy * fy * (1.0 + ty * ty))
-                        / (z_safe * z_safe);
+                    let j_norm2 =
+                        (fx * fx * (1.0 + tx * tx) + fy * fy * (1.0 + ty * ty)) / (z_safe * z_safe);
                     let bound = 3.0
                         * (j_norm2 * f64::from(geometry.max_variance[g]) + LOW_PASS).sqrt()
                         + 1.0;

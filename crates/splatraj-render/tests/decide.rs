@@ -26,7 +26,9 @@ fn scene() -> Scene {
             .means
             .push([0, 1, 2].map(|_| ((next() - 0.5) * spread) as f32));
         let size = 0.005 * 200f64.powf(next());
-        scene.scales.push([0, 1, 2].map(|_| (size * (0.2 + next())) as f32));
+        scene
+            .scales
+            .push([0, 1, 2].map(|_| (size * (0.2 + next())) as f32));
         scene
             .rotations
             .push([0, 1, 2, 3].map(|_| (next() - 0.5) as f32));
@@ -43,12 +45,19 @@ fn host_decisions_match_the_tensor_projection() {
     let grid = TileGrid::new(k.width, k.height);
     let poses = [
         Pose::look_at(DVec3::new(0.0, -1.0, 6.0), DVec3::ZERO, DVec3::Y).unwrap(),
-        Pose::look_at(DVec3::new(4.0, 0.5, -1.0), DVec3::new(0.0, 0.2, 0.0), DVec3::Y).unwrap(),
+        Pose::look_at(
+            DVec3::new(4.0, 0.5, -1.0),
+            DVec3::new(0.0, 0.2, 0.0),
+            DVec3::Y,
+        )
+        .unwrap(),
     ];
     let device = Device::flex();
     let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
-    let pose_tensor =
-        Tensor::<2>::from_data(TensorData::new(flat, [poses.len(), 6]), (&device, DType::F64));
+    let pose_tensor = Tensor::<2>::from_data(
+        TensorData::new(flat, [poses.len(), 6]),
+        (&device, DType::F64),
+    );
     let tensors = SceneTensors::new(&scene, None, &device, DType::F64);
     let projected = project(&tensors, pose_tensor, &k);
     let (radii, visible) = radii_and_visibility(&projected, NEAR_PLANE);
@@ -67,17 +76,29 @@ fn host_decisions_match_the_tensor_projection() {
         let reaches_grid = visible[i] && !xs.is_empty() && !ys.is_empty();
         if reaches_grid {
             on_grid += 1;
-            assert!(host.visible[i], "Gaussian {i}: visible on the grid, culled by the host");
+            assert!(
+                host.visible[i],
+                "Gaussian {i}: visible on the grid, culled by the host"
+            );
             assert_eq!(host.radii[i], radii[i], "Gaussian {i}: radius");
             let du = (host.means_2d[2 * i] as f64 - u).abs();
             let dv = (host.means_2d[2 * i + 1] as f64 - v).abs();
-            assert!(du.max(dv) < 1e-3 * (1.0 + u.abs().max(v.abs())), "Gaussian {i}: position");
+            assert!(
+                du.max(dv) < 1e-3 * (1.0 + u.abs().max(v.abs())),
+                "Gaussian {i}: position"
+            );
         } else if !visible[i] {
-            assert!(!host.visible[i], "Gaussian {i}: culled by the tensor path, not by the host");
+            assert!(
+                !host.visible[i],
+                "Gaussian {i}: culled by the tensor path, not by the host"
+            );
         } else {
             skipped += usize::from(!host.visible[i]);
         }
     }
     assert!(on_grid > 1000, "enough Gaussians on screen ({on_grid})");
-    assert!(skipped > 100, "the host skips off-screen Gaussians ({skipped})");
+    assert!(
+        skipped > 100,
+        "the host skips off-screen Gaussians ({skipped})"
+    );
 }
