@@ -11,7 +11,10 @@ use rayon::prelude::*;
 use splatraj_scene::Scene;
 
 use crate::camera::{Intrinsics, Pose};
+use glam::DVec3;
+
 use crate::project::{FOV_CLAMP, LOW_PASS, NORMALISED_DET_FLOOR, world_covariance};
+use crate::tiles::{TILE_SIZE, TileGrid};
 
 /// Pose-independent geometry on the host, for the decisions (computed once per scene).
 #[derive(Debug, Clone, Default)]
@@ -71,11 +74,17 @@ pub struct Decisions {
 }
 
 /// Projects every Gaussian for every pose and decides its cull, radius and depth.
+///
+/// With `focus` (a mask pass's object, one flag per Gaussian), the object's Gaussians are
+/// decided first; the others are then decided only where their bounded square reaches the box
+/// of tiles the object touches in that pose, and are marked not visible elsewhere. That
+/// changes no tile list the pass uses (binning keeps only the object's tiles).
 pub fn decide(
     geometry: &HostGeometry,
     poses: &[Pose],
     intrinsics: &Intrinsics,
     near: f64,
+    focus: Option<&[bool]>,
 ) -> Decisions {
     let n = geometry.len();
     let total = n * poses.len();
@@ -85,80 +94,171 @@ pub fn decide(
         radii: vec![0.0; total],
         visible: vec![false; total],
     };
-    let Intrinsics { fx, fy, cx, cy, .. } = *intrinsics;
-    // The tile grid's extent (whole tiles): a square that reaches into the last partial tile
+    let grid = TileGrid::new(intrinsics.width, intrinsics.height);
+    // The tile grid's extent in whole tiles: a square that reaches into the last partial tile
     // is listed there, as the binning rule says.
-    let grid = crate::tiles::TileGrid::new(intrinsics.width, intrinsics.height);
-    let (width, height) = (
-        (grid.tiles_x * crate::tiles::TILE_SIZE) as f64,
-        (grid.tiles_y * crate::tiles::TILE_SIZE) as f64,
-    );
-    let (tan_x, tan_y) = intrinsics.tan_half_fov();
-    let (lim_x, lim_y) = (FOV_CLAMP * tan_x, FOV_CLAMP * tan_y);
-    const BLOCK: usize = 4096;
+    let whole_grid = [
+        0.0,
+        0.0,
+        (grid.tiles_x * TILE_SIZE) as f64,
+        (grid.tiles_y * TILE_SIZE) as f64,
+    ];
     for (b, pose) in poses.iter().enumerate() {
-        let r = pose.rotation_wc();
-        let (r0, r1, r2) = (r.x_axis, r.y_axis, r.z_axis); // camera axes in world
-        let centre = pose.centre();
+        let camera = Camera::new(pose, intrinsics, near);
         let range = b * n..(b + 1) * n;
-        decisions.means_2d[2 * range.start..2 * range.end]
+        let mut out = Out {
+            means_2d: &mut decisions.means_2d[2 * range.start..2 * range.end],
+            depth: &mut decisions.depth[range.clone()],
+            radii: &mut decisions.radii[range.clone()],
+            visible: &mut decisions.visible[range],
+        };
+        let Some(focus) = focus else {
+            out.pass(&camera, geometry, &|_| true, whole_grid);
+            continue;
+        };
+        out.pass(&camera, geometry, &|g| focus[g], whole_grid);
+        // The box of tiles the object touches (in pixels), then everything else against it.
+        let mut tiles = [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        for g in (0..n).filter(|&g| focus[g] && out.visible[g]) {
+            let (u, v) = (
+                f64::from(out.means_2d[2 * g]),
+                f64::from(out.means_2d[2 * g + 1]),
+            );
+            let (xs, ys) = grid.touched(u, v, f64::from(out.radii[g]));
+            if xs.is_empty() || ys.is_empty() {
+                continue;
+            }
+            let size = TILE_SIZE as f64;
+            tiles[0] = tiles[0].min(xs.start as f64 * size);
+            tiles[1] = tiles[1].min(ys.start as f64 * size);
+            tiles[2] = tiles[2].max(xs.end as f64 * size);
+            tiles[3] = tiles[3].max(ys.end as f64 * size);
+        }
+        if tiles[0] < tiles[2] {
+            out.pass(&camera, geometry, &|g| !focus[g], tiles);
+        }
+    }
+    decisions
+}
+
+/// Gaussians per parallel block of the decision pass.
+const BLOCK: usize = 4096;
+
+/// One pose's share of [`Decisions`].
+struct Out<'a> {
+    means_2d: &'a mut [f32],
+    depth: &'a mut [f32],
+    radii: &'a mut [f32],
+    visible: &'a mut [bool],
+}
+
+impl Out<'_> {
+    /// Decides the Gaussians `select` picks, in parallel blocks, against `bounds`.
+    fn pass(
+        &mut self,
+        camera: &Camera,
+        geometry: &HostGeometry,
+        select: &(dyn Fn(usize) -> bool + Sync),
+        bounds: [f64; 4],
+    ) {
+        self.means_2d
             .par_chunks_mut(2 * BLOCK)
-            .zip(decisions.depth[range.clone()].par_chunks_mut(BLOCK))
-            .zip(decisions.radii[range.clone()].par_chunks_mut(BLOCK))
-            .zip(decisions.visible[range].par_chunks_mut(BLOCK))
+            .zip(self.depth.par_chunks_mut(BLOCK))
+            .zip(self.radii.par_chunks_mut(BLOCK))
+            .zip(self.visible.par_chunks_mut(BLOCK))
             .enumerate()
             .for_each(|(block, (((means_2d, depth), radii), visible))| {
                 for j in 0..depth.len() {
                     let g = block * BLOCK + j;
-                    let m = geometry.means[g].map(f64::from);
-                    let d = glam::DVec3::from(m) - centre;
-                    let (x, y, z) = (d.dot(r0), d.dot(r1), d.dot(r2));
-                    let z_safe = z.max(near);
-                    let (xz, yz) = (x / z_safe, y / z_safe);
-                    means_2d[2 * j] = (fx * xz + cx) as f32;
-                    means_2d[2 * j + 1] = (fy * yz + cy) as f32;
-                    depth[j] = z as f32;
-                    let (tx, ty) = (xz.clamp(-lim_x, lim_x), yz.clamp(-lim_y, lim_y));
-                    // A bound on the radius from ‖J‖²_F·λ_max(Σ): a Gaussian whose bounding
-                    // square surely misses the tile grid touches no tile, so its covariance is
-                    // not needed (it is marked not visible, which changes no tile list).
-                    let j_norm2 =
-                        (fx * fx * (1.0 + tx * tx) + fy * fy * (1.0 + ty * ty)) / (z_safe * z_safe);
-                    let bound = 3.0
-                        * (j_norm2 * f64::from(geometry.max_variance[g]) + LOW_PASS).sqrt()
-                        + 1.0;
-                    let (u, v) = (fx * xz + cx, fy * yz + cy);
-                    if z <= near
-                        || u + bound < 0.0
-                        || v + bound < 0.0
-                        || u - bound > width
-                        || v - bound > height
-                    {
-                        visible[j] = false;
-                        radii[j] = 0.0;
+                    if !select(g) {
                         continue;
                     }
-                    let t1 = r0 * (fx / z_safe) + r2 * (-fx * tx / z_safe);
-                    let t2 = r1 * (fy / z_safe) + r2 * (-fy * ty / z_safe);
-                    let [sxx, sxy, sxz, syy, syz, szz] = geometry.covariances[g].map(f64::from);
-                    let sigma = |t: glam::DVec3| {
-                        glam::DVec3::new(
-                            sxx * t.x + sxy * t.y + sxz * t.z,
-                            sxy * t.x + syy * t.y + syz * t.z,
-                            sxz * t.x + syz * t.y + szz * t.z,
-                        )
-                    };
-                    let s_t2 = sigma(t2);
-                    let a = t1.dot(sigma(t1)) + LOW_PASS;
-                    let bb = t1.dot(s_t2);
-                    let c = t2.dot(s_t2) + LOW_PASS;
-                    let (ok, radius) = cull_and_radius(z, a, bb, c, near);
-                    visible[j] = ok;
-                    radii[j] = radius;
+                    let (uv, z, radius) = camera.decide(geometry, g, bounds);
+                    means_2d[2 * j] = uv[0] as f32;
+                    means_2d[2 * j + 1] = uv[1] as f32;
+                    depth[j] = z as f32;
+                    radii[j] = radius.unwrap_or(0.0);
+                    visible[j] = radius.is_some();
                 }
             });
     }
-    decisions
+}
+
+/// One pose's camera, set up for deciding Gaussians.
+struct Camera {
+    r: [DVec3; 3],
+    centre: DVec3,
+    intrinsics: Intrinsics,
+    limits: (f64, f64),
+    near: f64,
+}
+
+impl Camera {
+    fn new(pose: &Pose, intrinsics: &Intrinsics, near: f64) -> Self {
+        let r = pose.rotation_wc();
+        let (tan_x, tan_y) = intrinsics.tan_half_fov();
+        Camera {
+            r: [r.x_axis, r.y_axis, r.z_axis], // camera axes in world
+            centre: pose.centre(),
+            intrinsics: *intrinsics,
+            limits: (FOV_CLAMP * tan_x, FOV_CLAMP * tan_y),
+            near,
+        }
+    }
+
+    /// Pixel position, depth and radius (`None` if culled) of Gaussian `g`. A Gaussian whose
+    /// bounded square misses `bounds` ([x0, y0, x1, y1], pixels) gets `None` without its
+    /// covariance being projected: it would touch no tile there.
+    fn decide(
+        &self,
+        geometry: &HostGeometry,
+        g: usize,
+        bounds: [f64; 4],
+    ) -> ([f64; 2], f64, Option<f32>) {
+        let Intrinsics { fx, fy, cx, cy, .. } = self.intrinsics;
+        let [r0, r1, r2] = self.r;
+        let d = DVec3::from(geometry.means[g].map(f64::from)) - self.centre;
+        let (x, y, z) = (d.dot(r0), d.dot(r1), d.dot(r2));
+        let z_safe = z.max(self.near);
+        let (xz, yz) = (x / z_safe, y / z_safe);
+        let (u, v) = (fx * xz + cx, fy * yz + cy);
+        let (tx, ty) = (
+            xz.clamp(-self.limits.0, self.limits.0),
+            yz.clamp(-self.limits.1, self.limits.1),
+        );
+        // λ_max(Σ_2D) ≤ ‖J‖²_F·λ_max(Σ) + 0.3 bounds the radius.
+        let j_norm2 = (fx * fx * (1.0 + tx * tx) + fy * fy * (1.0 + ty * ty)) / (z_safe * z_safe);
+        let bound = 3.0 * (j_norm2 * f64::from(geometry.max_variance[g]) + LOW_PASS).sqrt() + 1.0;
+        if z <= self.near
+            || u + bound < bounds[0]
+            || v + bound < bounds[1]
+            || u - bound > bounds[2]
+            || v - bound > bounds[3]
+        {
+            return ([u, v], z, None);
+        }
+        let t1 = r0 * (fx / z_safe) + r2 * (-fx * tx / z_safe);
+        let t2 = r1 * (fy / z_safe) + r2 * (-fy * ty / z_safe);
+        let [sxx, sxy, sxz, syy, syz, szz] = geometry.covariances[g].map(f64::from);
+        let sigma = |t: DVec3| {
+            DVec3::new(
+                sxx * t.x + sxy * t.y + sxz * t.z,
+                sxy * t.x + syy * t.y + syz * t.z,
+                sxz * t.x + syz * t.y + szz * t.z,
+            )
+        };
+        let s_t2 = sigma(t2);
+        let a = t1.dot(sigma(t1)) + LOW_PASS;
+        let b = t1.dot(s_t2);
+        let c = t2.dot(s_t2) + LOW_PASS;
+        let (ok, radius) = cull_and_radius(z, a, b, c, self.near);
+        ([u, v], z, ok.then_some(radius))
+    }
 }
 
 /// (visible, radius) from camera depth z and Σ_2D = [[a, b], [b, c]] (low-pass included).

@@ -217,7 +217,13 @@ pub fn render(
         .chunks_exact(6)
         .map(|p| Pose([p[0], p[1], p[2], p[3], p[4], p[5]]))
         .collect();
-    let decisions = decide(&scene.host, &host_poses, &request.intrinsics, request.near);
+    let decisions = decide(
+        &scene.host,
+        &host_poses,
+        &request.intrinsics,
+        request.near,
+        in_object.as_deref(),
+    );
     let decided = started.elapsed();
     let screen = ScreenData {
         n,

@@ -68,7 +68,7 @@ fn host_decisions_match_the_tensor_projection() {
         .try_to_vec::<f64>()
         .unwrap();
 
-    let host = decide(&HostGeometry::new(&scene), &poses, &k, NEAR_PLANE);
+    let host = decide(&HostGeometry::new(&scene), &poses, &k, NEAR_PLANE, None);
     let (mut on_grid, mut skipped) = (0, 0);
     for i in 0..visible.len() {
         let (u, v, r) = (means[2 * i], means[2 * i + 1], radii[i] as f64);
