@@ -172,7 +172,7 @@ impl<E: Real> Splat<E> {
         }
         let det = a * c - b * b;
         let full = Some((0..TILE_SIZE, 0..TILE_SIZE));
-        if !(det > 0.0) {
+        if det.is_nan() || det <= 0.0 {
             return full;
         }
         let half_x = (2.0 * t * c / det).sqrt();
