@@ -1,0 +1,322 @@
+//! COLMAP text model: `cameras.txt`, `images.txt` (and an empty `points3D.txt`, so that COLMAP
+//! and the 3DGS trainers that read COLMAP folders accept the export as a model).
+//!
+//! - `cameras.txt`: `CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]`; we write `PINHOLE` with
+//!   `fx fy cx cy` in pixels, one camera per distinct intrinsics.
+//! - `images.txt`: two lines per image. The first is `IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID
+//!   NAME`: the **world-to-camera** rotation R_cw = R_wcᵀ as a unit quaternion (Hamilton,
+//!   scalar first; we write qw ≥ 0) and the translation t = −R_cw·c, so a world point p is at
+//!   R_cw·p + t in the camera. The second lists the image's 2D points (`X Y POINT3D_ID`
+//!   triples); we write it empty.
+//! - Camera axes are OpenCV's (x right, y down, z forward), as ours; pixel (i, j) has its
+//!   centre at (i + 0.5, j + 0.5), as ours. Units are the scene's.
+//!
+//! Reading accepts `SIMPLE_PINHOLE` and `PINHOLE`, and takes the focal lengths and principal
+//! point of the distorted perspective models (`SIMPLE_RADIAL`, `RADIAL`, `OPENCV`,
+//! `FULL_OPENCV`), ignoring their distortion. Images are returned in the order of their ids
+//! (COLMAP numbers images in the order of their names when it imports them, and our export
+//! numbers frames in time order); `cameras.txt` is optional (without it the frames carry no
+//! intrinsics).
+
+use std::collections::HashMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use glam::{DMat3, DQuat, DVec3};
+
+use crate::camera::{CameraPath, CameraPose, Frame, Pinhole};
+use crate::check_export;
+use crate::error::{Result, invalid, read_text};
+
+const FORMAT: &str = "COLMAP text model";
+
+/// The three files of a COLMAP text model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ColmapFiles {
+    /// `cameras.txt`.
+    pub cameras: String,
+    /// `images.txt`.
+    pub images: String,
+    /// `points3D.txt` (header only).
+    pub points3d: String,
+}
+
+/// The image name of frame `i` (as our run folders name their frames).
+pub fn frame_name(i: usize) -> String {
+    format!("frame_{i:04}.png")
+}
+
+/// Hamilton quaternion (w, x, y, z) of `r`, with w ≥ 0.
+pub fn quaternion_wxyz(r: DMat3) -> [f64; 4] {
+    let mut q = DQuat::from_mat3(&r).normalize();
+    if q.w < 0.0 {
+        q = -q;
+    }
+    [q.w, q.x, q.y, q.z]
+}
+
+/// `path` as a COLMAP text model; image `i` (from 1) is named [`frame_name`]`(i - 1)`.
+pub fn export(path: &CameraPath) -> Result<ColmapFiles> {
+    let frames = check_export(path, FORMAT)?;
+    let mut cameras: Vec<Pinhole> = Vec::new();
+    let mut images = String::from(
+        "# Image list with two lines of data per image:\n\
+         #   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n\
+         #   POINTS2D[] as (X, Y, POINT3D_ID)\n",
+    );
+    let _ = writeln!(
+        images,
+        "# Number of images: {}, mean observations per image: 0",
+        frames.len()
+    );
+    for (i, (pose, camera)) in frames.iter().enumerate() {
+        let camera_id = match cameras.iter().position(|c| c == camera) {
+            Some(k) => k + 1,
+            None => {
+                cameras.push(*camera);
+                cameras.len()
+            }
+        };
+        let [qw, qx, qy, qz] = quaternion_wxyz(pose.world_to_camera_rotation());
+        let t = pose.world_to_camera_translation();
+        let _ = writeln!(
+            images,
+            "{} {qw} {qx} {qy} {qz} {} {} {} {camera_id} {}\n",
+            i + 1,
+            t.x,
+            t.y,
+            t.z,
+            frame_name(i)
+        );
+    }
+    let mut cameras_txt = String::from(
+        "# Camera list with one line of data per camera:\n\
+         #   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n",
+    );
+    let _ = writeln!(cameras_txt, "# Number of cameras: {}", cameras.len());
+    for (k, c) in cameras.iter().enumerate() {
+        let _ = writeln!(
+            cameras_txt,
+            "{} PINHOLE {} {} {} {} {} {}",
+            k + 1,
+            c.width,
+            c.height,
+            c.fx,
+            c.fy,
+            c.cx,
+            c.cy
+        );
+    }
+    let points3d = "# 3D point list with one line of data per point:\n\
+                    #   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n\
+                    # Number of points: 0, mean track length: 0\n"
+        .to_string();
+    Ok(ColmapFiles {
+        cameras: cameras_txt,
+        images,
+        points3d,
+    })
+}
+
+/// Data lines of a COLMAP text file: (1-based line number, trimmed text), comments and blank
+/// lines skipped.
+fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+    text.lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim()))
+        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
+}
+
+fn number<T: std::str::FromStr>(file: &str, element: &str, name: &str, token: &str) -> Result<T> {
+    token
+        .parse()
+        .map_err(|_| invalid(file, element, format!("{name} {token:?} is not a number")))
+}
+
+/// The cameras of `cameras.txt` text by id.
+pub fn import_cameras(text: &str, file: &str) -> Result<HashMap<u64, Pinhole>> {
+    let mut cameras = HashMap::new();
+    for (line, data) in data_lines(text) {
+        let tokens: Vec<&str> = data.split_whitespace().collect();
+        let element = format!("line {line}");
+        if tokens.len() < 4 {
+            return Err(invalid(
+                file,
+                element,
+                "expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]",
+            ));
+        }
+        let id: u64 = number(file, &element, "CAMERA_ID", tokens[0])?;
+        let element = format!("line {line} (camera {id})");
+        let width: usize = number(file, &element, "WIDTH", tokens[2])?;
+        let height: usize = number(file, &element, "HEIGHT", tokens[3])?;
+        let params = tokens[4..]
+            .iter()
+            .map(|t| number::<f64>(file, &element, "parameter", t))
+            .collect::<Result<Vec<_>>>()?;
+        // (parameter count, focal lengths shared?) of the perspective models we read.
+        let (count, shared_focal) = match tokens[1] {
+            "SIMPLE_PINHOLE" => (3, true),
+            "PINHOLE" => (4, false),
+            "SIMPLE_RADIAL" => (4, true),
+            "RADIAL" => (5, true),
+            "OPENCV" => (8, false),
+            "FULL_OPENCV" => (12, false),
+            other => {
+                return Err(invalid(
+                    file,
+                    element,
+                    format!(
+                        "camera model {other} is not supported (PINHOLE, SIMPLE_PINHOLE, \
+                         SIMPLE_RADIAL, RADIAL, OPENCV or FULL_OPENCV)"
+                    ),
+                ));
+            }
+        };
+        if params.len() != count {
+            return Err(invalid(
+                file,
+                element,
+                format!(
+                    "{} takes {count} parameters, the line has {}",
+                    tokens[1],
+                    params.len()
+                ),
+            ));
+        }
+        let camera = if shared_focal {
+            Pinhole {
+                fx: params[0],
+                fy: params[0],
+                cx: params[1],
+                cy: params[2],
+                width,
+                height,
+            }
+        } else {
+            Pinhole {
+                fx: params[0],
+                fy: params[1],
+                cx: params[2],
+                cy: params[3],
+                width,
+                height,
+            }
+        };
+        camera.validate().map_err(|p| invalid(file, &element, p))?;
+        if cameras.insert(id, camera).is_some() {
+            return Err(invalid(
+                file,
+                element,
+                format!("camera id {id} appears twice"),
+            ));
+        }
+    }
+    Ok(cameras)
+}
+
+/// The path of `images.txt` text, with intrinsics from `cameras` (from [`import_cameras`]) when
+/// given. `file` names `images.txt` in errors.
+pub fn import(
+    text: &str,
+    file: &str,
+    cameras: Option<&HashMap<u64, Pinhole>>,
+) -> Result<CameraPath> {
+    let mut images: Vec<(String, u64, Frame)> = Vec::new();
+    // COLMAP's reader: an image line, then its points line, which may be empty.
+    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim()));
+    while let Some((line, data)) = lines.next() {
+        if data.is_empty() || data.starts_with('#') {
+            continue;
+        }
+        let tokens: Vec<&str> = data.split_whitespace().collect();
+        let element = format!("line {line}");
+        if tokens.len() < 10 {
+            return Err(invalid(
+                file,
+                element,
+                format!(
+                    "{} fields, expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME",
+                    tokens.len()
+                ),
+            ));
+        }
+        let id: u64 = number(file, &element, "IMAGE_ID", tokens[0])?;
+        let element = format!("line {line} (image {id})");
+        let mut v = [0.0f64; 7];
+        for (k, name) in ["QW", "QX", "QY", "QZ", "TX", "TY", "TZ"]
+            .iter()
+            .enumerate()
+        {
+            v[k] = number(file, &element, name, tokens[k + 1])?;
+            if !v[k].is_finite() {
+                return Err(invalid(file, &element, format!("{name} is not finite")));
+            }
+        }
+        let camera_id: u64 = number(file, &element, "CAMERA_ID", tokens[8])?;
+        // Names may hold spaces: the rest of the line.
+        let name = tokens[9..].join(" ");
+        let q = DQuat::from_xyzw(v[1], v[2], v[3], v[0]);
+        let norm = q.length();
+        if norm <= 1e-12 {
+            return Err(invalid(file, element, "the quaternion QW QX QY QZ is zero"));
+        }
+        if (norm - 1.0).abs() > 1e-3 {
+            return Err(invalid(
+                file,
+                element,
+                format!("the quaternion QW QX QY QZ has norm {norm:.6}, not 1"),
+            ));
+        }
+        let r_cw = DMat3::from_quat(q / norm);
+        let t = DVec3::new(v[4], v[5], v[6]);
+        let pose = CameraPose::new(r_cw.transpose(), -(r_cw.transpose() * t))
+            .map_err(|p| invalid(file, &element, p))?;
+        let camera = match cameras {
+            Some(cameras) => Some(*cameras.get(&camera_id).ok_or_else(|| {
+                invalid(
+                    file,
+                    &element,
+                    format!("CAMERA_ID {camera_id} is not in cameras.txt"),
+                )
+            })?),
+            None => None,
+        };
+        if images.iter().any(|(_, other, _)| *other == id) {
+            return Err(invalid(
+                file,
+                element,
+                format!("image id {id} appears twice"),
+            ));
+        }
+        images.push((name, id, Frame { pose, camera }));
+        // The points line (skipped whatever it holds).
+        lines.next();
+    }
+    if images.is_empty() {
+        return Err(invalid(file, "images", "the file lists no images"));
+    }
+    images.sort_by_key(|(_, id, _)| *id);
+    Ok(CameraPath {
+        frames: images.into_iter().map(|(_, _, f)| f).collect(),
+        fps: None,
+    })
+}
+
+/// Reads `images.txt` and, when it is there, `cameras.txt` beside it.
+pub fn read(images: &Path) -> Result<CameraPath> {
+    let cameras_path = images.with_file_name("cameras.txt");
+    let cameras = if cameras_path.is_file() {
+        Some(import_cameras(
+            &read_text(&cameras_path)?,
+            &cameras_path.display().to_string(),
+        )?)
+    } else {
+        None
+    };
+    import(
+        &read_text(images)?,
+        &images.display().to_string(),
+        cameras.as_ref(),
+    )
+}

@@ -1,0 +1,254 @@
+//! Camera paths to and from other tools' camera files, for splatraj.
+//!
+//! splatraj's trajectories are poses Φ = [ω, c] in OpenCV camera axes (`docs/conventions.md`);
+//! this crate writes a sampled path ([`CameraPath`]) as
+//!
+//! - [`nerfstudio`] `camera_path.json` (`ns-render camera-path`, the nerfstudio viewer),
+//! - [`colmap`] `cameras.txt` + `images.txt` (+ an empty `points3D.txt`),
+//! - [`inria`] `cameras.json` (INRIA 3DGS viewers, SuperSplat's camera import),
+//! - [`supersplat`] `settings.json` with one animation track (the SuperSplat viewer),
+//!
+//! and reads the first three (and the SuperSplat track) back into poses and, where the file has
+//! them, intrinsics. Each module's documentation states its format's axes and units;
+//! `docs/interchange.md` gathers them. Errors name the file, the element and the problem
+//! ([`InterchangeError`]); nothing panics on a bad file. The crate does not depend on burn.
+
+#![warn(missing_docs)]
+
+pub mod camera;
+pub mod colmap;
+pub mod error;
+pub mod inria;
+pub mod nerfstudio;
+pub mod supersplat;
+
+use std::path::Path;
+
+pub use camera::{CameraPath, CameraPose, Frame, Pinhole};
+pub use error::{InterchangeError, Result};
+
+use error::{export_error, read_text};
+
+/// The formats this crate writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Format {
+    /// nerfstudio `camera_path.json`.
+    Nerfstudio,
+    /// COLMAP text model.
+    Colmap,
+    /// INRIA 3DGS `cameras.json`.
+    Inria,
+    /// SuperSplat viewer `settings.json`.
+    Supersplat,
+}
+
+impl Format {
+    /// Every format, in the order the CLI lists them.
+    pub const ALL: [Format; 4] = [
+        Format::Nerfstudio,
+        Format::Colmap,
+        Format::Inria,
+        Format::Supersplat,
+    ];
+
+    /// The name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Nerfstudio => "nerfstudio",
+            Format::Colmap => "colmap",
+            Format::Inria => "inria",
+            Format::Supersplat => "supersplat",
+        }
+    }
+
+    /// The files an export writes.
+    pub fn file_names(self) -> &'static [&'static str] {
+        match self {
+            Format::Nerfstudio => &["camera_path.json"],
+            Format::Colmap => &["cameras.txt", "images.txt", "points3D.txt"],
+            Format::Inria => &["cameras.json"],
+            Format::Supersplat => &["settings.json"],
+        }
+    }
+}
+
+impl std::fmt::Display for Format {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Format {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Format::ALL
+            .into_iter()
+            .find(|f| f.name().eq_ignore_ascii_case(s))
+            .ok_or_else(|| {
+                format!("unknown format {s:?} (nerfstudio, colmap, inria or supersplat)")
+            })
+    }
+}
+
+/// Options of [`export`] (each format uses those it has a place for).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExportOptions {
+    /// Frames per second.
+    pub fps: f64,
+    /// nerfstudio: viewer keyframes per second.
+    pub keyframes_per_second: f64,
+    /// SuperSplat: focus distance of the look-at targets.
+    pub focus: supersplat::Focus,
+}
+
+impl Default for ExportOptions {
+    fn default() -> Self {
+        Self {
+            fps: 30.0,
+            keyframes_per_second: nerfstudio::NerfstudioOptions::default().keyframes_per_second,
+            focus: supersplat::Focus::Distance(1.0),
+        }
+    }
+}
+
+/// `path` in `format`: (file name, contents) for each file of [`Format::file_names`].
+pub fn export(
+    path: &CameraPath,
+    format: Format,
+    options: &ExportOptions,
+) -> Result<Vec<(&'static str, String)>> {
+    let names = format.file_names();
+    Ok(match format {
+        Format::Nerfstudio => vec![(
+            names[0],
+            nerfstudio::export(
+                path,
+                &nerfstudio::NerfstudioOptions {
+                    fps: options.fps,
+                    keyframes_per_second: options.keyframes_per_second,
+                },
+            )?,
+        )],
+        Format::Colmap => {
+            let files = colmap::export(path)?;
+            vec![
+                (names[0], files.cameras),
+                (names[1], files.images),
+                (names[2], files.points3d),
+            ]
+        }
+        Format::Inria => vec![(names[0], inria::export(path)?)],
+        Format::Supersplat => vec![(
+            names[0],
+            supersplat::export(
+                path,
+                &supersplat::SupersplatOptions {
+                    fps: options.fps,
+                    focus: options.focus.clone(),
+                },
+            )?,
+        )],
+    })
+}
+
+/// Which format a camera file is in: `images.txt` (or `*.txt` that is not `cameras.txt`) is
+/// COLMAP; a JSON object with `camera_path` is nerfstudio, one with `animTracks` SuperSplat; a
+/// JSON array of objects with `rotation` is INRIA.
+pub fn detect(path: &Path) -> Result<Format> {
+    let file = path.display().to_string();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_lowercase())
+        .unwrap_or_default();
+    if name == "cameras.txt" {
+        return Err(InterchangeError::UnknownFormat {
+            file,
+            problem: "give COLMAP's images.txt (cameras.txt beside it is read with it)".into(),
+        });
+    }
+    if name.ends_with(".txt") {
+        return Ok(Format::Colmap);
+    }
+    let text = read_text(path)?;
+    let value: serde_json::Value =
+        serde_json::from_str(&text).map_err(|source| InterchangeError::Json {
+            file: file.clone(),
+            format: "camera (JSON)",
+            source,
+        })?;
+    if value.get("camera_path").is_some() {
+        Ok(Format::Nerfstudio)
+    } else if value.get("animTracks").is_some() {
+        Ok(Format::Supersplat)
+    } else if value
+        .as_array()
+        .and_then(|a| a.first())
+        .is_some_and(|e| e.get("rotation").is_some())
+    {
+        Ok(Format::Inria)
+    } else {
+        Err(InterchangeError::UnknownFormat {
+            file,
+            problem: "not a camera file this reads: expected a nerfstudio camera_path.json \
+                      (`camera_path`), an INRIA cameras.json (an array of cameras with \
+                      `rotation`), a SuperSplat settings.json (`animTracks`) or COLMAP's \
+                      images.txt"
+                .into(),
+        })
+    }
+}
+
+/// Reads a camera file of any format this crate reads (see [`detect`]); a SuperSplat track,
+/// which has no image size, gets 480-pixel-high 4:3 cameras.
+pub fn read_camera_path(path: &Path) -> Result<(Format, CameraPath)> {
+    let format = detect(path)?;
+    let camera_path = match format {
+        Format::Nerfstudio => nerfstudio::read(path)?,
+        Format::Colmap => colmap::read(path)?,
+        Format::Inria => inria::read(path)?,
+        Format::Supersplat => supersplat::read(path, 480, 4.0 / 3.0)?,
+    };
+    Ok((format, camera_path))
+}
+
+/// The frames of `path` with their intrinsics, checked for export (at least one frame, every
+/// frame with valid intrinsics and a finite pose).
+pub(crate) fn check_export(
+    path: &CameraPath,
+    format: &'static str,
+) -> Result<Vec<(CameraPose, Pinhole)>> {
+    if path.frames.is_empty() {
+        return Err(export_error(format, "the path has no frames"));
+    }
+    path.frames
+        .iter()
+        .enumerate()
+        .map(|(i, f)| {
+            let camera = f
+                .camera
+                .ok_or_else(|| export_error(format, format!("frame {i} has no intrinsics")))?;
+            camera
+                .validate()
+                .map_err(|p| export_error(format, format!("frame {i}: {p}")))?;
+            if !(f.pose.rotation.is_finite() && f.pose.centre.is_finite()) {
+                return Err(export_error(
+                    format,
+                    format!("frame {i}: pose is not finite"),
+                ));
+            }
+            Ok((f.pose, camera))
+        })
+        .collect()
+}
+
+/// Checks a frame rate.
+pub(crate) fn check_fps(fps: f64, format: &'static str) -> Result<()> {
+    if fps.is_finite() && fps > 0.0 {
+        Ok(())
+    } else {
+        Err(export_error(
+            format,
+            format!("fps {fps} is not a positive number"),
+        ))
+    }
+}
