@@ -1,10 +1,10 @@
 //! Pinhole camera (OpenCV axes) and the pose vector Φ = (ω, c).
 //!
-//! Conventions (DESIGN.md): camera x right, y down, z forward; pixel (i, j) has its centre at
-//! (i + 0.5, j + 0.5). Φ = [ω_x, ω_y, ω_z, c_x, c_y, c_z] where ω is the rotation vector of
-//! R_wc (camera-to-world) and c the camera centre in world coordinates, so that
-//! p_cam = R_wcᵀ (p_world − c). Host-side maths is f64 with glam; [`rotation_matrices`] is the
-//! differentiable tensor version used inside the optimisation graph.
+//! Conventions (docs/conventions.md): camera x right, y down, z forward; pixel (i, j) has its
+//! centre at (i + 0.5, j + 0.5). Φ = [ω_x, ω_y, ω_z, c_x, c_y, c_z] where ω is the rotation vector
+//! of R_wc (camera-to-world) and c the camera centre in world coordinates, so that p_cam = R_wcᵀ
+//! (p_world − c). Host-side maths is f64 with glam; [`rotation_matrices`] is the differentiable
+//! tensor version used inside the optimisation graph.
 
 use burn::tensor::{Bool, Tensor};
 use glam::{DMat3, DMat4, DVec3, DVec4};

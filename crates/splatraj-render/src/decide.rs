@@ -1,6 +1,6 @@
 //! The decisions of a render pass, made on the host without gradient: which Gaussians each pose
-//! culls, where they land on screen, their pixel radius and their depth (DESIGN.md: integer
-//! data decided off the autodiff graph).
+//! culls, where they land on screen, their pixel radius and their depth (docs/conventions.md:
+//! integer data decided off the autodiff graph).
 //!
 //! The same formulas as the differentiable projection ([`crate::project`]), evaluated in f64
 //! per Gaussian in parallel from a per-scene host copy of the means and world covariances

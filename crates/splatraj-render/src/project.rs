@@ -1,7 +1,8 @@
 //! First stage of the tensor rasterizer: Gaussians → screen space for a batch of poses.
 //!
 //! Differentiable with respect to the pose tensor Φ `[B, 6]` (burn autodiff); the scene's
-//! pose-independent quantities ([`SceneTensors`]) are constants. Rules (DESIGN.md, INRIA 3DGS):
+//! pose-independent quantities ([`SceneTensors`]) are constants. Rules (docs/conventions.md, INRIA
+//! 3DGS):
 //!
 //! - p_cam = R_wcᵀ (p − c), R_wc from [`rotation_matrices`].
 //! - Σ_cam = W Σ Wᵀ with W = R_wcᵀ.

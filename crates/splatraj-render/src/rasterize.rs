@@ -6,7 +6,7 @@
 //! transmittance and stop state from chunk to chunk, so that long lists are exact and memory
 //! stays bounded. Tiles are processed in groups of similar list length to limit padding.
 //!
-//! The rules are INRIA's (DESIGN.md): α = min(0.99, o·exp(power)), skipped when α < 1/255
+//! The rules are INRIA's (docs/conventions.md): α = min(0.99, o·exp(power)), skipped when α < 1/255
 //! (power is clamped at 0: for the positive-definite conics that survive culling it can only
 //! exceed 0 by rounding); a pixel stops before the Gaussian that would bring T below 1e-4. The
 //! skip and stop decisions carry no gradient; the gradient flows through α of the Gaussians

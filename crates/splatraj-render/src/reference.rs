@@ -1,12 +1,12 @@
 //! The independent reference renderer: brute force, per pixel, all in f64.
 //!
 //! This module is the project's yardstick. It is written directly from the "Conventions" and
-//! "Rendering" rules of `DESIGN.md` (the INRIA 3DGS rasterizer's rules) and shares no code with
-//! the burn tensor rasterizer, so that the tensor path can be tested against it (max abs
-//! difference ≤ 1e-5 in f64). It is also the CPU preview of a scene (see
-//! `examples/preview.rs`), which is why the work is organised like INRIA's rasterizer: every
-//! Gaussian is projected once, binned into the 16×16 tiles it touches, each tile's list is
-//! sorted front to back, and each pixel walks only its tile's list.
+//! "Rendering" rules of `docs/conventions.md` (the INRIA 3DGS rasterizer's rules) and shares no
+//! code with the burn tensor rasterizer, so that the tensor path can be tested against it (max abs
+//! difference ≤ 1e-5 in f64). It is also the CPU preview of a scene (see `examples/preview.rs`),
+//! which is why the work is organised like INRIA's rasterizer: every Gaussian is projected once,
+//! binned into the 16×16 tiles it touches, each tile's list is sorted front to back, and each pixel
+//! walks only its tile's list.
 //!
 //! # Rules, as implemented (cite these when comparing with another renderer)
 //!

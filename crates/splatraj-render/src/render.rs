@@ -56,7 +56,7 @@ pub enum Pruning {
     ObjectOnly,
 }
 
-/// Which implementation composites the tiles; both follow the same rules (DESIGN.md).
+/// Which implementation composites the tiles; both follow the same rules (docs/conventions.md).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Rasterizer {

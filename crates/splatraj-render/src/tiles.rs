@@ -1,10 +1,10 @@
 //! Tile binning on the host: which Gaussians touch which 16×16 tile, front to back.
 //!
-//! This is integer data decided without gradient (DESIGN.md): the cull decisions, the tile
-//! lists and the depth order. It also applies the exact pruning of mask passes: a tile no
-//! object Gaussian touches renders an all-zero mask, and in a tile the object does touch,
-//! Gaussians behind the object's last one cannot change the mask or its gradient (they only
-//! add terms whose mask value is 0, after every term that carries the object).
+//! This is integer data decided without gradient (docs/conventions.md): the cull decisions, the
+//! tile lists and the depth order. It also applies the exact pruning of mask passes: a tile no
+//! object Gaussian touches renders an all-zero mask, and in a tile the object does touch, Gaussians
+//! behind the object's last one cannot change the mask or its gradient (they only add terms whose
+//! mask value is 0, after every term that carries the object).
 
 use rayon::prelude::*;
 

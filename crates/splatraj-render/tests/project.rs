@@ -1,6 +1,6 @@
 //! Tensor projection (Gaussians → screen space, batched over poses) against an independent
-//! brute-force f64 host computation written here from DESIGN.md's rules: rotations through
-//! glam's quaternions (no Rodrigues), Σ_world as Σ_k s_k² r_k r_kᵀ (no R S Sᵀ Rᵀ product),
+//! brute-force f64 host computation written here from docs/conventions.md's rules: rotations
+//! through glam's quaternions (no Rodrigues), Σ_world as Σ_k s_k² r_k r_kᵀ (no R S Sᵀ Rᵀ product),
 //! the 2D covariance from an explicit Jacobian, and the conic from glam's 2×2 inverse.
 
 use std::f64::consts::PI;
@@ -118,7 +118,7 @@ fn ref_world_covariance(scene: &Scene, i: usize) -> DMat3 {
     sigma
 }
 
-/// Rules of DESIGN.md "Rendering", evaluated directly (no cull: the caller masks).
+/// Rules of docs/conventions.md "Rendering", evaluated directly (no cull: the caller masks).
 fn ref_project(scene: &Scene, pose: [f64; 6], k: &Intrinsics) -> Vec<RefSplat> {
     let omega = DVec3::new(pose[0], pose[1], pose[2]);
     let centre = DVec3::new(pose[3], pose[4], pose[5]);

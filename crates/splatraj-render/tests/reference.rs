@@ -1,5 +1,5 @@
-//! Tests of the reference renderer against closed forms worked out by hand from DESIGN.md's
-//! rules, never against the renderer's own intermediate values.
+//! Tests of the reference renderer against closed forms worked out by hand from
+//! docs/conventions.md's rules, never against the renderer's own intermediate values.
 
 use splatraj_render::reference::{RefCamera, RefChannels, RefImage, render_reference};
 use splatraj_scene::Scene;
