@@ -31,6 +31,9 @@ enum Command {
     /// Benchmarks.
     #[command(subcommand)]
     Bench(commands::bench::BenchCommand),
+    /// Write a run's trajectory as another tool's camera file (nerfstudio, COLMAP, INRIA,
+    /// SuperSplat).
+    Export(commands::export::ExportArgs),
 }
 
 fn main() -> ExitCode {
@@ -55,6 +58,7 @@ fn main() -> ExitCode {
         Command::Run(args) => commands::run::run(args),
         Command::Pose(args) => commands::pose::run(args),
         Command::Bench(command) => commands::bench::run(command),
+        Command::Export(args) => commands::export::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

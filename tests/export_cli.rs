@@ -1,0 +1,154 @@
+//! `splatraj export` on a run folder made by a 2-step run of a tiny config: every format's files
+//! appear whole and read back (through `splatraj-report`) as the poses `trajectory.json` holds.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{assert_clean_failure, s, splatraj, stderr, stdout};
+use splatraj_report::{CameraPose, Format, read_camera_path};
+
+const TINY: &str = r#"
+name = "tiny"
+seed = 5
+[scene]
+demo = { gaussians = 3000, seed = 7 }
+[[queries]]
+text = "red mug"
+[[queries]]
+text = "blue box"
+[camera]
+width = 32
+height = 24
+[optimiser]
+iterations = 2
+samples_per_window = 2
+[output]
+frames = 3
+width = 40
+height = 30
+trajectory_samples = 5
+metric_samples = 2
+ldj_samples = 11
+"#;
+
+fn tiny_run(dir: &Path) -> PathBuf {
+    let config = dir.join("tiny.toml");
+    std::fs::write(&config, TINY).unwrap();
+    let runs = format!("output.runs_dir=\"{}\"", dir.join("runs").display());
+    let out = splatraj(&["run", s(&config), "--quiet", "--set", &runs]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    PathBuf::from(stdout(&out).lines().last().unwrap().trim())
+}
+
+#[test]
+fn export_writes_every_format_and_it_reads_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = tiny_run(dir.path());
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("trajectory.json")).unwrap())
+            .unwrap();
+    // trajectory.json samples 5 poses at t = i/4; 0.5 s at 10 fps exports 5 frames at the same
+    // times, evaluated from the model and weights.
+    let sampled: Vec<[[f64; 4]; 4]> = json["poses"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| serde_json::from_value(p["world_to_camera"].clone()).unwrap())
+        .collect();
+    assert_eq!(sampled.len(), 5);
+
+    for format in Format::ALL {
+        let out_dir = dir.path().join("out").join(format.name());
+        let out = splatraj(&[
+            "export",
+            s(&run),
+            "--format",
+            format.name(),
+            "--fps",
+            "10",
+            "--seconds",
+            "0.5",
+            "--width",
+            "80",
+            "--out",
+            s(&out_dir),
+        ]);
+        assert!(out.status.success(), "{format}: {}", stderr(&out));
+        assert_eq!(stdout(&out).trim(), s(&out_dir));
+        for name in format.file_names() {
+            assert!(out_dir.join(name).is_file(), "{format}: {name} missing");
+        }
+        let names: Vec<String> = std::fs::read_dir(&out_dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(names.len(), format.file_names().len(), "{names:?}");
+
+        let main = match format {
+            Format::Colmap => "images.txt",
+            _ => format.file_names()[0],
+        };
+        let (detected, path) = read_camera_path(&out_dir.join(main)).unwrap();
+        assert_eq!(detected, format);
+        assert_eq!(path.frames.len(), 5, "{format}");
+        for (i, (frame, w2c)) in path.frames.iter().zip(&sampled).enumerate() {
+            let expected = CameraPose::from_world_to_camera(w2c).unwrap();
+            let (r, c) = frame.pose.max_difference(&expected);
+            // SuperSplat keeps position and viewing direction, not roll.
+            let forward = (frame.pose.forward() - expected.forward()).length();
+            match format {
+                Format::Supersplat => assert!(c < 1e-6 && forward < 1e-6, "{format} {i}"),
+                _ => assert!(r < 1e-6 && c < 1e-6, "{format} {i}: {r:e} {c:e}"),
+            }
+            if format != Format::Supersplat {
+                let camera = frame.camera.unwrap();
+                assert_eq!((camera.width, camera.height), (80, 60), "{format}");
+            }
+        }
+    }
+
+    // Defaults: the run's 3 frames at 30 fps, into exports/<format>/ of the run folder.
+    let out = splatraj(&["export", s(&run), "--format", "nerfstudio"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let default_file = run
+        .join("exports")
+        .join("nerfstudio")
+        .join("camera_path.json");
+    let text = std::fs::read_to_string(&default_file).unwrap();
+    let camera_path: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(camera_path["camera_path"].as_array().unwrap().len(), 3);
+    assert_eq!(camera_path["render_width"], 40);
+    assert_eq!(camera_path["render_height"], 30);
+
+    // A trajectory.json given directly works too.
+    let out = splatraj(&[
+        "export",
+        s(&run.join("trajectory.json")),
+        "--format",
+        "inria",
+        "--out",
+        s(&dir.path().join("direct")),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(dir.path().join("direct").join("cameras.json").is_file());
+}
+
+#[test]
+fn export_fails_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("nowhere");
+    assert_clean_failure(
+        &splatraj(&["export", s(&missing), "--format", "colmap"]),
+        &["cannot read the trajectory", "nowhere"],
+    );
+    let not_trajectory = dir.path().join("trajectory.json");
+    std::fs::write(&not_trajectory, "{\"model\": 3}").unwrap();
+    assert_clean_failure(
+        &splatraj(&["export", s(&not_trajectory), "--format", "inria"]),
+        &["is not a trajectory.json"],
+    );
+    let out = splatraj(&["export", s(&not_trajectory), "--format", "blender"]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("unknown format"), "{}", stderr(&out));
+}
