@@ -290,4 +290,53 @@ impl CameraPath {
     pub fn phis(&self) -> Vec<[f64; 6]> {
         self.frames.iter().map(|f| f.pose.phi()).collect()
     }
+
+    /// The poses as Φ with each ω the rotation vector of its rotation nearest the previous
+    /// frame's (angles may pass π), so a path that turns smoothly has smooth Φ: what a
+    /// trajectory model should be fitted to.
+    pub fn continuous_phis(&self) -> Vec<[f64; 6]> {
+        let mut out: Vec<[f64; 6]> = Vec::with_capacity(self.frames.len());
+        for phi in self.phis() {
+            let omega = DVec3::new(phi[0], phi[1], phi[2]);
+            let best = match out.last() {
+                Some(prev) => {
+                    let prev = DVec3::new(prev[0], prev[1], prev[2]);
+                    let angle = omega.length();
+                    let axis = if angle > 0.0 {
+                        omega / angle
+                    } else {
+                        // A zero rotation is also a full turn about any axis: the previous one.
+                        prev.normalize_or_zero()
+                    };
+                    // Every rotation vector of this rotation: axis·(angle + 2πk).
+                    (-3i32..=3)
+                        .map(|k| axis * (angle + 2.0 * std::f64::consts::PI * f64::from(k)))
+                        .min_by(|a, b| a.distance(prev).total_cmp(&b.distance(prev)))
+                        .unwrap_or(omega)
+                }
+                None => omega,
+            };
+            out.push([best.x, best.y, best.z, phi[3], phi[4], phi[5]]);
+        }
+        out
+    }
+
+    /// [`CameraPath::continuous_phis`] resampled at `count` evenly spaced times over the path
+    /// (the frames at evenly spaced times, linear in Φ between them): dense samples to fit a
+    /// trajectory model to.
+    pub fn resampled_phis(&self, count: usize) -> Vec<[f64; 6]> {
+        let phis = self.continuous_phis();
+        if phis.len() < 2 || count < 2 {
+            return phis.first().map_or(Vec::new(), |p| vec![*p; count]);
+        }
+        let last = (phis.len() - 1) as f64;
+        (0..count)
+            .map(|i| {
+                let s = i as f64 / (count - 1) as f64 * last;
+                let k = (s.floor() as usize).min(phis.len() - 2);
+                let f = s - k as f64;
+                std::array::from_fn(|j| phis[k][j] * (1.0 - f) + phis[k + 1][j] * f)
+            })
+            .collect()
+    }
 }

@@ -260,3 +260,37 @@ fn every_format_round_trips_through_files_and_detection() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn continuous_phis_follow_a_turn_through_pi() {
+    // A camera turning about z through a full turn: Φ from a file wraps at π; the continuous
+    // rotation vectors keep growing (0.3 rad steps) and give the same rotations.
+    let phis: Vec<[f64; 6]> = (0..25)
+        .map(|i| [0.0, 0.0, i as f64 * 0.3, i as f64, 0.0, 0.0])
+        .collect();
+    let camera = Pinhole::centred(100.0, 64, 48);
+    let path = CameraPath::from_phis(&phis, camera, 30.0);
+    let wrapped = path.phis();
+    assert!(wrapped.iter().all(|p| p[2].abs() <= PI + 1e-12));
+    let continuous = path.continuous_phis();
+    for (i, (c, p)) in continuous.iter().zip(&phis).enumerate() {
+        assert!(
+            (c[2] - p[2]).abs() < 1e-9,
+            "frame {i}: {} vs {}",
+            c[2],
+            p[2]
+        );
+        assert!(c[0].abs() < 1e-12 && c[1].abs() < 1e-12, "frame {i}");
+    }
+    // Resampled at twice the density: the frames themselves, and midpoints between them.
+    let dense = path.resampled_phis(49);
+    assert_eq!(dense.len(), 49);
+    for (i, d) in dense.iter().enumerate() {
+        let expected = i as f64 * 0.15;
+        assert!((d[2] - expected).abs() < 1e-9, "sample {i}: {}", d[2]);
+        assert!((d[3] - i as f64 * 0.5).abs() < 1e-9, "sample {i}: {}", d[3]);
+    }
+    assert_eq!(path.resampled_phis(3).len(), 3);
+    let single = CameraPath::from_phis(&phis[..1], camera, 30.0);
+    assert_eq!(single.resampled_phis(4), vec![phis[0]; 4]);
+}
