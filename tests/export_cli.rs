@@ -152,3 +152,88 @@ fn export_fails_cleanly() {
     assert!(!out.status.success());
     assert!(stderr(&out).contains("unknown format"), "{}", stderr(&out));
 }
+
+#[test]
+fn exported_camera_files_start_a_run() {
+    use splatraj::experiment::{Config, Experiment};
+    use splatraj::traj::trajectory::{Basis, uniform_times};
+
+    let dir = tempfile::tempdir().unwrap();
+    let run = tiny_run(dir.path());
+    let text = std::fs::read_to_string(run.join("trajectory.json")).unwrap();
+    let record: splatraj::traj::trajectory::TrajectoryRecord = serde_json::from_str(&text).unwrap();
+    let times = uniform_times(9);
+    let k = record.model.count();
+    let original: Vec<[f64; 6]> = record
+        .model
+        .matrix(&times)
+        .chunks_exact(k)
+        .map(|row| {
+            std::array::from_fn(|j| row.iter().zip(&record.weights).map(|(p, w)| p * w[j]).sum())
+        })
+        .collect();
+
+    for (format, file) in [
+        ("nerfstudio", "camera_path.json"),
+        ("colmap", "images.txt"),
+        ("inria", "cameras.json"),
+    ] {
+        let out_dir = dir.path().join("start").join(format);
+        let out = splatraj(&[
+            "export",
+            s(&run),
+            "--format",
+            format,
+            "--fps",
+            "100",
+            "--seconds",
+            "4",
+            "--out",
+            s(&out_dir),
+        ]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let config = dir.path().join("tiny.toml");
+        let sets = vec![format!(
+            "start.trajectory=\"{}\"",
+            out_dir.join(file).display()
+        )];
+        let config = Config::load(&config, &sets).unwrap();
+        let experiment = Experiment::prepare(&config).unwrap();
+        let starts = experiment.start_trajectories().unwrap();
+        assert_eq!(starts.len(), 1);
+        let start = &starts[0];
+        let k = start.model.count();
+        // 400 frames of the run's path, fitted again to the same RBF model: the same path
+        // (rotations and centres within 1e-4; the ridge and resampling leave a few 1e-6).
+        for (i, row) in start.model.matrix(&times).chunks_exact(k).enumerate() {
+            let pose: Vec<f64> = (0..6)
+                .map(|j| row.iter().zip(&start.weights).map(|(p, w)| p * w[j]).sum())
+                .collect();
+            let expected = CameraPose::from_phi(original[i]);
+            let got = CameraPose::from_phi(pose.try_into().unwrap());
+            let (r, c) = got.max_difference(&expected);
+            assert!(
+                r < 1e-4 && c < 1e-4,
+                "{format}: t = {}: {r:e} {c:e}",
+                times[i]
+            );
+        }
+    }
+
+    // A file that is neither ours nor a camera file says both.
+    let odd = dir.path().join("odd.json");
+    std::fs::write(&odd, "{\"frames\": []}").unwrap();
+    let config = Config::load(
+        &dir.path().join("tiny.toml"),
+        &[format!("start.trajectory=\"{}\"", odd.display())],
+    )
+    .unwrap();
+    let err = Experiment::prepare(&config)
+        .and_then(|e| e.start_trajectories())
+        .unwrap_err();
+    let message = format!("{err:#}");
+    assert!(
+        message.contains("start.trajectory") && message.contains("nor a camera file"),
+        "{message}"
+    );
+}

@@ -1,5 +1,5 @@
-//! Where the optimisations start: an earlier trajectory, a fixed pose, or object-facing or
-//! random poses per restart (`[start]`).
+//! Where the optimisations start: an earlier trajectory (ours, or another tool's camera file),
+//! a fixed pose, or object-facing or random poses per restart (`[start]`).
 
 use anyhow::{Context, Result};
 use splatraj_render::camera::Pose;
@@ -7,7 +7,7 @@ use splatraj_traj::optimise::start::START_FIT_SAMPLES;
 use splatraj_traj::optimise::{
     WindowTarget, object_start_poses, random_start_poses, window_start_trajectory,
 };
-use splatraj_traj::trajectory::{TrajectoryModel, TrajectoryRecord};
+use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord, uniform_times};
 
 use crate::config::StartKind;
 use crate::experiment::Experiment;
@@ -24,12 +24,23 @@ impl Experiment {
             let path = config.resolve(file);
             let text = std::fs::read_to_string(&path)
                 .with_context(|| format!("`start.trajectory`: cannot read {}", path.display()))?;
-            let record: TrajectoryRecord = serde_json::from_str(&text).with_context(|| {
-                format!(
-                    "`start.trajectory`: {} is not a trajectory.json (needs `model` and `weights`)",
-                    path.display()
-                )
-            })?;
+            let record: TrajectoryRecord = match serde_json::from_str(&text) {
+                Ok(record) => record,
+                // Another tool's camera file: its poses, fitted to the model.
+                Err(_) if splatraj_report::detect(&path).is_ok() => {
+                    return Ok(vec![self.camera_file_start(&path, model)?]);
+                }
+                Err(e) => {
+                    return Err(e).with_context(|| {
+                        format!(
+                            "`start.trajectory`: {} is not a trajectory.json (needs `model` and \
+                             `weights`) nor a camera file (nerfstudio camera_path.json, COLMAP \
+                             images.txt, INRIA cameras.json, SuperSplat settings.json)",
+                            path.display()
+                        )
+                    });
+                }
+            };
             let loaded = self
                 .trajectory(&record)
                 .with_context(|| format!("`start.trajectory`: {}", path.display()))?;
@@ -51,6 +62,24 @@ impl Experiment {
                 Ok(window_start_trajectory(model.clone(), per_window, device, dtype)?.record())
             })
             .collect()
+    }
+
+    /// A start fitted to the poses of another tool's camera file (`start.trajectory` = a
+    /// nerfstudio `camera_path.json`, COLMAP `images.txt`, INRIA `cameras.json` or SuperSplat
+    /// `settings.json`; `docs/interchange.md`): its frames spread evenly over t ∈ [0, 1], linear
+    /// between them, and least-squares fitted to `model`.
+    fn camera_file_start(
+        &self,
+        path: &std::path::Path,
+        model: TrajectoryModel,
+    ) -> Result<TrajectoryRecord> {
+        let context = || format!("`start.trajectory`: {}", path.display());
+        let (_, camera_path) = splatraj_report::read_camera_path(path).with_context(context)?;
+        let times = uniform_times(START_FIT_SAMPLES);
+        let poses = camera_path.resampled_phis(START_FIT_SAMPLES);
+        let fitted = Trajectory::fit(model, &times, &poses, &self.device, self.dtype)
+            .with_context(context)?;
+        Ok(fitted.record())
     }
 
     /// The `[trajectory]` model for the experiment's windows (a custom model built from
