@@ -283,7 +283,9 @@ pub struct StartConfig {
     /// A fixed start pose Φ = [ω, c] (instead of random starts).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pose: Option<[f64; 6]>,
-    /// A `trajectory.json` of an earlier run to start from (re-fitted to `[trajectory]`).
+    /// A path to start from, re-fitted to `[trajectory]`: an earlier run's `trajectory.json`, or
+    /// another tool's camera file (nerfstudio `camera_path.json`, COLMAP `images.txt`, INRIA
+    /// `cameras.json`, SuperSplat `settings.json`; see `docs/interchange.md`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub trajectory: Option<PathBuf>,
 }
