@@ -2,8 +2,8 @@
 //!
 //! IoU = |B_vis ∩ B_alone| / |B_vis ∪ B_alone| between the pixel bounding box of the object's
 //! visible mask (composited with every Gaussian, so occluders lower it) and that of the object
-//! rendered alone (all other Gaussians removed) from the same pose (DESIGN.md "Metrics"). A
-//! pixel belongs to a mask when its value is ≥ [`IOU_THRESHOLD`]. 1 when nothing hides the
+//! rendered alone (all other Gaussians removed) from the same pose (docs/conventions.md "Metrics").
+//! A pixel belongs to a mask when its value is ≥ [`IOU_THRESHOLD`]. 1 when nothing hides the
 //! object; a box half hidden along one side gives ½.
 //!
 //! **Empty boxes.** When neither mask has a pixel at the threshold (the object is out of view,
@@ -19,7 +19,7 @@
 
 use burn::tensor::Tensor;
 
-/// A pixel belongs to a mask when its value is at least this (DESIGN.md: threshold 0.5).
+/// A pixel belongs to a mask when its value is at least this (docs/conventions.md: threshold 0.5).
 pub const IOU_THRESHOLD: f64 = 0.5;
 
 /// A pixel bounding box, half-open: columns `x0..x1`, rows `y0..y1` (never empty).

@@ -1,6 +1,6 @@
 //! Costs of the SplaTraj objective, one file per cost, behind the [`Cost`] trait.
 //!
-//! Per query window (DESIGN.md "Optimisation problem") the optimiser minimises
+//! Per query window (docs/conventions.md "Optimisation problem") the optimiser minimises
 //!
 //! ```text
 //! L = w_tce·TCE + w_tre·TRE + w_up·L_upright + α_k·L_prior,      α_k = α_0·γ^k

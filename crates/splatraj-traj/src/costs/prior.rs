@@ -7,8 +7,9 @@
 //! with c the camera centre, o the object centre, r the prior radius and z_cam = R_wc e_z the
 //! optical axis in world coordinates. The first term pulls the camera to within r of o and is
 //! flat inside; the second is 0 looking straight at o and 2 looking straight away. It is the
-//! attracting form of DESIGN.md: the paper prints −max(r, ‖c − o‖) − ⟨…, (c − o)/‖c − o‖⟩,
-//! whose signs reward moving away from the object and facing away from it (typo 2).
+//! attracting form of docs/conventions.md: the paper prints
+//! −max(r, ‖c − o‖) − ⟨…, (c − o)/‖c − o‖⟩, whose signs reward moving away from the object and
+//! facing away from it (departure 2 there).
 //!
 //! The weight α_k = α_0·γ^k (k the optimisation step, γ ∈ (0, 1]) decays, so the image costs
 //! take over once the object is in view.

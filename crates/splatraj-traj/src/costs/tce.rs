@@ -1,8 +1,8 @@
 //! Target centring error (TCE): how far the object's mask centroid is from the image centre.
 //!
 //! TCE = ‖(c_x/W, c_y/H) − (½, ½)‖₂, with c the mask-weighted centroid in pixel coordinates,
-//! pixel (column i, row j) having its centre at (i + 0.5, j + 0.5) (DESIGN.md; the paper swaps
-//! W and H). 0 is a centred object, √½ ≈ 0.707 an object in a corner.
+//! pixel (column i, row j) having its centre at (i + 0.5, j + 0.5) (docs/conventions.md; the paper
+//! swaps W and H). 0 is a centred object, √½ ≈ 0.707 an object in a corner.
 //!
 //! Two guards keep it finite and well-behaved in autodiff:
 //! - **Mass floor.** The centroid divides by max(Σ m, [`MASS_FLOOR`]) and is taken relative to

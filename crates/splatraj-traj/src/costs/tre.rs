@@ -1,11 +1,11 @@
 //! Target ratio error (TRE): how far the object's share of the frame is from the target.
 //!
 //! TRE = |Σ I_b / (W·H) − r_t|, with I_b the composited mask image and r_t the target ratio
-//! (DESIGN.md; default [`DEFAULT_TARGET_RATIO`]). It needs no guard: it is finite for any mask,
-//! and for an empty mask it is r_t with the constant derivative −1/(W·H) per pixel. That
-//! derivative does not move the camera: pixels the object does not reach do not depend on the
-//! pose, so the pose gradient of an empty mask's TRE is zero. At exactly r_t, burn's |x|
-//! derivative is sign(0) = 0.
+//! (docs/conventions.md; default [`DEFAULT_TARGET_RATIO`]). It needs no guard: it is finite for any
+//! mask, and for an empty mask it is r_t with the constant derivative −1/(W·H) per pixel. That
+//! derivative does not move the camera: pixels the object does not reach do not depend on the pose,
+//! so the pose gradient of an empty mask's TRE is zero. At exactly r_t, burn's |x| derivative is
+//! sign(0) = 0.
 
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};

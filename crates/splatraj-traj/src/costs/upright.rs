@@ -1,7 +1,7 @@
 //! Uprightness: keeps the image's up direction toward the world's up.
 //!
 //! R_wc's columns are the camera's x (right), y (down) and z (forward) axes in world
-//! coordinates (DESIGN.md "Conventions"), so the camera's up axis is −R_wc e_y. The paper
+//! coordinates (docs/conventions.md "Conventions"), so the camera's up axis is −R_wc e_y. The paper
 //! writes it as R e_x (its typo 4: in OpenCV axes the up axis is −y) and its cost as
 //! −⟨e_z, R e_x⟩ ∈ [−1, 1]; we shift it to be ≥ 0, which changes no gradient.
 //!

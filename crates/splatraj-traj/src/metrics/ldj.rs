@@ -1,6 +1,6 @@
 //! Log dimensionless jerk (LDJ, Hogan & Sternad 2009), reported as +ln: higher = jerkier.
 //!
-//! For a motion x(t), t ∈ [t₁, t₂] (DESIGN.md "Metrics"):
+//! For a motion x(t), t ∈ [t₁, t₂] (docs/conventions.md "Metrics"):
 //!
 //! ```text
 //! LDJ = ln( (t₂ − t₁)³ / v_peak² · ∫ ‖d³x/dt³‖² dt ),   v_peak = max ‖dx/dt‖

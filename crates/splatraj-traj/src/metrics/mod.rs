@@ -1,4 +1,4 @@
-//! Metrics to report, not to optimise (DESIGN.md "Metrics").
+//! Metrics to report, not to optimise (docs/conventions.md "Metrics").
 //!
 //! - [`ldj()`](ldj()): smoothness of a whole trajectory (log dimensionless jerk) on the camera
 //!   centre and on the rotation vector;

@@ -1,4 +1,5 @@
-//! Per-window image metrics of a trajectory: TCE, TRE, IoU and visibility (DESIGN.md "Metrics").
+//! Per-window image metrics of a trajectory: TCE, TRE, IoU and visibility (docs/conventions.md
+//! "Metrics").
 //!
 //! Each window is evaluated on a fixed grid of times (the middles of `samples` equal strata,
 //! so runs are comparable), never on the optimiser's random samples. At each time the object's

@@ -1,6 +1,6 @@
 //! Stratified sampling of times inside the query windows.
 //!
-//! Query i of n owns the window T_i = [i/n, (i+1)/n] (0-based i; DESIGN.md "Optimisation
+//! Query i of n owns the window T_i = [i/n, (i+1)/n] (0-based i; docs/conventions.md "Optimisation
 //! problem"). Each step estimates ∫_{T_i} L dt from S samples: the window is cut into S equal
 //! strata and one time is drawn uniformly inside each. Stratifying keeps every part of the
 //! window represented at every step (plain uniform sampling can leave half a window unseen for

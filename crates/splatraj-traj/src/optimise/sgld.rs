@@ -1,6 +1,6 @@
 //! Stochastic gradient Langevin dynamics (SGLD): samples of one pose's posterior.
 //!
-//! Each chain follows (DESIGN.md "Optimisation problem")
+//! Each chain follows (docs/conventions.md "Optimisation problem")
 //!
 //! ```text
 //! θ ← θ − ½·η·∇L(θ) + N(0, η·τ)

@@ -1,7 +1,7 @@
 //! Trajectory optimisation: burn's Adam on the weights W of a [`Trajectory`], through the
 //! renderer, on stratified samples of every query window.
 //!
-//! Each step k, for every query window i (DESIGN.md "Optimisation problem"):
+//! Each step k, for every query window i (docs/conventions.md "Optimisation problem"):
 //! 1. draw S times stratified inside T_i ([`super::sampling`]);
 //! 2. poses Φ(t) = Ψ(t)·W `[S, 6]` (one matmul, differentiable in W);
 //! 3. render the window's object mask at all S poses in one batched, object-pruned render;

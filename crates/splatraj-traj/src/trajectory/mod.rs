@@ -1,14 +1,15 @@
 //! Trajectory models: camera poses Φ(t) `[B, 6]` as a linear function of fixed bases of t.
 //!
-//! Every model of DESIGN.md ("Optimisation problem") has the same shape: six independent scalar
-//! functions of normalised time t ∈ [0, 1], each a weighted sum of the same K basis functions,
+//! Every model of docs/conventions.md ("Optimisation problem") has the same shape: six independent
+//! scalar functions of normalised time t ∈ [0, 1], each a weighted sum of the same K basis
+//! functions,
 //!
 //! ```text
 //! Φ(t) = Ψ(t) · W        Ψ(t): [B, K] basis values, W: [K, 6] weights (the only parameters)
 //! ```
 //!
-//! with Φ = [ω_x, ω_y, ω_z, c_x, c_y, c_z] (rotation vector of R_wc, camera centre; DESIGN.md
-//! "Conventions"). Models differ only in Ψ, so the design splits the two:
+//! with Φ = [ω_x, ω_y, ω_z, c_x, c_y, c_z] (rotation vector of R_wc, camera centre;
+//! docs/conventions.md "Conventions"). Models differ only in Ψ, so the design splits the two:
 //!
 //! - [`Basis`] is a plain trait (no burn types in its required methods): the number of bases K
 //!   and ψ_k(t) on the host in f64; optionally a tensor evaluation that avoids a host round trip.

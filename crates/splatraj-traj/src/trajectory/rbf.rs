@@ -3,9 +3,10 @@
 //! ψ_k(t) = exp(−(t − t_k)² / (2σ²)). With n query windows T_i = [(i−1)/n, i/n] and c centres per
 //! window, window i's centres split it into c equal cells and sit at the cells' middles:
 //! t_{i,j} = (i−1)/n + (j − ½)/(c·n), j = 1 … c. For c = 1 that is (i − ½)/n, the middle of T_i
-//! (the paper prints i/n − ½, a typo: DESIGN.md). Over all windows the K = n·c centres are evenly
-//! spaced by 1/(n·c), half a spacing in from 0 and 1. σ defaults to that spacing, so neighbouring
-//! bases overlap (ψ = e^(−½) ≈ 0.61 at the next centre) and the sum of bases is smooth.
+//! (the paper prints i/n − ½, a typo: docs/conventions.md). Over all windows the K = n·c centres
+//! are evenly spaced by 1/(n·c), half a spacing in from 0 and 1. σ defaults to that spacing, so
+//! neighbouring bases overlap (ψ = e^(−½) ≈ 0.61 at the next centre) and the sum of bases is
+//! smooth.
 //!
 //! All centres lie inside [0, 1], so near t = 0 and t = 1 only one side's bases contribute: the
 //! model is stiffest at the trajectory's ends. Measured: a least-squares fit (4 windows × 5
