@@ -5,32 +5,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{assert_clean_failure, s, splatraj, stderr, stdout};
+use common::{TINY_CONFIG as TINY, assert_clean_failure, s, splatraj, stderr, stdout};
 use splatraj_report::{CameraPose, Format, read_camera_path};
-
-const TINY: &str = r#"
-name = "tiny"
-seed = 5
-[scene]
-demo = { gaussians = 3000, seed = 7 }
-[[queries]]
-text = "red mug"
-[[queries]]
-text = "blue box"
-[camera]
-width = 32
-height = 24
-[optimiser]
-iterations = 2
-samples_per_window = 2
-[output]
-frames = 3
-width = 40
-height = 30
-trajectory_samples = 5
-metric_samples = 2
-ldj_samples = 11
-"#;
 
 fn tiny_run(dir: &Path) -> PathBuf {
     let config = dir.join("tiny.toml");

@@ -5,38 +5,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{assert_clean_failure, s, splatraj, stderr, stdout};
+use common::{TINY_CONFIG as TINY, assert_clean_failure, s, splatraj, stderr, stdout};
 use splatraj::traj::trajectory::TrajectoryRecord;
-
-const TINY: &str = r#"
-name = "tiny"
-seed = 3
-[scene]
-demo = { gaussians = 3000, seed = 7 }
-[[queries]]
-text = "red mug"
-[[queries]]
-text = "blue box"
-[camera]
-width = 32
-height = 24
-[optimiser]
-iterations = 3
-samples_per_window = 2
-[output]
-frames = 3
-width = 40
-height = 30
-trajectory_samples = 5
-metric_samples = 2
-ldj_samples = 11
-[pose.optimiser]
-iterations = 3
-[sgld]
-iterations = 4
-burn_in = 1
-thin = 1
-"#;
 
 fn setup(text: &str) -> (tempfile::TempDir, PathBuf) {
     let dir = tempfile::tempdir().unwrap();

@@ -48,3 +48,34 @@ pub fn assert_clean_failure(output: &Output, mentions: &[&str]) {
         assert!(err.contains(m), "{err:?} does not mention {m:?}");
     }
 }
+
+/// A tiny run config (3 000 Gaussians, two queries, a few steps) for end-to-end runs.
+pub const TINY_CONFIG: &str = r#"
+name = "tiny"
+seed = 3
+[scene]
+demo = { gaussians = 3000, seed = 7 }
+[[queries]]
+text = "red mug"
+[[queries]]
+text = "blue box"
+[camera]
+width = 32
+height = 24
+[optimiser]
+iterations = 3
+samples_per_window = 2
+[output]
+frames = 3
+width = 40
+height = 30
+trajectory_samples = 5
+metric_samples = 2
+ldj_samples = 11
+[pose.optimiser]
+iterations = 3
+[sgld]
+iterations = 4
+burn_in = 1
+thin = 1
+"#;

@@ -1,11 +1,12 @@
 //! The fused compositing op against the tensor path (its specification) in f64: images and the
 //! gradients of all four inputs, on hand-built screen-space Gaussians that hit every rule, and
-//! the pose gradient of full renders against the tensor path and finite differences.
+//! the pose gradient of full renders against the tensor path (`rasterizer.rs` checks both paths'
+//! pose gradients against finite differences).
 
 mod common;
 
 use burn::tensor::{DType, Device, Tensor, TensorData};
-use common::{host, pose_tensor};
+use common::{Rng, host, pose_tensor};
 use glam::DVec3;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::fused::{CompositePlan, composite_fused};
@@ -13,19 +14,6 @@ use splatraj_render::rasterize::{CompositeOptions, MIN_ALPHA, SplatInputs, compo
 use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
 use splatraj_render::tiles::{TileGrid, TileWork};
 use splatraj_scene::Scene;
-
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
-}
 
 /// Host-side screen-space Gaussians of a batch, rows b·n + g.
 struct Splats {
@@ -412,49 +400,6 @@ fn pose_gradients_of_fused_and_tensor_renders_agree() {
             "{pruning:?}: pose gradients {grad_f:?} vs {grad_t:?}"
         );
         assert!(grad_f.iter().any(|g| g.abs() > 1e-4));
-    }
-}
-
-#[test]
-fn fused_pose_gradient_matches_finite_differences() {
-    let (scene, mask) = scene();
-    let k = Intrinsics::new(30.0, 32.0, 21.0, 13.5, 40, 28).unwrap();
-    let weights: Vec<f64> = (0..k.width * k.height * 4)
-        .map(|i| ((i * 31) % 17) as f64 / 17.0 - 0.3)
-        .collect();
-    let loss = |device: &Device, poses: Tensor<2>| {
-        let uploaded = DeviceScene::new(&scene, device, DType::F64);
-        let request = RenderRequest::new(k, vec![Channel::Rgb, Channel::Mask(mask.clone())]);
-        assert_eq!(
-            request.rasterizer,
-            Rasterizer::Fused,
-            "fused is the default"
-        );
-        let out = render(&uploaded, poses, &request).unwrap();
-        let w = Tensor::<4>::from_data(
-            TensorData::new(weights.clone(), [1, k.height, k.width, 4]),
-            (device, DType::F64),
-        );
-        (out.images * w).sum()
-    };
-    let base = poses()[0];
-    let device = Device::flex().autodiff();
-    let poses = pose_tensor(&[base], &device, DType::F64).require_grad();
-    let grads = loss(&device, poses.clone()).backward();
-    let grad = host(poses.grad(&grads).unwrap());
-    let plain = Device::flex();
-    let value = |p: Pose| loss(&plain, pose_tensor(&[p], &plain, DType::F64)).into_scalar::<f64>();
-    for (i, autodiff) in grad.iter().enumerate() {
-        let h = 1e-6;
-        let (mut plus, mut minus) = (base, base);
-        plus.0[i] += h;
-        minus.0[i] -= h;
-        let fd = (value(plus) - value(minus)) / (2.0 * h);
-        let error = (autodiff - fd).abs() / fd.abs().max(1e-3);
-        assert!(
-            error <= 1e-4,
-            "Φ[{i}]: fused {autodiff} vs finite differences {fd} ({error})"
-        );
     }
 }
 

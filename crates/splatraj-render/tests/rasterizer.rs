@@ -5,27 +5,13 @@
 mod common;
 
 use burn::tensor::{DType, Device, Tensor, TensorData};
-use common::{host, pose_tensor, ref_camera};
+use common::{Rng, host, pose_tensor, ref_camera};
 use glam::DVec3;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::rasterize::CompositeOptions;
 use splatraj_render::reference::{RefChannels, render_reference};
 use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
 use splatraj_scene::Scene;
-
-/// Small deterministic generator (xorshift), so the test needs no rand dependency.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
-}
 
 /// A scene in front of a camera at the origin looking along +y (z up): random anisotropic
 /// Gaussians, some far off to the side (cut by the image border), and a stack of opaque ones
