@@ -1,8 +1,10 @@
 //! Rendering of Gaussian scenes for splatraj.
 //!
-//! This crate holds the camera model and the renderers: an independent brute-force f64
-//! reference renderer (the yardstick for tests and a CPU preview), and the backend choice for
-//! burn tensors. It does not read files or pick objects: it takes a [`splatraj_scene::Scene`]
+//! This crate holds the camera model and the renderers: the differentiable rasterizer (host
+//! decisions and binning, projection as burn tensor ops, compositing as one fused burn op with
+//! its own backward or as chunked tensor ops), an independent brute-force f64 reference
+//! renderer (the yardstick for tests and a CPU preview), and the backend choice for burn
+//! tensors. It does not read files or pick objects: it takes a [`splatraj_scene::Scene`]
 //! and per-Gaussian channels from the crates before it in the pipeline.
 
 #![warn(missing_docs)]

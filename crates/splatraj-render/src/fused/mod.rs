@@ -9,9 +9,10 @@
 //! burn from end to end.
 //!
 //! Backends: the compositing kernels ([`cpu`]) run in plain Rust on the host, in parallel over
-//! (pose, tile). Flex and ndarray hand them their buffers; the GPU backend (`Cube`, i.e. wgpu)
-//! runs the same kernels after reading the inputs back to the host and uploads the result (a
-//! round trip; a CubeCL kernel, one workgroup per tile, is the planned replacement).
+//! (pose, tile). On Flex and ndarray the inputs are read into host vectors (a copy in memory);
+//! the GPU backend (`Cube`, i.e. wgpu) runs the same kernels after reading the inputs back from
+//! the device and uploads the result (a round trip; a CubeCL kernel, one workgroup per tile, is
+//! the planned replacement).
 
 pub mod cpu;
 pub mod plan;
