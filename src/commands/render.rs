@@ -196,18 +196,11 @@ fn grad_report(
     gaussians: usize,
 ) -> Result<GradReport> {
     let result = probe.forward_backward(pose)?;
-    let term = |name: &str| {
-        result
-            .terms
-            .iter()
-            .find(|t| t.0 == name)
-            .map_or(f64::NAN, |t| t.2)
-    };
     let forward_ms = median_ms(args.repeats, || probe.forward(pose).map(|_| ()))?;
     let forward_backward_ms = median_ms(args.repeats, || probe.forward_backward(pose).map(|_| ()))?;
     Ok(GradReport {
-        tce: term("tce"),
-        tre: term("tre"),
+        tce: result.term("tce"),
+        tre: result.term("tre"),
         loss: result.total,
         grad_pose: result.grad_pose.unwrap_or_else(|| vec![0.0; 6]),
         coverage: result.coverage.unwrap_or(0.0),

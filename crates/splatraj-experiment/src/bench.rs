@@ -392,13 +392,6 @@ pub fn run_one(args: &BenchSettings, config: &BenchConfig) -> Result<BenchRow> {
         (Some(a), Some(b)) if wall_s > 0.0 => Some((b - a) / wall_s),
         _ => None,
     };
-    let term = |name: &str| {
-        result
-            .terms
-            .iter()
-            .find(|t| t.0 == name)
-            .map_or(f64::NAN, |t| t.2)
-    };
     Ok(BenchRow {
         scene: setup.name,
         gaussians: setup.scene.len(),
@@ -408,8 +401,8 @@ pub fn run_one(args: &BenchSettings, config: &BenchConfig) -> Result<BenchRow> {
         pairs: result.stats.map_or(0, |s| s.pairs),
         object_gaussians: setup.mask.iter().filter(|&&m| m != 0.0).count(),
         coverage: result.coverage.unwrap_or(0.0),
-        tce: term("tce"),
-        tre: term("tre"),
+        tce: result.term("tce"),
+        tre: result.term("tre"),
         forward_ms,
         forward_backward_ms,
         setup_peak_mb,

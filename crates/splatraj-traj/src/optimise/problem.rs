@@ -63,6 +63,16 @@ pub struct PoseLoss {
     pub stats: Option<RenderStats>,
 }
 
+impl PoseLoss {
+    /// The unweighted value of the term `name` (NaN when the problem has no such cost).
+    pub fn term(&self, name: &str) -> f64 {
+        self.terms
+            .iter()
+            .find(|t| t.0 == name)
+            .map_or(f64::NAN, |t| t.2)
+    }
+}
+
 impl<'a> Problem<'a> {
     /// A problem rendered with the default rasterizer.
     pub fn new(
