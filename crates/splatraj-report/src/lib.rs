@@ -21,6 +21,7 @@ pub mod error;
 pub mod inria;
 pub mod nerfstudio;
 pub mod supersplat;
+pub mod video;
 
 use std::path::Path;
 
