@@ -20,6 +20,7 @@ pub mod colmap;
 pub mod error;
 pub mod inria;
 pub mod nerfstudio;
+pub mod report;
 pub mod supersplat;
 pub mod video;
 
