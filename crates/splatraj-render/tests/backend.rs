@@ -161,3 +161,156 @@ fn f64_is_really_f64() {
     );
     assert_eq!(host(x)[0], 1.0 + 1e-12);
 }
+
+/// The GPU kernels against the host kernels, both f32, on a batch that stresses the kernels'
+/// own structure: lists longer than one shared-memory stage (256), opaque stacks that stop
+/// pixels and whole tiles early, partial tiles, an empty tile, two channels, two poses. The
+/// host kernels are themselves checked against the tensor path in f64 (`tests/fused.rs`).
+#[cfg(feature = "wgpu")]
+#[test]
+fn gpu_kernels_match_host_kernels() {
+    use splatraj_render::fused::{CompositePlan, composite_fused};
+    use splatraj_render::rasterize::SplatInputs;
+    use splatraj_render::tiles::{TILE_SIZE, TileGrid, TileWork};
+
+    let (width, height, n, batch, channels) = (45, 37, 600, 2, 2);
+    let grid = TileGrid::new(width, height);
+    let mut rng = common::Rng(0x9e3779b97f4a7c15);
+    let (mut means, mut conics, mut opacities, mut values) = (vec![], vec![], vec![], vec![]);
+    let mut work = Vec::new();
+    for b in 0..batch {
+        let mut boxes = Vec::new();
+        for g in 0..n {
+            // The second pose leaves the right column of tiles empty (boxes end before x = 32).
+            let x_max = if b == 0 { width as f64 + 4.0 } else { 8.0 };
+            let (mx, my) = (rng.range(-4.0, x_max), rng.range(-4.0, height as f64 + 4.0));
+            let (sx, sy, rho) = (
+                rng.range(1.0, 6.0),
+                rng.range(1.0, 6.0),
+                rng.range(-0.6, 0.6),
+            );
+            let (a, bb, c) = (sx * sx, rho * sx * sy, sy * sy);
+            let det = a * c - bb * bb;
+            means.extend([mx, my]);
+            conics.extend([c / det, -bb / det, a / det]);
+            // Every tenth Gaussian is (nearly) opaque: pixels and tiles stop early.
+            opacities.push(if g % 10 == 0 {
+                0.999
+            } else {
+                rng.range(0.02, 0.9)
+            });
+            values.extend((0..channels).map(|_| rng.range(-1.0, 1.0)));
+            boxes.push((mx - 3.0 * sx, mx + 3.0 * sx, my - 3.0 * sy, my + 3.0 * sy));
+        }
+        for tile in 0..grid.tiles_x * grid.tiles_y {
+            let (x0, y0) = (
+                ((tile % grid.tiles_x) * TILE_SIZE) as f64,
+                ((tile / grid.tiles_x) * TILE_SIZE) as f64,
+            );
+            let x1 = x0 + TILE_SIZE as f64;
+            let y1 = y0 + TILE_SIZE as f64;
+            let gaussians: Vec<u32> = (0..n as u32)
+                .filter(|&g| {
+                    let (l, r, t, btm) = boxes[g as usize];
+                    r >= x0 && l <= x1 && btm >= y0 && t <= y1
+                })
+                .collect();
+            if !gaussians.is_empty() {
+                work.push(TileWork {
+                    batch: b,
+                    tile,
+                    gaussians,
+                });
+            }
+        }
+    }
+    assert!(
+        work.iter().any(|w| w.gaussians.len() > 256),
+        "a list longer than one stage"
+    );
+    assert!(
+        work.len() < batch * grid.tiles_x * grid.tiles_y,
+        "an empty tile"
+    );
+    let rows = n * batch;
+    let pixels = batch * height * width;
+    let w_image: Vec<f64> = (0..pixels * (channels + 1))
+        .map(|i| ((i * 7919) % 23) as f64 / 23.0 - 0.4)
+        .collect();
+
+    let run = |backend: BackendKind| -> Vec<Vec<f64>> {
+        let device = backend.device().unwrap().autodiff();
+        let t2 = |v: &[f64], cols: usize| {
+            Tensor::<2>::from_data(
+                TensorData::new(v.to_vec(), [v.len() / cols, cols]),
+                (&device, DType::F32),
+            )
+            .require_grad()
+        };
+        let (m, c, v) = (t2(&means, 2), t2(&conics, 3), t2(&values, channels));
+        let o = Tensor::<1>::from_data(
+            TensorData::new(opacities.clone(), [rows]),
+            (&device, DType::F32),
+        )
+        .require_grad();
+        let inputs = SplatInputs {
+            means_2d: m.clone(),
+            conics: c.clone(),
+            opacities: o.clone(),
+            values: v.clone(),
+        };
+        let out = composite_fused(&inputs, CompositePlan::new(&work, n, batch, grid));
+        let weights = |range: std::ops::Range<usize>| {
+            let w: Vec<f64> = w_image
+                .chunks(channels + 1)
+                .flat_map(|px| px[range.clone()].to_vec())
+                .collect();
+            w
+        };
+        let w_values = Tensor::<4>::from_data(
+            TensorData::new(weights(0..channels), [batch, height, width, channels]),
+            (&device, DType::F32),
+        );
+        let w_alpha = Tensor::<3>::from_data(
+            TensorData::new(weights(channels..channels + 1), [batch, height, width]),
+            (&device, DType::F32),
+        );
+        let loss = (out.images.clone() * w_values).sum() + (out.alpha.clone() * w_alpha).sum();
+        let grads = loss.backward();
+        vec![
+            host(out.images),
+            host(out.alpha),
+            host(m.grad(&grads).unwrap()),
+            host(c.grad(&grads).unwrap()),
+            host(o.grad(&grads).unwrap()),
+            host(v.grad(&grads).unwrap()),
+        ]
+    };
+    let want = run(BackendKind::Flex);
+    let got = run(BackendKind::Wgpu);
+    let names = [
+        "images",
+        "alpha",
+        "v_means",
+        "v_conics",
+        "v_opacities",
+        "v_values",
+    ];
+    for ((name, got), want) in names.iter().zip(&got).zip(&want) {
+        let scale = want.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let error = got
+            .iter()
+            .zip(want)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(scale > 0.0, "{name}: something to compare");
+        assert!(
+            error <= 1e-3 * scale.max(1.0),
+            "{name}: GPU and host kernels differ by {error} (largest value {scale})"
+        );
+    }
+    assert_eq!(
+        run(BackendKind::Wgpu),
+        got,
+        "the GPU kernels are deterministic"
+    );
+}

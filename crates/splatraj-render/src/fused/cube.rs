@@ -1,0 +1,627 @@
+//! The fused compositing kernels on the GPU backend (`Cube`: wgpu, and any CubeCL runtime):
+//! the same rules, saved state and back-to-front replay as the host kernels ([`super::cpu`]),
+//! written as CubeCL kernels with one cube (workgroup) of 256 units per work tile, one unit
+//! per pixel.
+//!
+//! - Forward: the tile's list is staged through shared memory 256 Gaussians at a time; each
+//!   unit composites its pixel and keeps its final T and the count of list entries up to its
+//!   last contributor. A tile stops once none of its pixels is open.
+//! - Backward: every unit replays its pixel back to front from the saved state; per list entry
+//!   the tile's 256 contributions are summed by a fixed tree reduction in shared memory into
+//!   that entry's gradient slot, and a second kernel sums each Gaussian's slots in plan order
+//!   (the host built the map from Gaussian to its slots). No atomics, so the result is the same
+//!   on every run.
+//!
+//! The tile lists are built on the host (binning is cheapest there: it is a per-pose sort the
+//! host already does for its decisions) and uploaded each pass as three integer tensors. f64 is
+//! not a GPU type on most devices: an f64 pass runs the host kernels instead.
+
+use std::sync::Arc;
+
+use burn::backend::Cube;
+use burn::backend::TensorMetadata;
+use burn::backend::tensor::FloatTensor;
+use burn::tensor::{DType, TensorData};
+use burn_backend::cubecl::dtype_to_storage_type;
+use burn_backend::ops::{FloatTensorOps, IntTensorOps};
+use burn_cubecl::cubecl::prelude::*;
+use burn_cubecl::kernel::into_contiguous;
+use burn_cubecl::tensor::CubeTensor;
+use burn_cubecl::{CubeDevice, cubecl};
+
+use super::plan::CompositePlan;
+use super::{CompositeKernels, FusedComposite, HostSaved, SplatPrimitives, host_backward};
+use crate::rasterize::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
+use crate::tiles::TILE_PIXELS;
+
+/// Gradient slot width of one list entry: [v_mx, v_my, v_a, v_b, v_c, v_o, v_values…].
+const fn slot_width(channels: usize) -> usize {
+    6 + channels
+}
+
+/// Work tile index of this cube (the launch grid is 2D when there are more than 65 535 tiles).
+#[cube]
+fn work_index() -> usize {
+    CUBE_POS_Y as usize * CUBE_COUNT_X as usize + CUBE_POS_X as usize
+}
+
+#[cube(launch)]
+#[allow(clippy::too_many_arguments)]
+fn forward_kernel<F: Float, I: Int>(
+    means: &Tensor<F>,       // [R, 2]
+    conics: &Tensor<F>,      // [R, 3]
+    opacities: &Tensor<F>,   // [R]
+    values: &Tensor<F>,      // [R, C]
+    work: &Tensor<I>,        // [work, 3]: pose, tile corner x, tile corner y
+    starts: &Tensor<I>,      // [work + 1]
+    rows: &Tensor<I>,        // [pairs]
+    image: &mut Tensor<F>,   // [B, H, W, C + 1]
+    final_t: &mut Tensor<F>, // [work, 256]
+    last: &mut Tensor<I>,    // [work, 256]
+    work_count: u32,
+    width: u32,
+    height: u32,
+    #[comptime] channels: usize,
+    #[define(F, I)] _dtypes: [ElemType; 2],
+) {
+    let w = work_index();
+    if w >= work_count as usize {
+        terminate!();
+    }
+    let p = UNIT_POS as usize;
+    let pose = u32::cast_from(work[3 * w]);
+    let x0 = u32::cast_from(work[3 * w + 1]);
+    let y0 = u32::cast_from(work[3 * w + 2]);
+    let x = x0 + (p % 16) as u32;
+    let y = y0 + (p / 16) as u32;
+    let inside = x < width && y < height;
+    // Pixel centre relative to the tile corner (the host kernels' coordinates).
+    let px = F::cast_from((p % 16) as u32) + F::new(0.5);
+    let py = F::cast_from((p / 16) as u32) + F::new(0.5);
+    let (x0f, y0f) = (F::cast_from(x0), F::cast_from(y0));
+
+    let mut open = inside;
+    let mut t = F::new(1.0);
+    let mut last_entry = 0u32;
+    let mut sums = Array::<F>::new(channels);
+    for k in 0..channels {
+        sums[k] = F::new(0.0);
+    }
+
+    let start = u32::cast_from(starts[w]) as usize;
+    let end = u32::cast_from(starts[w + 1]) as usize;
+    let mut sh_mx = Shared::<[F]>::new_slice(256usize);
+    let mut sh_my = Shared::<[F]>::new_slice(256usize);
+    let mut sh_a = Shared::<[F]>::new_slice(256usize);
+    let mut sh_b = Shared::<[F]>::new_slice(256usize);
+    let mut sh_c = Shared::<[F]>::new_slice(256usize);
+    let mut sh_o = Shared::<[F]>::new_slice(256usize);
+    let mut sh_values = Shared::<[F]>::new_slice(comptime!(256usize * channels));
+    let mut sh_open = Shared::<[u32]>::new_slice(1usize);
+
+    let mut first = start;
+    while first < end {
+        // Stop the tile once no pixel is open (uniform across the cube: read after a barrier).
+        if p == 0 {
+            sh_open[0] = 0u32;
+        }
+        sync_cube();
+        if open {
+            sh_open[0] = 1u32;
+        }
+        sync_cube();
+        if sh_open[0] == 0u32 {
+            break;
+        }
+        let j = first + p;
+        if j < end {
+            let row = u32::cast_from(rows[j]) as usize;
+            sh_mx[p] = means[2 * row] - x0f;
+            sh_my[p] = means[2 * row + 1] - y0f;
+            sh_a[p] = conics[3 * row];
+            sh_b[p] = conics[3 * row + 1];
+            sh_c[p] = conics[3 * row + 2];
+            sh_o[p] = opacities[row];
+            for k in 0..channels {
+                sh_values[k * 256 + p] = values[row * channels + k];
+            }
+        }
+        sync_cube();
+        let count = min(end - first, 256usize);
+        for i in 0..count {
+            if open {
+                let dx = px - sh_mx[i];
+                let dy = py - sh_my[i];
+                let power = F::new(0.0)
+                    - F::new(0.5) * (sh_a[i] * dx * dx + sh_c[i] * dy * dy)
+                    - sh_b[i] * dx * dy;
+                let alpha = min(
+                    sh_o[i] * F::exp(min(power, F::new(0.0))),
+                    F::new(MAX_ALPHA as f32),
+                );
+                if alpha >= F::new(MIN_ALPHA as f32) {
+                    let t_next = t * (F::new(1.0) - alpha);
+                    if t_next < F::new(MIN_TRANSMITTANCE as f32) {
+                        open = false;
+                    } else {
+                        let weight = alpha * t;
+                        for k in 0..channels {
+                            sums[k] += sh_values[k * 256 + i] * weight;
+                        }
+                        t = t_next;
+                        last_entry = (first - start + i + 1) as u32;
+                    }
+                }
+            }
+        }
+        sync_cube();
+        first += 256;
+    }
+
+    final_t[w * 256 + p] = t;
+    last[w * 256 + p] = I::cast_from(last_entry);
+    if inside {
+        let pixel = ((pose * height + y) * width + x) as usize;
+        for k in 0..channels {
+            image[pixel * (channels + 1) + k] = sums[k];
+        }
+        image[pixel * (channels + 1) + channels] = F::new(1.0) - t;
+    }
+}
+
+#[cube(launch)]
+#[allow(clippy::too_many_arguments)]
+fn backward_kernel<F: Float, I: Int>(
+    means: &Tensor<F>,     // [R, 2]
+    conics: &Tensor<F>,    // [R, 3]
+    opacities: &Tensor<F>, // [R]
+    values: &Tensor<F>,    // [R, C]
+    work: &Tensor<I>,      // [work, 3]
+    starts: &Tensor<I>,    // [work + 1]
+    rows: &Tensor<I>,      // [pairs]
+    final_t: &Tensor<F>,   // [work, 256]
+    last: &Tensor<I>,      // [work, 256]
+    v_image: &Tensor<F>,   // [B, H, W, C + 1]
+    slots: &mut Tensor<F>, // [pairs, 6 + C]
+    work_count: u32,
+    width: u32,
+    height: u32,
+    #[comptime] channels: usize,
+    #[define(F, I)] _dtypes: [ElemType; 2],
+) {
+    let w = work_index();
+    if w >= work_count as usize {
+        terminate!();
+    }
+    let stride = comptime!(channels + 6);
+    let p = UNIT_POS as usize;
+    let pose = u32::cast_from(work[3 * w]);
+    let x0 = u32::cast_from(work[3 * w + 1]);
+    let y0 = u32::cast_from(work[3 * w + 2]);
+    let x = x0 + (p % 16) as u32;
+    let y = y0 + (p / 16) as u32;
+    let inside = x < width && y < height;
+    let px = F::cast_from((p % 16) as u32) + F::new(0.5);
+    let py = F::cast_from((p / 16) as u32) + F::new(0.5);
+    let (x0f, y0f) = (F::cast_from(x0), F::cast_from(y0));
+
+    // The pixel's output gradients (zero outside the image) and replay state.
+    let mut v_out = Array::<F>::new(comptime!(channels + 1));
+    let mut behind = Array::<F>::new(channels); // Σ over later contributors of f·α·T
+    for k in 0..comptime!(channels + 1) {
+        v_out[k] = F::new(0.0);
+    }
+    for k in 0..channels {
+        behind[k] = F::new(0.0);
+    }
+    if inside {
+        let pixel = ((pose * height + y) * width + x) as usize;
+        for k in 0..comptime!(channels + 1) {
+            v_out[k] = v_image[pixel * (channels + 1) + k];
+        }
+    }
+    let t_final = final_t[w * 256 + p];
+    let mut t = t_final;
+    let my_last = u32::cast_from(last[w * 256 + p]) as usize;
+
+    // The tile replays from its deepest last contributor: a max over the cube.
+    let mut sh_last = Shared::<[u32]>::new_slice(256usize);
+    sh_last[p] = my_last as u32;
+    sync_cube();
+    let mut half = 128usize;
+    while half > 0 {
+        if p < half {
+            let other = sh_last[p + half];
+            if other > sh_last[p] {
+                sh_last[p] = other;
+            }
+        }
+        sync_cube();
+        half /= 2;
+    }
+    let replay = sh_last[0] as usize;
+    let start = u32::cast_from(starts[w]) as usize;
+
+    let mut sh_sum = Shared::<[F]>::new_slice(comptime!(256usize * (channels + 6)));
+    let mut done = 0usize;
+    while done < replay {
+        let j = replay - 1 - done;
+        let row = u32::cast_from(rows[start + j]) as usize;
+        let mx = means[2 * row] - x0f;
+        let my = means[2 * row + 1] - y0f;
+        let a = conics[3 * row];
+        let b = conics[3 * row + 1];
+        let c = conics[3 * row + 2];
+        let o = opacities[row];
+        for k in 0..stride {
+            sh_sum[k * 256 + p] = F::new(0.0);
+        }
+        if j < my_last {
+            let dx = px - mx;
+            let dy = py - my;
+            let power = F::new(0.0) - F::new(0.5) * (a * dx * dx + c * dy * dy) - b * dx * dy;
+            let exp_power = F::exp(min(power, F::new(0.0)));
+            let raw = o * exp_power;
+            let alpha = min(raw, F::new(MAX_ALPHA as f32));
+            if alpha >= F::new(MIN_ALPHA as f32) {
+                let keep = F::new(1.0) - alpha;
+                let t_before = t / keep;
+                let weight = alpha * t_before;
+                // dL/dα = Σ_k v_k (f_k T_i − S_k / (1 − α)) + v_A · T_final / (1 − α)
+                let mut v_alpha = v_out[channels] * t_final / keep;
+                for k in 0..channels {
+                    let value = values[row * channels + k];
+                    v_alpha += v_out[k] * (value * t_before - behind[k] / keep);
+                    sh_sum[(6 + k) * 256 + p] = v_out[k] * weight;
+                    behind[k] += value * weight;
+                }
+                t = t_before;
+                if raw <= F::new(MAX_ALPHA as f32) {
+                    sh_sum[5usize * 256 + p] = v_alpha * exp_power;
+                    if power <= F::new(0.0) {
+                        let v_power = v_alpha * raw;
+                        sh_sum[p] = v_power * (a * dx + b * dy);
+                        sh_sum[256 + p] = v_power * (b * dx + c * dy);
+                        sh_sum[2usize * 256 + p] = F::new(0.0) - v_power * F::new(0.5) * dx * dx;
+                        sh_sum[3usize * 256 + p] = F::new(0.0) - v_power * dx * dy;
+                        sh_sum[4usize * 256 + p] = F::new(0.0) - v_power * F::new(0.5) * dy * dy;
+                    }
+                }
+            }
+        }
+        sync_cube();
+        // A fixed tree over the tile's pixels: the same sum on every run.
+        let mut half = 128usize;
+        while half > 0 {
+            if p < half {
+                for k in 0..stride {
+                    let other = sh_sum[k * 256 + p + half];
+                    sh_sum[k * 256 + p] += other;
+                }
+            }
+            sync_cube();
+            half /= 2;
+        }
+        if p < stride {
+            slots[(start + j) * stride + p] = sh_sum[p * 256];
+        }
+        sync_cube();
+        done += 1;
+    }
+}
+
+#[cube(launch)]
+#[allow(clippy::too_many_arguments)]
+fn gather_kernel<F: Float, I: Int>(
+    slots: &Tensor<F>,           // [pairs, 6 + C]
+    slot_order: &Tensor<I>,      // [pairs]: slots grouped by row, in plan order within a row
+    slot_starts: &Tensor<I>,     // [R + 1]
+    v_means: &mut Tensor<F>,     // [R, 2]
+    v_conics: &mut Tensor<F>,    // [R, 3]
+    v_opacities: &mut Tensor<F>, // [R]
+    v_values: &mut Tensor<F>,    // [R, C]
+    row_count: u32,
+    #[comptime] channels: usize,
+    #[define(F, I)] _dtypes: [ElemType; 2],
+) {
+    let row = ABSOLUTE_POS;
+    if row >= row_count as usize {
+        terminate!();
+    }
+    let stride = comptime!(channels + 6);
+    let mut sums = Array::<F>::new(comptime!(channels + 6));
+    for k in 0..stride {
+        sums[k] = F::new(0.0);
+    }
+    let from = u32::cast_from(slot_starts[row]) as usize;
+    let to = u32::cast_from(slot_starts[row + 1]) as usize;
+    for i in from..to {
+        let slot = u32::cast_from(slot_order[i]) as usize;
+        for k in 0..stride {
+            sums[k] += slots[slot * stride + k];
+        }
+    }
+    v_means[2 * row] = sums[0];
+    v_means[2 * row + 1] = sums[1];
+    v_conics[3 * row] = sums[2];
+    v_conics[3 * row + 1] = sums[3];
+    v_conics[3 * row + 2] = sums[4];
+    v_opacities[row] = sums[5];
+    for k in 0..channels {
+        v_values[row * channels + k] = sums[6 + k];
+    }
+}
+
+/// What the GPU forward pass keeps for its backward.
+#[derive(Debug, Clone)]
+pub struct DeviceSaved {
+    inputs: [CubeTensor; 4],
+    plan: Arc<CompositePlan>,
+    lists: PlanTensors,
+    final_t: CubeTensor,
+    last: CubeTensor,
+}
+
+/// The backward state: on the device, or on the host for f64 passes.
+#[derive(Debug, Clone)]
+pub enum CubeSaved {
+    /// f32 (and f16/bf16) passes: state on the device.
+    Device(Box<DeviceSaved>),
+    /// f64 passes: the host kernels' state.
+    Host(HostSaved),
+}
+
+/// The tile lists of a plan as device tensors.
+#[derive(Debug, Clone)]
+struct PlanTensors {
+    work: CubeTensor,
+    starts: CubeTensor,
+    rows: CubeTensor,
+}
+
+/// An i32 device tensor (never empty: a kernel argument needs a buffer).
+fn int_tensor(values: Vec<i32>, device: &CubeDevice) -> CubeTensor {
+    let values = if values.is_empty() { vec![0] } else { values };
+    let len = values.len();
+    Cube::int_from_data(TensorData::new(values, [len]), device)
+}
+
+fn upload_plan(plan: &CompositePlan, device: &CubeDevice) -> PlanTensors {
+    let work = (0..plan.tiles.len())
+        .flat_map(|w| {
+            let (x0, y0) = plan.tile_origin(plan.tiles[w]);
+            [plan.batches[w] as i32, x0 as i32, y0 as i32]
+        })
+        .collect();
+    PlanTensors {
+        work: int_tensor(work, device),
+        starts: int_tensor(plan.starts.iter().map(|&s| s as i32).collect(), device),
+        rows: int_tensor(plan.rows.iter().map(|&r| r as i32).collect(), device),
+    }
+}
+
+/// Cubes for `work` tiles, 2D past the per-axis limit.
+fn tile_grid(work: usize) -> CubeCount {
+    const MAX_PER_AXIS: usize = 65_535;
+    let x = work.clamp(1, MAX_PER_AXIS);
+    CubeCount::Static(x as u32, work.div_ceil(x).max(1) as u32, 1)
+}
+
+fn zeros(shape: Vec<usize>, device: &CubeDevice, dtype: DType) -> CubeTensor {
+    Cube::float_zeros(shape.into(), device, dtype.into())
+}
+
+/// Rows grouped by the slots (list entries) that hold their gradients, in plan order.
+fn slots_by_row(plan: &CompositePlan, rows: usize) -> (Vec<i32>, Vec<i32>) {
+    let mut starts = vec![0i32; rows + 1];
+    for &r in &plan.rows {
+        starts[r as usize + 1] += 1;
+    }
+    for r in 0..rows {
+        starts[r + 1] += starts[r];
+    }
+    let mut next = starts.clone();
+    let mut order = vec![0i32; plan.rows.len()];
+    for (slot, &r) in plan.rows.iter().enumerate() {
+        order[next[r as usize] as usize] = slot as i32;
+        next[r as usize] += 1;
+    }
+    (order, starts)
+}
+
+fn device_forward(
+    inputs: SplatPrimitives<Cube>,
+    plan: Arc<CompositePlan>,
+) -> (CubeTensor, DeviceSaved) {
+    let inputs =
+        [inputs.means, inputs.conics, inputs.opacities, inputs.values].map(into_contiguous);
+    let device = inputs[0].device.clone();
+    let client = inputs[0].client.clone();
+    let dtype = inputs[0].dtype;
+    let channels = inputs[3].shape().dims::<2>()[1];
+    let grid = plan.grid;
+    let work_count = plan.tiles.len();
+    let lists = upload_plan(&plan, &device);
+    let image = zeros(
+        vec![plan.batch, grid.height, grid.width, channels + 1],
+        &device,
+        dtype,
+    );
+    let final_t = zeros(vec![work_count.max(1), TILE_PIXELS], &device, dtype);
+    let last = int_tensor(vec![0; work_count.max(1) * TILE_PIXELS], &device);
+    if work_count > 0 {
+        forward_kernel::launch(
+            &client,
+            tile_grid(work_count),
+            CubeDim::new_1d(TILE_PIXELS as u32),
+            inputs[0].clone().into_tensor_arg(),
+            inputs[1].clone().into_tensor_arg(),
+            inputs[2].clone().into_tensor_arg(),
+            inputs[3].clone().into_tensor_arg(),
+            lists.work.clone().into_tensor_arg(),
+            lists.starts.clone().into_tensor_arg(),
+            lists.rows.clone().into_tensor_arg(),
+            image.clone().into_tensor_arg(),
+            final_t.clone().into_tensor_arg(),
+            last.clone().into_tensor_arg(),
+            work_count as u32,
+            grid.width as u32,
+            grid.height as u32,
+            channels,
+            [
+                dtype_to_storage_type(dtype),
+                dtype_to_storage_type(last.dtype),
+            ],
+        );
+    }
+    let saved = DeviceSaved {
+        inputs,
+        plan,
+        lists,
+        final_t,
+        last,
+    };
+    (image, saved)
+}
+
+fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<Cube> {
+    let v_image = into_contiguous(v_image);
+    let DeviceSaved {
+        inputs,
+        plan,
+        lists,
+        final_t,
+        last,
+    } = saved;
+    let device = inputs[0].device.clone();
+    let client = inputs[0].client.clone();
+    let dtype = inputs[0].dtype;
+    let [rows, channels] = inputs[3].shape().dims::<2>();
+    let grid = plan.grid;
+    let work_count = plan.tiles.len();
+    let pairs = plan.rows.len();
+    let slots = zeros(vec![pairs.max(1), slot_width(channels)], &device, dtype);
+    let int_dtype = dtype_to_storage_type(last.dtype);
+    if work_count > 0 {
+        backward_kernel::launch(
+            &client,
+            tile_grid(work_count),
+            CubeDim::new_1d(TILE_PIXELS as u32),
+            inputs[0].clone().into_tensor_arg(),
+            inputs[1].clone().into_tensor_arg(),
+            inputs[2].clone().into_tensor_arg(),
+            inputs[3].clone().into_tensor_arg(),
+            lists.work.into_tensor_arg(),
+            lists.starts.into_tensor_arg(),
+            lists.rows.into_tensor_arg(),
+            final_t.into_tensor_arg(),
+            last.into_tensor_arg(),
+            v_image.into_tensor_arg(),
+            slots.clone().into_tensor_arg(),
+            work_count as u32,
+            grid.width as u32,
+            grid.height as u32,
+            channels,
+            [dtype_to_storage_type(dtype), int_dtype],
+        );
+    }
+    let v_means = zeros(vec![rows, 2], &device, dtype);
+    let v_conics = zeros(vec![rows, 3], &device, dtype);
+    let v_opacities = zeros(vec![rows], &device, dtype);
+    let v_values = zeros(vec![rows, channels], &device, dtype);
+    if rows > 0 {
+        let (order, starts) = slots_by_row(&plan, rows);
+        let order = int_tensor(order, &device);
+        let starts = int_tensor(starts, &device);
+        let cube_dim = CubeDim::new_1d(256);
+        let cubes = rows.div_ceil(256);
+        let cube_count =
+            CubeCount::Static(cubes.min(65_535) as u32, cubes.div_ceil(65_535) as u32, 1);
+        gather_kernel::launch(
+            &client,
+            cube_count,
+            cube_dim,
+            slots.into_tensor_arg(),
+            order.into_tensor_arg(),
+            starts.into_tensor_arg(),
+            v_means.clone().into_tensor_arg(),
+            v_conics.clone().into_tensor_arg(),
+            v_opacities.clone().into_tensor_arg(),
+            v_values.clone().into_tensor_arg(),
+            rows as u32,
+            channels,
+            [dtype_to_storage_type(dtype), int_dtype],
+        );
+    }
+    SplatPrimitives {
+        means: v_means,
+        conics: v_conics,
+        opacities: v_opacities,
+        values: v_values,
+    }
+}
+
+impl CompositeKernels for Cube {
+    type Saved = CubeSaved;
+
+    fn composite_forward(
+        inputs: SplatPrimitives<Self>,
+        plan: Arc<CompositePlan>,
+    ) -> (FloatTensor<Self>, CubeSaved) {
+        if inputs.means.dtype() == DType::F64 {
+            let (image, saved) = super::host_forward::<Self>(inputs, plan);
+            return (image, CubeSaved::Host(saved));
+        }
+        let (image, saved) = device_forward(inputs, plan);
+        (image, CubeSaved::Device(Box::new(saved)))
+    }
+
+    fn composite_backward(saved: CubeSaved, v_image: FloatTensor<Self>) -> SplatPrimitives<Self> {
+        match saved {
+            CubeSaved::Host(saved) => host_backward::<Self>(saved, v_image),
+            CubeSaved::Device(saved) => device_backward(*saved, v_image),
+        }
+    }
+}
+
+impl FusedComposite for Cube {
+    fn fused_composite(
+        inputs: SplatPrimitives<Self>,
+        plan: Arc<CompositePlan>,
+    ) -> FloatTensor<Self> {
+        Self::composite_forward(inputs, plan).0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tiles::{TileGrid, TileWork};
+
+    #[test]
+    fn slots_are_grouped_by_row_in_plan_order() {
+        let grid = TileGrid::new(32, 16);
+        let work = [
+            TileWork {
+                batch: 0,
+                tile: 0,
+                gaussians: vec![2, 0],
+            },
+            TileWork {
+                batch: 0,
+                tile: 1,
+                gaussians: vec![0, 1, 2],
+            },
+        ];
+        let plan = CompositePlan::new(&work, 3, 1, grid);
+        let (order, starts) = slots_by_row(&plan, 3);
+        // Slots: 0→row 2, 1→row 0, 2→row 0, 3→row 1, 4→row 2.
+        assert_eq!(starts, vec![0, 2, 3, 5]);
+        assert_eq!(order, vec![1, 2, 3, 0, 4]);
+        assert_eq!(
+            crate::tiles::TILE_SIZE,
+            16,
+            "the kernels hard-code 16-pixel tile rows"
+        );
+    }
+}
