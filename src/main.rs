@@ -31,6 +31,8 @@ enum Command {
     /// Benchmarks.
     #[command(subcommand)]
     Bench(commands::bench::BenchCommand),
+    /// CLIP text embeddings of phrases, written as a phrase table (.safetensors or .json).
+    EncodeText(commands::encode_text::EncodeTextArgs),
     /// Write a run's trajectory as another tool's camera file (nerfstudio, COLMAP, INRIA,
     /// SuperSplat).
     Export(commands::export::ExportArgs),
@@ -59,6 +61,7 @@ fn main() -> ExitCode {
         Command::Pose(args) => commands::pose::run(args),
         Command::Bench(command) => commands::bench::run(command),
         Command::Export(args) => commands::export::run(args),
+        Command::EncodeText(args) => commands::encode_text::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

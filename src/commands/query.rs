@@ -22,7 +22,7 @@ use splatraj::experiment::views::{FOV_X_DEGREES, ViewOptions};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera::Intrinsics;
 use splatraj_semantic::selection::{DEFAULT_FLOOR, DEFAULT_TOP_FRACTION};
-use splatraj_semantic::{ClusterOptions, SelectionOptions};
+use splatraj_semantic::{Activation, ClusterOptions, SelectionOptions};
 
 use crate::cli::ReadArgs;
 
@@ -73,6 +73,14 @@ pub struct QueryArgs {
     /// order.
     #[arg(long, value_name = "FILE.txt")]
     phrase_names: Option<PathBuf>,
+    /// features, langsplat: CLIP text-tower weights (open_clip_model.safetensors,
+    /// open_clip_pytorch_model.bin): the query can then be any phrase.
+    #[arg(long, value_name = "FILE")]
+    text_encoder: Option<PathBuf>,
+    /// features, langsplat: the text tower's activation, gelu (open_clip) or quick-gelu
+    /// (OpenAI) [default: open_clip_config.json beside the weights, else gelu].
+    #[arg(long, value_name = "gelu|quick-gelu", value_parser = Activation::from_str)]
+    text_activation: Option<Activation>,
     /// features, langsplat: canonical negative phrase (repeatable; default: object, things,
     /// stuff, texture).
     #[arg(long)]
@@ -175,6 +183,8 @@ pub fn run(args: QueryArgs) -> Result<()> {
         features: args.features,
         phrases: args.phrases,
         phrase_names: args.phrase_names,
+        text_encoder: args.text_encoder,
+        text_activation: args.text_activation,
         negatives: args.negative,
         temperature: args.temperature,
         latents: args.latents,

@@ -16,7 +16,7 @@ use splatraj_render::camera::Intrinsics;
 use splatraj_render::render::DeviceScene;
 use splatraj_scene::Scene;
 use splatraj_semantic::{
-    Region, RegionSpec, SelectionOptions, SourceKind, SourceRegistry, Spread, Target,
+    Activation, Region, RegionSpec, SelectionOptions, SourceKind, SourceRegistry, Spread, Target,
     TargetsConfig, find_target,
 };
 
@@ -40,6 +40,10 @@ pub struct QueryRequest {
     pub phrases: Option<PathBuf>,
     /// features, langsplat: phrases of an `.npy` (or `.safetensors`) table, one per line.
     pub phrase_names: Option<PathBuf>,
+    /// features, langsplat: CLIP text-tower weights, for free-text queries.
+    pub text_encoder: Option<PathBuf>,
+    /// features, langsplat: the text tower's activation (default: its config, else gelu).
+    pub text_activation: Option<Activation>,
     /// features, langsplat: canonical negatives (empty: the defaults).
     pub negatives: Vec<String>,
     /// features, langsplat: temperature of the relevancy softmax.
@@ -120,6 +124,8 @@ impl QueryRequest {
     pub fn choose_source(&self, scene: &Scene, scene_name: &str) -> Result<SourceKind> {
         use SourceKind::{Features, Labels, Langsplat, Region};
         let phrase_options = self.phrases.is_some()
+            || self.text_encoder.is_some()
+            || self.text_activation.is_some()
             || self.phrase_names.is_some()
             || !self.negatives.is_empty()
             || self.temperature.is_some();
@@ -150,7 +156,7 @@ impl QueryRequest {
             (kind != Features && self.features.is_some(), "--features"),
             (
                 !matches!(kind, Features | Langsplat) && phrase_options,
-                "--phrases/--phrase-names/--negative/--temperature",
+                "--phrases/--text-encoder/--phrase-names/--negative/--temperature",
             ),
             (
                 kind != Langsplat && langsplat_options,
@@ -173,9 +179,10 @@ impl QueryRequest {
                 "the region source needs a region: give --box MINX,MINY,MINZ,MAXX,MAXY,MAXZ or \
                  --sphere CX,CY,CZ,R"
             ),
-            Features | Langsplat if self.phrases.is_none() => bail!(
-                "the {kind} source needs text embeddings: give a phrase table with --phrases TABLE \
-                 (.json, .npy with --phrase-names, or .safetensors)"
+            Features | Langsplat if self.phrases.is_none() && self.text_encoder.is_none() => bail!(
+                "the {kind} source needs text embeddings: give CLIP text-tower weights with \
+                 --text-encoder FILE (any phrase), or a phrase table with --phrases TABLE (.json, \
+                 .npy with --phrase-names, or .safetensors)"
             ),
             Langsplat if self.latents.is_none() || self.checkpoint.is_none() => bail!(
                 "the langsplat source needs the per-Gaussian latents (--latents LATENTS.npy, [N, 3]) \
@@ -198,6 +205,8 @@ impl QueryRequest {
             features: self.features.clone(),
             phrases: self.phrases.clone(),
             phrase_names: self.phrase_names.clone(),
+            text_encoder: self.text_encoder.clone(),
+            text_activation: self.text_activation,
             negatives: (!self.negatives.is_empty()).then(|| self.negatives.clone()),
             temperature: self.temperature,
             latents: self.latents.clone(),

@@ -19,7 +19,10 @@
 //! - `region`: `regions = { shelf = { box = [x0, y0, z0, x1, y1, z1] }, ball = { sphere = [cx, cy, cz, r] } }`;
 //! - `features`: `features` (`.npy`/`.safetensors` `[N, D]`; default: the scene's own feature
 //!   properties), `phrases` (phrase table: `.json`, `.npy` with `phrase_names`, `.safetensors`),
-//!   `phrase_names`, `negatives`, `temperature`;
+//!   `phrase_names`, `negatives`, `temperature`, `text_encoder` (CLIP weights: any phrase can
+//!   then be queried; see [`crate::text_encoder`]) and `text_activation` (`"gelu"` or
+//!   `"quick-gelu"`, for weights without an `open_clip_config.json` beside them); at least one
+//!   of `phrases` and `text_encoder`;
 //! - `langsplat`: `latents` (`.npy` `[N, 3]`), `checkpoint` (LangSplat `.pth`), and the phrase
 //!   keys of `features`.
 //!
@@ -43,6 +46,7 @@ use crate::sources::{
     FeatureInput, FeaturesSource, LabelsSource, LangsplatDecoder, LangsplatSource, Region,
     RegionSource, SourceContext, SourceRegistry, TargetSource,
 };
+use crate::text_encoder::{Activation, TextEncoder, TextEncoderOptions};
 use crate::vectors::{DEFAULT_NEGATIVES, DEFAULT_TEMPERATURE};
 
 /// The kinds of target source: the built-in ones, or `custom.<name>` for a source registered
@@ -178,6 +182,16 @@ pub struct TargetsConfig {
     /// features, langsplat: phrase table of text embeddings.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub phrases: Option<PathBuf>,
+    /// features, langsplat: CLIP text-tower weights (`open_clip_model.safetensors`,
+    /// `open_clip_pytorch_model.bin`, a safetensors or `torch.save`d state dict) that encode
+    /// the phrases the table lacks, so that any phrase can be queried. Never downloaded.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub text_encoder: Option<PathBuf>,
+    /// features, langsplat: the text tower's MLP activation, `"gelu"` (open_clip's own towers)
+    /// or `"quick-gelu"` (OpenAI's); default: `open_clip_config.json` beside the weights, else
+    /// gelu.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub text_activation: Option<Activation>,
     /// features, langsplat: phrases of an `.npy` (or `.safetensors`) table, one per line.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub phrase_names: Option<PathBuf>,
@@ -203,7 +217,7 @@ pub struct TargetsConfig {
 }
 
 /// Which sources each optional key applies to, for refusing stray keys.
-const KEY_SOURCES: [(&str, &[SourceKind]); 10] = [
+const KEY_SOURCES: [(&str, &[SourceKind]); 12] = [
     ("label_names", &[SourceKind::Labels]),
     ("synonyms", &[SourceKind::Labels]),
     ("regions", &[SourceKind::Region]),
@@ -214,6 +228,14 @@ const KEY_SOURCES: [(&str, &[SourceKind]); 10] = [
         &[SourceKind::Features, SourceKind::Langsplat],
     ),
     ("negatives", &[SourceKind::Features, SourceKind::Langsplat]),
+    (
+        "text_encoder",
+        &[SourceKind::Features, SourceKind::Langsplat],
+    ),
+    (
+        "text_activation",
+        &[SourceKind::Features, SourceKind::Langsplat],
+    ),
     (
         "temperature",
         &[SourceKind::Features, SourceKind::Langsplat],
@@ -304,11 +326,11 @@ impl TargetsConfig {
                     ),
                     None => FeatureInput::Scene,
                 };
-                Box::new(self.features_source(features, &resolve, key)?)
+                Box::new(self.features_source(features, &resolve, device, key)?)
             }
             SourceKind::Langsplat => {
                 // Checked before the (slow) decoding, which would be wasted without it.
-                self.phrases_key(key)?;
+                self.text_inputs(key)?;
                 let required = |name: &str, value: &Option<PathBuf>, what: &str| {
                     value.as_deref().map(&resolve).ok_or_else(|| {
                         SemanticError::option(
@@ -340,6 +362,7 @@ impl TargetsConfig {
                     features: self.features_source(
                         FeatureInput::Sidecar(decoded),
                         &resolve,
+                        device,
                         key,
                     )?,
                 })
@@ -364,6 +387,8 @@ impl TargetsConfig {
                 "phrases" => self.phrases.is_some(),
                 "phrase_names" => self.phrase_names.is_some(),
                 "negatives" => self.negatives.is_some(),
+                "text_encoder" => self.text_encoder.is_some(),
+                "text_activation" => self.text_activation.is_some(),
                 "temperature" => self.temperature.is_some(),
                 "latents" => self.latents.is_some(),
                 "checkpoint" => self.checkpoint.is_some(),
@@ -395,18 +420,31 @@ impl TargetsConfig {
         Ok(())
     }
 
-    /// The `phrases` path, or the error saying it is needed.
-    fn phrases_key(&self, key: &dyn Fn(&str) -> String) -> Result<&Path> {
-        self.phrases.as_deref().ok_or_else(|| {
-            SemanticError::option(
-                key("phrases"),
-                format!(
-                    "the {} source needs a phrase table of text embeddings (.json, .npy with its \
-                     phrase names file, or .safetensors)",
-                    self.source
-                ),
-            )
-        })
+    /// The error of a features or langsplat source without text embeddings.
+    fn no_text_inputs(&self, key: &dyn Fn(&str) -> String) -> SemanticError {
+        SemanticError::option(
+            key("phrases"),
+            format!(
+                "the {} source needs text embeddings: a CLIP text encoder (text_encoder = \
+                 \"open_clip_model.safetensors\") for any phrase, or a phrase table (.json, \
+                 .npy with its phrase names file, or .safetensors)",
+                self.source
+            ),
+        )
+    }
+
+    /// Whether the text embeddings have a source: a phrase table, a text encoder or both.
+    fn text_inputs(&self, key: &dyn Fn(&str) -> String) -> Result<()> {
+        if self.phrases.is_none() && self.text_encoder.is_none() {
+            return Err(self.no_text_inputs(key));
+        }
+        if self.text_activation.is_some() && self.text_encoder.is_none() {
+            return Err(SemanticError::option(
+                key("text_activation"),
+                "applies to a text encoder, but none is given (text_encoder)",
+            ));
+        }
+        Ok(())
     }
 
     /// The phrase table, negatives and temperature around `features`, checked now so that a
@@ -415,12 +453,22 @@ impl TargetsConfig {
         &self,
         features: FeatureInput,
         resolve: &dyn Fn(&Path) -> PathBuf,
+        device: &Device,
         key: &dyn Fn(&str) -> String,
     ) -> Result<FeaturesSource> {
-        let phrases = self.phrases_key(key)?;
-        let phrase_names = self.phrase_names.as_deref().map(resolve);
-        let table = PhraseTable::read(&resolve(phrases), phrase_names.as_deref())
-            .map_err(|e| e.in_key(key("phrases")))?;
+        self.text_inputs(key)?;
+        let encoder = match &self.text_encoder {
+            Some(p) => {
+                let options = TextEncoderOptions {
+                    activation: self.text_activation,
+                    heads: None,
+                };
+                let encoder = TextEncoder::from_file(&resolve(p), options, device)
+                    .map_err(|e| e.in_key(key("text_encoder")))?;
+                Some(std::sync::Arc::new(encoder))
+            }
+            None => None,
+        };
         let negatives = match &self.negatives {
             Some(n) => n.clone(),
             None => DEFAULT_NEGATIVES.iter().map(|s| s.to_string()).collect(),
@@ -432,6 +480,42 @@ impl TargetsConfig {
                  is 1 and nothing can be told apart",
             ));
         }
+        let table = match (&self.phrases, &encoder) {
+            (Some(phrases), _) => {
+                let phrase_names = self.phrase_names.as_deref().map(resolve);
+                let table = PhraseTable::read(&resolve(phrases), phrase_names.as_deref())
+                    .map_err(|e| e.in_key(key("phrases")))?;
+                match &encoder {
+                    Some(encoder) if encoder.dim() != table.dim() => {
+                        return Err(SemanticError::Mismatch(format!(
+                            "the phrase table {} has vectors of length {} but the text encoder \
+                             {} makes {}: they must come from the same CLIP model",
+                            table.source,
+                            table.dim(),
+                            encoder.source().display(),
+                            encoder.dim()
+                        ))
+                        .in_key(key("text_encoder")));
+                    }
+                    // The negatives the table lacks are encoded once, here, not per query.
+                    Some(encoder) => {
+                        let missing: Vec<String> = negatives
+                            .iter()
+                            .filter(|n| table.get(n, "").is_err())
+                            .cloned()
+                            .collect();
+                        table
+                            .extended(&encoder.table(&missing)?)
+                            .map_err(|e| e.in_key(key("phrases")))?
+                    }
+                    None => table,
+                }
+            }
+            (None, Some(encoder)) => encoder
+                .table(&negatives)
+                .map_err(|e| e.in_key(key("negatives")))?,
+            (None, None) => return Err(self.no_text_inputs(key)),
+        };
         for n in &negatives {
             table
                 .get(n, "canonical negative phrase")
@@ -449,6 +533,7 @@ impl TargetsConfig {
             table,
             negatives,
             temperature,
+            encoder,
         })
     }
 }

@@ -237,6 +237,77 @@ impl PhraseTable {
         })
     }
 
+    /// This table with the rows of `more` after its own (same vector length, no phrase in
+    /// both).
+    pub fn extended(&self, more: &PhraseTable) -> Result<Self> {
+        if more.phrases.is_empty() {
+            return Ok(self.clone());
+        }
+        if more.dim() != self.dim() {
+            return Err(SemanticError::Mismatch(format!(
+                "{} has vectors of length {} but {} has {}",
+                self.source,
+                self.dim(),
+                more.source,
+                more.dim()
+            )));
+        }
+        let mut phrases = self.phrases.clone();
+        phrases.extend(more.phrases.iter().cloned());
+        let mut values = self.vectors.values.clone();
+        values.extend_from_slice(&more.vectors.values);
+        let source = format!("{} + {}", self.source, more.source);
+        let vectors = Matrix {
+            source: source.clone(),
+            rows: phrases.len(),
+            dim: self.dim(),
+            values,
+        };
+        Self::new(source, phrases, vectors)
+    }
+
+    /// The table as file bytes, in the form `path`'s extension names: `.safetensors`
+    /// (tensor `embeddings` F32 `[P, D]`, phrases as a JSON array in the metadata key
+    /// `phrases`: self-contained, the preferred form) or `.json` (`{"phrase": [floats]}`).
+    /// [`PhraseTable::read`] reads either back.
+    pub fn to_bytes(&self, path: &Path) -> Result<Vec<u8>> {
+        match extension(path).as_str() {
+            "safetensors" => {
+                let bytes: Vec<u8> = self
+                    .vectors
+                    .values
+                    .iter()
+                    .flat_map(|v| v.to_le_bytes())
+                    .collect();
+                let view = safetensors::tensor::TensorView::new(
+                    Dtype::F32,
+                    vec![self.vectors.rows, self.dim()],
+                    &bytes,
+                )
+                .map_err(|e| SemanticError::file(path, format!("cannot build the tensor: {e}")))?;
+                let phrases = serde_json::to_string(&self.phrases)
+                    .map_err(|e| SemanticError::file(path, e.to_string()))?;
+                let metadata = HashMap::from([(PHRASES_METADATA_KEY.to_string(), phrases)]);
+                safetensors::serialize([(EMBEDDINGS_TENSOR, view)], Some(metadata))
+                    .map_err(|e| SemanticError::file(path, format!("cannot serialise: {e}")))
+            }
+            "json" => {
+                let map: serde_json::Map<String, serde_json::Value> = self
+                    .phrases
+                    .iter()
+                    .enumerate()
+                    .map(|(i, p)| (p.clone(), serde_json::json!(self.vectors.row(i))))
+                    .collect();
+                serde_json::to_vec_pretty(&serde_json::Value::Object(map))
+                    .map_err(|e| SemanticError::file(path, e.to_string()))
+            }
+            other => Err(SemanticError::file(
+                path,
+                format!("unknown phrase table extension {other:?}: use .safetensors or .json"),
+            )),
+        }
+    }
+
     /// Length of the vectors.
     pub fn dim(&self) -> usize {
         self.vectors.dim

@@ -30,6 +30,7 @@ pub mod mask_file;
 pub mod names;
 pub mod selection;
 pub mod sources;
+pub mod text_encoder;
 pub mod vectors;
 
 pub use config::{RegionSpec, SourceKind, TargetsConfig};
@@ -39,6 +40,7 @@ pub use mask_file::read_mask_file;
 pub use selection::{
     ClusterOptions, EpsRule, KeepClusters, SelectionOptions, Spread, Target, find_target, select,
 };
+pub use text_encoder::{Activation, ClipTokenizer, TextEncoder, TextEncoderOptions};
 pub use sources::{
     FeatureInput, FeaturesSource, LabelsSource, LangsplatDecoder, LangsplatSource, Region,
     RegionSource, Relevancy, Scoring, SourceConfig, SourceContext, SourceRegistry, TargetSource,

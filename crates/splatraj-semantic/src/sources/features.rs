@@ -1,11 +1,14 @@
 //! `features` source: per-Gaussian embeddings scored against a text embedding, LERF style.
 
+use std::sync::Arc;
+
 use rayon::prelude::*;
 use splatraj_scene::Scene;
 
 use crate::embeddings::{Matrix, PhraseTable};
 use crate::error::{Result, SemanticError};
 use crate::sources::{Relevancy, Scoring, TargetSource};
+use crate::text_encoder::TextEncoder;
 use crate::vectors::{self, DEFAULT_NEGATIVES, DEFAULT_TEMPERATURE};
 
 /// Where the per-Gaussian feature vectors come from.
@@ -22,8 +25,9 @@ pub enum FeatureInput {
 /// r = min over negatives n of exp(τ·cos(f, q)) / (exp(τ·cos(f, q)) + exp(τ·cos(f, n)))
 ///
 /// with f the Gaussian's feature, q the query phrase's embedding and n each canonical negative
-/// phrase's embedding, all looked up in the phrase table. r lies in (0, 1); 0.5 means "no more
-/// like the query than like the most similar negative".
+/// phrase's embedding, all looked up in the phrase table, or, for a phrase the table lacks,
+/// computed by the text encoder when there is one (free-text queries). r lies in (0, 1); 0.5
+/// means "no more like the query than like the most similar negative".
 #[derive(Debug, Clone)]
 pub struct FeaturesSource {
     /// Where the per-Gaussian features come from.
@@ -34,6 +38,8 @@ pub struct FeaturesSource {
     pub negatives: Vec<String>,
     /// Temperature τ scaling the cosines.
     pub temperature: f32,
+    /// Encodes the phrases the table lacks; `None`: only the table's phrases can be queried.
+    pub encoder: Option<Arc<TextEncoder>>,
 }
 
 impl FeaturesSource {
@@ -45,6 +51,20 @@ impl FeaturesSource {
             table,
             negatives: DEFAULT_NEGATIVES.iter().map(|s| s.to_string()).collect(),
             temperature: DEFAULT_TEMPERATURE,
+            encoder: None,
+        }
+    }
+
+    /// The text embedding of `phrase`: its table row, else the encoder's output; without an
+    /// encoder a phrase the table lacks is a no-match error listing the closest phrases.
+    /// `what` names the role ("phrase", "canonical negative phrase").
+    pub fn text_vector(&self, phrase: &str, what: &str) -> Result<Vec<f32>> {
+        match (self.table.get(phrase, what), &self.encoder) {
+            (Ok(v), _) => Ok(v.to_vec()),
+            (Err(SemanticError::NoMatch { .. }), Some(encoder)) => {
+                Ok(encoder.encode(&[phrase])?.values)
+            }
+            (Err(e), _) => Err(e),
         }
     }
 }
@@ -107,14 +127,24 @@ impl TargetSource for FeaturesSource {
                 self.table.dim()
             )));
         }
-        let q = vectors::unit(self.table.get(query, "phrase")?, || {
+        if let Some(encoder) = &self.encoder
+            && encoder.dim() != dim
+        {
+            return Err(SemanticError::Mismatch(format!(
+                "{source} has vectors of length {dim} but the text encoder {} makes {}: they \
+                 must come from the same CLIP model",
+                encoder.source().display(),
+                encoder.dim()
+            )));
+        }
+        let q = vectors::unit(&self.text_vector(query, "phrase")?, || {
             format!("the embedding of phrase {query:?} in {}", self.table.source)
         })?;
         let negatives = self
             .negatives
             .iter()
             .map(|n| {
-                vectors::unit(self.table.get(n, "canonical negative phrase")?, || {
+                vectors::unit(&self.text_vector(n, "canonical negative phrase")?, || {
                     format!(
                         "the embedding of negative phrase {n:?} in {}",
                         self.table.source

@@ -1,0 +1,300 @@
+//! The CLIP text encoder against open_clip: token ids from open_clip's tokenizer and unit
+//! embeddings from open_clip's `encode_text` on two small seeded towers (GELU in safetensors,
+//! QuickGELU in a `torch.save`d state dict), made by `scripts/make_clip_text_fixture.py`; the
+//! full ViT-B/16 and B/32 state-dict shapes open_clip builds; bad weight files.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use burn::tensor::Device;
+use safetensors::tensor::TensorView;
+use splatraj_semantic::text_encoder::{
+    Activation, ClipTokenizer, TextEncoder, TextEncoderOptions, TowerShape,
+};
+
+fn fixtures() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/clip")
+}
+
+struct Phrase {
+    text: String,
+    tokens: Vec<u32>,
+    embeddings: BTreeMap<String, Vec<f64>>,
+}
+
+fn phrases() -> Vec<Phrase> {
+    let text = std::fs::read_to_string(fixtures().join("phrases.json")).unwrap();
+    let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    json["phrases"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| Phrase {
+            text: p["text"].as_str().unwrap().to_string(),
+            tokens: p["tokens"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|t| t.as_u64().unwrap() as u32)
+                .collect(),
+            embeddings: ["gelu", "quickgelu"]
+                .iter()
+                .map(|k| {
+                    let v = p[*k]
+                        .as_array()
+                        .unwrap()
+                        .iter()
+                        .map(|x| x.as_f64().unwrap())
+                        .collect();
+                    (k.to_string(), v)
+                })
+                .collect(),
+        })
+        .collect()
+}
+
+#[test]
+fn tokenizer_matches_open_clip() {
+    let tokenizer = ClipTokenizer::new();
+    let phrases = phrases();
+    assert!(phrases.len() >= 20);
+    for p in &phrases {
+        assert_eq!(tokenizer.padded_ids(&p.text), p.tokens, "{:?}", p.text);
+    }
+    // The long phrase is cut to the context with the end marker kept.
+    let long = phrases.last().unwrap();
+    assert_eq!(long.tokens[76], 49407);
+}
+
+fn check_tower(folder: &str, file: &str, activation: Activation, heads: usize) {
+    let device = Device::flex();
+    let path = fixtures().join(folder).join(file);
+    let encoder = TextEncoder::from_file(&path, TextEncoderOptions::default(), &device).unwrap();
+    assert_eq!(encoder.activation(), activation, "{}", encoder.describe());
+    assert_eq!(encoder.heads(), heads);
+    assert_eq!(encoder.shape().layers, 2);
+    let phrases = phrases();
+    let texts: Vec<&str> = phrases.iter().map(|p| p.text.as_str()).collect();
+    let got = encoder.encode(&texts).unwrap();
+    assert_eq!((got.rows, got.dim), (phrases.len(), 16));
+    let mut worst = 0.0f64;
+    for (i, p) in phrases.iter().enumerate() {
+        let want = &p.embeddings[folder];
+        for (g, w) in got.row(i).iter().zip(want) {
+            worst = worst.max((f64::from(*g) - w).abs());
+        }
+    }
+    eprintln!("{folder}: largest difference from open_clip {worst:e}");
+    assert!(worst < 1e-5, "{folder}: largest difference {worst:e}");
+    // One phrase alone gives the same row as in the batch (padding to the batch's longest
+    // row must not change a shorter row).
+    let alone = encoder.encode(&[texts[4]]).unwrap();
+    for (a, b) in alone.row(0).iter().zip(got.row(4)) {
+        assert!((a - b).abs() < 1e-6);
+    }
+}
+
+#[test]
+fn gelu_tower_in_safetensors_matches_open_clip() {
+    check_tower("gelu", "open_clip_model.safetensors", Activation::Gelu, 4);
+}
+
+#[test]
+fn quickgelu_tower_in_a_pytorch_state_dict_matches_open_clip() {
+    check_tower(
+        "quickgelu",
+        "open_clip_pytorch_model.bin",
+        Activation::QuickGelu,
+        2,
+    );
+}
+
+#[test]
+fn options_override_the_config_and_change_the_result() {
+    let device = Device::flex();
+    let path = fixtures().join("gelu/open_clip_model.safetensors");
+    let options = TextEncoderOptions {
+        activation: Some(Activation::QuickGelu),
+        heads: Some(2),
+    };
+    let encoder = TextEncoder::from_file(&path, options, &device).unwrap();
+    assert_eq!(
+        (encoder.heads(), encoder.activation()),
+        (2, Activation::QuickGelu)
+    );
+    let phrases = phrases();
+    let got = encoder.encode(&[phrases[4].text.as_str()]).unwrap();
+    let want = &phrases[4].embeddings["gelu"];
+    let diff: f64 = got
+        .row(0)
+        .iter()
+        .zip(want)
+        .map(|(g, w)| (f64::from(*g) - w).abs())
+        .fold(0.0, f64::max);
+    assert!(diff > 1e-3, "the options were ignored");
+    let bad = TextEncoderOptions {
+        heads: Some(5),
+        ..Default::default()
+    };
+    let err = TextEncoder::from_file(&path, bad, &device)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("5 attention heads do not divide the width 32"),
+        "{err}"
+    );
+}
+
+fn shapes(file: &str) -> BTreeMap<String, Vec<usize>> {
+    let text = std::fs::read_to_string(fixtures().join(file)).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+#[test]
+fn full_vit_b_towers_are_recognised() {
+    for file in ["vit_b_16_shapes.json", "vit_b_32_shapes.json"] {
+        let shapes = shapes(file);
+        let tower = TowerShape::find(&shapes, Path::new(file)).unwrap();
+        assert_eq!(
+            (
+                tower.vocab,
+                tower.context,
+                tower.width,
+                tower.layers,
+                tower.mlp_width,
+                tower.embed_dim
+            ),
+            (49408, 77, 512, 12, 2048, 512),
+            "{file}"
+        );
+        assert_eq!(tower.prefix, "");
+        // Every text key open_clip has is one the reader expects, and the rest is the vision
+        // tower (and logit scale).
+        let expected = tower.expected_shapes();
+        for (k, v) in &shapes {
+            match expected.get(k) {
+                Some(want) => assert_eq!(want, v, "{k}"),
+                None => assert!(k.starts_with("visual.") || k == "logit_scale", "{k}"),
+            }
+        }
+    }
+}
+
+/// Writes `tensors` (name → shape, zeros) as safetensors in `dir`.
+fn write_safetensors(dir: &Path, tensors: &BTreeMap<String, Vec<usize>>) -> PathBuf {
+    let data: Vec<(String, Vec<u8>, Vec<usize>)> = tensors
+        .iter()
+        .map(|(k, s)| {
+            (
+                k.clone(),
+                vec![0u8; 4 * s.iter().product::<usize>()],
+                s.clone(),
+            )
+        })
+        .collect();
+    let views: Vec<(String, TensorView)> = data
+        .iter()
+        .map(|(k, bytes, s)| {
+            (
+                k.clone(),
+                TensorView::new(safetensors::Dtype::F32, s.clone(), bytes).unwrap(),
+            )
+        })
+        .collect();
+    let path = dir.join("tower.safetensors");
+    safetensors::serialize_to_file(views, None, &path).unwrap();
+    path
+}
+
+#[test]
+fn bad_weights_name_the_file_and_the_tensor() {
+    let dir = tempfile::tempdir().unwrap();
+    let device = Device::flex();
+    // Width 8 is below one 64-wide head: the heads are given.
+    let options = TextEncoderOptions {
+        heads: Some(2),
+        activation: None,
+    };
+    let good = TowerShape {
+        prefix: "text.".into(),
+        vocab: 49408,
+        context: 8,
+        width: 8,
+        layers: 1,
+        mlp_width: 32,
+        embed_dim: 4,
+    }
+    .expected_shapes();
+    // The tower under `text.` (CustomTextCLIP) loads.
+    let path = write_safetensors(dir.path(), &good);
+    let encoder = TextEncoder::from_file(&path, options, &device);
+    assert!(encoder.is_ok(), "{:?}", encoder.err());
+    let err = TextEncoder::from_file(&path, TextEncoderOptions::default(), &device)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("attention heads do not divide the width 8"),
+        "{err}"
+    );
+
+    let cases: Vec<(Box<dyn Fn(&mut BTreeMap<String, Vec<usize>>)>, &str)> = vec![
+        (
+            Box::new(|t| {
+                t.remove("text.transformer.resblocks.0.attn.out_proj.bias");
+            }),
+            "missing tensor \"text.transformer.resblocks.0.attn.out_proj.bias\"",
+        ),
+        (
+            Box::new(|t| {
+                t.insert("text.ln_final.weight".into(), vec![9]);
+            }),
+            "tensor \"text.ln_final.weight\" has shape [9], expected [8]",
+        ),
+        (
+            Box::new(|t| {
+                t.insert("text.transformer.resblocks.0.ls_1.gamma".into(), vec![8]);
+            }),
+            "\"text.transformer.resblocks.0.ls_1.gamma\" belongs to a text-tower variant",
+        ),
+        (
+            Box::new(|t| {
+                t.insert("text.token_embedding.weight".into(), vec![1000, 8]);
+            }),
+            "has 1000 rows but CLIP's tokenizer has 49408 tokens",
+        ),
+        (
+            Box::new(|t| {
+                t.retain(|k, _| !k.contains("token_embedding"));
+            }),
+            "no tensor \"token_embedding.weight\": not a CLIP text tower",
+        ),
+    ];
+    for (edit, message) in cases {
+        let mut tensors = good.clone();
+        edit(&mut tensors);
+        let path = write_safetensors(dir.path(), &tensors);
+        let err = TextEncoder::from_file(&path, options, &device)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(message), "{err}");
+        assert!(err.contains("tower.safetensors"), "{err}");
+    }
+    // Not a checkpoint at all, and a missing file.
+    let junk = dir.path().join("junk.bin");
+    std::fs::write(&junk, b"not a checkpoint").unwrap();
+    let err = TextEncoder::from_file(&junk, TextEncoderOptions::default(), &device)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("junk.bin") && err.contains("TorchScript"),
+        "{err}"
+    );
+    let err = TextEncoder::from_file(
+        &dir.path().join("nope.bin"),
+        TextEncoderOptions::default(),
+        &device,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("nope.bin"), "{err}");
+}
