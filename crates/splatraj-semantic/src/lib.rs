@@ -17,8 +17,10 @@
 //! of a config file ([`TargetsConfig`]): which source, its files and options, and the
 //! selection settings, built into a source in one call.
 //!
-//! It does not compute text embeddings (no CLIP model here: phrase tables are precomputed
-//! files), render anything or read whole config files (the caller parses the file and hands
+//! [`text_encoder`] is a CLIP text tower in burn (open_clip/OpenAI weights from a file the user
+//! has) that makes `features` and `langsplat` queries free text.
+//!
+//! It does not render anything or read whole config files (the caller parses the file and hands
 //! over its `[targets]` table): those belong to other parts of splatraj.
 
 #![warn(missing_docs)]
@@ -40,9 +42,9 @@ pub use mask_file::read_mask_file;
 pub use selection::{
     ClusterOptions, EpsRule, KeepClusters, SelectionOptions, Spread, Target, find_target, select,
 };
-pub use text_encoder::{Activation, ClipTokenizer, TextEncoder, TextEncoderOptions};
 pub use sources::{
     FeatureInput, FeaturesSource, LabelsSource, LangsplatDecoder, LangsplatSource, Region,
     RegionSource, Relevancy, Scoring, SourceConfig, SourceContext, SourceRegistry, TargetSource,
     label_mask,
 };
+pub use text_encoder::{Activation, ClipTokenizer, TextEncoder, TextEncoderOptions};

@@ -298,3 +298,85 @@ fn bad_weights_name_the_file_and_the_tensor() {
     .to_string();
     assert!(err.contains("nope.bin"), "{err}");
 }
+
+mod common;
+
+/// Free text end to end: a scene whose Gaussians carry open_clip's embeddings (from the
+/// fixture, not from our encoder) of three phrases, plus noise; the `features` source with
+/// the fixture's text encoder and no phrase table selects each planted object by its phrase.
+#[test]
+fn free_text_query_selects_the_planted_object() {
+    use splatraj_scene::Scene;
+    use splatraj_semantic::{SelectionOptions, SourceKind, TargetsConfig, find_target};
+
+    let phrases = phrases();
+    let planted = ["red mug", "green ball", "potted plant"];
+    let per_object = 40;
+    let mut rng = common::rng(13);
+    let mut means = Vec::new();
+    let mut rows = Vec::new();
+    let mut truth = Vec::new();
+    for (k, name) in planted.iter().enumerate() {
+        let base: Vec<f32> = phrases.iter().find(|p| p.text == *name).unwrap().embeddings["gelu"]
+            .iter()
+            .map(|&x| x as f32)
+            .collect();
+        for i in 0..per_object {
+            means.push([
+                k as f32 * 10.0,
+                (i % 8) as f32 * 0.02,
+                (i / 8) as f32 * 0.02,
+            ]);
+            rows.push(common::noisy(&mut rng, &base, 0.02));
+            truth.push(k);
+        }
+    }
+    let n = means.len();
+    let scene = Scene {
+        means,
+        scales: vec![[0.01; 3]; n],
+        rotations: vec![[1.0, 0.0, 0.0, 0.0]; n],
+        opacities: vec![1.0; n],
+        sh_degree: 0,
+        sh: vec![0.0; 3 * n],
+        extras: Default::default(),
+    };
+    let dir = tempfile::tempdir().unwrap();
+    common::write_npy(&dir.path().join("features.npy"), &rows);
+    let config = TargetsConfig {
+        source: SourceKind::Features,
+        features: Some("features.npy".into()),
+        text_encoder: Some(fixtures().join("gelu/open_clip_model.safetensors")),
+        selection: SelectionOptions {
+            // Below one object's share (1/3): the percentile keeps only the most relevant.
+            top_fraction: 0.3,
+            floor: 0.5,
+            cluster: None,
+        },
+        ..Default::default()
+    };
+    let device = Device::flex();
+    let source = config.build(dir.path(), &device).unwrap();
+    for (k, name) in planted.iter().enumerate() {
+        // Typed differently from the fixture's phrase: the tokenizer's clean-up makes it the
+        // same text.
+        let query = name.to_uppercase();
+        let target = find_target(source.as_ref(), &scene, &query, &config.selection).unwrap();
+        let selected: Vec<usize> = target.indices();
+        assert!(selected.len() >= 30, "{query}: {selected:?}");
+        assert!(
+            selected.iter().all(|&i| truth[i] == k),
+            "{query}: {selected:?}"
+        );
+    }
+    // Without an encoder the same phrase is not known.
+    let no_encoder = TargetsConfig {
+        text_encoder: None,
+        ..config.clone()
+    };
+    let err = no_encoder
+        .build(dir.path(), &device)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("needs text embeddings"), "{err}");
+}
