@@ -56,18 +56,52 @@ impl ReadArgs {
 pub fn interrupt_flag() -> Arc<AtomicBool> {
     let flag = Arc::new(AtomicBool::new(false));
     let handler_flag = flag.clone();
-    // The first Ctrl-C asks for a clean stop; a second one quits at once (files already
-    // written are whole, the others are not there). A second registration (tests calling
-    // twice in one process) fails; the run still works, only without the clean stop.
+    // The first Ctrl-C asks for a clean stop; a second one quits at once, after removing the
+    // temporary files of writes in progress (files already written are whole, the others are
+    // not there; a run's checkpoint keeps its best trajectory). A second registration (tests
+    // calling twice in one process) fails; the run still works, only without the clean stop.
     let on_signal = move || {
         if handler_flag.swap(true, Ordering::SeqCst) {
-            std::process::exit(130);
+            splatraj_scene::atomic::remove_partial_files();
+            std::process::exit(EXIT_INTERRUPTED.into());
         }
     };
     if let Err(e) = ctrlc::set_handler(on_signal) {
         tracing::warn!("Ctrl-C will not stop the run cleanly: {e}");
     }
     flag
+}
+
+/// Exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells expect).
+pub const EXIT_INTERRUPTED: u8 = 130;
+
+/// A command stopped by Ctrl-C after writing what it had: `main` prints the message and exits
+/// with [`EXIT_INTERRUPTED`].
+#[derive(Debug)]
+pub struct Interrupted(pub String);
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Interrupted {}
+
+/// `--max-memory GB` of the commands that render or optimise.
+#[derive(Debug, Args)]
+pub struct MemoryArgs {
+    /// The most memory (GB) the work may plan to use; sizes whose estimated peak is above are
+    /// refused before any work (default: `max_memory_gb` of the config, else 75 % of RAM).
+    #[arg(long, value_name = "GB")]
+    pub max_memory: Option<f64>,
+}
+
+impl MemoryArgs {
+    /// The `--set` override it makes (none when not given).
+    pub fn overrides(&self) -> Option<String> {
+        self.max_memory.map(|gb| format!("max_memory_gb={gb:?}"))
+    }
 }
 
 /// A progress bar on stderr (hidden when `quiet` or when stderr is not a terminal).

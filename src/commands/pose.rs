@@ -20,11 +20,12 @@ use splatraj::experiment::outputs::{
     FrameSpec, create_run_dir, frame_png, write_bytes, write_csv, write_json,
 };
 use splatraj::experiment::records::{PoseFile, pose_history, sgld_samples};
+use splatraj::experiment::resources::RAISE_LIMIT;
 use splatraj::experiment::{Experiment, Posterior};
 use splatraj_traj::metrics::WindowMetrics;
 use splatraj_traj::optimise::StopReason;
 
-use crate::cli::{bar_observer, interrupt_flag, progress_bar};
+use crate::cli::{Interrupted, MemoryArgs, bar_observer, interrupt_flag, progress_bar};
 
 /// Arguments of `splatraj pose`.
 #[derive(Debug, Args)]
@@ -45,6 +46,8 @@ pub struct PoseArgs {
     /// After optimising, run this many SGLD chains from the best pose and write the samples.
     #[arg(long, value_name = "CHAINS")]
     sgld: Option<usize>,
+    #[command(flatten)]
+    memory: MemoryArgs,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
@@ -98,11 +101,15 @@ pub fn run(args: PoseArgs) -> Result<()> {
     if let Some(r) = args.restarts {
         overrides.push(format!("start.restarts={r}"));
     }
+    overrides.extend(args.memory.overrides());
     let config = Config::load(&args.config, &overrides)?;
     if args.sgld == Some(0) {
         anyhow::bail!("--sgld needs at least one chain");
     }
     let experiment = Experiment::prepare(&config)?;
+    experiment
+        .pose_memory(args.sgld.unwrap_or(0))
+        .check(experiment.memory_limit()?, RAISE_LIMIT)?;
     let index = config.pose.query;
     let window = &experiment.windows[index];
     let costs = experiment.pose_costs()?;
@@ -125,8 +132,9 @@ pub fn run(args: PoseArgs) -> Result<()> {
     let bar = progress_bar(config.pose.optimiser.iterations as u64, args.quiet);
     let run = experiment.optimise_pose(&mut bar_observer(&bar, interrupt_flag()))?;
     bar.finish_and_clear();
-    if run.stop() == StopReason::Interrupted {
-        eprintln!("stopped early: writing the best pose so far");
+    let interrupted = run.stop() == StopReason::Interrupted;
+    if interrupted {
+        eprintln!("stopped by Ctrl-C: writing the best pose so far");
     }
     let (header, rows) = pose_history(&run.results);
     write_csv(&dir.join("history.csv"), &header, &rows)?;
@@ -173,5 +181,12 @@ pub fn run(args: PoseArgs) -> Result<()> {
     write_bytes(&dir.join("frame.png"), &png)?;
     write_json(&dir.join("metrics.json"), &PoseMetrics { metrics, sgld })?;
     println!("{}", dir.display());
+    if interrupted {
+        return Err(Interrupted(format!(
+            "interrupted: {} holds the best pose so far",
+            dir.display()
+        ))
+        .into());
+    }
     Ok(())
 }

@@ -16,6 +16,7 @@ use serde::Serialize;
 use splatraj::experiment::io::read_camera_file;
 use splatraj::experiment::outputs::{npy_f32, write_bytes};
 use splatraj::experiment::probe::{MaskProbe, median_ms};
+use splatraj::experiment::resources::{MemoryLimit, MemoryPlan, render_bytes, scene_bytes};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera_file::resize;
 use splatraj_render::host::{OnDevice, to_host};
@@ -24,7 +25,7 @@ use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderR
 use splatraj_semantic::{label_mask, read_mask_file};
 use splatraj_traj::costs::DEFAULT_TARGET_RATIO;
 
-use crate::cli::{DtypeArg, ReadArgs};
+use crate::cli::{DtypeArg, MemoryArgs, ReadArgs};
 
 /// Arguments of `splatraj render`.
 #[derive(Debug, Args)]
@@ -71,6 +72,8 @@ pub struct RenderArgs {
     /// Output folder for rgb.png, mask.png and mask.npy (created if missing).
     #[arg(long, default_value = ".")]
     out: PathBuf,
+    #[command(flatten)]
+    memory: MemoryArgs,
 }
 
 /// What `render --grad` prints.
@@ -115,7 +118,28 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let dtype = args.dtype.precision().dtype();
     let camera = read_camera_file(&args.camera)?;
     let intrinsics = resize(&camera.intrinsics, args.width, args.height)?;
+    let limit = MemoryLimit::new(args.memory.max_memory)?;
     let scene = args.read.load(&args.scene)?.scene;
+    let float_bytes = dtype.size();
+    let mut plan = MemoryPlan::default();
+    plan.stage(
+        format!(
+            "a render of {} Gaussians at the camera's `width` × `height` (--width, --height) = \
+             {} × {}",
+            scene.len(),
+            intrinsics.width,
+            intrinsics.height
+        ),
+        scene_bytes(scene.len(), float_bytes)
+            + render_bytes(
+                1,
+                intrinsics.width as f64 * intrinsics.height as f64,
+                scene.len(),
+                args.grad,
+                float_bytes,
+            ),
+    );
+    plan.check(limit, "--max-memory GB")?;
     let mask = match (&args.mask, &args.label) {
         (Some(path), _) => Some(read_mask_file(path, scene.len())?),
         (None, Some(label)) => {
@@ -146,6 +170,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         )?)
     };
     let rgb = image(RenderRequest::new(intrinsics, vec![Channel::Rgb]))?;
+    check_finite("the RGB image", &rgb)?;
     let mut outputs = vec![("rgb.png", png_rgb(&rgb, &intrinsics)?)];
     let mut report = None;
     if let Some(mask) = mask {
@@ -153,6 +178,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             pruning: Pruning::ObjectOnly,
             ..RenderRequest::new(intrinsics, vec![Channel::Mask(mask.clone())])
         })?;
+        check_finite("the mask image", &values)?;
         outputs.push(("mask.png", png_gray(&values, &intrinsics)?));
         let shape = [intrinsics.height as u64, intrinsics.width as u64];
         outputs.push(("mask.npy", npy_f32(&values, &shape)?));
@@ -165,7 +191,11 @@ pub fn run(args: RenderArgs) -> Result<()> {
                 intrinsics,
                 args.rasterizer,
             )?;
-            report = Some(grad_report(&args, &probe, &pose, scene.len())?);
+            let grad = grad_report(&args, &probe, &pose, scene.len())?;
+            let mut numbers = vec![grad.tce, grad.tre, grad.loss, grad.coverage];
+            numbers.extend(&grad.grad_pose);
+            check_finite("the costs and pose gradient", &numbers)?;
+            report = Some(grad);
         }
     }
 
@@ -187,6 +217,18 @@ pub fn run(args: RenderArgs) -> Result<()> {
         println!("{}", serde_json::to_string(&report)?);
     }
     Ok(())
+}
+
+/// A non-finite value must never reach a file: it is an error naming what held it.
+fn check_finite(what: &str, values: &[f64]) -> Result<()> {
+    match values.iter().position(|v| !v.is_finite()) {
+        Some(i) => bail!(
+            "{what} holds a non-finite value ({} at index {i}); nothing was written. The \
+             camera or the scene's values are out of the range the renderer can handle",
+            values[i]
+        ),
+        None => Ok(()),
+    }
 }
 
 fn grad_report(

@@ -7,35 +7,52 @@
 //! per-window metrics on a fixed time grid at the output resolution, LDJ, and render frames.
 //! The work is the library's ([`splatraj::experiment::Experiment`]); this file draws progress
 //! and writes files.
+//!
+//! Nothing is lost: the estimated peak memory is checked against the limit before any work
+//! (`--check` runs the same checks, reads every input and tests that the runs folder is
+//! writable); the best trajectory so far is checkpointed to `checkpoint.json` every few seconds
+//! while optimising, so SIGKILL or a second Ctrl-C loses seconds of work, and `splatraj run
+//! --resume RUN_DIR` continues such a run in its folder. A run stopped by Ctrl-C writes its
+//! files for the best trajectory so far and exits 130.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Context, Result, bail};
 use clap::Args;
 use serde::Serialize;
+use splatraj::experiment::checkpoint::{CHECKPOINT_FILE, Checkpoint};
 use splatraj::experiment::config::{Config, MaskOverlay};
 use splatraj::experiment::outputs::{
     FrameSpec, create_run_dir, write_bytes, write_csv, write_frames, write_json,
 };
 use splatraj::experiment::records::trajectory_history;
-use splatraj::experiment::{Evaluation, Experiment, TrajectoryRun};
+use splatraj::experiment::resources::RAISE_LIMIT;
+use splatraj::experiment::{Evaluation, Experiment, RunOptions, RunStop, TrajectoryRun};
+use splatraj_scene::atomic::is_partial_file;
 use splatraj_traj::metrics::{Smoothness, WindowMetrics};
-use splatraj_traj::optimise::StopReason;
 use splatraj_traj::optimise::sampling::window_of;
 use splatraj_traj::trajectory::uniform_times;
 
-use crate::cli::{bar_observer, interrupt_flag, progress_bar};
+use crate::cli::{Interrupted, MemoryArgs, bar_observer, interrupt_flag, progress_bar};
 
 /// Arguments of `splatraj run`.
 #[derive(Debug, Args)]
 pub struct RunArgs {
     /// Experiment config (TOML).
-    config: PathBuf,
+    #[arg(required_unless_present = "resume")]
+    config: Option<PathBuf>,
+    /// Continue a run that was interrupted or killed, in its folder (reads its `config.toml`
+    /// and `checkpoint.json`).
+    #[arg(long, value_name = "RUN_DIR", conflicts_with = "config")]
+    resume: Option<PathBuf>,
     /// Override a config value, e.g. `--set optimiser.iterations=50` (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
-    /// Check the config, scene and queries, print what would run, and stop.
+    #[command(flatten)]
+    memory: MemoryArgs,
+    /// Check the config, scene, queries, start, masks, memory and runs folder, print what
+    /// would run, and stop.
     #[arg(long)]
     check: bool,
     /// No progress bar.
@@ -57,7 +74,7 @@ struct MetricsFile {
 struct RunReport {
     scene: String,
     gaussians: usize,
-    stop: StopReason,
+    stop: RunStop,
     restarts_run: usize,
     best_restart: usize,
     best_step: usize,
@@ -75,28 +92,67 @@ struct RunReport {
 /// Runs `splatraj run`.
 pub fn run(args: RunArgs) -> Result<()> {
     let started = Instant::now();
-    let config = Config::load(&args.config, &args.set)?;
+    let mut overrides = args.set.clone();
+    overrides.extend(args.memory.overrides());
+    let (config, resume) = match (&args.resume, &args.config) {
+        (Some(dir), _) => {
+            let (config, checkpoint) = resumable(dir, &overrides)?;
+            (config, Some((dir.clone(), checkpoint)))
+        }
+        (None, Some(path)) => (Config::load(path, &overrides)?, None),
+        (None, None) => bail!("give a config file, or --resume RUN_DIR"),
+    };
     let experiment = Experiment::prepare(&config)?;
     print_plan(&experiment);
-    if args.check {
-        return Ok(());
-    }
-    // Checked before the folder exists: the costs and starts build.
+    // Everything that can fail before the work is checked before any folder exists: the costs,
+    // the starts (reading `start.trajectory`), the memory, the runs folder.
     experiment.costs()?;
     let restarts = experiment.start_trajectories()?.len();
+    let memory = experiment.trajectory_memory()?;
+    memory.check(experiment.memory_limit()?, RAISE_LIMIT)?;
+    if resume.is_none() {
+        check_writable(&config.output.runs_dir.join(&config.name))?;
+    }
+    if args.check {
+        if let Some(peak) = memory.peak() {
+            eprintln!(
+                "check passed; peak memory about {} ({})",
+                splatraj::experiment::resources::show_bytes(peak.bytes),
+                peak.what
+            );
+        }
+        return Ok(());
+    }
 
-    let dir = create_run_dir(&config.output.runs_dir, &config.name)?;
+    let dir = match &resume {
+        Some((dir, _)) => {
+            remove_partial_files(dir)?;
+            dir.clone()
+        }
+        None => {
+            let dir = create_run_dir(&config.output.runs_dir, &config.name)?;
+            write_bytes(
+                &dir.join("config.toml"),
+                toml::to_string(&config)?.as_bytes(),
+            )?;
+            dir
+        }
+    };
     eprintln!("run folder: {}", dir.display());
-    write_bytes(
-        &dir.join("config.toml"),
-        toml::to_string(&config)?.as_bytes(),
-    )?;
 
     let bar = progress_bar((config.optimiser.iterations * restarts) as u64, args.quiet);
-    let run = experiment.run_trajectory(&mut bar_observer(&bar, interrupt_flag()))?;
+    let options = RunOptions {
+        checkpoint_dir: Some(&dir),
+        resume: resume.as_ref().map(|(_, c)| c),
+    };
+    let run = experiment.run_trajectory_with(options, &mut bar_observer(&bar, interrupt_flag()))?;
     bar.finish_and_clear();
-    if run.stop == StopReason::Interrupted {
-        eprintln!("stopped early: writing the best trajectory so far");
+    match run.stop {
+        RunStop::Interrupted => eprintln!("stopped by Ctrl-C: writing the best trajectory so far"),
+        RunStop::TimeLimit => eprintln!(
+            "`optimiser.time_limit_s` reached: writing the best trajectory so far"
+        ),
+        RunStop::Finished => {}
     }
     let (header, rows) = trajectory_history(&run, experiment.windows.len());
     write_csv(&dir.join("history.csv"), &header, &rows)?;
@@ -148,6 +204,93 @@ pub fn run(args: RunArgs) -> Result<()> {
         },
     )?;
     println!("{}", dir.display());
+    match run.stop {
+        // A finished run needs no checkpoint; a stopped one keeps it for --resume.
+        RunStop::Finished => {
+            let checkpoint = dir.join(CHECKPOINT_FILE);
+            if checkpoint.exists() {
+                std::fs::remove_file(&checkpoint)
+                    .with_context(|| format!("cannot remove {}", checkpoint.display()))?;
+            }
+            Ok(())
+        }
+        RunStop::TimeLimit => Ok(()),
+        RunStop::Interrupted => Err(Interrupted(format!(
+            "interrupted: {} holds the best trajectory so far; `splatraj run --resume {}` \
+             continues the optimisation",
+            dir.display(),
+            dir.display()
+        ))
+        .into()),
+    }
+}
+
+/// The config and checkpoint of a run folder to resume: its resolved `config.toml` (with
+/// `overrides`), its inputs resolved against the original config's folder.
+fn resumable(dir: &Path, overrides: &[String]) -> Result<(Config, Checkpoint)> {
+    if !dir.is_dir() {
+        bail!("--resume {}: not a run folder", dir.display());
+    }
+    if finished(&dir.join("metrics.json")) {
+        bail!("--resume {}: this run already finished", dir.display());
+    }
+    let checkpoint = Checkpoint::read(dir)?;
+    let mut config = Config::load(&dir.join("config.toml"), overrides)?;
+    config.base_dir = checkpoint.base_dir.clone();
+    eprintln!(
+        "resuming {}: restart {}/{} at step {}/{}, best sampled loss so far {:.4}",
+        dir.display(),
+        checkpoint.restart + 1,
+        checkpoint.restarts,
+        checkpoint.steps_done,
+        checkpoint.steps,
+        checkpoint.best_total
+    );
+    Ok((config, checkpoint))
+}
+
+/// Whether `metrics.json` says its run finished.
+fn finished(metrics: &Path) -> bool {
+    std::fs::read_to_string(metrics)
+        .ok()
+        .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
+        .is_some_and(|v| v["run"]["stop"] == "finished")
+}
+
+/// Fails unless files can be created in `dir` (or, when it does not exist yet, in the
+/// nearest folder above it that does).
+fn check_writable(dir: &Path) -> Result<()> {
+    let existing = dir
+        .ancestors()
+        .find(|p| p.as_os_str().is_empty() || p.is_dir())
+        .map(|p| if p.as_os_str().is_empty() { Path::new(".") } else { p })
+        .unwrap_or(Path::new("."));
+    let probe = existing.join(format!(".splatraj-write-test.{}", std::process::id()));
+    std::fs::File::create(&probe).with_context(|| {
+        format!(
+            "the runs folder {} is not writable (cannot create a file in {}); set \
+             `output.runs_dir`",
+            dir.display(),
+            existing.display()
+        )
+    })?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
+/// Removes the temporary files a killed process left in a run folder (and its `frames/`).
+fn remove_partial_files(dir: &Path) -> Result<()> {
+    for folder in [dir.to_path_buf(), dir.join("frames")] {
+        let Ok(entries) = std::fs::read_dir(&folder) else {
+            continue;
+        };
+        for entry in entries.flatten() {
+            if is_partial_file(&entry.file_name().to_string_lossy()) {
+                std::fs::remove_file(entry.path())
+                    .with_context(|| format!("cannot remove {}", entry.path().display()))?;
+            }
+        }
+    }
     Ok(())
 }
 

@@ -6,6 +6,7 @@
 //! backend = "flex"         # flex (= cpu) | ndarray | wgpu, among those compiled in
 //! precision = "f32"        # f32 | f64
 //! rasterizer = "fused"     # fused (default) | tensor: which compositing every render uses
+//! # max_memory_gb = 8.0    # refuse sizes whose estimated peak memory is above (default: 75 % of RAM)
 //!
 //! [scene]                  # a file, or the built-in demo room
 //! demo = { gaussians = 30000, seed = 7 }    # or: path = "scene.ply", labels = "labels.json"
@@ -31,7 +32,7 @@
 //!                          # [costs.custom.<name>]: a cost registered in `Extensions`
 //! [optimiser]              # iterations, samples_per_window, learning_rate, position_unit …
 //! [start]                  # kind = "objects" (jitter) | "random" (spread), restarts; or pose = [...], or trajectory = "…"
-//! [output]                 # frames, width, height, mask_overlay, runs_dir …
+//! [output]                 # frames (or fps × seconds), width, height, mask_overlay, runs_dir …
 //! [pose]                   # `splatraj pose`: query, ablation; [pose.optimiser]: its Adam
 //! [sgld]                   # `splatraj pose --sgld`: Langevin settings
 //! ```
@@ -76,6 +77,10 @@ pub struct Config {
     /// `tensor`, the readable specification).
     #[serde(default)]
     pub rasterizer: Rasterizer,
+    /// The most memory (GB, 10⁹ bytes) the run may plan to use: sizes whose estimated peak
+    /// exceeds it are refused before any work. Default: 75 % of the physical memory.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_memory_gb: Option<f64>,
     /// Where the Gaussians come from.
     pub scene: SceneConfig,
     /// How queries become per-Gaussian channels.
@@ -339,8 +344,15 @@ pub struct OutputConfig {
     /// Folder that holds `<name>/<timestamp>/` run folders (relative to the working
     /// directory, unlike input paths).
     pub runs_dir: PathBuf,
-    /// Frames rendered along the whole trajectory (0: none).
+    /// Frames rendered along the whole trajectory (0: none), at evenly spaced times over
+    /// [0, 1]; ignored when `seconds` is given.
     pub frames: usize,
+    /// Frame rate of `video.mp4` and of the exports (`exports/<format>/`), frames per second.
+    pub fps: f64,
+    /// Length of the video in seconds: when given, `fps × seconds` frames (rounded) are
+    /// rendered instead of `frames`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub seconds: Option<f64>,
     /// Frame width in pixels.
     pub width: usize,
     /// Frame height in pixels.
@@ -360,6 +372,8 @@ impl Default for OutputConfig {
         Self {
             runs_dir: PathBuf::from("runs"),
             frames: 60,
+            fps: 30.0,
+            seconds: None,
             width: 320,
             height: 240,
             mask_overlay: MaskOverlay::Tint,
@@ -371,10 +385,27 @@ impl Default for OutputConfig {
 }
 
 impl OutputConfig {
+    /// Frames to render: `fps × seconds` (rounded, at least 1) when `seconds` is given, else
+    /// `frames`.
+    pub fn frame_count(&self) -> usize {
+        match self.seconds {
+            Some(s) => ((self.fps * s).round() as usize).max(1),
+            None => self.frames,
+        }
+    }
+
     /// Checks the counts and sizes; errors name the key.
     pub fn validate(&self) -> Result<()> {
         if self.width == 0 || self.height == 0 {
             bail!("`output.width` and `output.height` must be ≥ 1");
+        }
+        if !(self.fps.is_finite() && self.fps > 0.0) {
+            bail!("`output.fps` = {} must be a positive number", self.fps);
+        }
+        if let Some(s) = self.seconds
+            && !(s.is_finite() && s > 0.0)
+        {
+            bail!("`output.seconds` = {s} must be a positive number");
         }
         if self.trajectory_samples < 2 {
             bail!("`output.trajectory_samples` must be ≥ 2");
@@ -442,9 +473,9 @@ impl Ablation {
         CostsConfig {
             tce: tce.then(|| config.tce.clone().unwrap_or_default()),
             tre: tre.then(|| config.tre.clone().unwrap_or_default()),
-            upright: config.upright.clone(),
             prior: Some(config.prior.clone().unwrap_or_default()),
-            custom: config.custom.clone(),
+            // Every other cost (upright, custom, …) as configured.
+            ..config.clone()
         }
     }
 }
@@ -499,11 +530,22 @@ impl Config {
     /// sources registered in `extensions`.
     pub fn load_with(path: &Path, overrides: &[String], extensions: &Extensions) -> Result<Config> {
         let mut value = read_table(path, 0)?;
+        let mut set_keys = Vec::with_capacity(overrides.len());
         for o in overrides {
-            apply_override(&mut value, o)?;
+            set_keys.push((apply_override(&mut value, o)?, o.as_str()));
         }
-        let mut config: Config = Config::deserialize(value).map_err(|e| {
-            anyhow::anyhow!("config {}: {}", path.display(), e.message().trim_end())
+        let mut config: Config = deserialize_table(value).map_err(|(key, message)| {
+            // A key an override set, a key below it, or the table holding it (a tagged table
+            // like `[trajectory]` reports its own name) is the option's fault, not the file's.
+            let set_by = set_keys.iter().rev().find(|(k, _)| {
+                key == *k
+                    || key.starts_with(&format!("{k}."))
+                    || (!key.is_empty() && k.starts_with(&format!("{key}.")))
+            });
+            match set_by {
+                Some((_, o)) => anyhow::anyhow!("--set {o}: `{key}`: {message}"),
+                None => anyhow::anyhow!("config {}: {}", path.display(), at_key(&key, &message)),
+            }
         })?;
         config.base_dir = path
             .parent()
@@ -520,8 +562,10 @@ impl Config {
     /// A config from TOML text (no `extends`), checked with `extensions`; relative paths are
     /// resolved against `base_dir`.
     pub fn from_toml(text: &str, base_dir: &Path, extensions: &Extensions) -> Result<Config> {
-        let mut config: Config = toml::from_str(text)
-            .map_err(|e| anyhow::anyhow!("config: {}", e.message().trim_end()))?;
+        let table: toml::Table = toml::from_str(text)
+            .map_err(|e| anyhow::anyhow!("config is not valid TOML: {}", e.message().trim_end()))?;
+        let mut config: Config = deserialize_table(table)
+            .map_err(|(key, message)| anyhow::anyhow!("config: {}", at_key(&key, &message)))?;
         config.base_dir = base_dir.to_path_buf();
         config.validate_with(extensions).context("config")?;
         Ok(config)
@@ -565,6 +609,11 @@ impl Config {
             && !(up.iter().all(|v| v.is_finite()) && up.iter().any(|v| *v != 0.0))
         {
             bail!("`scene.up` = {up:?} must be finite and non-zero");
+        }
+        if let Some(gb) = self.max_memory_gb
+            && !(gb.is_finite() && gb > 0.0)
+        {
+            bail!("`max_memory_gb` = {gb} must be finite and > 0");
         }
         if self.queries.is_empty() {
             bail!("`queries`: at least one `[[queries]]` table is needed");
@@ -620,10 +669,9 @@ impl Config {
         if self.start.pose.is_some() && self.start.trajectory.is_some() {
             bail!("`start`: give `pose` or `trajectory`, not both");
         }
-        if let Some(p) = self.start.pose
-            && !p.iter().all(|v| v.is_finite())
-        {
-            bail!("`start.pose` = {p:?} must be finite");
+        if let Some(p) = self.start.pose {
+            splatraj_render::camera_file::check_pose_range(&p)
+                .map_err(|e| anyhow::anyhow!("`start.pose`: {e}"))?;
         }
         self.output.validate()?;
         self.pose
@@ -641,6 +689,32 @@ impl Config {
             .validate()
             .map_err(|e| anyhow::anyhow!("`sgld`: {e}"))?;
         Ok(())
+    }
+}
+
+/// Deserialises the whole config, or says at which key (dotted, list entries by index:
+/// `queries.0.text`, as `--set` writes it; empty at the top level) and what went wrong.
+fn deserialize_table(table: toml::Table) -> Result<Config, (String, String)> {
+    serde_path_to_error::deserialize(toml::Value::Table(table)).map_err(|e| {
+        let key = e
+            .path()
+            .iter()
+            .map(|segment| match segment {
+                serde_path_to_error::Segment::Seq { index } => index.to_string(),
+                other => other.to_string(),
+            })
+            .collect::<Vec<_>>()
+            .join(".");
+        (key, e.into_inner().message().trim_end().to_string())
+    })
+}
+
+/// "`key`: message", or the message alone at the top level.
+fn at_key(key: &str, message: &str) -> String {
+    if key.is_empty() || key == "?" {
+        message.to_string()
+    } else {
+        format!("`{key}`: {message}")
     }
 }
 
@@ -697,27 +771,44 @@ fn merge(base: &mut toml::Table, over: toml::Table) {
     }
 }
 
-/// Sets `key=value` in the TOML table; the value is parsed as TOML (a bare word that is not
-/// valid TOML is taken as a string). Numeric path segments index arrays (`queries.0.text`).
-pub fn apply_override(root: &mut toml::Table, assignment: &str) -> Result<()> {
+/// Sets `key=value` in the TOML table and returns the key; the value is parsed as TOML (a bare
+/// word that is not valid TOML is taken as a string, so `--set queries.0.text=lamp` works).
+/// Numeric path segments index arrays (`queries.0.text`). An empty value, or one that starts
+/// like a TOML number, list, table or quoted string but does not parse, is an error naming
+/// the option.
+pub fn apply_override(root: &mut toml::Table, assignment: &str) -> Result<String> {
     let Some((key, raw)) = assignment.split_once('=') else {
-        bail!("--set {assignment:?}: expected KEY=VALUE, e.g. optimiser.iterations=50");
+        bail!("--set {assignment}: expected KEY=VALUE, e.g. optimiser.iterations=50");
     };
     let key = key.trim();
+    if key.is_empty() {
+        bail!("--set {assignment}: no key before `=` (expected KEY=VALUE)");
+    }
+    let raw = raw.trim();
+    if raw.is_empty() {
+        bail!("--set {assignment}: no value after `=` (a string needs quotes: {key}=\"\")");
+    }
     let value: toml::Value = match toml::from_str::<toml::Table>(&format!("v = {raw}")) {
         Ok(mut t) => t.remove("v").expect("just parsed"),
-        Err(_) => toml::Value::String(raw.trim().to_string()),
+        Err(e) if raw.starts_with(['[', '{', '"', '\'', '+', '-', '.']) || raw.starts_with(|c: char| c.is_ascii_digit()) => {
+            bail!(
+                "--set {assignment}: `{raw}` is not a valid TOML value ({}; a string needs \
+                 quotes: {key}='\"{raw}\"')",
+                e.message().trim_end()
+            )
+        }
+        Err(_) => toml::Value::String(raw.to_string()),
     };
-    let parts: Vec<&str> = key.split('.').collect();
+    let parts: Vec<&str> = key.split('.').map(str::trim).collect();
     if parts.iter().any(|p| p.is_empty()) {
-        bail!("--set {assignment:?}: empty key segment");
+        bail!("--set {assignment}: empty key segment in `{key}`");
     }
     let mut tree = toml::Value::Table(std::mem::take(root));
-    let result = set_path(&mut tree, &parts, 0, value, key);
+    let result = set_path(&mut tree, &parts, 0, value, assignment);
     if let toml::Value::Table(t) = tree {
         *root = t;
     }
-    result
+    result.map(|()| parts.join("."))
 }
 
 /// Sets `parts[depth..]` below `node` to `value`, creating tables on the way.

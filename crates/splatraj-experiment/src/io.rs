@@ -10,9 +10,22 @@ use splatraj_render::camera_file::{CameraFile, CameraSpec};
 pub fn read_camera_file(path: &Path) -> Result<CameraSpec> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read the camera file {}", path.display()))?;
-    // serde names the unknown or missing key and lists the expected ones.
-    let file: CameraFile =
-        serde_json::from_str(&text).map_err(|e| anyhow!("camera file {}: {e}", path.display()))?;
+    // serde names the unknown or missing key and lists the expected ones; the path says which
+    // key a wrong value or length is at.
+    let deserializer = &mut serde_json::Deserializer::from_str(&text);
+    let file: CameraFile = serde_path_to_error::deserialize(deserializer).map_err(|e| {
+        let key = e.path().to_string();
+        match key.as_str() {
+            "." | "" => anyhow!("camera file {}: {}", path.display(), e.inner()),
+            "world_to_camera" => anyhow!(
+                "camera file {}: key `world_to_camera` must be a 4×4 matrix, as 4 rows of 4 \
+                 numbers or 16 numbers row by row ({})",
+                path.display(),
+                e.inner()
+            ),
+            _ => anyhow!("camera file {}: key `{key}`: {}", path.display(), e.inner()),
+        }
+    })?;
     file.camera()
         .map_err(|e| anyhow!("camera file {}: {e}", path.display()))
 }

@@ -23,6 +23,7 @@
 
 pub mod bench;
 pub mod bench_scenes;
+pub mod checkpoint;
 pub mod config;
 pub mod experiment;
 pub mod extensions;
@@ -33,6 +34,7 @@ pub mod pose_run;
 pub mod probe;
 pub mod query;
 pub mod records;
+pub mod resources;
 pub mod starts;
 pub mod trajectory_run;
 pub mod views;
@@ -42,4 +44,4 @@ pub use experiment::Experiment;
 pub use extensions::Extensions;
 pub use observer::{Flow, Observer, Progress};
 pub use pose_run::{PoseRun, Posterior};
-pub use trajectory_run::{Evaluation, TrajectoryRun};
+pub use trajectory_run::{Evaluation, RunOptions, RunStop, TrajectoryRun};

@@ -1,27 +1,59 @@
 //! The paper's method: optimise a trajectory from each start, keep the best, evaluate it.
+//!
+//! A run may write a [`Checkpoint`] of its best trajectory as it goes (at a bounded rate), and
+//! may continue from one ([`RunOptions::resume`]): the restart in progress goes on from its
+//! best weights for its remaining steps (with a fresh Adam, and the prior's weight where it
+//! had decayed to), then the remaining restarts run, and the best of all is kept.
 
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
+use serde::Serialize;
 use splatraj_traj::metrics::{
     Smoothness, WindowMetrics, WindowObject, trajectory_ldj, window_metrics,
 };
-use splatraj_traj::optimise::{Flow, Problem, StopReason, TrajectoryResult, optimise_trajectory};
+use splatraj_traj::optimise::{
+    Flow, Problem, StopReason, TrajectoryResult, TrajectoryStep, optimise_trajectory,
+};
 use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord};
 
+use crate::checkpoint::{Checkpoint, Checkpointer};
 use crate::experiment::Experiment;
 use crate::observer::{Observer, Progress};
+
+/// Why a trajectory run ended (`metrics.json`'s `stop`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RunStop {
+    /// Every restart ran all its iterations.
+    Finished,
+    /// The observer asked to stop (Ctrl-C).
+    Interrupted,
+    /// `optimiser.time_limit_s` was reached (over all restarts).
+    TimeLimit,
+}
+
+/// How [`Experiment::run_trajectory_with`] runs besides the config.
+#[derive(Debug, Default)]
+pub struct RunOptions<'a> {
+    /// Write `checkpoint.json` into this run folder while optimising.
+    pub checkpoint_dir: Option<&'a Path>,
+    /// Continue the run this checkpoint describes.
+    pub resume: Option<&'a Checkpoint>,
+}
 
 /// What [`Experiment::run_trajectory`] did.
 #[derive(Debug, Clone)]
 pub struct TrajectoryRun {
-    /// One result per start run (fewer than the starts when stopped early).
+    /// One result per start run (fewer than the starts when stopped early). A resumed run's
+    /// first entry is the checkpoint's best (no history).
     pub results: Vec<TrajectoryResult>,
     /// Index in `results` of the best (lowest finite sampled loss).
     pub best: usize,
-    /// `interrupted` when the observer or the time limit stopped it.
-    pub stop: StopReason,
-    /// Wall time of the optimisation.
+    /// Finished, interrupted or out of time.
+    pub stop: RunStop,
+    /// Wall time of the optimisation (this process only).
     pub elapsed: Duration,
     /// Names of the cost terms (the history's columns, per window).
     pub cost_names: Vec<&'static str>,
@@ -48,43 +80,196 @@ pub struct Evaluation {
     pub ldj: Smoothness,
 }
 
+/// The best trajectory seen so far in a run, for the checkpoint.
+struct Tracker<'a> {
+    checkpointer: Option<Checkpointer>,
+    state: Checkpoint,
+    model: &'a TrajectoryModel,
+}
+
+impl Tracker<'_> {
+    /// Takes in one step of restart `restart`.
+    fn step(&mut self, restart: usize, steps_before: usize, s: &TrajectoryStep) -> Result<()> {
+        let state = &mut self.state;
+        if state.restart != restart {
+            state.restart = restart;
+            state.restart_best = None;
+        }
+        state.steps_done = steps_before + s.step + 1;
+        if let Some(weights) = &s.new_best {
+            state.restart_best = Some((weights.clone(), s.total));
+            if !(state.best_total <= s.total) {
+                state.model = self.model.clone();
+                state.weights = weights.clone();
+                state.best_total = s.total;
+                state.best_restart = restart;
+                state.best_step = steps_before + s.step;
+            }
+        }
+        match &mut self.checkpointer {
+            Some(c) if state.best_total.is_finite() => c.offer(state.clone()),
+            _ => Ok(()),
+        }
+    }
+
+    fn flush(&mut self, elapsed_s: f64) -> Result<()> {
+        self.state.elapsed_s = elapsed_s;
+        match &mut self.checkpointer {
+            Some(c) if self.state.best_total.is_finite() => {
+                c.offer(self.state.clone())?;
+                c.flush()
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
 impl Experiment {
     /// Optimises a trajectory from each of [`Experiment::start_trajectories`] (restart r uses
     /// seed `seed + r`); `observer` sees every step and may stop the run, which keeps the best
     /// trajectory so far.
     pub fn run_trajectory(&self, observer: &mut dyn Observer) -> Result<TrajectoryRun> {
+        self.run_trajectory_with(RunOptions::default(), observer)
+    }
+
+    /// [`Experiment::run_trajectory`] that checkpoints into a run folder and/or continues a
+    /// checkpoint ([`RunOptions`]). `optimiser.time_limit_s` bounds the whole run (every
+    /// restart, this process).
+    pub fn run_trajectory_with(
+        &self,
+        options: RunOptions<'_>,
+        observer: &mut dyn Observer,
+    ) -> Result<TrajectoryRun> {
         let starts = self.start_trajectories()?;
         let costs = self.costs()?;
+        let model = self.model()?;
         let scene = self.autodiff_scene();
-        let problem = Problem::new(&scene, &self.windows, &costs, self.intrinsics)
-            .with_rasterizer(self.config.rasterizer);
         let steps = self.config.optimiser.iterations;
-        let started = Instant::now();
+        // The time limit is the run's, not each restart's: this loop enforces it.
+        let mut optimiser = self.config.optimiser.clone();
+        let time_limit = optimiser.time_limit_s.take();
+        let base_dir = std::path::absolute(&self.config.base_dir)
+            .unwrap_or_else(|_| self.config.base_dir.clone());
+        let first_restart = options.resume.map_or(0, |c| c.restart);
+        let mut tracker = Tracker {
+            checkpointer: options.checkpoint_dir.map(Checkpointer::new),
+            state: options.resume.cloned().map(|c| Checkpoint { steps, ..c }).unwrap_or_else(|| Checkpoint {
+                model: model.clone(),
+                weights: Vec::new(),
+                best_total: f64::NAN,
+                best_restart: 0,
+                best_step: 0,
+                restart: 0,
+                steps_done: 0,
+                restart_best: None,
+                restarts: starts.len(),
+                steps,
+                elapsed_s: 0.0,
+                base_dir,
+            }),
+            model: &model,
+        };
+        let elapsed_before = tracker.state.elapsed_s;
         let mut results: Vec<TrajectoryResult> = Vec::new();
-        for (r, start) in starts.iter().enumerate() {
-            let mut step_observer = |s: &splatraj_traj::optimise::TrajectoryStep| {
-                observer.progress(&Progress::Trajectory {
+        if let Some(c) = options.resume {
+            anyhow::ensure!(
+                c.restarts == starts.len(),
+                "the checkpoint is of a run with {} restarts, the config asks for {} \
+                 (`start.restarts`)",
+                c.restarts,
+                starts.len()
+            );
+            anyhow::ensure!(
+                c.model == model,
+                "the checkpoint's trajectory model differs from the config's `[trajectory]`"
+            );
+            results.push(TrajectoryResult {
+                best: c.best_record(),
+                best_total: c.best_total,
+                best_step: c.best_step,
+                history: Vec::new(),
+                skipped_steps: 0,
+                stop: StopReason::Finished,
+                elapsed: Duration::ZERO,
+            });
+        }
+        let occupancy = self.occupancy()?;
+        let started = Instant::now();
+        let mut stop = RunStop::Finished;
+        for (r, fresh_start) in starts.iter().enumerate().skip(first_restart) {
+            // A resumed restart goes on from its best so far, for the steps it has left.
+            let (start, steps_before) = match options.resume {
+                Some(c) if r == c.restart => match &c.restart_best {
+                    Some((weights, _)) => (
+                        TrajectoryRecord {
+                            model: model.clone(),
+                            weights: weights.clone(),
+                        },
+                        c.steps_done,
+                    ),
+                    None => (fresh_start.clone(), 0),
+                },
+                _ => (fresh_start.clone(), 0),
+            };
+            if steps_before >= steps {
+                continue;
+            }
+            let shifted_costs;
+            let costs = if steps_before > 0 {
+                shifted_costs = self.costs_from_step(steps_before)?;
+                &shifted_costs
+            } else {
+                &costs
+            };
+            let problem = Problem::new(&scene, &self.windows, costs, self.intrinsics)
+                .with_rasterizer(self.config.rasterizer)
+                .with_occupancy(occupancy.as_ref())
+                .with_seconds(self.path_seconds());
+            let mut restart_options = optimiser.clone();
+            restart_options.iterations = steps - steps_before;
+            let mut stopped_by = None;
+            let mut failure = None;
+            let mut step_observer = |s: &TrajectoryStep| {
+                if let Err(e) = tracker.step(r, steps_before, s) {
+                    failure = Some(e);
+                    return Flow::Stop;
+                }
+                let flow = observer.progress(&Progress::Trajectory {
                     restart: r,
                     restarts: starts.len(),
-                    step: s.step,
+                    step: steps_before + s.step,
                     steps,
                     total: s.total,
                     best: s.best_total,
-                })
+                });
+                if flow == Flow::Stop {
+                    stopped_by = Some(RunStop::Interrupted);
+                } else if time_limit.is_some_and(|l| started.elapsed().as_secs_f64() >= l) {
+                    stopped_by = Some(RunStop::TimeLimit);
+                }
+                if stopped_by.is_some() {
+                    Flow::Stop
+                } else {
+                    Flow::Continue
+                }
             };
             let result = optimise_trajectory(
                 &problem,
-                start,
-                &self.config.optimiser,
+                &start,
+                &restart_options,
                 self.config.seed.wrapping_add(r as u64),
                 &mut step_observer,
             )?;
-            let stop = result.stop;
+            if let Some(e) = failure {
+                return Err(e.context("writing the checkpoint"));
+            }
             results.push(result);
-            if stop == StopReason::Interrupted {
+            if let Some(why) = stopped_by {
+                stop = why;
                 break;
             }
         }
+        tracker.flush(elapsed_before + started.elapsed().as_secs_f64())?;
         let best = results
             .iter()
             .enumerate()
@@ -92,7 +277,6 @@ impl Experiment {
             .min_by(|a, b| a.1.best_total.total_cmp(&b.1.best_total))
             .map(|(i, _)| i)
             .unwrap_or(0);
-        let stop = results.last().map_or(StopReason::Finished, |r| r.stop);
         anyhow::ensure!(!results.is_empty(), "no optimisation ran");
         Ok(TrajectoryRun {
             results,
@@ -101,6 +285,18 @@ impl Experiment {
             elapsed: started.elapsed(),
             cost_names: costs.names(),
         })
+    }
+
+    /// The costs as they weigh at step `step` and after: the prior's α_0 becomes α_0·γ^step,
+    /// so that a resumed restart's prior weight goes on decaying from where it was.
+    fn costs_from_step(&self, step: usize) -> Result<splatraj_traj::costs::WeightedCosts> {
+        let mut config = self.config.costs.clone();
+        if let Some(prior) = &mut config.prior {
+            prior.alpha0 *= prior.gamma.powi(step.min(i32::MAX as usize) as i32);
+        }
+        config
+            .build_with(&self.extensions.costs)
+            .map_err(anyhow::Error::msg)
     }
 
     /// The trajectory of `record` (e.g. a `trajectory.json` read back) on the experiment's
@@ -134,6 +330,7 @@ impl Experiment {
                 self.window_metrics(&plain, i, (i, n), samples, &output, &pose_at)
             })
             .collect::<Result<Vec<_>>>()?;
+        let windows = self.with_path_metrics(windows, trajectory)?;
         let ldj = trajectory_ldj(trajectory, self.config.output.ldj_samples);
         Ok(Evaluation { windows, ldj })
     }

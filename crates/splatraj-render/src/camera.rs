@@ -69,6 +69,15 @@ impl Intrinsics {
                 "cx = {cx}, cy = {cy} must be finite"
             )));
         }
+        // Beyond these the projection (x·f/z) and the 1.3·tan(fov) clamp overflow f32.
+        if !(fx.max(fy) <= 1e12 && fx.min(fy) >= 1e-6 && cx.abs().max(cy.abs()) <= 1e12) {
+            return Err(CameraError::Intrinsics(format!(
+                "fx = {fx}, fy = {fy} must be in [1e-6, 1e12] pixels and |cx|, |cy| = {}, {} \
+                 at most 1e12",
+                cx.abs(),
+                cy.abs()
+            )));
+        }
         if width == 0 || height == 0 {
             return Err(CameraError::Intrinsics(format!(
                 "image size {width}×{height} must be at least 1×1"

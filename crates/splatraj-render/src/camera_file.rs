@@ -106,10 +106,16 @@ impl CameraFile {
                 if let Some(i) = phi.iter().position(|v| !v.is_finite()) {
                     return bad(format!("key `pose` holds a non-finite value at index {i}"));
                 }
+                check_pose_range(phi).map_err(|e| CameraFileError(format!("key `pose`: {e}")))?;
                 Pose(*phi)
             }
-            (None, Some(m)) => Pose::from_world_to_camera(m.to_dmat4())
-                .map_err(|e| CameraFileError(format!("key `world_to_camera`: {e}")))?,
+            (None, Some(m)) => {
+                let pose = Pose::from_world_to_camera(m.to_dmat4())
+                    .map_err(|e| CameraFileError(format!("key `world_to_camera`: {e}")))?;
+                check_pose_range(&pose.0)
+                    .map_err(|e| CameraFileError(format!("key `world_to_camera`: {e}")))?;
+                pose
+            }
             (Some(_), Some(_)) => {
                 return bad("give either key `pose` or key `world_to_camera`, not both".into());
             }
@@ -124,6 +130,51 @@ impl CameraFile {
         };
         Ok(CameraSpec { intrinsics, pose })
     }
+}
+
+/// Largest rotation-vector angle accepted, radians: ω is axis × angle, so a real pose needs at
+/// most π; far beyond, the renderer's sines and squares lose all precision or overflow.
+pub const MAX_ROTATION_ANGLE: f64 = 1e4;
+/// Largest camera-centre coordinate accepted: its square must stay finite in f32.
+pub const MAX_COORDINATE: f64 = 1e15;
+
+/// Refuses a pose Φ = [ω, c] whose rendering could not be finite: a non-finite value, a
+/// rotation angle above [`MAX_ROTATION_ANGLE`] or a centre coordinate above
+/// [`MAX_COORDINATE`] (in absolute value); the message names the component.
+pub fn check_pose_range(phi: &[f64; 6]) -> Result<(), String> {
+    const NAMES: [&str; 6] = ["ω_x", "ω_y", "ω_z", "c_x", "c_y", "c_z"];
+    if let Some(i) = phi.iter().position(|v| !v.is_finite()) {
+        return Err(format!(
+            "{} (index {i}) = {} is not finite",
+            NAMES[i], phi[i]
+        ));
+    }
+    let largest = phi[..3].iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let angle = if largest > 0.0 {
+        largest
+            * phi[..3]
+                .iter()
+                .map(|v| (v / largest).powi(2))
+                .sum::<f64>()
+                .sqrt()
+    } else {
+        0.0
+    };
+    if angle > MAX_ROTATION_ANGLE {
+        return Err(format!(
+            "the rotation vector ω = {:?} turns by {angle:e} rad; ω is axis × angle in radians \
+             (at most π is needed, {MAX_ROTATION_ANGLE:e} accepted)",
+            &phi[..3]
+        ));
+    }
+    if let Some(i) = (3..6).find(|&i| phi[i].abs() > MAX_COORDINATE) {
+        return Err(format!(
+            "{} (index {i}) = {:e} is beyond ±{MAX_COORDINATE:e} scene units, where the \
+             renderer's squares overflow",
+            NAMES[i], phi[i]
+        ));
+    }
+    Ok(())
 }
 
 /// `k` at another resolution: both sides given, or one side alone keeping the aspect ratio,

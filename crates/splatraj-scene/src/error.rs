@@ -34,7 +34,7 @@ pub enum SceneError {
     /// A Gaussian holds a value that cannot be rendered (NaN/Inf, zero-norm quaternion,
     /// non-positive scale).
     #[error(
-        "{path}: Gaussian {index}: {property} {problem} (use the lenient option to drop invalid Gaussians with a warning)"
+        "{path}: Gaussian {index}: {property} {problem} (--drop-invalid, or `drop_invalid = true` in a config's [scene], drops invalid Gaussians with a warning)"
     )]
     InvalidGaussian {
         /// File concerned.

@@ -258,3 +258,98 @@ fn point_cloud_ply_is_not_a_splat() {
         &["cloud.ply", "point cloud"],
     );
 }
+
+/// fruit_drops with its header text edited by `edit` (the payload kept as is).
+fn edited_header(dir: &Path, edit: impl FnOnce(&str) -> String) -> PathBuf {
+    edited_fruit(dir, |b, start| {
+        let header = String::from_utf8(b[..start].to_vec()).unwrap();
+        let mut out = edit(&header).into_bytes();
+        out.extend_from_slice(&b[start..]);
+        *b = out;
+    })
+}
+
+/// A minimal ASCII Gaussian PLY with `rows` as its data lines and `count` declared.
+fn ascii_scene(dir: &Path, count: usize, rows: &[&str]) -> PathBuf {
+    let path = dir.join("ascii.ply");
+    let mut text = format!("ply\nformat ascii 1.0\nelement vertex {count}\n");
+    for p in [
+        "x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
+        "rot_0", "rot_1", "rot_2", "rot_3",
+    ] {
+        text.push_str(&format!("property float {p}\n"));
+    }
+    text.push_str("end_header\n");
+    for row in rows {
+        text.push_str(row);
+        text.push('\n');
+    }
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+const ROW: &str = "0 0 0 0.1 0.2 0.3 0.5 -3 -3 -3 1 0 0 0";
+
+#[test]
+fn a_property_declared_twice_is_refused_naming_it_and_its_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["x", "opacity"] {
+        // The second declaration replaces an unused property, so the row size is unchanged and
+        // a lenient reader would read shifted columns.
+        let path = edited_header(dir.path(), |h| {
+            h.replacen("property float f_rest_44\n", &format!("property float {name}\n"), 1)
+        });
+        let options = ReadOptions {
+            invalid: InvalidPolicy::Drop,
+            ..ReadOptions::default()
+        };
+        assert_mentions(
+            &error_of(&path, &options),
+            &["edited.ply", &format!("property '{name}'"), "'vertex'", "declared twice", "line"],
+        );
+    }
+}
+
+#[test]
+fn binary_data_longer_than_the_header_count_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = edited_header(dir.path(), |h| {
+        h.replacen("element vertex 4721\n", "element vertex 4719\n", 1)
+    });
+    assert_mentions(
+        &error_of(&path, &ReadOptions::default()),
+        &["edited.ply", "2 more rows", "'vertex'", "4719"],
+    );
+}
+
+#[test]
+fn binary_trailing_bytes_that_are_not_rows_are_only_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = edited_fruit(dir.path(), |b, _| b.extend_from_slice(b"junk"));
+    assert_eq!(read_scene(&path, &ReadOptions::default()).unwrap().scene.len(), 4721);
+}
+
+#[test]
+fn ascii_rows_beyond_the_header_count_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = ascii_scene(dir.path(), 1, &[ROW, ROW]);
+    assert_mentions(
+        &error_of(&path, &ReadOptions::default()),
+        &["ascii.ply", "1 more rows", "'vertex'"],
+    );
+    // The same rows with the right count read.
+    let path = ascii_scene(dir.path(), 2, &[ROW, ROW]);
+    assert_eq!(read_scene(&path, &ReadOptions::default()).unwrap().scene.len(), 2);
+}
+
+#[test]
+fn an_ascii_row_with_an_extra_value_is_refused_naming_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let extra = format!("{ROW} 7");
+    let path = ascii_scene(dir.path(), 2, &[ROW, &extra]);
+    // 3 header lines, 14 properties, end_header: the second row is line 20.
+    assert_mentions(
+        &error_of(&path, &ReadOptions::default()),
+        &["ascii.ply", "line 20", "'vertex'", "row 1", "15 values", "14"],
+    );
+}

@@ -161,15 +161,27 @@ impl PlyFile {
 }
 
 /// Parses a whole PLY file held in memory.
+///
+/// Strict where a lenient reader would shift columns or drop data silently: a property or
+/// element declared twice, an ASCII row with more or fewer values than its properties, and data
+/// holding whole rows beyond an element's declared count are errors naming the line or element;
+/// other bytes after the last element are a warning.
 pub fn read_ply_tables(bytes: &[u8], path: &Path) -> Result<PlyFile> {
+    let header_lines = check_header_names(bytes, path)?;
     let parser = Parser::<Row>::new();
     let mut reader = Reader::new(Cursor::new(bytes));
     let header: Header = parser
         .read_header(&mut reader)
         .map_err(|e| SceneError::malformed(path, format!("bad PLY header: {e}")))?;
     let mut tables = Vec::with_capacity(header.elements.len());
+    let mut line = header_lines;
     for def in header.elements.values() {
-        tables.push(read_element(&parser, &mut reader, &header, def, path)?);
+        tables.push(read_element(&parser, &mut reader, &header, def, (path, line))?);
+        line += def.count;
+    }
+    let rest = &bytes[(reader.get_ref().position() as usize).min(bytes.len())..];
+    if let Some(last) = header.elements.values().last() {
+        check_trailing(rest, header.encoding, last, path)?;
     }
     Ok(PlyFile {
         encoding: header.encoding,
@@ -178,12 +190,146 @@ pub fn read_ply_tables(bytes: &[u8], path: &Path) -> Result<PlyFile> {
     })
 }
 
+/// Refuses a header that declares an element, or a property of one element, twice (the PLY
+/// parser keys them by name and would read shifted columns); returns the header's line count.
+fn check_header_names(bytes: &[u8], path: &Path) -> Result<usize> {
+    let head = &bytes[..bytes.len().min(1 << 20)];
+    let end = head
+        .windows(b"end_header".len())
+        .position(|w| w == b"end_header")
+        .unwrap_or(head.len());
+    let text = String::from_utf8_lossy(&head[..end]);
+    let mut elements: Vec<(String, usize)> = Vec::new();
+    let mut properties: Vec<(String, usize)> = Vec::new();
+    let mut lines = 0;
+    for (number, line) in text.lines().enumerate().map(|(i, l)| (i + 1, l)) {
+        lines = number;
+        let words: Vec<&str> = line.split_whitespace().collect();
+        let (keyword, name) = match words.as_slice() {
+            ["element", name, ..] => ("element", *name),
+            ["property", .., name] => ("property", *name),
+            _ => continue,
+        };
+        let owner = match elements.last() {
+            Some((e, _)) if keyword == "property" => format!(" of element '{e}'"),
+            _ => String::new(),
+        };
+        let seen = if keyword == "element" {
+            properties.clear();
+            &mut elements
+        } else {
+            &mut properties
+        };
+        if let Some((_, first)) = seen.iter().find(|(n, _)| n == name) {
+            return Err(SceneError::malformed(
+                path,
+                format!(
+                    "header line {number}: {keyword} '{name}'{owner} is declared twice (first on \
+                     line {first}); every name must be unique"
+                ),
+            ));
+        }
+        seen.push((name.to_string(), number));
+    }
+    // The `end_header` line itself.
+    Ok(lines + 1)
+}
+
+/// Bytes after the last element: whole rows of it are a count that disagrees with the data
+/// (an error), anything else but whitespace a warning.
+fn check_trailing(rest: &[u8], encoding: Encoding, last: &ElementDef, path: &Path) -> Result<()> {
+    let more_rows = |rows: String| {
+        SceneError::malformed(
+            path,
+            format!(
+                "the data holds {rows} more rows of element '{}' than its header count {} \
+                 declares; fix the count in the header",
+                last.name, last.count
+            ),
+        )
+    };
+    match encoding {
+        Encoding::Ascii => {
+            let text = String::from_utf8_lossy(rest);
+            let extra: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
+            if extra.is_empty() {
+                return Ok(());
+            }
+            let widths_fit = extra
+                .iter()
+                .all(|l| expected_tokens(&l.split_whitespace().collect::<Vec<_>>(), last).is_some());
+            if widths_fit {
+                return Err(more_rows(extra.len().to_string()));
+            }
+            tracing::warn!(
+                "{}: {} lines after the last element are not part of the file's data and are \
+                 ignored",
+                path.display(),
+                extra.len()
+            );
+        }
+        Encoding::BinaryLittleEndian | Encoding::BinaryBigEndian => {
+            if rest.is_empty() {
+                return Ok(());
+            }
+            match binary_row_size(last) {
+                Some(size) if size > 0 && rest.len() % size == 0 => {
+                    return Err(more_rows((rest.len() / size).to_string()));
+                }
+                _ => tracing::warn!(
+                    "{}: {} bytes after the last element ('{}') are ignored",
+                    path.display(),
+                    rest.len(),
+                    last.name
+                ),
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Bytes of one binary row of `def` (None with list properties: rows vary).
+fn binary_row_size(def: &ElementDef) -> Option<usize> {
+    def.properties
+        .values()
+        .map(|p| match &p.data_type {
+            PropertyType::Scalar(s) => Some(scalar_size(s)),
+            PropertyType::List(..) => None,
+        })
+        .sum()
+}
+
+fn scalar_size(scalar: &ScalarType) -> usize {
+    match scalar {
+        ScalarType::Char | ScalarType::UChar => 1,
+        ScalarType::Short | ScalarType::UShort => 2,
+        ScalarType::Int | ScalarType::UInt | ScalarType::Float => 4,
+        ScalarType::Double => 8,
+    }
+}
+
+/// The number of values an ASCII row of `def` holds when it starts with `tokens` (list
+/// lengths read from the row), if the row has exactly that many.
+fn expected_tokens(tokens: &[&str], def: &ElementDef) -> Option<usize> {
+    let mut at = 0usize;
+    for p in def.properties.values() {
+        match &p.data_type {
+            PropertyType::Scalar(_) => at += 1,
+            PropertyType::List(..) => {
+                let len: usize = tokens.get(at)?.parse().ok()?;
+                at = at.checked_add(1 + len)?;
+            }
+        }
+    }
+    (at == tokens.len()).then_some(at)
+}
+
 fn read_element<T: BufRead>(
     parser: &Parser<Row>,
     reader: &mut Reader<T>,
     header: &Header,
     def: &ElementDef,
-    path: &Path,
+    (path, first_line): (&Path, usize),
 ) -> Result<Table> {
     let scalars: Vec<(String, ScalarType)> = def
         .properties
@@ -218,6 +364,25 @@ fn read_element<T: BufRead>(
                     .map_err(|e| SceneError::io(path, e))?;
                 if read == 0 {
                     return Err(truncated(path, def, i));
+                }
+                let tokens: Vec<&str> = line.split_whitespace().collect();
+                if expected_tokens(&tokens, def).is_none() {
+                    return Err(SceneError::malformed(
+                        path,
+                        format!(
+                            "line {}: element '{}' row {i} holds {} values, its {} properties \
+                             need {}",
+                            first_line + i + 1,
+                            def.name,
+                            tokens.len(),
+                            def.properties.len(),
+                            if binary_row_size(def).is_some() {
+                                def.properties.len().to_string()
+                            } else {
+                                "a different number (with the list lengths it gives)".to_string()
+                            }
+                        ),
+                    ));
                 }
                 parser.read_ascii_element(line.trim(), def)
             }

@@ -157,6 +157,9 @@ pub struct TrajectoryStep {
     pub updated: bool,
     /// Lowest sampled loss so far (this step included).
     pub best_total: f64,
+    /// The weights `[K][6]` (scene units) when this step set a new best, so that an observer
+    /// can checkpoint the best trajectory while the loop runs; `None` otherwise.
+    pub new_best: Option<Vec<[f64; 6]>>,
 }
 
 /// What [`optimise_trajectory`] found.
@@ -251,7 +254,9 @@ pub fn optimise_trajectory(
         } else {
             skipped_steps += 1;
         }
-        if total.is_finite() && best.as_ref().is_none_or(|(b, _, _)| total < *b) {
+        let improved = total.is_finite() && best.as_ref().is_none_or(|(b, _, _)| total < *b);
+        let new_best = improved.then(|| evaluated.iter().map(|w| units.denormalise(w)).collect());
+        if improved {
             best = Some((total, step, evaluated));
         }
         let row = TrajectoryStep {
@@ -261,6 +266,7 @@ pub fn optimise_trajectory(
             windows: window_terms,
             updated: finite,
             best_total: best.as_ref().map_or(f64::NAN, |b| b.0),
+            new_best,
         };
         let out_of_time = options
             .time_limit_s
