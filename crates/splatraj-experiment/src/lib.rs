@@ -30,6 +30,7 @@ pub mod extensions;
 pub mod io;
 pub mod observer;
 pub mod outputs;
+pub mod path_checks;
 pub mod pose_run;
 pub mod probe;
 pub mod query;

@@ -100,8 +100,11 @@ impl Experiment {
         let costs = self.pose_costs()?;
         let starts = self.pose_starts()?;
         let scene = self.autodiff_scene();
+        let occupancy = self.occupancy()?;
         let problem = Problem::new(&scene, &self.windows, &costs, self.intrinsics)
             .with_rasterizer(self.config.rasterizer)
+            .with_approximations(self.config.approximations)
+            .with_occupancy(occupancy.as_ref())
             .window(window)?;
         let options = &self.config.pose.optimiser;
         let started = Instant::now();
@@ -132,8 +135,11 @@ impl Experiment {
         let index = self.config.pose.query;
         let costs = self.pose_costs()?;
         let scene = self.autodiff_scene();
+        let occupancy = self.occupancy()?;
         let problem = Problem::new(&scene, &self.windows, &costs, self.intrinsics)
             .with_rasterizer(self.config.rasterizer)
+            .with_approximations(self.config.approximations)
+            .with_occupancy(occupancy.as_ref())
             .window(index)?;
         let units = PoseUnits::with_position(self.windows[index].context.prior_radius);
         let sampled = sample_poses_sgld(

@@ -13,6 +13,7 @@
 
 #![warn(missing_docs)]
 
+pub mod clearance;
 pub mod costs;
 pub mod metrics;
 pub mod optimise;

@@ -427,6 +427,8 @@ fn weighted_sum_equals_hand_weighted_terms() {
             gamma: 0.9,
             radius: None,
         }),
+        clearance: None,
+        motion: None,
         custom: Default::default(),
     };
     let costs = config.build().unwrap();

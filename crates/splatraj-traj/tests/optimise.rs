@@ -85,6 +85,8 @@ fn roll_only() -> WeightedCosts {
             mode: UprightMode::Roll,
         }),
         prior: None,
+        clearance: None,
+        motion: None,
         custom: Default::default(),
     }
     .build()

@@ -15,7 +15,15 @@
 //! - [`mod@tce`]: target centring error (image cost); [`mod@tre`]: target ratio error (image cost);
 //! - [`mod@upright`]: camera up against world up (`up-vector`, the paper's) or horizon tilt (`roll`);
 //! - [`mod@prior`]: the decaying warm-start prior (attracting form; the paper's signs are a typo);
+//! - [`mod@clearance`]: keeps the camera a margin away from the scene's geometry (path cost);
+//! - [`mod@motion`]: speed, acceleration and turning-rate limits, even speed (path cost);
 //! - [`iou`]: bounding-box IoU, a metric only (see that module for why it is not a [`Cost`]).
+//!
+//! **Samples and path.** Most costs judge each sampled pose on its own ([`CostDomain::Samples`]).
+//! A path cost ([`CostDomain::Path`]) judges the camera's motion: in a trajectory optimisation
+//! it reads [`CostInputs::path`], the window's stretch of the trajectory on a fine, evenly
+//! spaced time grid, and enters the total as its mean over that path; without a path (single
+//! poses) it reads the sampled poses like any other cost.
 //!
 //! **Extending.** A cost is a config struct (serde, its weights and parameters) implementing
 //! [`CostConfig`] (`init()` builds the cost, burn's `XConfig` → `init()` style) and a [`Cost`]
@@ -31,7 +39,9 @@
 //! and for an empty mask (object out of view) TCE has a zero gradient and TRE a constant one,
 //! so that nothing but the prior moves a camera that sees nothing (see each function's docs).
 
+pub mod clearance;
 pub mod iou;
+pub mod motion;
 pub mod prior;
 pub mod registry;
 pub mod tce;
@@ -43,7 +53,11 @@ use std::collections::BTreeMap;
 use burn::tensor::{DType, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 
+use crate::clearance::{Occupancy, OccupancySpec};
+
+pub use clearance::{ClearanceCost, DEFAULT_CLEARANCE_SIGMA, DEFAULT_MIN_OPACITY, clearance};
 pub use iou::{IOU_THRESHOLD, PixelBox, bbox_iou, bbox_iou_batch, mask_box};
+pub use motion::MotionCost;
 pub use prior::{PRIOR_EPSILON_FRACTION, PriorCost, default_prior_radius, prior};
 pub use registry::{CostConfig, CostRegistry};
 pub use tce::{MASS_FLOOR, NORM_EPSILON, TceCost, centroid_offset, tce};
@@ -86,6 +100,12 @@ pub enum CostError {
         cost: &'static str,
         /// The channel.
         channel: ImageChannel,
+    },
+    /// A cost needs the scene's geometry but the problem holds none.
+    #[error("cost `{cost}` needs the scene's geometry (an occupancy), but the problem has none")]
+    MissingOccupancy {
+        /// Name of the cost.
+        cost: &'static str,
     },
     /// Tensor shapes or dtypes of the inputs disagree.
     #[error("cost inputs: {0}")]
@@ -158,8 +178,32 @@ pub struct CostInputs {
     masks: Option<Tensor<3>>,
     depth: Option<Tensor<3>>,
     rgb: Option<Tensor<4>>,
+    path: Option<PathSamples>,
+    occupancy: Option<Occupancy>,
     step: usize,
     query: QueryContext,
+}
+
+/// The window's stretch of a trajectory, densely sampled in time order (trajectory
+/// optimisation only): what path costs read.
+#[derive(Debug, Clone)]
+pub struct PathSamples {
+    /// Poses Φ `[P, 6]` at evenly spaced times, in time order.
+    pub poses: Tensor<2>,
+    /// Normalised time between consecutive poses.
+    pub time_step: f64,
+    /// Duration of the whole trajectory (t from 0 to 1) in seconds, when known.
+    pub seconds: Option<f64>,
+}
+
+/// Which poses a cost judges (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CostDomain {
+    /// Each sampled pose on its own; one value per sample.
+    Samples,
+    /// The densely sampled path when there is one (its mean enters the total), else the
+    /// sampled poses.
+    Path,
 }
 
 /// A rendered channel a cost can read (see [`Cost::channels`]).
@@ -213,6 +257,8 @@ impl CostInputs {
             masks,
             depth: None,
             rgb: None,
+            path: None,
+            occupancy: None,
             step,
             query,
         })
@@ -228,6 +274,38 @@ impl CostInputs {
     pub fn with_rgb(mut self, rgb: Tensor<4>) -> Self {
         self.rgb = Some(rgb);
         self
+    }
+
+    /// Adds the densely sampled path (for path costs).
+    pub fn with_path(mut self, path: PathSamples) -> Self {
+        self.path = Some(path);
+        self
+    }
+
+    /// Adds the scene's geometry (for clearance).
+    pub fn with_occupancy(mut self, occupancy: Occupancy) -> Self {
+        self.occupancy = Some(occupancy);
+        self
+    }
+
+    /// The densely sampled path, in a trajectory optimisation.
+    pub fn path(&self) -> Option<&PathSamples> {
+        self.path.as_ref()
+    }
+
+    /// The path's poses `[P, 6]` when there is a path, else the sampled poses `[B, 6]`.
+    pub fn path_or_sample_poses(&self) -> Tensor<2> {
+        match &self.path {
+            Some(p) => p.poses.clone(),
+            None => self.poses.clone(),
+        }
+    }
+
+    /// The scene's geometry, or [`CostError::MissingOccupancy`] naming `cost`.
+    pub fn require_occupancy(&self, cost: &'static str) -> Result<Occupancy, CostError> {
+        self.occupancy
+            .clone()
+            .ok_or(CostError::MissingOccupancy { cost })
     }
 
     /// Rendered depth `[B, H, W]`, or [`CostError::MissingChannel`] naming `cost`.
@@ -324,6 +402,16 @@ pub trait Cost: std::fmt::Debug + Send + Sync {
         &[]
     }
 
+    /// Which poses it judges (default: each sample on its own).
+    fn domain(&self) -> CostDomain {
+        CostDomain::Samples
+    }
+
+    /// The scene geometry it reads ([`CostInputs::require_occupancy`]), if any.
+    fn occupancy(&self) -> Option<OccupancySpec> {
+        None
+    }
+
     /// Checks the config values; errors name the full key (`costs.<name>.<field>`).
     fn validate(&self) -> Result<(), CostError>;
 
@@ -382,6 +470,12 @@ pub struct CostsConfig {
     /// Decaying warm-start prior.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub prior: Option<PriorCost>,
+    /// Clearance from the scene's geometry (path cost; off unless its table is given).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clearance: Option<ClearanceCost>,
+    /// Motion limits (path cost; off unless its table is given).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion: Option<MotionCost>,
     /// Costs registered by other crates ([`CostRegistry`]), by name: `[costs.custom.<name>]`
     /// holds that cost's config table.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
@@ -396,13 +490,16 @@ impl Default for CostsConfig {
             tre: Some(TreCost::default()),
             upright: Some(UprightCost::default()),
             prior: Some(PriorCost::default()),
+            clearance: None,
+            motion: None,
             custom: BTreeMap::new(),
         }
     }
 }
 
 impl CostsConfig {
-    /// Validates every configured cost and collects them, in the order tce, tre, upright, prior.
+    /// Validates every configured cost and collects them, in the order tce, tre, upright, prior,
+    /// clearance, motion.
     /// A `custom` cost is an error here: build those with [`CostsConfig::build_with`].
     pub fn build(&self) -> Result<WeightedCosts, CostError> {
         self.build_with(&CostRegistry::default())
@@ -421,6 +518,12 @@ impl CostsConfig {
             costs.push(Box::new(c.clone()));
         }
         if let Some(c) = &self.prior {
+            costs.push(Box::new(c.clone()));
+        }
+        if let Some(c) = &self.clearance {
+            costs.push(Box::new(c.clone()));
+        }
+        if let Some(c) = &self.motion {
             costs.push(Box::new(c.clone()));
         }
         for (name, table) in &self.custom {
@@ -519,14 +622,31 @@ impl WeightedCosts {
         all
     }
 
-    /// Every term and Σ_i w_i(k)·cost_i per sample `[B]`.
+    /// Whether any cost judges the path (the optimiser then samples it densely).
+    pub fn needs_path(&self) -> bool {
+        self.costs.iter().any(|c| c.domain() == CostDomain::Path)
+    }
+
+    /// The scene geometry some cost reads (the first one's spec; None when no cost does).
+    pub fn occupancy(&self) -> Option<OccupancySpec> {
+        self.costs.iter().find_map(|c| c.occupancy())
+    }
+
+    /// Every term and Σ_i w_i(k)·cost_i per sample `[B]` (a path cost adds its mean over the
+    /// path to every sample).
     pub fn evaluate(&self, inputs: &CostInputs) -> Result<CostTerms, CostError> {
         let mut total: Option<Tensor<1>> = None;
         let mut terms = Vec::with_capacity(self.costs.len());
+        let batch = inputs.batch();
         for cost in &self.costs {
             let weight = cost.weight(inputs.step());
             let value = cost.evaluate(inputs)?;
-            let weighted = value.clone().mul_scalar(weight);
+            let on_path = cost.domain() == CostDomain::Path && inputs.path().is_some();
+            let weighted = if on_path {
+                value.clone().mean().mul_scalar(weight).expand([batch])
+            } else {
+                value.clone().mul_scalar(weight)
+            };
             total = Some(match total {
                 Some(t) => t + weighted,
                 None => weighted,

@@ -16,7 +16,10 @@ use std::sync::Arc;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
-use super::{CONFIG_TABLE, Cost, CostError, PriorCost, TceCost, TreCost, UprightCost};
+use super::{
+    CONFIG_TABLE, ClearanceCost, Cost, CostError, MotionCost, PriorCost, TceCost, TreCost,
+    UprightCost,
+};
 
 /// The config of one cost: deserialised from its config table, checked and turned into the
 /// cost by [`CostConfig::init`].
@@ -37,7 +40,14 @@ macro_rules! self_config {
 }
 
 // The built-in costs are their own configs.
-self_config!(TceCost, TreCost, UprightCost, PriorCost);
+self_config!(
+    TceCost,
+    TreCost,
+    UprightCost,
+    PriorCost,
+    ClearanceCost,
+    MotionCost
+);
 
 type Factory = Arc<dyn Fn(&toml::Value) -> Result<Box<dyn Cost>, CostError> + Send + Sync>;
 

@@ -45,6 +45,10 @@ pub struct WindowMetrics {
     pub tce_max: f64,
     /// Worst TRE over the samples.
     pub tre_max: f64,
+    /// Clearance and motion on the window's stretch of path (filled in by the caller from
+    /// [`super::path_metrics`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub path: Option<super::PathMetrics>,
 }
 
 /// What one window's metrics need: its object and how to frame it.
@@ -113,5 +117,6 @@ pub fn window_metrics(
         visible: shown == batch,
         tce_max: max(&tces),
         tre_max: max(&tres),
+        path: None,
     })
 }

@@ -16,7 +16,8 @@ use splatraj_render::rasterize::RenderStats;
 use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
 
 use super::{OptimiseError, WindowTarget, per_sample};
-use crate::costs::{CostInputs, CostTerms, ImageChannel, WeightedCosts, coverage};
+use crate::clearance::Occupancy;
+use crate::costs::{CostInputs, CostTerms, ImageChannel, PathSamples, WeightedCosts, coverage};
 
 /// A scene, its query windows, the costs and the camera: the arguments every optimiser shares.
 #[derive(Debug, Clone, Copy)]
@@ -35,6 +36,10 @@ pub struct Problem<'a> {
     /// Prune a mask-only pass to the object (exact: same image and gradient; on by default,
     /// off only to measure what pruning saves).
     pub prune: bool,
+    /// The scene's solid geometry, for costs that read it (clearance).
+    pub occupancy: Option<&'a Occupancy>,
+    /// Duration of the whole trajectory in seconds (motion limits), when known.
+    pub seconds: Option<f64>,
 }
 
 /// One evaluation: the cost terms and the object mask when one was rendered.
@@ -88,7 +93,21 @@ impl<'a> Problem<'a> {
             intrinsics,
             rasterizer: Rasterizer::default(),
             prune: true,
+            occupancy: None,
+            seconds: None,
         }
+    }
+
+    /// The same problem with the scene's geometry (needed by the clearance cost).
+    pub fn with_occupancy(mut self, occupancy: Option<&'a Occupancy>) -> Self {
+        self.occupancy = occupancy;
+        self
+    }
+
+    /// The same problem with the trajectory's duration in seconds (needed by motion limits).
+    pub fn with_seconds(mut self, seconds: Option<f64>) -> Self {
+        self.seconds = seconds;
+        self
     }
 
     /// The same problem with another rasterizer.
@@ -174,7 +193,35 @@ impl<'a> Problem<'a> {
         step: usize,
         request: Option<&RenderRequest>,
     ) -> Result<Evaluated, OptimiseError> {
+        self.evaluate_along(index, poses, None, step, request)
+    }
+
+    /// [`Problem::evaluate`] with the window's densely sampled path (poses `[P, 6]` at times
+    /// `time_step` apart) for the path costs.
+    pub fn evaluate_along(
+        &self,
+        index: usize,
+        poses: Tensor<2>,
+        path: Option<(Tensor<2>, f64)>,
+        step: usize,
+        request: Option<&RenderRequest>,
+    ) -> Result<Evaluated, OptimiseError> {
         let window = &self.windows[index];
+        let seconds = self.seconds;
+        let occupancy = self.occupancy;
+        let attach = move |mut inputs: CostInputs| {
+            if let Some((poses, time_step)) = path.clone() {
+                inputs = inputs.with_path(PathSamples {
+                    poses,
+                    time_step,
+                    seconds,
+                });
+            }
+            if let Some(o) = occupancy {
+                inputs = inputs.with_occupancy(o.clone());
+            }
+            inputs
+        };
         let owned;
         let request = match request {
             Some(r) => Some(r),
@@ -184,7 +231,7 @@ impl<'a> Problem<'a> {
             }
         };
         let Some(request) = request else {
-            let inputs = CostInputs::new(poses, None, step, window.context)?;
+            let inputs = attach(CostInputs::new(poses, None, step, window.context)?);
             let terms = self.costs.evaluate(&inputs)?;
             return Ok(Evaluated {
                 terms,
@@ -209,7 +256,7 @@ impl<'a> Problem<'a> {
                 Channel::Features { .. } => {}
             }
         }
-        let mut inputs = CostInputs::new(poses, masks.clone(), step, window.context)?;
+        let mut inputs = attach(CostInputs::new(poses, masks.clone(), step, window.context)?);
         if let Some(d) = depth {
             inputs = inputs.with_depth(d);
         }

@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Tensor, TensorData};
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use splatraj_render::render::RenderRequest;
@@ -31,6 +31,26 @@ use super::units::PoseUnits;
 use super::{OptimiseError, Problem, check_adam, host_values, sampling};
 use crate::costs::QueryContext;
 use crate::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord};
+
+/// Default points per window of the path the path costs read each step.
+pub const DEFAULT_PATH_SAMPLES: usize = 16;
+
+/// Times of window `index`'s stretch of the path (of `windows`), `per_window` points per
+/// window on the grid t_j = (j + phase)/(windows·per_window) shared by all windows, from one
+/// point before the window to its next window's first point (so the differences of
+/// consecutive points cover the joins between windows), kept inside [0, 1]; and the grid's
+/// step. A new phase ∈ [0, 1) each step moves the grid, so over the steps every instant of
+/// the path is judged (the optimiser uses phase 0, which holds both ends, every other step).
+pub fn path_times(index: usize, windows: usize, per_window: usize, phase: f64) -> (Vec<f64>, f64) {
+    let step = 1.0 / (windows.max(1) * per_window.max(1)) as f64;
+    let first = (index * per_window) as i64 - 1;
+    let last = ((index + 1) * per_window) as i64;
+    let times = (first..=last)
+        .map(|j| (j as f64 + phase) * step)
+        .filter(|t| (0.0..=1.0).contains(t))
+        .collect();
+    (times, step)
+}
 
 /// One query window's object: its per-Gaussian mask and cost context.
 #[derive(Debug, Clone)]
@@ -67,6 +87,9 @@ pub struct TrajectoryOptions {
     /// Stop after this many seconds (the best trajectory so far is returned). Default: none.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub time_limit_s: Option<f64>,
+    /// Points per window of the densely sampled path that path costs (clearance, motion)
+    /// read each step (≥ 2; only used when such a cost is on). Default 16.
+    pub path_samples: usize,
 }
 
 impl Default for TrajectoryOptions {
@@ -81,6 +104,7 @@ impl Default for TrajectoryOptions {
             epsilon: 1e-8,
             position_unit: None,
             time_limit_s: None,
+            path_samples: DEFAULT_PATH_SAMPLES,
         }
     }
 }
@@ -88,6 +112,12 @@ impl Default for TrajectoryOptions {
 impl TrajectoryOptions {
     /// Checks every field; errors name the field.
     pub fn validate(&self) -> Result<(), OptimiseError> {
+        if self.path_samples < 2 {
+            return Err(OptimiseError::InvalidOptions {
+                field: "path_samples",
+                reason: format!("= {} must be at least 2", self.path_samples),
+            });
+        }
         if self.samples_per_window == 0 {
             return Err(OptimiseError::InvalidOptions {
                 field: "samples_per_window",
@@ -209,6 +239,7 @@ pub fn optimise_trajectory(
         .with_epsilon(options.epsilon as f32)
         .init();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let needs_path = problem.costs.needs_path();
     let started = Instant::now();
     let n = windows.len();
     let mut history = Vec::with_capacity(options.iterations);
@@ -219,6 +250,13 @@ pub fn optimise_trajectory(
     for step in 0..options.iterations {
         let mut loss: Option<Tensor<1>> = None;
         let mut window_terms = Vec::with_capacity(n);
+        // Every other step the grid holds t = 0 and t = 1 exactly (the path's ends, which a
+        // shifted grid reaches only rarely); in between, a random shift covers the rest.
+        let phase: f64 = if needs_path && step % 2 == 1 {
+            rng.random()
+        } else {
+            0.0
+        };
         for (i, request) in requests.iter().enumerate() {
             let times =
                 sampling::stratified_times(i, n, options.samples_per_window, Some(&mut rng));
@@ -227,7 +265,16 @@ pub fn optimise_trajectory(
                 (&device, dtype),
             );
             let poses = units.to_scene(module.forward(times)); // [S, 6]
-            let terms = problem.evaluate(i, poses, step, request.as_ref())?.terms;
+            let path = needs_path.then(|| {
+                let (times, time_step) = path_times(i, n, options.path_samples, phase);
+                let count = times.len();
+                let times =
+                    Tensor::<1>::from_data(TensorData::new(times, [count]), (&device, dtype));
+                (units.to_scene(module.forward(times)), time_step) // [P, 6]
+            });
+            let terms = problem
+                .evaluate_along(i, poses, path, step, request.as_ref())?
+                .terms;
             window_terms.push(terms.means());
             let mean = terms.total.mean();
             loss = Some(match loss {

@@ -1,0 +1,57 @@
+//! The scene's solid geometry for the clearance cost, and the per-window clearance and motion
+//! metrics of a trajectory (`metrics.json`'s `path` of each window).
+
+use anyhow::{Result, bail};
+use splatraj_traj::clearance::Occupancy;
+use splatraj_traj::metrics::{WindowMetrics, path_metrics};
+use splatraj_traj::trajectory::Trajectory;
+
+use crate::experiment::Experiment;
+
+impl Experiment {
+    /// The scene's solid ellipsoids, indexed, when a configured cost reads them (clearance);
+    /// None otherwise. Errors when a motion limit is set without the path's duration.
+    pub fn occupancy(&self) -> Result<Option<Occupancy>> {
+        if let Some(motion) = &self.config.costs.motion
+            && motion.needs_duration()
+            && self.path_seconds().is_none()
+        {
+            bail!(
+                "`costs.motion` limits rates per second: give the path's duration in `[output] \
+                 seconds`"
+            );
+        }
+        Ok(self
+            .costs()?
+            .occupancy()
+            .map(|spec| Occupancy::new(&self.scene, spec)))
+    }
+
+    /// Duration of the whole trajectory in seconds (`[output] seconds`), when given.
+    pub fn path_seconds(&self) -> Option<f64> {
+        self.config.output.seconds
+    }
+
+    /// `windows` with each window's clearance (when the clearance cost is on) and motion
+    /// metrics of `trajectory` filled in, on a grid of at least `output.ldj_samples` times.
+    pub fn with_path_metrics(
+        &self,
+        mut windows: Vec<WindowMetrics>,
+        trajectory: &Trajectory,
+    ) -> Result<Vec<WindowMetrics>> {
+        let occupancy = self.occupancy()?;
+        let margin = self.config.costs.clearance.as_ref().map(|c| c.margin);
+        let clearance = occupancy.as_ref().zip(margin);
+        let paths = path_metrics(
+            &|t: &[f64]| trajectory.poses_at(t),
+            windows.len(),
+            self.config.output.ldj_samples,
+            clearance,
+            self.path_seconds(),
+        );
+        for (w, p) in windows.iter_mut().zip(paths) {
+            w.path = Some(p);
+        }
+        Ok(windows)
+    }
+}

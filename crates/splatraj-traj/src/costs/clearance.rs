@@ -1,0 +1,176 @@
+//! Clearance: keeps the camera centre at least a margin away from the scene's geometry.
+//!
+//! ```text
+//! L_clear = max(0, m − d(c))² / m²,     d(c) = signed distance from c to the nearest surface
+//! ```
+//!
+//! with m the margin and the surfaces those of [`crate::clearance`] (the opaque Gaussians'
+//! σ-ellipsoids). It is 0 at or beyond the margin, 1 on a surface, and grows quadratically
+//! inside geometry, so a buried camera is pushed out along the deepest surface's normal.
+//! Dividing by m² makes the weight independent of the scene's units.
+//!
+//! **Differentiable in the pose.** The nearest surface point x* and its outward normal n are
+//! found on the host (exactly: [`crate::clearance::ellipsoid`]) and held fixed; in the graph
+//! d(c) = n·(c − x*). That is the signed distance itself (c − x* is along n outside, against
+//! it inside) and its exact gradient n (the envelope theorem: moving c moves x* only along
+//! the surface, to first order), with no square root to blow up on the surface.
+//!
+//! **Where it is evaluated.** It is a path cost ([`CostDomain::Path`]): in a trajectory
+//! optimisation it sees the window's densely sampled path (a fine, randomly shifted time grid
+//! every step, including the stretch into the next window), not only the few stratified
+//! samples, so the path cannot slip through thin geometry between samples. Elsewhere (single
+//! poses) it sees the sampled poses.
+
+use burn::tensor::{Tensor, TensorData};
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+use super::{Cost, CostDomain, CostError, CostInputs, check_weight, invalid};
+use crate::clearance::OccupancySpec;
+
+/// Default ellipsoid size: 2σ holds most of a Gaussian's visible mass (3σ is where the
+/// rasterizer cuts it off).
+pub const DEFAULT_CLEARANCE_SIGMA: f64 = 2.0;
+
+/// Default opacity below which a Gaussian does not block the camera.
+pub const DEFAULT_MIN_OPACITY: f64 = 0.2;
+
+/// Clearance per pose `[B]` from camera centres `[B, 3]` and, per pose, the nearest surface
+/// point and outward normal `[B, 3]` (held fixed) and the margin m > 0.
+pub fn clearance(
+    centres: Tensor<2>,
+    surface_points: Tensor<2>,
+    normals: Tensor<2>,
+    margin: f64,
+) -> Tensor<1> {
+    let [batch, _] = centres.dims();
+    let distance = ((centres - surface_points) * normals)
+        .sum_dim(1)
+        .reshape([batch]);
+    distance
+        .neg()
+        .add_scalar(margin)
+        .clamp_min(0.0)
+        .div_scalar(margin)
+        .square()
+}
+
+/// The clearance cost: table `[costs.clearance]`, keys `weight` (default 1), `margin` (scene
+/// units, required), `sigma` (ellipsoid size in standard deviations, default 2) and
+/// `min_opacity` (default 0.2).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClearanceCost {
+    /// Weight (≥ 0).
+    #[serde(default = "one")]
+    pub weight: f64,
+    /// Margin m (scene units, > 0): the clearance the camera keeps.
+    pub margin: f64,
+    /// Ellipsoid size in standard deviations (> 0).
+    #[serde(default = "default_sigma")]
+    pub sigma: f64,
+    /// Opacity below which a Gaussian is see-through, in [0, 1].
+    #[serde(default = "default_min_opacity")]
+    pub min_opacity: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+fn default_sigma() -> f64 {
+    DEFAULT_CLEARANCE_SIGMA
+}
+
+fn default_min_opacity() -> f64 {
+    DEFAULT_MIN_OPACITY
+}
+
+impl ClearanceCost {
+    /// A clearance cost of weight 1 with margin `margin` and the default geometry.
+    pub fn with_margin(margin: f64) -> Self {
+        Self {
+            weight: 1.0,
+            margin,
+            sigma: DEFAULT_CLEARANCE_SIGMA,
+            min_opacity: DEFAULT_MIN_OPACITY,
+        }
+    }
+}
+
+impl Cost for ClearanceCost {
+    fn name(&self) -> &'static str {
+        "clearance"
+    }
+    fn weight(&self, _step: usize) -> f64 {
+        self.weight
+    }
+    fn domain(&self) -> CostDomain {
+        CostDomain::Path
+    }
+    fn occupancy(&self) -> Option<OccupancySpec> {
+        Some(OccupancySpec {
+            sigma: self.sigma,
+            min_opacity: self.min_opacity,
+        })
+    }
+    fn validate(&self) -> Result<(), CostError> {
+        check_weight(self.name(), "weight", self.weight)?;
+        for (field, value) in [("margin", self.margin), ("sigma", self.sigma)] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(invalid(
+                    self.name(),
+                    field,
+                    format!("= {value} must be finite and > 0"),
+                ));
+            }
+        }
+        if !(0.0..=1.0).contains(&self.min_opacity) {
+            return Err(invalid(
+                self.name(),
+                "min_opacity",
+                format!("= {} must be in [0, 1]", self.min_opacity),
+            ));
+        }
+        Ok(())
+    }
+    fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
+        let occupancy = inputs.require_occupancy(self.name())?;
+        let poses = inputs.path_or_sample_poses();
+        let [batch, _] = poses.dims();
+        let centres = poses.narrow(1, 3, 3); // [P, 3]
+        let host = crate::optimise::host_values(centres.clone().detach());
+        let mut points = Vec::with_capacity(3 * batch);
+        let mut normals = Vec::with_capacity(3 * batch);
+        for c in host.chunks_exact(3) {
+            let c = DVec3::new(c[0], c[1], c[2]);
+            match occupancy.nearest_within(c, self.margin) {
+                Some(contact) if contact.surface.distance < self.margin => {
+                    points.extend(contact.surface.point.to_array());
+                    normals.extend(contact.surface.normal.to_array());
+                }
+                // Clear of everything: a zero normal and a point at the margin give 0 and no
+                // gradient.
+                _ => {
+                    points.extend([0.0; 3]);
+                    normals.extend([0.0; 3]);
+                }
+            }
+        }
+        let device = (&centres.device(), centres.dtype());
+        let tensor = |v: Vec<f64>| Tensor::<2>::from_data(TensorData::new(v, [batch, 3]), device);
+        // With a zero normal d = 0 < m: shift those rows' distance to the margin instead.
+        let value = clearance(
+            centres,
+            tensor(points),
+            tensor(normals.clone()),
+            self.margin,
+        );
+        let clear: Vec<f64> = normals
+            .chunks_exact(3)
+            .map(|n| if n == [0.0; 3] { 0.0 } else { 1.0 })
+            .collect();
+        let keep = Tensor::<1>::from_data(TensorData::new(clear, [batch]), device);
+        Ok(value * keep)
+    }
+}

@@ -1,0 +1,182 @@
+//! Motion limits: keeps the camera's speed, acceleration and turning rate within bounds, and
+//! optionally its speed even, along the densely sampled path.
+//!
+//! The path is played over `seconds` (the config's `[output] seconds`): normalised time t
+//! becomes t·T seconds. On the path's evenly spaced poses (time step h, so Δt = h·T seconds)
+//!
+//! ```text
+//! v_k = (c_{k+1} − c_k)/Δt,   a_k = (c_{k+1} − 2c_k + c_{k−1})/Δt²,
+//! θ_k² ≈ ‖R_{k+1} − R_k‖²_F / 2                 (= 4 sin²(θ/2) ≈ θ² for the small turn θ)
+//! L_motion = mean_k max(0, ‖v_k‖²/v_max² − 1) + mean_k max(0, ‖a_k‖²/a_max² − 1)
+//!          + mean_k max(0, θ_k²/(ω_max Δt)² − 1) + w_even · mean_k (‖v_k‖²/mean‖v‖² − 1)²
+//! ```
+//!
+//! Each limit term is 0 within its bound and grows linearly with the relative excess of the
+//! squared rate (no square root, so no NaN gradient at rest); a limit left out of the config
+//! is not charged. Linear, not quadratic, on purpose: a quadratic penalty's pull vanishes at
+//! the bound, so any competing cost (the prior pulling toward the next object) leaves the
+//! rate above it, while a linear one is an exact penalty: with a large enough weight the
+//! optimum keeps the bound (measured: a quadratic hinge of weight 50 left a 1 unit/s limit at
+//! 1.5–1.6 units/s on `tests/clearance.rs`' two-object path). The even-speed term is the spread of the squared speed about its
+//! mean over the window's stretch of path, scale-free. It is a path cost
+//! ([`CostDomain::Path`]): with no path (single poses) it is 0.
+
+use burn::tensor::Tensor;
+use serde::{Deserialize, Serialize};
+
+use super::{Cost, CostDomain, CostError, CostInputs, check_weight, invalid};
+
+/// The motion-limit cost: table `[costs.motion]`, keys `weight` (default 1), `max_speed`
+/// (scene units per second), `max_acceleration` (scene units per second²),
+/// `max_angular_speed` (degrees per second), each optional, and `even_speed` (weight of the
+/// even-speed term, default 0). Needs `[output] seconds` when a limit is given.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MotionCost {
+    /// Weight (≥ 0).
+    pub weight: f64,
+    /// Largest camera speed, scene units per second (> 0).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_speed: Option<f64>,
+    /// Largest camera acceleration, scene units per second² (> 0).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_acceleration: Option<f64>,
+    /// Largest turning rate of the view, degrees per second (> 0).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_angular_speed: Option<f64>,
+    /// Weight of the even-speed term (≥ 0; 0 leaves the speed free).
+    pub even_speed: f64,
+}
+
+impl Default for MotionCost {
+    /// Weight 1, no limits, speed free.
+    fn default() -> Self {
+        Self {
+            weight: 1.0,
+            max_speed: None,
+            max_acceleration: None,
+            max_angular_speed: None,
+            even_speed: 0.0,
+        }
+    }
+}
+
+impl MotionCost {
+    /// Whether any limit needs the path's duration.
+    pub fn needs_duration(&self) -> bool {
+        self.max_speed.is_some()
+            || self.max_acceleration.is_some()
+            || self.max_angular_speed.is_some()
+    }
+}
+
+/// max(0, x/limit² − 1), averaged: the charge of squared rates `x` `[N]` over `limit`.
+fn over_limit(squared_rate: Tensor<1>, limit: f64) -> Tensor<1> {
+    squared_rate
+        .div_scalar(limit * limit)
+        .sub_scalar(1.0)
+        .clamp_min(0.0)
+        .mean()
+}
+
+impl Cost for MotionCost {
+    fn name(&self) -> &'static str {
+        "motion"
+    }
+    fn weight(&self, _step: usize) -> f64 {
+        self.weight
+    }
+    fn domain(&self) -> CostDomain {
+        CostDomain::Path
+    }
+    fn validate(&self) -> Result<(), CostError> {
+        check_weight(self.name(), "weight", self.weight)?;
+        check_weight(self.name(), "even_speed", self.even_speed)?;
+        for (field, value) in [
+            ("max_speed", self.max_speed),
+            ("max_acceleration", self.max_acceleration),
+            ("max_angular_speed", self.max_angular_speed),
+        ] {
+            if let Some(v) = value
+                && !(v.is_finite() && v > 0.0)
+            {
+                return Err(invalid(
+                    self.name(),
+                    field,
+                    format!("= {v} must be finite and > 0"),
+                ));
+            }
+        }
+        Ok(())
+    }
+    fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
+        let Some(path) = inputs.path() else {
+            return Ok(inputs
+                .poses()
+                .clone()
+                .narrow(1, 0, 1)
+                .reshape([inputs.batch()])
+                * 0.0);
+        };
+        let poses = path.poses.clone();
+        let [count, _] = poses.dims();
+        let zero = poses.clone().narrow(1, 0, 1).sum().mul_scalar(0.0); // [1], in the graph
+        if count < 3 {
+            return Ok(zero);
+        }
+        let seconds = match (path.seconds, self.needs_duration()) {
+            (Some(s), _) => s,
+            (None, false) => 1.0,
+            (None, true) => {
+                return Err(CostError::InvalidContext {
+                    field: "seconds",
+                    reason: "motion limits need the path's duration: set `[output] seconds`".into(),
+                });
+            }
+        };
+        let dt = path.time_step * seconds;
+        let centres = poses.clone().narrow(1, 3, 3); // [P, 3]
+        let steps = centres.clone().narrow(0, 1, count - 1) - centres.narrow(0, 0, count - 1);
+        let squared_speed = steps
+            .clone()
+            .square()
+            .sum_dim(1)
+            .reshape([count - 1])
+            .div_scalar(dt * dt); // [P − 1]
+        let mut total = zero;
+        if let Some(limit) = self.max_speed {
+            total = total + over_limit(squared_speed.clone(), limit);
+        }
+        if let Some(limit) = self.max_acceleration {
+            let second = steps.clone().narrow(0, 1, count - 2) - steps.narrow(0, 0, count - 2);
+            let squared = second
+                .square()
+                .sum_dim(1)
+                .reshape([count - 2])
+                .div_scalar(dt.powi(4));
+            total = total + over_limit(squared, limit);
+        }
+        if let Some(limit) = self.max_angular_speed {
+            let rotations = splatraj_render::camera::rotation_matrices(poses.narrow(1, 0, 3));
+            let turns =
+                rotations.clone().narrow(0, 1, count - 1) - rotations.narrow(0, 0, count - 1);
+            let squared_angle = turns
+                .square()
+                .sum_dim(2)
+                .sum_dim(1)
+                .reshape([count - 1])
+                .div_scalar(2.0 * dt * dt); // θ²/Δt² [P − 1]
+            total = total + over_limit(squared_angle, limit.to_radians());
+        }
+        if self.even_speed > 0.0 {
+            // Floored so that a camera at rest (mean 0) gives a finite value and gradient.
+            let mean = squared_speed.clone().mean().add_scalar(1e-12);
+            let spread = (squared_speed / mean.expand([count - 1]))
+                .sub_scalar(1.0)
+                .square()
+                .mean();
+            total = total + spread.mul_scalar(self.even_speed);
+        }
+        Ok(total)
+    }
+}

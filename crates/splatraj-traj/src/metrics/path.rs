@@ -1,0 +1,183 @@
+//! How a trajectory moves through the scene, per query window: clearance from the geometry
+//! and peak speed, acceleration and turning rate (docs/conventions.md "Clearance and motion").
+//!
+//! The trajectory is sampled on one even grid over [0, 1], made fine enough that consecutive
+//! camera centres are at most a quarter of the clearance margin apart (so no surface can pass
+//! between two samples unseen: a path that crosses a surface has a sample within an eighth of
+//! the margin of it). Each window gets the samples inside it (its boundaries included).
+//!
+//! - Clearance: signed distance of each sample's centre to the nearest solid surface
+//!   ([`crate::clearance`]), searched up to [`CLEARANCE_CAP_MARGINS`] margins away: a value
+//!   at that cap means "at least this". `time_inside_margin` is the share of the window's
+//!   samples (of its time: the grid is even) closer than the margin.
+//! - Motion: finite differences on the grid, Δt = h·T with T the trajectory's duration in
+//!   seconds (per unit of normalised time when none is given): speed ‖Δc‖/Δt between
+//!   consecutive samples, acceleration ‖c_{k+1} − 2c_k + c_{k−1}‖/Δt² at inner samples,
+//!   angular speed the exact angle of R_kᵀR_{k+1} over Δt, in degrees per second.
+
+use glam::DVec3;
+use serde::Serialize;
+use splatraj_render::camera::rotation_vector_to_matrix;
+
+use crate::clearance::Occupancy;
+use crate::optimise::sampling::window_bounds;
+use crate::trajectory::{Pose, uniform_times};
+
+/// Clearances are searched this many margins away; beyond it they read as the cap.
+pub const CLEARANCE_CAP_MARGINS: f64 = 4.0;
+
+/// Most grid points the metrics refine to (a path longer than this many quarter-margins is
+/// checked more coarsely, and says so in `largest_gap`).
+pub const MAX_PATH_SAMPLES: usize = 40_001;
+
+/// Clearance of one window's stretch of path.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ClearanceMetrics {
+    /// The margin the clearance cost keeps.
+    pub margin: f64,
+    /// Smallest clearance on the window's samples (capped at `CLEARANCE_CAP_MARGINS` × margin).
+    pub min_clearance: f64,
+    /// Share of the window's time closer to the geometry than the margin.
+    pub time_inside_margin: f64,
+    /// Largest distance between consecutive camera centres of the grid (whole path).
+    pub largest_gap: f64,
+}
+
+/// Peak rates of one window's stretch of path.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MotionMetrics {
+    /// Duration of the whole trajectory in seconds the rates are per (None: per unit of
+    /// normalised time).
+    pub seconds: Option<f64>,
+    /// Largest speed, scene units per second.
+    pub peak_speed: f64,
+    /// Largest acceleration, scene units per second².
+    pub peak_acceleration: f64,
+    /// Largest turning rate, degrees per second.
+    pub peak_angular_speed: f64,
+    /// Standard deviation of the speed over its mean (0: even speed).
+    pub speed_spread: f64,
+}
+
+/// Clearance (when an occupancy is given) and motion of one window.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PathMetrics {
+    /// Grid samples inside the window.
+    pub samples: usize,
+    /// Clearance from the geometry, when an occupancy was given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub clearance: Option<ClearanceMetrics>,
+    /// Peak rates.
+    pub motion: MotionMetrics,
+}
+
+/// Per-window path metrics of the trajectory whose poses `pose_at` gives, sampled at least
+/// `samples` times over [0, 1] (refined for the clearance, see the module docs);
+/// `clearance` is the occupancy and margin, `seconds` the duration.
+pub fn path_metrics(
+    pose_at: &dyn Fn(&[f64]) -> Vec<Pose>,
+    windows: usize,
+    samples: usize,
+    clearance: Option<(&Occupancy, f64)>,
+    seconds: Option<f64>,
+) -> Vec<PathMetrics> {
+    let mut times = uniform_times(samples.max(3));
+    let mut poses = pose_at(&times);
+    let gap = |poses: &[Pose]| {
+        poses
+            .windows(2)
+            .map(|w| centre(&w[0]).distance(centre(&w[1])))
+            .fold(0.0, f64::max)
+    };
+    if let Some((_, margin)) = clearance {
+        let factor = (gap(&poses) / (0.25 * margin)).ceil().max(1.0) as usize;
+        let refined = ((times.len() - 1) * factor + 1).min(MAX_PATH_SAMPLES);
+        if refined > times.len() {
+            times = uniform_times(refined);
+            poses = pose_at(&times);
+        }
+    }
+    let largest_gap = gap(&poses);
+    let clearances = clearance.map(|(occupancy, margin)| {
+        let cap = CLEARANCE_CAP_MARGINS * margin;
+        let centres: Vec<DVec3> = poses.iter().map(centre).collect();
+        use rayon::prelude::*;
+        centres
+            .par_iter()
+            .map(|&c| {
+                occupancy
+                    .nearest_within(c, cap)
+                    .map_or(cap, |contact| contact.surface.distance.min(cap))
+            })
+            .collect::<Vec<f64>>()
+    });
+    let duration = seconds.unwrap_or(1.0);
+    let dt = duration / (times.len() - 1) as f64;
+    let n = windows.max(1);
+    (0..n)
+        .map(|i| {
+            let (start, end) = window_bounds(i, n);
+            let inside: Vec<usize> = (0..times.len())
+                .filter(|&k| times[k] >= start - 1e-12 && times[k] <= end + 1e-12)
+                .collect();
+            let (first, last) = (inside[0], *inside.last().expect("a window holds samples"));
+            let speeds: Vec<f64> = (first..last)
+                .map(|k| centre(&poses[k]).distance(centre(&poses[k + 1])) / dt)
+                .collect();
+            let peak_acceleration = (first.max(1)..last.min(times.len() - 2) + 1)
+                .map(|k| {
+                    let second =
+                        centre(&poses[k + 1]) - 2.0 * centre(&poses[k]) + centre(&poses[k - 1]);
+                    second.length() / (dt * dt)
+                })
+                .fold(0.0, f64::max);
+            let peak_angular_speed = (first..last)
+                .map(|k| turn_angle(&poses[k], &poses[k + 1]).to_degrees() / dt)
+                .fold(0.0, f64::max);
+            let mean = speeds.iter().sum::<f64>() / speeds.len().max(1) as f64;
+            let variance =
+                speeds.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / speeds.len().max(1) as f64;
+            let motion = MotionMetrics {
+                seconds,
+                peak_speed: speeds.iter().copied().fold(0.0, f64::max),
+                peak_acceleration,
+                peak_angular_speed,
+                speed_spread: if mean > 0.0 {
+                    variance.sqrt() / mean
+                } else {
+                    0.0
+                },
+            };
+            let clearance = clearance
+                .zip(clearances.as_ref())
+                .map(|((_, margin), all)| {
+                    let here: Vec<f64> = inside.iter().map(|&k| all[k]).collect();
+                    ClearanceMetrics {
+                        margin,
+                        min_clearance: here.iter().copied().fold(f64::INFINITY, f64::min),
+                        time_inside_margin: here.iter().filter(|&&d| d < margin).count() as f64
+                            / here.len() as f64,
+                        largest_gap,
+                    }
+                });
+            PathMetrics {
+                samples: inside.len(),
+                clearance,
+                motion,
+            }
+        })
+        .collect()
+}
+
+fn centre(pose: &Pose) -> DVec3 {
+    DVec3::new(pose[3], pose[4], pose[5])
+}
+
+/// The angle (radians) of the rotation from `a`'s camera orientation to `b`'s.
+fn turn_angle(a: &Pose, b: &Pose) -> f64 {
+    let ra = rotation_vector_to_matrix(DVec3::new(a[0], a[1], a[2]));
+    let rb = rotation_vector_to_matrix(DVec3::new(b[0], b[1], b[2]));
+    let relative = ra.transpose() * rb;
+    let trace = relative.x_axis.x + relative.y_axis.y + relative.z_axis.z;
+    ((trace - 1.0) * 0.5).clamp(-1.0, 1.0).acos()
+}
