@@ -29,8 +29,12 @@
 //!                          # model registered in `Extensions` (as `source = "custom.<name>"`
 //!                          # and [targets.custom.<name>] for a target source)
 //! [costs]                  # tce, tre, upright, prior tables (all four by default);
+//!                          # clearance (margin, sigma, min_opacity) and motion (max_speed,
+//!                          # max_acceleration, max_angular_speed, even_speed; needs
+//!                          # [output] seconds) on request;
 //!                          # [costs.custom.<name>]: a cost registered in `Extensions`
-//! [optimiser]              # iterations, samples_per_window, learning_rate, position_unit …
+//! [optimiser]              # iterations, samples_per_window, learning_rate, position_unit,
+//!                          # path_samples (path points per window for clearance/motion) …
 //! [start]                  # kind = "objects" (jitter) | "random" (spread), restarts; or pose = [...], or trajectory = "…"
 //! [output]                 # frames (or fps × seconds), width, height, mask_overlay, runs_dir …
 //! [pose]                   # `splatraj pose`: query, ablation; [pose.optimiser]: its Adam
