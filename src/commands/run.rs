@@ -103,16 +103,16 @@ pub fn run(args: RunArgs) -> Result<()> {
         (None, None) => bail!("give a config file, or --resume RUN_DIR"),
     };
     let experiment = Experiment::prepare(&config)?;
-    print_plan(&experiment);
     // Everything that can fail before the work is checked before any folder exists: the costs,
     // the starts (reading `start.trajectory`), the memory, the runs folder.
     experiment.costs()?;
-    let restarts = experiment.start_trajectories()?.len();
     let memory = experiment.trajectory_memory()?;
     memory.check(experiment.memory_limit()?, RAISE_LIMIT)?;
+    let restarts = experiment.start_trajectories()?.len();
     if resume.is_none() {
         check_writable(&config.output.runs_dir.join(&config.name))?;
     }
+    print_plan(&experiment);
     if args.check {
         if let Some(peak) = memory.peak() {
             eprintln!(
