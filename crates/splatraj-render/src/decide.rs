@@ -25,6 +25,8 @@ pub struct HostGeometry {
     pub covariances: Vec<[f32; 6]>,
     /// Largest eigenvalue of each world covariance (the squared largest scale).
     pub max_variance: Vec<f32>,
+    /// Opacities (for the `min_opacity` approximation).
+    pub opacities: Vec<f32>,
 }
 
 impl HostGeometry {
@@ -46,6 +48,7 @@ impl HostGeometry {
             means: scene.means.clone(),
             covariances,
             max_variance,
+            opacities: scene.opacities.clone(),
         }
     }
 

@@ -22,4 +22,5 @@ pub mod rasterize;
 pub mod reference;
 pub mod render;
 pub mod sh;
+pub mod stages;
 pub mod tiles;

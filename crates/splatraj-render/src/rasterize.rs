@@ -36,13 +36,16 @@ pub struct SplatInputs {
     pub values: Tensor<2>,
 }
 
-/// How the compositing is cut into pieces; the result does not depend on it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// How the tensor path cuts the compositing into pieces (the result does not depend on
+/// `chunk` and `tile_group`), and its stopping rule.
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CompositeOptions {
     /// Gaussians per depth chunk (the K of `[tiles, 256, K]`).
     pub chunk: usize,
     /// Tiles processed together.
     pub tile_group: usize,
+    /// A pixel stops before T would fall below this ([`MIN_TRANSMITTANCE`] is the exact rule).
+    pub stop_transmittance: f64,
 }
 
 impl Default for CompositeOptions {
@@ -50,7 +53,55 @@ impl Default for CompositeOptions {
         CompositeOptions {
             chunk: 128,
             tile_group: 16,
+            stop_transmittance: MIN_TRANSMITTANCE,
         }
+    }
+}
+
+/// Rendering shortcuts that trade accuracy for time; the default is the exact rendering.
+///
+/// Both change images and gradients, so they are meant for optimisation passes only (output
+/// frames and metrics stay exact). They are measured by `splatraj study`.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Approximations {
+    /// A pixel stops before T would fall below this; larger values stop pixels earlier (exact:
+    /// [`MIN_TRANSMITTANCE`] = 1e-4).
+    pub stop_transmittance: f64,
+    /// Gaussians with a lower opacity are left out of the pass altogether (exact: 0, none).
+    pub min_opacity: f64,
+}
+
+impl Default for Approximations {
+    fn default() -> Self {
+        Approximations {
+            stop_transmittance: MIN_TRANSMITTANCE,
+            min_opacity: 0.0,
+        }
+    }
+}
+
+impl Approximations {
+    /// Whether these are the exact rules.
+    pub fn is_exact(&self) -> bool {
+        *self == Approximations::default()
+    }
+
+    /// Checks the values: `stop_transmittance` in [1e-4, 1), `min_opacity` in [0, 1).
+    pub fn check(&self) -> Result<(), String> {
+        if !(MIN_TRANSMITTANCE..1.0).contains(&self.stop_transmittance) {
+            return Err(format!(
+                "stop_transmittance = {} must lie in [{MIN_TRANSMITTANCE}, 1) ({MIN_TRANSMITTANCE} is exact)",
+                self.stop_transmittance
+            ));
+        }
+        if !(0.0..1.0).contains(&self.min_opacity) {
+            return Err(format!(
+                "min_opacity = {} must lie in [0, 1) (0 is exact)",
+                self.min_opacity
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -289,7 +340,7 @@ fn composite_group(
         let log_t_after =
             log_keep.clone().detach().cumsum(2) + log_t.clone().detach().unsqueeze_dim::<3>(2);
         let stop = log_t_after
-            .lower_elem(MIN_TRANSMITTANCE.ln())
+            .lower_elem(options.stop_transmittance.ln())
             .float()
             .cast(dtype);
         let dropped = (stop.clone() + stopped.clone().unsqueeze_dim::<3>(2)).greater_elem(0.5);

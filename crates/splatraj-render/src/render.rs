@@ -13,8 +13,11 @@ use crate::camera::{Intrinsics, Pose};
 use crate::decide::{HostGeometry, decide};
 use crate::fused::{CompositePlan, composite_fused};
 use crate::project::{NEAR_PLANE, SceneTensors, project_with_near};
-use crate::rasterize::{CompositeOptions, Composited, RenderStats, SplatInputs, composite};
+use crate::rasterize::{
+    Approximations, CompositeOptions, Composited, RenderStats, SplatInputs, composite,
+};
 use crate::sh::{ShTensors, sh_colours};
+use crate::stages::{self, Stage};
 use crate::tiles::{ScreenData, TileGrid, TileSelection, bin_tiles};
 
 /// One channel of a render.
@@ -96,6 +99,8 @@ pub struct RenderRequest {
     pub composite: CompositeOptions,
     /// Which compositing implementation runs.
     pub rasterizer: Rasterizer,
+    /// Shortcuts that trade accuracy for time (default: none, the exact rendering).
+    pub approximations: Approximations,
 }
 
 impl RenderRequest {
@@ -108,6 +113,7 @@ impl RenderRequest {
             near: NEAR_PLANE,
             composite: CompositeOptions::default(),
             rasterizer: Rasterizer::default(),
+            approximations: Approximations::default(),
         }
     }
 }
@@ -217,13 +223,23 @@ pub fn render(
         .chunks_exact(6)
         .map(|p| Pose([p[0], p[1], p[2], p[3], p[4], p[5]]))
         .collect();
-    let decisions = decide(
+    let mut decisions = decide(
         &scene.host,
         &host_poses,
         &request.intrinsics,
         request.near,
         in_object.as_deref(),
     );
+    let min_opacity = request.approximations.min_opacity as f32;
+    if min_opacity > 0.0 {
+        for (visible, &opacity) in decisions
+            .visible
+            .iter_mut()
+            .zip(scene.host.opacities.iter().cycle())
+        {
+            *visible &= opacity >= min_opacity;
+        }
+    }
     let decided = started.elapsed();
     let screen = ScreenData {
         n,
@@ -312,16 +328,39 @@ pub fn render(
         values,
     };
     let prepared = started.elapsed();
+    let stop_transmittance = request.approximations.stop_transmittance;
     let composited = match request.rasterizer {
-        Rasterizer::Fused => composite_fused(&inputs, CompositePlan::new(&work, u, batch, grid)),
-        Rasterizer::Tensor => composite(&inputs, &work, u, batch, &grid, request.composite),
+        Rasterizer::Fused => composite_fused(
+            &inputs,
+            CompositePlan::new(&work, u, batch, grid).with_stop_transmittance(stop_transmittance),
+        ),
+        Rasterizer::Tensor => composite(
+            &inputs,
+            &work,
+            u,
+            batch,
+            &grid,
+            CompositeOptions {
+                stop_transmittance,
+                ..request.composite
+            },
+        ),
     };
+    let composited_at = started.elapsed();
+    for (stage, elapsed) in [
+        (Stage::Decide, decided),
+        (Stage::Bin, binned - decided),
+        (Stage::Project, prepared - binned),
+        (Stage::Composite, composited_at - prepared),
+    ] {
+        stages::add(stage, elapsed);
+    }
     // Stage times of the forward graph (backends may defer work, so they are indicative).
     tracing::debug!(
         decide_ms = decided.as_secs_f64() * 1e3,
         bin_ms = (binned - decided).as_secs_f64() * 1e3,
         project_ms = (prepared - binned).as_secs_f64() * 1e3,
-        composite_ms = (started.elapsed() - prepared).as_secs_f64() * 1e3,
+        composite_ms = (composited_at - prepared).as_secs_f64() * 1e3,
         gaussians_used = u,
         tiles = work.len(),
         pairs = composited.stats.pairs,

@@ -10,7 +10,9 @@ use common::{Rng, host, pose_tensor};
 use glam::DVec3;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::fused::{CompositePlan, composite_fused};
-use splatraj_render::rasterize::{CompositeOptions, MIN_ALPHA, SplatInputs, composite};
+use splatraj_render::rasterize::{
+    Approximations, CompositeOptions, MIN_ALPHA, MIN_TRANSMITTANCE, SplatInputs, composite,
+};
 use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
 use splatraj_render::tiles::{TileGrid, TileWork};
 use splatraj_scene::Scene;
@@ -136,7 +138,11 @@ fn tensor(values: &[f64], shape: Vec<usize>, device: &Device) -> Tensor<2> {
 }
 
 /// Images, alpha and the gradients of Σ w·image + Σ w'·alpha w.r.t. the four inputs.
-fn composite_and_gradients(rasterizer: Rasterizer, chunk: usize) -> Vec<Vec<f64>> {
+fn composite_and_gradients(
+    rasterizer: Rasterizer,
+    chunk: usize,
+    stop_transmittance: f64,
+) -> Vec<Vec<f64>> {
     let (s, work, grid, n, batch) = hard_case(3);
     let device = Device::flex().autodiff();
     let rows = s.opacities.len();
@@ -155,7 +161,10 @@ fn composite_and_gradients(rasterizer: Rasterizer, chunk: usize) -> Vec<Vec<f64>
         values: values.clone(),
     };
     let out = match rasterizer {
-        Rasterizer::Fused => composite_fused(&inputs, CompositePlan::new(&work, n, batch, grid)),
+        Rasterizer::Fused => composite_fused(
+            &inputs,
+            CompositePlan::new(&work, n, batch, grid).with_stop_transmittance(stop_transmittance),
+        ),
         Rasterizer::Tensor => composite(
             &inputs,
             &work,
@@ -165,6 +174,7 @@ fn composite_and_gradients(rasterizer: Rasterizer, chunk: usize) -> Vec<Vec<f64>
             CompositeOptions {
                 chunk,
                 tile_group: 3,
+                stop_transmittance,
             },
         ),
     };
@@ -213,10 +223,10 @@ fn fused_matches_the_tensor_path_on_every_rule() {
         "v_opacities",
         "v_values",
     ];
-    let fused = composite_and_gradients(Rasterizer::Fused, 0);
+    let fused = composite_and_gradients(Rasterizer::Fused, 0, MIN_TRANSMITTANCE);
     // Chunks of 8 split the long lists into many pieces; 128 is the default.
     for chunk in [8, 128] {
-        let tensor = composite_and_gradients(Rasterizer::Tensor, chunk);
+        let tensor = composite_and_gradients(Rasterizer::Tensor, chunk, MIN_TRANSMITTANCE);
         for (i, name) in names.iter().enumerate() {
             let tolerance = if i < 2 { 1e-10 } else { 1e-8 };
             let error = relative_error(&fused[i], &tensor[i]);
@@ -358,14 +368,31 @@ fn render_loss(
     pruning: Pruning,
     channels: Vec<Channel>,
 ) -> (Vec<f64>, Vec<f64>) {
-    let (scene, _) = scene();
+    render_scene_loss(
+        &scene().0,
+        rasterizer,
+        pruning,
+        channels,
+        Approximations::default(),
+    )
+}
+
+/// [`render_loss`] of any scene, with rendering approximations.
+fn render_scene_loss(
+    scene: &Scene,
+    rasterizer: Rasterizer,
+    pruning: Pruning,
+    channels: Vec<Channel>,
+    approximations: Approximations,
+) -> (Vec<f64>, Vec<f64>) {
     let k = Intrinsics::new(30.0, 32.0, 21.0, 13.5, 40, 28).unwrap();
     let device = Device::flex().autodiff();
-    let uploaded = DeviceScene::new(&scene, &device, DType::F64);
+    let uploaded = DeviceScene::new(scene, &device, DType::F64);
     let poses = pose_tensor(&poses(), &device, DType::F64).require_grad();
     let mut request = RenderRequest::new(k, channels);
     request.rasterizer = rasterizer;
     request.pruning = pruning;
+    request.approximations = approximations;
     let out = render(&uploaded, poses.clone(), &request).unwrap();
     let [b, h, w, c] = out.images.dims();
     let weights: Vec<f64> = (0..b * h * w * c)
@@ -424,5 +451,79 @@ fn fused_is_deterministic_across_thread_counts() {
         let other = run(threads);
         assert_eq!(one.0, other.0, "images with {threads} threads");
         assert_eq!(one.1, other.1, "gradients with {threads} threads");
+    }
+}
+
+#[test]
+fn a_larger_stop_transmittance_is_one_rule_on_both_paths() {
+    let stop = 0.02;
+    let fused = composite_and_gradients(Rasterizer::Fused, 0, stop);
+    let tensor = composite_and_gradients(Rasterizer::Tensor, 8, stop);
+    for i in 0..fused.len() {
+        let tolerance = if i < 2 { 1e-10 } else { 1e-8 };
+        let error = relative_error(&fused[i], &tensor[i]);
+        assert!(error <= tolerance, "output {i}: error {error:e}");
+    }
+    // T never falls below the stop, so alpha = 1 − T stays at or below 1 − stop; the exact rule
+    // lets the opaque stack of the hard case go past it.
+    let max_alpha = |alpha: &[f64]| alpha.iter().fold(0.0f64, |m, &a| m.max(a));
+    assert!(max_alpha(&fused[1]) <= 1.0 - stop + 1e-12);
+    let exact = composite_and_gradients(Rasterizer::Fused, 0, MIN_TRANSMITTANCE);
+    assert!(max_alpha(&exact[1]) > 1.0 - stop);
+}
+
+#[test]
+fn min_opacity_renders_as_if_the_faint_gaussians_were_absent() {
+    let (scene, mask) = scene();
+    let min_opacity = 0.5;
+    let keep: Vec<bool> = scene.opacities.iter().map(|&o| o >= min_opacity).collect();
+    assert!(keep.iter().any(|&k| !k) && keep.iter().any(|&k| k));
+    let mut kept = scene.clone();
+    kept.retain(&keep);
+    let kept_mask: Vec<f32> = mask
+        .iter()
+        .zip(&keep)
+        .filter(|(_, k)| **k)
+        .map(|(m, _)| *m)
+        .collect();
+    let approximate = Approximations {
+        min_opacity: min_opacity as f64,
+        ..Approximations::default()
+    };
+    for rasterizer in [Rasterizer::Fused, Rasterizer::Tensor] {
+        let channels = |mask: &[f32]| vec![Channel::Rgb, Channel::Mask(mask.to_vec())];
+        let (image, grad) = render_scene_loss(
+            &scene,
+            rasterizer,
+            Pruning::None,
+            channels(&mask),
+            approximate,
+        );
+        let (want_image, want_grad) = render_scene_loss(
+            &kept,
+            rasterizer,
+            Pruning::None,
+            channels(&kept_mask),
+            Approximations::default(),
+        );
+        assert!(
+            relative_error(&image, &want_image) < 1e-12,
+            "{rasterizer:?}: image"
+        );
+        assert!(
+            relative_error(&grad, &want_grad) < 1e-10,
+            "{rasterizer:?}: gradient"
+        );
+        let (exact, _) = render_scene_loss(
+            &scene,
+            rasterizer,
+            Pruning::None,
+            channels(&mask),
+            Approximations::default(),
+        );
+        assert!(
+            relative_error(&image, &exact) > 1e-3,
+            "the faint Gaussians were drawn"
+        );
     }
 }

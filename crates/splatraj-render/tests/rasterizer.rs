@@ -218,6 +218,7 @@ fn pruning_and_chunking_are_exact() {
             CompositeOptions {
                 chunk: 3,
                 tile_group: 2,
+                ..Default::default()
             },
             Rasterizer::Tensor,
         ),
@@ -226,6 +227,7 @@ fn pruning_and_chunking_are_exact() {
             CompositeOptions {
                 chunk: 1,
                 tile_group: 1,
+                ..Default::default()
             },
             Rasterizer::Tensor,
         ),

@@ -18,7 +18,7 @@
 use rayon::prelude::*;
 
 use super::plan::CompositePlan;
-use crate::rasterize::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
+use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
 use crate::tiles::{TILE_PIXELS, TILE_SIZE};
 
 /// The float types the kernels run in.
@@ -221,7 +221,7 @@ fn forward_tile<E: Real>(splats: &HostSplats<E>, plan: &CompositePlan, w: usize)
     let (x0, y0) = plan.tile_origin(plan.tiles[w]);
     let (x0, y0) = (E::of(x0 as f64), E::of(y0 as f64));
     let min_alpha = E::of(MIN_ALPHA);
-    let min_t = E::of(MIN_TRANSMITTANCE);
+    let min_t = E::of(plan.stop_transmittance);
 
     let mut open = valid_pixels(plan, plan.tiles[w]);
     let mut t = vec![E::ONE; TILE_PIXELS];

@@ -31,7 +31,7 @@ use burn_cubecl::{CubeDevice, cubecl};
 
 use super::plan::CompositePlan;
 use super::{CompositeKernels, FusedComposite, HostSaved, SplatPrimitives, host_backward};
-use crate::rasterize::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
+use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
 use crate::tiles::TILE_PIXELS;
 
 /// Gradient slot width of one list entry: [v_mx, v_my, v_a, v_b, v_c, v_o, v_values…].
@@ -58,6 +58,7 @@ fn forward_kernel<F: Float, I: Int>(
     image: &mut Tensor<F>,   // [B, H, W, C + 1]
     final_t: &mut Tensor<F>, // [work, 256]
     last: &mut Tensor<I>,    // [work, 256]
+    stop_t: f32,
     work_count: u32,
     width: u32,
     height: u32,
@@ -141,7 +142,7 @@ fn forward_kernel<F: Float, I: Int>(
                 );
                 if alpha >= F::new(MIN_ALPHA as f32) {
                     let t_next = t * (F::new(1.0) - alpha);
-                    if t_next < F::new(MIN_TRANSMITTANCE as f32) {
+                    if t_next < F::cast_from(stop_t) {
                         open = false;
                     } else {
                         let weight = alpha * t;
@@ -464,6 +465,7 @@ fn device_forward(
             image.clone().into_tensor_arg(),
             final_t.clone().into_tensor_arg(),
             last.clone().into_tensor_arg(),
+            plan.stop_transmittance as f32,
             work_count as u32,
             grid.width as u32,
             grid.height as u32,

@@ -244,7 +244,9 @@ impl<B: CompositeKernels> Backward<B, 4> for CompositeBackward {
 
     fn backward(self, ops: Ops<Self::State, 4>, grads: &mut Gradients, _: &mut Checkpointer) {
         let v_image = grads.consume::<B>(&ops.node);
+        let started = std::time::Instant::now();
         let v = B::composite_backward(ops.state, v_image);
+        crate::stages::add(crate::stages::Stage::CompositeBackward, started.elapsed());
         let [means, conics, opacities, values] = ops.parents;
         for (node, grad) in [
             (means, v.means),

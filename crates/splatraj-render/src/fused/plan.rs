@@ -1,10 +1,11 @@
 //! The integer side of a fused compositing pass: which rows each (pose, tile) composites.
 
+use crate::rasterize::MIN_TRANSMITTANCE;
 use crate::tiles::{TILE_SIZE, TileGrid, TileWork};
 
 /// Tile lists of a batch, flattened: work tile `w` composites rows
 /// `rows[starts[w]..starts[w + 1]]` (row = pose · U + Gaussian) front to back.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct CompositePlan {
     /// The image tiling.
     pub grid: TileGrid,
@@ -18,6 +19,8 @@ pub struct CompositePlan {
     pub starts: Vec<usize>,
     /// Input rows, list after list. `[pairs]`
     pub rows: Vec<u32>,
+    /// A pixel stops before T would fall below this (the exact rule: [`MIN_TRANSMITTANCE`]).
+    pub stop_transmittance: f64,
 }
 
 impl CompositePlan {
@@ -38,6 +41,15 @@ impl CompositePlan {
             tiles: work.iter().map(|w| w.tile).collect(),
             starts,
             rows,
+            stop_transmittance: MIN_TRANSMITTANCE,
+        }
+    }
+
+    /// The same plan with another stopping transmittance (an approximation when larger).
+    pub fn with_stop_transmittance(self, stop_transmittance: f64) -> Self {
+        CompositePlan {
+            stop_transmittance,
+            ..self
         }
     }
 
