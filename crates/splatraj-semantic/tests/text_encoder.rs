@@ -145,7 +145,13 @@ fn options_override_the_config_and_change_the_result() {
     );
 }
 
-fn shapes(file: &str) -> BTreeMap<String, Vec<usize>> {
+/// Tensor name → shape.
+type Shapes = BTreeMap<String, Vec<usize>>;
+
+/// A change that breaks a tower's tensors.
+type Edit = Box<dyn Fn(&mut Shapes)>;
+
+fn shapes(file: &str) -> Shapes {
     let text = std::fs::read_to_string(fixtures().join(file)).unwrap();
     serde_json::from_str(&text).unwrap()
 }
@@ -237,7 +243,7 @@ fn bad_weights_name_the_file_and_the_tensor() {
         "{err}"
     );
 
-    let cases: Vec<(Box<dyn Fn(&mut BTreeMap<String, Vec<usize>>)>, &str)> = vec![
+    let cases: Vec<(Edit, &str)> = vec![
         (
             Box::new(|t| {
                 t.remove("text.transformer.resblocks.0.attn.out_proj.bias");

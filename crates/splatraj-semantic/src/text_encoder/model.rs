@@ -98,7 +98,7 @@ impl Tower {
             }
         }
         let tokens = Tensor::<2, Int>::from_data(TensorData::new(flat, [batch, len]), &device);
-        let positions = self.positional.val().slice([0..len]); // [len, width]
+        let positions = self.positional.val().narrow(0, 0, len); // [len, width]
         let mut x = self.token_embedding.forward(tokens) + positions.unsqueeze::<3>(); // [B, len, W]
 
         let mut mask = vec![0.0f32; len * len];
