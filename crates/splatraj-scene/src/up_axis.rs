@@ -1,12 +1,28 @@
 //! A guess of the scene's world-up direction, for scenes that do not say.
 //!
-//! Captured scenes are dominated by flat splats on horizontal surfaces (floors, tables) and
-//! vertical ones (walls). The normal of a flat splat is its shortest axis. We take the
-//! opacity- and area-weighted scatter matrix of these normals and pick its principal direction;
-//! then the sign: the densest slab of Gaussians along that direction is the ground, which lies
-//! at the *bottom* of the scene, so up points away from it. The result is snapped to the
-//! nearest coordinate axis (COLMAP captures are y-down, nerfstudio and Blender scenes z-up)
-//! when it is close to one. It is a guess: configs can always state `up`.
+//! **Axis.** Captured scenes with a floor or a table are dominated by flat splats on horizontal
+//! surfaces (and some vertical ones: walls). The normal of a flat splat is its shortest axis.
+//! We take the opacity- and area-weighted scatter matrix of these normals and pick its
+//! principal direction. When no direction holds at least [`STRONG_NORMALS`] of that weight
+//! (no dominant ground) and the scene's robust bounding box is [`TALL`] times longer along one
+//! side than along that direction, the scene is an object captured all around (a statue, a
+//! rider, a guitar) and that longest side is up: standing things are taller than wide. Few flat
+//! splats: the direction of least spread of the centres.
+//!
+//! **Sign**, from where the scene sits relative to the world origin, which trainers put at
+//! one of two places. Where the origin lies on the scene's extent along the axis (within
+//! [`ORIGIN_ON_SCENE`] half-extents of its centre), it is a ground point (Blender and
+//! SuperSplat scenes stand on the origin): up points from the origin into the scene. Where it
+//! lies far outside ([`ORIGIN_AT_CAMERAS`] half-extents or more), it is where the cameras were
+//! (COLMAP-style captures centre the world on their cameras, which look down at a tabletop):
+//! up points toward it. In between, the densest slab of Gaussians along the axis is taken as
+//! the ground at the bottom of the scene.
+//!
+//! Judged on real captures whose up we know (see the scene crate's README): biker and guitar
+//! (PlayCanvas, y-down, standing on y = 0: −y), donut (Blender synthetic, z-up, lying on
+//! z = 0: +z), fruit_drops (a tabletop 2 units below its cameras at the origin: +z), and the
+//! demo room (+z). The result is snapped to the nearest coordinate axis when within 25° of
+//! one. It is a guess: configs can always state `up`.
 
 use glam::{Mat3, Quat, Vec3};
 use serde::Serialize;
@@ -34,12 +50,23 @@ pub enum UpMethod {
     Normals,
     /// From the direction of least spread of the centres (few flat splats).
     Spread,
+    /// From the longest side of the bounding box (flat splats without a dominant direction).
+    Extent,
 }
 
 /// A splat counts as flat when its shortest axis is this much shorter than its middle one.
 const FLATNESS: f32 = 0.3;
 /// Minimum number of flat splats for the normal-based estimate.
 const MIN_FLAT: usize = 100;
+/// Share of the normals' weight one direction needs to be taken as up (else: longest side).
+pub const STRONG_NORMALS: f32 = 0.5;
+/// Without a dominant normal, a scene this many times longer along one side than along the
+/// normals' axis is a standing object, and that side is up.
+pub const TALL: f32 = 2.0;
+/// The origin is a ground point when within this many half-extents of the scene's centre.
+pub const ORIGIN_ON_SCENE: f32 = 1.5;
+/// The origin is where the cameras were when this many half-extents or more away.
+pub const ORIGIN_AT_CAMERAS: f32 = 3.0;
 
 /// Guesses the up direction; `None` for an empty scene.
 pub fn guess_up_axis(scene: &Scene) -> Option<UpGuess> {
@@ -69,7 +96,19 @@ pub fn guess_up_axis(scene: &Scene) -> Option<UpGuess> {
 
     let (axis, confidence, method) = if flat >= MIN_FLAT && total > 0.0 {
         let (axis, value) = principal_direction(scatter / total, Largest);
-        (axis, value, UpMethod::Normals)
+        let size = Vec3::from(bounds.max) - Vec3::from(bounds.min);
+        let k = (0..3)
+            .max_by(|&a, &b| size[a].total_cmp(&size[b]))
+            .unwrap_or(2);
+        // The box's side along the normals' axis.
+        let along = size.dot(axis.abs());
+        if value >= STRONG_NORMALS || size[k] < TALL * along {
+            (axis, value, UpMethod::Normals)
+        } else {
+            // Confidence: how much longer the longest side is than the others.
+            let share = size[k] / (size.x + size.y + size.z).max(f32::MIN_POSITIVE);
+            (Vec3::AXES[k], share.clamp(1.0 / 3.0, 1.0), UpMethod::Extent)
+        }
     } else {
         let centre = Vec3::from(bounds.center());
         let mut spread = Mat3::ZERO;
@@ -87,7 +126,8 @@ pub fn guess_up_axis(scene: &Scene) -> Option<UpGuess> {
         (axis, confidence.clamp(1.0 / 3.0, 1.0), UpMethod::Spread)
     };
 
-    let raw = orient_away_from_ground(scene, axis, &bounds);
+    let raw = orient_by_origin(axis, &bounds)
+        .unwrap_or_else(|| orient_away_from_ground(scene, axis, &bounds));
     let snapped = snap_to_axis(raw, 25f32.to_radians());
     Some(UpGuess {
         up: snapped.to_array(),
@@ -124,6 +164,32 @@ fn principal_direction(m: Mat3, which: Extreme) -> (Vec3, f32) {
         v = (iterated * v).normalize_or(v);
     }
     (v, v.dot(m * v))
+}
+
+/// `axis` or `-axis` by where the world origin lies along it (see the module docs); `None`
+/// when that says nothing.
+fn orient_by_origin(axis: Vec3, bounds: &crate::scene::Bounds) -> Option<Vec3> {
+    let centre = axis.dot(Vec3::from(bounds.center()));
+    let corners = [bounds.min, bounds.max];
+    let half = (0..8)
+        .map(|c| {
+            let corner = Vec3::new(corners[c & 1][0], corners[(c >> 1) & 1][1], corners[c >> 2][2]);
+            (axis.dot(corner) - centre).abs()
+        })
+        .fold(0.0f32, f32::max);
+    if !(half > 0.0 && centre.is_finite()) {
+        return None;
+    }
+    let offset = centre / half; // where the scene's centre is, in half-extents from the origin
+    if offset.abs() <= ORIGIN_ON_SCENE {
+        // The origin is a ground point: up points from it into the scene.
+        Some(if centre >= 0.0 { axis } else { -axis })
+    } else if offset.abs() >= ORIGIN_AT_CAMERAS {
+        // The origin is where the cameras were, above the scene.
+        Some(if centre >= 0.0 { -axis } else { axis })
+    } else {
+        None
+    }
 }
 
 /// Flips `axis` so that it points from the densest slab (the ground) into the scene.
