@@ -77,8 +77,16 @@ impl Experiment {
     pub fn trajectory_file(&self, trajectory: &Trajectory) -> Result<TrajectoryFile> {
         let n = self.windows.len();
         let times = uniform_times(self.config.output.trajectory_samples);
-        let poses = trajectory
-            .poses_at(&times)
+        let sampled = trajectory.poses_at(&times);
+        // A non-finite pose must never reach a file.
+        if let Some((pose, t)) = sampled
+            .iter()
+            .zip(&times)
+            .find(|(p, _)| !p.iter().all(|v| v.is_finite()))
+        {
+            anyhow::bail!("the trajectory is not finite at t = {t}: pose {pose:?}");
+        }
+        let poses = sampled
             .into_iter()
             .zip(&times)
             .map(|(pose, &t)| SampledPose {
