@@ -32,6 +32,9 @@ enum Command {
     /// Benchmarks.
     #[command(subcommand)]
     Bench(commands::bench::BenchCommand),
+    /// Measure what accuracy costs in time: variants of one experiment, each optimised and
+    /// judged by one fixed evaluation (`study merge` joins shards).
+    Study(commands::study::StudyArgs),
     /// CLIP text embeddings of phrases, written as a phrase table (.safetensors or .json).
     EncodeText(commands::encode_text::EncodeTextArgs),
     /// Write a run's trajectory as another tool's camera file (nerfstudio, COLMAP, INRIA,
@@ -63,6 +66,7 @@ fn main() -> ExitCode {
         Command::Run(args) => commands::run::run(args),
         Command::Pose(args) => commands::pose::run(args),
         Command::Bench(command) => commands::bench::run(command),
+        Command::Study(args) => commands::study::run(args),
         Command::Export(args) => commands::export::run(args),
         Command::EncodeText(args) => commands::encode_text::run(args),
     };

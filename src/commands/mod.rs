@@ -8,3 +8,4 @@ pub mod query;
 pub mod render;
 pub mod run;
 pub mod scene;
+pub mod study;

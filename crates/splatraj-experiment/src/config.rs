@@ -38,6 +38,8 @@
 //! [start]                  # kind = "objects" (jitter) | "random" (spread), restarts; or pose = [...], or trajectory = "…"
 //! [output]                 # frames (or fps × seconds), width, height, mask_overlay, runs_dir …
 //! [pose]                   # `splatraj pose`: query, ablation; [pose.optimiser]: its Adam
+//! [approximations]         # optimisation renders only: stop_transmittance, min_opacity (exact by default)
+//! [study]                  # `splatraj study`: factors, design, seeds, quality, evaluation
 //! [sgld]                   # `splatraj pose --sgld`: Langevin settings
 //! ```
 //!
@@ -53,6 +55,7 @@ use serde::{Deserialize, Serialize};
 use splatraj_render::backend::{BackendKind, Precision};
 use splatraj_render::camera::Intrinsics;
 use splatraj_render::render::Rasterizer;
+use splatraj_render::rasterize::Approximations;
 use splatraj_semantic::TargetsConfig;
 use splatraj_traj::costs::{CostsConfig, DEFAULT_TARGET_RATIO};
 use splatraj_traj::optimise::{
@@ -116,6 +119,17 @@ pub struct Config {
     /// SGLD sampling (`splatraj pose --sgld`).
     #[serde(default)]
     pub sgld: SgldOptions,
+    /// Rendering shortcuts of the optimisation passes (trajectory, pose, SGLD), exact by
+    /// default; frames and metrics are always rendered exactly. `stop_transmittance`: a pixel
+    /// stops before T would fall below it (exact: 1e-4; larger stops earlier); `min_opacity`:
+    /// Gaussians with a lower opacity are left out (exact: 0). Their cost in accuracy is
+    /// measured by `splatraj study` (docs/results.md).
+    #[serde(default, skip_serializing_if = "Approximations::is_exact")]
+    pub approximations: Approximations,
+    /// `splatraj study`: the variants to run and how to judge them
+    /// ([`crate::study::StudyConfig`]).
+    #[serde(default, skip_serializing_if = "crate::study::StudyConfig::is_default")]
+    pub study: crate::study::StudyConfig,
     /// Folder that relative input paths are resolved against: the config file's folder when
     /// loaded by [`Config::load`], else the working directory. Not part of the file.
     #[serde(skip)]
@@ -692,6 +706,13 @@ impl Config {
         self.sgld
             .validate()
             .map_err(|e| anyhow::anyhow!("`sgld`: {e}"))?;
+        self.approximations
+            .check()
+            .map_err(|e| match e.split_once(' ') {
+                Some((key, rest)) => anyhow::anyhow!("`approximations.{key}` {rest}"),
+                None => anyhow::anyhow!("`approximations`: {e}"),
+            })?;
+        self.study.validate().map_err(anyhow::Error::msg)?;
         Ok(())
     }
 }

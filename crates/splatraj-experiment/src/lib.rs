@@ -37,6 +37,7 @@ pub mod query;
 pub mod records;
 pub mod resources;
 pub mod starts;
+pub mod study;
 pub mod trajectory_run;
 pub mod views;
 

@@ -223,6 +223,7 @@ impl Experiment {
             };
             let problem = Problem::new(&scene, &self.windows, costs, self.intrinsics)
                 .with_rasterizer(self.config.rasterizer)
+                .with_approximations(self.config.approximations)
                 .with_occupancy(occupancy.as_ref())
                 .with_seconds(self.path_seconds());
             let mut restart_options = optimiser.clone();

@@ -36,8 +36,8 @@ pub use start::{
     window_start_trajectory,
 };
 pub use trajectory::{
-    Flow, StopReason, TrajectoryOptions, TrajectoryResult, TrajectoryStep, WindowTarget,
-    optimise_trajectory,
+    Flow, StepTiming, StopReason, TrajectoryOptions, TrajectoryResult, TrajectoryStep,
+    WindowTarget, optimise_trajectory,
 };
 pub use units::PoseUnits;
 

@@ -12,7 +12,7 @@
 use burn::tensor::{DType, Device, Tensor};
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::host::{OnDevice, to_host};
-use splatraj_render::rasterize::RenderStats;
+use splatraj_render::rasterize::{Approximations, RenderStats};
 use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
 
 use super::{OptimiseError, WindowTarget, per_sample};
@@ -40,6 +40,8 @@ pub struct Problem<'a> {
     pub occupancy: Option<&'a Occupancy>,
     /// Duration of the whole trajectory in seconds (motion limits), when known.
     pub seconds: Option<f64>,
+    /// Rendering shortcuts of the optimisation passes (exact by default).
+    pub approximations: Approximations,
 }
 
 /// One evaluation: the cost terms and the object mask when one was rendered.
@@ -95,7 +97,14 @@ impl<'a> Problem<'a> {
             prune: true,
             occupancy: None,
             seconds: None,
+            approximations: Approximations::default(),
         }
+    }
+
+    /// The same problem with rendering shortcuts (`[approximations]`; not for metrics).
+    pub fn with_approximations(mut self, approximations: Approximations) -> Self {
+        self.approximations = approximations;
+        self
     }
 
     /// The same problem with the scene's geometry (needed by the clearance cost).
@@ -162,6 +171,7 @@ impl<'a> Problem<'a> {
             request.pruning = Pruning::ObjectOnly;
         }
         request.rasterizer = self.rasterizer;
+        request.approximations = self.approximations;
         Some(request)
     }
 

@@ -190,6 +190,19 @@ pub struct TrajectoryStep {
     /// The weights `[K][6]` (scene units) when this step set a new best, so that an observer
     /// can checkpoint the best trajectory while the loop runs; `None` otherwise.
     pub new_best: Option<Vec<[f64; 6]>>,
+    /// Where the step's time went.
+    pub timing: StepTiming,
+}
+
+/// Wall time of one step's phases (what `splatraj study` reports per stage).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StepTiming {
+    /// Poses, renders and costs of every window, up to the loss on the host.
+    pub evaluate: Duration,
+    /// The backward pass and the gradient read back.
+    pub backward: Duration,
+    /// Adam's update and the step's bookkeeping.
+    pub update: Duration,
 }
 
 /// What [`optimise_trajectory`] found.
@@ -248,6 +261,7 @@ pub fn optimise_trajectory(
     let mut stop = StopReason::Finished;
 
     for step in 0..options.iterations {
+        let step_started = Instant::now();
         let mut loss: Option<Tensor<1>> = None;
         let mut window_terms = Vec::with_capacity(n);
         // Every other step the grid holds t = 0 and t = 1 exactly (the path's ends, which a
@@ -289,8 +303,10 @@ pub fn optimise_trajectory(
             .unwrap_or(f64::NAN);
         // Weights before the update: they are what `total` was measured at.
         let evaluated = module.host_weights();
+        let backward_started = Instant::now();
         let grads = loss.backward();
         let grad = module.weights.val().grad(&grads).map(host_values);
+        let backward_done = Instant::now();
         let finite = total.is_finite()
             && grad
                 .as_ref()
@@ -314,6 +330,11 @@ pub fn optimise_trajectory(
             updated: finite,
             best_total: best.as_ref().map_or(f64::NAN, |b| b.0),
             new_best,
+            timing: StepTiming {
+                evaluate: backward_started - step_started,
+                backward: backward_done - backward_started,
+                update: backward_done.elapsed(),
+            },
         };
         let out_of_time = options
             .time_limit_s

@@ -1,0 +1,188 @@
+//! The study folder: `study.json` (plan, rows, failures, summary), `study.csv`, `summary.md`
+//! and `frontier.svg`, each written whole or not at all; reading it back, and merging the
+//! folders of a study's shards into one study.
+
+use std::path::Path;
+
+use anyhow::{Context, Result, bail};
+use serde::{Deserialize, Serialize};
+
+use super::plan::{Shard, StudyPlan};
+use super::plot::frontier_svg;
+use super::rows::{StudyRow, study_csv};
+use super::summary::{StudyContext, StudySummary};
+use crate::outputs::{write_bytes, write_csv, write_json};
+
+/// The format tag of `study.json`.
+pub const STUDY_FORMAT: &str = "splatraj-study/1";
+
+/// A run that did not finish.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Failure {
+    /// Run index.
+    pub run: usize,
+    /// Its variant's label.
+    pub label: String,
+    /// What went wrong.
+    pub error: String,
+}
+
+/// `study.json`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct StudyFile {
+    /// [`STUDY_FORMAT`].
+    pub format: String,
+    /// The plan every run was made from.
+    pub plan: StudyPlan,
+    /// The slice of the runs this folder holds (none: all of them).
+    pub shard: Option<Shard>,
+    /// Where and how it ran.
+    pub context: StudyContext,
+    /// One per run and seed (or start), in run order.
+    pub rows: Vec<StudyRow>,
+    /// Runs that failed.
+    pub failures: Vec<Failure>,
+    /// The aggregate (recomputed from the rows when read back).
+    #[serde(default, skip_deserializing)]
+    pub summary: Option<StudySummary>,
+}
+
+impl StudyFile {
+    /// A study of `rows` with its summary.
+    pub fn new(
+        plan: StudyPlan,
+        shard: Option<Shard>,
+        context: StudyContext,
+        mut rows: Vec<StudyRow>,
+        failures: Vec<Failure>,
+    ) -> StudyFile {
+        rows.sort_by_key(|r| (r.run, r.repeat));
+        let summary = Some(StudySummary::new(&plan, &rows));
+        StudyFile {
+            format: STUDY_FORMAT.into(),
+            plan,
+            shard,
+            context,
+            rows,
+            failures,
+            summary,
+        }
+    }
+}
+
+/// Writes the study folder `dir` (created if missing).
+pub fn write_study(dir: &Path, study: &StudyFile) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let summary = study
+        .summary
+        .clone()
+        .unwrap_or_else(|| StudySummary::new(&study.plan, &study.rows));
+    let (header, rows) = study_csv(&study.rows);
+    write_csv(&dir.join("study.csv"), &header, &rows)?;
+    let title = match study.shard {
+        Some(s) => format!("{}: error against time (shard {}/{})", study.plan.name, s.index, s.count),
+        None => format!("{}: error against time", study.plan.name),
+    };
+    write_bytes(&dir.join("frontier.svg"), frontier_svg(&summary, &title)?.as_bytes())?;
+    let mut md = summary.markdown(&study.plan, &study.context);
+    if let Some(s) = study.shard {
+        md = format!(
+            "> Shard {}/{} of the study: only its runs. `splatraj study merge` joins the shards.\n\n{md}",
+            s.index, s.count
+        );
+    }
+    if !study.failures.is_empty() {
+        md += "\n## Failed runs\n\n";
+        for f in &study.failures {
+            md += &format!("- run {} (`{}`): {}\n", f.run, f.label, f.error);
+        }
+    }
+    write_bytes(&dir.join("summary.md"), md.as_bytes())?;
+    let with_summary = StudyFile {
+        summary: Some(summary),
+        ..study.clone()
+    };
+    write_json(&dir.join("study.json"), &with_summary)
+}
+
+/// Reads `dir/study.json`.
+pub fn read_study(dir: &Path) -> Result<StudyFile> {
+    let path = dir.join("study.json");
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("cannot read {} (is {} a study folder?)", path.display(), dir.display()))?;
+    let study: StudyFile = serde_json::from_str(&text)
+        .with_context(|| format!("{} is not a splatraj study.json", path.display()))?;
+    if study.format != STUDY_FORMAT {
+        bail!(
+            "{}: format `{}`, expected `{STUDY_FORMAT}`",
+            path.display(),
+            study.format
+        );
+    }
+    Ok(study)
+}
+
+/// Joins the study folders `dirs` (shards of one study) into one study: same plan, every
+/// shard once, no run twice. Missing shards are an error naming them.
+pub fn merge_studies(dirs: &[&Path]) -> Result<StudyFile> {
+    let Some((first_dir, rest)) = dirs.split_first() else {
+        bail!("study merge: give at least one study folder");
+    };
+    let first = read_study(first_dir)?;
+    let mut rows = first.rows.clone();
+    let mut failures = first.failures.clone();
+    let mut shards: Vec<Shard> = first.shard.into_iter().collect();
+    for dir in rest {
+        let other = read_study(dir)?;
+        if other.plan != first.plan {
+            bail!(
+                "{} holds another study than {} (its plan differs: config, overrides, factors, \
+                 seeds or evaluation)",
+                dir.display(),
+                first_dir.display()
+            );
+        }
+        if let Some(s) = other.shard {
+            if shards.iter().any(|t| t.count != s.count) {
+                bail!(
+                    "{} is shard {}/{}, the others are of {} shards",
+                    dir.display(),
+                    s.index,
+                    s.count,
+                    shards[0].count
+                );
+            }
+            if shards.contains(&s) {
+                bail!("{}: shard {}/{} is given twice", dir.display(), s.index, s.count);
+            }
+            shards.push(s);
+        }
+        rows.extend(other.rows);
+        failures.extend(other.failures);
+    }
+    if let Some(count) = shards.first().map(|s| s.count) {
+        let missing: Vec<String> = (1..=count)
+            .filter(|k| !shards.iter().any(|s| s.index == *k))
+            .map(|k| format!("{k}/{count}"))
+            .collect();
+        if !missing.is_empty() {
+            bail!("study merge: shard(s) {} missing", missing.join(", "));
+        }
+    }
+    let mut seen = std::collections::HashSet::new();
+    for r in &rows {
+        if !seen.insert((r.run, r.repeat)) {
+            bail!(
+                "study merge: run {} (`{}`, repeat {}) appears twice",
+                r.run,
+                r.label,
+                r.repeat
+            );
+        }
+    }
+    let context = StudyContext {
+        command: None,
+        ..first.context.clone()
+    };
+    Ok(StudyFile::new(first.plan, None, context, rows, failures))
+}

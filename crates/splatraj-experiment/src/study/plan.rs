@@ -1,0 +1,643 @@
+//! The variants and runs of a study, made once from the config and the command line so that
+//! every process of a study (the parent, its children, every shard) makes the same plan.
+//!
+//! A factor is a config key and its values (`--vary optimiser.iterations=50,100`). One factor
+//! at a time (the default) gives the config itself (the baseline) and, for each factor and
+//! value, the config with that one value set; the grid gives every combination. A value is
+//! applied as `--set` would apply it, except that a TOML table (`camera={width=64,height=48}`)
+//! sets each of its keys, merged into the config's table as `extends` merges (a table whose
+//! `kind` differs from the config's replaces it whole: `trajectory={kind="waypoint"}`).
+//! Variants whose resolved configs are equal are one variant (the first is kept). A run is a
+//! variant with one seed (`seed`, `seed + 1`, … for `--seeds N`); a single-pose study runs
+//! each variant once with `N` random starts instead.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use serde::{Deserialize, Serialize};
+
+use super::{EvaluationConfig, StudyConfig, StudyTask};
+use crate::config::{Ablation, Config};
+use crate::extensions::Extensions;
+use crate::study::summary::{Quality, short_value};
+
+/// How factors combine into variants.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Design {
+    /// The config itself, then each factor's values with every other key as configured.
+    #[default]
+    OneAtATime,
+    /// Every combination of the factors' values.
+    Grid,
+}
+
+/// One factor: a config key and its values as TOML text.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Factor {
+    /// Dotted key, as `--set` writes it.
+    pub key: String,
+    /// Values as TOML text (a bare word is a string).
+    pub values: Vec<String>,
+}
+
+impl Factor {
+    /// Parses `KEY=V1,V2,…` (commas inside `[…]`, `{…}` or quotes do not split).
+    pub fn parse(arg: &str) -> Result<Factor> {
+        let Some((key, values)) = arg.split_once('=') else {
+            bail!("--vary {arg}: expected KEY=V1,V2,… e.g. optimiser.iterations=50,100");
+        };
+        let key = key.trim();
+        if key.is_empty() {
+            bail!("--vary {arg}: no key before `=`");
+        }
+        let values = split_top_level(values);
+        if values.iter().any(|v| v.is_empty()) {
+            bail!("--vary {arg}: an empty value (values are separated by commas)");
+        }
+        Ok(Factor {
+            key: key.to_string(),
+            values,
+        })
+    }
+}
+
+/// Splits at commas outside brackets, braces and quotes; trims each part.
+fn split_top_level(text: &str) -> Vec<String> {
+    let mut parts = Vec::new();
+    let (mut depth, mut quote, mut current) = (0i32, None::<char>, String::new());
+    for c in text.chars() {
+        match (quote, c) {
+            (Some(q), c) if c == q => quote = None,
+            (Some(_), _) => {}
+            (None, '"' | '\'') => quote = Some(c),
+            (None, '[' | '{') => depth += 1,
+            (None, ']' | '}') => depth -= 1,
+            (None, ',') if depth == 0 => {
+                parts.push(current.trim().to_string());
+                current.clear();
+                continue;
+            }
+            _ => {}
+        }
+        current.push(c);
+    }
+    parts.push(current.trim().to_string());
+    parts
+}
+
+/// The paper's tables as studies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Preset {
+    /// Table I: single pose, the ablations prior, +TCE, +TRE, +TCE+TRE, for every query, from
+    /// 10 random starts each; TCE, TRE, IoU by ablation.
+    Table1,
+    /// Table II: waypoint, polynomial and RBF trajectories on the config's problem; TCE, TRE,
+    /// IoU and LDJ by model, 3 seeds.
+    Table2,
+}
+
+impl std::str::FromStr for Preset {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "table1" => Ok(Preset::Table1),
+            "table2" => Ok(Preset::Table2),
+            other => Err(format!(
+                "unknown preset `{other}`: expected table1 or table2"
+            )),
+        }
+    }
+}
+
+/// One slice of a study's runs: `K/N` takes runs K−1, K−1+N, K−1+2N, … (1-based K).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Shard {
+    /// This slice, 1-based.
+    pub index: usize,
+    /// Slices in all.
+    pub count: usize,
+}
+
+impl std::str::FromStr for Shard {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let bad = || format!("--shard {s}: expected K/N with 1 ≤ K ≤ N, e.g. 2/8");
+        let (k, n) = s.split_once('/').ok_or_else(bad)?;
+        let (index, count): (usize, usize) = (
+            k.trim().parse().map_err(|_| bad())?,
+            n.trim().parse().map_err(|_| bad())?,
+        );
+        if index == 0 || index > count {
+            return Err(bad());
+        }
+        Ok(Shard { index, count })
+    }
+}
+
+impl Shard {
+    /// Whether run `run` belongs to this slice.
+    pub fn holds(&self, run: usize) -> bool {
+        run % self.count == self.index - 1
+    }
+}
+
+/// One variant: the settings that make it and the `--set` assignments they become.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Variant {
+    /// Index in the plan.
+    pub index: usize,
+    /// Short name (`baseline`, `iterations=50`, …).
+    pub label: String,
+    /// `(key, value text)` as the factors gave them.
+    pub settings: Vec<(String, String)>,
+    /// The assignments applied over the base config.
+    pub overrides: Vec<String>,
+}
+
+/// One run: a variant with one seed (trajectory) or with all its starts (pose).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Run {
+    /// Index in the plan.
+    pub index: usize,
+    /// Its variant.
+    pub variant: usize,
+    /// Repeat index (its seed is the config's seed plus this); 0 for pose runs.
+    pub repeat: usize,
+}
+
+/// What the command line asks of a study besides the config file.
+#[derive(Debug, Clone, Default)]
+pub struct PlanOptions {
+    /// `--set` overrides of the base config (every variant and the evaluation).
+    pub set: Vec<String>,
+    /// `--vary` factors (replace the config's and the preset's).
+    pub vary: Vec<Factor>,
+    /// `--grid`.
+    pub grid: bool,
+    /// `--seeds`.
+    pub seeds: Option<usize>,
+    /// `--preset`.
+    pub preset: Option<Preset>,
+}
+
+/// A study's variants and runs, and everything needed to rebuild each run's config.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StudyPlan {
+    /// The config file.
+    pub config: PathBuf,
+    /// The experiment's name.
+    pub name: String,
+    /// Overrides of the base config (`--set`, then the preset's).
+    pub base_overrides: Vec<String>,
+    /// The preset, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub preset: Option<Preset>,
+    /// Trajectory or single pose.
+    pub task: StudyTask,
+    /// One at a time or grid.
+    pub design: Design,
+    /// The factors.
+    pub factors: Vec<Factor>,
+    /// Repeats per variant.
+    pub seeds: usize,
+    /// The base config's seed.
+    pub base_seed: u64,
+    /// The error judged.
+    pub quality: Quality,
+    /// Extra table grouped by this key.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub table_by: Option<String>,
+    /// The base config's value of `table_by` (short form), naming the baseline's group.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub baseline_value: Option<String>,
+    /// The fixed evaluation.
+    pub evaluation: EvaluationConfig,
+    /// The variants.
+    pub variants: Vec<Variant>,
+    /// The runs, variant-major.
+    pub runs: Vec<Run>,
+}
+
+impl StudyPlan {
+    /// The plan for `config` and `options`; every variant's config is loaded and checked, so
+    /// a bad value fails here naming its `--vary`/`[study]` setting.
+    pub fn new(config: &Path, options: &PlanOptions, extensions: &Extensions) -> Result<Self> {
+        let mut base_overrides = options.set.clone();
+        if let Some(preset) = options.preset {
+            base_overrides.extend(preset_overrides(preset));
+        }
+        let base = Config::load_with(config, &base_overrides, extensions)?;
+        let mut study = base.study.clone();
+        if let Some(preset) = options.preset {
+            apply_preset(preset, &base, &mut study);
+        }
+        if options.grid {
+            study.design = Design::Grid;
+        }
+        if let Some(seeds) = options.seeds {
+            study.seeds = seeds;
+        }
+        study
+            .validate()
+            .map_err(|e| anyhow::anyhow!("{e}{}", if options.seeds == Some(0) { " (--seeds)" } else { "" }))?;
+        let factors = if !options.vary.is_empty() {
+            options.vary.clone()
+        } else if !study.vary.is_empty() {
+            study
+                .vary
+                .iter()
+                .map(|f| Factor {
+                    key: f.key.clone(),
+                    values: f.values.iter().map(value_text).collect(),
+                })
+                .collect()
+        } else {
+            default_sweep(&base)
+        };
+        let base_table = toml::Table::try_from(&base).context("serialising the config")?;
+        let baseline_value = study
+            .table_by
+            .as_ref()
+            .and_then(|k| lookup(&base_table, k))
+            .map(|v| short_value(&v.to_string()));
+        let settings = match study.design {
+            Design::OneAtATime => one_at_a_time(&factors),
+            Design::Grid => grid(&factors),
+        };
+        let mut variants: Vec<Variant> = Vec::new();
+        let mut resolved: Vec<String> = Vec::new();
+        for settings in settings {
+            let overrides: Vec<String> = settings
+                .iter()
+                .flat_map(|(k, v)| assignments(&base_table, k, v))
+                .collect();
+            let label = label(&settings);
+            let mut all = base_overrides.clone();
+            all.extend(overrides.iter().cloned());
+            let variant_config = Config::load_with(config, &all, extensions)
+                .with_context(|| format!("study variant `{label}`"))?;
+            let text = toml::to_string(&variant_config)?;
+            if resolved.contains(&text) {
+                continue;
+            }
+            resolved.push(text);
+            variants.push(Variant {
+                index: variants.len(),
+                label,
+                settings,
+                overrides,
+            });
+        }
+        let runs = match study.task {
+            StudyTask::Trajectory => variants
+                .iter()
+                .flat_map(|v| (0..study.seeds).map(move |repeat| (v.index, repeat)))
+                .enumerate()
+                .map(|(index, (variant, repeat))| Run {
+                    index,
+                    variant,
+                    repeat,
+                })
+                .collect(),
+            StudyTask::Pose => variants
+                .iter()
+                .map(|v| Run {
+                    index: v.index,
+                    variant: v.index,
+                    repeat: 0,
+                })
+                .collect(),
+        };
+        Ok(StudyPlan {
+            config: config.to_path_buf(),
+            name: base.name.clone(),
+            base_overrides,
+            preset: options.preset,
+            task: study.task,
+            design: study.design,
+            factors,
+            seeds: study.seeds,
+            base_seed: base.seed,
+            quality: study.quality,
+            table_by: study.table_by.clone(),
+            baseline_value,
+            evaluation: study.evaluation.clone(),
+            variants,
+            runs,
+        })
+    }
+
+    /// The runs of `shard` (all runs without one).
+    pub fn runs_of(&self, shard: Option<Shard>) -> Vec<Run> {
+        self.runs
+            .iter()
+            .filter(|r| shard.is_none_or(|s| s.holds(r.index)))
+            .copied()
+            .collect()
+    }
+
+    /// The overrides that make run `run`'s config: base, variant, then its seed (trajectory)
+    /// or its starts (pose).
+    pub fn run_overrides(&self, run: &Run) -> Vec<String> {
+        let mut all = self.base_overrides.clone();
+        all.extend(self.variants[run.variant].overrides.iter().cloned());
+        match self.task {
+            StudyTask::Trajectory => {
+                all.push(format!(
+                    "seed={}",
+                    self.base_seed.wrapping_add(run.repeat as u64)
+                ));
+            }
+            StudyTask::Pose => all.push(format!("start.restarts={}", self.seeds)),
+        }
+        all
+    }
+
+    /// Run `run`'s config.
+    pub fn run_config(&self, run: &Run, extensions: &Extensions) -> Result<Config> {
+        Config::load_with(&self.config, &self.run_overrides(run), extensions)
+            .with_context(|| format!("study run {} (`{}`)", run.index, self.variants[run.variant].label))
+    }
+
+    /// The config of the fixed evaluation: the base config at the evaluation's size and
+    /// sample counts, whatever the variant.
+    pub fn evaluation_config(&self, extensions: &Extensions) -> Result<Config> {
+        let base = Config::load_with(&self.config, &self.base_overrides, extensions)?;
+        let e = &self.evaluation;
+        let mut all = self.base_overrides.clone();
+        all.push(format!("output.width={}", e.width.unwrap_or(base.output.width)));
+        all.push(format!("output.height={}", e.height.unwrap_or(base.output.height)));
+        all.push(format!("output.metric_samples={}", e.samples));
+        all.push(format!("output.ldj_samples={}", e.ldj_samples));
+        Config::load_with(&self.config, &all, extensions).context("the study's evaluation")
+    }
+}
+
+/// A TOML value as the text a factor holds (inline tables on one line).
+fn value_text(value: &toml::Value) -> String {
+    value.to_string()
+}
+
+/// The base overrides a preset adds (random starts, as the paper's repetitions).
+fn preset_overrides(preset: Preset) -> Vec<String> {
+    match preset {
+        Preset::Table1 => vec!["start.kind=\"random\"".into()],
+        Preset::Table2 => Vec::new(),
+    }
+}
+
+/// What a preset sets in `[study]` (the command line may still change the design or seeds).
+fn apply_preset(preset: Preset, base: &Config, study: &mut StudyConfig) {
+    match preset {
+        Preset::Table1 => {
+            let ablations = [
+                Ablation::Prior,
+                Ablation::PriorTce,
+                Ablation::PriorTre,
+                Ablation::PriorTceTre,
+            ];
+            study.task = StudyTask::Pose;
+            study.design = Design::Grid;
+            study.seeds = 10;
+            study.table_by = Some("pose.ablation".into());
+            study.vary = vec![
+                super::FactorConfig {
+                    key: "pose.ablation".into(),
+                    values: ablations
+                        .iter()
+                        .map(|a| toml::Value::String(a.name().into()))
+                        .collect(),
+                },
+                super::FactorConfig {
+                    key: "pose.query".into(),
+                    values: (0..base.queries.len())
+                        .map(|q| toml::Value::Integer(q as i64))
+                        .collect(),
+                },
+            ];
+        }
+        Preset::Table2 => {
+            study.task = StudyTask::Trajectory;
+            study.design = Design::OneAtATime;
+            study.seeds = 3;
+            study.table_by = Some("trajectory".into());
+            let kind = |k: &str| {
+                let mut t = toml::Table::new();
+                t.insert("kind".into(), toml::Value::String(k.into()));
+                toml::Value::Table(t)
+            };
+            // The config's own model is the baseline; the other two replace it whole.
+            study.vary = vec![super::FactorConfig {
+                key: "trajectory".into(),
+                values: ["waypoint", "polynomial", "rbf"]
+                    .into_iter()
+                    .filter(|k| *k != base.trajectory.name())
+                    .map(kind)
+                    .collect(),
+            }];
+        }
+    }
+}
+
+/// The default sweep: every accuracy-for-time knob around the config (half and twice the
+/// optimisation resolution, samples per window and iterations; two stop transmittances and
+/// opacity floors; the other precision and rasterizer).
+pub fn default_sweep(base: &Config) -> Vec<Factor> {
+    let (w, h) = (base.camera.width, base.camera.height);
+    let mut resolutions = Vec::new();
+    if w >= 16 && h >= 16 {
+        resolutions.push(format!("{{width={},height={}}}", w / 2, h / 2));
+    }
+    resolutions.push(format!("{{width={},height={}}}", w * 2, h * 2));
+    let s = base.optimiser.samples_per_window;
+    let i = base.optimiser.iterations;
+    let mut samples = vec![(s / 2).max(1), s * 2];
+    samples.dedup();
+    let other_precision = match base.precision {
+        splatraj_render::backend::Precision::F32 => "\"f64\"",
+        splatraj_render::backend::Precision::F64 => "\"f32\"",
+    };
+    let other_rasterizer = match base.rasterizer {
+        splatraj_render::render::Rasterizer::Fused => "\"tensor\"",
+        splatraj_render::render::Rasterizer::Tensor => "\"fused\"",
+    };
+    vec![
+        Factor {
+            key: "camera".into(),
+            values: resolutions,
+        },
+        Factor {
+            key: "optimiser.samples_per_window".into(),
+            values: samples.iter().map(|v| v.to_string()).collect(),
+        },
+        Factor {
+            key: "optimiser.iterations".into(),
+            values: vec![(i / 2).max(1).to_string(), (i * 2).to_string()],
+        },
+        Factor {
+            key: "approximations.stop_transmittance".into(),
+            values: vec!["0.001".into(), "0.01".into()],
+        },
+        Factor {
+            key: "approximations.min_opacity".into(),
+            values: vec!["0.02".into(), "0.1".into()],
+        },
+        Factor {
+            key: "precision".into(),
+            values: vec![other_precision.into()],
+        },
+        Factor {
+            key: "rasterizer".into(),
+            values: vec![other_rasterizer.into()],
+        },
+    ]
+}
+
+/// The baseline, then each factor's values alone.
+fn one_at_a_time(factors: &[Factor]) -> Vec<Vec<(String, String)>> {
+    let mut out = vec![Vec::new()];
+    for f in factors {
+        for v in &f.values {
+            out.push(vec![(f.key.clone(), v.clone())]);
+        }
+    }
+    out
+}
+
+/// Every combination, the first factor varying slowest.
+fn grid(factors: &[Factor]) -> Vec<Vec<(String, String)>> {
+    factors.iter().fold(vec![Vec::new()], |acc, f| {
+        acc.iter()
+            .flat_map(|prefix| {
+                f.values.iter().map(move |v| {
+                    let mut s = prefix.clone();
+                    s.push((f.key.clone(), v.clone()));
+                    s
+                })
+            })
+            .collect()
+    })
+}
+
+/// `short=value …` (the key's last segment, the value without spaces), or `baseline`.
+fn label(settings: &[(String, String)]) -> String {
+    if settings.is_empty() {
+        return "baseline".into();
+    }
+    settings
+        .iter()
+        .map(|(k, v)| {
+            let short = k.rsplit('.').next().unwrap_or(k);
+            let v: String = v.chars().filter(|c| !c.is_whitespace()).collect();
+            format!("{short}={}", v.trim_matches('"'))
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// The `--set` assignments of `key = raw` over `base`: a table value sets each of its keys
+/// when the base holds a table there with the same `kind` (or none), else the value is set
+/// whole.
+fn assignments(base: &toml::Table, key: &str, raw: &str) -> Vec<String> {
+    let parsed = raw
+        .trim_start()
+        .starts_with('{')
+        .then(|| toml::from_str::<toml::Table>(&format!("v = {raw}")).ok())
+        .flatten()
+        .and_then(|mut t| t.remove("v"));
+    match (parsed, lookup(base, key)) {
+        (Some(toml::Value::Table(over)), Some(toml::Value::Table(existing)))
+            if over.get("kind").is_none_or(|k| Some(k) == existing.get("kind")) =>
+        {
+            flatten(key, &over)
+        }
+        _ => vec![format!("{key}={raw}")],
+    }
+}
+
+/// `prefix.k=v` for every leaf of `table`.
+fn flatten(prefix: &str, table: &toml::Table) -> Vec<String> {
+    table
+        .iter()
+        .flat_map(|(k, v)| match v {
+            toml::Value::Table(t) => flatten(&format!("{prefix}.{k}"), t),
+            v => vec![format!("{prefix}.{k}={v}")],
+        })
+        .collect()
+}
+
+/// The value at a dotted key (numeric segments index arrays).
+fn lookup<'a>(table: &'a toml::Table, key: &str) -> Option<&'a toml::Value> {
+    let mut parts = key.split('.');
+    let mut node = table.get(parts.next()?.trim())?;
+    for part in parts {
+        node = match node {
+            toml::Value::Table(t) => t.get(part.trim())?,
+            toml::Value::Array(a) => a.get(part.trim().parse::<usize>().ok()?)?,
+            _ => return None,
+        };
+    }
+    Some(node)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_split_at_top_level_commas_only() {
+        let f = Factor::parse("camera={width=64,height=48},{width=8,height=6}").unwrap();
+        assert_eq!(f.key, "camera");
+        assert_eq!(f.values, ["{width=64,height=48}", "{width=8,height=6}"]);
+        let f = Factor::parse("queries.0.text=\"a,b\",lamp").unwrap();
+        assert_eq!(f.values, ["\"a,b\"", "lamp"]);
+        assert!(Factor::parse("iterations").is_err());
+        assert!(Factor::parse("x=1,,2").is_err());
+    }
+
+    #[test]
+    fn grid_and_one_at_a_time_count_their_variants() {
+        let f = |k: &str, n: usize| Factor {
+            key: k.into(),
+            values: (0..n).map(|i| i.to_string()).collect(),
+        };
+        let factors = [f("a", 2), f("b", 3)];
+        assert_eq!(one_at_a_time(&factors).len(), 1 + 2 + 3);
+        let g = grid(&factors);
+        assert_eq!(g.len(), 6);
+        assert_eq!(g[1], vec![("a".into(), "0".into()), ("b".into(), "1".into())]);
+    }
+
+    #[test]
+    fn a_table_value_merges_unless_its_kind_differs() {
+        let base: toml::Table =
+            toml::from_str("[camera]\nwidth = 1\nfov_x = 60.0\n[trajectory]\nkind = \"rbf\"\ncentres_per_window = 8\n")
+                .unwrap();
+        assert_eq!(
+            assignments(&base, "camera", "{width=64,height=48}"),
+            ["camera.height=48", "camera.width=64"]
+        );
+        assert_eq!(
+            assignments(&base, "trajectory", "{kind=\"waypoint\"}"),
+            ["trajectory={kind=\"waypoint\"}"]
+        );
+        assert_eq!(
+            assignments(&base, "trajectory", "{kind=\"rbf\"}"),
+            ["trajectory.kind=\"rbf\""]
+        );
+    }
+
+    #[test]
+    fn shards_partition_the_runs() {
+        let shards: Vec<Shard> = (1..=3).map(|k| format!("{k}/3").parse().unwrap()).collect();
+        for run in 0..10 {
+            assert_eq!(shards.iter().filter(|s| s.holds(run)).count(), 1);
+        }
+        assert!("0/3".parse::<Shard>().is_err());
+        assert!("4/3".parse::<Shard>().is_err());
+    }
+}

@@ -1,0 +1,161 @@
+//! A small study in this process (tiny demo scene, two knobs × two values): a row for every
+//! run, a frontier of exactly the non-dominated variants (brute force), files that read back,
+//! and an evaluation that does not depend on the variant.
+
+use std::path::{Path, PathBuf};
+
+use splatraj_experiment::Extensions;
+use splatraj_experiment::study::measure::MemoryReading;
+use splatraj_experiment::study::plan::PlanOptions;
+use splatraj_experiment::study::summary::StudyContext;
+use splatraj_experiment::study::{
+    Design, Factor, StudyFile, StudyPlan, StudySummary, measure_run, read_study, write_study,
+};
+
+const TINY: &str = r#"
+name = "tiny"
+seed = 3
+[scene]
+demo = { gaussians = 3000, seed = 7 }
+[[queries]]
+text = "red mug"
+[[queries]]
+text = "blue box"
+[camera]
+width = 32
+height = 24
+[optimiser]
+iterations = 3
+samples_per_window = 2
+[output]
+width = 40
+height = 30
+[study]
+seeds = 2
+[study.evaluation]
+samples = 2
+ldj_samples = 11
+"#;
+
+fn config(dir: &Path) -> PathBuf {
+    let path = dir.join("tiny.toml");
+    std::fs::write(&path, TINY).unwrap();
+    path
+}
+
+fn options(grid: bool) -> PlanOptions {
+    PlanOptions {
+        vary: vec![
+            Factor::parse("optimiser.iterations=2,4").unwrap(),
+            Factor::parse("camera={width=16,height=12},{width=48,height=36}").unwrap(),
+        ],
+        grid,
+        ..PlanOptions::default()
+    }
+}
+
+#[test]
+fn one_at_a_time_is_the_baseline_and_each_value_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = StudyPlan::new(&config(dir.path()), &options(false), &Extensions::default()).unwrap();
+    assert_eq!(plan.design, Design::OneAtATime);
+    let labels: Vec<&str> = plan.variants.iter().map(|v| v.label.as_str()).collect();
+    assert_eq!(
+        labels,
+        [
+            "baseline",
+            "iterations=2",
+            "iterations=4",
+            "camera={width=16,height=12}",
+            "camera={width=48,height=36}"
+        ]
+    );
+    // The table value sets each key, keeping the rest of [camera] (fov_x, target_ratio).
+    assert_eq!(plan.variants[3].overrides, ["camera.height=12", "camera.width=16"]);
+    assert_eq!(plan.runs.len(), 5 * 2);
+    // A value equal to the config's is the baseline itself, not a second variant.
+    let same = PlanOptions {
+        vary: vec![Factor::parse("optimiser.iterations=3,4").unwrap()],
+        ..PlanOptions::default()
+    };
+    let plan = StudyPlan::new(&config(dir.path()), &same, &Extensions::default()).unwrap();
+    assert_eq!(plan.variants.len(), 2);
+    // A bad value fails before anything runs, naming the variant and the key.
+    let bad = PlanOptions {
+        vary: vec![Factor::parse("optimiser.samples_per_window=0").unwrap()],
+        ..PlanOptions::default()
+    };
+    let err = StudyPlan::new(&config(dir.path()), &bad, &Extensions::default()).unwrap_err();
+    let text = format!("{err:#}");
+    assert!(text.contains("samples_per_window=0"), "{text}");
+}
+
+#[test]
+fn a_grid_study_has_a_row_per_run_and_a_non_dominated_frontier() {
+    let dir = tempfile::tempdir().unwrap();
+    let extensions = Extensions::default();
+    let plan = StudyPlan::new(&config(dir.path()), &options(true), &extensions).unwrap();
+    assert_eq!(plan.variants.len(), 4);
+    assert_eq!(plan.runs.len(), 8);
+    let mut rows = Vec::new();
+    for run in &plan.runs {
+        rows.extend(measure_run(&plan, run, &extensions, MemoryReading::Shared).unwrap());
+    }
+    for v in &plan.variants {
+        let seeds: Vec<u64> = rows.iter().filter(|r| r.variant == v.index).map(|r| r.seed).collect();
+        assert_eq!(seeds, [3, 4], "variant {}", v.label);
+    }
+    for r in &rows {
+        assert!(r.error.is_finite() && r.optimisation_s > 0.0, "{r:?}");
+        assert_eq!(r.windows.len(), 2);
+        assert!(r.peak_mb.is_none());
+        // The evaluation is the base config's, whatever the variant: 2 poses per window.
+        let expected = (r.windows[0].tce + r.windows[0].tre + r.windows[1].tce + r.windows[1].tre) / 2.0;
+        assert!((r.error - expected).abs() < 1e-12);
+    }
+
+    let summary = StudySummary::new(&plan, &rows);
+    assert_eq!(summary.variants.len(), 4);
+    // Brute force: a variant is on the frontier iff no other is at least as fast and as good
+    // and strictly better in one.
+    let points: Vec<(f64, f64)> = summary.variants.iter().map(|v| v.figures.point()).collect();
+    for (i, v) in summary.variants.iter().enumerate() {
+        let dominated = points.iter().enumerate().any(|(j, q)| {
+            j != i
+                && q.0 <= points[i].0
+                && q.1 <= points[i].1
+                && (q.0 < points[i].0 || q.1 < points[i].1)
+        });
+        assert_eq!(v.on_frontier, !dominated, "{}: {:?} of {points:?}", v.label, points[i]);
+        assert_eq!(summary.frontier.contains(&i), !dominated);
+    }
+    // Mean over the two seeds.
+    let first: Vec<f64> = rows.iter().filter(|r| r.variant == 0).map(|r| r.error).collect();
+    let mean = summary.variants[0].figures.error.unwrap().mean;
+    assert!((mean - (first[0] + first[1]) / 2.0).abs() < 1e-12);
+    let best = summary.best.unwrap();
+    let cheap = summary.cheapest_within_5_percent.unwrap();
+    assert!(points[cheap].1 <= points[best].1 * 1.05 + 1e-15);
+    assert!(points.iter().all(|p| p.1 > points[best].1 * 1.05 || p.0 >= points[cheap].0));
+
+    let out = dir.path().join("study");
+    let study = StudyFile::new(plan.clone(), None, StudyContext::default(), rows.clone(), Vec::new());
+    write_study(&out, &study).unwrap();
+    for file in ["study.csv", "study.json", "frontier.svg", "summary.md"] {
+        assert!(out.join(file).is_file(), "{file}");
+    }
+    let back = read_study(&out).unwrap();
+    assert_eq!(back.plan, plan);
+    // serde_json reads floats back to within an ulp.
+    assert_eq!(back.rows.len(), study.rows.len());
+    for (a, b) in back.rows.iter().zip(&study.rows) {
+        assert_eq!((a.run, a.repeat, &a.label), (b.run, b.repeat, &b.label));
+        assert!((a.error - b.error).abs() < 1e-12 && (a.iou - b.iou).abs() < 1e-12);
+    }
+    let csv = std::fs::read_to_string(out.join("study.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 8);
+    let svg = std::fs::read_to_string(out.join("frontier.svg")).unwrap();
+    assert!(svg.contains("<svg") && svg.contains("iterations=4"));
+    let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    assert!(md.contains("Cheapest setting within 5 %"), "{md}");
+}

@@ -1,0 +1,334 @@
+//! `splatraj study CONFIG.toml`: what accuracy costs in time. Runs variants of one experiment
+//! (`--vary KEY=V1,V2`, the `[study]` table, `--preset table1|table2`, or the default sweep of
+//! every accuracy-for-time knob), each measured the same way, and writes the study folder
+//! (`study.csv`, `study.json`, `frontier.svg`, `summary.md`). `splatraj study merge DIR...`
+//! joins the folders of `--shard K/N` runs into one study.
+//!
+//! Each run goes to a child process of this binary (hidden `--one RUN`), so that the peak
+//! memory it reports (VmHWM, a process-wide high-water mark) is its own and no run's
+//! allocations slow the next; `--in-process` runs them here instead (no memory figure). The
+//! plan, the measuring and the files are `splatraj::experiment::study`; this file parses,
+//! spawns, shows progress and writes.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, Subcommand};
+use splatraj::experiment::Extensions;
+use splatraj::experiment::outputs::create_run_dir;
+use splatraj::experiment::study::files::Failure;
+use splatraj::experiment::study::measure::MemoryReading;
+use splatraj::experiment::study::plan::PlanOptions;
+use splatraj::experiment::study::summary::StudyContext;
+use splatraj::experiment::study::{
+    Factor, Preset, Shard, StudyFile, StudyPlan, StudyRow, measure_run, merge_studies, write_study,
+};
+
+/// Arguments of `splatraj study`.
+#[derive(Debug, Args)]
+#[command(args_conflicts_with_subcommands = true)]
+pub struct StudyArgs {
+    #[command(subcommand)]
+    command: Option<StudyCommand>,
+    #[command(flatten)]
+    run: StudyRunArgs,
+}
+
+/// `splatraj study merge`.
+#[derive(Debug, Subcommand)]
+pub enum StudyCommand {
+    /// Join the study folders of a study's shards (`--shard K/N`) into one study.
+    Merge(MergeArgs),
+}
+
+/// Arguments of `splatraj study merge`.
+#[derive(Debug, Args)]
+pub struct MergeArgs {
+    /// The shards' study folders.
+    #[arg(required = true)]
+    dirs: Vec<PathBuf>,
+    /// Folder of the merged study.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+/// Arguments of a study run.
+#[derive(Debug, Args)]
+pub struct StudyRunArgs {
+    /// Experiment config (TOML).
+    config: Option<PathBuf>,
+    /// Override a config value of every variant and of the evaluation (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// A factor: a config key and its values, e.g. `optimiser.iterations=50,100` or
+    /// `camera={width=64,height=48},{width=256,height=192}` (repeatable; replaces `[study]`'s).
+    #[arg(long, value_name = "KEY=V1,V2,...")]
+    vary: Vec<String>,
+    /// Every combination of the factors' values (default: one factor at a time).
+    #[arg(long)]
+    grid: bool,
+    /// Repeats of every variant (seeds `seed`, `seed + 1`, …); starts of a single-pose study.
+    #[arg(long)]
+    seeds: Option<usize>,
+    /// The paper's tables: table1 (single-pose ablations) or table2 (trajectory models).
+    #[arg(long, value_parser = parse_preset)]
+    preset: Option<Preset>,
+    /// Run only the K-th of N slices of the runs (1-based), e.g. a Slurm array task.
+    #[arg(long, value_name = "K/N", value_parser = parse_shard)]
+    shard: Option<Shard>,
+    /// Study folder (default: `<output.runs_dir>/<name>-study/<timestamp>/`).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Run every variant in this process (no per-run peak memory).
+    #[arg(long)]
+    in_process: bool,
+    /// Print the plan (variants and runs) and stop.
+    #[arg(long)]
+    dry_run: bool,
+    /// No progress lines.
+    #[arg(long)]
+    quiet: bool,
+    /// Internal: run one run of the plan here and print its rows as one JSON line.
+    #[arg(long, hide = true)]
+    one: Option<usize>,
+}
+
+fn parse_preset(s: &str) -> Result<Preset, String> {
+    s.parse()
+}
+
+fn parse_shard(s: &str) -> Result<Shard, String> {
+    s.parse()
+}
+
+/// Runs `splatraj study`.
+pub fn run(args: StudyArgs) -> Result<()> {
+    match args.command {
+        Some(StudyCommand::Merge(merge)) => run_merge(&merge),
+        None => run_study(&args.run),
+    }
+}
+
+fn run_merge(args: &MergeArgs) -> Result<()> {
+    let dirs: Vec<&Path> = args.dirs.iter().map(PathBuf::as_path).collect();
+    let study = merge_studies(&dirs)?;
+    write_study(&args.out, &study)?;
+    eprintln!(
+        "merged {} folder(s): {} rows of {} runs, {} failed",
+        dirs.len(),
+        study.rows.len(),
+        study.plan.runs.len(),
+        study.failures.len()
+    );
+    println!("{}", args.out.display());
+    Ok(())
+}
+
+fn plan_options(args: &StudyRunArgs) -> Result<PlanOptions> {
+    Ok(PlanOptions {
+        set: args.set.clone(),
+        vary: args
+            .vary
+            .iter()
+            .map(|v| Factor::parse(v))
+            .collect::<Result<_>>()?,
+        grid: args.grid,
+        seeds: args.seeds,
+        preset: args.preset,
+    })
+}
+
+fn run_study(args: &StudyRunArgs) -> Result<()> {
+    let Some(config) = &args.config else {
+        bail!("give a config file (splatraj study CONFIG.toml), or `splatraj study merge DIR...`");
+    };
+    let extensions = Extensions::default();
+    let plan = StudyPlan::new(config, &plan_options(args)?, &extensions)?;
+    if let Some(index) = args.one {
+        let run = plan
+            .runs
+            .get(index)
+            .with_context(|| format!("--one {index}: the plan has {} runs", plan.runs.len()))?;
+        let rows = measure_run(&plan, run, &extensions, MemoryReading::OwnProcess)?;
+        println!("{}", serde_json::to_string(&rows)?);
+        return Ok(());
+    }
+    let runs = plan.runs_of(args.shard);
+    eprintln!(
+        "study of {}: {} variant(s), {} run(s){}",
+        plan.name,
+        plan.variants.len(),
+        plan.runs.len(),
+        args.shard
+            .map(|s| format!(", shard {}/{}: {} run(s)", s.index, s.count, runs.len()))
+            .unwrap_or_default()
+    );
+    for v in &plan.variants {
+        eprintln!("  variant {}: {}  [{}]", v.index, v.label, v.overrides.join(" "));
+    }
+    if args.dry_run {
+        return Ok(());
+    }
+    let base = splatraj::experiment::Config::load(config, &plan.base_overrides)?;
+    let dir = match &args.out {
+        Some(dir) => {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create {}", dir.display()))?;
+            dir.clone()
+        }
+        None => create_run_dir(&base.output.runs_dir, &format!("{}-study", plan.name))?,
+    };
+    eprintln!("study folder: {}", dir.display());
+    let exe = std::env::current_exe().context("cannot find the splatraj binary to re-run")?;
+    let mut rows: Vec<StudyRow> = Vec::new();
+    let mut failures = Vec::new();
+    for (i, run) in runs.iter().enumerate() {
+        let label = &plan.variants[run.variant].label;
+        let measured = if args.in_process {
+            measure_run(&plan, run, &extensions, MemoryReading::Shared)
+                .map_err(|e| format!("{e:#}"))
+        } else {
+            in_child(&exe, args, run.index)
+        };
+        match measured {
+            Ok(new) => {
+                if !args.quiet {
+                    for r in &new {
+                        eprintln!(
+                            "[{}/{}] {label} (repeat {}): error {:.4}, optimisation {:.2} s, peak {}",
+                            i + 1,
+                            runs.len(),
+                            r.repeat,
+                            r.error,
+                            r.optimisation_s,
+                            r.peak_mb.map_or("–".into(), |m| format!("{m:.0} MB"))
+                        );
+                    }
+                }
+                rows.extend(new);
+            }
+            Err(error) => {
+                eprintln!("[{}/{}] {label}: failed: {error}", i + 1, runs.len());
+                failures.push(Failure {
+                    run: run.index,
+                    label: label.clone(),
+                    error,
+                });
+            }
+        }
+    }
+    let context = StudyContext {
+        machine: machine(),
+        evaluation: format!(
+            "{}×{}, {:?} {:?} {:?}, exact rendering",
+            plan.evaluation.width.unwrap_or(base.output.width),
+            plan.evaluation.height.unwrap_or(base.output.height),
+            base.rasterizer,
+            base.precision,
+            base.backend
+        ),
+        command: Some(command_line()),
+    };
+    let failed = failures.len();
+    let study = StudyFile::new(plan, args.shard, context, rows, failures);
+    write_study(&dir, &study)?;
+    if let Some(summary) = &study.summary
+        && let Some(c) = summary.cheapest_within_5_percent
+    {
+        eprintln!(
+            "cheapest within 5 % of the best error: {}",
+            summary.variants[c].label
+        );
+    }
+    println!("{}", dir.display());
+    if failed > 0 {
+        bail!(
+            "{failed} run(s) failed (listed in {})",
+            dir.join("summary.md").display()
+        );
+    }
+    Ok(())
+}
+
+/// Runs run `index` in a child process of this binary with the same plan arguments.
+fn in_child(exe: &Path, args: &StudyRunArgs, index: usize) -> Result<Vec<StudyRow>, String> {
+    let mut child = Command::new(exe);
+    child.arg("study");
+    if let Some(config) = &args.config {
+        child.arg(config);
+    }
+    for s in &args.set {
+        child.args(["--set", s]);
+    }
+    for v in &args.vary {
+        child.args(["--vary", v]);
+    }
+    if args.grid {
+        child.arg("--grid");
+    }
+    if let Some(seeds) = args.seeds {
+        child.args(["--seeds", &seeds.to_string()]);
+    }
+    if let Some(preset) = args.preset {
+        child.args([
+            "--preset",
+            match preset {
+                Preset::Table1 => "table1",
+                Preset::Table2 => "table2",
+            },
+        ]);
+    }
+    child.args(["--one", &index.to_string()]);
+    let output = child
+        .output()
+        .map_err(|e| format!("cannot start a study process: {e}"))?;
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let parsed = stdout
+        .lines()
+        .last()
+        .and_then(|line| serde_json::from_str::<Vec<StudyRow>>(line).ok());
+    match (output.status.success(), parsed) {
+        (true, Some(rows)) => Ok(rows),
+        _ => {
+            let err = String::from_utf8_lossy(&output.stderr);
+            let err = err.trim().strip_prefix("error: ").unwrap_or(err.trim());
+            Err(if err.is_empty() {
+                format!("the study process ended with {}", output.status)
+            } else {
+                err.to_string()
+            })
+        }
+    }
+}
+
+/// The command line as typed (arguments with spaces or shell characters quoted).
+fn command_line() -> String {
+    std::env::args()
+        .enumerate()
+        .map(|(i, a)| {
+            let a = if i == 0 { "splatraj".to_string() } else { a };
+            if a.chars().all(|c| c.is_ascii_alphanumeric() || "-_./=,:".contains(c)) {
+                a
+            } else {
+                format!("'{}'", a.replace('\'', "'\\''"))
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// The machine in words: CPU model and cores.
+fn machine() -> String {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let model = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|t| {
+            t.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split_once(':'))
+                .map(|(_, m)| m.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    format!("{model}, {cores} cores available")
+}
