@@ -96,8 +96,9 @@ fn label_query_counts_exactly_and_pictures_the_object() {
     assert!(text.contains("selected: 1038 of 4721 Gaussians"), "{text}");
     for key in [
         "candidates:",
-        "clusters:",
-        "noise",
+        "clustering: none",
+        "kept: 1 cluster(s) [1038]",
+        "dropped: 0 candidates",
         "relevancy:",
         "centre:",
         "extent:",
@@ -128,7 +129,11 @@ fn label_query_counts_exactly_and_pictures_the_object() {
     assert_eq!(report["gaussians"], 4721);
     assert_eq!(report["name"], "Category 4");
     assert_eq!(report["source"], "labels");
-    assert_eq!(report["clusters"], json!([1038]));
+    assert_eq!(report["clusters"].as_array().unwrap().len(), 1);
+    assert_eq!(report["clusters"][0]["count"], 1038);
+    assert_eq!(report["clusters"][0]["kept"], true);
+    assert_eq!(report["rejected"], 0);
+    assert_eq!(report["warnings"], json!([]));
     assert!((report["fraction"].as_f64().unwrap() - 1038.0 / 4721.0).abs() < 1e-9);
     assert_eq!(report["relevancy"]["min"], 1.0);
     assert!(
@@ -300,6 +305,15 @@ fn misspelt_label_fails_with_suggestions_and_writes_nothing() {
 
 /// One-hot features by label (9 labels) plus one dimension for the negatives.
 fn write_features(dir: &Path, scene: &Scene) -> PathBuf {
+    write_features_as(dir, scene, |_, id| id as usize)
+}
+
+/// One-hot features, Gaussian `i` with label `id` getting dimension `dimension(i, id)`.
+fn write_features_as(
+    dir: &Path,
+    scene: &Scene,
+    dimension: impl Fn(usize, i32) -> usize,
+) -> PathBuf {
     use npyz::WriterBuilder;
     let labels = scene.extras.labels.as_ref().unwrap();
     let dim = 10;
@@ -311,9 +325,9 @@ fn write_features(dir: &Path, scene: &Scene) -> PathBuf {
         .writer(&mut bytes)
         .begin_nd()
         .unwrap();
-    for &id in &labels.ids {
+    for (i, &id) in labels.ids.iter().enumerate() {
         let mut row = vec![0.0f32; dim];
-        row[id as usize] = 1.0;
+        row[dimension(i, id)] = 1.0;
         writer.extend(row).unwrap();
     }
     writer.finish().unwrap();
@@ -387,7 +401,7 @@ fn features_route_selects_the_phrases_label() {
     assert_eq!(by_features["extent"], by_label["extent"]);
     assert!(by_features["relevancy"]["min"].as_f64().unwrap() > 0.99);
 
-    // With DBSCAN (the default): the main part of label 3.
+    // With clustering (the default): the main part of label 3.
     let clustered = json_report(&query(&[
         "--source",
         "features",
@@ -401,7 +415,12 @@ fn features_route_selects_the_phrases_label() {
     let count = clustered["count"].as_u64().unwrap() as usize;
     assert!(count <= 398 && count as f64 >= 0.9 * 398.0, "{clustered}");
     assert_eq!(clustered["candidates"], 398);
-    assert!(clustered["eps"].as_f64().unwrap() > 0.0);
+    assert!(clustered["clustering"]["eps"].as_f64().unwrap() > 0.0);
+    assert_eq!(
+        clustered["rejected"].as_u64().unwrap() as usize,
+        398 - count,
+        "{clustered}"
+    );
 
     // A phrase not in the table: the error lists the closest phrases.
     let none = dir.path().join("none");
@@ -441,6 +460,126 @@ fn features_route_selects_the_phrases_label() {
     ]);
     assert_clean_failure(&out, &["--phrases", "labels source"]);
     assert!(!none.exists());
+}
+
+/// Pixels of picture `b` tinted toward cyan compared with picture `a` (blue minus red up by
+/// more than 10 levels), and pixels tinted away from it (down by more than 10).
+fn cyan_shift(a: &Path, b: &Path) -> (usize, usize) {
+    let (a, b) = (
+        image::open(a).unwrap().to_rgb8(),
+        image::open(b).unwrap().to_rgb8(),
+    );
+    assert_eq!(a.dimensions(), b.dimensions());
+    let (mut cyan, mut other) = (0, 0);
+    for (p, q) in a.pixels().zip(b.pixels()) {
+        let [r0, _, b0] = p.0.map(i32::from);
+        let [r1, _, b1] = q.0.map(i32::from);
+        let shift = (b1 - r1) - (b0 - r0);
+        if shift > 10 {
+            cyan += 1;
+        }
+        if shift < -10 {
+            other += 1;
+        }
+    }
+    (cyan, other)
+}
+
+#[test]
+fn look_alikes_are_dropped_reported_and_shown_with_show_rejected() {
+    let (ply, sidecar) = fruit();
+    let dir = tempfile::tempdir().unwrap();
+    let scene = fruit_scene();
+    let ids = &scene.extras.labels.as_ref().unwrap().ids;
+    // Label 3 is the apple; so is every 30th Gaussian of labels 5-8, scattered over four
+    // other objects on the table.
+    let look_alike = |i: usize, id: i32| id >= 5 && i % 30 == 0;
+    let features = write_features_as(dir.path(), &scene, |i, id| {
+        if look_alike(i, id) { 3 } else { id as usize }
+    });
+    let look_alikes = (0..ids.len()).filter(|&i| look_alike(i, ids[i])).count();
+    assert!(look_alikes > 50, "{look_alikes}");
+    let table = dir.path().join("table.json");
+    let negative = one_hot(9);
+    std::fs::write(
+        &table,
+        json!({"apple": one_hot(3), "object": negative, "things": negative, "stuff": negative,
+               "texture": negative})
+        .to_string(),
+    )
+    .unwrap();
+    let top = format!("{}", (398 + look_alikes) as f64 / ids.len() as f64);
+    let query = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "query",
+            "--scene",
+            s(&ply),
+            "--labels",
+            s(&sidecar),
+            "--features",
+            s(&features),
+            "--phrases",
+            s(&table),
+            "--query",
+            "apple",
+            "--top-fraction",
+            &top,
+            "--json",
+            "--out",
+            s(out),
+        ];
+        args.extend_from_slice(extra);
+        json_report(&splatraj(&args))
+    };
+    let plain = dir.path().join("plain");
+    let shown = dir.path().join("shown");
+    let report = query(&plain, &[]);
+    assert_eq!(
+        report["candidates"].as_u64().unwrap() as usize,
+        398 + look_alikes
+    );
+    let count = report["count"].as_u64().unwrap() as usize;
+    assert!(count <= 398 && count as f64 >= 0.95 * 398.0, "{report}");
+    // At least 95% of the look-alikes are dropped, and every dropped candidate is reported.
+    let rejected = report["rejected"].as_u64().unwrap() as usize;
+    assert!(rejected as f64 >= 0.95 * look_alikes as f64, "{report}");
+    assert_eq!(count + rejected, 398 + look_alikes);
+    assert_eq!(report["clusters"][0]["kept"], true);
+    assert_eq!(report["warnings"], json!([]));
+    // Without clustering the look-alikes stay, and the extent is flagged, naming the query.
+    let out = splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--labels",
+        s(&sidecar),
+        "--features",
+        s(&features),
+        "--phrases",
+        s(&table),
+        "--query",
+        "apple",
+        "--top-fraction",
+        &top,
+        "--no-cluster",
+        "--out",
+        s(&dir.path().join("unclustered")),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("warning: query \"apple\"") && err.contains("implausible"),
+        "{err}"
+    );
+
+    // The picture tints the dropped candidates only with --show-rejected.
+    query(&shown, &["--show-rejected"]);
+    let (cyan, other) = cyan_shift(&plain.join("query.png"), &shown.join("query.png"));
+    magenta_centroid(&shown.join("query.png"), 320, 240);
+    assert!(
+        cyan > 20 && other == 0,
+        "with --show-rejected {cyan} pixels turned toward cyan, {other} away from it"
+    );
 }
 
 /// The semantic crate's LangSplat fixture (see its README).

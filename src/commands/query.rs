@@ -4,11 +4,14 @@
 //! The query goes through one of the semantic sources (labels, a region, per-Gaussian
 //! language features scored against a phrase table, or LangSplat latents decoded by the
 //! scene's autoencoder checkpoint and then scored as features) and the selection (percentile,
-//! floor, DBSCAN) of `splatraj-semantic`. The command prints the counts, clusters, relevancy spread,
-//! centre and extent, and renders `query.png`: the RGB render from a camera that looks at the
-//! selection's centre from 30° above the horizontal (`--elevation`), at a distance where its extent fills
-//! about a third of the frame, with the selected Gaussians tinted magenta. Every input is read
-//! and checked, and the picture rendered, before the file is written (whole or not at all).
+//! floor, density clustering against the scene) of `splatraj-semantic`. The command prints the
+//! counts, the clustering, the kept cluster and the runner-ups, the candidates dropped, the
+//! relevancy spread, centre and extent (warnings on stderr), and renders `query.png`: the RGB
+//! render from a camera that looks at the selection's centre from 30° above the horizontal
+//! (`--elevation`), at a distance where its extent fills about a third of the frame, with the
+//! selected Gaussians tinted magenta (and the dropped candidates cyan with `--show-rejected`).
+//! Every input is read and checked, and the picture rendered, before the file is written
+//! (whole or not at all).
 //! The work is `splatraj::experiment::query` ([`QueryRequest`]); this file parses and prints.
 
 use std::path::PathBuf;
@@ -17,7 +20,7 @@ use std::str::FromStr;
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use splatraj::experiment::outputs::write_bytes;
-use splatraj::experiment::query::{QueryRequest, parse_region, parse_synonyms};
+use splatraj::experiment::query::{QueryRequest, RejectedView, parse_region, parse_synonyms};
 use splatraj::experiment::views::{FOV_X_DEGREES, ViewOptions};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera::Intrinsics;
@@ -101,9 +104,13 @@ pub struct QueryArgs {
     /// Relevancy a Gaussian must exceed, in [0, 1) (features).
     #[arg(long, default_value_t = DEFAULT_FLOOR)]
     floor: f32,
-    /// Keep every Gaussian above the thresholds: no DBSCAN (features).
+    /// Keep every Gaussian above the thresholds: no density clustering (features).
     #[arg(long)]
     no_cluster: bool,
+    /// Also tint, in cyan, the candidates the clustering dropped (runner-up clusters and
+    /// outliers) in query.png.
+    #[arg(long)]
+    show_rejected: bool,
     /// Output folder for query.png (created if missing).
     #[arg(long, default_value = ".")]
     out: PathBuf,
@@ -194,6 +201,11 @@ pub fn run(args: QueryArgs) -> Result<()> {
             floor: args.floor,
             cluster: (!args.no_cluster).then(ClusterOptions::default),
         },
+        rejected: if args.show_rejected {
+            RejectedView::Tinted
+        } else {
+            RejectedView::Hidden
+        },
         view: ViewOptions {
             elevation_degrees: args.elevation,
             search: !args.fixed_view,
@@ -210,6 +222,9 @@ pub fn run(args: QueryArgs) -> Result<()> {
     let path = args.out.join(IMAGE_NAME);
     write_bytes(&path, &outcome.png)?;
     let report = outcome.report(&scene_name, scene.len(), &path);
+    for w in &report.warnings {
+        eprintln!("warning: {w}");
+    }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {

@@ -12,15 +12,35 @@ use anyhow::{Context, Result, anyhow, bail};
 use burn::tensor::Device;
 use serde::Serialize;
 use splatraj_render::backend::Precision;
-use splatraj_render::camera::Intrinsics;
-use splatraj_render::render::DeviceScene;
+use splatraj_render::camera::{Intrinsics, Pose};
+use splatraj_render::host::{OnDevice, to_host};
+use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render};
 use splatraj_scene::Scene;
 use splatraj_semantic::{
-    Activation, Region, RegionSpec, SelectionOptions, SourceKind, SourceRegistry, Spread, Target,
-    TargetsConfig, find_target,
+    Activation, Cluster, ClusteringSummary, Region, RegionSpec, SelectionOptions, SourceKind,
+    SourceRegistry, Spread, Target, TargetsConfig, find_target,
 };
 
-use crate::views::{CameraReport, ViewOptions, diagnostic_camera, highlighted_picture};
+use crate::views::{
+    CameraReport, ViewOptions, diagnostic_camera, highlighted_picture, highlighted_png,
+};
+
+/// Colour of the rejected candidates in `query.png` (cyan, against the selection's magenta).
+pub const REJECTED_RGB: [f64; 3] = [0.1, 0.85, 1.0];
+/// Strength of the rejected candidates' tint.
+const REJECTED_STRENGTH: f64 = 0.6;
+/// Runner-up clusters listed one by one in the text report.
+const LISTED_RUNNER_UPS: usize = 5;
+
+/// Whether `query.png` shows the candidates the selection dropped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RejectedView {
+    /// Only the selection is tinted.
+    #[default]
+    Hidden,
+    /// The dropped candidates (runner-up clusters and noise) are tinted [`REJECTED_RGB`].
+    Tinted,
+}
 
 /// What to look for and how: the query, the source (or `None` to choose it from the inputs)
 /// and every source's inputs, the selection and the picture's camera.
@@ -56,6 +76,8 @@ pub struct QueryRequest {
     pub selection: SelectionOptions,
     /// How the picture's camera looks at the selection.
     pub view: ViewOptions,
+    /// Whether the picture shows the dropped candidates.
+    pub rejected: RejectedView,
     /// The picture's camera.
     pub intrinsics: Intrinsics,
 }
@@ -69,7 +91,8 @@ pub struct QueryOutcome {
     pub target: Target,
     /// The picture's camera.
     pub camera: CameraReport,
-    /// `query.png`: the RGB render with the selection tinted magenta.
+    /// `query.png`: the RGB render with the selection tinted magenta (and the dropped
+    /// candidates cyan with [`RejectedView::Tinted`]).
     pub png: Vec<u8>,
     /// Share of the picture's pixels where the selection dominates (mask > 0.5).
     pub highlighted_share: f64,
@@ -92,14 +115,16 @@ pub struct QueryReport {
     pub count: usize,
     /// `count / gaussians`.
     pub fraction: f64,
-    /// Gaussians above the thresholds, before DBSCAN.
+    /// Gaussians above the thresholds, before clustering.
     pub candidates: usize,
-    /// Sizes of the kept clusters.
-    pub clusters: Vec<usize>,
-    /// Candidates DBSCAN called noise.
+    /// How the candidates were clustered (`null`: not clustered).
+    pub clustering: Option<ClusteringSummary>,
+    /// Every cluster, largest relevancy mass first: the kept one(s) and the runner-ups.
+    pub clusters: Vec<Cluster>,
+    /// Candidates in no cluster.
     pub noise: usize,
-    /// DBSCAN radius, if it ran.
-    pub eps: Option<f32>,
+    /// Candidates left out (runner-up clusters and noise).
+    pub rejected: usize,
     /// Relevancy at the percentile, for graded sources.
     pub percentile_threshold: Option<f32>,
     /// Spread of the relevancy over all Gaussians.
@@ -114,6 +139,8 @@ pub struct QueryReport {
     pub highlighted_share: f64,
     /// Where the picture was written.
     pub image: String,
+    /// Doubts about the selection, each naming the query.
+    pub warnings: Vec<String>,
 }
 
 impl QueryRequest {
@@ -233,8 +260,14 @@ impl QueryRequest {
         let uploaded = DeviceScene::new(scene, device, Precision::F32.dtype());
         let (pose, camera) =
             diagnostic_camera(scene, &uploaded, &target, &self.intrinsics, self.view)?;
-        let (png, highlighted_share) =
-            highlighted_picture(&uploaded, &target, &pose, &self.intrinsics)?;
+        let (png, highlighted_share) = match self.rejected {
+            RejectedView::Hidden => {
+                highlighted_picture(&uploaded, &target, &pose, &self.intrinsics)?
+            }
+            RejectedView::Tinted => {
+                picture_with_rejected(&uploaded, &target, &pose, &self.intrinsics)?
+            }
+        };
         Ok(QueryOutcome {
             source: kind,
             target,
@@ -259,9 +292,10 @@ impl QueryOutcome {
             count: t.count,
             fraction: t.count as f64 / gaussians as f64,
             candidates: t.candidates,
+            clustering: t.clustering.clone(),
             clusters: t.clusters.clone(),
             noise: t.noise,
-            eps: t.eps,
+            rejected: t.rejected.len(),
             percentile_threshold: t.percentile_threshold,
             relevancy: t.relevancy_spread,
             centre: t.centre,
@@ -269,8 +303,40 @@ impl QueryOutcome {
             camera: self.camera.clone(),
             highlighted_share: self.highlighted_share,
             image: image.display().to_string(),
+            warnings: t.warnings.clone(),
         }
     }
+}
+
+/// The RGB render at `pose` with the dropped candidates of `target` tinted [`REJECTED_RGB`]
+/// and its selection magenta over them, as PNG bytes, and the share of pixels where the
+/// selection dominates.
+pub fn picture_with_rejected(
+    scene: &DeviceScene,
+    target: &Target,
+    pose: &Pose,
+    k: &Intrinsics,
+) -> Result<(Vec<u8>, f64)> {
+    let request = RenderRequest::new(
+        *k,
+        vec![
+            Channel::Rgb,
+            Channel::Mask(target.mask.clone()),
+            Channel::Mask(target.rejected_mask()),
+        ],
+    );
+    let pixels = to_host(render(scene, scene.poses(&[*pose]), &request)?.images)?;
+    // [H·W·5] (R, G, B, selected, rejected) → [H·W·4] with the rejected tint blended in.
+    let tinted: Vec<f64> = pixels
+        .chunks_exact(5)
+        .flat_map(|px| {
+            let a = REJECTED_STRENGTH * px[4].clamp(0.0, 1.0);
+            let rgb: [f64; 3] =
+                std::array::from_fn(|c| px[c].clamp(0.0, 1.0) * (1.0 - a) + a * REJECTED_RGB[c]);
+            [rgb[0], rgb[1], rgb[2], px[3]]
+        })
+        .collect();
+    highlighted_png(&tinted, k)
 }
 
 /// The command-line option that sets a `[targets]` key, for error messages.
@@ -357,7 +423,7 @@ fn fmt3(v: [f32; 3]) -> String {
 }
 
 impl QueryReport {
-    /// The human-readable report, one fact a line.
+    /// The human-readable report, one fact a line (the warnings are the caller's to show).
     pub fn text(&self) -> String {
         let r = self;
         let mut s = String::new();
@@ -375,16 +441,44 @@ impl QueryReport {
             .percentile_threshold
             .map_or(String::new(), |t| format!(" (percentile threshold {t:.4})"));
         s.push_str(&format!("candidates: {}{threshold}\n", r.candidates));
-        let sizes: Vec<String> = r.clusters.iter().map(|c| c.to_string()).collect();
-        let eps = r
-            .eps
-            .map_or("no DBSCAN".to_string(), |e| format!("DBSCAN eps {e:.4}"));
+        match &r.clustering {
+            None => s.push_str("clustering: none\n"),
+            Some(c) => s.push_str(&format!(
+                "clustering: {}, min_points {}, radius {:.4} (median; {:.4} to {:.4})\n",
+                c.method, c.min_points, c.eps, c.eps_range[0], c.eps_range[1]
+            )),
+        }
+        let (kept, runner_ups): (Vec<&Cluster>, Vec<&Cluster>) =
+            r.clusters.iter().partition(|c| c.kept);
+        let sizes: Vec<String> = kept.iter().map(|c| c.count.to_string()).collect();
+        let mass: f64 = kept.iter().map(|c| c.relevancy_mass).sum();
         s.push_str(&format!(
-            "clusters: {} [{}], noise {} ({eps})\n",
-            r.clusters.len(),
-            sizes.join(", "),
+            "kept: {} cluster(s) [{}], relevancy mass {mass:.1}\n",
+            kept.len(),
+            sizes.join(", ")
+        ));
+        s.push_str(&format!(
+            "dropped: {} candidates ({} in {} runner-up cluster(s), {} noise)\n",
+            r.rejected,
+            runner_ups.iter().map(|c| c.count).sum::<usize>(),
+            runner_ups.len(),
             r.noise
         ));
+        for c in runner_ups.iter().take(LISTED_RUNNER_UPS) {
+            s.push_str(&format!(
+                "  runner-up: {} Gaussians, relevancy mass {:.1}, centre {}, extent {}\n",
+                c.count,
+                c.relevancy_mass,
+                fmt3(c.centre),
+                fmt3(c.extent)
+            ));
+        }
+        if runner_ups.len() > LISTED_RUNNER_UPS {
+            s.push_str(&format!(
+                "  and {} smaller runner-ups\n",
+                runner_ups.len() - LISTED_RUNNER_UPS
+            ));
+        }
         s.push_str(&format!(
             "relevancy: min {:.4}, median {:.4}, max {:.4}\n",
             r.relevancy.min, r.relevancy.median, r.relevancy.max

@@ -10,7 +10,7 @@
 //! [targets.selection]
 //! top_fraction = 0.02
 //! floor = 0.5
-//! cluster = { min_points = 5, eps = { auto = { quantile = 0.9, factor = 2 } }, keep = "largest" }
+//! cluster = { min_points = 5, eps = { scene = { neighbours = 16, factor = 2 } }, keep = "largest" }
 //! ```
 //!
 //! Keys by source (a key of another source is an error, not silently ignored):

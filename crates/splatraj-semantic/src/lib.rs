@@ -9,10 +9,11 @@
 //! decodes LangSplat's per-Gaussian 3-d latents to 512-d with the scene's autoencoder decoder
 //! ([`LangsplatDecoder`]: a burn module on the caller's device, weights read from the PyTorch
 //! checkpoint with burn-store's reader) and then scores them as `features`. [`selection`] then
-//! keeps the top relevancy percentile above a floor, cleans it with DBSCAN in 3D
-//! (petal-clustering, with a radius from k-d tree neighbour distances via kiddo) and returns a
-//! [`Target`]: the 0/1 channel, a robust centre and extent for the trajectory prior, and counts
-//! for diagnostics. [`embeddings`] reads the feature sidecars (`.npy`, `.safetensors`) and
+//! keeps the top relevancy percentile above a floor, clusters it by density in 3D against
+//! the scene's own density ([`cluster`]: each candidate's nearest scene Gaussians from a kiddo
+//! k-d tree) and returns a [`Target`]: the 0/1 channel of the cluster with the largest
+//! relevancy mass, a robust centre and extent for the trajectory prior, the runner-up clusters
+//! and dropped candidates, and warnings. [`embeddings`] reads the feature sidecars (`.npy`, `.safetensors`) and
 //! phrase tables (JSON, `.npy` + phrases, `.safetensors`). [`config`] is the `[targets]` table
 //! of a config file ([`TargetsConfig`]): which source, its files and options, and the
 //! selection settings, built into a source in one call.
@@ -25,6 +26,7 @@
 
 #![warn(missing_docs)]
 
+pub mod cluster;
 pub mod config;
 pub mod embeddings;
 pub mod error;
@@ -40,7 +42,8 @@ pub use embeddings::{Matrix, PhraseTable, read_feature_sidecar};
 pub use error::{Result, SemanticError};
 pub use mask_file::read_mask_file;
 pub use selection::{
-    ClusterOptions, EpsRule, KeepClusters, SelectionOptions, Spread, Target, find_target, select,
+    Cluster, ClusterOptions, ClusteringSummary, EpsRule, KeepClusters, SelectionOptions, Spread,
+    Target, find_target, select,
 };
 pub use sources::{
     FeatureInput, FeaturesSource, LabelsSource, LangsplatDecoder, LangsplatSource, Region,

@@ -1,29 +1,33 @@
-//! From per-Gaussian relevancy to the object's 0/1 channel: thresholds, DBSCAN, statistics.
+//! From per-Gaussian relevancy to the object's 0/1 channel: thresholds, density clustering,
+//! statistics.
 //!
 //! Graded relevancy (the `features` route) keeps the Gaussians in the top `top_fraction` of
-//! relevancy **and** above `floor`, then runs DBSCAN in 3D on their centres and keeps the main
-//! cluster (or every cluster above a size fraction). Masks (labels, regions) skip the
-//! thresholds and are clustered only when the source asks for it.
+//! relevancy **and** above `floor` (the candidates), then clusters them by density in 3D and
+//! keeps the cluster with the largest relevancy mass (sum of relevancy), or every cluster
+//! above a share of the candidates' mass. Masks (labels, regions) skip the thresholds and are
+//! clustered only when the source asks for it. The [`Target`] lists every cluster (kept or
+//! runner-up, with its count, mass, centre and extent), the candidates dropped, and warnings.
 //!
-//! DBSCAN's radius is derived from the kept points themselves: `eps = factor × quantile` of
-//! each point's distance to its (`min_points` − 1)-th nearest neighbour (the classic "k-distance"
-//! heuristic of Ester et al.), defaults `quantile = 0.9`, `factor = 2`. The median
-//! nearest-neighbour distance (`neighbour = 1`, `quantile = 0.5`) is available through
-//! [`EpsRule::Auto`] but is not the default: on the fruit_drops capture it split every
-//! ground-truth object into 5-20 pieces (splats crowd in dense surface patches, so the typical
-//! nearest neighbour is far closer than the gaps inside one object), whereas the default kept
-//! each object in one cluster holding ≥ 98.5% of its Gaussians.
+//! Clustering rules ([`EpsRule`]): by default a candidate's neighbourhood is its nearest
+//! Gaussians of the whole scene ([`EpsRule::Scene`], see [`crate::cluster`] for the rule and
+//! the figures that chose it), so the radius follows the scene's density and not the
+//! candidates' spread. [`EpsRule::Auto`] is the rule before that: one DBSCAN radius
+//! `factor × quantile` of the candidates' own distances to their (`min_points` − 1)-th
+//! nearest candidate (Ester et al.'s "k-distance"); scattered look-alikes inflate it (1.84 m
+//! on the 20 000-Gaussian scene of issue 16, where the object is 0.2 m across), which is why
+//! it is no longer the default. [`EpsRule::Fixed`] is one radius in world units.
+//!
+//! The centre is the per-axis median of the kept Gaussians' means and the extent the span
+//! between their 5% and 95% quantiles, so a few stray Gaussians move neither. A selection
+//! whose extent is implausible for its count, because more than [`SPARSE_SHARE`] of its
+//! Gaussians lie apart from the rest ([`isolated_share`]: far from other selected Gaussians
+//! compared with the scene's density there), is scattered look-alikes rather than one object;
+//! it gets a warning naming the query.
 
-use std::collections::HashMap;
-use std::num::NonZeroUsize;
-
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
-use ndarray::Array2;
-use petal_clustering::{Dbscan, Fit};
-use petal_neighbors::distance::Euclidean;
 use serde::{Deserialize, Serialize};
 use splatraj_scene::Scene;
 
+use crate::cluster::{self, Clustering, PointIndex, kth_neighbour_distances};
 use crate::error::{Result, SemanticError};
 use crate::sources::{Relevancy, Scoring, TargetSource};
 
@@ -33,20 +37,48 @@ pub const DEFAULT_TOP_FRACTION: f32 = 0.02;
 pub const DEFAULT_FLOOR: f32 = 0.5;
 /// Default DBSCAN minimum neighbourhood size (the point itself included).
 pub const DEFAULT_MIN_POINTS: usize = 5;
-/// Default quantile of the k-distances that sets eps.
+/// Default nearest scene Gaussian whose distance sets a candidate's radius
+/// ([`EpsRule::Scene`]).
+pub const DEFAULT_SCENE_NEIGHBOURS: usize = 16;
+/// Default multiplier of that distance ([`EpsRule::Scene`]).
+pub const DEFAULT_SCENE_FACTOR: f32 = 2.0;
+/// Default quantile of the k-distances that sets eps ([`EpsRule::Auto`]).
 pub const DEFAULT_EPS_QUANTILE: f32 = 0.9;
-/// Default multiplier of that quantile.
+/// Default multiplier of that quantile ([`EpsRule::Auto`]).
 pub const DEFAULT_EPS_FACTOR: f32 = 2.0;
+/// A selected Gaussian is isolated when its [`SPARSITY_NEIGHBOUR`]-th nearest selected
+/// Gaussian is more than this many times farther than its [`SPARSITY_NEIGHBOUR`]-th nearest
+/// Gaussian of the scene (the selection at least 27× sparser than the scene there).
+pub const SPARSE_RATIO: f32 = 3.0;
+/// Which neighbour the sparsity check compares (1 = nearest).
+pub const SPARSITY_NEIGHBOUR: usize = 4;
+/// A selection with more than this share of isolated Gaussians gets a warning.
+pub const SPARSE_SHARE: f64 = 0.1;
 
-/// How DBSCAN's neighbourhood radius is chosen.
+/// How a candidate's neighbourhood is chosen for the density clustering.
 ///
-/// In a config: `eps = { fixed = 0.05 }` or `eps = { auto = { quantile = 0.5, factor = 3 } }`
-/// (missing fields of `auto` take their defaults).
+/// In a config: `eps = { scene = {} }` (the default; `{ scene = { neighbours = 32, factor =
+/// 1.5 } }`),
+/// `eps = { fixed = 0.05 }` or `eps = { auto = { quantile = 0.5, factor = 3 } }` (missing
+/// fields take their defaults).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum EpsRule {
-    /// `factor × quantile_q` over the kept points of the distance to their `neighbour`-th
-    /// nearest other point; `neighbour = None` means `min_points − 1`.
+    /// One radius per candidate: `factor` × its distance to its `neighbours`-th nearest
+    /// Gaussian of the whole scene, so it follows the scene's local density (see
+    /// [`crate::cluster`]).
+    Scene {
+        /// Which nearest scene Gaussian sets the radius (the candidate itself counts as the
+        /// 1st).
+        #[serde(default = "default_scene_neighbours")]
+        neighbours: usize,
+        /// Multiplier of that distance (> 0).
+        #[serde(default = "default_scene_factor")]
+        factor: f32,
+    },
+    /// One radius for all: `factor × quantile_q` over the candidates of the distance to their
+    /// `neighbour`-th nearest other candidate; `neighbour = None` means `min_points − 1`.
+    /// Scattered look-alikes inflate it: the default before [`EpsRule::Scene`].
     Auto {
         /// Which neighbour (1 = nearest); `None`: `min_points − 1`.
         #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -64,12 +96,31 @@ pub enum EpsRule {
 
 impl Default for EpsRule {
     fn default() -> Self {
+        EpsRule::Scene {
+            neighbours: DEFAULT_SCENE_NEIGHBOURS,
+            factor: DEFAULT_SCENE_FACTOR,
+        }
+    }
+}
+
+impl EpsRule {
+    /// The rule that was the default before [`EpsRule::Scene`], with its defaults: its default parameters: one radius from the candidates' own
+    /// k-distances.
+    pub fn candidate_k_distance() -> Self {
         EpsRule::Auto {
             neighbour: None,
             quantile: DEFAULT_EPS_QUANTILE,
             factor: DEFAULT_EPS_FACTOR,
         }
     }
+}
+
+fn default_scene_neighbours() -> usize {
+    DEFAULT_SCENE_NEIGHBOURS
+}
+
+fn default_scene_factor() -> f32 {
+    DEFAULT_SCENE_FACTOR
 }
 
 fn default_eps_quantile() -> f32 {
@@ -80,27 +131,29 @@ fn default_eps_factor() -> f32 {
     DEFAULT_EPS_FACTOR
 }
 
-/// Which DBSCAN clusters make the object.
+/// Which clusters make the object.
 ///
 /// In a config: `keep = "largest"` or `keep = { above_fraction = 0.1 }`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum KeepClusters {
-    /// Only the largest cluster (the object; other clusters are look-alikes or noise).
+    /// Only the cluster with the largest relevancy mass (the object; other clusters are
+    /// look-alikes).
     #[default]
     Largest,
-    /// Every cluster holding at least this fraction of the Gaussians that passed the
-    /// thresholds (for objects made of separate parts).
+    /// Every cluster holding at least this fraction of the candidates' relevancy mass (for
+    /// objects made of separate parts); the largest is always kept.
     AboveFraction(f32),
 }
 
-/// DBSCAN settings (config keys `min_points`, `eps`, `keep`; missing ones take the defaults).
+/// Density clustering settings (config keys `min_points`, `eps`, `keep`; missing ones take
+/// the defaults).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, rename_all = "snake_case", deny_unknown_fields)]
 pub struct ClusterOptions {
-    /// Minimum neighbourhood size of a core point, the point itself included.
+    /// Candidates a core point's neighbourhood must hold, the point itself included.
     pub min_points: usize,
-    /// Radius rule.
+    /// Neighbourhood rule.
     pub eps: EpsRule,
     /// Which clusters to keep.
     pub keep: KeepClusters,
@@ -216,7 +269,37 @@ pub struct Spread {
     pub max: f32,
 }
 
-/// The Gaussians of one object, ready for the trajectory costs.
+/// One cluster of candidates.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Cluster {
+    /// Gaussians in it.
+    pub count: usize,
+    /// Sum of their relevancies.
+    pub relevancy_mass: f64,
+    /// Per-axis median of their means.
+    pub centre: [f32; 3],
+    /// Per-axis span between the 5% and 95% quantiles of their means.
+    pub extent: [f32; 3],
+    /// Whether it is part of the target (else a runner-up).
+    pub kept: bool,
+}
+
+/// How the candidates were clustered.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ClusteringSummary {
+    /// The rule, in words ("scene density (16 nearest Gaussians)", "candidate k-distance",
+    /// "fixed radius").
+    pub method: String,
+    /// Candidates a core point's neighbourhood held at least.
+    pub min_points: usize,
+    /// The neighbourhood radius: the one radius of the global rules, the median of the
+    /// candidates' radii under [`EpsRule::Scene`].
+    pub eps: f32,
+    /// Smallest and largest radius over the candidates (equal for the global rules).
+    pub eps_range: [f32; 2],
+}
+
+/// The Gaussians of one object, ready for the trajectory costs, and how they were found.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Target {
     /// The query as given.
@@ -227,22 +310,28 @@ pub struct Target {
     pub mask: Vec<f32>,
     /// Number of selected Gaussians.
     pub count: usize,
-    /// Gaussians that passed the thresholds, before DBSCAN.
+    /// Gaussians that passed the thresholds, before clustering.
     pub candidates: usize,
     /// Robust centre: per-axis median of the selected centres.
     pub centre: [f32; 3],
     /// Robust extent: per-axis span between the 5% and 95% quantiles of the selected centres.
     pub extent: [f32; 3],
-    /// Sizes of all DBSCAN clusters found, largest first (one entry, the count, without DBSCAN).
-    pub clusters: Vec<usize>,
-    /// Candidates DBSCAN marked as noise.
+    /// Every cluster found, largest relevancy mass first (without clustering: one, of all
+    /// candidates).
+    pub clusters: Vec<Cluster>,
+    /// Candidates in no cluster.
     pub noise: usize,
-    /// DBSCAN radius used, if DBSCAN ran.
-    pub eps: Option<f32>,
+    /// Candidates left out of the target (runner-up clusters and noise), as sorted indices.
+    #[serde(skip)]
+    pub rejected: Vec<usize>,
+    /// How the candidates were clustered; `None`: they were not.
+    pub clustering: Option<ClusteringSummary>,
     /// Relevancy threshold the percentile set (graded scores only).
     pub percentile_threshold: Option<f32>,
     /// Relevancies of the selected Gaussians.
     pub relevancy_spread: Spread,
+    /// Doubts about the selection, each naming the query (for the caller to show).
+    pub warnings: Vec<String>,
 }
 
 impl Target {
@@ -254,6 +343,20 @@ impl Target {
             .filter(|(_, m)| **m > 0.5)
             .map(|(i, _)| i)
             .collect()
+    }
+
+    /// Sizes of the clusters, largest relevancy mass first.
+    pub fn cluster_sizes(&self) -> Vec<usize> {
+        self.clusters.iter().map(|c| c.count).collect()
+    }
+
+    /// The 0/1 channel of the rejected candidates.
+    pub fn rejected_mask(&self) -> Vec<f32> {
+        let mut mask = vec![0.0; self.mask.len()];
+        for &i in &self.rejected {
+            mask[i] = 1.0;
+        }
+        mask
     }
 }
 
@@ -347,67 +450,102 @@ pub fn select(
         }
     };
 
-    let (selected, clusters, noise, eps) = match cluster {
-        None => (candidates.clone(), vec![candidates.len()], 0, None),
+    // The scene's k-d tree serves the scene-density rule and the sparsity check.
+    let scene_index = PointIndex::new(&scene.means)?;
+    let (groups, noise, clustering) = match cluster {
+        None => (vec![candidates.clone()], Vec::new(), None),
         Some(c) => {
-            let points: Vec<[f32; 3]> = candidates.iter().map(|&i| scene.means[i]).collect();
-            if points.len() < c.min_points {
+            if candidates.len() < c.min_points {
                 return Err(nothing(format!(
-                    "only {} Gaussians passed the thresholds, fewer than DBSCAN's min_points = \
-                     {}: lower min_points, or raise top_fraction / lower floor",
-                    points.len(),
+                    "only {} Gaussians passed the thresholds, fewer than the clustering's \
+                     min_points = {}: lower min_points, or raise top_fraction / lower floor",
+                    candidates.len(),
                     c.min_points
                 )));
             }
-            let eps = dbscan_eps(&points, &c)?;
-            let (groups, noise) = dbscan(&points, eps, c.min_points);
+            let (found, summary) = cluster_candidates(scene, &scene_index, &candidates, &c)?;
+            let to_scene =
+                |v: Vec<usize>| -> Vec<usize> { v.into_iter().map(|j| candidates[j]).collect() };
+            let groups: Vec<Vec<usize>> = found.clusters.into_iter().map(to_scene).collect();
             if groups.is_empty() {
                 return Err(nothing(format!(
-                    "DBSCAN (eps {eps}, min_points {}) found no cluster among the {} candidate \
-                     Gaussians: they are too scattered; raise the eps factor",
+                    "{} (min_points {}) found no cluster among the {} candidate Gaussians: they \
+                     are too scattered for one object; check the query, or raise top_fraction so \
+                     that more of the object passes",
+                    summary.method,
                     c.min_points,
-                    points.len()
+                    candidates.len()
                 )));
             }
-            let sizes: Vec<usize> = groups.iter().map(Vec::len).collect();
-            let kept_groups: Vec<&Vec<usize>> = match c.keep {
-                KeepClusters::Largest => vec![&groups[0]],
-                KeepClusters::AboveFraction(f) => {
-                    let min = f as f64 * points.len() as f64;
-                    let above: Vec<_> = groups.iter().filter(|g| g.len() as f64 >= min).collect();
-                    if above.is_empty() {
-                        // The largest cluster is always kept: an empty target helps no one.
-                        vec![&groups[0]]
-                    } else {
-                        above
-                    }
-                }
-            };
-            let mut selected: Vec<usize> = kept_groups
-                .into_iter()
-                .flatten()
-                .map(|&j| candidates[j])
-                .collect();
-            selected.sort_unstable();
-            (selected, sizes, noise, Some(eps))
+            (groups, to_scene(found.noise), Some(summary))
         }
     };
+
+    let mass = |g: &[usize]| -> f64 { g.iter().map(|&i| r[i] as f64).sum() };
+    let mut groups: Vec<(f64, Vec<usize>)> = groups.into_iter().map(|g| (mass(&g), g)).collect();
+    // Largest mass first; ties by size, then by the smallest index, for a deterministic order.
+    groups.sort_by(|a, b| {
+        b.0.total_cmp(&a.0)
+            .then(b.1.len().cmp(&a.1.len()))
+            .then(a.1[0].cmp(&b.1[0]))
+    });
+    let keep_above = match cluster.map(|c| c.keep) {
+        Some(KeepClusters::AboveFraction(f)) => f as f64 * mass(&candidates),
+        _ => f64::INFINITY,
+    };
+    let kept: Vec<bool> = (0..groups.len())
+        .map(|k| k == 0 || groups[k].0 >= keep_above)
+        .collect();
+    let clusters: Vec<Cluster> = groups
+        .iter()
+        .zip(&kept)
+        .map(|((m, g), &kept)| {
+            let (centre, extent) = robust_box(scene, g);
+            Cluster {
+                count: g.len(),
+                relevancy_mass: *m,
+                centre,
+                extent,
+                kept,
+            }
+        })
+        .collect();
+    let mut selected: Vec<usize> = groups
+        .iter()
+        .zip(&kept)
+        .filter(|(_, k)| **k)
+        .flat_map(|((_, g), _)| g.iter().copied())
+        .collect();
+    selected.sort_unstable();
+    let mut rejected: Vec<usize> = groups
+        .iter()
+        .zip(&kept)
+        .filter(|(_, k)| !**k)
+        .flat_map(|((_, g), _)| g.iter().copied())
+        .chain(noise.iter().copied())
+        .collect();
+    rejected.sort_unstable();
 
     let mut mask = vec![0.0f32; n];
     for &i in &selected {
         mask[i] = 1.0;
     }
-    let axis = |k: usize| -> Vec<f32> {
-        let mut v: Vec<f32> = selected.iter().map(|&i| scene.means[i][k]).collect();
-        v.sort_by(f32::total_cmp);
-        v
-    };
-    let mut centre = [0.0; 3];
-    let mut extent = [0.0; 3];
-    for k in 0..3 {
-        let v = axis(k);
-        centre[k] = quantile_sorted(&v, 0.5);
-        extent[k] = quantile_sorted(&v, 0.95) - quantile_sorted(&v, 0.05);
+    let (centre, extent) = robust_box(scene, &selected);
+    let mut warnings = Vec::new();
+    if let Some(share) = isolated_share(scene, &scene_index, &selected)?
+        && share > SPARSE_SHARE
+    {
+        warnings.push(format!(
+            "query {query:?}: the extent {:.3} × {:.3} × {:.3} is implausible for {} Gaussians: \
+             {:.0}% of them lie apart from the rest (scattered look-alikes, not one object), so \
+             the centre and the framing may miss the object; check the query, the relevancy \
+             (top_fraction, floor) and the clustering (cluster)",
+            extent[0],
+            extent[1],
+            extent[2],
+            selected.len(),
+            100.0 * share
+        ));
     }
     let mut rel: Vec<f32> = selected.iter().map(|&i| r[i]).collect();
     rel.sort_by(f32::total_cmp);
@@ -420,15 +558,102 @@ pub fn select(
         centre,
         extent,
         clusters,
-        noise,
-        eps,
+        noise: noise.len(),
+        rejected,
+        clustering,
         percentile_threshold,
         relevancy_spread: Spread {
             min: rel[0],
             median: quantile_sorted(&rel, 0.5),
             max: rel[rel.len() - 1],
         },
+        warnings,
     })
+}
+
+/// Clusters the `candidates` (scene indices) under `c`'s rule; the clusters and noise are
+/// positions in `candidates`.
+fn cluster_candidates(
+    scene: &Scene,
+    scene_index: &PointIndex,
+    candidates: &[usize],
+    c: &ClusterOptions,
+) -> Result<(Clustering, ClusteringSummary)> {
+    let points: Vec<[f32; 3]> = candidates.iter().map(|&i| scene.means[i]).collect();
+    match c.eps {
+        EpsRule::Scene { neighbours, factor } => {
+            let (found, mut radii) = cluster::scene_density_clusters(
+                scene_index,
+                &scene.means,
+                candidates,
+                neighbours,
+                factor,
+                c.min_points,
+            )?;
+            radii.sort_by(f32::total_cmp);
+            let summary = ClusteringSummary {
+                method: format!(
+                    "scene density (radius {factor} × distance to the {neighbours}th nearest \
+                     Gaussian)"
+                ),
+                min_points: c.min_points,
+                eps: quantile_sorted(&radii, 0.5),
+                eps_range: [radii[0], radii[radii.len() - 1]],
+            };
+            Ok((found, summary))
+        }
+        EpsRule::Auto { .. } | EpsRule::Fixed(_) => {
+            let eps = dbscan_eps(&points, c)?;
+            let method = match c.eps {
+                EpsRule::Fixed(_) => "DBSCAN, fixed radius",
+                _ => "DBSCAN, radius from the candidates' k-distances",
+            };
+            let summary = ClusteringSummary {
+                method: method.to_string(),
+                min_points: c.min_points,
+                eps,
+                eps_range: [eps, eps],
+            };
+            Ok((cluster::dbscan(&points, eps, c.min_points), summary))
+        }
+    }
+}
+
+/// Per-axis median and 5-95% span of the means of `indices`.
+fn robust_box(scene: &Scene, indices: &[usize]) -> ([f32; 3], [f32; 3]) {
+    let mut centre = [0.0; 3];
+    let mut extent = [0.0; 3];
+    for k in 0..3 {
+        let mut v: Vec<f32> = indices.iter().map(|&i| scene.means[i][k]).collect();
+        v.sort_by(f32::total_cmp);
+        centre[k] = quantile_sorted(&v, 0.5);
+        extent[k] = quantile_sorted(&v, 0.95) - quantile_sorted(&v, 0.05);
+    }
+    (centre, extent)
+}
+
+/// Share of the `selected` Gaussians that are isolated within the selection: whose distance
+/// to their [`SPARSITY_NEIGHBOUR`]-th nearest selected Gaussian is more than [`SPARSE_RATIO`]
+/// times their distance to their [`SPARSITY_NEIGHBOUR`]-th nearest Gaussian of the scene.
+/// An object's Gaussians are as close to each other as the scene's are there (share near 0);
+/// scattered look-alikes are far from each other among dense scene Gaussians. `None` when
+/// too few are selected to tell.
+pub fn isolated_share(
+    scene: &Scene,
+    scene_index: &PointIndex,
+    selected: &[usize],
+) -> Result<Option<f64>> {
+    if selected.len() <= SPARSITY_NEIGHBOUR {
+        return Ok(None);
+    }
+    let points: Vec<[f32; 3]> = selected.iter().map(|&i| scene.means[i]).collect();
+    let own = kth_neighbour_distances(&points, SPARSITY_NEIGHBOUR)?;
+    let isolated = points
+        .iter()
+        .zip(&own)
+        .filter(|(p, d)| **d > SPARSE_RATIO * scene_index.kth_other_distance(p, SPARSITY_NEIGHBOUR))
+        .count();
+    Ok(Some(isolated as f64 / points.len() as f64))
 }
 
 fn validate(o: &SelectionOptions) -> Result<()> {
@@ -455,6 +680,23 @@ fn validate(o: &SelectionOptions) -> Result<()> {
             ));
         }
         match c.eps {
+            EpsRule::Scene { neighbours, factor } => {
+                if neighbours < 2 {
+                    return Err(SemanticError::option(
+                        "cluster.eps.scene.neighbours",
+                        format!(
+                            "{neighbours} must be at least 2 (the 1st nearest Gaussian is the \
+                             candidate itself)"
+                        ),
+                    ));
+                }
+                if !(factor.is_finite() && factor > 0.0) {
+                    return Err(SemanticError::option(
+                        "cluster.eps.scene.factor",
+                        format!("{factor} must be finite and > 0"),
+                    ));
+                }
+            }
             EpsRule::Auto {
                 neighbour,
                 quantile,
@@ -500,10 +742,17 @@ fn validate(o: &SelectionOptions) -> Result<()> {
     Ok(())
 }
 
-/// DBSCAN radius for `points` under `c.eps` (see the module docs).
+/// The one DBSCAN radius for `points` under a global rule (`Auto`, `Fixed`; see the module
+/// docs); an error under [`EpsRule::Scene`], whose radius differs per candidate.
 pub fn dbscan_eps(points: &[[f32; 3]], c: &ClusterOptions) -> Result<f32> {
     let (neighbour, quantile, factor) = match c.eps {
         EpsRule::Fixed(e) => return Ok(e),
+        EpsRule::Scene { .. } => {
+            return Err(SemanticError::option(
+                "cluster.eps",
+                "the scene rule has one radius per candidate, not one for all",
+            ));
+        }
         EpsRule::Auto {
             neighbour,
             quantile,
@@ -524,49 +773,6 @@ pub fn dbscan_eps(points: &[[f32; 3]], c: &ClusterOptions) -> Result<f32> {
         .flat_map(|p| p.iter().map(|v| v.abs()))
         .fold(0.0f32, f32::max);
     Ok(eps.max(scale * 1e-6).max(1e-12))
-}
-
-/// Distance from each point to its `k`-th nearest other point (`k` ≥ 1), through a k-d tree.
-/// With fewer than `k + 1` points the farthest other point is used.
-pub fn kth_neighbour_distances(points: &[[f32; 3]], k: usize) -> Result<Vec<f32>> {
-    if points.len() < 2 {
-        return Ok(vec![0.0; points.len()]);
-    }
-    let tree: ImmutableKdTree<f32, 3> = ImmutableKdTree::new_from_slice(points).map_err(|e| {
-        SemanticError::Mismatch(format!("cannot build a k-d tree of the candidates: {e}"))
-    })?;
-    // The query point is in the tree at distance 0, hence k + 1 results.
-    let want = (k + 1).min(points.len());
-    let want = NonZeroUsize::new(want).expect("at least 2 points");
-    Ok(points
-        .iter()
-        .map(|p| {
-            let found = tree
-                .query(p)
-                .nearest_n::<SquaredEuclidean<f32>>(want)
-                .execute();
-            found.last().map_or(0.0, |r| r.distance.max(0.0).sqrt())
-        })
-        .collect())
-}
-
-/// DBSCAN clusters (indices into `points`, largest first, ties by smallest index) and the
-/// number of noise points.
-pub fn dbscan(points: &[[f32; 3]], eps: f32, min_points: usize) -> (Vec<Vec<usize>>, usize) {
-    let flat: Vec<f32> = points.iter().flatten().copied().collect();
-    let array = Array2::from_shape_vec((points.len(), 3), flat).expect("3 columns");
-    let (clusters, noise): (HashMap<usize, Vec<usize>>, Vec<usize>) =
-        Dbscan::new(eps, min_points, Euclidean::default()).fit(&array, None);
-    let mut groups: Vec<Vec<usize>> = clusters
-        .into_values()
-        .map(|mut g| {
-            g.sort_unstable();
-            g
-        })
-        .collect();
-    // HashMap order is random: sort for a deterministic "largest".
-    groups.sort_by(|a, b| b.len().cmp(&a.len()).then(a[0].cmp(&b[0])));
-    (groups, noise.len())
 }
 
 /// Nearest-rank quantile of sorted values (`q` in [0, 1]); 0 for an empty slice.

@@ -26,10 +26,11 @@ fn each_label_query_selects_exactly_that_labels_gaussians() {
         assert!(count > 0);
         assert_eq!(target.name, query);
         assert_eq!(
-            target.clusters,
+            target.cluster_sizes(),
             vec![count],
-            "no DBSCAN on ground truth by default"
+            "no clustering on ground truth by default"
         );
+        assert!(target.clustering.is_none() && target.rejected.is_empty());
         total += count;
         // The robust centre lies inside the label's own bounding box.
         let pts: Vec<[f32; 3]> = (0..ids.len())
@@ -125,7 +126,7 @@ fn dbscan_on_labels_is_an_option() {
         ..Default::default()
     };
     let t = find_target(&source, &scene, "Category 6", &SelectionOptions::default()).unwrap();
-    assert!(t.eps.is_some());
+    assert!(t.clustering.is_some());
     // Clustering only removes Gaussians, and only the label's own.
     for (m, &l) in t.mask.iter().zip(ids) {
         if *m > 0.5 {
@@ -139,5 +140,6 @@ fn dbscan_on_labels_is_an_option() {
         t.count
     );
     assert_eq!(t.candidates, all);
-    assert_eq!(t.clusters.iter().sum::<usize>() + t.noise, all);
+    assert_eq!(t.cluster_sizes().iter().sum::<usize>() + t.noise, all);
+    assert_eq!(t.count + t.rejected.len(), all);
 }
