@@ -40,6 +40,11 @@ enum Command {
     /// Write a run's trajectory as another tool's camera file (nerfstudio, COLMAP, INRIA,
     /// SuperSplat).
     Export(commands::export::ExportArgs),
+    /// Render any camera path (a run's trajectory.json, or a nerfstudio, COLMAP, INRIA or
+    /// SuperSplat camera file) to frames and an MP4 video.
+    RenderPath(commands::render_path::RenderPathArgs),
+    /// Rebuild a run folder's report.html from its files.
+    Report(commands::report::ReportArgs),
 }
 
 fn main() -> ExitCode {
@@ -68,6 +73,8 @@ fn main() -> ExitCode {
         Command::Bench(command) => commands::bench::run(command),
         Command::Study(args) => commands::study::run(args),
         Command::Export(args) => commands::export::run(args),
+        Command::RenderPath(args) => commands::render_path::run(args),
+        Command::Report(args) => commands::report::run(args),
         Command::EncodeText(args) => commands::encode_text::run(args),
     };
     match result {

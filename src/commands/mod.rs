@@ -6,6 +6,8 @@ pub mod export;
 pub mod pose;
 pub mod query;
 pub mod render;
+pub mod render_path;
+pub mod report;
 pub mod run;
 pub mod scene;
 pub mod study;

@@ -22,17 +22,13 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use serde::Serialize;
 use splatraj::experiment::checkpoint::{CHECKPOINT_FILE, Checkpoint};
-use splatraj::experiment::config::{Config, MaskOverlay};
-use splatraj::experiment::outputs::{
-    FrameSpec, create_run_dir, write_bytes, write_csv, write_frames, write_json,
-};
+use splatraj::experiment::config::Config;
+use splatraj::experiment::outputs::{create_run_dir, write_bytes, write_csv, write_json};
 use splatraj::experiment::records::trajectory_history;
 use splatraj::experiment::resources::RAISE_LIMIT;
 use splatraj::experiment::{Evaluation, Experiment, RunOptions, RunStop, TrajectoryRun};
 use splatraj_scene::atomic::is_partial_file;
 use splatraj_traj::metrics::{Smoothness, WindowMetrics};
-use splatraj_traj::optimise::sampling::window_of;
-use splatraj_traj::trajectory::uniform_times;
 
 use crate::cli::{Interrupted, MemoryArgs, bar_observer, interrupt_flag, progress_bar};
 
@@ -149,9 +145,9 @@ pub fn run(args: RunArgs) -> Result<()> {
     bar.finish_and_clear();
     match run.stop {
         RunStop::Interrupted => eprintln!("stopped by Ctrl-C: writing the best trajectory so far"),
-        RunStop::TimeLimit => eprintln!(
-            "`optimiser.time_limit_s` reached: writing the best trajectory so far"
-        ),
+        RunStop::TimeLimit => {
+            eprintln!("`optimiser.time_limit_s` reached: writing the best trajectory so far")
+        }
         RunStop::Finished => {}
     }
     let (header, rows) = trajectory_history(&run, experiment.windows.len());
@@ -167,27 +163,15 @@ pub fn run(args: RunArgs) -> Result<()> {
     let metrics_s = metrics_started.elapsed().as_secs_f64();
 
     let frames_started = Instant::now();
-    let n = experiment.windows.len();
-    let frame_times = uniform_times(config.output.frames);
-    let specs: Vec<FrameSpec> = frame_times
-        .iter()
-        .zip(trajectory.poses_at(&frame_times))
-        .map(|(&t, pose)| FrameSpec {
-            pose,
-            tint: (config.output.mask_overlay == MaskOverlay::Tint)
-                .then(|| experiment.windows[window_of(t, n)].mask.as_slice()),
-        })
-        .collect();
-    let frame_bar = progress_bar(specs.len() as u64, args.quiet);
+    // Frames, frame_metrics.csv and video.mp4, then the same poses in every export format.
+    let output = experiment.output_frames(&trajectory)?;
+    let frame_bar = progress_bar(output.poses.len() as u64, args.quiet);
     frame_bar.set_message("frames");
-    write_frames(
-        &experiment.plain_scene(),
-        (&experiment.output_intrinsics()?, config.rasterizer),
-        &specs,
-        &dir.join("frames"),
-        &mut |done| frame_bar.set_position(done as u64),
-    )?;
+    experiment.write_output_frames(&output, &dir, &mut |done| {
+        frame_bar.set_position(done as u64)
+    })?;
     frame_bar.finish_and_clear();
+    experiment.write_exports(&output, &dir)?;
     let frames_s = frames_started.elapsed().as_secs_f64();
 
     let report = run_report(&experiment, &run, [metrics_s, frames_s], started);
@@ -203,6 +187,7 @@ pub fn run(args: RunArgs) -> Result<()> {
             run: report,
         },
     )?;
+    experiment.write_report(&dir)?;
     println!("{}", dir.display());
     match run.stop {
         // A finished run needs no checkpoint; a stopped one keeps it for --resume.
@@ -263,7 +248,13 @@ fn check_writable(dir: &Path) -> Result<()> {
     let existing = dir
         .ancestors()
         .find(|p| p.as_os_str().is_empty() || p.is_dir())
-        .map(|p| if p.as_os_str().is_empty() { Path::new(".") } else { p })
+        .map(|p| {
+            if p.as_os_str().is_empty() {
+                Path::new(".")
+            } else {
+                p
+            }
+        })
         .unwrap_or(Path::new("."));
     let probe = existing.join(format!(".splatraj-write-test.{}", std::process::id()));
     std::fs::File::create(&probe).with_context(|| {

@@ -23,6 +23,7 @@
 
 pub mod bench;
 pub mod bench_scenes;
+pub mod camera_paths;
 pub mod checkpoint;
 pub mod config;
 pub mod experiment;
@@ -31,11 +32,14 @@ pub mod io;
 pub mod observer;
 pub mod outputs;
 pub mod path_checks;
+pub mod path_render;
 pub mod pose_run;
 pub mod probe;
 pub mod query;
 pub mod records;
 pub mod resources;
+pub mod run_files;
+pub mod run_report;
 pub mod starts;
 pub mod study;
 pub mod trajectory_run;

@@ -97,7 +97,7 @@ pub struct FrameSpec<'a> {
 
 /// Strength of the mask overlay's tint (lighter than `query`'s, so the object stays legible
 /// in a sequence).
-const TINT_ALPHA: f64 = 0.45;
+pub(crate) const TINT_ALPHA: f64 = 0.45;
 
 /// Renders `frames` and writes them as `frame_NNNN.png` into `dir`; `progress` is told after
 /// each frame.
@@ -111,7 +111,7 @@ pub fn write_frames(
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     for (index, frame) in frames.iter().enumerate() {
         let png = frame_png(scene, camera, frame)?;
-        write_bytes(&dir.join(format!("frame_{index:04}.png")), &png)?;
+        write_bytes(&dir.join(crate::path_render::frame_name(index)), &png)?;
         progress(index + 1);
     }
     Ok(())

@@ -87,9 +87,18 @@ fn made_up_run(video: VideoSource) -> RunReport {
         history: Some(CostHistory {
             steps: (0..20).map(f64::from).collect(),
             terms: vec![
-                ("tce".into(), (0..20).map(|s| 0.5 / (1.0 + s as f64)).collect()),
-                ("prior".into(), (0..20).map(|s| 2.0 - 0.05 * s as f64).collect()),
-                ("total".into(), (0..20).map(|s| 2.5 - 0.06 * s as f64).collect()),
+                (
+                    "tce".into(),
+                    (0..20).map(|s| 0.5 / (1.0 + s as f64)).collect(),
+                ),
+                (
+                    "prior".into(),
+                    (0..20).map(|s| 2.0 - 0.05 * s as f64).collect(),
+                ),
+                (
+                    "total".into(),
+                    (0..20).map(|s| 2.5 - 0.06 * s as f64).collect(),
+                ),
             ],
         }),
         view: Some(SceneView {
@@ -174,7 +183,13 @@ fn the_page_is_well_formed_self_contained_and_complete() {
     // heading and both views' labels.
     let texts: Vec<&str> = doc.descendants().filter_map(|n| n.text()).collect();
     assert!(texts.iter().any(|t| *t == "a <b> & \"c\""));
-    assert!(texts.iter().filter(|t| t.contains("1: a <b> & \"c\"")).count() >= 2);
+    assert!(
+        texts
+            .iter()
+            .filter(|t| t.contains("1: a <b> & \"c\""))
+            .count()
+            >= 2
+    );
     assert!(texts.iter().any(|t| t.contains("gaussians = 3000")));
     assert!(texts.contains(&"0.0456"));
 }

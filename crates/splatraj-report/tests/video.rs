@@ -57,7 +57,11 @@ fn frames_come_back_from_the_mp4_within_codec_error() {
     assert_eq!((video.width, video.height), (width, height));
     assert_eq!(video.samples, count);
     assert_eq!(video.frames.len(), count);
-    assert!((video.seconds - count as f64 / fps).abs() < 1e-3, "{}", video.seconds);
+    assert!(
+        (video.seconds - count as f64 / fps).abs() < 1e-3,
+        "{}",
+        video.seconds
+    );
     assert!((video.fps - fps).abs() < 1e-2, "{}", video.fps);
     // Baseline without B-frames: what browsers and phones decode.
     assert!(video.profile.contains("Baseline"), "{}", video.profile);

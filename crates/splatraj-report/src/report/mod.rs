@@ -130,7 +130,7 @@ table{border-collapse:collapse;font-size:14px}th,td{border:1px solid #ccc;paddin
 th{background:#f2f2f2}td:first-child,th:first-child{text-align:left}
 .strip{display:flex;gap:8px;overflow-x:auto}figure{margin:0}figure img{width:220px;display:block;border:1px solid #ccc}
 figcaption{font-size:12px;color:#555;text-align:center}.views{display:flex;flex-wrap:wrap;gap:12px}
-pre{background:#f6f6f6;padding:10px;font-size:13px;overflow-x:auto}video{max-width:100%;border:1px solid #ccc}
+pre{background:#f6f6f6;padding:10px;font-size:13px;overflow-x:auto}video{width:640px;max-width:100%;border:1px solid #ccc;background:#000}
 .note{color:#666;font-size:13px}";
 
 impl RunReport {

@@ -120,7 +120,12 @@ pub fn cost_history(history: &CostHistory) -> Result<String, ReportError> {
         .filter(|v| v.is_finite());
     let high = values.fold(floor, f64::max) * 1.5;
     let last = history.steps.last().copied().unwrap_or(1.0).max(1.0);
-    let first = history.steps.first().copied().unwrap_or(0.0).min(last - 1.0);
+    let first = history
+        .steps
+        .first()
+        .copied()
+        .unwrap_or(0.0)
+        .min(last - 1.0);
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();

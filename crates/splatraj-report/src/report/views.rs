@@ -163,9 +163,8 @@ fn draw(view: &SceneView, [ex, ey]: [DVec3; 2], caption: &str) -> Result<String,
         chart
             .draw_series(view.points.iter().filter_map(|(p, c)| {
                 let at = project(DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64));
-                inside(at).then(|| {
-                    Circle::new(at, 1, RGBColor(c[0], c[1], c[2]).mix(0.55).filled())
-                })
+                inside(at)
+                    .then(|| Circle::new(at, 1, RGBColor(c[0], c[1], c[2]).mix(0.55).filled()))
             }))
             .map_err(|e| fail(&e))?;
 
@@ -202,9 +201,11 @@ fn draw(view: &SceneView, [ex, ey]: [DVec3; 2], caption: &str) -> Result<String,
         }
         if let Some(first) = view.path.first() {
             chart
-                .draw_series([
-                    Circle::new(project(DVec3::from(first.centre)), 5, BLACK.filled()),
-                ])
+                .draw_series([Circle::new(
+                    project(DVec3::from(first.centre)),
+                    5,
+                    BLACK.filled(),
+                )])
                 .map_err(|e| fail(&e))?;
             chart
                 .draw_series([Text::new(

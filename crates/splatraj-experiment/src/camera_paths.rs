@@ -1,0 +1,422 @@
+//! Camera paths as files: a run's `trajectory.json` (evaluated from its model at any number of
+//! frames) or another tool's camera file (nerfstudio, COLMAP, INRIA, SuperSplat), read as
+//! frames to render or export; and frames written in every interchange format
+//! (`exports/<format>/`). `splatraj export`, `splatraj render-path` and the end of
+//! `splatraj run` all go through here, so a run's exports hold exactly the poses of its frames.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use serde::Deserialize;
+use splatraj_render::camera::Intrinsics;
+use splatraj_render::camera_file::resize;
+use splatraj_report::supersplat::Focus;
+use splatraj_report::{CameraPath, CameraPose, ExportOptions, Format, Frame, Pinhole};
+use splatraj_traj::optimise::sampling::window_of;
+use splatraj_traj::trajectory::{Basis, TrajectoryRecord, uniform_times};
+
+use crate::outputs::write_bytes;
+
+/// Frames per second when neither the command line, the run's config nor the file says.
+pub const DEFAULT_FPS: f64 = 30.0;
+
+/// Length of an exported or rendered `trajectory.json` when nothing else says, in seconds.
+pub const DEFAULT_SECONDS: f64 = 5.0;
+
+/// Frames of a camera path: a pose and a camera for each, at times t ∈ [0, 1].
+#[derive(Debug, Clone, PartialEq)]
+pub struct PathFrames {
+    /// Time of each frame in [0, 1] (the query windows split this range).
+    pub times: Vec<f64>,
+    /// Φ = [ω, c] of each frame (OpenCV camera axes).
+    pub poses: Vec<[f64; 6]>,
+    /// The camera of each frame.
+    pub cameras: Vec<Intrinsics>,
+    /// Frames per second.
+    pub fps: f64,
+}
+
+impl PathFrames {
+    /// The frames as a [`CameraPath`] of `splatraj-report`.
+    pub fn camera_path(&self) -> CameraPath {
+        CameraPath {
+            frames: self
+                .poses
+                .iter()
+                .zip(&self.cameras)
+                .map(|(&pose, k)| Frame {
+                    pose: CameraPose::from_phi(pose),
+                    camera: Some(pinhole(k)),
+                })
+                .collect(),
+            fps: Some(self.fps),
+        }
+    }
+}
+
+fn pinhole(k: &Intrinsics) -> Pinhole {
+    Pinhole {
+        fx: k.fx,
+        fy: k.fy,
+        cx: k.cx,
+        cy: k.cy,
+        width: k.width,
+        height: k.height,
+    }
+}
+
+/// How many frames to take of a path, and at which size; `None` leaves it to the file.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FrameRequest {
+    /// Frames per second.
+    pub fps: Option<f64>,
+    /// Length in seconds (a `trajectory.json` is evaluated at fps × seconds times; another
+    /// tool's file keeps its own frames).
+    pub seconds: Option<f64>,
+    /// Image width (rescales the camera; alone, keeps the aspect ratio).
+    pub width: Option<usize>,
+    /// Image height (rescales the camera; alone, keeps the aspect ratio).
+    pub height: Option<usize>,
+}
+
+impl FrameRequest {
+    fn check(&self) -> Result<()> {
+        for (name, value) in [("--fps", self.fps), ("--seconds", self.seconds)] {
+            if let Some(v) = value
+                && !(v.is_finite() && v > 0.0)
+            {
+                bail!("{name} {v} must be a positive number");
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One window of a run, as `trajectory.json` lists it.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct WindowEntry {
+    /// The query.
+    #[serde(default)]
+    pub query: String,
+    /// The object's centre.
+    pub object_centre: [f64; 3],
+}
+
+#[derive(Debug, Deserialize)]
+struct SampledPose {
+    pose: [f64; 6],
+}
+
+/// What paths need of a `trajectory.json` besides the model and weights.
+#[derive(Debug, Deserialize)]
+struct TrajectoryExtras {
+    output_intrinsics: Intrinsics,
+    #[serde(default)]
+    windows: Vec<WindowEntry>,
+    #[serde(default)]
+    poses: Vec<SampledPose>,
+}
+
+/// A run's `trajectory.json`, read back.
+#[derive(Debug, Clone)]
+pub struct RunTrajectory {
+    /// The file.
+    pub file: PathBuf,
+    /// Model and weights.
+    pub record: TrajectoryRecord,
+    /// The run's frame camera.
+    pub output_intrinsics: Intrinsics,
+    /// The run's query windows.
+    pub windows: Vec<WindowEntry>,
+    /// The densely sampled poses the file holds (for a custom model, whose basis needs its
+    /// registry).
+    pub sampled: Vec<[f64; 6]>,
+    /// The run's frame rate and frame count (its `config.toml` beside the file), if known.
+    pub run_frames: Option<(f64, usize)>,
+}
+
+impl RunTrajectory {
+    /// Reads `path`: a run folder (its `trajectory.json`) or a `trajectory.json`.
+    pub fn read(path: &Path) -> Result<Self> {
+        let file = if path.is_dir() {
+            path.join("trajectory.json")
+        } else {
+            path.to_path_buf()
+        };
+        let text = std::fs::read_to_string(&file)
+            .with_context(|| format!("cannot read the trajectory {}", file.display()))?;
+        Self::parse(&file, &text)
+    }
+
+    fn parse(file: &Path, text: &str) -> Result<Self> {
+        let record: TrajectoryRecord = serde_json::from_str(text).with_context(|| {
+            format!(
+                "{} is not a trajectory.json (needs `model` and `weights`)",
+                file.display()
+            )
+        })?;
+        let extras: TrajectoryExtras = serde_json::from_str(text).with_context(|| {
+            format!("{}: no frame camera (`output_intrinsics`)", file.display())
+        })?;
+        let folder = file.parent().unwrap_or(Path::new("."));
+        Ok(Self {
+            file: file.to_path_buf(),
+            record,
+            output_intrinsics: extras.output_intrinsics,
+            windows: extras.windows,
+            sampled: extras.poses.into_iter().map(|p| p.pose).collect(),
+            run_frames: run_frames(folder),
+        })
+    }
+
+    /// Whether the model is built in (so it can be evaluated at any time).
+    pub fn evaluable(&self) -> bool {
+        self.record.model.validate().is_ok()
+    }
+
+    /// Φ(t) = Ψ(t)·W on the host at `times` (`None` for a custom model).
+    pub fn poses_at(&self, times: &[f64]) -> Option<Vec<[f64; 6]>> {
+        if !self.evaluable() {
+            return None;
+        }
+        let k = self.record.model.count();
+        Some(
+            self.record
+                .model
+                .matrix(times)
+                .chunks_exact(k)
+                .map(|row| {
+                    let mut pose = [0.0; 6];
+                    for (psi, w) in row.iter().zip(&self.record.weights) {
+                        for (p, wj) in pose.iter_mut().zip(w) {
+                            *p += psi * wj;
+                        }
+                    }
+                    pose
+                })
+                .collect(),
+        )
+    }
+
+    /// The frames `request` asks for: fps × seconds evenly spaced times over [0, 1] (by
+    /// default the run's own frames: its `output.fps` and frame count), through the run's
+    /// frame camera rescaled. A custom model gives the sampled poses instead.
+    pub fn frames(&self, request: &FrameRequest) -> Result<PathFrames> {
+        request.check()?;
+        let fps = request
+            .fps
+            .or(self.run_frames.map(|r| r.0))
+            .unwrap_or(DEFAULT_FPS);
+        let count = match (request.seconds, self.run_frames) {
+            (Some(s), _) => ((fps * s).round() as usize).max(1),
+            (None, Some((_, frames))) => frames,
+            (None, None) => ((fps * DEFAULT_SECONDS).round() as usize).max(1),
+        };
+        let camera = resize(&self.output_intrinsics, request.width, request.height)?;
+        let (times, poses) = match self.poses_at(&uniform_times(count)) {
+            Some(poses) => (uniform_times(count), poses),
+            None => {
+                tracing::warn!(
+                    "model {} is not built in: using the {} poses sampled in {}",
+                    self.record.model.name(),
+                    self.sampled.len(),
+                    self.file.display()
+                );
+                (uniform_times(self.sampled.len()), self.sampled.clone())
+            }
+        };
+        if poses.is_empty() {
+            bail!("{}: no poses", self.file.display());
+        }
+        Ok(PathFrames {
+            cameras: vec![camera; poses.len()],
+            times,
+            poses,
+            fps,
+        })
+    }
+
+    /// The object centre of each window.
+    pub fn object_centres(&self) -> Vec<[f64; 3]> {
+        self.windows.iter().map(|w| w.object_centre).collect()
+    }
+}
+
+/// The frame rate and frame count of the run whose `config.toml` is in `folder`.
+fn run_frames(folder: &Path) -> Option<(f64, usize)> {
+    let text = std::fs::read_to_string(folder.join("config.toml")).ok()?;
+    let config: toml::Value = toml::from_str(&text).ok()?;
+    let output = config.get("output")?;
+    let fps = output
+        .get("fps")
+        .and_then(|v| v.as_float())
+        .unwrap_or(DEFAULT_FPS);
+    let frames = match output.get("seconds").and_then(|v| v.as_float()) {
+        Some(seconds) => (fps * seconds).round() as usize,
+        None => usize::try_from(output.get("frames")?.as_integer()?).ok()?,
+    };
+    (frames > 0).then_some((fps, frames))
+}
+
+/// A camera path file: ours or another tool's.
+#[derive(Debug, Clone)]
+pub enum PathFile {
+    /// A run's `trajectory.json`.
+    Trajectory(RunTrajectory),
+    /// Another tool's camera file.
+    Imported {
+        /// The file.
+        file: PathBuf,
+        /// Its format.
+        format: Format,
+        /// Its frames.
+        path: CameraPath,
+    },
+}
+
+impl PathFile {
+    /// Reads a run folder or `trajectory.json`, or a camera file of any format
+    /// `splatraj-report` reads (told apart by their contents).
+    pub fn read(path: &Path) -> Result<Self> {
+        let ours = path.is_dir() || {
+            let text = std::fs::read_to_string(path).unwrap_or_default();
+            serde_json::from_str::<serde_json::Value>(&text)
+                .is_ok_and(|v| v.get("model").is_some() && v.get("weights").is_some())
+        };
+        if ours {
+            return Ok(Self::Trajectory(RunTrajectory::read(path)?));
+        }
+        let (format, camera_path) = splatraj_report::read_camera_path(path)?;
+        Ok(Self::Imported {
+            file: path.to_path_buf(),
+            format,
+            path: camera_path,
+        })
+    }
+
+    /// What the file is, in words.
+    pub fn describe(&self) -> String {
+        match self {
+            Self::Trajectory(t) => format!(
+                "{} (model {}, {} windows)",
+                t.file.display(),
+                t.record.model.name(),
+                t.windows.len()
+            ),
+            Self::Imported { file, format, path } => format!(
+                "{} ({format}, {} frames)",
+                file.display(),
+                path.frames.len()
+            ),
+        }
+    }
+
+    /// The frames to render. Another tool's file keeps its own frames, spread evenly over
+    /// t ∈ [0, 1] (as `[start] trajectory` spreads them), at its own frame rate unless
+    /// `request.fps` says; `request.seconds` applies to a `trajectory.json` only.
+    pub fn frames(&self, request: &FrameRequest) -> Result<PathFrames> {
+        match self {
+            Self::Trajectory(t) => t.frames(request),
+            Self::Imported { file, path, .. } => imported_frames(file, path, request),
+        }
+    }
+}
+
+fn imported_frames(file: &Path, path: &CameraPath, request: &FrameRequest) -> Result<PathFrames> {
+    request.check()?;
+    if path.frames.is_empty() {
+        bail!("{}: no frames", file.display());
+    }
+    let cameras = path
+        .frames
+        .iter()
+        .enumerate()
+        .map(|(i, f)| {
+            let p = f.camera.with_context(|| {
+                format!("{}: frame {i} has no camera intrinsics", file.display())
+            })?;
+            let k = Intrinsics {
+                fx: p.fx,
+                fy: p.fy,
+                cx: p.cx,
+                cy: p.cy,
+                width: p.width,
+                height: p.height,
+            };
+            resize(&k, request.width, request.height)
+                .with_context(|| format!("{}: frame {i}", file.display()))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(PathFrames {
+        times: uniform_times(path.frames.len()),
+        poses: path.phis(),
+        cameras,
+        fps: request.fps.or(path.fps).unwrap_or(DEFAULT_FPS),
+    })
+}
+
+/// The files of `frames` in `format`. SuperSplat's look-at targets sit at the distance of the
+/// object each frame's window shows (`object_centres`, one per window; 1 scene unit without).
+pub fn export_files(
+    frames: &PathFrames,
+    object_centres: &[[f64; 3]],
+    format: Format,
+) -> Result<Vec<(&'static str, String)>> {
+    let focus = if object_centres.is_empty() {
+        Focus::Distance(1.0)
+    } else {
+        Focus::PerFrame(
+            frames
+                .times
+                .iter()
+                .zip(&frames.poses)
+                .map(|(&t, pose)| {
+                    let o = object_centres[window_of(t, object_centres.len())];
+                    let d = (0..3).map(|k| (o[k] - pose[3 + k]).powi(2)).sum::<f64>();
+                    d.sqrt().max(1e-3)
+                })
+                .collect(),
+        )
+    };
+    let options = ExportOptions {
+        fps: frames.fps,
+        focus,
+        ..ExportOptions::default()
+    };
+    Ok(splatraj_report::export(
+        &frames.camera_path(),
+        format,
+        &options,
+    )?)
+}
+
+/// Writes `frames` in `format` into `dir` (created if missing), each file whole or not at all;
+/// returns the file names.
+pub fn write_export(
+    dir: &Path,
+    frames: &PathFrames,
+    object_centres: &[[f64; 3]],
+    format: Format,
+) -> Result<Vec<&'static str>> {
+    let files = export_files(frames, object_centres, format)?;
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
+    for (name, contents) in &files {
+        write_bytes(&dir.join(name), contents.as_bytes())?;
+    }
+    Ok(files.iter().map(|f| f.0).collect())
+}
+
+/// Writes `frames` in every format into `exports/<format>/` under `run_dir`.
+pub fn write_all_exports(
+    run_dir: &Path,
+    frames: &PathFrames,
+    object_centres: &[[f64; 3]],
+) -> Result<()> {
+    for format in Format::ALL {
+        let dir = run_dir.join("exports").join(format.name());
+        write_export(&dir, frames, object_centres, format)
+            .with_context(|| format!("exporting {format}"))?;
+    }
+    Ok(())
+}

@@ -1,0 +1,81 @@
+//! The outputs of a finished trajectory that other tools read: frames and `video.mp4`, the
+//! camera path in every interchange format (`exports/<format>/`), and `report.html`. The
+//! frames, the video and the exports share one set of times and poses
+//! ([`Experiment::output_frames`]), so an exported path rendered back gives the run's frames.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+use splatraj_traj::trajectory::{Trajectory, uniform_times};
+
+use crate::camera_paths::{PathFrames, write_all_exports};
+use crate::experiment::Experiment;
+use crate::path_render::{PathObject, PathRender, RenderedPath, Video, render_path};
+use crate::run_report::write_run_report;
+
+impl Experiment {
+    /// The frames of the run's output: `output.frame_count()` evenly spaced times over [0, 1],
+    /// the trajectory's poses there, the output camera, at `output.fps`.
+    pub fn output_frames(&self, trajectory: &Trajectory) -> Result<PathFrames> {
+        let times = uniform_times(self.config.output.frame_count());
+        let poses = trajectory.poses_at(&times);
+        Ok(PathFrames {
+            cameras: vec![self.output_intrinsics()?; times.len()],
+            times,
+            poses,
+            fps: self.config.output.fps,
+        })
+    }
+
+    /// Each window's object, for path renders.
+    pub fn path_objects(&self) -> Vec<PathObject<'_>> {
+        self.windows
+            .iter()
+            .map(|w| PathObject {
+                mask: &w.mask,
+                target_ratio: w.context.target_ratio,
+            })
+            .collect()
+    }
+
+    /// Renders `frames` into the run folder `dir`: `frames/`, `frame_metrics.csv` and
+    /// `video.mp4` (nothing when there are no frames); `progress` is told after each frame.
+    pub fn write_output_frames(
+        &self,
+        frames: &PathFrames,
+        dir: &Path,
+        progress: &mut dyn FnMut(usize),
+    ) -> Result<Option<RenderedPath>> {
+        if frames.poses.is_empty() {
+            return Ok(None);
+        }
+        let job = PathRender {
+            frames,
+            objects: self.path_objects(),
+            overlay: self.config.output.mask_overlay,
+            rasterizer: self.config.rasterizer,
+            video: Video::Mp4,
+        };
+        Ok(Some(render_path(&self.plain_scene(), &job, dir, progress)?))
+    }
+
+    /// Writes `frames` in every interchange format into `exports/<format>/` under `dir`
+    /// (nothing when there are no frames).
+    pub fn write_exports(&self, frames: &PathFrames, dir: &Path) -> Result<()> {
+        if frames.poses.is_empty() {
+            return Ok(());
+        }
+        let centres: Vec<[f64; 3]> = self
+            .windows
+            .iter()
+            .map(|w| w.context.object_centre)
+            .collect();
+        write_all_exports(dir, frames, &centres)
+    }
+
+    /// Writes `report.html` into the run folder `dir` from its files, with this scene under
+    /// the path views; call it last (it reads `metrics.json`).
+    pub fn write_report(&self, dir: &Path) -> Result<PathBuf> {
+        write_run_report(dir, Some(&self.scene))
+    }
+}

@@ -1,0 +1,443 @@
+//! `report.html` of a run folder, built from the folder's files (and the scene, for the views of
+//! the path): what `splatraj run` writes last and `splatraj report RUN_DIR` rebuilds.
+//!
+//! Read: `config.toml` (shown, and names the scene), `metrics.json` (summary and per-window
+//! table: every number it holds, so new metrics show up without code here),
+//! `trajectory.json` (windows, object centres, world up and the sampled path),
+//! `history.csv` (each cost term summed over the windows), `frame_metrics.csv` (TCE, TRE,
+//! coverage along t), `frames/` (keyframes) and `video.mp4`. A missing file leaves its section
+//! empty with a note, so a stopped or older run still gets a page.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use serde_json::Value;
+use splatraj_report::CameraPose;
+use splatraj_report::report::{
+    CostHistory, FrameMetrics, INLINE_VIDEO_BYTES, Keyframe, PathSample, RunReport, SceneView,
+    Table, VideoSource, Window,
+};
+use splatraj_scene::demo::{DemoConfig, demo_scene};
+use splatraj_scene::{InvalidPolicy, ReadOptions, Scene, read_scene};
+use splatraj_traj::optimise::sampling::window_of;
+use splatraj_traj::trajectory::uniform_times;
+
+use crate::outputs::write_bytes;
+use crate::path_render::{FRAME_METRICS_FILE, VIDEO_FILE, frame_name};
+
+/// The report's file name in a run folder.
+pub const REPORT_FILE: &str = "report.html";
+
+/// Keyframes shown per window.
+const KEYFRAMES_PER_WINDOW: usize = 5;
+
+/// Scene points drawn in each view (more makes the page heavy without showing more).
+const VIEW_POINTS: usize = 6000;
+
+/// Gaussians fainter than this are left out of the views (floaters and haze).
+const VIEW_MIN_OPACITY: f32 = 0.3;
+
+/// Writes `report.html` into the run folder `dir` (whole or not at all); `scene` draws the
+/// points under the path views. Returns the file.
+pub fn write_run_report(dir: &Path, scene: Option<&Scene>) -> Result<PathBuf> {
+    let report = run_report(dir, scene)?;
+    let html = report.to_html()?;
+    let path = dir.join(REPORT_FILE);
+    write_bytes(&path, html.as_bytes())?;
+    Ok(path)
+}
+
+/// What `report.html` shows of the run folder `dir`.
+pub fn run_report(dir: &Path, scene: Option<&Scene>) -> Result<RunReport> {
+    if !dir.is_dir() {
+        bail!("{} is not a run folder", dir.display());
+    }
+    let config = std::fs::read_to_string(dir.join("config.toml")).unwrap_or_default();
+    let metrics = read_json(&dir.join("metrics.json"))?;
+    let trajectory = read_json(&dir.join("trajectory.json"))?;
+    let title = toml::from_str::<toml::Value>(&config)
+        .ok()
+        .and_then(|c| c.get("name")?.as_str().map(String::from))
+        .unwrap_or_else(|| "run".into());
+    let windows = windows_of(&trajectory);
+    let along = read_frame_metrics(&dir.join(FRAME_METRICS_FILE))?;
+    let video = video_of(dir)?;
+    Ok(RunReport {
+        title,
+        folder: dir.display().to_string(),
+        summary: summary_of(&metrics),
+        metrics: window_table(&metrics),
+        keyframes: keyframes(dir, &along, windows.len())?,
+        history: read_history(&dir.join("history.csv"))?,
+        view: scene.map(|s| scene_view(s, &trajectory)),
+        along,
+        windows,
+        video,
+        config,
+    })
+}
+
+fn read_json(path: &Path) -> Result<Value> {
+    match std::fs::read_to_string(path) {
+        Ok(text) => serde_json::from_str(&text)
+            .with_context(|| format!("{} is not valid JSON", path.display())),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Value::Null),
+        Err(e) => Err(e).with_context(|| format!("cannot read {}", path.display())),
+    }
+}
+
+/// A JSON scalar as table text (numbers to 4 significant places).
+fn cell(value: &Value) -> Option<String> {
+    match value {
+        Value::Number(n) => n.as_f64().map(|v| {
+            if v.fract() == 0.0 && v.abs() < 1e9 {
+                format!("{v}")
+            } else {
+                format!("{v:.4}")
+            }
+        }),
+        Value::Bool(b) => Some(b.to_string()),
+        Value::String(s) => Some(s.clone()),
+        Value::Null => Some("–".into()),
+        _ => None,
+    }
+}
+
+fn summary_of(metrics: &Value) -> Vec<(String, String)> {
+    let mut rows = Vec::new();
+    if let Some(run) = metrics.get("run").and_then(Value::as_object) {
+        rows.extend(
+            run.iter()
+                .filter_map(|(k, v)| Some((k.replace('_', " "), cell(v)?))),
+        );
+    }
+    if let Some(ldj) = metrics.get("ldj").and_then(Value::as_object) {
+        rows.extend(
+            ldj.iter()
+                .filter_map(|(k, v)| Some((format!("LDJ {k}"), cell(v)?))),
+        );
+    }
+    rows
+}
+
+/// Every scalar of every window of `metrics.json`, one column per key (in first-seen order).
+fn window_table(metrics: &Value) -> Table {
+    let windows: Vec<&serde_json::Map<String, Value>> = metrics
+        .get("windows")
+        .and_then(Value::as_array)
+        .map(|a| a.iter().filter_map(Value::as_object).collect())
+        .unwrap_or_default();
+    // The usual columns first, in reading order; any others after them.
+    let mut header: Vec<String> = [
+        "window",
+        "name",
+        "samples",
+        "tce",
+        "tre",
+        "iou",
+        "coverage",
+        "visible_fraction",
+        "visible",
+        "tce_max",
+        "tre_max",
+    ]
+    .into_iter()
+    .filter(|k| windows.iter().any(|w| w.contains_key(*k)))
+    .map(String::from)
+    .collect();
+    for w in &windows {
+        for (k, v) in w.iter() {
+            if cell(v).is_some() && !header.contains(k) {
+                header.push(k.clone());
+            }
+        }
+    }
+    let rows = windows
+        .iter()
+        .map(|w| {
+            header
+                .iter()
+                .map(|k| w.get(k).and_then(cell).unwrap_or_default())
+                .collect()
+        })
+        .collect();
+    Table { header, rows }
+}
+
+fn windows_of(trajectory: &Value) -> Vec<Window> {
+    let list = trajectory.get("windows").and_then(Value::as_array);
+    list.map(|a| {
+        a.iter()
+            .map(|w| Window {
+                query: w["query"].as_str().unwrap_or_default().to_string(),
+                start: w["start"].as_f64().unwrap_or(0.0),
+                end: w["end"].as_f64().unwrap_or(1.0),
+                target_ratio: w["target_ratio"].as_f64().unwrap_or(f64::NAN),
+            })
+            .collect()
+    })
+    .unwrap_or_default()
+}
+
+fn read_csv(path: &Path) -> Result<Option<(Vec<String>, Vec<Vec<String>>)>> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(e).with_context(|| format!("cannot read {}", path.display())),
+    };
+    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
+    let header: Vec<String> = match lines.next() {
+        Some(h) => h.split(',').map(|s| s.trim().to_string()).collect(),
+        None => return Ok(None),
+    };
+    let rows = lines
+        .map(|l| l.split(',').map(|s| s.trim().to_string()).collect())
+        .collect();
+    Ok(Some((header, rows)))
+}
+
+fn number(path: &Path, line: usize, column: &str, text: Option<&String>) -> Result<f64> {
+    let text = text.with_context(|| format!("{}: line {line}: no `{column}`", path.display()))?;
+    text.parse().with_context(|| {
+        format!(
+            "{}: line {line}: `{column}` = {text:?} is not a number",
+            path.display()
+        )
+    })
+}
+
+fn read_frame_metrics(path: &Path) -> Result<Vec<FrameMetrics>> {
+    let Some((header, rows)) = read_csv(path)? else {
+        return Ok(Vec::new());
+    };
+    let column = |name: &str| {
+        header
+            .iter()
+            .position(|h| h == name)
+            .with_context(|| format!("{}: no `{name}` column", path.display()))
+    };
+    let [t, window, tce, tre, coverage] = [
+        column("t")?,
+        column("window")?,
+        column("tce")?,
+        column("tre")?,
+        column("coverage")?,
+    ];
+    rows.iter()
+        .enumerate()
+        .map(|(i, row)| {
+            let get = |c: usize, name: &str| number(path, i + 2, name, row.get(c));
+            Ok(FrameMetrics {
+                t: get(t, "t")?,
+                window: get(window, "window")? as usize,
+                tce: get(tce, "tce")?,
+                tre: get(tre, "tre")?,
+                coverage: get(coverage, "coverage")?,
+            })
+        })
+        .collect()
+}
+
+/// `history.csv` as one series per cost term (its `q<i>_<term>` columns summed) and the total.
+fn read_history(path: &Path) -> Result<Option<CostHistory>> {
+    let Some((header, rows)) = read_csv(path)? else {
+        return Ok(None);
+    };
+    let mut terms: Vec<(String, Vec<usize>)> = Vec::new();
+    for (c, name) in header.iter().enumerate() {
+        let Some(term) = name
+            .strip_prefix('q')
+            .and_then(|rest| rest.split_once('_'))
+            .filter(|(i, _)| i.parse::<usize>().is_ok())
+            .map(|(_, term)| term.to_string())
+        else {
+            continue;
+        };
+        match terms.iter_mut().find(|(t, _)| *t == term) {
+            Some((_, columns)) => columns.push(c),
+            None => terms.push((term, vec![c])),
+        }
+    }
+    if let Some(c) = header.iter().position(|h| h == "total") {
+        terms.push(("total".into(), vec![c]));
+    }
+    let mut series: Vec<(String, Vec<f64>)> =
+        terms.iter().map(|(t, _)| (t.clone(), Vec::new())).collect();
+    for (i, row) in rows.iter().enumerate() {
+        for ((term, columns), (_, values)) in terms.iter().zip(&mut series) {
+            let mut sum = 0.0;
+            for &c in columns {
+                sum += number(path, i + 2, term, row.get(c))?;
+            }
+            values.push(sum);
+        }
+    }
+    Ok(Some(CostHistory {
+        steps: (0..rows.len()).map(|s| s as f64).collect(),
+        terms: series,
+    }))
+}
+
+/// Up to [`KEYFRAMES_PER_WINDOW`] frames of each window, evenly spread over its frames.
+fn keyframes(dir: &Path, along: &[FrameMetrics], windows: usize) -> Result<Vec<Vec<Keyframe>>> {
+    let frames_dir = dir.join("frames");
+    let count = (0..)
+        .take_while(|&i| frames_dir.join(frame_name(i)).is_file())
+        .count();
+    // Frame times: from the per-frame metrics, else evenly spaced as the run renders them.
+    let times: Vec<f64> = if along.len() == count {
+        along.iter().map(|f| f.t).collect()
+    } else {
+        uniform_times(count)
+    };
+    let mut strips = vec![Vec::new(); windows.max(1)];
+    for (w, strip) in strips.iter_mut().enumerate() {
+        let mine: Vec<usize> = (0..count)
+            .filter(|&i| window_of(times[i], windows.max(1)) == w)
+            .collect();
+        let take = mine.len().min(KEYFRAMES_PER_WINDOW);
+        for k in 0..take {
+            let i = mine[if take == 1 {
+                mine.len() / 2
+            } else {
+                k * (mine.len() - 1) / (take - 1)
+            }];
+            let name = frame_name(i);
+            let path = frames_dir.join(&name);
+            strip.push(Keyframe {
+                t: times[i],
+                png: std::fs::read(&path)
+                    .with_context(|| format!("cannot read {}", path.display()))?,
+                name,
+            });
+        }
+    }
+    Ok(strips)
+}
+
+fn video_of(dir: &Path) -> Result<Option<VideoSource>> {
+    let path = dir.join(VIDEO_FILE);
+    let Ok(meta) = std::fs::metadata(&path) else {
+        return Ok(None);
+    };
+    Ok(Some(if meta.len() as usize <= INLINE_VIDEO_BYTES {
+        VideoSource::Inline(
+            std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?,
+        )
+    } else {
+        VideoSource::Link(VIDEO_FILE.into())
+    }))
+}
+
+/// The scene's opaque Gaussians (an even sample), the sampled path and the objects.
+fn scene_view(scene: &Scene, trajectory: &Value) -> SceneView {
+    let opaque: Vec<usize> = (0..scene.len())
+        .filter(|&i| scene.opacities[i] >= VIEW_MIN_OPACITY)
+        .collect();
+    let stride = opaque.len().div_ceil(VIEW_POINTS).max(1);
+    let points = opaque
+        .iter()
+        .step_by(stride)
+        .map(|&i| {
+            let colour = scene
+                .base_color(i)
+                .map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8);
+            (scene.means[i], colour)
+        })
+        .collect();
+    let path = trajectory
+        .get("poses")
+        .and_then(Value::as_array)
+        .map(|poses| {
+            poses
+                .iter()
+                .filter_map(|p| {
+                    let phi: [f64; 6] = serde_json::from_value(p.get("pose")?.clone()).ok()?;
+                    let camera = CameraPose::from_phi(phi);
+                    Some(PathSample {
+                        centre: camera.centre.to_array(),
+                        forward: camera.forward().to_array(),
+                        window: p.get("window")?.as_u64()? as usize,
+                    })
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let objects = trajectory
+        .get("windows")
+        .and_then(Value::as_array)
+        .map(|windows| {
+            windows
+                .iter()
+                .filter_map(|w| {
+                    let centre: [f64; 3] =
+                        serde_json::from_value(w.get("object_centre")?.clone()).ok()?;
+                    Some((w["query"].as_str().unwrap_or_default().to_string(), centre))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let up = trajectory
+        .get("world_up")
+        .and_then(|u| serde_json::from_value(u.clone()).ok())
+        .unwrap_or([0.0, 0.0, 1.0]);
+    SceneView {
+        up,
+        points,
+        path,
+        objects,
+    }
+}
+
+/// The scene a run folder's `config.toml` names: the demo room is made again; a file is looked
+/// for where the run found it (`metrics.json`'s `run.scene`), then as the config names it from
+/// the working directory and from the run folder.
+pub fn run_scene(dir: &Path) -> Result<Scene> {
+    let text = std::fs::read_to_string(dir.join("config.toml"))
+        .with_context(|| format!("cannot read {}", dir.join("config.toml").display()))?;
+    let config: toml::Value = toml::from_str(&text)
+        .with_context(|| format!("{}: not valid TOML", dir.join("config.toml").display()))?;
+    let scene = config.get("scene").context("config.toml has no [scene]")?;
+    if let Some(demo) = scene.get("demo") {
+        let defaults = DemoConfig::default();
+        let number = |key: &str, default: u64| {
+            demo.get(key)
+                .and_then(toml::Value::as_integer)
+                .map_or(default, |v| v as u64)
+        };
+        return Ok(demo_scene(&DemoConfig {
+            seed: number("seed", defaults.seed),
+            gaussians: number("gaussians", defaults.gaussians as u64) as usize,
+        })?);
+    }
+    let named = scene
+        .get("path")
+        .and_then(toml::Value::as_str)
+        .context("config.toml: [scene] names neither `path` nor `demo`")?;
+    let run_saw = read_json(&dir.join("metrics.json"))?["run"]["scene"]
+        .as_str()
+        .map(PathBuf::from);
+    let candidates: Vec<PathBuf> = run_saw
+        .into_iter()
+        .chain([PathBuf::from(named), dir.join(named)])
+        .collect();
+    let Some(found) = candidates.iter().find(|p| p.is_file()) else {
+        bail!(
+            "cannot find the run's scene {named:?} (looked at {}): give it with --scene",
+            candidates
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    };
+    let options = ReadOptions {
+        invalid: if scene.get("drop_invalid").and_then(toml::Value::as_bool) == Some(true) {
+            InvalidPolicy::Drop
+        } else {
+            InvalidPolicy::Reject
+        },
+        labels: None,
+    };
+    Ok(read_scene(found, &options)?.scene)
+}
