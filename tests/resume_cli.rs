@@ -50,16 +50,21 @@ fn wait_for_checkpoint(runs: &Path, child: &mut Child) -> PathBuf {
         if let Some(status) = child.try_wait().unwrap() {
             panic!("the run ended ({status}) before it was stopped");
         }
-        let found = std::fs::read_dir(runs.join("tiny")).ok().and_then(|entries| {
-            entries
-                .flatten()
-                .map(|e| e.path())
-                .find(|p| p.join("checkpoint.json").exists())
-        });
+        let found = std::fs::read_dir(runs.join("tiny"))
+            .ok()
+            .and_then(|entries| {
+                entries
+                    .flatten()
+                    .map(|e| e.path())
+                    .find(|p| p.join("checkpoint.json").exists())
+            });
         if let Some(dir) = found {
             return dir;
         }
-        assert!(started.elapsed() < Duration::from_secs(120), "no checkpoint");
+        assert!(
+            started.elapsed() < Duration::from_secs(120),
+            "no checkpoint"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
 }
@@ -72,7 +77,10 @@ fn no_partial_files(dir: &Path) {
     for folder in [dir.to_path_buf(), dir.join("frames")] {
         for entry in std::fs::read_dir(folder).into_iter().flatten().flatten() {
             let name = entry.file_name().to_string_lossy().into_owned();
-            assert!(!name.ends_with(".partial"), "left-over temporary file {name}");
+            assert!(
+                !name.ends_with(".partial"),
+                "left-over temporary file {name}"
+            );
         }
     }
 }
@@ -92,7 +100,7 @@ fn a_killed_run_leaves_its_best_trajectory_and_resume_finishes_it() {
     assert!(record.weights.iter().flatten().all(|v| v.is_finite()));
     let state: serde_json::Value = serde_json::from_str(&checkpoint).unwrap();
     let done = state["steps_done"].as_u64().unwrap() as usize;
-    assert!(done >= 1 && done < STEPS, "steps done {done}");
+    assert!((1..STEPS).contains(&done), "steps done {done}");
     assert!(!run.join("metrics.json").exists());
 
     let out = splatraj(&["run", "--resume", s(&run), "--quiet"]);
@@ -108,13 +116,20 @@ fn a_killed_run_leaves_its_best_trajectory_and_resume_finishes_it() {
         serde_json::from_str(&std::fs::read_to_string(run.join("trajectory.json")).unwrap())
             .unwrap();
     assert_eq!(finished.weights.len(), record.weights.len());
-    assert!(!run.join("checkpoint.json").exists(), "a finished run keeps no checkpoint");
+    assert!(
+        !run.join("checkpoint.json").exists(),
+        "a finished run keeps no checkpoint"
+    );
     no_partial_files(&run);
 
     // A finished run is not resumed again.
     let again = splatraj(&["run", "--resume", s(&run), "--quiet"]);
     assert!(!again.status.success());
-    assert!(stderr(&again).contains("already finished"), "{}", stderr(&again));
+    assert!(
+        stderr(&again).contains("already finished"),
+        "{}",
+        stderr(&again)
+    );
 }
 
 #[test]
@@ -123,7 +138,13 @@ fn ctrl_c_writes_the_best_so_far_and_exits_130() {
     let mut child = spawn_run(&config);
     let run = wait_for_checkpoint(&dir.path().join("runs"), &mut child);
     let pid = child.id().to_string();
-    assert!(Command::new("kill").args(["-INT", &pid]).status().unwrap().success());
+    assert!(
+        Command::new("kill")
+            .args(["-INT", &pid])
+            .status()
+            .unwrap()
+            .success()
+    );
     let output = child.wait_with_output().unwrap();
     assert_eq!(output.status.code(), Some(130), "{}", stderr(&output));
     assert!(stderr(&output).contains("--resume"), "{}", stderr(&output));
@@ -146,7 +167,12 @@ fn a_time_limit_is_recorded_as_such() {
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let runs = dir.path().join("runs").join("tiny");
-    let run = std::fs::read_dir(runs).unwrap().next().unwrap().unwrap().path();
+    let run = std::fs::read_dir(runs)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
     let metrics = json(&run.join("metrics.json"));
     assert_eq!(metrics["run"]["stop"], "time_limit");
     assert!((metrics["run"]["iterations_run"].as_u64().unwrap() as usize) < STEPS);

@@ -815,7 +815,10 @@ pub fn apply_override(root: &mut toml::Table, assignment: &str) -> Result<String
     }
     let value: toml::Value = match toml::from_str::<toml::Table>(&format!("v = {raw}")) {
         Ok(mut t) => t.remove("v").expect("just parsed"),
-        Err(e) if raw.starts_with(['[', '{', '"', '\'', '+', '-', '.']) || raw.starts_with(|c: char| c.is_ascii_digit()) => {
+        Err(e)
+            if raw.starts_with(['[', '{', '"', '\'', '+', '-', '.'])
+                || raw.starts_with(|c: char| c.is_ascii_digit()) =>
+        {
             bail!(
                 "--set {assignment}: `{raw}` is not a valid TOML value ({}; a string needs \
                  quotes: {key}='\"{raw}\"')",

@@ -98,14 +98,20 @@ impl MemoryPlan {
 
     /// The largest stage.
     pub fn peak(&self) -> Option<&Stage> {
-        self.stages.iter().max_by(|a, b| a.bytes.total_cmp(&b.bytes))
+        self.stages
+            .iter()
+            .max_by(|a, b| a.bytes.total_cmp(&b.bytes))
     }
 
     /// Errors when a stage exceeds `limit`, naming the stage, the estimate and the limit, and
     /// how to raise it (`raise`: the key or option that does).
     pub fn check(&self, limit: MemoryLimit, raise: &str) -> Result<()> {
         if let Some(stage) = self.peak()
-            && !(stage.bytes <= limit.bytes)
+            // NaN (a size beyond any float) does not fit either.
+            && !matches!(
+                stage.bytes.partial_cmp(&limit.bytes),
+                Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
+            )
         {
             let source = if limit.given {
                 "the limit given".to_string()

@@ -98,7 +98,8 @@ impl Tracker<'_> {
         state.steps_done = steps_before + s.step + 1;
         if let Some(weights) = &s.new_best {
             state.restart_best = Some((weights.clone(), s.total));
-            if !(state.best_total <= s.total) {
+            // The first finite loss, or a lower one (best_total starts as NaN).
+            if state.best_total.is_nan() || s.total < state.best_total {
                 state.model = self.model.clone();
                 state.weights = weights.clone();
                 state.best_total = s.total;
@@ -153,20 +154,24 @@ impl Experiment {
         let first_restart = options.resume.map_or(0, |c| c.restart);
         let mut tracker = Tracker {
             checkpointer: options.checkpoint_dir.map(Checkpointer::new),
-            state: options.resume.cloned().map(|c| Checkpoint { steps, ..c }).unwrap_or_else(|| Checkpoint {
-                model: model.clone(),
-                weights: Vec::new(),
-                best_total: f64::NAN,
-                best_restart: 0,
-                best_step: 0,
-                restart: 0,
-                steps_done: 0,
-                restart_best: None,
-                restarts: starts.len(),
-                steps,
-                elapsed_s: 0.0,
-                base_dir,
-            }),
+            state: options
+                .resume
+                .cloned()
+                .map(|c| Checkpoint { steps, ..c })
+                .unwrap_or_else(|| Checkpoint {
+                    model: model.clone(),
+                    weights: Vec::new(),
+                    best_total: f64::NAN,
+                    best_restart: 0,
+                    best_step: 0,
+                    restart: 0,
+                    steps_done: 0,
+                    restart_best: None,
+                    restarts: starts.len(),
+                    steps,
+                    elapsed_s: 0.0,
+                    base_dir,
+                }),
             model: &model,
         };
         let elapsed_before = tracker.state.elapsed_s;

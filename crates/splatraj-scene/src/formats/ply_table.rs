@@ -176,7 +176,13 @@ pub fn read_ply_tables(bytes: &[u8], path: &Path) -> Result<PlyFile> {
     let mut tables = Vec::with_capacity(header.elements.len());
     let mut line = header_lines;
     for def in header.elements.values() {
-        tables.push(read_element(&parser, &mut reader, &header, def, (path, line))?);
+        tables.push(read_element(
+            &parser,
+            &mut reader,
+            &header,
+            def,
+            (path, line),
+        )?);
         line += def.count;
     }
     let rest = &bytes[(reader.get_ref().position() as usize).min(bytes.len())..];
@@ -255,9 +261,9 @@ fn check_trailing(rest: &[u8], encoding: Encoding, last: &ElementDef, path: &Pat
             if extra.is_empty() {
                 return Ok(());
             }
-            let widths_fit = extra
-                .iter()
-                .all(|l| expected_tokens(&l.split_whitespace().collect::<Vec<_>>(), last).is_some());
+            let widths_fit = extra.iter().all(|l| {
+                expected_tokens(&l.split_whitespace().collect::<Vec<_>>(), last).is_some()
+            });
             if widths_fit {
                 return Err(more_rows(extra.len().to_string()));
             }
@@ -273,7 +279,7 @@ fn check_trailing(rest: &[u8], encoding: Encoding, last: &ElementDef, path: &Pat
                 return Ok(());
             }
             match binary_row_size(last) {
-                Some(size) if size > 0 && rest.len() % size == 0 => {
+                Some(size) if size > 0 && rest.len().is_multiple_of(size) => {
                     return Err(more_rows((rest.len() / size).to_string()));
                 }
                 _ => tracing::warn!(
