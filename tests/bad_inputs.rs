@@ -108,7 +108,12 @@ fn a_camera_of_ten_million_pixels_squared_is_refused_before_binning() {
     case.render_fails(
         &camera,
         &[],
-        &["`width` × `height`", "10000000 × 10000000", "PB", "--max-memory"],
+        &[
+            "`width` × `height`",
+            "10000000 × 10000000",
+            "PB",
+            "--max-memory",
+        ],
     );
 }
 
@@ -117,7 +122,11 @@ fn a_hundred_million_basis_functions_are_refused() {
     let case = Case::new();
     let config = case.config_with("[trajectory]\nkind = \"rbf\"\ncentres_per_window = 100000000");
     for extra in [&[][..], &["--check"][..]] {
-        case.run_fails(&config, extra, &["`trajectory`", "200000000 basis functions", "memory"]);
+        case.run_fails(
+            &config,
+            extra,
+            &["`trajectory`", "200000000 basis functions", "memory"],
+        );
     }
 }
 
@@ -145,7 +154,11 @@ fn an_output_width_of_a_hundred_thousand_is_refused_by_check_and_run_and_the_lim
     // 16 poses × 2 renders × 2.4e7 pixels × 48 bytes ≈ 37 GB, above an 8 GB limit.
     for extra in [&[][..], &["--check"][..]] {
         let args = [&set16[..], &["--max-memory", "8"], extra].concat();
-        case.run_fails(&case.config(), &args, &["`output.width`", "100000 × 240", "8.0 GB"]);
+        case.run_fails(
+            &case.config(),
+            &args,
+            &["`output.width`", "100000 × 240", "8.0 GB"],
+        );
     }
     let raised = [&set16[..], &["--max-memory", "1000", "--check"]].concat();
     let config = case.config();
@@ -162,7 +175,11 @@ fn an_output_width_of_a_hundred_thousand_is_refused_by_check_and_run_and_the_lim
 fn a_camera_pose_of_1e308_is_refused_and_no_image_is_written() {
     let case = Case::new();
     let camera = case.camera(|c| c["pose"] = serde_json::json!([1e308, 0, 0, 0, 0, 0]));
-    case.render_fails(&camera, &[], &["camera.json", "key `pose`", "rotation vector"]);
+    case.render_fails(
+        &camera,
+        &[],
+        &["camera.json", "key `pose`", "rotation vector"],
+    );
 }
 
 #[test]
@@ -186,7 +203,11 @@ fn a_world_to_camera_of_three_rows_is_refused_naming_the_key() {
 fn a_start_pose_of_1e308_is_refused_naming_the_key() {
     let case = Case::new();
     let set = "start.pose=[1e308, 0, 0, 0, 0, 0]";
-    case.run_fails(&case.config(), &["--set", set], &["`start.pose`", "rotation vector"]);
+    case.run_fails(
+        &case.config(),
+        &["--set", set],
+        &["`start.pose`", "rotation vector"],
+    );
 }
 
 // --- Files read strictly. ---
@@ -203,7 +224,10 @@ fn a_ply_with_a_property_declared_twice_is_refused_and_not_converted() {
     .unwrap();
     let converted = case.path("converted.ply");
     let out = splatraj(&["scene", "convert", s(&ply), s(&converted)]);
-    assert_clean_failure(&out, &["twice.ply", "property 'x'", "declared twice", "line 6"]);
+    assert_clean_failure(
+        &out,
+        &["twice.ply", "property 'x'", "declared twice", "line 6"],
+    );
     assert!(!converted.exists());
 }
 
@@ -220,7 +244,22 @@ fn a_scene_with_a_nan_names_the_drop_invalid_option() {
         bytes.extend(format!("property float {n}\n").as_bytes());
     }
     bytes.extend(b"end_header\n");
-    let values = [f32::NAN, 0., 0., 0.1, 0.2, 0.3, 0.5, -3., -3., -3., 1., 0., 0., 0.];
+    let values = [
+        f32::NAN,
+        0.,
+        0.,
+        0.1,
+        0.2,
+        0.3,
+        0.5,
+        -3.,
+        -3.,
+        -3.,
+        1.,
+        0.,
+        0.,
+        0.,
+    ];
     for v in values {
         bytes.extend(v.to_le_bytes());
     }
@@ -271,7 +310,11 @@ fn an_unknown_backend_lists_the_backends() {
     let text = std::fs::read_to_string(case.config()).unwrap();
     let config = case.path("variant.toml");
     std::fs::write(&config, format!("backend = \"cuda\"\n{text}")).unwrap();
-    case.run_fails(&config, &[], &["variant.toml", "`backend`", "cuda", "flex", "wgpu"]);
+    case.run_fails(
+        &config,
+        &[],
+        &["variant.toml", "`backend`", "cuda", "flex", "wgpu"],
+    );
 }
 
 #[test]

@@ -173,7 +173,11 @@ fn orient_by_origin(axis: Vec3, bounds: &crate::scene::Bounds) -> Option<Vec3> {
     let corners = [bounds.min, bounds.max];
     let half = (0..8)
         .map(|c| {
-            let corner = Vec3::new(corners[c & 1][0], corners[(c >> 1) & 1][1], corners[c >> 2][2]);
+            let corner = Vec3::new(
+                corners[c & 1][0],
+                corners[(c >> 1) & 1][1],
+                corners[c >> 2][2],
+            );
             (axis.dot(corner) - centre).abs()
         })
         .fold(0.0f32, f32::max);

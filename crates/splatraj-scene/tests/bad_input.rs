@@ -297,7 +297,11 @@ fn a_property_declared_twice_is_refused_naming_it_and_its_lines() {
         // The second declaration replaces an unused property, so the row size is unchanged and
         // a lenient reader would read shifted columns.
         let path = edited_header(dir.path(), |h| {
-            h.replacen("property float f_rest_44\n", &format!("property float {name}\n"), 1)
+            h.replacen(
+                "property float f_rest_44\n",
+                &format!("property float {name}\n"),
+                1,
+            )
         });
         let options = ReadOptions {
             invalid: InvalidPolicy::Drop,
@@ -305,7 +309,13 @@ fn a_property_declared_twice_is_refused_naming_it_and_its_lines() {
         };
         assert_mentions(
             &error_of(&path, &options),
-            &["edited.ply", &format!("property '{name}'"), "'vertex'", "declared twice", "line"],
+            &[
+                "edited.ply",
+                &format!("property '{name}'"),
+                "'vertex'",
+                "declared twice",
+                "line",
+            ],
         );
     }
 }
@@ -326,7 +336,13 @@ fn binary_data_longer_than_the_header_count_is_refused() {
 fn binary_trailing_bytes_that_are_not_rows_are_only_a_warning() {
     let dir = tempfile::tempdir().unwrap();
     let path = edited_fruit(dir.path(), |b, _| b.extend_from_slice(b"junk"));
-    assert_eq!(read_scene(&path, &ReadOptions::default()).unwrap().scene.len(), 4721);
+    assert_eq!(
+        read_scene(&path, &ReadOptions::default())
+            .unwrap()
+            .scene
+            .len(),
+        4721
+    );
 }
 
 #[test]
@@ -339,7 +355,13 @@ fn ascii_rows_beyond_the_header_count_are_refused() {
     );
     // The same rows with the right count read.
     let path = ascii_scene(dir.path(), 2, &[ROW, ROW]);
-    assert_eq!(read_scene(&path, &ReadOptions::default()).unwrap().scene.len(), 2);
+    assert_eq!(
+        read_scene(&path, &ReadOptions::default())
+            .unwrap()
+            .scene
+            .len(),
+        2
+    );
 }
 
 #[test]
@@ -350,6 +372,13 @@ fn an_ascii_row_with_an_extra_value_is_refused_naming_its_line() {
     // 3 header lines, 14 properties, end_header: the second row is line 20.
     assert_mentions(
         &error_of(&path, &ReadOptions::default()),
-        &["ascii.ply", "line 20", "'vertex'", "row 1", "15 values", "14"],
+        &[
+            "ascii.ply",
+            "line 20",
+            "'vertex'",
+            "row 1",
+            "15 values",
+            "14",
+        ],
     );
 }
