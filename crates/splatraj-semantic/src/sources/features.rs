@@ -67,14 +67,18 @@ impl FeaturesSource {
             (Err(e), _) => Err(e),
         }
     }
-}
 
-impl TargetSource for FeaturesSource {
-    fn kind(&self) -> &'static str {
-        "features"
-    }
-
-    fn relevancy(&self, scene: &Scene, query: &str) -> Result<Relevancy> {
+    /// The relevancy of each row of `values` (`[rows, dim]`, named `source` in errors) to
+    /// `query`: the scoring shared by every source whose features live in text-embedding
+    /// space, whatever their rows stand for (`row_kind`: "Gaussian", "leaf cluster").
+    pub fn score_rows(
+        &self,
+        query: &str,
+        source: &str,
+        row_kind: &str,
+        dim: usize,
+        values: &[f32],
+    ) -> Result<Vec<f32>> {
         if !(self.temperature.is_finite() && self.temperature > 0.0) {
             return Err(SemanticError::option(
                 "temperature",
@@ -87,37 +91,6 @@ impl TargetSource for FeaturesSource {
                 "at least one canonical negative phrase is needed: without one every relevancy \
                  is 1 and nothing can be told apart",
             ));
-        }
-        let (source, dim, rows, values): (String, usize, usize, &[f32]) =
-            match &self.features {
-                FeatureInput::Scene => {
-                    let f = scene.extras.features.as_ref().ok_or_else(|| {
-                        SemanticError::MissingData {
-                            source_kind: "features",
-                            detail:
-                                "the scene has no per-Gaussian features: give a feature sidecar \
-                             (.npy or .safetensors, [N, D]) or a scene with feature properties"
-                                    .to_string(),
-                        }
-                    })?;
-                    let rows = f.values.len().checked_div(f.dim).unwrap_or(0);
-                    (
-                        format!(
-                            "scene features ({})",
-                            f.names.first().map_or("", String::as_str)
-                        ),
-                        f.dim,
-                        rows,
-                        &f.values,
-                    )
-                }
-                FeatureInput::Sidecar(m) => (m.source.clone(), m.dim, m.rows, &m.values),
-            };
-        if rows != scene.len() {
-            return Err(SemanticError::Mismatch(format!(
-                "{source}: {rows} feature vectors for a scene of {} Gaussians",
-                scene.len()
-            )));
         }
         if dim != self.table.dim() {
             return Err(SemanticError::Mismatch(format!(
@@ -153,20 +126,69 @@ impl TargetSource for FeaturesSource {
             })
             .collect::<Result<Vec<_>>>()?;
         let tau = self.temperature;
-        let values = values
+        values
             .par_chunks_exact(dim)
             .enumerate()
             .map(|(i, f)| {
                 let f = vectors::unit(f, || {
-                    format!("the feature vector of Gaussian {i} in {source}")
+                    format!("the feature vector of {row_kind} {i} in {source}")
                 })?;
                 Ok(vectors::relevancy(&f, &q, &negatives, tau))
             })
-            .collect::<Result<Vec<f32>>>()?;
+            .collect()
+    }
+}
+
+impl TargetSource for FeaturesSource {
+    fn kind(&self) -> &'static str {
+        "features"
+    }
+
+    fn relevancy(&self, scene: &Scene, query: &str) -> Result<Relevancy> {
+        let (source, dim, values): (String, usize, &[f32]) = match &self.features {
+            FeatureInput::Scene => {
+                let f = scene_features(scene, "features")?;
+                (
+                    format!(
+                        "scene features ({})",
+                        f.names.first().map_or("", String::as_str)
+                    ),
+                    f.dim,
+                    &f.values,
+                )
+            }
+            FeatureInput::Sidecar(m) => (m.source.clone(), m.dim, &m.values),
+        };
+        let rows = values.len().checked_div(dim).unwrap_or(0);
+        if rows != scene.len() {
+            return Err(SemanticError::Mismatch(format!(
+                "{source}: {rows} feature vectors for a scene of {} Gaussians",
+                scene.len()
+            )));
+        }
         Ok(Relevancy {
             name: query.trim().to_string(),
-            values,
+            values: self.score_rows(query, &source, "Gaussian", dim, values)?,
             scoring: Scoring::Graded,
         })
     }
+}
+
+/// The scene's own per-Gaussian features (PLY properties such as `semantic_0..`), or an error
+/// naming `source_kind` when the scene has none.
+pub fn scene_features<'a>(
+    scene: &'a Scene,
+    source_kind: &'static str,
+) -> Result<&'a splatraj_scene::Features> {
+    scene
+        .extras
+        .features
+        .as_ref()
+        .ok_or_else(|| SemanticError::MissingData {
+            source_kind,
+            detail: "the scene has no per-Gaussian features: give a feature sidecar (.npy or \
+                     .safetensors, [N, D]) or a scene with feature properties (semantic_0.., \
+                     f_lang_0..)"
+                .to_string(),
+        })
 }

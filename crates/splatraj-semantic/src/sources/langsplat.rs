@@ -59,6 +59,18 @@ pub struct LangsplatDecoder {
     source: PathBuf,
 }
 
+/// One Linear layer's weights as PyTorch stores them, read to the host.
+pub(crate) struct LinearWeights {
+    /// `[out, input]`, row-major.
+    pub weight: Vec<f32>,
+    /// `[out]`.
+    pub bias: Vec<f32>,
+    /// Output width.
+    pub out: usize,
+    /// Input width.
+    pub input: usize,
+}
+
 /// One decoder layer's tensors as found in the checkpoint.
 #[derive(Default)]
 struct LayerKeys<'a> {
@@ -172,28 +184,54 @@ impl LangsplatDecoder {
                 widths.push(input);
             }
             widths.push(out);
-            let w = read_f32(path, &key("weight"), weight)?;
-            let b = read_f32(path, &key("bias"), bias)?;
-            // PyTorch keeps [out, in]; burn's Linear computes x·W with W as [in, out].
-            let mut w_t = vec![0.0f32; w.len()];
-            for o in 0..out {
-                for i in 0..input {
-                    w_t[i * out + o] = w[o * input + i];
-                }
-            }
-            let weight =
-                Tensor::<2>::from_data(TensorData::new(w_t, [input, out]), (device, DType::F32));
-            let bias = Tensor::<1>::from_data(TensorData::new(b, [out]), (device, DType::F32));
-            linears.push(Linear {
-                weight: Param::from_tensor(weight),
-                bias: Some(Param::from_tensor(bias)),
+            linears.push(LinearWeights {
+                weight: read_f32(path, &key("weight"), weight)?,
+                bias: read_f32(path, &key("bias"), bias)?,
+                out,
+                input,
             });
         }
-        Ok(LangsplatDecoder {
+        Ok(Self::from_linear_layers(linears, path, device))
+    }
+
+    /// A decoder of `layers` (chained: each layer's `input` is the previous one's `out`, as
+    /// the caller checked), read from `source`, on `device`. Other checkpoints whose decoder
+    /// is Linear layers (Feature 3DGS's 1×1 convolution is one) are built through this.
+    pub(crate) fn from_linear_layers(
+        layers: Vec<LinearWeights>,
+        source: &Path,
+        device: &Device,
+    ) -> Self {
+        let mut widths: Vec<usize> = layers.first().map(|l| l.input).into_iter().collect();
+        let linears = layers
+            .into_iter()
+            .map(|l| {
+                widths.push(l.out);
+                let (out, input) = (l.out, l.input);
+                // PyTorch keeps [out, in]; burn's Linear computes x·W with W as [in, out].
+                let mut w_t = vec![0.0f32; l.weight.len()];
+                for o in 0..out {
+                    for i in 0..input {
+                        w_t[i * out + o] = l.weight[o * input + i];
+                    }
+                }
+                let weight = Tensor::<2>::from_data(
+                    TensorData::new(w_t, [input, out]),
+                    (device, DType::F32),
+                );
+                let bias =
+                    Tensor::<1>::from_data(TensorData::new(l.bias, [out]), (device, DType::F32));
+                Linear {
+                    weight: Param::from_tensor(weight),
+                    bias: Some(Param::from_tensor(bias)),
+                }
+            })
+            .collect();
+        LangsplatDecoder {
             module: DecoderLayers { layers: linears },
             widths,
-            source: path.to_path_buf(),
-        })
+            source: source.to_path_buf(),
+        }
     }
 
     /// Widths from the latent to the output (LangSplat: [`LANGSPLAT_WIDTHS`]).
@@ -293,7 +331,11 @@ impl LangsplatDecoder {
 }
 
 /// A tensor's values as f32; float32 and float64 are accepted (LangSplat saves float32).
-fn read_f32(path: &Path, key: &str, tensor: &pytorch_reader::Tensor) -> Result<Vec<f32>> {
+pub(crate) fn read_f32(
+    path: &Path,
+    key: &str,
+    tensor: &pytorch_reader::Tensor,
+) -> Result<Vec<f32>> {
     let bytes = tensor
         .read()
         .map_err(|e| SemanticError::file(path, format!("reading key {key:?}: {e}")))?;

@@ -5,22 +5,26 @@
 //! it in a [`SourceRegistry`]; a config then names it `source = "custom.<name>"`. Selection (thresholds, DBSCAN) is not the sources' job: it lives in
 //! [`crate::selection`] and reads the [`Scoring`] a source declares.
 
+pub mod feature3dgs;
 pub mod features;
 pub mod labels;
 pub mod langsplat;
 pub mod region;
 pub mod registry;
+pub mod text_keys;
 
 use serde::Serialize;
 use splatraj_scene::Scene;
 
 use crate::error::Result;
 
+pub use feature3dgs::{Feature3dgsConfig, Feature3dgsSource};
 pub use features::{FeatureInput, FeaturesSource};
 pub use labels::{LabelsSource, label_mask};
 pub use langsplat::{LangsplatDecoder, LangsplatSource};
 pub use region::{Region, RegionSource};
 pub use registry::{SourceConfig, SourceContext, SourceRegistry};
+pub use text_keys::TextKeys;
 
 /// How the values of a [`Relevancy`] are to be read by the selection.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]

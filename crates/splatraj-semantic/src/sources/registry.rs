@@ -21,6 +21,7 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use super::TargetSource;
+use super::feature3dgs::{FEATURE3DGS, Feature3dgsConfig};
 use crate::error::{Result, SemanticError};
 
 /// What a source's `init` may need besides its own table: where relative paths start and the
@@ -54,10 +55,20 @@ pub trait SourceConfig: Serialize + DeserializeOwned + 'static {
 type Factory =
     Arc<dyn Fn(&toml::Value, &SourceContext, &str) -> Result<Box<dyn TargetSource>> + Send + Sync>;
 
-/// Names → source configs, for `[targets] source = "custom.<name>"`.
-#[derive(Clone, Default)]
+/// Names → source configs, for `[targets] source = "custom.<name>"`. The default registry
+/// holds the language fields that ship with splatraj as registered sources
+/// (`custom.feature3dgs`); [`SourceRegistry::empty`] holds none.
+#[derive(Clone)]
 pub struct SourceRegistry {
     factories: BTreeMap<String, Factory>,
+}
+
+impl Default for SourceRegistry {
+    fn default() -> Self {
+        let mut registry = SourceRegistry::empty();
+        registry.register::<Feature3dgsConfig>(FEATURE3DGS);
+        registry
+    }
 }
 
 impl std::fmt::Debug for SourceRegistry {
@@ -67,6 +78,13 @@ impl std::fmt::Debug for SourceRegistry {
 }
 
 impl SourceRegistry {
+    /// A registry without any source.
+    pub fn empty() -> Self {
+        SourceRegistry {
+            factories: BTreeMap::new(),
+        }
+    }
+
     /// Registers `C` under `name` (replacing an earlier registration of that name).
     pub fn register<C: SourceConfig>(&mut self, name: &str) -> &mut Self {
         let factory: Factory =
