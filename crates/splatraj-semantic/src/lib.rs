@@ -13,10 +13,10 @@
 //! the scene's own density ([`cluster`]: each candidate's nearest scene Gaussians from a kiddo
 //! k-d tree) and returns a [`Target`]: the 0/1 channel of the cluster with the largest
 //! relevancy mass, a robust centre and extent for the trajectory prior, the runner-up clusters
-//! and dropped candidates, and warnings. [`embeddings`] reads the feature sidecars (`.npy`, `.safetensors`) and
-//! phrase tables (JSON, `.npy` + phrases, `.safetensors`). [`config`] is the `[targets]` table
-//! of a config file ([`TargetsConfig`]): which source, its files and options, and the
-//! selection settings, built into a source in one call.
+//! and dropped candidates, and warnings. [`embeddings`] reads the feature sidecars (`.npy`,
+//! `.safetensors`) and phrase tables (JSON, `.npy` + phrases, `.safetensors`). [`config`] is
+//! the `[targets]` table of a config file ([`TargetsConfig`]): which source, its files and
+//! options, and the selection settings, built into a source in one call.
 //!
 //! [`text_encoder`] is a CLIP text tower in burn (open_clip/OpenAI weights from a file the user
 //! has) that makes `features` and `langsplat` queries free text.
