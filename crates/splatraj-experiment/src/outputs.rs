@@ -99,24 +99,6 @@ pub struct FrameSpec<'a> {
 /// in a sequence).
 pub(crate) const TINT_ALPHA: f64 = 0.45;
 
-/// Renders `frames` and writes them as `frame_NNNN.png` into `dir`; `progress` is told after
-/// each frame.
-pub fn write_frames(
-    scene: &DeviceScene,
-    camera: (&Intrinsics, Rasterizer),
-    frames: &[FrameSpec<'_>],
-    dir: &Path,
-    progress: &mut dyn FnMut(usize),
-) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    for (index, frame) in frames.iter().enumerate() {
-        let png = frame_png(scene, camera, frame)?;
-        write_bytes(&dir.join(crate::path_render::frame_name(index)), &png)?;
-        progress(index + 1);
-    }
-    Ok(())
-}
-
 /// One frame as PNG bytes: the RGB render, with the object tinted where asked.
 pub fn frame_png(
     scene: &DeviceScene,

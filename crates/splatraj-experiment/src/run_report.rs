@@ -23,6 +23,7 @@ use splatraj_traj::optimise::sampling::window_of;
 use splatraj_traj::trajectory::uniform_times;
 
 use crate::outputs::write_bytes;
+use crate::records::Csv;
 use crate::path_render::{FRAME_METRICS_FILE, VIDEO_FILE, frame_name};
 
 /// The report's file name in a run folder.
@@ -179,7 +180,7 @@ fn windows_of(trajectory: &Value) -> Vec<Window> {
     .unwrap_or_default()
 }
 
-fn read_csv(path: &Path) -> Result<Option<(Vec<String>, Vec<Vec<String>>)>> {
+fn read_csv(path: &Path) -> Result<Option<Csv>> {
     let text = match std::fs::read_to_string(path) {
         Ok(text) => text,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),

@@ -182,7 +182,7 @@ fn the_page_is_well_formed_self_contained_and_complete() {
     // Text arrives as text: the odd query name survives escaping in the table, the keyframe
     // heading and both views' labels.
     let texts: Vec<&str> = doc.descendants().filter_map(|n| n.text()).collect();
-    assert!(texts.iter().any(|t| *t == "a <b> & \"c\""));
+    assert!(texts.contains(&"a <b> & \"c\""));
     assert!(
         texts
             .iter()

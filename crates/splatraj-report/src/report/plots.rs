@@ -5,6 +5,9 @@ use plotters::prelude::*;
 
 use super::{CostHistory, FrameMetrics, ReportError, Window, window_colour};
 
+/// A line of the metrics plot: its name, colour and value of a frame.
+type MetricLine = (&'static str, RGBColor, fn(&FrameMetrics) -> f64);
+
 /// Plot size in pixels.
 const SIZE: (u32, u32) = (1100, 380);
 
@@ -73,7 +76,7 @@ pub fn along_t(frames: &[FrameMetrics], windows: &[Window]) -> Result<String, Re
                 )])
                 .map_err(|e| fail(&e))?;
         }
-        let series: [(&str, RGBColor, fn(&FrameMetrics) -> f64); 3] = [
+        let series: [MetricLine; 3] = [
             ("TCE", RGBColor(200, 30, 30), |f| f.tce),
             ("TRE", RGBColor(30, 90, 200), |f| f.tre),
             ("coverage", RGBColor(20, 150, 60), |f| f.coverage),
