@@ -18,6 +18,10 @@
 //! text = "red mug"
 //! # target_ratio = 0.15   # this window's share of the frame (default: [camera] target_ratio)
 //! # mask = "mug.npy"      # a per-Gaussian 0/1 .npy instead of the target source
+//! # shot = { kind = "orbit", elevation = 30, radius = 1.2, sweep = 90, direction = "ccw" }
+//! #   a shot preset for this window (trajectory runs): `orbit` (elevation°, radius (default:
+//! #   the working radius of target_ratio), sweep°, direction ccw|cw, azimuth°, weight) or
+//! #   `dolly` (elevation°, from, to (radii at the window's start and end), azimuth°, weight)
 //!
 //! [camera]                 # optimisation camera; [output] sets the final render's size
 //! width = 64
@@ -61,6 +65,7 @@ use splatraj_traj::costs::{CostsConfig, DEFAULT_TARGET_RATIO};
 use splatraj_traj::optimise::{
     ObjectView, SgldOptions, SinglePoseOptions, StartDistribution, TrajectoryOptions,
 };
+use splatraj_traj::shots::ShotSpec;
 use splatraj_traj::trajectory::TrajectoryModel;
 
 use crate::extensions::Extensions;
@@ -195,6 +200,9 @@ pub struct QueryConfig {
     /// A per-Gaussian 0/1 mask (`.npy`, one value per Gaussian) used instead of the source.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mask: Option<PathBuf>,
+    /// A shot preset for this window (orbit, dolly; trajectory runs): its start and its cost.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shot: Option<ShotSpec>,
 }
 
 /// `[camera]`: the optimisation camera (pinhole, principal point at the centre unless given).
@@ -641,6 +649,11 @@ impl Config {
                 && !(r > 0.0 && r <= 1.0)
             {
                 bail!("`queries.{i}.target_ratio` = {r} must be in (0, 1]");
+            }
+            if let Some(shot) = &q.shot
+                && let Err(e) = shot.validate()
+            {
+                bail!("`queries.{i}.shot.{}` {}", e.field, e.reason);
             }
         }
         self.camera.intrinsics()?;

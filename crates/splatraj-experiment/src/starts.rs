@@ -1,12 +1,17 @@
 //! Where the optimisations start: an earlier trajectory (ours, or another tool's camera file),
-//! a fixed pose, or object-facing or random poses per restart (`[start]`).
+//! a fixed pose, or object-facing or random poses per restart (`[start]`); a window with a
+//! shot preset (`[[queries]] shot`) starts on its shot's path instead, and the shot's cost
+//! keeps it there.
 
 use anyhow::{Context, Result};
 use splatraj_render::camera::Pose;
+use splatraj_traj::costs::{ShotCost, WeightedCosts};
 use splatraj_traj::optimise::start::START_FIT_SAMPLES;
 use splatraj_traj::optimise::{
-    WindowTarget, object_start_poses, random_start_poses, window_start_trajectory,
+    WindowStart, WindowTarget, object_side, object_start_poses, random_start_poses,
+    start_trajectory,
 };
+use splatraj_traj::shots::{ShotFrame, ShotPath};
 use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord, uniform_times};
 
 use crate::config::StartKind;
@@ -56,12 +61,67 @@ impl Experiment {
             Some(pose) => vec![vec![Pose(pose); n]],
             None => self.start_poses(&self.windows)?,
         };
+        // A fixed `start.pose` is taken as given; object and random starts follow the shots.
+        let shots = match config.start.pose {
+            Some(_) => vec![None; n],
+            None => self.shot_paths()?,
+        };
         per_restart
             .iter()
             .map(|per_window| {
-                Ok(window_start_trajectory(model.clone(), per_window, device, dtype)?.record())
+                let starts: Vec<WindowStart> = per_window
+                    .iter()
+                    .zip(&shots)
+                    .map(|(pose, shot)| match shot {
+                        Some(s) => WindowStart::Shot(*s),
+                        None => WindowStart::Hold(*pose),
+                    })
+                    .collect();
+                Ok(start_trajectory(model.clone(), &starts, device, dtype)?.record())
             })
             .collect()
+    }
+
+    /// Each window's shot (`queries.<i>.shot`) placed around its object, seen at azimuth 0
+    /// from the side object starts look from; None for a window without one.
+    pub fn shot_paths(&self) -> Result<Vec<Option<ShotPath>>> {
+        let centres: Vec<[f64; 3]> = self
+            .windows
+            .iter()
+            .map(|w| w.context.object_centre)
+            .collect();
+        let side = object_side(&centres, self.bounds.0, self.up.up);
+        self.config
+            .queries
+            .iter()
+            .zip(&self.windows)
+            .enumerate()
+            .map(|(i, (query, window))| {
+                let Some(spec) = &query.shot else {
+                    return Ok(None);
+                };
+                let frame = ShotFrame {
+                    object_centre: window.context.object_centre,
+                    working_radius: window.context.prior_radius,
+                    world_up: self.up.up,
+                    side,
+                };
+                spec.place(&frame)
+                    .map(Some)
+                    .with_context(|| format!("`queries.{i}.shot` ({})", spec.kind()))
+            })
+            .collect()
+    }
+
+    /// `costs` with the shots' cost added when some query has a shot (trajectory runs).
+    pub fn with_shot_cost(&self, costs: WeightedCosts) -> Result<WeightedCosts> {
+        let shots = self.shot_paths()?;
+        if shots.iter().all(Option::is_none) {
+            return Ok(costs);
+        }
+        costs
+            .with_cost(Box::new(ShotCost { shots }))
+            .map_err(anyhow::Error::msg)
     }
 
     /// A start fitted to the poses of another tool's camera file (`start.trajectory` = a

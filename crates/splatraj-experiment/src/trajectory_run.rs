@@ -142,7 +142,7 @@ impl Experiment {
         observer: &mut dyn Observer,
     ) -> Result<TrajectoryRun> {
         let starts = self.start_trajectories()?;
-        let costs = self.costs()?;
+        let costs = self.with_shot_cost(self.costs()?)?;
         let model = self.model()?;
         let scene = self.autodiff_scene();
         let steps = self.config.optimiser.iterations;
@@ -221,7 +221,7 @@ impl Experiment {
             }
             let shifted_costs;
             let costs = if steps_before > 0 {
-                shifted_costs = self.costs_from_step(steps_before)?;
+                shifted_costs = self.with_shot_cost(self.costs_from_step(steps_before)?)?;
                 &shifted_costs
             } else {
                 &costs

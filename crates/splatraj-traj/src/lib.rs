@@ -17,4 +17,5 @@ pub mod clearance;
 pub mod costs;
 pub mod metrics;
 pub mod optimise;
+pub mod shots;
 pub mod trajectory;

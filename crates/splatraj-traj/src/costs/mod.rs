@@ -17,6 +17,7 @@
 //! - [`mod@prior`]: the decaying warm-start prior (attracting form; the paper's signs are a typo);
 //! - [`mod@clearance`]: keeps the camera a margin away from the scene's geometry (path cost);
 //! - [`mod@motion`]: speed, acceleration and turning-rate limits, even speed (path cost);
+//! - [`mod@shot`]: keeps a window's camera on its shot preset (orbit, dolly; [`crate::shots`]);
 //! - [`iou`]: bounding-box IoU, a metric only (see that module for why it is not a [`Cost`]).
 //!
 //! **Samples and path.** Most costs judge each sampled pose on its own ([`CostDomain::Samples`]).
@@ -44,6 +45,7 @@ pub mod iou;
 pub mod motion;
 pub mod prior;
 pub mod registry;
+pub mod shot;
 pub mod tce;
 pub mod tre;
 pub mod upright;
@@ -60,6 +62,7 @@ pub use iou::{IOU_THRESHOLD, PixelBox, bbox_iou, bbox_iou_batch, mask_box};
 pub use motion::MotionCost;
 pub use prior::{PRIOR_EPSILON_FRACTION, PriorCost, default_prior_radius, prior};
 pub use registry::{CostConfig, CostRegistry};
+pub use shot::ShotCost;
 pub use tce::{MASS_FLOOR, NORM_EPSILON, TceCost, centroid_offset, tce};
 pub use tre::{DEFAULT_TARGET_RATIO, TreCost, coverage, tre};
 pub use upright::{UprightCost, UprightMode, upright};
@@ -180,8 +183,19 @@ pub struct CostInputs {
     rgb: Option<Tensor<4>>,
     path: Option<PathSamples>,
     occupancy: Option<Occupancy>,
+    times: Option<SampleTimes>,
     step: usize,
     query: QueryContext,
+}
+
+/// When the sampled poses were taken (trajectory optimisation only): what costs that depend
+/// on the time within the window (shots) read.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SampleTimes {
+    /// Index of the query window the samples belong to.
+    pub window: usize,
+    /// Each sample's time within its window, s ∈ [0, 1] (0 at the window's start), `[B]`.
+    pub within: Vec<f64>,
 }
 
 /// The window's stretch of a trajectory, densely sampled in time order (trajectory
@@ -259,6 +273,7 @@ impl CostInputs {
             rgb: None,
             path: None,
             occupancy: None,
+            times: None,
             step,
             query,
         })
@@ -286,6 +301,17 @@ impl CostInputs {
     pub fn with_occupancy(mut self, occupancy: Occupancy) -> Self {
         self.occupancy = Some(occupancy);
         self
+    }
+
+    /// Adds when the samples were taken (for costs that depend on time, e.g. shots).
+    pub fn with_times(mut self, times: SampleTimes) -> Self {
+        self.times = Some(times);
+        self
+    }
+
+    /// When the samples were taken, in a trajectory optimisation.
+    pub fn times(&self) -> Option<&SampleTimes> {
+        self.times.as_ref()
     }
 
     /// The densely sampled path, in a trajectory optimisation.
@@ -593,6 +619,13 @@ impl WeightedCosts {
             }
         }
         Ok(Self { costs })
+    }
+
+    /// The same set with `cost` added last (a cost built outside the config, e.g. the shots').
+    pub fn with_cost(self, cost: Box<dyn Cost>) -> Result<Self, CostError> {
+        let mut costs = self.costs;
+        costs.push(cost);
+        Self::new(costs)
     }
 
     /// The costs, in evaluation order.

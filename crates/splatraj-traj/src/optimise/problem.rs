@@ -15,9 +15,12 @@ use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::rasterize::{Approximations, RenderStats};
 use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
 
+use super::sampling::window_bounds;
 use super::{OptimiseError, WindowTarget, per_sample};
 use crate::clearance::Occupancy;
-use crate::costs::{CostInputs, CostTerms, ImageChannel, PathSamples, WeightedCosts, coverage};
+use crate::costs::{
+    CostInputs, CostTerms, ImageChannel, PathSamples, SampleTimes, WeightedCosts, coverage,
+};
 
 /// A scene, its query windows, the costs and the camera: the arguments every optimiser shares.
 #[derive(Debug, Clone, Copy)]
@@ -203,15 +206,17 @@ impl<'a> Problem<'a> {
         step: usize,
         request: Option<&RenderRequest>,
     ) -> Result<Evaluated, OptimiseError> {
-        self.evaluate_along(index, poses, None, step, request)
+        self.evaluate_along(index, poses, None, None, step, request)
     }
 
-    /// [`Problem::evaluate`] with the window's densely sampled path (poses `[P, 6]` at times
-    /// `time_step` apart) for the path costs.
+    /// [`Problem::evaluate`] with the samples' times `[B]` (t ∈ [0, 1] of the whole
+    /// trajectory, for costs that depend on time) and the window's densely sampled path
+    /// (poses `[P, 6]` at times `time_step` apart) for the path costs.
     pub fn evaluate_along(
         &self,
         index: usize,
         poses: Tensor<2>,
+        times: Option<&[f64]>,
         path: Option<(Tensor<2>, f64)>,
         step: usize,
         request: Option<&RenderRequest>,
@@ -219,7 +224,15 @@ impl<'a> Problem<'a> {
         let window = &self.windows[index];
         let seconds = self.seconds;
         let occupancy = self.occupancy;
+        let (start, end) = window_bounds(index, self.windows.len());
+        let times = times.map(|ts| SampleTimes {
+            window: index,
+            within: ts.iter().map(|t| (t - start) / (end - start)).collect(),
+        });
         let attach = move |mut inputs: CostInputs| {
+            if let Some(t) = times.clone() {
+                inputs = inputs.with_times(t);
+            }
             if let Some((poses, time_step)) = path.clone() {
                 inputs = inputs.with_path(PathSamples {
                     poses,

@@ -31,7 +31,8 @@ use splatraj_render::camera::Pose;
 use burn::tensor::{DType, Device};
 
 use super::OptimiseError;
-use super::sampling::window_of;
+use super::sampling::{window_bounds, window_of};
+use crate::shots::ShotPath;
 use crate::trajectory::{Trajectory, TrajectoryModel, uniform_times};
 
 /// How random starts are drawn (see the module docs).
@@ -156,15 +157,8 @@ pub fn object_start_poses(
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ (restart as u64).wrapping_mul(0x9E37_79B9));
     let elevation = view.elevation_degrees.to_radians();
-    let mean = objects.iter().map(|(c, _)| DVec3::from(*c)).sum::<DVec3>() / objects.len() as f64;
-    let to_middle = DVec3::from(scene_centre) - mean;
-    let horizontal = (to_middle - up * to_middle.dot(up)).normalize_or_zero();
-    // Objects around the middle have no preferred side: any horizontal direction will do.
-    let horizontal = if horizontal == DVec3::ZERO || !horizontal.is_finite() {
-        up.any_orthonormal_vector()
-    } else {
-        horizontal
-    };
+    let centres: Vec<[f64; 3]> = objects.iter().map(|(c, _)| *c).collect();
+    let horizontal = DVec3::from(object_side(&centres, scene_centre, up.to_array()));
     let turn = if restart == 0 {
         0.0
     } else {
@@ -184,6 +178,22 @@ pub fn object_start_poses(
             })
         })
         .collect()
+}
+
+/// The horizontal direction object starts (and shots, at azimuth 0) see the objects from:
+/// from the objects' mean centre toward the scene's centre (module docs), unit length; any
+/// horizontal direction when the objects surround the middle. `world_up` must be non-zero.
+pub fn object_side(objects: &[[f64; 3]], scene_centre: [f64; 3], world_up: [f64; 3]) -> [f64; 3] {
+    let up = DVec3::from(world_up).normalize_or_zero();
+    let mean = objects.iter().map(|c| DVec3::from(*c)).sum::<DVec3>() / objects.len().max(1) as f64;
+    let to_middle = DVec3::from(scene_centre) - mean;
+    let horizontal = (to_middle - up * to_middle.dot(up)).normalize_or_zero();
+    // Objects around the middle have no preferred side: any horizontal direction will do.
+    if horizontal == DVec3::ZERO || !horizontal.is_finite() {
+        up.any_orthonormal_vector().to_array()
+    } else {
+        horizontal.to_array()
+    }
 }
 
 /// ω rewritten as the equivalent rotation vector nearest `previous` (ω and ω·(1 − 2π/|ω|)
@@ -208,6 +218,25 @@ pub fn unwrap_rotation(previous: [f64; 3], omega: [f64; 3]) -> [f64; 3] {
 /// segments, to get several samples per segment).
 pub const START_FIT_SAMPLES: usize = 401;
 
+/// What a start asks of one window: hold one pose, or follow a shot's ideal path.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum WindowStart {
+    /// The same pose throughout the window.
+    Hold(Pose),
+    /// The shot's pose at each time of the window ([`ShotPath::pose_at`]).
+    Shot(ShotPath),
+}
+
+impl WindowStart {
+    /// The pose asked for at s ∈ [0, 1] within the window.
+    pub fn pose_at(&self, s: f64) -> Pose {
+        match self {
+            WindowStart::Hold(p) => *p,
+            WindowStart::Shot(shot) => shot.pose_at(s),
+        }
+    }
+}
+
 /// The trajectory of `model` closest (least squares) to holding `per_window[i]` throughout
 /// window i; rotation vectors are unwrapped along the sequence first ([`unwrap_rotation`]).
 pub fn window_start_trajectory(
@@ -216,17 +245,33 @@ pub fn window_start_trajectory(
     device: &Device,
     dtype: DType,
 ) -> Result<Trajectory, OptimiseError> {
+    let starts: Vec<WindowStart> = per_window.iter().map(|p| WindowStart::Hold(*p)).collect();
+    start_trajectory(model, &starts, device, dtype)
+}
+
+/// The trajectory of `model` closest (least squares) to what `per_window[i]` asks of window
+/// i (a held pose or a shot's path), sampled at [`START_FIT_SAMPLES`] times; rotation vectors
+/// are unwrapped along the samples in time order first ([`unwrap_rotation`]).
+pub fn start_trajectory(
+    model: TrajectoryModel,
+    per_window: &[WindowStart],
+    device: &Device,
+    dtype: DType,
+) -> Result<Trajectory, OptimiseError> {
     let n = per_window.len();
-    let mut unwrapped: Vec<[f64; 6]> = Vec::with_capacity(n);
-    for p in per_window {
-        let mut pose = p.0;
-        if let Some(prev) = unwrapped.last() {
+    let times = uniform_times(START_FIT_SAMPLES);
+    let mut poses: Vec<[f64; 6]> = Vec::with_capacity(times.len());
+    for &t in &times {
+        let i = window_of(t, n);
+        let (start, end) = window_bounds(i, n);
+        let mut pose = per_window[i]
+            .pose_at(((t - start) / (end - start)).clamp(0.0, 1.0))
+            .0;
+        if let Some(prev) = poses.last() {
             let w = unwrap_rotation([prev[0], prev[1], prev[2]], [pose[0], pose[1], pose[2]]);
             pose[..3].copy_from_slice(&w);
         }
-        unwrapped.push(pose);
+        poses.push(pose);
     }
-    let times = uniform_times(START_FIT_SAMPLES);
-    let poses: Vec<[f64; 6]> = times.iter().map(|&t| unwrapped[window_of(t, n)]).collect();
     Ok(Trajectory::fit(model, &times, &poses, device, dtype)?)
 }

@@ -274,11 +274,11 @@ pub fn optimise_trajectory(
         for (i, request) in requests.iter().enumerate() {
             let times =
                 sampling::stratified_times(i, n, options.samples_per_window, Some(&mut rng));
-            let times = Tensor::<1>::from_data(
-                TensorData::new(times, [options.samples_per_window]),
+            let sample_times = Tensor::<1>::from_data(
+                TensorData::new(times.clone(), [options.samples_per_window]),
                 (&device, dtype),
             );
-            let poses = units.to_scene(module.forward(times)); // [S, 6]
+            let poses = units.to_scene(module.forward(sample_times)); // [S, 6]
             let path = needs_path.then(|| {
                 let (times, time_step) = path_times(i, n, options.path_samples, phase);
                 let count = times.len();
@@ -287,7 +287,7 @@ pub fn optimise_trajectory(
                 (units.to_scene(module.forward(times)), time_step) // [P, 6]
             });
             let terms = problem
-                .evaluate_along(i, poses, path, step, request.as_ref())?
+                .evaluate_along(i, poses, Some(&times), path, step, request.as_ref())?
                 .terms;
             window_terms.push(terms.means());
             let mean = terms.total.mean();
