@@ -69,9 +69,14 @@ fn shards_merge_into_the_unsharded_study() {
     assert_eq!(json["plan"]["variants"].as_array().unwrap().len(), 5);
     let all = json["rows"].as_array().unwrap();
     assert_eq!(all.len(), 5);
-    assert!(all.iter().all(|r| r["peak_mb"].as_f64().is_some_and(|m| m > 0.0)));
+    assert!(
+        all.iter()
+            .all(|r| r["peak_mb"].as_f64().is_some_and(|m| m > 0.0))
+    );
 
-    let shards: Vec<PathBuf> = (1..=2).map(|k| dir.path().join(format!("shard{k}"))).collect();
+    let shards: Vec<PathBuf> = (1..=2)
+        .map(|k| dir.path().join(format!("shard{k}")))
+        .collect();
     for (k, shard) in shards.iter().enumerate() {
         let out = study(&config, shard, &["--shard", &format!("{}/2", k + 1)]);
         assert!(out.status.success(), "{}", stderr(&out));
@@ -99,7 +104,11 @@ fn shards_merge_into_the_unsharded_study() {
 fn bad_studies_fail_cleanly_before_running() {
     let (dir, config) = setup();
     let out_dir = dir.path().join("out");
-    let out = study(&config, &out_dir, &["--vary", "optimiser.samples_per_window=0"]);
+    let out = study(
+        &config,
+        &out_dir,
+        &["--vary", "optimiser.samples_per_window=0"],
+    );
     assert_clean_failure(&out, &["samples_per_window"]);
     assert!(!out_dir.exists(), "no folder for a study that cannot run");
     let out = study(&config, &out_dir, &["--shard", "3/2"]);

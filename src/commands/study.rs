@@ -165,7 +165,12 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
             .unwrap_or_default()
     );
     for v in &plan.variants {
-        eprintln!("  variant {}: {}  [{}]", v.index, v.label, v.overrides.join(" "));
+        eprintln!(
+            "  variant {}: {}  [{}]",
+            v.index,
+            v.label,
+            v.overrides.join(" ")
+        );
     }
     if args.dry_run {
         return Ok(());
@@ -308,7 +313,9 @@ fn command_line() -> String {
         .enumerate()
         .map(|(i, a)| {
             let a = if i == 0 { "splatraj".to_string() } else { a };
-            if a.chars().all(|c| c.is_ascii_alphanumeric() || "-_./=,:".contains(c)) {
+            if a.chars()
+                .all(|c| c.is_ascii_alphanumeric() || "-_./=,:".contains(c))
+            {
                 a
             } else {
                 format!("'{}'", a.replace('\'', "'\\''"))

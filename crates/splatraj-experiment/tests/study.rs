@@ -57,7 +57,8 @@ fn options(grid: bool) -> PlanOptions {
 #[test]
 fn one_at_a_time_is_the_baseline_and_each_value_alone() {
     let dir = tempfile::tempdir().unwrap();
-    let plan = StudyPlan::new(&config(dir.path()), &options(false), &Extensions::default()).unwrap();
+    let plan =
+        StudyPlan::new(&config(dir.path()), &options(false), &Extensions::default()).unwrap();
     assert_eq!(plan.design, Design::OneAtATime);
     let labels: Vec<&str> = plan.variants.iter().map(|v| v.label.as_str()).collect();
     assert_eq!(
@@ -71,7 +72,10 @@ fn one_at_a_time_is_the_baseline_and_each_value_alone() {
         ]
     );
     // The table value sets each key, keeping the rest of [camera] (fov_x, target_ratio).
-    assert_eq!(plan.variants[3].overrides, ["camera.height=12", "camera.width=16"]);
+    assert_eq!(
+        plan.variants[3].overrides,
+        ["camera.height=12", "camera.width=16"]
+    );
     assert_eq!(plan.runs.len(), 5 * 2);
     // A value equal to the config's is the baseline itself, not a second variant.
     let same = PlanOptions {
@@ -102,7 +106,11 @@ fn a_grid_study_has_a_row_per_run_and_a_non_dominated_frontier() {
         rows.extend(measure_run(&plan, run, &extensions, MemoryReading::Shared).unwrap());
     }
     for v in &plan.variants {
-        let seeds: Vec<u64> = rows.iter().filter(|r| r.variant == v.index).map(|r| r.seed).collect();
+        let seeds: Vec<u64> = rows
+            .iter()
+            .filter(|r| r.variant == v.index)
+            .map(|r| r.seed)
+            .collect();
         assert_eq!(seeds, [3, 4], "variant {}", v.label);
     }
     for r in &rows {
@@ -110,7 +118,8 @@ fn a_grid_study_has_a_row_per_run_and_a_non_dominated_frontier() {
         assert_eq!(r.windows.len(), 2);
         assert!(r.peak_mb.is_none());
         // The evaluation is the base config's, whatever the variant: 2 poses per window.
-        let expected = (r.windows[0].tce + r.windows[0].tre + r.windows[1].tce + r.windows[1].tre) / 2.0;
+        let expected =
+            (r.windows[0].tce + r.windows[0].tre + r.windows[1].tce + r.windows[1].tre) / 2.0;
         assert!((r.error - expected).abs() < 1e-12);
     }
 
@@ -126,20 +135,38 @@ fn a_grid_study_has_a_row_per_run_and_a_non_dominated_frontier() {
                 && q.1 <= points[i].1
                 && (q.0 < points[i].0 || q.1 < points[i].1)
         });
-        assert_eq!(v.on_frontier, !dominated, "{}: {:?} of {points:?}", v.label, points[i]);
+        assert_eq!(
+            v.on_frontier, !dominated,
+            "{}: {:?} of {points:?}",
+            v.label, points[i]
+        );
         assert_eq!(summary.frontier.contains(&i), !dominated);
     }
     // Mean over the two seeds.
-    let first: Vec<f64> = rows.iter().filter(|r| r.variant == 0).map(|r| r.error).collect();
+    let first: Vec<f64> = rows
+        .iter()
+        .filter(|r| r.variant == 0)
+        .map(|r| r.error)
+        .collect();
     let mean = summary.variants[0].figures.error.unwrap().mean;
     assert!((mean - (first[0] + first[1]) / 2.0).abs() < 1e-12);
     let best = summary.best.unwrap();
     let cheap = summary.cheapest_within_5_percent.unwrap();
     assert!(points[cheap].1 <= points[best].1 * 1.05 + 1e-15);
-    assert!(points.iter().all(|p| p.1 > points[best].1 * 1.05 || p.0 >= points[cheap].0));
+    assert!(
+        points
+            .iter()
+            .all(|p| p.1 > points[best].1 * 1.05 || p.0 >= points[cheap].0)
+    );
 
     let out = dir.path().join("study");
-    let study = StudyFile::new(plan.clone(), None, StudyContext::default(), rows.clone(), Vec::new());
+    let study = StudyFile::new(
+        plan.clone(),
+        None,
+        StudyContext::default(),
+        rows.clone(),
+        Vec::new(),
+    );
     write_study(&out, &study).unwrap();
     for file in ["study.csv", "study.json", "frontier.svg", "summary.md"] {
         assert!(out.join(file).is_file(), "{file}");

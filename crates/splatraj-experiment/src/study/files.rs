@@ -80,10 +80,16 @@ pub fn write_study(dir: &Path, study: &StudyFile) -> Result<()> {
     let (header, rows) = study_csv(&study.rows);
     write_csv(&dir.join("study.csv"), &header, &rows)?;
     let title = match study.shard {
-        Some(s) => format!("{}: error against time (shard {}/{})", study.plan.name, s.index, s.count),
+        Some(s) => format!(
+            "{}: error against time (shard {}/{})",
+            study.plan.name, s.index, s.count
+        ),
         None => format!("{}: error against time", study.plan.name),
     };
-    write_bytes(&dir.join("frontier.svg"), frontier_svg(&summary, &title)?.as_bytes())?;
+    write_bytes(
+        &dir.join("frontier.svg"),
+        frontier_svg(&summary, &title)?.as_bytes(),
+    )?;
     let mut md = summary.markdown(&study.plan, &study.context);
     if let Some(s) = study.shard {
         md = format!(
@@ -108,8 +114,13 @@ pub fn write_study(dir: &Path, study: &StudyFile) -> Result<()> {
 /// Reads `dir/study.json`.
 pub fn read_study(dir: &Path) -> Result<StudyFile> {
     let path = dir.join("study.json");
-    let text = std::fs::read_to_string(&path)
-        .with_context(|| format!("cannot read {} (is {} a study folder?)", path.display(), dir.display()))?;
+    let text = std::fs::read_to_string(&path).with_context(|| {
+        format!(
+            "cannot read {} (is {} a study folder?)",
+            path.display(),
+            dir.display()
+        )
+    })?;
     let study: StudyFile = serde_json::from_str(&text)
         .with_context(|| format!("{} is not a splatraj study.json", path.display()))?;
     if study.format != STUDY_FORMAT {
@@ -153,7 +164,12 @@ pub fn merge_studies(dirs: &[&Path]) -> Result<StudyFile> {
                 );
             }
             if shards.contains(&s) {
-                bail!("{}: shard {}/{} is given twice", dir.display(), s.index, s.count);
+                bail!(
+                    "{}: shard {}/{} is given twice",
+                    dir.display(),
+                    s.index,
+                    s.count
+                );
             }
             shards.push(s);
         }

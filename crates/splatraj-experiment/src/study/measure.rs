@@ -14,9 +14,9 @@ use anyhow::Result;
 use splatraj_render::camera::Pose;
 use splatraj_render::stages::{self, Stage};
 
+use super::StudyTask;
 use super::plan::{Run, StudyPlan};
 use super::rows::{StageTimes, StudyRow, WindowScore};
-use super::StudyTask;
 use crate::bench::peak_mb;
 use crate::experiment::Experiment;
 use crate::extensions::Extensions;
@@ -79,6 +79,8 @@ pub fn measure_run(
             let result = experiment.run_trajectory(&mut observer::quiet())?;
             let run_s = started.elapsed().as_secs_f64();
             let peak_mb = peak();
+            // Before the evaluation renders (the renderer's clock is process-wide).
+            let split = stage_times(&result);
             let trajectory = evaluation.trajectory(&result.best().best)?;
             let judged = evaluation.evaluate(&trajectory)?;
             let windows = judged.windows.iter().map(WindowScore::from).collect();
@@ -88,7 +90,7 @@ pub fn measure_run(
                 peak_mb,
                 iterations: result.iterations_run(),
                 best_total: result.best().best_total,
-                stages: Some(stage_times(&result)),
+                stages: Some(split),
                 ldj_positional: judged.ldj.positional,
                 ldj_angular: judged.ldj.angular,
                 ..row(run.repeat, config.seed, windows)

@@ -241,9 +241,16 @@ impl StudyPlan {
         if let Some(seeds) = options.seeds {
             study.seeds = seeds;
         }
-        study
-            .validate()
-            .map_err(|e| anyhow::anyhow!("{e}{}", if options.seeds == Some(0) { " (--seeds)" } else { "" }))?;
+        study.validate().map_err(|e| {
+            anyhow::anyhow!(
+                "{e}{}",
+                if options.seeds == Some(0) {
+                    " (--seeds)"
+                } else {
+                    ""
+                }
+            )
+        })?;
         let factors = if !options.vary.is_empty() {
             options.vary.clone()
         } else if !study.vary.is_empty() {
@@ -359,8 +366,12 @@ impl StudyPlan {
 
     /// Run `run`'s config.
     pub fn run_config(&self, run: &Run, extensions: &Extensions) -> Result<Config> {
-        Config::load_with(&self.config, &self.run_overrides(run), extensions)
-            .with_context(|| format!("study run {} (`{}`)", run.index, self.variants[run.variant].label))
+        Config::load_with(&self.config, &self.run_overrides(run), extensions).with_context(|| {
+            format!(
+                "study run {} (`{}`)",
+                run.index, self.variants[run.variant].label
+            )
+        })
     }
 
     /// The config of the fixed evaluation: the base config at the evaluation's size and
@@ -369,8 +380,14 @@ impl StudyPlan {
         let base = Config::load_with(&self.config, &self.base_overrides, extensions)?;
         let e = &self.evaluation;
         let mut all = self.base_overrides.clone();
-        all.push(format!("output.width={}", e.width.unwrap_or(base.output.width)));
-        all.push(format!("output.height={}", e.height.unwrap_or(base.output.height)));
+        all.push(format!(
+            "output.width={}",
+            e.width.unwrap_or(base.output.width)
+        ));
+        all.push(format!(
+            "output.height={}",
+            e.height.unwrap_or(base.output.height)
+        ));
         all.push(format!("output.metric_samples={}", e.samples));
         all.push(format!("output.ldj_samples={}", e.ldj_samples));
         Config::load_with(&self.config, &all, extensions).context("the study's evaluation")
@@ -551,7 +568,9 @@ fn assignments(base: &toml::Table, key: &str, raw: &str) -> Vec<String> {
         .and_then(|mut t| t.remove("v"));
     match (parsed, lookup(base, key)) {
         (Some(toml::Value::Table(over)), Some(toml::Value::Table(existing)))
-            if over.get("kind").is_none_or(|k| Some(k) == existing.get("kind")) =>
+            if over
+                .get("kind")
+                .is_none_or(|k| Some(k) == existing.get("kind")) =>
         {
             flatten(key, &over)
         }
@@ -609,7 +628,10 @@ mod tests {
         assert_eq!(one_at_a_time(&factors).len(), 1 + 2 + 3);
         let g = grid(&factors);
         assert_eq!(g.len(), 6);
-        assert_eq!(g[1], vec![("a".into(), "0".into()), ("b".into(), "1".into())]);
+        assert_eq!(
+            g[1],
+            vec![("a".into(), "0".into()), ("b".into(), "1".into())]
+        );
     }
 
     #[test]

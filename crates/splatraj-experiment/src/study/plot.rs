@@ -22,9 +22,9 @@ pub fn frontier_svg(summary: &StudySummary, title: &str) -> Result<String> {
             (t.is_finite() && e.is_finite()).then_some((t, e, sd, v.on_frontier, v.label.as_str()))
         })
         .collect();
-    let (t_max, e_max) = points.iter().fold((0.0f64, 0.0f64), |(t, e), p| {
-        (t.max(p.0), e.max(p.1 + p.2))
-    });
+    let (t_max, e_max) = points
+        .iter()
+        .fold((0.0f64, 0.0f64), |(t, e), p| (t.max(p.0), e.max(p.1 + p.2)));
     let (t_max, e_max) = (t_max.max(1e-3) * 1.15, e_max.max(1e-3) * 1.15);
     let mut svg = String::new();
     {

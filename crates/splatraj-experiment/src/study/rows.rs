@@ -198,9 +198,9 @@ pub fn study_csv(rows: &[StudyRow]) -> Csv {
             );
             for w in 0..windows {
                 match r.windows.get(w) {
-                    Some(m) => row.extend(
-                        [m.tce, m.tre, m.iou, m.visible_fraction].map(|v| v.to_string()),
-                    ),
+                    Some(m) => {
+                        row.extend([m.tce, m.tre, m.iou, m.visible_fraction].map(|v| v.to_string()))
+                    }
                     None => row.extend(std::iter::repeat_n(String::new(), 4)),
                 }
             }

@@ -119,9 +119,8 @@ pub struct Figures {
 impl Figures {
     /// The figures of `rows`.
     pub fn of(rows: &[&StudyRow]) -> Figures {
-        let spread = |f: &dyn Fn(&StudyRow) -> Option<f64>| {
-            Spread::of(rows.iter().filter_map(|r| f(r)))
-        };
+        let spread =
+            |f: &dyn Fn(&StudyRow) -> Option<f64>| Spread::of(rows.iter().filter_map(|r| f(r)));
         let timed: Vec<StageTimes> = rows.iter().filter_map(|r| r.stages).collect();
         let stages = (!timed.is_empty()).then(|| {
             let n = timed.len() as f64;
@@ -261,7 +260,8 @@ impl StudySummary {
             .filter(|&i| variants[i].on_frontier)
             .collect();
         frontier.sort_by(|&a, &b| points[a].0.total_cmp(&points[b].0));
-        let finite = || (0..points.len()).filter(|&i| points[i].0.is_finite() && points[i].1.is_finite());
+        let finite =
+            || (0..points.len()).filter(|&i| points[i].0.is_finite() && points[i].1.is_finite());
         let best = finite().min_by(|&a, &b| points[a].1.total_cmp(&points[b].1));
         let cheapest_within_5_percent = best.and_then(|b| {
             let bound = points[b].1 + 0.05 * points[b].1.abs();
@@ -277,7 +277,12 @@ impl StudySummary {
                     .iter()
                     .find(|(k, _)| k == key)
                     .map_or_else(
-                        || format!("{} (config)", plan.baseline_value.as_deref().unwrap_or("as configured")),
+                        || {
+                            format!(
+                                "{} (config)",
+                                plan.baseline_value.as_deref().unwrap_or("as configured")
+                            )
+                        },
                         |(_, v)| short_value(v),
                     );
                 match groups.iter_mut().find(|(g, _)| *g == value) {
@@ -463,8 +468,18 @@ mod tests {
 
     #[test]
     fn ties_and_slower_equals_on_the_frontier() {
-        let points = [(1.0, 3.0), (1.0, 3.0), (2.0, 3.0), (2.0, 1.0), (0.5, 5.0), (3.0, f64::NAN)];
-        assert_eq!(pareto_front(&points), [true, true, false, true, true, false]);
+        let points = [
+            (1.0, 3.0),
+            (1.0, 3.0),
+            (2.0, 3.0),
+            (2.0, 1.0),
+            (0.5, 5.0),
+            (3.0, f64::NAN),
+        ];
+        assert_eq!(
+            pareto_front(&points),
+            [true, true, false, true, true, false]
+        );
     }
 
     #[test]
