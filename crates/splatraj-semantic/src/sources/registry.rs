@@ -22,6 +22,7 @@ use serde::de::DeserializeOwned;
 
 use super::TargetSource;
 use super::feature3dgs::{FEATURE3DGS, Feature3dgsConfig};
+use super::opengaussian::{OPENGAUSSIAN, OpenGaussianConfig};
 use crate::error::{Result, SemanticError};
 
 /// What a source's `init` may need besides its own table: where relative paths start and the
@@ -57,7 +58,7 @@ type Factory =
 
 /// Names → source configs, for `[targets] source = "custom.<name>"`. The default registry
 /// holds the language fields that ship with splatraj as registered sources
-/// (`custom.feature3dgs`); [`SourceRegistry::empty`] holds none.
+/// (`custom.feature3dgs`, `custom.opengaussian`); [`SourceRegistry::empty`] holds none.
 #[derive(Clone)]
 pub struct SourceRegistry {
     factories: BTreeMap<String, Factory>,
@@ -67,6 +68,7 @@ impl Default for SourceRegistry {
     fn default() -> Self {
         let mut registry = SourceRegistry::empty();
         registry.register::<Feature3dgsConfig>(FEATURE3DGS);
+        registry.register::<OpenGaussianConfig>(OPENGAUSSIAN);
         registry
     }
 }
