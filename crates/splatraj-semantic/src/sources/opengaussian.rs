@@ -45,9 +45,12 @@ pub struct ClusterLang {
     pub leaf_ind: Vec<usize>,
 }
 
+/// One `.npy` member of an `.npz` file: its shape and its values as f64.
+type Array = (Vec<u64>, Vec<f64>);
+
 /// The `.npy` members of an `.npz` file (stored or deflated), by name without `.npy`, each as
 /// its shape and values converted to f64 (float32/64 and integer arrays).
-fn read_npz(path: &Path) -> Result<BTreeMap<String, (Vec<u64>, Vec<f64>)>> {
+fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>> {
     let file = std::fs::File::open(path).map_err(|e| SemanticError::io(path, e))?;
     let mut archive = zip::ZipArchive::new(std::io::BufReader::new(file))
         .map_err(|e| SemanticError::file(path, format!("not a readable .npz (zip) file: {e}")))?;
@@ -96,7 +99,7 @@ impl ClusterLang {
     /// leaves is an error naming the file and the key.
     pub fn read(path: &Path) -> Result<Self> {
         let arrays = read_npz(path)?;
-        let get = |key: &str, rank: usize| -> Result<&(Vec<u64>, Vec<f64>)> {
+        let get = |key: &str, rank: usize| -> Result<&Array> {
             let found = arrays.get(key).ok_or_else(|| {
                 SemanticError::file(
                     path,
