@@ -28,6 +28,10 @@
 //!
 //! - `custom.<name>`: a source another crate registered in a [`SourceRegistry`]; its keys go in
 //!   `[targets.custom.<name>]` (deserialised by its [`crate::sources::SourceConfig`]).
+//!   The default registry holds `custom.feature3dgs` (`decoder`, Feature 3DGS's
+//!   `decoder_chkpnt*.pth`, optional) and `custom.opengaussian` (`cluster_lang`, OpenGaussian's
+//!   `cluster_lang.npz`; `min_views`, default 1), each also taking the phrase keys of
+//!   `features` in its table (see `docs/open-vocabulary.md`).
 //!
 //! `[targets.selection]` holds [`SelectionOptions`] for every source.
 
