@@ -254,6 +254,20 @@ fn region_query_selects_the_box() {
         s(dir.path()),
     ]);
     assert!(json_report(&out)["count"].as_u64().unwrap() > 0);
+    // A value starting with '-' is the option's value, not a flag (no '=' needed).
+    let out = splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--sphere",
+        "-0.75,0.11,-2.12,5",
+        "--query",
+        "wide",
+        "--json",
+        "--out",
+        s(dir.path()),
+    ]);
+    assert!(json_report(&out)["count"].as_u64().unwrap() > 0);
     let none = dir.path().join("none");
     let out = splatraj(&[
         "query",
@@ -493,7 +507,7 @@ fn look_alikes_are_dropped_reported_and_shown_with_show_rejected() {
     let ids = &scene.extras.labels.as_ref().unwrap().ids;
     // Label 3 is the apple; so is every 30th Gaussian of labels 5-8, scattered over four
     // other objects on the table.
-    let look_alike = |i: usize, id: i32| id >= 5 && i % 30 == 0;
+    let look_alike = |i: usize, id: i32| id >= 5 && i.is_multiple_of(30);
     let features = write_features_as(dir.path(), &scene, |i, id| {
         if look_alike(i, id) { 3 } else { id as usize }
     });

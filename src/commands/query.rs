@@ -58,11 +58,13 @@ pub struct QueryArgs {
     #[arg(
         long = "box",
         value_name = "MINX,MINY,MINZ,MAXX,MAXY,MAXZ",
-        conflicts_with = "sphere"
+        conflicts_with = "sphere",
+        allow_hyphen_values = true
     )]
     region_box: Option<String>,
     /// region: a ball in world coordinates.
-    #[arg(long, value_name = "CX,CY,CZ,R")]
+    // Coordinates may start with '-': take the next word as the value, not as a flag.
+    #[arg(long, value_name = "CX,CY,CZ,R", allow_hyphen_values = true)]
     sphere: Option<String>,
     /// features: per-Gaussian feature vectors, `[N, D]` (.npy or .safetensors); by default
     /// the scene's own feature properties.
