@@ -261,13 +261,19 @@ fn region_query_selects_the_box() {
         s(&ply),
         "--sphere",
         "-0.75,0.11,-2.12,5",
+        "--up",
+        "0,0,-2",
         "--query",
         "wide",
         "--json",
         "--out",
         s(dir.path()),
     ]);
-    assert!(json_report(&out)["count"].as_u64().unwrap() > 0);
+    let report = json_report(&out);
+    assert!(report["count"].as_u64().unwrap() > 0);
+    // --up is taken as given (normalised), not guessed.
+    assert_eq!(report["camera"]["up"], serde_json::json!([0.0, 0.0, -1.0]));
+    assert_eq!(report["camera"]["up_from"], "config");
     let none = dir.path().join("none");
     let out = splatraj(&[
         "query",

@@ -17,7 +17,7 @@
 use std::path::PathBuf;
 use std::str::FromStr;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result, anyhow, bail};
 use clap::{Args, ValueEnum};
 use splatraj::experiment::outputs::write_bytes;
 use splatraj::experiment::query::{QueryRequest, RejectedView, parse_region, parse_synonyms};
@@ -131,6 +131,10 @@ pub struct QueryArgs {
     /// is used when the preferred one shows less than half as much).
     #[arg(long)]
     fixed_view: bool,
+    /// World up of the scene, `X,Y,Z` (e.g. `0,-1,0` for y-down captures); by default guessed
+    /// from the scene.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    up: Option<String>,
     /// Tensor backend: flex (CPU, default), ndarray or wgpu, among those compiled in.
     #[arg(long, default_value = "flex", value_parser = BackendKind::from_str)]
     backend: BackendKind,
@@ -211,6 +215,7 @@ pub fn run(args: QueryArgs) -> Result<()> {
         view: ViewOptions {
             elevation_degrees: args.elevation,
             search: !args.fixed_view,
+            up: args.up.as_deref().map(parse_up).transpose()?,
         },
         intrinsics: Intrinsics::from_fov_x(FOV_X_DEGREES, args.width, args.height)?,
     };
@@ -240,4 +245,24 @@ pub fn run(args: QueryArgs) -> Result<()> {
         100.0 * outcome.highlighted_share
     );
     Ok(())
+}
+
+/// `--up X,Y,Z` as a unit vector.
+fn parse_up(text: &str) -> Result<[f64; 3]> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| anyhow!("--up {text:?}: {e} (expected X,Y,Z)"))?;
+    let [x, y, z] = values[..] else {
+        bail!(
+            "--up {text:?}: expected 3 values X,Y,Z, got {}",
+            values.len()
+        );
+    };
+    let length = (x * x + y * y + z * z).sqrt();
+    if !(length.is_finite() && length > 0.0) {
+        bail!("--up {text:?}: must be a finite, non-zero direction");
+    }
+    Ok([x / length, y / length, z / length])
 }

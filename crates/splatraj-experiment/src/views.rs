@@ -31,6 +31,8 @@ pub struct ViewOptions {
     pub elevation_degrees: f64,
     /// Try other views when the selection is hidden in the preferred one.
     pub search: bool,
+    /// World up (unit length); `None`: guessed from the scene.
+    pub up: Option<[f64; 3]>,
 }
 
 /// The diagnostic camera.
@@ -79,7 +81,7 @@ pub fn diagnostic_camera(
     k: &Intrinsics,
     view: ViewOptions,
 ) -> Result<(Pose, CameraReport)> {
-    let resolved = resolve_up(None, false, scene);
+    let resolved = resolve_up(view.up, false, scene);
     let up = DVec3::from_array(resolved.up);
     let centre = DVec3::from_array(target.centre.map(f64::from));
     let bounds = scene

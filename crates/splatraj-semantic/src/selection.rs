@@ -408,8 +408,12 @@ pub fn select(
         Scoring::Mask { cluster } => {
             let kept: Vec<usize> = (0..n).filter(|&i| r[i] > 0.5).collect();
             if kept.is_empty() {
+                // A soft mask renders (as weights), but membership needs a value above 0.5:
+                // say so, with the largest value found, rather than only "none".
+                let largest = r.iter().copied().fold(f32::NEG_INFINITY, f32::max);
                 return Err(nothing(format!(
-                    "{:?} contains none of the {n} Gaussians",
+                    "{:?} contains none of the {n} Gaussians: a mask marks the object with \
+                     values above 0.5 (1 = object, 0 = not), and its largest value is {largest}",
                     relevancy.name
                 )));
             }

@@ -168,3 +168,24 @@ fn equal_relevancies_empty_scenes_and_bad_options_are_errors() {
         "{err}"
     );
 }
+
+#[test]
+fn a_soft_mask_without_members_says_why() {
+    // Renders take mask values as weights, but membership needs a value above 0.5.
+    let scene = small_scene(vec![[1.0, 0.0]; 4]);
+    let rel = Relevancy {
+        name: "half.npy".into(),
+        values: vec![0.5; 4],
+        scoring: Scoring::Mask { cluster: false },
+    };
+    let err = select(&scene, "half.npy", &rel, &opts()).unwrap_err();
+    assert!(
+        matches!(err, SemanticError::NothingSelected { .. }),
+        "{err:?}"
+    );
+    let msg = err.to_string();
+    assert!(
+        msg.contains("above 0.5") && msg.contains("largest value is 0.5"),
+        "{msg}"
+    );
+}
