@@ -58,8 +58,8 @@ use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 use splatraj_render::backend::{BackendKind, Precision};
 use splatraj_render::camera::Intrinsics;
-use splatraj_render::render::Rasterizer;
 use splatraj_render::rasterize::Approximations;
+use splatraj_render::render::Rasterizer;
 use splatraj_semantic::TargetsConfig;
 use splatraj_traj::costs::{CostsConfig, DEFAULT_TARGET_RATIO};
 use splatraj_traj::optimise::{

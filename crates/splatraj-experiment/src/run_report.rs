@@ -23,8 +23,8 @@ use splatraj_traj::optimise::sampling::window_of;
 use splatraj_traj::trajectory::uniform_times;
 
 use crate::outputs::write_bytes;
-use crate::records::Csv;
 use crate::path_render::{FRAME_METRICS_FILE, VIDEO_FILE, frame_name};
+use crate::records::Csv;
 
 /// The report's file name in a run folder.
 pub const REPORT_FILE: &str = "report.html";

@@ -32,8 +32,8 @@ pub use single_pose::{
     optimise_single_pose,
 };
 pub use start::{
-    ObjectView, StartDistribution, WindowStart, object_side, object_start_poses, random_start_poses,
-    start_trajectory, unwrap_rotation, window_start_trajectory,
+    ObjectView, StartDistribution, WindowStart, object_side, object_start_poses,
+    random_start_poses, start_trajectory, unwrap_rotation, window_start_trajectory,
 };
 pub use trajectory::{
     Flow, StepTiming, StopReason, TrajectoryOptions, TrajectoryResult, TrajectoryStep,
