@@ -125,6 +125,11 @@ impl Experiment {
                 .with_context(|| format!("`queries.{i}.text` = {:?}", query.text))?,
                 (None, None) => unreachable!("a source is built whenever a query has no mask"),
             };
+            // Doubts about the grounding (e.g. a selection spread implausibly thin) are the
+            // user's to judge: show them, they do not stop the run.
+            for warning in &target.warnings {
+                tracing::warn!("`queries.{i}`: {warning}");
+            }
             let target_ratio = query.target_ratio.unwrap_or(config.camera.target_ratio);
             let extent = target.extent.map(f64::from);
             let prior_radius = default_prior_radius(extent, fov_x, fov_y, target_ratio)
