@@ -45,6 +45,44 @@ fn work_index() -> usize {
     CUBE_POS_Y as usize * CUBE_COUNT_X as usize + CUBE_POS_X as usize
 }
 
+/// Where unit `p` of work tile `w` sits: its pose, its pixel and whether that pixel lies in
+/// the image, and its centre relative to the tile corner (the host kernels' coordinates).
+#[derive(CubeType)]
+struct TilePixel<F: Float> {
+    pose: u32,
+    x: u32,
+    y: u32,
+    inside: bool,
+    px: F,
+    py: F,
+    x0: F,
+    y0: F,
+}
+
+#[cube]
+fn tile_pixel<F: Float, I: Int>(
+    work: &Tensor<I>,
+    w: usize,
+    p: usize,
+    width: u32,
+    height: u32,
+) -> TilePixel<F> {
+    let x0 = u32::cast_from(work[3 * w + 1]);
+    let y0 = u32::cast_from(work[3 * w + 2]);
+    let x = x0 + (p % 16) as u32;
+    let y = y0 + (p / 16) as u32;
+    TilePixel::<F> {
+        pose: u32::cast_from(work[3 * w]),
+        x,
+        y,
+        inside: x < width && y < height,
+        px: F::cast_from((p % 16) as u32) + F::new(0.5),
+        py: F::cast_from((p / 16) as u32) + F::new(0.5),
+        x0: F::cast_from(x0),
+        y0: F::cast_from(y0),
+    }
+}
+
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 fn forward_kernel<F: Float, I: Int>(
@@ -70,16 +108,9 @@ fn forward_kernel<F: Float, I: Int>(
         terminate!();
     }
     let p = UNIT_POS as usize;
-    let pose = u32::cast_from(work[3 * w]);
-    let x0 = u32::cast_from(work[3 * w + 1]);
-    let y0 = u32::cast_from(work[3 * w + 2]);
-    let x = x0 + (p % 16) as u32;
-    let y = y0 + (p / 16) as u32;
-    let inside = x < width && y < height;
-    // Pixel centre relative to the tile corner (the host kernels' coordinates).
-    let px = F::cast_from((p % 16) as u32) + F::new(0.5);
-    let py = F::cast_from((p / 16) as u32) + F::new(0.5);
-    let (x0f, y0f) = (F::cast_from(x0), F::cast_from(y0));
+    let at = tile_pixel::<F, I>(work, w, p, width, height);
+    let (pose, x, y, inside) = (at.pose, at.x, at.y, at.inside);
+    let (px, py, x0f, y0f) = (at.px, at.py, at.x0, at.y0);
 
     let mut open = inside;
     let mut t = F::new(1.0);
@@ -196,15 +227,9 @@ fn backward_kernel<F: Float, I: Int>(
     }
     let stride = comptime!(channels + 6);
     let p = UNIT_POS as usize;
-    let pose = u32::cast_from(work[3 * w]);
-    let x0 = u32::cast_from(work[3 * w + 1]);
-    let y0 = u32::cast_from(work[3 * w + 2]);
-    let x = x0 + (p % 16) as u32;
-    let y = y0 + (p / 16) as u32;
-    let inside = x < width && y < height;
-    let px = F::cast_from((p % 16) as u32) + F::new(0.5);
-    let py = F::cast_from((p / 16) as u32) + F::new(0.5);
-    let (x0f, y0f) = (F::cast_from(x0), F::cast_from(y0));
+    let at = tile_pixel::<F, I>(work, w, p, width, height);
+    let (pose, x, y, inside) = (at.pose, at.x, at.y, at.inside);
+    let (px, py, x0f, y0f) = (at.px, at.py, at.x0, at.y0);
 
     // The pixel's output gradients (zero outside the image) and replay state.
     let mut v_out = Array::<F>::new(comptime!(channels + 1));
