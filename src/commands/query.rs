@@ -17,10 +17,12 @@
 use std::path::PathBuf;
 use std::str::FromStr;
 
-use anyhow::{Context, Result, anyhow, bail};
+use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use splatraj::experiment::outputs::write_bytes;
-use splatraj::experiment::query::{QueryRequest, RejectedView, parse_region, parse_synonyms};
+use splatraj::experiment::query::{
+    QueryRequest, RejectedView, parse_direction, parse_region, parse_synonyms,
+};
 use splatraj::experiment::views::{FOV_X_DEGREES, ViewOptions};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera::Intrinsics;
@@ -215,7 +217,11 @@ pub fn run(args: QueryArgs) -> Result<()> {
         view: ViewOptions {
             elevation_degrees: args.elevation,
             search: !args.fixed_view,
-            up: args.up.as_deref().map(parse_up).transpose()?,
+            up: args
+                .up
+                .as_deref()
+                .map(|up| parse_direction(up, "--up"))
+                .transpose()?,
         },
         intrinsics: Intrinsics::from_fov_x(FOV_X_DEGREES, args.width, args.height)?,
     };
@@ -245,24 +251,4 @@ pub fn run(args: QueryArgs) -> Result<()> {
         100.0 * outcome.highlighted_share
     );
     Ok(())
-}
-
-/// `--up X,Y,Z` as a unit vector.
-fn parse_up(text: &str) -> Result<[f64; 3]> {
-    let values: Vec<f64> = text
-        .split(',')
-        .map(|v| v.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| anyhow!("--up {text:?}: {e} (expected X,Y,Z)"))?;
-    let [x, y, z] = values[..] else {
-        bail!(
-            "--up {text:?}: expected 3 values X,Y,Z, got {}",
-            values.len()
-        );
-    };
-    let length = (x * x + y * y + z * z).sqrt();
-    if !(length.is_finite() && length > 0.0) {
-        bail!("--up {text:?}: must be a finite, non-zero direction");
-    }
-    Ok([x / length, y / length, z / length])
 }

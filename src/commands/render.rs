@@ -15,7 +15,7 @@ use clap::Args;
 use serde::Serialize;
 use splatraj::experiment::io::read_camera_file;
 use splatraj::experiment::outputs::{npy_f32, write_bytes};
-use splatraj::experiment::probe::{MaskProbe, median_ms};
+use splatraj::experiment::probe::{MaskProbe, ProbeReport};
 use splatraj::experiment::resources::{MemoryLimit, MemoryPlan, render_bytes, scene_bytes};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera_file::resize;
@@ -77,20 +77,13 @@ pub struct RenderArgs {
 }
 
 /// What `render --grad` prints.
+/// The `--grad` line: the probe's figures and what they were measured on.
 #[derive(Debug, Serialize)]
 struct GradReport {
-    tce: f64,
-    tre: f64,
-    loss: f64,
-    /// d loss / dΦ, Φ = [ω_x, ω_y, ω_z, c_x, c_y, c_z].
-    grad_pose: Vec<f64>,
-    coverage: f64,
+    #[serde(flatten)]
+    probe: ProbeReport,
     target_ratio: f64,
     repeats: usize,
-    /// Median time of mask render + loss (no autodiff).
-    forward_ms: f64,
-    /// Median time of mask render + loss + backward on the autodiff device.
-    forward_backward_ms: f64,
     gaussians: usize,
     width: usize,
     height: usize,
@@ -191,11 +184,19 @@ pub fn run(args: RenderArgs) -> Result<()> {
                 intrinsics,
                 args.rasterizer,
             )?;
-            let grad = grad_report(&args, &probe, &pose, scene.len())?;
-            let mut numbers = vec![grad.tce, grad.tre, grad.loss, grad.coverage];
-            numbers.extend(&grad.grad_pose);
-            check_finite("the costs and pose gradient", &numbers)?;
-            report = Some(grad);
+            let measured = probe.measure(&pose, args.repeats)?;
+            check_finite("the costs and pose gradient", &measured.values())?;
+            report = Some(GradReport {
+                probe: measured,
+                target_ratio: args.target_ratio,
+                repeats: args.repeats,
+                gaussians: scene.len(),
+                width: intrinsics.width,
+                height: intrinsics.height,
+                backend: args.backend.to_string(),
+                dtype: format!("{:?}", args.dtype).to_lowercase(),
+                rasterizer: args.rasterizer,
+            });
         }
     }
 
@@ -229,32 +230,4 @@ fn check_finite(what: &str, values: &[f64]) -> Result<()> {
         ),
         None => Ok(()),
     }
-}
-
-fn grad_report(
-    args: &RenderArgs,
-    probe: &MaskProbe,
-    pose: &splatraj_render::camera::Pose,
-    gaussians: usize,
-) -> Result<GradReport> {
-    let result = probe.forward_backward(pose)?;
-    let forward_ms = median_ms(args.repeats, || probe.forward(pose).map(|_| ()))?;
-    let forward_backward_ms = median_ms(args.repeats, || probe.forward_backward(pose).map(|_| ()))?;
-    Ok(GradReport {
-        tce: result.term("tce"),
-        tre: result.term("tre"),
-        loss: result.total,
-        grad_pose: result.grad_pose.unwrap_or_else(|| vec![0.0; 6]),
-        coverage: result.coverage.unwrap_or(0.0),
-        target_ratio: args.target_ratio,
-        repeats: args.repeats,
-        forward_ms,
-        forward_backward_ms,
-        gaussians,
-        width: probe.intrinsics.width,
-        height: probe.intrinsics.height,
-        backend: args.backend.to_string(),
-        dtype: format!("{:?}", args.dtype).to_lowercase(),
-        rasterizer: args.rasterizer,
-    })
 }

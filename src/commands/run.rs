@@ -15,20 +15,20 @@
 //! --resume RUN_DIR` continues such a run in its folder. A run stopped by Ctrl-C writes its
 //! files for the best trajectory so far and exits 130.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::Args;
-use serde::Serialize;
-use splatraj::experiment::checkpoint::{CHECKPOINT_FILE, Checkpoint};
 use splatraj::experiment::config::Config;
 use splatraj::experiment::outputs::{create_run_dir, write_bytes, write_csv, write_json};
 use splatraj::experiment::records::trajectory_history;
 use splatraj::experiment::resources::RAISE_LIMIT;
-use splatraj::experiment::{Evaluation, Experiment, RunOptions, RunStop, TrajectoryRun};
-use splatraj_scene::atomic::is_partial_file;
-use splatraj_traj::metrics::{Smoothness, WindowMetrics};
+use splatraj::experiment::run_folder::{
+    MetricsFile, RunReport, StageTimes, check_writable, remove_checkpoint, remove_partial_files,
+    resumable,
+};
+use splatraj::experiment::{Evaluation, Experiment, RunOptions, RunStop};
 
 use crate::cli::{Interrupted, MemoryArgs, bar_observer, interrupt_flag, progress_bar};
 
@@ -56,35 +56,6 @@ pub struct RunArgs {
     quiet: bool,
 }
 
-/// `metrics.json`.
-#[derive(Debug, Serialize)]
-struct MetricsFile {
-    windows: Vec<WindowMetrics>,
-    ldj: Smoothness,
-    ldj_samples: usize,
-    run: RunReport,
-}
-
-/// How the optimisation went.
-#[derive(Debug, Serialize)]
-struct RunReport {
-    scene: String,
-    gaussians: usize,
-    stop: RunStop,
-    restarts_run: usize,
-    best_restart: usize,
-    best_step: usize,
-    best_total: f64,
-    iterations_run: usize,
-    skipped_steps: usize,
-    optimisation_s: f64,
-    per_iteration_ms: f64,
-    metrics_s: f64,
-    frames_s: f64,
-    total_s: f64,
-    backend: String,
-}
-
 /// Runs `splatraj run`.
 pub fn run(args: RunArgs) -> Result<()> {
     let started = Instant::now();
@@ -93,6 +64,15 @@ pub fn run(args: RunArgs) -> Result<()> {
     let (config, resume) = match (&args.resume, &args.config) {
         (Some(dir), _) => {
             let (config, checkpoint) = resumable(dir, &overrides)?;
+            eprintln!(
+                "resuming {}: restart {}/{} at step {}/{}, best sampled loss so far {:.4}",
+                dir.display(),
+                checkpoint.restart + 1,
+                checkpoint.restarts,
+                checkpoint.steps_done,
+                checkpoint.steps,
+                checkpoint.best_total
+            );
             (config, Some((dir.clone(), checkpoint)))
         }
         (None, Some(path)) => (Config::load(path, &overrides)?, None),
@@ -160,7 +140,7 @@ pub fn run(args: RunArgs) -> Result<()> {
 
     let metrics_started = Instant::now();
     let evaluation = experiment.evaluate(&trajectory)?;
-    let metrics_s = metrics_started.elapsed().as_secs_f64();
+    let metrics = metrics_started.elapsed();
 
     let frames_started = Instant::now();
     // Frames, frame_metrics.csv and video.mp4, then the same poses in every export format.
@@ -172,33 +152,23 @@ pub fn run(args: RunArgs) -> Result<()> {
     })?;
     frame_bar.finish_and_clear();
     experiment.write_exports(&output, &dir)?;
-    let frames_s = frames_started.elapsed().as_secs_f64();
+    let times = StageTimes {
+        metrics,
+        frames: frames_started.elapsed(),
+        total: started.elapsed(),
+    };
 
-    let report = run_report(&experiment, &run, [metrics_s, frames_s], started);
+    let report = RunReport::new(&experiment, &run, times);
     print_summary(&evaluation, &report);
-    let Evaluation { windows, ldj } = evaluation;
-    let ldj_samples = config.output.ldj_samples;
     write_json(
         &dir.join("metrics.json"),
-        &MetricsFile {
-            windows,
-            ldj,
-            ldj_samples,
-            run: report,
-        },
+        &MetricsFile::new(evaluation, config.output.ldj_samples, report),
     )?;
     experiment.write_report(&dir)?;
     println!("{}", dir.display());
     match run.stop {
         // A finished run needs no checkpoint; a stopped one keeps it for --resume.
-        RunStop::Finished => {
-            let checkpoint = dir.join(CHECKPOINT_FILE);
-            if checkpoint.exists() {
-                std::fs::remove_file(&checkpoint)
-                    .with_context(|| format!("cannot remove {}", checkpoint.display()))?;
-            }
-            Ok(())
-        }
+        RunStop::Finished => remove_checkpoint(&dir),
         RunStop::TimeLimit => Ok(()),
         RunStop::Interrupted => Err(Interrupted(format!(
             "interrupted: {} holds the best trajectory so far; `splatraj run --resume {}` \
@@ -207,110 +177,6 @@ pub fn run(args: RunArgs) -> Result<()> {
             dir.display()
         ))
         .into()),
-    }
-}
-
-/// The config and checkpoint of a run folder to resume: its resolved `config.toml` (with
-/// `overrides`), its inputs resolved against the original config's folder.
-fn resumable(dir: &Path, overrides: &[String]) -> Result<(Config, Checkpoint)> {
-    if !dir.is_dir() {
-        bail!("--resume {}: not a run folder", dir.display());
-    }
-    if finished(&dir.join("metrics.json")) {
-        bail!("--resume {}: this run already finished", dir.display());
-    }
-    let checkpoint = Checkpoint::read(dir)?;
-    let mut config = Config::load(&dir.join("config.toml"), overrides)?;
-    config.base_dir = checkpoint.base_dir.clone();
-    eprintln!(
-        "resuming {}: restart {}/{} at step {}/{}, best sampled loss so far {:.4}",
-        dir.display(),
-        checkpoint.restart + 1,
-        checkpoint.restarts,
-        checkpoint.steps_done,
-        checkpoint.steps,
-        checkpoint.best_total
-    );
-    Ok((config, checkpoint))
-}
-
-/// Whether `metrics.json` says its run finished.
-fn finished(metrics: &Path) -> bool {
-    std::fs::read_to_string(metrics)
-        .ok()
-        .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
-        .is_some_and(|v| v["run"]["stop"] == "finished")
-}
-
-/// Fails unless files can be created in `dir` (or, when it does not exist yet, in the
-/// nearest folder above it that does).
-fn check_writable(dir: &Path) -> Result<()> {
-    let existing = dir
-        .ancestors()
-        .find(|p| p.as_os_str().is_empty() || p.is_dir())
-        .map(|p| {
-            if p.as_os_str().is_empty() {
-                Path::new(".")
-            } else {
-                p
-            }
-        })
-        .unwrap_or(Path::new("."));
-    let probe = existing.join(format!(".splatraj-write-test.{}", std::process::id()));
-    std::fs::File::create(&probe).with_context(|| {
-        format!(
-            "the runs folder {} is not writable (cannot create a file in {}); set \
-             `output.runs_dir`",
-            dir.display(),
-            existing.display()
-        )
-    })?;
-    let _ = std::fs::remove_file(&probe);
-    Ok(())
-}
-
-/// Removes the temporary files a killed process left in a run folder (and its `frames/`).
-fn remove_partial_files(dir: &Path) -> Result<()> {
-    for folder in [dir.to_path_buf(), dir.join("frames")] {
-        let Ok(entries) = std::fs::read_dir(&folder) else {
-            continue;
-        };
-        for entry in entries.flatten() {
-            if is_partial_file(&entry.file_name().to_string_lossy()) {
-                std::fs::remove_file(entry.path())
-                    .with_context(|| format!("cannot remove {}", entry.path().display()))?;
-            }
-        }
-    }
-    Ok(())
-}
-
-fn run_report(
-    experiment: &Experiment,
-    run: &TrajectoryRun,
-    [metrics_s, frames_s]: [f64; 2],
-    started: Instant,
-) -> RunReport {
-    let best = run.best();
-    let optimisation_s = run.elapsed.as_secs_f64();
-    let iterations_run = run.iterations_run();
-    let config = &experiment.config;
-    RunReport {
-        scene: experiment.scene_name.clone(),
-        gaussians: experiment.scene.len(),
-        stop: run.stop,
-        restarts_run: run.results.len(),
-        best_restart: run.best,
-        best_step: best.best_step,
-        best_total: best.best_total,
-        iterations_run,
-        skipped_steps: run.results.iter().map(|r| r.skipped_steps).sum(),
-        optimisation_s,
-        per_iteration_ms: 1e3 * optimisation_s / iterations_run.max(1) as f64,
-        metrics_s,
-        frames_s,
-        total_s: started.elapsed().as_secs_f64(),
-        backend: format!("{:?} {:?}", config.backend, config.precision),
     }
 }
 

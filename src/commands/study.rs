@@ -17,6 +17,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use splatraj::experiment::Extensions;
 use splatraj::experiment::outputs::create_run_dir;
+use splatraj::experiment::study::context::rows_from_child;
 use splatraj::experiment::study::files::Failure;
 use splatraj::experiment::study::measure::MemoryReading;
 use splatraj::experiment::study::plan::PlanOptions;
@@ -223,18 +224,7 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
             }
         }
     }
-    let context = StudyContext {
-        machine: machine(),
-        evaluation: format!(
-            "{}×{}, {:?} {:?} {:?}, exact rendering",
-            plan.evaluation.width.unwrap_or(base.output.width),
-            plan.evaluation.height.unwrap_or(base.output.height),
-            base.rasterizer,
-            base.precision,
-            base.backend
-        ),
-        command: Some(command_line()),
-    };
+    let context = StudyContext::new(&plan, &base, std::env::args());
     let failed = failures.len();
     let study = StudyFile::new(plan, args.shard, context, rows, failures);
     write_study(&dir, &study)?;
@@ -288,54 +278,5 @@ fn in_child(exe: &Path, args: &StudyRunArgs, index: usize) -> Result<Vec<StudyRo
     let output = child
         .output()
         .map_err(|e| format!("cannot start a study process: {e}"))?;
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let parsed = stdout
-        .lines()
-        .last()
-        .and_then(|line| serde_json::from_str::<Vec<StudyRow>>(line).ok());
-    match (output.status.success(), parsed) {
-        (true, Some(rows)) => Ok(rows),
-        _ => {
-            let err = String::from_utf8_lossy(&output.stderr);
-            let err = err.trim().strip_prefix("error: ").unwrap_or(err.trim());
-            Err(if err.is_empty() {
-                format!("the study process ended with {}", output.status)
-            } else {
-                err.to_string()
-            })
-        }
-    }
-}
-
-/// The command line as typed (arguments with spaces or shell characters quoted).
-fn command_line() -> String {
-    std::env::args()
-        .enumerate()
-        .map(|(i, a)| {
-            let a = if i == 0 { "splatraj".to_string() } else { a };
-            if a.chars()
-                .all(|c| c.is_ascii_alphanumeric() || "-_./=,:".contains(c))
-            {
-                a
-            } else {
-                format!("'{}'", a.replace('\'', "'\\''"))
-            }
-        })
-        .collect::<Vec<_>>()
-        .join(" ")
-}
-
-/// The machine in words: CPU model and cores.
-fn machine() -> String {
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let model = std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|t| {
-            t.lines()
-                .find(|l| l.starts_with("model name"))
-                .and_then(|l| l.split_once(':'))
-                .map(|(_, m)| m.trim().to_string())
-        })
-        .unwrap_or_else(|| "unknown CPU".into());
-    format!("{model}, {cores} cores available")
+    rows_from_child(&output)
 }

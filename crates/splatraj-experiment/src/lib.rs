@@ -39,6 +39,7 @@ pub mod query;
 pub mod records;
 pub mod resources;
 pub mod run_files;
+pub mod run_folder;
 pub mod run_report;
 pub mod starts;
 pub mod study;

@@ -88,6 +88,51 @@ impl MaskProbe {
     pub fn scene(&self) -> &DeviceScene {
         &self.plain
     }
+
+    /// Costs and pose gradient at `pose`, and the median of `repeats` timings of the forward
+    /// and forward + backward passes.
+    pub fn measure(&self, pose: &Pose, repeats: usize) -> Result<ProbeReport> {
+        let result = self.forward_backward(pose)?;
+        let forward_ms = median_ms(repeats, || self.forward(pose).map(|_| ()))?;
+        let forward_backward_ms = median_ms(repeats, || self.forward_backward(pose).map(|_| ()))?;
+        Ok(ProbeReport {
+            tce: result.term("tce"),
+            tre: result.term("tre"),
+            loss: result.total,
+            grad_pose: result.grad_pose.unwrap_or_else(|| vec![0.0; 6]),
+            coverage: result.coverage.unwrap_or(0.0),
+            forward_ms,
+            forward_backward_ms,
+        })
+    }
+}
+
+/// What [`MaskProbe::measure`] found.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ProbeReport {
+    /// TCE.
+    pub tce: f64,
+    /// TRE.
+    pub tre: f64,
+    /// TCE + TRE.
+    pub loss: f64,
+    /// d loss / dΦ, Φ = [ω_x, ω_y, ω_z, c_x, c_y, c_z].
+    pub grad_pose: Vec<f64>,
+    /// Share of the frame the object covers.
+    pub coverage: f64,
+    /// Median time of mask render + loss (no autodiff).
+    pub forward_ms: f64,
+    /// Median time of mask render + loss + backward on the autodiff device.
+    pub forward_backward_ms: f64,
+}
+
+impl ProbeReport {
+    /// Every number that reaches a file (for the non-finite check).
+    pub fn values(&self) -> Vec<f64> {
+        let mut values = vec![self.tce, self.tre, self.loss, self.coverage];
+        values.extend(&self.grad_pose);
+        values
+    }
 }
 
 /// Median of `runs` timings of `f`, in milliseconds.

@@ -394,6 +394,16 @@ pub fn parse_floats<const N: usize>(text: &str, option: &str, form: &str) -> Res
     Ok(values)
 }
 
+/// `X,Y,Z` as a unit direction; errors name `option`.
+pub fn parse_direction(text: &str, option: &str) -> Result<[f64; 3]> {
+    let [x, y, z] = parse_floats::<3>(text, option, "X,Y,Z")?.map(f64::from);
+    let length = (x * x + y * y + z * z).sqrt();
+    if !(length.is_finite() && length > 0.0) {
+        bail!("{option} {text:?}: must be a finite, non-zero direction");
+    }
+    Ok([x / length, y / length, z / length])
+}
+
 /// `NAME=ALT1,ALT2` items into label name → synonyms (repeated names merge).
 pub fn parse_synonyms(items: &[String]) -> Result<BTreeMap<String, Vec<String>>> {
     let mut synonyms: BTreeMap<String, Vec<String>> = BTreeMap::new();

@@ -14,6 +14,7 @@
 //! Peak memory is a process-wide high-water mark, so the command runs each run in a child
 //! process of its own (as `bench render` does); in-process runs report none.
 
+pub mod context;
 pub mod files;
 pub mod measure;
 pub mod plan;

@@ -1,0 +1,97 @@
+//! Where and how a study ran, for its files: the machine, the fixed evaluation in words, the
+//! command that regenerates it; and the rows a child process reports.
+
+use std::process::Output;
+
+use super::StudyRow;
+use super::plan::StudyPlan;
+use super::summary::StudyContext;
+use crate::config::Config;
+
+impl StudyContext {
+    /// The context of `plan` over `base` run on this machine with the command line `args`.
+    pub fn new(plan: &StudyPlan, base: &Config, args: impl IntoIterator<Item = String>) -> Self {
+        StudyContext {
+            machine: machine(),
+            evaluation: format!(
+                "{}×{}, {:?} {:?} {:?}, exact rendering",
+                plan.evaluation.width.unwrap_or(base.output.width),
+                plan.evaluation.height.unwrap_or(base.output.height),
+                base.rasterizer,
+                base.precision,
+                base.backend
+            ),
+            command: Some(command_line(args)),
+        }
+    }
+}
+
+/// The command line as typed (arguments with spaces or shell characters quoted), the program
+/// named `splatraj`.
+pub fn command_line(args: impl IntoIterator<Item = String>) -> String {
+    args.into_iter()
+        .enumerate()
+        .map(|(i, a)| {
+            let a = if i == 0 { "splatraj".to_string() } else { a };
+            if a.chars()
+                .all(|c| c.is_ascii_alphanumeric() || "-_./=,:".contains(c))
+            {
+                a
+            } else {
+                format!("'{}'", a.replace('\'', "'\\''"))
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// The machine in words: CPU model and cores.
+pub fn machine() -> String {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let model = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|t| {
+            t.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split_once(':'))
+                .map(|(_, m)| m.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    format!("{model}, {cores} cores available")
+}
+
+/// The rows a child process (`splatraj study ... --one RUN`) printed as its last line, or its
+/// error message.
+pub fn rows_from_child(output: &Output) -> Result<Vec<StudyRow>, String> {
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let parsed = stdout
+        .lines()
+        .last()
+        .and_then(|line| serde_json::from_str::<Vec<StudyRow>>(line).ok());
+    match (output.status.success(), parsed) {
+        (true, Some(rows)) => Ok(rows),
+        _ => {
+            let err = String::from_utf8_lossy(&output.stderr);
+            let err = err.trim().strip_prefix("error: ").unwrap_or(err.trim());
+            Err(if err.is_empty() {
+                format!("the study process ended with {}", output.status)
+            } else {
+                err.to_string()
+            })
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn command_lines_quote_what_a_shell_would_split() {
+        let args = ["/usr/bin/x", "study", "a b.toml", "--vary", "k=it's"].map(String::from);
+        assert_eq!(
+            command_line(args),
+            "splatraj study 'a b.toml' --vary 'k=it'\\''s'"
+        );
+    }
+}
