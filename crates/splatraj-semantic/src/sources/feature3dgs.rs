@@ -20,15 +20,14 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use burn::store::pytorch_reader::PytorchReader;
 use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 use splatraj_scene::Scene;
 
 use crate::embeddings::Matrix;
 use crate::error::{Result, SemanticError};
+use crate::sources::conv1x1::read_conv1x1_layers;
 use crate::sources::features::scene_features;
-use crate::sources::langsplat::{LinearWeights, read_f32};
 use crate::sources::text_keys::{TextKeys, refuse_unknown_keys};
 use crate::sources::{
     FeatureInput, FeaturesSource, LangsplatDecoder, Relevancy, Scoring, SourceConfig,
@@ -38,64 +37,16 @@ use crate::sources::{
 /// The name the source is registered under (`source = "custom.feature3dgs"`).
 pub const FEATURE3DGS: &str = "feature3dgs";
 
-/// Keys of Feature 3DGS's `CNN_decoder` state dict.
-pub const DECODER_KEYS: [&str; 2] = ["conv.weight", "conv.bias"];
-
-/// Reads Feature 3DGS's 1×1-convolution decoder (`decoder_chkpnt*.pth`) onto `device`, as a
-/// one-layer Linear decoder. A missing key or a shape other than `[out, in, 1, 1]` and `[out]`
-/// is an error naming the file and the key.
+/// Reads Feature 3DGS's 1×1-convolution decoder (`decoder_chkpnt*.pth`, keys `conv.weight`
+/// `[out, in, 1, 1]` and `conv.bias` `[out]`) onto `device`, as a one-layer Linear decoder. A
+/// missing key or another shape is an error naming the file and the key.
 pub fn read_decoder(path: &Path, device: &Device) -> Result<LangsplatDecoder> {
-    let reader = PytorchReader::new(path).map_err(|e| {
-        SemanticError::file(path, format!("not a readable PyTorch checkpoint: {e}"))
-    })?;
-    let tensors = reader.tensors();
-    let get = |key: &str| {
-        tensors.get(key).ok_or_else(|| {
-            let mut keys: Vec<&str> = tensors.keys().map(String::as_str).collect();
-            keys.sort_unstable();
-            keys.truncate(8);
-            SemanticError::file(
-                path,
-                format!(
-                    "missing key {key:?}: not a Feature 3DGS CNN_decoder state dict (one \
-                     Conv2d with kernel_size=1 under `conv`; its keys: {keys:?})"
-                ),
-            )
-        })
-    };
-    let (weight, bias) = (get(DECODER_KEYS[0])?, get(DECODER_KEYS[1])?);
-    let [out, input, 1, 1] = weight.shape()[..] else {
-        return Err(SemanticError::file(
-            path,
-            format!(
-                "key {:?} has shape {:?}: a 1×1 convolution's weight is [out, in, 1, 1]",
-                DECODER_KEYS[0],
-                weight.shape()
-            ),
-        ));
-    };
-    if bias.shape() != [out] {
-        return Err(SemanticError::file(
-            path,
-            format!(
-                "key {:?} has shape {:?}: expected [{out}] to match {:?}",
-                DECODER_KEYS[1],
-                bias.shape(),
-                DECODER_KEYS[0]
-            ),
-        ));
-    }
-    let layer = LinearWeights {
-        weight: read_f32(path, DECODER_KEYS[0], weight)?,
-        bias: read_f32(path, DECODER_KEYS[1], bias)?,
-        out,
-        input,
-    };
-    Ok(LangsplatDecoder::from_linear_layers(
-        vec![layer],
+    read_conv1x1_layers(
         path,
+        &["conv."],
+        "a Feature 3DGS CNN_decoder state dict (one Conv2d with kernel_size=1 under `conv`)",
         device,
-    ))
+    )
 }
 
 /// Feature 3DGS's `semantic_*` features, decoded by its 1×1 convolution when there is one,

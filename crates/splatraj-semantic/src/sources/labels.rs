@@ -2,7 +2,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use splatraj_scene::Scene;
+use splatraj_scene::{Labels, Scene};
 
 use crate::error::{Result, SemanticError};
 use crate::names;
@@ -41,12 +41,26 @@ impl TargetSource for LabelsSource {
                      SuperSplat segments JSON) or a scene with a label property"
                     .to_string(),
             })?;
-        if labels.ids.len() != scene.len() {
+        self.match_labels(labels, scene.len(), query)
+    }
+}
+
+impl LabelsSource {
+    /// The 0/1 values of the Gaussians whose label `query` names (the rule of
+    /// [`LabelsSource`]), for `labels` of a scene of `gaussians` Gaussians: the matching of
+    /// every source whose per-Gaussian values are instance ids (e.g. Gaussian Grouping's
+    /// classified identities).
+    pub fn match_labels(
+        &self,
+        labels: &Labels,
+        gaussians: usize,
+        query: &str,
+    ) -> Result<Relevancy> {
+        if labels.ids.len() != gaussians {
             return Err(SemanticError::Mismatch(format!(
-                "labels from {} hold {} ids for a scene of {} Gaussians",
+                "labels from {} hold {} ids for a scene of {gaussians} Gaussians",
                 labels.source,
                 labels.ids.len(),
-                scene.len()
             )));
         }
         let present: BTreeSet<i32> = labels.ids.iter().copied().collect();

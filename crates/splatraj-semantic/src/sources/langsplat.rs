@@ -254,10 +254,9 @@ impl LangsplatDecoder {
         &self.source
     }
 
-    /// Decodes `[rows, latent_dim]` latents to unit `[rows, output_dim]` vectors, as LangSplat's
-    /// `Autoencoder.decode`: Linear and ReLU in turn (none after the last Linear), then L2
-    /// normalisation of each row.
-    pub fn forward(&self, latents: Tensor<2>) -> Tensor<2> {
+    /// The layers' raw output for `[rows, latent_dim]` inputs: Linear and ReLU in turn, none
+    /// after the last Linear (logits, for decoders that end in a classifier).
+    pub fn forward_raw(&self, latents: Tensor<2>) -> Tensor<2> {
         let layers = &self.module.layers;
         let mut x = latents;
         for (i, layer) in layers.iter().enumerate() {
@@ -266,6 +265,14 @@ impl LangsplatDecoder {
                 x = relu(x);
             }
         }
+        x
+    }
+
+    /// Decodes `[rows, latent_dim]` latents to unit `[rows, output_dim]` vectors, as LangSplat's
+    /// `Autoencoder.decode`: [`LangsplatDecoder::forward_raw`], then L2 normalisation of each
+    /// row.
+    pub fn forward(&self, latents: Tensor<2>) -> Tensor<2> {
+        let x = self.forward_raw(latents);
         let norm = (x.clone() * x.clone())
             .sum_dim(1)
             .sqrt()
@@ -297,33 +304,45 @@ impl LangsplatDecoder {
                 value: latents.values[i],
             });
         }
+        self.map_rows(latents, self.output_dim(), "decoded", &|x| self.forward(x))
+    }
+
+    /// `head` applied, on the decoder's device, to batches of `inputs` (`[rows, latent_dim]`,
+    /// checked by the caller), each batch's `[rows, out_dim]` result read back to the host:
+    /// the batched loop every use of a decoder shares. `what` names the result in errors and
+    /// in the matrix's source ("decoded", "classified").
+    pub fn map_rows(
+        &self,
+        inputs: &Matrix,
+        out_dim: usize,
+        what: &str,
+        head: &dyn Fn(Tensor<2>) -> Tensor<2>,
+    ) -> Result<Matrix> {
         let device = self.module.devices().into_iter().next().ok_or_else(|| {
             SemanticError::Mismatch("the decoder holds no tensor (no device)".to_string())
         })?;
-        let out_dim = self.output_dim();
-        let mut values = Vec::with_capacity(latents.rows * out_dim);
-        for chunk in latents.values.chunks(DECODE_ROWS * latents.dim) {
-            let rows = chunk.len() / latents.dim;
+        let mut values = Vec::with_capacity(inputs.rows * out_dim);
+        for chunk in inputs.values.chunks(DECODE_ROWS * inputs.dim) {
+            let rows = chunk.len() / inputs.dim;
             let x = Tensor::<2>::from_data(
-                TensorData::new(chunk.to_vec(), [rows, latents.dim]),
+                TensorData::new(chunk.to_vec(), [rows, inputs.dim]),
                 (&device, DType::F32),
             );
-            let decoded = self
-                .forward(x)
+            let batch = head(x)
                 .into_data()
                 .convert::<f32>()
                 .try_into_vec::<f32>()
                 .map_err(|e| {
                     SemanticError::Mismatch(format!(
-                        "reading the decoded latents of {} back from the device: {e:?}",
-                        latents.source
+                        "reading the {what} rows of {} back from the device: {e:?}",
+                        inputs.source
                     ))
                 })?;
-            values.extend(decoded);
+            values.extend(batch);
         }
         Ok(Matrix {
-            source: format!("{} decoded by {}", latents.source, self.source.display()),
-            rows: latents.rows,
+            source: format!("{} {what} by {}", inputs.source, self.source.display()),
+            rows: inputs.rows,
             dim: out_dim,
             values,
         })

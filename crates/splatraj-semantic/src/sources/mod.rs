@@ -5,8 +5,10 @@
 //! it in a [`SourceRegistry`]; a config then names it `source = "custom.<name>"`. Selection (thresholds, DBSCAN) is not the sources' job: it lives in
 //! [`crate::selection`] and reads the [`Scoring`] a source declares.
 
+pub mod conv1x1;
 pub mod feature3dgs;
 pub mod features;
+pub mod gaussian_grouping;
 pub mod labels;
 pub mod langsplat;
 pub mod opengaussian;
@@ -21,6 +23,7 @@ use crate::error::Result;
 
 pub use feature3dgs::{Feature3dgsConfig, Feature3dgsSource};
 pub use features::{FeatureInput, FeaturesSource};
+pub use gaussian_grouping::{GaussianGroupingConfig, GaussianGroupingSource};
 pub use labels::{LabelsSource, label_mask};
 pub use langsplat::{LangsplatDecoder, LangsplatSource};
 pub use opengaussian::{OpenGaussianConfig, OpenGaussianSource};

@@ -22,6 +22,7 @@ use serde::de::DeserializeOwned;
 
 use super::TargetSource;
 use super::feature3dgs::{FEATURE3DGS, Feature3dgsConfig};
+use super::gaussian_grouping::{GAUSSIAN_GROUPING, GaussianGroupingConfig};
 use super::opengaussian::{OPENGAUSSIAN, OpenGaussianConfig};
 use crate::error::{Result, SemanticError};
 
@@ -58,7 +59,8 @@ type Factory =
 
 /// Names → source configs, for `[targets] source = "custom.<name>"`. The default registry
 /// holds the language fields that ship with splatraj as registered sources
-/// (`custom.feature3dgs`, `custom.opengaussian`); [`SourceRegistry::empty`] holds none.
+/// (`custom.feature3dgs`, `custom.opengaussian`, `custom.gaussian_grouping`);
+/// [`SourceRegistry::empty`] holds none.
 #[derive(Clone)]
 pub struct SourceRegistry {
     factories: BTreeMap<String, Factory>,
@@ -69,6 +71,7 @@ impl Default for SourceRegistry {
         let mut registry = SourceRegistry::empty();
         registry.register::<Feature3dgsConfig>(FEATURE3DGS);
         registry.register::<OpenGaussianConfig>(OPENGAUSSIAN);
+        registry.register::<GaussianGroupingConfig>(GAUSSIAN_GROUPING);
         registry
     }
 }
