@@ -14,11 +14,24 @@
 //! ```text
 //! orbit:  c*(s) = o + r·(cos ε·h(±s·sweep) + sin ε·u)          (+ ccw, − cw)
 //! dolly:  c*(s) = o + ((1 − s)·r₀ + s·r₁)·(cos ε·h₀ + sin ε·u)
+//! reveal: c*(s) = o + r·(cos ε·h₀ + sin ε·u),   view turned by ∓pan·(1 − smooth(s/f)) about u
+//! group:  c*(s) = o + r·(cos ε·h₀ + sin ε·u),   o and r those of the objects' union
 //! ```
 //!
-//! with ε the elevation. The camera looks at o throughout, upright; the elevation is kept in
-//! (−90°, 90°) so that the view never points straight down, where "upright" has no meaning
-//! and the orientation would twist.
+//! with ε the elevation. The camera looks at its aim point a(s), upright; for orbit, dolly and
+//! group a(s) = o. The elevation is kept in (−90°, 90°) so that the view never points
+//! straight down, where "upright" has no meaning and the orientation would twist.
+//!
+//! **Reveal** is a pan from a standing camera: at s = 0 the view is the view of o turned by
+//! `pan` about world up (so the object is out of frame: hidden by the frame's edge, not by
+//! an occluder, which works in any scene), and it turns toward o along the smoothstep
+//! 3x² − 2x³ of x = s/`framed_from` (no jolt at either end), framing o from s = `framed_from`
+//! to the window's end: a(s) = c* + R(u, θ(s))·(o − c*), θ(0) = ∓pan, θ = 0 from
+//! `framed_from` on. `direction` is the way the view turns toward the object.
+//!
+//! **Group** frames several queries' objects together: the caller grounds each of the
+//! `objects` and passes their union's centre and working radius in the [`ShotFrame`]; the
+//! window's target (TCE, TRE, metrics) is the union's mask. The camera holds one framing.
 
 use glam::{DQuat, DVec3};
 use serde::{Deserialize, Serialize};
@@ -32,8 +45,13 @@ pub const DEFAULT_ORBIT_SWEEP: f64 = 90.0;
 pub const DEFAULT_SHOT_WEIGHT: f64 = 10.0;
 /// Default start radius of a dolly as a multiple of the window's working radius (an approach).
 pub const DEFAULT_DOLLY_FROM: f64 = 1.5;
+/// Default angle a reveal's view starts turned away from its object, degrees: out of frame
+/// for any horizontal field of view below 180° minus the object's width.
+pub const DEFAULT_REVEAL_PAN: f64 = 90.0;
+/// Default share of a reveal's window after which its object is framed.
+pub const DEFAULT_REVEAL_FRAMED_FROM: f64 = 0.6;
 
-/// Which way an orbit turns about world up, seen from above.
+/// Which way an orbit (or a reveal's view) turns about world up, seen from above.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Direction {
@@ -42,6 +60,16 @@ pub enum Direction {
     Ccw,
     /// Clockwise.
     Cw,
+}
+
+impl Direction {
+    /// +1 counter-clockwise, −1 clockwise (the sign of a turn about world up).
+    pub fn sign(self) -> f64 {
+        match self {
+            Direction::Ccw => 1.0,
+            Direction::Cw => -1.0,
+        }
+    }
 }
 
 /// A shot as the config gives it (`[[queries]] shot = { kind = "…", … }`); distances in
@@ -53,6 +81,10 @@ pub enum ShotSpec {
     Orbit(OrbitSpec),
     /// Approach (or retreat from) the object along one view line.
     Dolly(DollySpec),
+    /// Start with the object out of frame, pan to frame it.
+    Reveal(RevealSpec),
+    /// Frame several queries' objects together.
+    Group(GroupSpec),
 }
 
 /// `kind = "orbit"`: elevation, radius, sweep, direction.
@@ -121,6 +153,91 @@ impl Default for DollySpec {
     }
 }
 
+/// `kind = "reveal"`: a standing camera pans from off the object onto it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RevealSpec {
+    /// Elevation of the camera seen from the object, degrees, in (−90, 90). Default 30.
+    pub elevation: f64,
+    /// Distance from the object's centre, scene units (> 0). Default: the working radius.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radius: Option<f64>,
+    /// Azimuth of the camera, degrees, as for an orbit. Default 0.
+    pub azimuth: f64,
+    /// Angle the view starts turned away from the object, degrees, in (0, 180]. Default 90.
+    pub pan: f64,
+    /// Way the view turns toward the object, seen from above: `ccw` (default) or `cw`.
+    pub direction: Direction,
+    /// Share of the window after which the object is framed, in (0, 1]. Default 0.6.
+    pub framed_from: f64,
+    /// Weight of the shot's cost (≥ 0). Default 10.
+    pub weight: f64,
+}
+
+impl Default for RevealSpec {
+    /// 30° elevation, working radius, azimuth 0, a 90° counter-clockwise pan framed from 0.6.
+    fn default() -> Self {
+        Self {
+            elevation: DEFAULT_SHOT_ELEVATION,
+            radius: None,
+            azimuth: 0.0,
+            pan: DEFAULT_REVEAL_PAN,
+            direction: Direction::Ccw,
+            framed_from: DEFAULT_REVEAL_FRAMED_FROM,
+            weight: DEFAULT_SHOT_WEIGHT,
+        }
+    }
+}
+
+/// `kind = "group"`: the union of `objects` (each grounded like a query's text) held in one
+/// framing; the window's query text only names the group.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GroupSpec {
+    /// The objects framed together (at least two), each a query text of the target source.
+    pub objects: Vec<String>,
+    /// Elevation of the view above the horizontal, degrees, in (−90, 90). Default 30.
+    pub elevation: f64,
+    /// Distance from the union's centre, scene units (> 0). Default: the union's working
+    /// radius.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radius: Option<f64>,
+    /// Azimuth of the camera, degrees, as for an orbit. Default 0.
+    pub azimuth: f64,
+    /// Weight of the shot's cost (≥ 0; 0 leaves the framing to TCE and TRE). Default 10.
+    pub weight: f64,
+}
+
+impl Default for GroupSpec {
+    /// No objects (a config must name them), 30° elevation, working radius, azimuth 0.
+    fn default() -> Self {
+        Self {
+            objects: Vec::new(),
+            elevation: DEFAULT_SHOT_ELEVATION,
+            radius: None,
+            azimuth: 0.0,
+            weight: DEFAULT_SHOT_WEIGHT,
+        }
+    }
+}
+
+/// A group's box: the smallest axis-aligned box holding every object's box (`(centre,
+/// extent)`, each extent a full side length); its centre and extent. Empty input: a point at
+/// the origin.
+pub fn union_box(boxes: &[([f64; 3], [f64; 3])]) -> ([f64; 3], [f64; 3]) {
+    let (lo, hi) = boxes.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), (centre, extent)| {
+            let (c, half) = (DVec3::from(*centre), 0.5 * DVec3::from(*extent).abs());
+            (lo.min(c - half), hi.max(c + half))
+        },
+    );
+    if boxes.is_empty() {
+        return ([0.0; 3], [0.0; 3]);
+    }
+    ((0.5 * (lo + hi)).to_array(), (hi - lo).to_array())
+}
+
 /// Why a shot cannot be placed; `field` is its key in the shot table.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("shot `{field}` {reason}")]
@@ -148,6 +265,8 @@ pub struct ShotFrame {
 /// A shot placed in the scene: the camera centre it asks for at each s ∈ [0, 1] of its window.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ShotPath {
+    /// The shot's kind as the config names it (`orbit`, `dolly`, `reveal`, `group`).
+    pub kind: &'static str,
     /// Object centre o (the camera looks at it).
     pub object_centre: DVec3,
     /// Unit world up u.
@@ -160,6 +279,11 @@ pub struct ShotPath {
     pub radius: (f64, f64),
     /// Signed angle turned about u over the window, radians (positive: counter-clockwise).
     pub turn: f64,
+    /// Signed angle the view is turned about u away from the object at s = 0, radians (0:
+    /// it looks at the object throughout).
+    pub pan: f64,
+    /// Share of the window from which the view is back on the object (reveal), in (0, 1].
+    pub framed_from: f64,
     /// Weight of the shot's cost.
     pub weight: f64,
 }
@@ -188,6 +312,16 @@ impl ShotSpec {
         match self {
             ShotSpec::Orbit(_) => "orbit",
             ShotSpec::Dolly(_) => "dolly",
+            ShotSpec::Reveal(_) => "reveal",
+            ShotSpec::Group(_) => "group",
+        }
+    }
+
+    /// The objects a group frames together (empty for the other kinds).
+    pub fn group_objects(&self) -> &[String] {
+        match self {
+            ShotSpec::Group(g) => &g.objects,
+            _ => &[],
         }
     }
 
@@ -196,6 +330,8 @@ impl ShotSpec {
         let (elevation, azimuth, weight) = match self {
             ShotSpec::Orbit(o) => (o.elevation, o.azimuth, o.weight),
             ShotSpec::Dolly(d) => (d.elevation, d.azimuth, d.weight),
+            ShotSpec::Reveal(r) => (r.elevation, r.azimuth, r.weight),
+            ShotSpec::Group(g) => (g.elevation, g.azimuth, g.weight),
         };
         check(elevation.abs() < 90.0, "elevation", || {
             format!("= {elevation}° must be in (−90°, 90°) (a view along up has no horizon)")
@@ -224,6 +360,40 @@ impl ShotSpec {
                 }
                 Ok(())
             }
+            ShotSpec::Reveal(r) => {
+                if let Some(radius) = r.radius {
+                    positive("radius", radius)?;
+                }
+                check(r.pan > 0.0 && r.pan <= 180.0, "pan", || {
+                    format!("= {}° must be in (0°, 180°]", r.pan)
+                })?;
+                check(
+                    r.framed_from > 0.0 && r.framed_from <= 1.0,
+                    "framed_from",
+                    || {
+                        format!(
+                            "= {} must be in (0, 1] (a share of the window)",
+                            r.framed_from
+                        )
+                    },
+                )
+            }
+            ShotSpec::Group(g) => {
+                if let Some(radius) = g.radius {
+                    positive("radius", radius)?;
+                }
+                check(g.objects.len() >= 2, "objects", || {
+                    format!(
+                        "names {} object(s): a group frames at least two (for one, use a plain \
+                         query)",
+                        g.objects.len()
+                    )
+                })?;
+                match g.objects.iter().find(|o| o.trim().is_empty()) {
+                    Some(_) => check(false, "objects", || "holds an empty name".into()),
+                    None => Ok(()),
+                }
+            }
         }
     }
 
@@ -244,21 +414,21 @@ impl ShotSpec {
             format!("{o} must be finite")
         })?;
         let working = positive("radius", frame.working_radius)?;
-        let (elevation, azimuth, weight, radius, turn) = match self {
-            ShotSpec::Orbit(s) => {
-                let r = s.radius.unwrap_or(working);
-                let sign = match s.direction {
-                    Direction::Ccw => 1.0,
-                    Direction::Cw => -1.0,
-                };
-                (
-                    s.elevation,
-                    s.azimuth,
-                    s.weight,
-                    (r, r),
-                    sign * s.sweep.to_radians(),
-                )
-            }
+        let still = |r: Option<f64>| {
+            let r = r.unwrap_or(working);
+            (r, r)
+        };
+        // (elevation, azimuth, weight, radius at both ends, turn, pan, framed_from)
+        let (elevation, azimuth, weight, radius, turn, pan, framed_from) = match self {
+            ShotSpec::Orbit(s) => (
+                s.elevation,
+                s.azimuth,
+                s.weight,
+                still(s.radius),
+                s.direction.sign() * s.sweep.to_radians(),
+                0.0,
+                1.0,
+            ),
             ShotSpec::Dolly(s) => (
                 s.elevation,
                 s.azimuth,
@@ -268,15 +438,40 @@ impl ShotSpec {
                     s.to.unwrap_or(working),
                 ),
                 0.0,
+                0.0,
+                1.0,
+            ),
+            // The view turns toward the object in `direction`, so it starts turned the
+            // other way.
+            ShotSpec::Reveal(s) => (
+                s.elevation,
+                s.azimuth,
+                s.weight,
+                still(s.radius),
+                0.0,
+                -s.direction.sign() * s.pan.to_radians(),
+                s.framed_from,
+            ),
+            ShotSpec::Group(s) => (
+                s.elevation,
+                s.azimuth,
+                s.weight,
+                still(s.radius),
+                0.0,
+                0.0,
+                1.0,
             ),
         };
         Ok(ShotPath {
+            kind: self.kind(),
             object_centre: o,
             up,
             start_side: DQuat::from_axis_angle(up, azimuth.to_radians()) * side,
             elevation: elevation.to_radians(),
             radius,
             turn,
+            pan,
+            framed_from,
             weight,
         })
     }
@@ -299,9 +494,22 @@ impl ShotPath {
         self.object_centre + self.direction_at(s) * self.radius_at(s)
     }
 
-    /// The ideal pose at s: at c*(s), looking at the object, upright.
+    /// Angle θ(s) the view is turned about up away from the object at s (reveal; else 0).
+    pub fn pan_at(&self, s: f64) -> f64 {
+        let x = (s / self.framed_from).clamp(0.0, 1.0);
+        self.pan * (1.0 - x * x * (3.0 - 2.0 * x))
+    }
+
+    /// The point a(s) the camera looks at: the object, or for a reveal the object turned
+    /// about the camera by θ(s) (module docs).
+    pub fn aim_at(&self, s: f64) -> DVec3 {
+        let c = self.centre_at(s);
+        c + DQuat::from_axis_angle(self.up, self.pan_at(s)) * (self.object_centre - c)
+    }
+
+    /// The ideal pose at s: at c*(s), looking at a(s), upright.
     pub fn pose_at(&self, s: f64) -> Pose {
-        Pose::look_at(self.centre_at(s), self.object_centre, self.up)
+        Pose::look_at(self.centre_at(s), self.aim_at(s), self.up)
             .expect("a shot's elevation is within (−90°, 90°), so the view is not along up")
     }
 

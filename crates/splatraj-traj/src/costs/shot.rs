@@ -1,16 +1,18 @@
 //! The shot cost: keeps a window's camera on its shot preset ([`crate::shots`]).
 //!
 //! For a sample at time s ∈ [0, 1] within a window whose shot asks for the camera centre
-//! c*(s) (orbit, dolly), with c the camera centre, f its forward axis, o the object and r̄ the
-//! shot's mean radius:
+//! c*(s) and the aim point a(s) (orbit, dolly, reveal, group), with c the camera centre, f its
+//! forward axis and r̄ the shot's mean radius:
 //!
 //! ```text
-//! L_shot = w_shot · ( ‖c − c*(s)‖²/r̄²  +  1 − f·(o − c)/√(‖o − c‖² + ε²) )
+//! L_shot = w_shot · ( ‖c − c*(s)‖²/r̄²  +  1 − f·(a(s) − c)/√(‖a(s) − c‖² + ε²) )
 //! ```
 //!
 //! The first term holds the elevation, the radius and the sweep's progress at once (c*(s)
-//! moves along the shot); the second keeps the object on the view's axis (0 when looking
-//! straight at it), so that the object stays centred even where the rendered mask is thin.
+//! moves along the shot); the second keeps the aim point on the view's axis (0 when looking
+//! straight at it): the object itself for all but a reveal, so that the object stays centred
+//! even where the rendered mask is thin; for a reveal the point the pan looks at, so that the
+//! object stays out of frame until the pan brings it in.
 //! Windows without a shot cost 0. The shot's own `weight` is applied inside, one weight per
 //! window, so the cost's own weight is 1. It needs each sample's time within its window
 //! ([`CostInputs::times`]): a trajectory optimisation gives it; single poses do not.
@@ -73,21 +75,25 @@ impl Cost for ShotCost {
                 times.within.len()
             )));
         }
-        let wanted: Vec<f64> = times
-            .within
-            .iter()
-            .flat_map(|&s| shot.centre_at(s.clamp(0.0, 1.0)).to_array())
-            .collect();
-        let wanted = Tensor::<2>::from_data(
-            TensorData::new(wanted, [batch, 3]),
-            (&centres.device(), inputs.dtype()),
-        ); // [B, 3]
+        let rows = |point: &dyn Fn(f64) -> glam::DVec3| -> Tensor<2> {
+            let values: Vec<f64> = times
+                .within
+                .iter()
+                .flat_map(|&s| point(s.clamp(0.0, 1.0)).to_array())
+                .collect();
+            Tensor::from_data(
+                TensorData::new(values, [batch, 3]),
+                (&centres.device(), inputs.dtype()),
+            )
+        };
+        let wanted = rows(&|s| shot.centre_at(s)); // [B, 3]
+        let aim_points = rows(&|s| shot.aim_at(s)); // [B, 3]
         let radius = shot.mean_radius();
         let position = (centres.clone() - wanted)
             .square()
             .sum_dim(1)
             .div_scalar(radius * radius); // [B, 1]
-        let to_object = inputs.row(shot.object_centre.to_array()) - centres; // [B, 3]
+        let to_object = aim_points - centres; // [B, 3]
         let distance = to_object
             .clone()
             .square()

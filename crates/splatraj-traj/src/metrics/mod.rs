@@ -2,12 +2,17 @@
 //!
 //! - [`ldj()`](ldj()): smoothness of a whole trajectory (log dimensionless jerk) on the camera
 //!   centre and on the rotation vector;
-//! - [`window`]: per query window TCE, TRE, bounding-box IoU and visibility, on a fixed grid.
+//! - [`window`]: per query window TCE, TRE, bounding-box IoU, visibility and occlusion, on a
+//!   fixed grid;
+//! - [`path`]: per window clearance and motion peaks on a dense grid;
+//! - [`shot`]: per window with a shot preset, the deviation from what the shot asks.
 
 pub mod ldj;
 pub mod path;
+pub mod shot;
 pub mod window;
 
 pub use ldj::{DEFAULT_LDJ_SAMPLES, Smoothness, ldj, pose_ldj, trajectory_ldj};
 pub use path::{ClearanceMetrics, MotionMetrics, PathMetrics, path_metrics};
-pub use window::{WindowMetrics, WindowObject, window_metrics};
+pub use shot::{Deviation, ShotMetrics, shot_metrics};
+pub use window::{Occlusion, WindowMetrics, WindowObject, window_metrics};

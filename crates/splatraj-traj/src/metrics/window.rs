@@ -7,6 +7,14 @@
 //! with the object alone; TCE and TRE come from the first, IoU compares the two. A sample
 //! counts as showing the object when its visible mask has a pixel at or above the IoU threshold
 //! (0.5); the window's `visible` is true when every sample shows it.
+//!
+//! **Occlusion.** A sample's occluded share is 1 − Σ visible mask / Σ mask of the object alone
+//! (what the occluders take away from what the frame would show; measured only where the
+//! object alone is in frame). The sample is *hidden* when more than half of the object is
+//! occluded. `occlusion.longest_hidden` is the longest run of consecutive hidden samples as a
+//! share of the window (consecutive samples are adjacent strata, each 1/`samples` of the
+//! window), and in seconds when the caller knows the window's duration. An object out of
+//! frame is not "hidden": `visible_fraction` reports that.
 
 use burn::tensor::Tensor;
 use serde::Serialize;
@@ -45,10 +53,59 @@ pub struct WindowMetrics {
     pub tce_max: f64,
     /// Worst TRE over the samples.
     pub tre_max: f64,
+    /// How much of the object occluders hide (module docs).
+    pub occlusion: Occlusion,
     /// Clearance and motion on the window's stretch of path (filled in by the caller from
     /// [`super::path_metrics`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub path: Option<super::PathMetrics>,
+    /// Deviation from the window's shot preset, when it has one (filled in by the caller
+    /// from [`super::shot_metrics`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shot: Option<super::ShotMetrics>,
+}
+
+/// What occluders hide of a window's object (see the module docs).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Occlusion {
+    /// Mean occluded share over the samples whose object alone is in frame (0 when none is).
+    pub mean_occluded: f64,
+    /// Share of the samples that are hidden (more than half of the object occluded).
+    pub hidden_fraction: f64,
+    /// Longest run of consecutive hidden samples, as a share of the window.
+    pub longest_hidden: f64,
+    /// `longest_hidden` in seconds, when the trajectory's duration is known (filled in by
+    /// the caller with [`Occlusion::with_window_seconds`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub longest_hidden_seconds: Option<f64>,
+}
+
+impl Occlusion {
+    /// From each sample's occluded share in time order (None: the object alone is out of
+    /// frame there).
+    pub fn from_shares(shares: &[Option<f64>]) -> Self {
+        let framed: Vec<f64> = shares.iter().flatten().copied().collect();
+        let hidden: Vec<bool> = shares.iter().map(|s| s.is_some_and(|s| s > 0.5)).collect();
+        let mut longest = 0;
+        let mut run = 0;
+        for &h in &hidden {
+            run = if h { run + 1 } else { 0 };
+            longest = longest.max(run);
+        }
+        let n = shares.len().max(1) as f64;
+        Self {
+            mean_occluded: framed.iter().sum::<f64>() / framed.len().max(1) as f64,
+            hidden_fraction: hidden.iter().filter(|&&h| h).count() as f64 / n,
+            longest_hidden: longest as f64 / n,
+            longest_hidden_seconds: None,
+        }
+    }
+
+    /// The same with `longest_hidden_seconds` for a window lasting `seconds`.
+    pub fn with_window_seconds(mut self, seconds: f64) -> Self {
+        self.longest_hidden_seconds = Some(self.longest_hidden * seconds);
+        self
+    }
 }
 
 /// What one window's metrics need: its object and how to frame it.
@@ -96,13 +153,24 @@ pub fn window_metrics(
     let tces = host(tce(visible.clone()));
     let tres = host(tre(visible.clone(), object.target_ratio));
     let coverages = host(coverage(visible.clone()));
-    let ious = bbox_iou_batch(visible.clone(), alone);
+    let ious = bbox_iou_batch(visible.clone(), alone.clone());
     let [batch, height, width] = visible.dims();
     let pixels = host(visible.reshape([batch * height * width]));
+    let alone_pixels = host(alone.reshape([batch * height * width]));
+    let in_frame = |m: &[f64]| mask_box(m, width, height, IOU_THRESHOLD).is_some();
     let shown = pixels
         .chunks_exact(height * width)
-        .filter(|m| mask_box(m, width, height, IOU_THRESHOLD).is_some())
+        .filter(|m| in_frame(m))
         .count();
+    let occluded: Vec<Option<f64>> = pixels
+        .chunks_exact(height * width)
+        .zip(alone_pixels.chunks_exact(height * width))
+        .map(|(seen, alone)| {
+            let whole: f64 = alone.iter().sum();
+            (in_frame(alone) && whole > 0.0)
+                .then(|| (1.0 - seen.iter().sum::<f64>() / whole).clamp(0.0, 1.0))
+        })
+        .collect();
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
     let max = |v: &[f64]| v.iter().copied().fold(f64::NAN, f64::max);
     Ok(WindowMetrics {
@@ -117,6 +185,8 @@ pub fn window_metrics(
         visible: shown == batch,
         tce_max: max(&tces),
         tre_max: max(&tres),
+        occlusion: Occlusion::from_shares(&occluded),
         path: None,
+        shot: None,
     })
 }

@@ -7,10 +7,12 @@
 //! - [`sgld`]: stochastic gradient Langevin dynamics, many chains of one pose at once, for
 //!   samples of the pose posterior ∝ exp(−L/τ);
 //! - [`start`]: starting poses (seeded random ones, or ones that look at each object);
+//! - [`route`]: planned starts that go around the scene's geometry between windows;
 //! - [`sampling`] and [`units`]: the stratified times and the normalised parameter units the
 //!   loops share.
 
 pub mod problem;
+pub mod route;
 pub mod sampling;
 pub mod sgld;
 pub mod single_pose;
@@ -26,6 +28,7 @@ use crate::costs::{CostError, CostTerms};
 use crate::trajectory::TrajectoryError;
 
 pub use problem::{Evaluated, PoseLoss, Problem};
+pub use route::{Route, RouteKind, RoutePlanner, Transition, plan_transitions};
 pub use sgld::{SgldOptions, SgldResult, SgldSample, sample_poses_sgld};
 pub use single_pose::{
     HistoryRow, SinglePoseOptions, SinglePoseResult, optimise_poses, optimise_poses_observed,
@@ -33,7 +36,8 @@ pub use single_pose::{
 };
 pub use start::{
     ObjectView, StartDistribution, WindowStart, object_side, object_start_poses,
-    random_start_poses, start_trajectory, unwrap_rotation, window_start_trajectory,
+    random_start_poses, routed_start_trajectory, start_trajectory, unwrap_rotation,
+    window_start_trajectory,
 };
 pub use trajectory::{
     Flow, StepTiming, StopReason, TrajectoryOptions, TrajectoryResult, TrajectoryStep,

@@ -31,6 +31,7 @@ use splatraj_render::camera::Pose;
 use burn::tensor::{DType, Device};
 
 use super::OptimiseError;
+use super::route::Transition;
 use super::sampling::{window_bounds, window_of};
 use crate::shots::ShotPath;
 use crate::trajectory::{Trajectory, TrajectoryModel, uniform_times};
@@ -258,6 +259,27 @@ pub fn start_trajectory(
     device: &Device,
     dtype: DType,
 ) -> Result<Trajectory, OptimiseError> {
+    routed_start_trajectory(model, per_window, &[], device, dtype)
+}
+
+/// Each window's end and the next window's start camera centre, per join (what
+/// [`crate::optimise::route::plan_transitions`] routes between).
+pub fn window_joins(per_window: &[WindowStart]) -> Vec<(DVec3, DVec3)> {
+    per_window
+        .windows(2)
+        .map(|w| (w[0].pose_at(1.0).centre(), w[1].pose_at(0.0).centre()))
+        .collect()
+}
+
+/// [`start_trajectory`] whose camera centres follow `transitions` (planned routes around the
+/// geometry, [`crate::optimise::route`]) over their times.
+pub fn routed_start_trajectory(
+    model: TrajectoryModel,
+    per_window: &[WindowStart],
+    transitions: &[Transition],
+    device: &Device,
+    dtype: DType,
+) -> Result<Trajectory, OptimiseError> {
     let n = per_window.len();
     let times = uniform_times(START_FIT_SAMPLES);
     let mut poses: Vec<[f64; 6]> = Vec::with_capacity(times.len());
@@ -267,6 +289,12 @@ pub fn start_trajectory(
         let mut pose = per_window[i]
             .pose_at(((t - start) / (end - start)).clamp(0.0, 1.0))
             .0;
+        if let Some(route) = transitions
+            .iter()
+            .find(|r| t >= r.times.0 && t <= r.times.1)
+        {
+            pose[3..].copy_from_slice(&route.centre_at(t).to_array());
+        }
         if let Some(prev) = poses.last() {
             let w = unwrap_rotation([prev[0], prev[1], prev[2]], [pose[0], pose[1], pose[2]]);
             pose[..3].copy_from_slice(&w);
