@@ -20,8 +20,12 @@
 //! # mask = "mug.npy"      # a per-Gaussian 0/1 .npy instead of the target source
 //! # shot = { kind = "orbit", elevation = 30, radius = 1.2, sweep = 90, direction = "ccw" }
 //! #   a shot preset for this window (trajectory runs): `orbit` (elevation°, radius (default:
-//! #   the working radius of target_ratio), sweep°, direction ccw|cw, azimuth°, weight) or
-//! #   `dolly` (elevation°, from, to (radii at the window's start and end), azimuth°, weight)
+//! #   the working radius of target_ratio), sweep°, direction ccw|cw, azimuth°, weight),
+//! #   `dolly` (elevation°, from, to (radii at the window's start and end), azimuth°, weight),
+//! #   `reveal` (elevation°, radius, azimuth°, pan° (view turned away at the start, default 90),
+//! #   direction (way the view turns), framed_from (share of the window, default 0.6), weight)
+//! #   or `group` (objects = ["…", "…"]: texts grounded like queries, framed together; this
+//! #   query's text only names the group; elevation°, radius, azimuth°, weight)
 //!
 //! [camera]                 # optimisation camera; [output] sets the final render's size
 //! width = 64
@@ -39,7 +43,8 @@
 //!                          # [costs.custom.<name>]: a cost registered in `Extensions`
 //! [optimiser]              # iterations, samples_per_window, learning_rate, position_unit,
 //!                          # path_samples (path points per window for clearance/motion) …
-//! [start]                  # kind = "objects" (jitter) | "random" (spread), restarts; or pose = [...], or trajectory = "…"
+//! [start]                  # kind = "objects" (jitter) | "random" (spread), restarts; or pose = [...], or trajectory = "…";
+//!                          # route = "auto" | "planned" | "straight" (around the geometry between windows)
 //! [output]                 # frames (or fps × seconds), width, height, mask_overlay, runs_dir …
 //! [pose]                   # `splatraj pose`: query, ablation; [pose.optimiser]: its Adam
 //! [approximations]         # optimisation renders only: stop_transmittance, min_opacity (exact by default)
@@ -63,7 +68,7 @@ use splatraj_render::render::Rasterizer;
 use splatraj_semantic::TargetsConfig;
 use splatraj_traj::costs::{CostsConfig, DEFAULT_TARGET_RATIO};
 use splatraj_traj::optimise::{
-    ObjectView, SgldOptions, SinglePoseOptions, StartDistribution, TrajectoryOptions,
+    ObjectView, RouteKind, SgldOptions, SinglePoseOptions, StartDistribution, TrajectoryOptions,
 };
 use splatraj_traj::shots::ShotSpec;
 use splatraj_traj::trajectory::TrajectoryModel;
@@ -311,6 +316,12 @@ pub struct StartConfig {
     pub spread: f64,
     /// Independent random starts; the best result is kept (≥ 1).
     pub restarts: usize,
+    /// How the start travels between consecutive windows: `auto` (default: `planned` when
+    /// `[costs.clearance]` is on, else `straight`), `planned` (around the geometry: a grid
+    /// search keeping the clearance margin, for joins whose straight way does not; see
+    /// `splatraj_traj::optimise::route`) or `straight`. Gradient descent alone cannot take a
+    /// path that crosses a wall around it; a planned start can.
+    pub route: RouteKind,
     /// A fixed start pose Φ = [ω, c] (instead of random starts).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pose: Option<[f64; 6]>,
@@ -346,6 +357,7 @@ impl Default for StartConfig {
             elevation: ObjectView::default().elevation_degrees,
             spread: StartDistribution::default().spread,
             restarts: 1,
+            route: RouteKind::Auto,
             pose: None,
             trajectory: None,
         }
@@ -655,6 +667,12 @@ impl Config {
             {
                 bail!("`queries.{i}.shot.{}` {}", e.field, e.reason);
             }
+        }
+        if self.start.route == RouteKind::Planned && self.costs.clearance.is_none() {
+            bail!(
+                "`start.route` = \"planned\" routes around the geometry the clearance cost \
+                 keeps clear of: add `[costs.clearance]` (with its `margin`), or use \"auto\""
+            );
         }
         self.camera.intrinsics()?;
         self.costs

@@ -104,7 +104,15 @@ impl Experiment {
         let (fov_x, fov_y) = (2.0 * tx.atan(), 2.0 * ty.atan());
         let half = self.bounds.1;
         for (i, query) in config.queries.iter().enumerate() {
+            let group = query.shot.as_ref().map_or(&[][..], |s| s.group_objects());
             let target: Target = match (&query.mask, &source) {
+                (Some(_), _) if !group.is_empty() => {
+                    bail!("`queries.{i}`: a group shot frames its `shot.objects`; leave out `mask`")
+                }
+                (None, Some(source)) if !group.is_empty() => {
+                    group_target(source.as_ref(), &self.scene, group, &selection)
+                        .with_context(|| format!("`queries.{i}.shot.objects`"))?
+                }
                 (Some(mask), _) => {
                     let path = config.resolve(mask);
                     let values = read_mask_file(&path, self.scene.len())?;
@@ -186,6 +194,39 @@ impl Experiment {
             .intrinsics
             .rescaled(self.config.output.width, self.config.output.height)?)
     }
+}
+
+/// The union of `objects`, each grounded like a query's text: every Gaussian of any of them,
+/// centred on and spanning the box that holds each object's box (`shots::union_box`).
+fn group_target(
+    source: &dyn splatraj_semantic::TargetSource,
+    scene: &Scene,
+    objects: &[String],
+    selection: &splatraj_semantic::SelectionOptions,
+) -> Result<Target> {
+    let mut parts = Vec::with_capacity(objects.len());
+    for (k, text) in objects.iter().enumerate() {
+        let part = splatraj_semantic::find_target(source, scene, text, selection)
+            .with_context(|| format!("object {k} ({text:?})"))?;
+        parts.push(part);
+    }
+    let boxes: Vec<([f64; 3], [f64; 3])> = parts
+        .iter()
+        .map(|p| (p.centre.map(f64::from), p.extent.map(f64::from)))
+        .collect();
+    let (centre, extent) = splatraj_traj::shots::union_box(&boxes);
+    let mut union = parts[0].clone();
+    for part in &parts[1..] {
+        for (u, m) in union.mask.iter_mut().zip(&part.mask) {
+            *u = u.max(*m);
+        }
+        union.warnings.extend(part.warnings.iter().cloned());
+    }
+    union.count = union.mask.iter().filter(|&&m| m > 0.5).count();
+    union.centre = centre.map(|v| v as f32);
+    union.extent = extent.map(|v| v as f32);
+    union.name = objects.join(" + ");
+    Ok(union)
 }
 
 fn load_scene(config: &Config) -> Result<(Scene, String)> {

@@ -1,9 +1,10 @@
 //! The scene's solid geometry for the clearance cost, and the per-window clearance and motion
-//! metrics of a trajectory (`metrics.json`'s `path` of each window).
+//! metrics of a trajectory (`metrics.json`'s `path` of each window), its shot adherence
+//! (`shot`) and the occlusion's longest stretch in seconds.
 
 use anyhow::{Result, bail};
 use splatraj_traj::clearance::Occupancy;
-use splatraj_traj::metrics::{WindowMetrics, path_metrics};
+use splatraj_traj::metrics::{WindowMetrics, path_metrics, shot_metrics};
 use splatraj_traj::trajectory::Trajectory;
 
 use crate::experiment::Experiment;
@@ -33,7 +34,9 @@ impl Experiment {
     }
 
     /// `windows` with each window's clearance (when the clearance cost is on) and motion
-    /// metrics of `trajectory` filled in, on a grid of at least `output.ldj_samples` times.
+    /// metrics of `trajectory` filled in, on a grid of at least `output.ldj_samples` times;
+    /// for a window with a shot, its deviation from the shot (`output.ldj_samples` / windows
+    /// times per window); with `[output] seconds`, the longest occlusion in seconds.
     pub fn with_path_metrics(
         &self,
         mut windows: Vec<WindowMetrics>,
@@ -49,8 +52,17 @@ impl Experiment {
             clearance,
             self.path_seconds(),
         );
-        for (w, p) in windows.iter_mut().zip(paths) {
+        let n = windows.len();
+        let shots = self.shot_paths()?;
+        let per_window = (self.config.output.ldj_samples / n.max(1)).max(2);
+        for (i, (w, p)) in windows.iter_mut().zip(paths).enumerate() {
             w.path = Some(p);
+            w.shot = shots.get(i).copied().flatten().map(|shot| {
+                shot_metrics(&shot, i, n, per_window, &|t: &[f64]| trajectory.poses_at(t))
+            });
+            if let Some(seconds) = self.path_seconds() {
+                w.occlusion = w.occlusion.clone().with_window_seconds(seconds / n as f64);
+            }
         }
         Ok(windows)
     }

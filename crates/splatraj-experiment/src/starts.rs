@@ -1,15 +1,19 @@
 //! Where the optimisations start: an earlier trajectory (ours, or another tool's camera file),
 //! a fixed pose, or object-facing or random poses per restart (`[start]`); a window with a
 //! shot preset (`[[queries]] shot`) starts on its shot's path instead, and the shot's cost
-//! keeps it there.
+//! keeps it there. With `[start] route` planned (by default when the clearance cost is on),
+//! the start goes around the geometry between windows whose straight join does not keep the
+//! margin.
 
 use anyhow::{Context, Result};
+use glam::DVec3;
 use splatraj_render::camera::Pose;
 use splatraj_traj::costs::{ShotCost, WeightedCosts};
 use splatraj_traj::optimise::start::START_FIT_SAMPLES;
+use splatraj_traj::optimise::start::window_joins;
 use splatraj_traj::optimise::{
-    WindowStart, WindowTarget, object_side, object_start_poses, random_start_poses,
-    start_trajectory,
+    RouteKind, RoutePlanner, WindowStart, WindowTarget, object_side, object_start_poses,
+    plan_transitions, random_start_poses, routed_start_trajectory,
 };
 use splatraj_traj::shots::{ShotFrame, ShotPath};
 use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord, uniform_times};
@@ -66,9 +70,11 @@ impl Experiment {
             Some(_) => vec![None; n],
             None => self.shot_paths()?,
         };
+        let planner = self.route_planner(&per_restart, &shots)?;
         per_restart
             .iter()
-            .map(|per_window| {
+            .enumerate()
+            .map(|(r, per_window)| {
                 let starts: Vec<WindowStart> = per_window
                     .iter()
                     .zip(&shots)
@@ -77,9 +83,70 @@ impl Experiment {
                         None => WindowStart::Hold(*pose),
                     })
                     .collect();
-                Ok(start_trajectory(model.clone(), &starts, device, dtype)?.record())
+                let transitions = match &planner {
+                    Some(planner) => {
+                        let has_shot: Vec<bool> = shots.iter().map(Option::is_some).collect();
+                        let (routes, walled_in) =
+                            plan_transitions(planner, &window_joins(&starts), &has_shot);
+                        for i in walled_in {
+                            tracing::warn!(
+                                "start {r}: no route keeps `costs.clearance.margin` from \
+                                 window {i} to window {}; the start goes straight",
+                                i + 1
+                            );
+                        }
+                        routes
+                    }
+                    None => Vec::new(),
+                };
+                Ok(
+                    routed_start_trajectory(model.clone(), &starts, &transitions, device, dtype)?
+                        .record(),
+                )
             })
             .collect()
+    }
+
+    /// The grid `[start] route` plans on (None when the starts go straight): over the
+    /// scene's robust bounds and every start's camera centres, keeping the clearance margin.
+    fn route_planner(
+        &self,
+        per_restart: &[Vec<Pose>],
+        shots: &[Option<ShotPath>],
+    ) -> Result<Option<RoutePlanner>> {
+        let clearance = match (self.config.start.route, &self.config.costs.clearance) {
+            (RouteKind::Straight, _) | (RouteKind::Auto, None) => return Ok(None),
+            (_, Some(c)) => c,
+            (RouteKind::Planned, None) => anyhow::bail!(
+                "`start.route` = \"planned\" needs `[costs.clearance]` (its margin and geometry)"
+            ),
+        };
+        if self.windows.len() < 2 {
+            return Ok(None);
+        }
+        let Some(occupancy) = self.occupancy()? else {
+            return Ok(None);
+        };
+        let (centre, half) = (DVec3::from(self.bounds.0), DVec3::from(self.bounds.1));
+        let (mut lo, mut hi) = (centre - half, centre + half);
+        let shot_centres = shots
+            .iter()
+            .flatten()
+            .flat_map(|s| [s.centre_at(0.0), s.centre_at(1.0)]);
+        for c in per_restart
+            .iter()
+            .flatten()
+            .map(|p| p.centre())
+            .chain(shot_centres)
+        {
+            (lo, hi) = (lo.min(c), hi.max(c));
+        }
+        Ok(Some(RoutePlanner::new(
+            &occupancy,
+            clearance.margin,
+            lo,
+            hi,
+        )))
     }
 
     /// Each window's shot (`queries.<i>.shot`) placed around its object, seen at azimuth 0
