@@ -37,6 +37,7 @@ use splatraj_scene::{Labels, Scene};
 use crate::embeddings::Matrix;
 use crate::error::{Result, SemanticError};
 use crate::sources::conv1x1::read_conv1x1_layers;
+use crate::sources::properties::numbered_properties;
 use crate::sources::{
     LabelsSource, LangsplatDecoder, Relevancy, SourceConfig, SourceContext, TargetSource,
 };
@@ -68,59 +69,12 @@ pub fn read_classifier(path: &Path, device: &Device) -> Result<LangsplatDecoder>
 /// The scene's identity encodings `[N, num_objects]` from its `obj_dc_0..` properties, in
 /// index order; an error when there are none, an index is missing or a value is not finite.
 pub fn identity_encodings(scene: &Scene) -> Result<Matrix> {
-    let mut by_index: BTreeMap<usize, &[f32]> = BTreeMap::new();
-    for p in &scene.extras.properties {
-        if let Some(index) = p.name.strip_prefix(OBJ_DC_PREFIX)
-            && let Ok(index) = index.parse::<usize>()
-        {
-            by_index.insert(index, &p.values);
-        }
-    }
-    let dim = by_index.len();
-    if dim == 0 {
-        return Err(SemanticError::MissingData {
-            source_kind: GAUSSIAN_GROUPING,
-            detail: format!(
-                "the scene has no {OBJ_DC_PREFIX}* properties (Gaussian Grouping's identity \
-                 encodings): give the point_cloud.ply Gaussian Grouping saved"
-            ),
-        });
-    }
-    if let Some(missing) = (0..dim).find(|i| !by_index.contains_key(i)) {
-        return Err(SemanticError::MissingData {
-            source_kind: GAUSSIAN_GROUPING,
-            detail: format!(
-                "the scene has {dim} {OBJ_DC_PREFIX}* properties but no {OBJ_DC_PREFIX}{missing}: \
-                 they must be numbered 0..{}",
-                dim - 1
-            ),
-        });
-    }
-    let n = scene.len();
-    let mut values = vec![0.0f32; n * dim];
-    for (&k, column) in &by_index {
-        if column.len() != n {
-            return Err(SemanticError::Mismatch(format!(
-                "property {OBJ_DC_PREFIX}{k} has {} values for a scene of {n} Gaussians",
-                column.len()
-            )));
-        }
-        for (i, &v) in column.iter().enumerate() {
-            if !v.is_finite() {
-                return Err(SemanticError::NonFinite {
-                    what: format!("property {OBJ_DC_PREFIX}{k} of Gaussian {i}"),
-                    value: v,
-                });
-            }
-            values[i * dim + k] = v;
-        }
-    }
-    Ok(Matrix {
-        source: format!("the scene's {OBJ_DC_PREFIX}0..{} properties", dim - 1),
-        rows: n,
-        dim,
-        values,
-    })
+    numbered_properties(
+        scene,
+        OBJ_DC_PREFIX,
+        GAUSSIAN_GROUPING,
+        "Gaussian Grouping's identity encodings",
+    )
 }
 
 /// Each Gaussian's most probable class and its softmax probability.

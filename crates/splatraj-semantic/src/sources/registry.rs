@@ -23,6 +23,7 @@ use serde::de::DeserializeOwned;
 use super::TargetSource;
 use super::feature3dgs::{FEATURE3DGS, Feature3dgsConfig};
 use super::gaussian_grouping::{GAUSSIAN_GROUPING, GaussianGroupingConfig};
+use super::legaussians::{LEGAUSSIANS, LeGaussiansConfig};
 use super::opengaussian::{OPENGAUSSIAN, OpenGaussianConfig};
 use crate::error::{Result, SemanticError};
 
@@ -59,8 +60,8 @@ type Factory =
 
 /// Names → source configs, for `[targets] source = "custom.<name>"`. The default registry
 /// holds the language fields that ship with splatraj as registered sources
-/// (`custom.feature3dgs`, `custom.opengaussian`, `custom.gaussian_grouping`);
-/// [`SourceRegistry::empty`] holds none.
+/// (`custom.feature3dgs`, `custom.opengaussian`, `custom.gaussian_grouping`,
+/// `custom.legaussians`); [`SourceRegistry::empty`] holds none.
 #[derive(Clone)]
 pub struct SourceRegistry {
     factories: BTreeMap<String, Factory>,
@@ -72,6 +73,7 @@ impl Default for SourceRegistry {
         registry.register::<Feature3dgsConfig>(FEATURE3DGS);
         registry.register::<OpenGaussianConfig>(OPENGAUSSIAN);
         registry.register::<GaussianGroupingConfig>(GAUSSIAN_GROUPING);
+        registry.register::<LeGaussiansConfig>(LEGAUSSIANS);
         registry
     }
 }
