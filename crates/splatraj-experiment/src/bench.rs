@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera::Intrinsics;
 use splatraj_render::render::{Pruning, Rasterizer};
+use splatraj_render::stages;
 
 use crate::bench_scenes::{demo_bench_scene, file_bench_scene};
 use crate::probe::{MaskProbe, median_ms};
@@ -161,6 +162,7 @@ impl BenchConfig {
             peak_mb: None,
             cpu_per_wall: None,
             rayon_threads: 0,
+            stages_ms: Vec::new(),
             skipped: Some(why.into()),
         }
     }
@@ -228,6 +230,10 @@ pub struct BenchRow {
     pub cpu_per_wall: Option<f64>,
     /// Threads of rayon's global pool in the child.
     pub rayon_threads: usize,
+    /// Mean ms per forward + backward pass in each render stage (`splatraj_render::stages`
+    /// names), then `other`: the rest of the pass (the projection's autodiff backward, costs).
+    #[serde(default)]
+    pub stages_ms: Vec<(String, f64)>,
     /// Why the configuration was not run.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub skipped: Option<String>,
@@ -312,6 +318,7 @@ impl BenchReport {
                 row.cpu_per_wall.map_or("-".into(), |v| format!("{v:.2}")),
             );
         }
+        out += &stage_table(&report.rows);
         let speedups = speedups(&report.rows);
         if !speedups.is_empty() {
             out += "fused speed-up over tensor (fwd, fwd+bwd):\n";
@@ -321,6 +328,32 @@ impl BenchReport {
         }
         out
     }
+}
+
+/// Where a forward + backward pass spends its time, one line per timed row (ms per pass).
+fn stage_table(rows: &[BenchRow]) -> String {
+    let Some(names) = rows.iter().find(|r| !r.stages_ms.is_empty()) else {
+        return String::new();
+    };
+    let mut out = format!(
+        "{:<20} {:>9} {:>4} {:>7} {:>7}",
+        "stages, ms/pass", "gaussians", "res", "pruning", "raster"
+    );
+    for (name, _) in &names.stages_ms {
+        out += &format!(" {name:>9}");
+    }
+    out += "\n";
+    for row in rows.iter().filter(|r| !r.stages_ms.is_empty()) {
+        out += &format!(
+            "{:<20} {:>9} {:>4} {:>7} {:>7}",
+            row.scene, row.gaussians, row.resolution, row.pruning, row.rasterizer
+        );
+        for (_, ms) in &row.stages_ms {
+            out += &format!(" {ms:>9.1}");
+        }
+        out += "\n";
+    }
+    out
 }
 
 /// For each configuration timed with both rasterizers: tensor time / fused time.
@@ -384,9 +417,20 @@ pub fn run_one(args: &BenchSettings, config: &BenchConfig) -> Result<BenchRow> {
     let cpu_before = cpu_seconds();
     let wall = Instant::now();
     let forward_ms = median_ms(args.repeats, || probe.forward(&setup.pose).map(|_| ()))?;
+    // The stage clock is process-wide and each row runs in its own child, so only this
+    // configuration's passes are on it.
+    stages::reset();
+    let pass = Instant::now();
     let forward_backward_ms = median_ms(args.repeats, || {
         probe.forward_backward(&setup.pose).map(|_| ())
     })?;
+    let per_pass = |d: std::time::Duration| 1e3 * d.as_secs_f64() / args.repeats.max(1) as f64;
+    let mut stages_ms: Vec<(String, f64)> = stages::totals()
+        .iter()
+        .map(|&(stage, total)| (stage.name().to_string(), per_pass(total)))
+        .collect();
+    let staged: f64 = stages_ms.iter().map(|(_, ms)| ms).sum();
+    stages_ms.push(("other".into(), per_pass(pass.elapsed()) - staged));
     let wall_s = wall.elapsed().as_secs_f64();
     let cpu_per_wall = match (cpu_before, cpu_seconds()) {
         (Some(a), Some(b)) if wall_s > 0.0 => Some((b - a) / wall_s),
@@ -409,6 +453,7 @@ pub fn run_one(args: &BenchSettings, config: &BenchConfig) -> Result<BenchRow> {
         peak_mb: peak_mb(),
         cpu_per_wall,
         rayon_threads: rayon::current_num_threads(),
+        stages_ms,
         skipped: None,
     })
 }

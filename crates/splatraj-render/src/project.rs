@@ -38,15 +38,25 @@ pub const LOW_PASS: f64 = 0.3;
 pub const NORMALISED_DET_FLOOR: f64 = 1e-12;
 
 /// Scene quantities that do not depend on the pose, computed once per scene on the host and uploaded.
+///
+/// The projection reads them component-major ([`SceneTensors::components`]): every per-Gaussian
+/// quantity of a pass is then one contiguous row of N values, so each tensor op is a plain
+/// vectorised loop with its pose constants broadcast, instead of the strided, per-Gaussian 3×3
+/// products and last-axis concatenations that made projection the slowest stage on CPU backends.
 #[derive(Debug, Clone)]
 pub struct SceneTensors {
-    /// Gaussian centres, world coordinates. `[N, 3]`
+    /// Gaussian centres, world coordinates (for SH view directions). `[N, 3]`
     pub means: Tensor<2>,
-    /// World covariances Σ = R S Sᵀ Rᵀ, row-major. `[N, 3, 3]`
-    pub cov_world: Tensor<3>,
+    /// Per-Gaussian rows: the centre's x, y, z, then the world covariance Σ = R S Sᵀ Rᵀ as
+    /// xx, xy, xz, yy, yz, zz. `[9, N]`
+    pub components: Tensor<2>,
     /// Activated opacities in [0, 1]. `[N]`
     pub opacities: Tensor<1>,
 }
+
+/// Rows of [`SceneTensors::components`].
+const CENTRE_ROWS: usize = 0;
+const COVARIANCE_ROWS: usize = 3;
 
 impl SceneTensors {
     /// Uploads the Gaussians `indices` (all when `None`, in that order) with Σ computed in f64.
@@ -64,17 +74,24 @@ impl SceneTensors {
         };
         let n = indices.len();
         let mut means = Vec::with_capacity(3 * n);
-        let mut covs = Vec::with_capacity(9 * n);
+        let mut components = vec![0.0f64; 9 * n];
         let mut opacities = Vec::with_capacity(n);
-        for &i in indices {
-            means.extend(scene.means[i].map(f64::from));
-            covs.extend(world_covariance(scene.scales[i], scene.rotations[i]));
+        for (column, &i) in indices.iter().enumerate() {
+            let mean = scene.means[i].map(f64::from);
+            means.extend(mean);
+            let s = world_covariance(scene.scales[i], scene.rotations[i]);
+            let values = [
+                mean[0], mean[1], mean[2], s[0], s[1], s[2], s[4], s[5], s[8],
+            ];
+            for (row, value) in values.into_iter().enumerate() {
+                components[row * n + column] = value;
+            }
             opacities.push(f64::from(scene.opacities[i]));
         }
         let options = (device, dtype);
         Self {
             means: Tensor::from_data(TensorData::new(means, [n, 3]), options),
-            cov_world: Tensor::from_data(TensorData::new(covs, [n, 3, 3]), options),
+            components: Tensor::from_data(TensorData::new(components, [9, n]), options),
             opacities: Tensor::from_data(TensorData::new(opacities, [n]), options),
         }
     }
@@ -83,7 +100,7 @@ impl SceneTensors {
     pub fn select(&self, indices: Tensor<1, Int>) -> Self {
         Self {
             means: self.means.clone().select(0, indices.clone()),
-            cov_world: self.cov_world.clone().select(0, indices.clone()),
+            components: self.components.clone().select(1, indices.clone()),
             opacities: self.opacities.clone().select(0, indices),
         }
     }
@@ -92,7 +109,7 @@ impl SceneTensors {
     pub fn narrow(&self, start: usize, len: usize) -> Self {
         Self {
             means: self.means.clone().narrow(0, start, len),
-            cov_world: self.cov_world.clone().narrow(0, start, len),
+            components: self.components.clone().narrow(1, start, len),
             opacities: self.opacities.clone().narrow(0, start, len),
         }
     }
@@ -101,7 +118,7 @@ impl SceneTensors {
     pub fn without_autodiff(&self) -> Self {
         Self {
             means: self.means.clone().without_autodiff(),
-            cov_world: self.cov_world.clone().without_autodiff(),
+            components: self.components.clone().without_autodiff(),
             opacities: self.opacities.clone().without_autodiff(),
         }
     }
@@ -114,6 +131,14 @@ impl SceneTensors {
     /// True when there is no Gaussian.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+
+    /// Row `row` of the components as `[1, 1, N]`, ready to broadcast against a batch.
+    fn row(&self, row: usize) -> Tensor<3> {
+        self.components
+            .clone()
+            .narrow(0, row, 1)
+            .unsqueeze_dim::<3>(0)
     }
 }
 
@@ -167,68 +192,81 @@ pub fn project_with_near(
     let (lim_x, lim_y) = (FOV_CLAMP * tan_x, FOV_CLAMP * tan_y);
 
     let omega = poses.clone().narrow(1, 0, 3); // [B, 3]
-    let centre = poses.narrow(1, 3, 3); // [B, 3]
+    let centre = poses.narrow(1, 3, 3).unsqueeze_dim::<3>(2); // [B, 3, 1]
     let r_wc = rotation_matrices(omega); // [B, 3, 3]; column k = camera axis k in world
 
-    // p_cam as a row vector: (p − c)ᵀ R_wc = (R_wcᵀ (p − c))ᵀ, one batched matmul.
-    let offset = scene.means.clone().unsqueeze_dim::<3>(0) - centre.unsqueeze_dim::<3>(1); // [B, N, 3]
-    let p_cam = offset.matmul(r_wc.clone()); // [B, N, 3]
-    let x = p_cam.clone().narrow(2, 0, 1); // [B, N, 1]
-    let y = p_cam.clone().narrow(2, 1, 1); // [B, N, 1]
-    let z = p_cam.narrow(2, 2, 1); // [B, N, 1]
+    // Every per-Gaussian quantity below is [B, 1, N]: one contiguous row per pose.
+    // p_cam = R_wcᵀ (p − c) for all Gaussians at once; subtracting before rotating keeps f32
+    // precision when the scene sits far from the origin.
+    let centres = scene
+        .components
+        .clone()
+        .narrow(0, CENTRE_ROWS, 3)
+        .unsqueeze_dim::<3>(0)
+        .repeat_dim(0, batch); // [B, 3, N]
+    let p_cam = r_wc.clone().swap_dims(1, 2).matmul(centres - centre); // [B, 3, N]
+    let x = p_cam.clone().narrow(1, 0, 1); // [B, 1, N]
+    let y = p_cam.clone().narrow(1, 1, 1); // [B, 1, N]
+    let z = p_cam.narrow(1, 2, 1); // [B, 1, N]
 
     // Divide only by z ≥ near: behind-camera entries stay finite, and clamp_min's backward
     // masks their z-gradient to 0 instead of multiplying (so no 0·Inf).
-    let z_safe = z.clone().clamp_min(near); // [B, N, 1]
-    let inv_z = z_safe.recip(); // [B, N, 1]
-    let x_over_z = x * inv_z.clone(); // [B, N, 1]
-    let y_over_z = y * inv_z.clone(); // [B, N, 1]
+    let z_safe = z.clone().clamp_min(near); // [B, 1, N]
+    let inv_z = z_safe.recip(); // [B, 1, N]
+    let x_over_z = x * inv_z.clone(); // [B, 1, N]
+    let y_over_z = y * inv_z.clone(); // [B, 1, N]
 
-    let u = x_over_z.clone().mul_scalar(fx).add_scalar(cx); // [B, N, 1]
-    let v = y_over_z.clone().mul_scalar(fy).add_scalar(cy); // [B, N, 1]
-    let means_2d = Tensor::cat(vec![u, v], 2); // [B, N, 2]
+    let u = x_over_z.clone().mul_scalar(fx).add_scalar(cx); // [B, 1, N]
+    let v = y_over_z.clone().mul_scalar(fy).add_scalar(cy); // [B, 1, N]
+    let means_2d = interleave(vec![u, v]); // [B, N, 2]
 
     // Jacobian entries with clamped x/z, y/z: J00 = fx/z, J02 = −fx·x̂/z, J11 = fy/z, J12 = −fy·ŷ/z.
-    let tx = x_over_z.clamp(-lim_x, lim_x); // [B, N, 1]
-    let ty = y_over_z.clamp(-lim_y, lim_y); // [B, N, 1]
-    let j00 = inv_z.clone().mul_scalar(fx); // [B, N, 1]
-    let j11 = inv_z.clone().mul_scalar(fy); // [B, N, 1]
-    let j02 = (tx * inv_z.clone()).mul_scalar(-fx); // [B, N, 1]
-    let j12 = (ty * inv_z).mul_scalar(-fy); // [B, N, 1]
+    let tx = x_over_z.clamp(-lim_x, lim_x); // [B, 1, N]
+    let ty = y_over_z.clamp(-lim_y, lim_y); // [B, 1, N]
+    let j00 = inv_z.clone().mul_scalar(fx); // [B, 1, N]
+    let j11 = inv_z.clone().mul_scalar(fy); // [B, 1, N]
+    let j02 = (tx * inv_z.clone()).mul_scalar(-fx); // [B, 1, N]
+    let j12 = (ty * inv_z).mul_scalar(-fy); // [B, 1, N]
 
-    // T = J W with W = R_wcᵀ: row k of W is column k of R_wc (camera axis k in world), so
-    // T's rows are t1 = J00·r0 + J02·r2 and t2 = J11·r1 + J12·r2. This avoids per-Gaussian 3×3
-    // matmuls (tiny batched matmuls are slow on the CPU backends); Σ_2D = T Σ_world Tᵀ.
-    let axis = |k: usize| r_wc.clone().narrow(2, k, 1).reshape([batch, 1, 3]); // [B, 1, 3]
-    let (r0, r1, r2) = (axis(0), axis(1), axis(2));
-    let t1 = j00 * r0 + j02 * r2.clone(); // [B, N, 3]
-    let t2 = j11 * r1 + j12 * r2; // [B, N, 3]
+    // T = J W with W = R_wcᵀ: row k of W is camera axis k in world (column k of R_wc), so T's
+    // rows are t1 = J00·r0 + J02·r2 and t2 = J11·r1 + J12·r2, component by component.
+    let axis = |k: usize, e: usize| r_wc.clone().narrow(1, e, 1).narrow(2, k, 1); // [B, 1, 1]
+    let t1: [Tensor<3>; 3] =
+        std::array::from_fn(|e| j00.clone() * axis(0, e) + j02.clone() * axis(2, e)); // [B, 1, N] each
+    let t2: [Tensor<3>; 3] =
+        std::array::from_fn(|e| j11.clone() * axis(1, e) + j12.clone() * axis(2, e)); // [B, 1, N] each
 
-    // Σ t_k for each Gaussian by broadcasting Σ [1, N, 3, 3] against t_k [B, N, 1, 3].
-    let sigma = scene.cov_world.clone().unsqueeze_dim::<4>(0); // [1, N, 3, 3]
-    let sigma_times = |t: Tensor<3>| {
-        (sigma.clone() * t.unsqueeze_dim::<4>(2))
-            .sum_dim(3)
-            .reshape([batch, n, 3])
-    }; // [B, N, 3]
-    let s_t1 = sigma_times(t1.clone()); // [B, N, 3]
-    let s_t2 = sigma_times(t2.clone()); // [B, N, 3]
-    let a = (t1.clone() * s_t1).sum_dim(2).add_scalar(LOW_PASS); // [B, N, 1]
-    let b = (t1 * s_t2.clone()).sum_dim(2); // [B, N, 1]
-    let c = (t2 * s_t2).sum_dim(2).add_scalar(LOW_PASS); // [B, N, 1]
-    let cov_2d = Tensor::cat(vec![a.clone(), b.clone(), c.clone()], 2); // [B, N, 3]
+    // Σ_2D = T Σ Tᵀ from the six covariance rows (xx, xy, xz, yy, yz, zz).
+    let s: [Tensor<3>; 6] = std::array::from_fn(|k| scene.row(COVARIANCE_ROWS + k)); // [1, 1, N] each
+    let sigma_rows = [[0, 1, 2], [1, 3, 4], [2, 4, 5]]; // Σ[i][j] = s[sigma_rows[i][j]]
+    let sigma_times = |t: &[Tensor<3>; 3]| -> [Tensor<3>; 3] {
+        sigma_rows.map(|row| {
+            s[row[0]].clone() * t[0].clone()
+                + s[row[1]].clone() * t[1].clone()
+                + s[row[2]].clone() * t[2].clone()
+        })
+    }; // [B, 1, N] each
+    let dot = |p: &[Tensor<3>; 3], q: [Tensor<3>; 3]| {
+        let [q0, q1, q2] = q;
+        p[0].clone() * q0 + p[1].clone() * q1 + p[2].clone() * q2
+    }; // [B, 1, N]
+    let s_t1 = sigma_times(&t1);
+    let a = dot(&t1, s_t1.clone()).add_scalar(LOW_PASS); // [B, 1, N]
+    let b = dot(&t2, s_t1); // [B, 1, N]; t2ᵀΣt1 = t1ᵀΣt2 since Σ is symmetric
+    let c = dot(&t2, sigma_times(&t2)).add_scalar(LOW_PASS); // [B, 1, N]
+    let cov_2d = interleave(vec![a.clone(), b.clone(), c.clone()]); // [B, N, 3]
 
     // Invert through the trace-normalised matrix: a·c − b² itself overflows f32 (and its
     // square, in the backward pass, overflows much sooner) for big Gaussians near the camera.
     // trace ≥ 0.6 thanks to the low-pass, so the division is safe.
-    let trace = a.clone() + c.clone(); // [B, N, 1]
-    let inv_trace = trace.clone().recip(); // [B, N, 1]
-    let an = a * inv_trace.clone(); // [B, N, 1]
-    let bn = b * inv_trace.clone(); // [B, N, 1]
-    let cn = c * inv_trace; // [B, N, 1]
-    let det_n = an.clone() * cn.clone() - bn.clone().square(); // [B, N, 1], det / trace²
-    let scale = (det_n.clamp_min(NORMALISED_DET_FLOOR) * trace).recip(); // [B, N, 1], 1/(det/trace)
-    let conics = Tensor::cat(vec![cn, bn.neg(), an], 2) * scale; // [B, N, 3]
+    let trace = a.clone() + c.clone(); // [B, 1, N]
+    let inv_trace = trace.clone().recip(); // [B, 1, N]
+    let an = a * inv_trace.clone(); // [B, 1, N]
+    let bn = b * inv_trace.clone(); // [B, 1, N]
+    let cn = c * inv_trace; // [B, 1, N]
+    let det_n = an.clone() * cn.clone() - bn.clone().square(); // [B, 1, N], det / trace²
+    let scale = (det_n.clamp_min(NORMALISED_DET_FLOOR) * trace).recip(); // [B, 1, N], 1/(det/trace)
+    let conics = interleave(vec![cn * scale.clone(), -(bn * scale.clone()), an * scale]); // [B, N, 3]
 
     Projected {
         means_2d,
@@ -236,6 +274,12 @@ pub fn project_with_near(
         conics,
         cov_2d,
     }
+}
+
+/// Per-Gaussian rows `[B, 1, N]` each → `[B, N, K]`, one Gaussian's K values together (the
+/// layout the compositing ops read).
+fn interleave(rows: Vec<Tensor<3>>) -> Tensor<3> {
+    Tensor::cat(rows, 1).swap_dims(1, 2)
 }
 
 /// Host-side cull data from a projection, without gradient: `(radii, visible)`, each `B·N`
