@@ -115,6 +115,8 @@ fn a_grid_study_has_a_row_per_run_and_a_non_dominated_frontier() {
     }
     for r in &rows {
         assert!(r.error.is_finite() && r.optimisation_s > 0.0, "{r:?}");
+        // No clearance cost in the config: nothing to report.
+        assert!(r.min_clearance.is_none() && r.windows[0].min_clearance.is_none());
         assert_eq!(r.windows.len(), 2);
         assert!(r.peak_mb.is_none());
         // The evaluation is the base config's, whatever the variant: 2 poses per window.
@@ -185,4 +187,48 @@ fn a_grid_study_has_a_row_per_run_and_a_non_dominated_frontier() {
     assert!(svg.contains("<svg") && svg.contains("iterations=4"));
     let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
     assert!(md.contains("Cheapest setting within 5 %"), "{md}");
+}
+
+/// With a clearance cost in the base config, every row carries the evaluation's clearance: the
+/// smallest over its windows and the mean share of time inside the margin, and `summary.md`
+/// shows them.
+#[test]
+fn a_clearance_config_reports_the_paths_clearance() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("tiny-clear.toml");
+    let config = TINY.replace(
+        "samples_per_window = 2",
+        "samples_per_window = 2\npath_samples = 6",
+    ) + "[costs.tce]\nweight = 1.0\n[costs.tre]\nweight = 1.0\n[costs.clearance]\nweight = 1.0\nmargin = 0.1\n";
+    std::fs::write(&path, config).unwrap();
+    let extensions = Extensions::default();
+    let options = PlanOptions {
+        seeds: Some(1),
+        vary: vec![Factor::parse("optimiser.iterations=1").unwrap()],
+        ..PlanOptions::default()
+    };
+    let plan = StudyPlan::new(&path, &options, &extensions).unwrap();
+    let mut rows = Vec::new();
+    for run in &plan.runs {
+        rows.extend(measure_run(&plan, run, &extensions, MemoryReading::Shared).unwrap());
+    }
+    assert_eq!(rows.len(), 2);
+    for r in &rows {
+        let per_window: Vec<f64> = r.windows.iter().map(|w| w.min_clearance.unwrap()).collect();
+        let smallest = per_window.iter().copied().fold(f64::INFINITY, f64::min);
+        assert_eq!(r.min_clearance, Some(smallest), "{r:?}");
+        let inside: f64 = r
+            .windows
+            .iter()
+            .map(|w| w.time_inside_margin.unwrap())
+            .sum::<f64>()
+            / r.windows.len() as f64;
+        assert!((r.inside_margin.unwrap() - inside).abs() < 1e-12);
+        assert!((0.0..=1.0).contains(&inside));
+    }
+    let md = StudySummary::new(&plan, &rows).markdown(&plan, &StudyContext::default());
+    assert!(
+        md.contains("| min clearance | time inside margin |"),
+        "{md}"
+    );
 }

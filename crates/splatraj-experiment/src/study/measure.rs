@@ -70,6 +70,15 @@ pub fn measure_run(
             visible: mean(|w| w.visible_fraction),
             ldj_positional: None,
             ldj_angular: None,
+            min_clearance: windows
+                .iter()
+                .filter_map(|w| w.min_clearance)
+                .reduce(f64::min),
+            inside_margin: windows
+                .iter()
+                .map(|w| w.time_inside_margin)
+                .sum::<Option<f64>>()
+                .map(|s| s / windows.len().max(1) as f64),
             windows,
         }
     };

@@ -82,6 +82,14 @@ pub struct StudyRow {
     pub ldj_positional: Option<f64>,
     /// LDJ of the rotation (trajectory runs).
     pub ldj_angular: Option<f64>,
+    /// Smallest clearance of the camera from the scene's geometry over every window, scene
+    /// units (when the base config has a clearance cost: a setting can trade it for framing,
+    /// which TCE and TRE do not show).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_clearance: Option<f64>,
+    /// Mean over windows of the share of time closer to the geometry than the margin.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inside_margin: Option<f64>,
     /// The evaluation per window.
     pub windows: Vec<WindowScore>,
 }
@@ -105,10 +113,17 @@ pub struct WindowScore {
     pub tce_max: f64,
     /// Worst TRE.
     pub tre_max: f64,
+    /// Smallest clearance from the geometry (when the clearance cost is on).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_clearance: Option<f64>,
+    /// Share of the window's time inside the clearance margin.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_inside_margin: Option<f64>,
 }
 
 impl From<&WindowMetrics> for WindowScore {
     fn from(m: &WindowMetrics) -> Self {
+        let clearance = m.path.as_ref().and_then(|p| p.clearance.as_ref());
         WindowScore {
             name: m.name.clone(),
             tce: m.tce,
@@ -118,6 +133,8 @@ impl From<&WindowMetrics> for WindowScore {
             coverage: m.coverage,
             tce_max: m.tce_max,
             tre_max: m.tre_max,
+            min_clearance: clearance.map(|c| c.min_clearance),
+            time_inside_margin: clearance.map(|c| c.time_inside_margin),
         }
     }
 }
@@ -157,6 +174,8 @@ pub fn study_csv(rows: &[StudyRow]) -> Csv {
         "visible",
         "ldj_positional",
         "ldj_angular",
+        "min_clearance",
+        "inside_margin",
     ]
     .map(String::from)
     .to_vec();
@@ -188,6 +207,8 @@ pub fn study_csv(rows: &[StudyRow]) -> Csv {
                 r.visible.to_string(),
                 opt(r.ldj_positional),
                 opt(r.ldj_angular),
+                opt(r.min_clearance),
+                opt(r.inside_margin),
             ];
             row.extend(
                 StageTimes::default()

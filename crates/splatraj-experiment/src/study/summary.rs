@@ -112,6 +112,10 @@ pub struct Figures {
     pub run_s: Option<Spread>,
     /// Peak memory, MB.
     pub peak_mb: Option<Spread>,
+    /// Smallest clearance from the geometry over the windows, scene units.
+    pub min_clearance: Option<Spread>,
+    /// Share of time inside the clearance margin.
+    pub inside_margin: Option<Spread>,
     /// Mean per-stage times, when measured.
     pub stages: Option<StageTimes>,
 }
@@ -146,6 +150,8 @@ impl Figures {
             optimisation_s: spread(&|r| Some(r.optimisation_s)),
             run_s: spread(&|r| Some(r.run_s)),
             peak_mb: spread(&|r| r.peak_mb),
+            min_clearance: spread(&|r| r.min_clearance),
+            inside_margin: spread(&|r| r.inside_margin),
             stages,
         }
     }
@@ -340,12 +346,34 @@ impl StudySummary {
         }
         md += "\n## Variants\n\nMean ± sd over seeds (starts for single-pose runs); times in \
                seconds of wall time; peak memory of the run's own process.\n\n";
-        md += "| variant | error | TCE | TRE | IoU | visible | LDJ pos | LDJ ang | optimisation s | run s | peak MB | frontier |\n";
-        md += "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+        // Clearance columns only when the base config keeps a clearance (else they are empty).
+        let clearance = self
+            .variants
+            .iter()
+            .any(|v| v.figures.min_clearance.is_some());
+        let (head, rule) = if clearance {
+            (" min clearance | time inside margin |", "---|---|")
+        } else {
+            ("", "")
+        };
+        md += &format!(
+            "| variant | error | TCE | TRE | IoU | visible | LDJ pos | LDJ ang |{head} \
+             optimisation s | run s | peak MB | frontier |\n"
+        );
+        md += &format!("|---|---|---|---|---|---|---|---|{rule}---|---|---|---|\n");
         for v in &self.variants {
             let f = &v.figures;
+            let clearance_cells = if clearance {
+                format!(
+                    " {} | {} |",
+                    show(f.min_clearance, 3),
+                    show(f.inside_margin, 3)
+                )
+            } else {
+                String::new()
+            };
             md += &format!(
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                "| {} | {} | {} | {} | {} | {} | {} | {} |{clearance_cells} {} | {} | {} | {} |\n",
                 v.label,
                 show(f.error, 4),
                 show(f.tce, 4),
