@@ -122,12 +122,18 @@ struct Splat<E> {
     b: E,
     c: E,
     opacity: E,
-    /// Below this power α < 1/255 for sure (ln(1/(255·o)) less a margin for rounding).
+    /// ln(255·o): α ≥ 1/255 needs ½dᵀ·conic·d ≤ this (NaN or negative: nowhere).
+    reach: E,
+    /// Below this power α < 1/255 for sure (−reach less a margin for rounding).
     skip_below: E,
 }
 
 impl<E: Real> Splat<E> {
     fn load(splats: &HostSplats<E>, row: usize, x0: E, y0: E) -> Self {
+        // One logarithm per list entry, shared by the pixel box and the per-pixel skip: this
+        // runs once per tile–Gaussian pair, which on real captures is about as often as pixels.
+        // In f64 like the bound it feeds: α at exactly 1/255 must not round out of the box.
+        let reach = E::of((255.0 * splats.opacities[row].to_f64()).ln());
         // Coordinates relative to the tile's corner keep dx, dy small (as the tensor path does
         // with its tile centre), so f32 loses nothing to cancellation.
         Splat {
@@ -137,7 +143,8 @@ impl<E: Real> Splat<E> {
             b: splats.conics[3 * row + 1],
             c: splats.conics[3 * row + 2],
             opacity: splats.opacities[row],
-            skip_below: E::of(-(255.0 * splats.opacities[row].to_f64()).ln() - 1e-3),
+            reach,
+            skip_below: -reach - E::of(1e-3),
         }
     }
 
@@ -162,11 +169,10 @@ impl<E: Real> Splat<E> {
     /// rest of the tile is skipped (it would be skipped by the 1/255 rule anyway, so this
     /// changes no value and no decision). The whole tile when the bound is not finite.
     fn pixel_box(&self) -> Option<(std::ops::Range<usize>, std::ops::Range<usize>)> {
-        let [mx, my, a, b, c, o] =
-            [self.mx, self.my, self.a, self.b, self.c, self.opacity].map(E::to_f64);
+        let [mx, my, a, b, c, t] =
+            [self.mx, self.my, self.a, self.b, self.c, self.reach].map(E::to_f64);
         // ½dᵀ·conic·d ≤ t with t = ln(255·o); the ellipse's half-widths are sqrt(2t·Σ_xx),
         // sqrt(2t·Σ_yy) with Σ = conic⁻¹ (Σ_xx = c/det, Σ_yy = a/det).
-        let t = (255.0 * o).ln();
         if t.is_nan() || t < 0.0 {
             return None; // o < 1/255: α < 1/255 everywhere
         }
@@ -180,14 +186,39 @@ impl<E: Real> Splat<E> {
         if !(half_x.is_finite() && half_y.is_finite() && mx.is_finite() && my.is_finite()) {
             return full;
         }
-        // Pixel i's centre is i + 0.5: keep i with |i + 0.5 − m| ≤ half + 1.
+        // Pixel i's centre is i + 0.5: keep i with |i + 0.5 − m| ≤ half + 1. Clamping to the
+        // tile first (integer bounds commute with floor and ceil) keeps the values small, so
+        // the rounding is a cast: the baseline x86-64 target has no rounding instruction and
+        // calls into libm for f64::floor/ceil, once per tile–Gaussian pair.
         let span = |m: f64, half: f64| {
-            let lo = (m - half - 1.5).ceil().clamp(0.0, TILE_SIZE as f64) as usize;
-            let hi = (m + half + 0.5).floor().clamp(-1.0, TILE_SIZE as f64 - 1.0) as i64 + 1;
+            let lo = ceil_small((m - half - 1.5).clamp(0.0, TILE_SIZE as f64)) as usize;
+            let hi = floor_small((m + half + 0.5).clamp(-1.0, TILE_SIZE as f64 - 1.0)) + 1;
             lo..(hi.max(lo as i64) as usize)
         };
         let (xs, ys) = (span(mx, half_x), span(my, half_y));
         (!xs.is_empty() && !ys.is_empty()).then_some((xs, ys))
+    }
+}
+
+/// ⌊x⌋ for |x| well inside the i64 range.
+#[inline(always)]
+fn floor_small(x: f64) -> i64 {
+    let truncated = x as i64;
+    if (truncated as f64) > x {
+        truncated - 1
+    } else {
+        truncated
+    }
+}
+
+/// ⌈x⌉ for |x| well inside the i64 range.
+#[inline(always)]
+fn ceil_small(x: f64) -> i64 {
+    let truncated = x as i64;
+    if (truncated as f64) < x {
+        truncated + 1
+    } else {
+        truncated
     }
 }
 
