@@ -6,7 +6,9 @@
 //! scene's autoencoder checkpoint and then scored as features) and the selection (percentile,
 //! floor, density clustering against the scene) of `splatraj-semantic`. The command prints the
 //! counts, the clustering, the kept cluster and the runner-ups, the candidates dropped, the
-//! relevancy spread, centre and extent (warnings on stderr), and renders `query.png`: the RGB
+//! relevancy spread, centre and extent, and for language features the relevancy over all
+//! Gaussians with the most relevant groups (also, on stdout, when nothing is selected;
+//! warnings on stderr), and renders `query.png`: the RGB
 //! render from a camera that looks at the selection's centre from 30° above the horizontal
 //! (`--elevation`), at a distance where its extent fills about a third of the frame, with the
 //! selected Gaussians tinted magenta (and the dropped candidates cyan with `--show-rejected`).
@@ -21,7 +23,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use splatraj::experiment::outputs::write_bytes;
 use splatraj::experiment::query::{
-    QueryRequest, RejectedView, parse_direction, parse_region, parse_synonyms,
+    QueryRequest, RejectedView, SelectionFailed, parse_direction, parse_region, parse_synonyms,
 };
 use splatraj::experiment::views::{FOV_X_DEGREES, ViewOptions};
 use splatraj_render::backend::BackendKind;
@@ -228,7 +230,15 @@ pub fn run(args: QueryArgs) -> Result<()> {
     let device = args.backend.device()?;
     let scene = args.read.load(&args.scene)?.scene;
     let scene_name = args.scene.display().to_string();
-    let outcome = request.run(&scene, &scene_name, &device)?;
+    let outcome = request.run(&scene, &scene_name, &device).inspect_err(|e| {
+        // Nothing selected: show why before the error.
+        if let Some(failed) = e.downcast_ref::<SelectionFailed>() {
+            match serde_json::to_string_pretty(&failed.explanation) {
+                Ok(json) if args.json => println!("{json}"),
+                _ => print!("{}", failed.explanation.text()),
+            }
+        }
+    })?;
 
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create the output folder {}", args.out.display()))?;

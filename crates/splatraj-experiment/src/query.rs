@@ -17,8 +17,8 @@ use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render};
 use splatraj_scene::Scene;
 use splatraj_semantic::{
-    Activation, Cluster, ClusteringSummary, Region, RegionSpec, SelectionOptions, SourceKind,
-    SourceRegistry, Spread, Target, TargetsConfig, find_target,
+    Activation, Cluster, ClusteringSummary, Explanation, Region, RegionSpec, SelectionOptions,
+    SourceKind, SourceRegistry, Spread, Target, TargetsConfig, explain, select,
 };
 
 use crate::views::{
@@ -82,6 +82,24 @@ pub struct QueryRequest {
     pub intrinsics: Intrinsics,
 }
 
+/// A graded query whose selection failed (nothing above the thresholds, no cluster), with
+/// the explanation of its relevancy for the caller to show.
+#[derive(Debug, Clone)]
+pub struct SelectionFailed {
+    /// The error, naming the scene, the source and the query.
+    pub message: String,
+    /// The relevancy over all Gaussians, thresholds and most relevant groups.
+    pub explanation: Explanation,
+}
+
+impl std::fmt::Display for SelectionFailed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl std::error::Error for SelectionFailed {}
+
 /// What [`QueryRequest::run`] found and drew.
 #[derive(Debug, Clone)]
 pub struct QueryOutcome {
@@ -89,6 +107,8 @@ pub struct QueryOutcome {
     pub source: SourceKind,
     /// The selection.
     pub target: Target,
+    /// Why it was found: the relevancy over all Gaussians (graded sources only).
+    pub explanation: Option<Explanation>,
     /// The picture's camera.
     pub camera: CameraReport,
     /// `query.png`: the RGB render with the selection tinted magenta (and the dropped
@@ -129,6 +149,9 @@ pub struct QueryReport {
     pub percentile_threshold: Option<f32>,
     /// Spread of the relevancy over all Gaussians.
     pub relevancy: Spread,
+    /// The relevancy over all Gaussians, thresholds and most relevant groups (graded sources).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub explanation: Option<Explanation>,
     /// Robust centre of the selection.
     pub centre: [f32; 3],
     /// Robust extent of the selection.
@@ -255,8 +278,25 @@ impl QueryRequest {
         let source = config
             .build_named(Path::new(""), device, &registry, &option_of_key)
             .with_context(|| format!("{scene_name} ({kind} source)"))?;
-        let target = find_target(source.as_ref(), scene, &self.query, &self.selection)
-            .with_context(|| format!("{scene_name} ({} source)", source.kind()))?;
+        if scene.is_empty() {
+            bail!("{scene_name} holds no Gaussian: there is nothing to select");
+        }
+        let in_scene = || format!("{scene_name} ({} source)", source.kind());
+        let relevancy = source
+            .relevancy(scene, &self.query)
+            .with_context(in_scene)?;
+        // Explained before the selection, so that a query that selects nothing says why.
+        let explanation = explain(scene, &self.query, &relevancy, &self.selection)?;
+        let target = select(scene, &self.query, &relevancy, &self.selection).map_err(|e| {
+            let message = format!("{}: {e}", in_scene());
+            match explanation.clone() {
+                Some(explanation) => anyhow!(SelectionFailed {
+                    message,
+                    explanation
+                }),
+                None => anyhow!(message),
+            }
+        })?;
         let uploaded = DeviceScene::new(scene, device, Precision::F32.dtype());
         let (pose, camera) =
             diagnostic_camera(scene, &uploaded, &target, &self.intrinsics, self.view)?;
@@ -271,6 +311,7 @@ impl QueryRequest {
         Ok(QueryOutcome {
             source: kind,
             target,
+            explanation,
             camera,
             png,
             highlighted_share,
@@ -298,6 +339,7 @@ impl QueryOutcome {
             rejected: t.rejected.len(),
             percentile_threshold: t.percentile_threshold,
             relevancy: t.relevancy_spread,
+            explanation: self.explanation.clone(),
             centre: t.centre,
             extent: t.extent,
             camera: self.camera.clone(),
@@ -493,6 +535,9 @@ impl QueryReport {
             "relevancy: min {:.4}, median {:.4}, max {:.4}\n",
             r.relevancy.min, r.relevancy.median, r.relevancy.max
         ));
+        if let Some(x) = &r.explanation {
+            s.push_str(&x.text());
+        }
         s.push_str(&format!("centre: {}\n", fmt3(r.centre)));
         s.push_str(&format!("extent: {}\n", fmt3(r.extent)));
         let c = &r.camera;

@@ -18,6 +18,9 @@
 //! the `[targets]` table of a config file ([`TargetsConfig`]): which source, its files and
 //! options, and the selection settings, built into a source in one call.
 //!
+//! [`explain`] tells why a graded query found, or did not find, an object (relevancy
+//! quantiles, thresholds, the most relevant Gaussians grouped in space).
+//!
 //! [`text_encoder`] is a CLIP text tower in burn (open_clip/OpenAI weights from a file the user
 //! has) that makes `features` and `langsplat` queries free text.
 //!
@@ -30,6 +33,7 @@ pub mod cluster;
 pub mod config;
 pub mod embeddings;
 pub mod error;
+pub mod explain;
 pub mod mask_file;
 pub mod names;
 pub mod selection;
@@ -40,6 +44,7 @@ pub mod vectors;
 pub use config::{RegionSpec, SourceKind, TargetsConfig};
 pub use embeddings::{Matrix, PhraseTable, read_feature_sidecar};
 pub use error::{Result, SemanticError};
+pub use explain::{Explanation, explain};
 pub use mask_file::read_mask_file;
 pub use selection::{
     Cluster, ClusterOptions, ClusteringSummary, EpsRule, KeepClusters, SelectionOptions, Spread,

@@ -624,7 +624,7 @@ fn cluster_candidates(
 }
 
 /// Per-axis median and 5-95% span of the means of `indices`.
-fn robust_box(scene: &Scene, indices: &[usize]) -> ([f32; 3], [f32; 3]) {
+pub(crate) fn robust_box(scene: &Scene, indices: &[usize]) -> ([f32; 3], [f32; 3]) {
     let mut centre = [0.0; 3];
     let mut extent = [0.0; 3];
     for k in 0..3 {
