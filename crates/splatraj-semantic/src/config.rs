@@ -29,9 +29,14 @@
 //! - `custom.<name>`: a source another crate registered in a [`SourceRegistry`]; its keys go in
 //!   `[targets.custom.<name>]` (deserialised by its [`crate::sources::SourceConfig`]).
 //!   The default registry holds `custom.feature3dgs` (`decoder`, Feature 3DGS's
-//!   `decoder_chkpnt*.pth`, optional) and `custom.opengaussian` (`cluster_lang`, OpenGaussian's
-//!   `cluster_lang.npz`; `min_views`, default 1), each also taking the phrase keys of
-//!   `features` in its table (see `docs/open-vocabulary.md`).
+//!   `decoder_chkpnt*.pth`, optional), `custom.opengaussian` (`cluster_lang`, OpenGaussian's
+//!   `cluster_lang.npz`; `min_views`, default 1) and `custom.legaussians` (`index_decoder`,
+//!   LEGaussians' `index_decoder_chkpnt*.pth`; `codebook`, its `*_codebook.pt`; `combine`,
+//!   `"argmax"` (default) or `"softmax"`; temperature default 100), each also taking the
+//!   phrase keys of `features` in its table, and `custom.gaussian_grouping` (`classifier`,
+//!   Gaussian Grouping's `classifier.pth`; `min_probability`, default 0.3; `label_names` and
+//!   `synonyms` as for `labels`; queries name instance ids or those names); see
+//!   `docs/open-vocabulary.md`.
 //!
 //! `[targets.selection]` holds [`SelectionOptions`] for every source.
 
