@@ -73,6 +73,7 @@ pub fn frontier_svg(summary: &StudySummary, title: &str) -> Result<String> {
         chart
             .configure_mesh()
             .disable_x_mesh()
+            .set_tick_mark_size(LabelAreaPosition::Bottom, 0)
             .x_label_formatter(&|_| String::new())
             .x_desc("optimisation time, s (mean over seeds, log scale)")
             .y_desc(format!("error: {}", summary.quality.describe()))
@@ -148,7 +149,32 @@ pub fn frontier_svg(summary: &StudySummary, title: &str) -> Result<String> {
             w: (xs.end - xs.start) as f64 - 4.0,
             h: (ys.end - ys.start) as f64 - 4.0,
         };
-        let placed = place_labels(&anchors, &sizes, &order, bounds, MARKER_RADIUS as f64 + 1.0);
+        // What a label must not cover: every marker, the frontier line and the sd bars.
+        let marker = MARKER_RADIUS as f64 + 1.0;
+        let mut obstacles: Vec<LabelBox> = anchors
+            .iter()
+            .map(|a| LabelBox::around(*a, marker))
+            .collect();
+        let pixel = |t: f64, e: f64| {
+            let (x, y) = chart.backend_coord(&(t, e));
+            (x as f64, y as f64)
+        };
+        let frontier_pixels: Vec<(f64, f64)> = summary
+            .frontier
+            .iter()
+            .map(|&i| summary.variants[i].figures.point())
+            .map(|(t, e)| pixel(t, e))
+            .collect();
+        for pair in frontier_pixels.windows(2) {
+            obstacles.extend(segment_boxes(pair[0], pair[1]));
+        }
+        for &(t, e, sd, _, _) in points.iter().filter(|p| p.2 > 0.0) {
+            obstacles.extend(segment_boxes(
+                pixel(t, (e - sd).max(e_lo)),
+                pixel(t, e + sd),
+            ));
+        }
+        let placed = place_labels(&anchors, &sizes, &order, bounds, &obstacles);
         let font = ("sans-serif", LABEL_FONT).into_font();
         for ((p, anchor), label) in points.iter().zip(&anchors).zip(&placed) {
             let colour = if p.3 { frontier_colour } else { other };
@@ -219,6 +245,16 @@ pub struct LabelBox {
 }
 
 impl LabelBox {
+    /// The square of half-side `half` centred on `p`.
+    pub fn around(p: (f64, f64), half: f64) -> LabelBox {
+        LabelBox {
+            x: p.0 - half,
+            y: p.1 - half,
+            w: 2.0 * half,
+            h: 2.0 * half,
+        }
+    }
+
     /// The area this box shares with `other`.
     pub fn overlap(&self, other: &LabelBox) -> f64 {
         let w = (self.x + self.w).min(other.x + other.w) - self.x.max(other.x);
@@ -243,6 +279,18 @@ impl LabelBox {
     }
 }
 
+/// Small boxes covering the segment from `a` to `b` (one every 4 px), as obstacles for labels.
+fn segment_boxes(a: (f64, f64), b: (f64, f64)) -> Vec<LabelBox> {
+    let length = ((b.0 - a.0).powi(2) + (b.1 - a.1).powi(2)).sqrt();
+    let steps = (length / 4.0).ceil().max(1.0) as usize;
+    (0..=steps)
+        .map(|k| {
+            let s = k as f64 / steps as f64;
+            LabelBox::around((a.0 + s * (b.0 - a.0), a.1 + s * (b.1 - a.1)), 1.5)
+        })
+        .collect()
+}
+
 /// Where a label went.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlacedLabel {
@@ -263,24 +311,17 @@ const DIRECTIONS: [f64; 12] = [
 
 /// Places the labels of `anchors` (label sizes `sizes`, placed in the order `order`): each at
 /// the first position, ring by ring outwards, that overlaps no label placed before it and no
-/// point's marker (a square of half-side `marker` around every anchor) and lies inside
-/// `bounds`; where no position is free, at the one overlapping least. One box per anchor.
+/// obstacle (markers first, then lines) and lies inside `bounds`; where no position is free,
+/// at the one overlapping least. One box per anchor.
 pub fn place_labels(
     anchors: &[(f64, f64)],
     sizes: &[(f64, f64)],
     order: &[usize],
     bounds: LabelBox,
-    marker: f64,
+    obstacles: &[LabelBox],
 ) -> Vec<PlacedLabel> {
-    let markers: Vec<LabelBox> = anchors
-        .iter()
-        .map(|a| LabelBox {
-            x: a.0 - marker,
-            y: a.1 - marker,
-            w: 2.0 * marker,
-            h: 2.0 * marker,
-        })
-        .collect();
+    // Rings are measured from the edge of a point's marker (the first obstacle's size).
+    let marker = obstacles.first().map_or(0.0, |o| o.w / 2.0);
     let mut placed: Vec<Option<PlacedLabel>> = vec![None; anchors.len()];
     for &i in order {
         let (w, h) = sizes[i];
@@ -308,7 +349,7 @@ pub fn place_labels(
                     .iter()
                     .flatten()
                     .map(|p| p.bbox.overlap(&bbox))
-                    .chain(markers.iter().map(|m| m.overlap(&bbox)))
+                    .chain(obstacles.iter().map(|m| m.overlap(&bbox)))
                     .sum::<f64>()
                     + 10.0 * outside;
                 let candidate = PlacedLabel {
@@ -366,7 +407,8 @@ mod tests {
             .map(|k| label_size(&"x".repeat(10 + 2 * k)))
             .collect();
         let order: Vec<usize> = (0..anchors.len()).collect();
-        let placed = place_labels(&anchors, &sizes, &order, bounds, 6.0);
+        let markers: Vec<LabelBox> = anchors.iter().map(|a| LabelBox::around(*a, 6.0)).collect();
+        let placed = place_labels(&anchors, &sizes, &order, bounds, &markers);
         assert_eq!(placed.len(), anchors.len());
         for (i, p) in placed.iter().enumerate() {
             assert!(p.bbox.inside(&bounds), "label {i} at {:?}", p.bbox);
@@ -374,20 +416,26 @@ mod tests {
             for (j, q) in placed.iter().enumerate().skip(i + 1) {
                 assert_eq!(p.bbox.overlap(&q.bbox), 0.0, "labels {i} and {j}");
             }
-            for (j, a) in anchors.iter().enumerate() {
-                let marker = LabelBox {
-                    x: a.0 - 6.0,
-                    y: a.1 - 6.0,
-                    w: 12.0,
-                    h: 12.0,
-                };
-                assert_eq!(p.bbox.overlap(&marker), 0.0, "label {i} on marker {j}");
+            for (j, marker) in markers.iter().enumerate() {
+                assert_eq!(p.bbox.overlap(marker), 0.0, "label {i} on marker {j}");
             }
         }
         // A lone point keeps its label right next to it, with no leader line.
-        let lone = place_labels(&[(100.0, 100.0)], &[(50.0, 12.0)], &[0], bounds, 6.0);
+        let lone_marker = [LabelBox::around((100.0, 100.0), 6.0)];
+        let lone = place_labels(
+            &[(100.0, 100.0)],
+            &[(50.0, 12.0)],
+            &[0],
+            bounds,
+            &lone_marker,
+        );
         assert!(!lone[0].needs_leader);
         assert!(lone[0].bbox.x > 100.0 && lone[0].bbox.x < 120.0);
+        // A line leaving the point to the right pushes the label off it.
+        let mut with_line = lone_marker.to_vec();
+        with_line.extend(segment_boxes((100.0, 100.0), (300.0, 100.0)));
+        let moved = place_labels(&[(100.0, 100.0)], &[(50.0, 12.0)], &[0], bounds, &with_line);
+        assert!(with_line.iter().all(|o| o.overlap(&moved[0].bbox) == 0.0));
     }
 
     #[test]
