@@ -1,19 +1,18 @@
 //! `splatraj query`: what a semantic query selects in a scene, as text (or JSON) and as a
 //! picture.
 //!
-//! The query goes through one of the semantic sources (labels, a region, per-Gaussian
-//! language features scored against a phrase table, or LangSplat latents decoded by the
-//! scene's autoencoder checkpoint and then scored as features) and the selection (percentile,
-//! floor, density clustering against the scene) of `splatraj-semantic`. The command prints the
-//! counts, the clustering, the kept cluster and the runner-ups, the candidates dropped, the
-//! relevancy spread, centre and extent, and for language features the relevancy over all
-//! Gaussians with the most relevant groups (also, on stdout, when nothing is selected;
-//! warnings on stderr), and renders `query.png`: the RGB
-//! render from a camera that looks at the selection's centre from 30° above the horizontal
+//! The query goes through one of the semantic sources (labels, a region, per-Gaussian language
+//! features scored against a phrase table, or LangSplat latents decoded by the scene's autoencoder
+//! checkpoint and then scored as features) and the selection (percentile, floor, density clustering
+//! against the scene) of `splatraj-semantic`. The command prints the counts, the clustering, the
+//! kept cluster and the runner-ups, the candidates dropped, the relevancy spread, centre and
+//! extent, and for language features the relevancy over all Gaussians with the most relevant groups
+//! (also, on stdout, when nothing is selected; warnings on stderr), and renders `query.png`: the
+//! RGB render from a camera that looks at the selection's centre from 30° above the horizontal
 //! (`--elevation`), at a distance where its extent fills about a third of the frame, with the
 //! selected Gaussians tinted magenta (and the dropped candidates cyan with `--show-rejected`).
-//! Every input is read and checked, and the picture rendered, before the file is written
-//! (whole or not at all).
+//! Every input is read and checked, and the picture rendered, before the file is written (whole or
+//! not at all).
 //! The work is `splatraj::experiment::query` ([`QueryRequest`]); this file parses and prints.
 
 use std::path::PathBuf;
