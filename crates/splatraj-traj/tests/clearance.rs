@@ -154,7 +154,7 @@ fn distances_to_rotated_ellipsoids_match_brute_force() {
 }
 
 #[test]
-fn the_index_finds_the_same_nearest_surface_as_a_scan() {
+fn the_index_finds_the_same_nearest_surface_as_a_scan_and_the_same_clear_points() {
     let mut rng = 0xC1EA_u64;
     let mut r = || xorshift(&mut rng);
     let gaussians: Vec<([f32; 3], [f32; 3], [f32; 4])> = (0..300)
@@ -182,6 +182,16 @@ fn the_index_finds_the_same_nearest_surface_as_a_scan() {
         let within = occupancy.nearest_within(p, 0.1);
         if scan <= 0.1 {
             assert!((within.unwrap().surface.distance - scan).abs() < 1e-12);
+        }
+        // The early-exit test agrees with the scan (away from the threshold's rounding).
+        for radius in [0.0, 0.05, 0.3] {
+            if (scan - radius).abs() > 1e-9 {
+                assert_eq!(
+                    occupancy.is_clear(p, radius),
+                    scan >= radius,
+                    "{p}, {radius}"
+                );
+            }
         }
     }
 }

@@ -158,10 +158,15 @@ fn scene() -> Scene {
         [0.0, -0.08, 0.0],
         [4.0, 4.0, 0.0],
     ];
+    round_gaussians(means, 0.08)
+}
+
+/// Round, opaque, grey Gaussians of one scale at `means`.
+fn round_gaussians(means: Vec<[f32; 3]>, scale: f32) -> Scene {
     let n = means.len();
     Scene {
         means,
-        scales: vec![[0.08; 3]; n],
+        scales: vec![[scale; 3]; n],
         rotations: vec![[1.0, 0.0, 0.0, 0.0]; n],
         opacities: vec![0.9; n],
         sh_degree: 0,
@@ -537,16 +542,7 @@ fn two_objects() -> Scene {
         ]);
     }
     means.push([4.0, 4.0, 0.0]);
-    let n = means.len();
-    Scene {
-        means,
-        scales: vec![[0.06; 3]; n],
-        rotations: vec![[1.0, 0.0, 0.0, 0.0]; n],
-        opacities: vec![0.9; n],
-        sh_degree: 0,
-        sh: vec![0.0; n * 3],
-        extras: Default::default(),
-    }
+    round_gaussians(means, 0.06)
 }
 
 fn window_of_mask(mask: Vec<f32>, centre: [f64; 3], prior_radius: f64, ratio: f64) -> WindowTarget {

@@ -200,6 +200,33 @@ impl Occupancy {
         best
     }
 
+    /// Whether no surface lies closer to `p` than `radius` (≥ 0): `p` is outside every
+    /// ellipsoid and at least `radius` from each. Stops at the first surface found closer;
+    /// an ellipsoid whose inscribed or circumscribed sphere decides it is not measured
+    /// exactly (the distance to its surface lies between the distances to those spheres).
+    pub fn is_clear(&self, p: DVec3, radius: f64) -> bool {
+        for tier in &self.inner.tiers {
+            let reach = radius + tier.reach;
+            let found = tier
+                .tree
+                .query(&p.to_array())
+                .within::<SquaredEuclidean<f64>>(reach * reach)
+                .unsorted()
+                .execute();
+            for neighbour in found {
+                let e = &self.inner.ellipsoids[tier.members[neighbour.item as usize]];
+                let to_centre = neighbour.distance.sqrt();
+                if to_centre - e.radii.max_element() >= radius {
+                    continue;
+                }
+                if to_centre < e.radii.min_element() + radius || e.nearest(p).distance < radius {
+                    return false;
+                }
+            }
+        }
+        true
+    }
+
     /// The nearest surface to `p` over all ellipsoids (None when there is none): the search
     /// radius starts at `hint` and doubles until a surface within it is found.
     pub fn nearest(&self, p: DVec3, hint: f64) -> Option<Contact> {

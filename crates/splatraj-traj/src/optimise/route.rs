@@ -96,13 +96,7 @@ impl RoutePlanner {
         let count = dims[0] * dims[1] * dims[2];
         planner.free = (0..count)
             .into_par_iter()
-            .map(|i| {
-                let c = planner.centre(i);
-                planner
-                    .occupancy
-                    .nearest_within(c, needed)
-                    .is_none_or(|contact| contact.surface.distance >= needed)
-            })
+            .map(|i| planner.occupancy.is_clear(planner.centre(i), needed))
             .collect();
         planner
     }
