@@ -115,6 +115,12 @@ fn a_grid_study_has_a_row_per_run_and_a_non_dominated_frontier() {
     }
     for r in &rows {
         assert!(r.error.is_finite() && r.optimisation_s > 0.0, "{r:?}");
+        // Renders ran, and decide is part of projection (the renderer's clock is
+        // process-wide and other tests render at the same time, so only same-clock relations
+        // and positivity are checked).
+        let stages = r.stages.unwrap();
+        assert!(stages.decide_s > 0.0 && stages.decide_s <= stages.projection_s);
+        assert!(stages.composite_backward_s > 0.0, "{stages:?}");
         // No clearance cost in the config: nothing to report.
         assert!(r.min_clearance.is_none() && r.windows[0].min_clearance.is_none());
         assert_eq!(r.windows.len(), 2);

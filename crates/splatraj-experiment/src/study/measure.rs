@@ -164,5 +164,7 @@ fn stage_times(run: &crate::TrajectoryRun) -> StageTimes {
         costs_s: (evaluate - forward).max(0.0),
         backward_s: backward,
         optimiser_s: update,
+        decide_s: of(Stage::Decide),
+        composite_backward_s: of(Stage::CompositeBackward),
     }
 }

@@ -25,17 +25,29 @@ pub struct StageTimes {
     pub backward_s: f64,
     /// Adam's step and the rest of the loop.
     pub optimiser_s: f64,
+    /// Of `projection_s`: the renderer's host decisions (cull, screen position, radius,
+    /// depth), the rest being the differentiable projection.
+    #[serde(default)]
+    pub decide_s: f64,
+    /// Of `backward_s`: the fused compositing's own backward, the rest being burn's autodiff
+    /// through projection and costs (0 for the tensor rasterizer, whose backward is all
+    /// autodiff).
+    #[serde(default)]
+    pub composite_backward_s: f64,
 }
 
 impl StageTimes {
-    /// The stages' names and values, in order.
-    pub fn entries(&self) -> [(&'static str, f64); 6] {
+    /// The stages' names and values, in order; a `decide_s` and `composite_backward_s` part
+    /// follows the stage it is part of.
+    pub fn entries(&self) -> [(&'static str, f64); 8] {
         [
             ("projection_s", self.projection_s),
+            ("decide_s", self.decide_s),
             ("binning_s", self.binning_s),
             ("compositing_s", self.compositing_s),
             ("costs_s", self.costs_s),
             ("backward_s", self.backward_s),
+            ("composite_backward_s", self.composite_backward_s),
             ("optimiser_s", self.optimiser_s),
         ]
     }

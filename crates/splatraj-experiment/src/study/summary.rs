@@ -136,6 +136,8 @@ impl Figures {
                 costs_s: mean(|s| s.costs_s),
                 backward_s: mean(|s| s.backward_s),
                 optimiser_s: mean(|s| s.optimiser_s),
+                decide_s: mean(|s| s.decide_s),
+                composite_backward_s: mean(|s| s.composite_backward_s),
             }
         });
         Figures {
@@ -437,7 +439,8 @@ impl StudySummary {
         }
         if self.variants.iter().any(|v| v.figures.stages.is_some()) {
             md += "\n## Where the optimisation time goes\n\nSeconds per run, summed over steps \
-                   (forward stages as the renderer's clock measures them).\n\n| variant | projection | binning | compositing | costs | backward | optimiser |\n|---|---|---|---|---|---|---|\n";
+                   (forward stages as the renderer's clock measures them); a bracketed column is the part \
+                   of the stage before it.\n\n| variant | projection | (decide) | binning | compositing | costs | backward | (composite backward) | optimiser |\n|---|---|---|---|---|---|---|---|---|\n";
             for v in &self.variants {
                 if let Some(s) = v.figures.stages {
                     md += &format!("| {} |", v.label);
