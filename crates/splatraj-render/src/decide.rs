@@ -27,6 +27,95 @@ pub struct HostGeometry {
     pub max_variance: Vec<f32>,
     /// Opacities (for the `min_opacity` approximation).
     pub opacities: Vec<f32>,
+    /// Gaussians grouped by place, so a pose can skip the groups it cannot see.
+    pub blocks: Vec<Block>,
+    /// Index into [`HostGeometry::blocks`] of each Gaussian. `[N]`
+    pub block_of: Vec<u32>,
+}
+
+/// Neighbouring Gaussians (consecutive in Morton order of their means), bounded as a whole.
+///
+/// A pass visits only what a pose can see; on scenes of millions of Gaussians most of them are
+/// off-screen, behind the camera or outside a mask pass's tiles, and testing one bound per block
+/// instead of projecting each Gaussian is what keeps the decisions from growing with N.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Block {
+    /// Centre of the members' means (middle of their bounding box), world coordinates.
+    pub centre: DVec3,
+    /// Largest distance of a member's mean from `centre` (rounded up).
+    pub radius: f64,
+    /// Largest eigenvalue of a member's world covariance.
+    pub max_variance: f64,
+}
+
+/// Gaussians per [`Block`]: small enough to bound tightly, large enough that the block tests
+/// cost nothing next to the Gaussians they skip.
+const BLOCK_MEMBERS: usize = 256;
+
+/// Groups the Gaussians into [`Block`]s: sorted by a 30-bit Morton code of their means (10 bits
+/// per axis over the scene's bounding box), then cut into runs of [`BLOCK_MEMBERS`].
+fn spatial_blocks(means: &[[f32; 3]], max_variance: &[f32]) -> (Vec<Block>, Vec<u32>) {
+    let finite = means.iter().filter(|m| m.iter().all(|v| v.is_finite()));
+    let (lo, hi) = finite.fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), m| {
+            let m = DVec3::from(m.map(f64::from));
+            (lo.min(m), hi.max(m))
+        },
+    );
+    let cells = 1023.0;
+    let extent = (hi - lo).max(DVec3::splat(f64::MIN_POSITIVE));
+    let morton = |m: &[f32; 3]| -> u32 {
+        let q = (DVec3::from(m.map(f64::from)) - lo) / extent * cells;
+        // NaN and out-of-range values land in a corner cell; the block bounds stay exact.
+        let cell = |v: f64| v.clamp(0.0, cells) as u32;
+        let spread = |mut v: u32| {
+            v = (v | (v << 16)) & 0x0300_00ff;
+            v = (v | (v << 8)) & 0x0300_f00f;
+            v = (v | (v << 4)) & 0x030c_30c3;
+            (v | (v << 2)) & 0x0924_9249
+        };
+        spread(cell(q.x)) | (spread(cell(q.y)) << 1) | (spread(cell(q.z)) << 2)
+    };
+    let mut order: Vec<(u32, u32)> = means
+        .par_iter()
+        .enumerate()
+        .map(|(g, m)| (morton(m), g as u32))
+        .collect();
+    order.par_sort_unstable();
+    let mut block_of = vec![0u32; means.len()];
+    let blocks = order
+        .chunks(BLOCK_MEMBERS)
+        .enumerate()
+        .map(|(b, members)| {
+            let point = |g: u32| DVec3::from(means[g as usize].map(f64::from));
+            let (lo, hi) = members.iter().fold(
+                (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+                |(lo, hi), &(_, g)| (lo.min(point(g)), hi.max(point(g))),
+            );
+            let centre = 0.5 * (lo + hi);
+            let mut block = Block {
+                centre,
+                radius: 0.0,
+                max_variance: 0.0,
+            };
+            for &(_, g) in members {
+                block_of[g as usize] = b as u32;
+                // f64::max skips NaN: a non-finite member makes the radius infinite below.
+                let distance = (point(g) - centre).length();
+                block.radius = if distance.is_finite() {
+                    block.radius.max(distance)
+                } else {
+                    f64::INFINITY
+                };
+                block.max_variance = block.max_variance.max(f64::from(max_variance[g as usize]));
+            }
+            // Rounding of the distances must not let a member poke out of the bound.
+            block.radius = block.radius * (1.0 + 1e-9) + 1e-9;
+            block
+        })
+        .collect();
+    (blocks, block_of)
 }
 
 impl HostGeometry {
@@ -39,16 +128,19 @@ impl HostGeometry {
                 [s[0], s[1], s[2], s[4], s[5], s[8]].map(|v| v as f32)
             })
             .collect();
-        let max_variance = scene
+        let max_variance: Vec<f32> = scene
             .scales
             .iter()
             .map(|s| s.iter().fold(0.0f32, |m, &v| m.max(v * v)))
             .collect();
+        let (blocks, block_of) = spatial_blocks(&scene.means, &max_variance);
         HostGeometry {
             means: scene.means.clone(),
             covariances,
             max_variance,
             opacities: scene.opacities.clone(),
+            blocks,
+            block_of,
         }
     }
 
@@ -64,6 +156,9 @@ impl HostGeometry {
 }
 
 /// Screen data of every Gaussian for every pose, flat `[B · N]` (means `[B · N · 2]`).
+///
+/// Positions and depths are meaningful only where `visible`: a Gaussian whose whole block the
+/// pose cannot see is skipped and keeps zeros.
 #[derive(Debug, Clone, Default)]
 pub struct Decisions {
     /// Pixel coordinates (u, v) of the projected means.
@@ -169,6 +264,12 @@ impl Out<'_> {
         select: &(dyn Fn(usize) -> bool + Sync),
         bounds: [f64; 4],
     ) {
+        let reachable: Vec<bool> = geometry
+            .blocks
+            .par_iter()
+            .map(|block| camera.may_reach(block, bounds))
+            .collect();
+        let select = |g: usize| select(g) && reachable[geometry.block_of[g] as usize];
         self.means_2d
             .par_chunks_mut(2 * BLOCK)
             .zip(self.depth.par_chunks_mut(BLOCK))
@@ -212,6 +313,51 @@ impl Camera {
             limits: (FOV_CLAMP * tan_x, FOV_CLAMP * tan_y),
             near,
         }
+    }
+
+    /// False only when no member of `block` can reach `bounds` in this pose: each is behind the
+    /// near plane or, by [`Camera::decide`]'s own bound, lands outside `bounds`.
+    fn may_reach(&self, block: &Block, bounds: [f64; 4]) -> bool {
+        let Intrinsics { fx, fy, cx, cy, .. } = self.intrinsics;
+        let [r0, r1, r2] = self.r;
+        let d = block.centre - self.centre;
+        let (x, y, z, r) = (d.dot(r0), d.dot(r1), d.dot(r2), block.radius);
+        if !(x.is_finite() && y.is_finite() && z.is_finite() && r.is_finite()) {
+            return true;
+        }
+        if z + r <= self.near {
+            return false;
+        }
+        let z_min = z - r;
+        if z_min <= self.near {
+            return true; // straddles the near plane: decide each member
+        }
+        // A member's camera coordinates lie in the box [x ± r] × [y ± r] × [z ± r] with z > 0,
+        // where x'/z' is extreme at the corners.
+        let ratio_range = |a: f64| {
+            let ratios = [
+                (a - r) / z_min,
+                (a - r) / (z + r),
+                (a + r) / z_min,
+                (a + r) / (z + r),
+            ];
+            ratios
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &q| {
+                    (lo.min(q), hi.max(q))
+                })
+        };
+        let ((x_lo, x_hi), (y_lo, y_hi)) = (ratio_range(x), ratio_range(y));
+        let (u_lo, u_hi) = (fx * x_lo + cx, fx * x_hi + cx);
+        let (v_lo, v_hi) = (fy * y_lo + cy, fy * y_hi + cy);
+        // The largest footprint bound of a member: |x̂|, |ŷ| are clamped, and z ≥ z_min.
+        let (lx, ly) = self.limits;
+        let j_norm2 = (fx * fx * (1.0 + lx * lx) + fy * fy * (1.0 + ly * ly)) / (z_min * z_min);
+        let bound = 3.0 * (j_norm2 * block.max_variance + LOW_PASS).sqrt() + 1.0;
+        !(u_hi + bound < bounds[0]
+            || v_hi + bound < bounds[1]
+            || u_lo - bound > bounds[2]
+            || v_lo - bound > bounds[3])
     }
 
     /// Pixel position, depth and radius (`None` if culled) of Gaussian `g`. A Gaussian whose

@@ -55,13 +55,12 @@ impl TileGrid {
         v: f64,
         radius: f64,
     ) -> (std::ops::Range<usize>, std::ops::Range<usize>) {
+        // Clamping before rounding is the same as after (the bounds are integers) and keeps
+        // the values small enough for the cast-based rounding.
         let span = |centre: f64, count: usize| {
-            let lo = ((centre - radius) / TILE_SIZE as f64)
-                .floor()
-                .clamp(0.0, count as f64) as usize;
-            let hi = ((centre + radius) / TILE_SIZE as f64)
-                .ceil()
-                .clamp(0.0, count as f64) as usize;
+            let tiles = |edge: f64| (edge / TILE_SIZE as f64).clamp(0.0, count as f64);
+            let lo = floor_small(tiles(centre - radius)) as usize;
+            let hi = ceil_small(tiles(centre + radius)) as usize;
             lo..hi.max(lo)
         };
         (span(u, self.tiles_x), span(v, self.tiles_y))
@@ -163,6 +162,7 @@ fn bin_one_pose(
     // Gaussians that touch a wanted tile, front to back (ties by index), sorted once for all
     // tiles: pushing them in this order leaves every list sorted. (depth, index) is one u64.
     let mut order: Vec<u64> = (0..n)
+        .into_par_iter()
         .filter(|&g| tiles_of(g).any(|tile| wanted[tile]))
         .map(|g| (u64::from(ordered_bits(screen.depth[b * n + g])) << 32) | g as u64)
         .collect();
@@ -189,6 +189,29 @@ fn bin_one_pose(
             })
         })
         .collect()
+}
+
+/// ⌊x⌋ for |x| well inside the i64 range, as a cast: the baseline x86-64 target has no
+/// rounding instruction, and `f64::floor` is a libm call on paths run once per Gaussian or pair.
+#[inline(always)]
+pub(crate) fn floor_small(x: f64) -> i64 {
+    let truncated = x as i64;
+    if (truncated as f64) > x {
+        truncated - 1
+    } else {
+        truncated
+    }
+}
+
+/// ⌈x⌉ for |x| well inside the i64 range.
+#[inline(always)]
+pub(crate) fn ceil_small(x: f64) -> i64 {
+    let truncated = x as i64;
+    if (truncated as f64) < x {
+        truncated + 1
+    } else {
+        truncated
+    }
 }
 
 /// The bits of `x` as a u32 that orders like the float itself (negative values included).

@@ -102,3 +102,125 @@ fn host_decisions_match_the_tensor_projection() {
         "the host skips off-screen Gaussians ({skipped})"
     );
 }
+
+/// 144 clusters of 256 Gaussians (about one block each) 0.8 apart on a floor, so whole
+/// neighbourhoods fall outside a view or a mask pass's tiles; a tenth are large enough to reach
+/// the next cluster.
+fn clustered_scene() -> Scene {
+    let mut state = 0x9e37_79b9_u64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut scene = Scene::default();
+    for cluster in 0..144 {
+        let centre = [
+            0.8 * ((cluster % 12) as f64 - 5.5),
+            0.8 * ((cluster / 12) as f64 - 5.5),
+            0.2 * (next() - 0.5),
+        ];
+        for i in 0..256 {
+            scene
+                .means
+                .push([0, 1, 2].map(|a| (centre[a] + 0.3 * (next() - 0.5)) as f32));
+            let size = if i % 10 == 0 { 0.25 } else { 0.01 } * (0.5 + next());
+            scene
+                .scales
+                .push([0, 1, 2].map(|_| (size * (0.5 + 0.5 * next())) as f32));
+            scene
+                .rotations
+                .push([0, 1, 2, 3].map(|_| (next() - 0.5) as f32));
+            scene.opacities.push(next() as f32);
+        }
+    }
+    scene
+}
+
+#[test]
+fn focused_decisions_keep_every_gaussian_that_reaches_the_object_tiles() {
+    let scene = clustered_scene();
+    // The "object": Gaussians near (0.5, 0, 0); the camera sees much more than its tiles.
+    let focus: Vec<bool> = scene
+        .means
+        .iter()
+        .map(|m| DVec3::from(m.map(f64::from)).distance(DVec3::new(0.4, 0.4, 0.0)) < 0.25)
+        .collect();
+    let k = Intrinsics::from_fov_x(70.0, 200, 140).unwrap();
+    let grid = TileGrid::new(k.width, k.height);
+    let object = DVec3::new(0.4, 0.4, 0.0);
+    let poses = [
+        // From above, and grazing along the floor through its clusters (near-plane cases).
+        Pose::look_at(DVec3::new(0.4, -0.6, 4.0), object, DVec3::Y).unwrap(),
+        Pose::look_at(DVec3::new(-2.0, -1.5, 0.3), object, DVec3::Z).unwrap(),
+    ];
+    let device = Device::flex();
+    let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
+    let pose_tensor = Tensor::<2>::from_data(
+        TensorData::new(flat, [poses.len(), 6]),
+        (&device, DType::F64),
+    );
+    let tensors = SceneTensors::new(&scene, None, &device, DType::F64);
+    let projected = project(&tensors, pose_tensor, &k);
+    let (radii, visible) = radii_and_visibility(&projected, NEAR_PLANE);
+    let means: Vec<f64> = projected
+        .means_2d
+        .into_data()
+        .convert::<f64>()
+        .try_to_vec::<f64>()
+        .unwrap();
+    let host = decide(
+        &HostGeometry::new(&scene),
+        &poses,
+        &k,
+        NEAR_PLANE,
+        Some(&focus),
+    );
+
+    let n = scene.len();
+    let tiles = |i: usize| grid.touched(means[2 * i], means[2 * i + 1], radii[i] as f64);
+    let (mut needed, mut skipped) = (0, 0);
+    for b in 0..poses.len() {
+        // The object's tile box in this pose, from the tensor projection.
+        // [x0, x1) × [y0, y1) in tiles, grown from empty.
+        let (mut xs, mut ys) = ((usize::MAX, 0), (usize::MAX, 0));
+        for g in (0..n).filter(|&g| focus[g] && visible[b * n + g]) {
+            let (gx, gy) = tiles(b * n + g);
+            if gx.is_empty() || gy.is_empty() {
+                continue;
+            }
+            xs = (xs.0.min(gx.start), xs.1.max(gx.end));
+            ys = (ys.0.min(gy.start), ys.1.max(gy.end));
+        }
+        assert!(xs.0 < xs.1, "pose {b} sees the object");
+        for g in 0..n {
+            let i = b * n + g;
+            let (gx, gy) = tiles(i);
+            let overlaps = gx.start < xs.1 && xs.0 < gx.end && gy.start < ys.1 && ys.0 < gy.end;
+            if visible[i] && overlaps {
+                needed += 1;
+                assert!(
+                    host.visible[i],
+                    "pose {b}, Gaussian {g}: reaches the object's tiles, culled by the host"
+                );
+                assert_eq!(host.radii[i], radii[i], "pose {b}, Gaussian {g}: radius");
+            } else if !visible[i] {
+                assert!(
+                    !host.visible[i],
+                    "pose {b}, Gaussian {g}: culled by the tensor path, not by the host"
+                );
+            } else {
+                skipped += usize::from(!host.visible[i]);
+            }
+        }
+    }
+    assert!(
+        needed > 300,
+        "enough Gaussians reach the object's tiles ({needed})"
+    );
+    assert!(
+        skipped > 500,
+        "the host skips what cannot reach them ({skipped})"
+    );
+}

@@ -19,7 +19,7 @@ use rayon::prelude::*;
 
 use super::plan::CompositePlan;
 use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
-use crate::tiles::{TILE_PIXELS, TILE_SIZE};
+use crate::tiles::{TILE_PIXELS, TILE_SIZE, ceil_small, floor_small};
 
 /// The float types the kernels run in.
 pub trait Real:
@@ -197,28 +197,6 @@ impl<E: Real> Splat<E> {
         };
         let (xs, ys) = (span(mx, half_x), span(my, half_y));
         (!xs.is_empty() && !ys.is_empty()).then_some((xs, ys))
-    }
-}
-
-/// ⌊x⌋ for |x| well inside the i64 range.
-#[inline(always)]
-fn floor_small(x: f64) -> i64 {
-    let truncated = x as i64;
-    if (truncated as f64) > x {
-        truncated - 1
-    } else {
-        truncated
-    }
-}
-
-/// ⌈x⌉ for |x| well inside the i64 range.
-#[inline(always)]
-fn ceil_small(x: f64) -> i64 {
-    let truncated = x as i64;
-    if (truncated as f64) < x {
-        truncated + 1
-    } else {
-        truncated
     }
 }
 
