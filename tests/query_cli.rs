@@ -99,7 +99,7 @@ fn label_query_counts_exactly_and_pictures_the_object() {
         "clustering: none",
         "kept: 1 cluster(s) [1038]",
         "dropped: 0 candidates",
-        "relevancy:",
+        "relevancy of the 1038 selected Gaussians: min 1.0000",
         "centre:",
         "extent:",
     ] {
@@ -135,7 +135,7 @@ fn label_query_counts_exactly_and_pictures_the_object() {
     assert_eq!(report["rejected"], 0);
     assert_eq!(report["warnings"], json!([]));
     assert!((report["fraction"].as_f64().unwrap() - 1038.0 / 4721.0).abs() < 1e-9);
-    assert_eq!(report["relevancy"]["min"], 1.0);
+    assert_eq!(report["selected_relevancy"]["min"], 1.0);
     assert!(
         report["highlighted_share"].as_f64().unwrap() > 0.0,
         "{report}"
@@ -419,7 +419,7 @@ fn features_route_selects_the_phrases_label() {
     let by_label = json_report(&query(&["--query", "Category 3"]));
     assert_eq!(by_features["centre"], by_label["centre"]);
     assert_eq!(by_features["extent"], by_label["extent"]);
-    assert!(by_features["relevancy"]["min"].as_f64().unwrap() > 0.99);
+    assert!(by_features["selected_relevancy"]["min"].as_f64().unwrap() > 0.99);
 
     // With clustering (the default): the main part of label 3.
     let clustered = json_report(&query(&[
@@ -671,7 +671,7 @@ fn langsplat_route_decodes_latents_and_selects_the_phrases_label() {
     ]));
     assert_eq!(report["source"], "langsplat");
     assert_eq!(report["count"], 398);
-    assert!(report["relevancy"]["min"].as_f64().unwrap() > 0.5);
+    assert!(report["selected_relevancy"]["min"].as_f64().unwrap() > 0.5);
     let by_label = json_report(&splatraj(&[
         "query",
         "--scene",

@@ -2,9 +2,12 @@
 //! picture.
 //!
 //! The query goes through one of the semantic sources (labels, a region, per-Gaussian language
-//! features scored against a phrase table, or LangSplat latents decoded by the scene's autoencoder
-//! checkpoint and then scored as features) and the selection (percentile, floor, density clustering
-//! against the scene) of `splatraj-semantic`. The command prints the counts, the clustering, the
+//! features scored against a phrase table, LangSplat latents decoded by the scene's autoencoder
+//! checkpoint and then scored as features, or a registered source such as
+//! `custom.gaussian_grouping`) and the selection (percentile, floor, density clustering against
+//! the scene) of `splatraj-semantic`. The scene and source come from the options, or from a run
+//! config (`--config RUN.toml [--set KEY=VALUE]...`: its `[scene]` and `[targets]`, as `run`
+//! builds them). The command prints the counts, the clustering, the
 //! kept cluster and the runner-ups, the candidates dropped, the relevancy spread, centre and
 //! extent, and for language features the relevancy over all Gaussians with the most relevant groups
 //! (also, on stdout, when nothing is selected; warnings on stderr), and renders `query.png`: the
@@ -13,22 +16,25 @@
 //! selected Gaussians tinted magenta (and the dropped candidates cyan with `--show-rejected`).
 //! Every input is read and checked, and the picture rendered, before the file is written (whole or
 //! not at all).
-//! The work is `splatraj::experiment::query` ([`QueryRequest`]); this file parses and prints.
+//! The work is `splatraj::experiment::query` ([`ConfigQuery`], [`QueryRequest`]); this file
+//! parses and prints.
 
 use std::path::PathBuf;
 use std::str::FromStr;
 
 use anyhow::{Context, Result, bail};
-use clap::{Args, ValueEnum};
+use clap::Args;
 use splatraj::experiment::outputs::write_bytes;
 use splatraj::experiment::query::{
-    QueryRequest, RejectedView, SelectionFailed, parse_direction, parse_region, parse_synonyms,
+    ConfigQuery, PictureOptions, QueryRequest, RejectedView, SelectionFailed, parse_direction,
+    parse_region, parse_source_keys, parse_synonyms,
 };
 use splatraj::experiment::views::{FOV_X_DEGREES, ViewOptions};
+use splatraj::experiment::{Config, Extensions};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera::Intrinsics;
 use splatraj_semantic::selection::{DEFAULT_FLOOR, DEFAULT_TOP_FRACTION};
-use splatraj_semantic::{Activation, ClusterOptions, SelectionOptions};
+use splatraj_semantic::{Activation, ClusterOptions, SelectionOptions, SourceKind, SourceRegistry};
 
 use crate::cli::ReadArgs;
 
@@ -37,24 +43,65 @@ const DEFAULT_ELEVATION_DEGREES: f64 = 30.0;
 /// Name of the picture written into `--out`.
 const IMAGE_NAME: &str = "query.png";
 
+/// Options that set the scene or the source, which a run config sets instead.
+const SET_BY_CONFIG: [&str; 20] = [
+    "scene",
+    "labels",
+    "drop_invalid",
+    "source",
+    "source_key",
+    "synonym",
+    "region_box",
+    "sphere",
+    "features",
+    "phrases",
+    "phrase_names",
+    "text_encoder",
+    "text_activation",
+    "negative",
+    "temperature",
+    "latents",
+    "checkpoint",
+    "top_fraction",
+    "floor",
+    "no_cluster",
+];
+
 /// Arguments of `splatraj query`.
 #[derive(Debug, Args)]
 pub struct QueryArgs {
+    /// A run config: its `[scene]` and `[targets]` (source, built-in or registered, with its
+    /// keys and text encoder; `[targets.selection]`) are read and built as `splatraj run`
+    /// builds them, instead of the scene and source options.
+    #[arg(long, value_name = "RUN.toml", conflicts_with_all = SET_BY_CONFIG)]
+    config: Option<PathBuf>,
+    /// With --config: override a config key, e.g. `targets.selection.floor=0.6`
+    /// (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE", requires = "config")]
+    set: Vec<String>,
     /// Scene file (INRIA PLY, compressed PLY or SPZ).
-    #[arg(long)]
-    scene: PathBuf,
+    #[arg(long, required_unless_present = "config")]
+    scene: Option<PathBuf>,
     #[command(flatten)]
     read: ReadArgs,
-    /// What to look for: a label name or id (labels), any name (region), a phrase of the
-    /// phrase table (features).
+    /// What to look for: a label name or id (labels, custom.gaussian_grouping), any name
+    /// (region), a phrase (features, langsplat and the registered language fields).
     #[arg(long)]
     query: String,
-    /// Target source; by default `region` when --box/--sphere is given, `langsplat` when
-    /// --latents or --checkpoint is given, `features` when --phrases or --features is given,
-    /// else `labels` when the scene has labels.
-    #[arg(long, value_enum)]
+    /// Target source: labels, region, features, langsplat, or a registered one,
+    /// custom.<name> (custom.feature3dgs, custom.opengaussian, custom.gaussian_grouping,
+    /// custom.legaussians; its keys with --source-key); by default `region` when
+    /// --box/--sphere is given, `langsplat` when --latents or --checkpoint is given,
+    /// `features` when --phrases or --features is given, else `labels` when the scene has
+    /// labels.
+    #[arg(long, value_parser = SourceKind::from_str)]
     source: Option<SourceKind>,
-    /// labels: synonyms of a label, `NAME=ALT1,ALT2` (repeatable).
+    /// custom.<name>: a key of the source's table, as `[targets.custom.<name>]` holds it
+    /// (e.g. `classifier=classifier.pth`; paths relative to the working directory;
+    /// repeatable).
+    #[arg(long = "source-key", value_name = "KEY=VALUE")]
+    source_key: Vec<String>,
+    /// labels, custom.gaussian_grouping: synonyms of a label, `NAME=ALT1,ALT2` (repeatable).
     #[arg(long, value_name = "NAME=ALT1,ALT2")]
     synonym: Vec<String>,
     /// region: an axis-aligned box in world coordinates.
@@ -138,36 +185,13 @@ pub struct QueryArgs {
     /// from the scene.
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     up: Option<String>,
-    /// Tensor backend: flex (CPU, default), ndarray or wgpu, among those compiled in.
-    #[arg(long, default_value = "flex", value_parser = BackendKind::from_str)]
-    backend: BackendKind,
+    /// Tensor backend: flex (CPU), ndarray or wgpu, among those compiled in [default: the
+    /// config's, else flex].
+    #[arg(long, value_parser = BackendKind::from_str)]
+    backend: Option<BackendKind>,
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
-}
-
-/// The target sources on the command line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum SourceKind {
-    /// Per-Gaussian labels with names.
-    Labels,
-    /// A box or a sphere (--box, --sphere).
-    Region,
-    /// Per-Gaussian language features and a phrase table.
-    Features,
-    /// LangSplat latents decoded by the scene's autoencoder, then as features.
-    Langsplat,
-}
-
-impl From<SourceKind> for splatraj_semantic::SourceKind {
-    fn from(kind: SourceKind) -> Self {
-        match kind {
-            SourceKind::Labels => Self::Labels,
-            SourceKind::Region => Self::Region,
-            SourceKind::Features => Self::Features,
-            SourceKind::Langsplat => Self::Langsplat,
-        }
-    }
 }
 
 /// Runs `splatraj query`.
@@ -189,27 +213,7 @@ pub fn run(args: QueryArgs) -> Result<()> {
             args.elevation
         );
     }
-    // The command line fills the same `[targets]` table a run config holds (paths relative
-    // to the working directory).
-    let request = QueryRequest {
-        query: args.query.clone(),
-        source: args.source.map(Into::into),
-        synonyms: parse_synonyms(&args.synonym)?,
-        region: parse_region(args.region_box.as_deref(), args.sphere.as_deref())?,
-        features: args.features,
-        phrases: args.phrases,
-        phrase_names: args.phrase_names,
-        text_encoder: args.text_encoder,
-        text_activation: args.text_activation,
-        negatives: args.negative,
-        temperature: args.temperature,
-        latents: args.latents,
-        checkpoint: args.checkpoint,
-        selection: SelectionOptions {
-            top_fraction: args.top_fraction,
-            floor: args.floor,
-            cluster: (!args.no_cluster).then(ClusterOptions::default),
-        },
+    let picture = PictureOptions {
         rejected: if args.show_rejected {
             RejectedView::Tinted
         } else {
@@ -226,10 +230,20 @@ pub fn run(args: QueryArgs) -> Result<()> {
         },
         intrinsics: Intrinsics::from_fov_x(FOV_X_DEGREES, args.width, args.height)?,
     };
-    let device = args.backend.device()?;
-    let scene = args.read.load(&args.scene)?.scene;
-    let scene_name = args.scene.display().to_string();
-    let outcome = request.run(&scene, &scene_name, &device).inspect_err(|e| {
+    let outcome = match &args.config {
+        Some(path) => {
+            let extensions = Extensions::default();
+            let config = Config::load_with(path, &args.set, &extensions)?;
+            let query = ConfigQuery {
+                query: args.query.clone(),
+                picture,
+                backend: args.backend,
+            };
+            query.run(&config, &extensions)
+        }
+        None => from_options(&args, picture),
+    }
+    .inspect_err(|e| {
         // Nothing selected: show why before the error.
         if let Some(failed) = e.downcast_ref::<SelectionFailed>() {
             match serde_json::to_string_pretty(&failed.explanation) {
@@ -243,7 +257,7 @@ pub fn run(args: QueryArgs) -> Result<()> {
         .with_context(|| format!("cannot create the output folder {}", args.out.display()))?;
     let path = args.out.join(IMAGE_NAME);
     write_bytes(&path, &outcome.png)?;
-    let report = outcome.report(&scene_name, scene.len(), &path);
+    let report = outcome.report(&path);
     for w in &report.warnings {
         eprintln!("warning: {w}");
     }
@@ -260,4 +274,42 @@ pub fn run(args: QueryArgs) -> Result<()> {
         100.0 * outcome.highlighted_share
     );
     Ok(())
+}
+
+/// The query through the scene and source options: they fill the same `[targets]` table a run
+/// config holds (paths relative to the working directory).
+fn from_options(
+    args: &QueryArgs,
+    picture: PictureOptions,
+) -> Result<splatraj::experiment::query::QueryOutcome> {
+    let request = QueryRequest {
+        query: args.query.clone(),
+        source: args.source.clone(),
+        source_keys: parse_source_keys(&args.source_key)?,
+        synonyms: parse_synonyms(&args.synonym)?,
+        region: parse_region(args.region_box.as_deref(), args.sphere.as_deref())?,
+        features: args.features.clone(),
+        phrases: args.phrases.clone(),
+        phrase_names: args.phrase_names.clone(),
+        text_encoder: args.text_encoder.clone(),
+        text_activation: args.text_activation,
+        negatives: args.negative.clone(),
+        temperature: args.temperature,
+        latents: args.latents.clone(),
+        checkpoint: args.checkpoint.clone(),
+        selection: SelectionOptions {
+            top_fraction: args.top_fraction,
+            floor: args.floor,
+            cluster: (!args.no_cluster).then(ClusterOptions::default),
+        },
+        picture,
+    };
+    let device = args.backend.unwrap_or(BackendKind::Flex).device()?;
+    let path = args
+        .scene
+        .as_deref()
+        .context("--scene (or --config) is needed")?;
+    let scene = args.read.load(path)?.scene;
+    let name = path.display().to_string();
+    request.run(&scene, &name, &SourceRegistry::default(), &device)
 }

@@ -833,16 +833,21 @@ fn merge(base: &mut toml::Table, over: toml::Table) {
 /// like a TOML number, list, table or quoted string but does not parse, is an error naming
 /// the option.
 pub fn apply_override(root: &mut toml::Table, assignment: &str) -> Result<String> {
+    apply_assignment(root, assignment, "--set")
+}
+
+/// [`apply_override`] for another command-line `option` (errors name it).
+pub fn apply_assignment(root: &mut toml::Table, assignment: &str, option: &str) -> Result<String> {
     let Some((key, raw)) = assignment.split_once('=') else {
-        bail!("--set {assignment}: expected KEY=VALUE, e.g. optimiser.iterations=50");
+        bail!("{option} {assignment}: expected KEY=VALUE");
     };
     let key = key.trim();
     if key.is_empty() {
-        bail!("--set {assignment}: no key before `=` (expected KEY=VALUE)");
+        bail!("{option} {assignment}: no key before `=` (expected KEY=VALUE)");
     }
     let raw = raw.trim();
     if raw.is_empty() {
-        bail!("--set {assignment}: no value after `=` (a string needs quotes: {key}=\"\")");
+        bail!("{option} {assignment}: no value after `=` (a string needs quotes: {key}=\"\")");
     }
     let value: toml::Value = match toml::from_str::<toml::Table>(&format!("v = {raw}")) {
         Ok(mut t) => t.remove("v").expect("just parsed"),
@@ -851,7 +856,7 @@ pub fn apply_override(root: &mut toml::Table, assignment: &str) -> Result<String
                 || raw.starts_with(|c: char| c.is_ascii_digit()) =>
         {
             bail!(
-                "--set {assignment}: `{raw}` is not a valid TOML value ({}; a string needs \
+                "{option} {assignment}: `{raw}` is not a valid TOML value ({}; a string needs \
                  quotes: {key}='\"{raw}\"')",
                 e.message().trim_end()
             )
@@ -860,10 +865,11 @@ pub fn apply_override(root: &mut toml::Table, assignment: &str) -> Result<String
     };
     let parts: Vec<&str> = key.split('.').map(str::trim).collect();
     if parts.iter().any(|p| p.is_empty()) {
-        bail!("--set {assignment}: empty key segment in `{key}`");
+        bail!("{option} {assignment}: empty key segment in `{key}`");
     }
     let mut tree = toml::Value::Table(std::mem::take(root));
-    let result = set_path(&mut tree, &parts, 0, value, assignment);
+    let assignment = format!("{option} {assignment}");
+    let result = set_path(&mut tree, &parts, 0, value, &assignment);
     if let toml::Value::Table(t) = tree {
         *root = t;
     }
@@ -893,10 +899,10 @@ fn set_path(
         toml::Value::Array(a) => {
             let i: usize = part
                 .parse()
-                .with_context(|| format!("--set {key}: `{here}` must index a list (0-based)"))?;
+                .with_context(|| format!("{key}: `{here}` must index a list (0-based)"))?;
             let len = a.len();
             let slot = a.get_mut(i).with_context(|| {
-                format!("--set {key}: `{here}` is out of range ({len} entries)")
+                format!("{key}: `{here}` is out of range ({len} entries)")
             })?;
             if last {
                 *slot = value;
@@ -905,7 +911,7 @@ fn set_path(
             slot
         }
         _ => bail!(
-            "--set {key}: `{}` is a value, not a table",
+            "{key}: `{}` is a value, not a table",
             parts[..depth].join(".")
         ),
     };

@@ -229,7 +229,9 @@ fn group_target(
     Ok(union)
 }
 
-fn load_scene(config: &Config) -> Result<(Scene, String)> {
+/// The scene of `[scene]` (a file, read as configured, or the demo room) and its name for
+/// messages (the path, or `demo (…)`).
+pub fn load_scene(config: &Config) -> Result<(Scene, String)> {
     if let Some(demo) = &config.scene.demo {
         let scene = demo_scene(&DemoConfig {
             seed: demo.seed,

@@ -1,9 +1,12 @@
-//! One semantic query against a scene, as `splatraj query` runs it: the source chosen from the
-//! inputs given, the same `[targets]` table a run config holds, the selection, a diagnostic
-//! picture of it, and the report (text or JSON).
+//! One semantic query against a scene, as `splatraj query` runs it: the target source, the
+//! selection, a diagnostic picture of it, and the report (text or JSON).
 //!
-//! This is the command's library half, so its messages name the command-line options
-//! (`--box`, `--phrases`, …) that set each input.
+//! The source comes either from a run config ([`ConfigQuery`]: its `[scene]` and `[targets]`
+//! built exactly as `splatraj run` builds them, so every registered source, the four shipped
+//! language fields and any a caller registers in [`Extensions`], is reachable) or from
+//! command-line options ([`QueryRequest`]: they fill the same `[targets]` table; its messages
+//! name the options, `--box`, `--phrases`, …, that set each input). Both end in
+//! [`find_and_draw`].
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -11,16 +14,20 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, anyhow, bail};
 use burn::tensor::Device;
 use serde::Serialize;
-use splatraj_render::backend::Precision;
+use splatraj_render::backend::{BackendKind, Precision};
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render};
-use splatraj_scene::Scene;
+use splatraj_scene::{Scene, resolve_up};
+use splatraj_semantic::sources::TextKeys;
 use splatraj_semantic::{
     Activation, Cluster, ClusteringSummary, Explanation, Region, RegionSpec, SelectionOptions,
-    SourceKind, SourceRegistry, Spread, Target, TargetsConfig, explain, select,
+    SourceKind, SourceRegistry, Spread, Target, TargetSource, TargetsConfig, explain, select,
 };
 
+use crate::config::{Config, apply_assignment};
+use crate::experiment::load_scene;
+use crate::extensions::Extensions;
 use crate::views::{
     CameraReport, ViewOptions, diagnostic_camera, highlighted_picture, highlighted_png,
 };
@@ -42,15 +49,76 @@ pub enum RejectedView {
     Tinted,
 }
 
-/// What to look for and how: the query, the source (or `None` to choose it from the inputs)
-/// and every source's inputs, the selection and the picture's camera.
+/// How `query.png` shows the selection: the camera's view, size and what it tints.
+#[derive(Debug, Clone)]
+pub struct PictureOptions {
+    /// How the picture's camera looks at the selection.
+    pub view: ViewOptions,
+    /// Whether the picture shows the dropped candidates.
+    pub rejected: RejectedView,
+    /// The picture's camera.
+    pub intrinsics: Intrinsics,
+}
+
+/// A query against a run config's scene and target source: `[scene]`, and `[targets]` (the
+/// source, built-in or registered, with its keys, text encoder and `[targets.selection]`),
+/// read and built as `splatraj run` reads and builds them.
+#[derive(Debug, Clone)]
+pub struct ConfigQuery {
+    /// What to look for, as a `[[queries]] text` would name it.
+    pub query: String,
+    /// The picture; a view without `up` takes the config's world up (`[scene] up`, the demo
+    /// room's, or the guess), as runs do.
+    pub picture: PictureOptions,
+    /// The backend; `None`: the config's `backend`.
+    pub backend: Option<BackendKind>,
+}
+
+impl ConfigQuery {
+    /// Loads `config`'s scene, builds its target source from the sources of `extensions`
+    /// (paths relative to the config's folder) and finds and draws the query; writes nothing.
+    /// Errors name the config file and the key (`targets.custom.legaussians.codebook`).
+    pub fn run(&self, config: &Config, extensions: &Extensions) -> Result<QueryOutcome> {
+        let at = || format!("config {}", config.path.display());
+        let selection = config
+            .targets
+            .selection()
+            .map_err(|e| anyhow!("{}: {e}", at()))?;
+        let device = self.backend.unwrap_or(config.backend).device()?;
+        let (scene, scene_name) = load_scene(config)?;
+        let source = config
+            .targets
+            .build_with(&config.base_dir, &device, &extensions.sources)
+            .map_err(|e| anyhow!("{}: {e}", at()))?;
+        // The config's up (or the demo room's) as runs take it; else the picture guesses it
+        // by the same rule and says so.
+        let mut picture = self.picture.clone();
+        let demo = config.scene.demo.is_some();
+        if picture.view.up.is_none() && (config.scene.up.is_some() || demo) {
+            picture.view.up = Some(resolve_up(config.scene.up, demo, &scene).up);
+        }
+        let grounding = Grounding {
+            scene: &scene,
+            scene_name: &scene_name,
+            source: source.as_ref(),
+            kind: config.targets.source.clone(),
+        };
+        find_and_draw(&grounding, &self.query, &selection, &picture, &device)
+    }
+}
+
+/// What to look for and how, from command-line options: the query, the source (or `None` to
+/// choose it from the inputs) and every source's inputs, the selection and the picture.
 #[derive(Debug, Clone)]
 pub struct QueryRequest {
     /// A label name or id (labels), any name (region), a phrase of the phrase table (features).
     pub query: String,
     /// The source asked for; `None`: see [`QueryRequest::choose_source`].
     pub source: Option<SourceKind>,
-    /// labels: label name → other words that mean it.
+    /// custom.<name>: the source's own keys (`--source-key KEY=VALUE`), as its
+    /// `[targets.custom.<name>]` table would hold them.
+    pub source_keys: toml::Table,
+    /// labels (and registered sources that take it): label name → other words that mean it.
     pub synonyms: BTreeMap<String, Vec<String>>,
     /// region: the box or sphere (named after the query).
     pub region: Option<RegionSpec>,
@@ -74,12 +142,8 @@ pub struct QueryRequest {
     pub checkpoint: Option<PathBuf>,
     /// Percentile, floor and DBSCAN.
     pub selection: SelectionOptions,
-    /// How the picture's camera looks at the selection.
-    pub view: ViewOptions,
-    /// Whether the picture shows the dropped candidates.
-    pub rejected: RejectedView,
-    /// The picture's camera.
-    pub intrinsics: Intrinsics,
+    /// The picture.
+    pub picture: PictureOptions,
 }
 
 /// A graded query whose selection failed (nothing above the thresholds, no cluster), with
@@ -100,9 +164,13 @@ impl std::fmt::Display for SelectionFailed {
 
 impl std::error::Error for SelectionFailed {}
 
-/// What [`QueryRequest::run`] found and drew.
+/// What [`find_and_draw`] found and drew.
 #[derive(Debug, Clone)]
 pub struct QueryOutcome {
+    /// The scene's name (its file, or `demo (…)`).
+    pub scene: String,
+    /// Gaussians in the scene.
+    pub gaussians: usize,
     /// The source that grounded the query.
     pub source: SourceKind,
     /// The selection.
@@ -147,8 +215,9 @@ pub struct QueryReport {
     pub rejected: usize,
     /// Relevancy at the percentile, for graded sources.
     pub percentile_threshold: Option<f32>,
-    /// Spread of the relevancy over all Gaussians.
-    pub relevancy: Spread,
+    /// Spread of the relevancy over the selected Gaussians only (the explanation has it over
+    /// all of them).
+    pub selected_relevancy: Spread,
     /// The relevancy over all Gaussians, thresholds and most relevant groups (graded sources).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub explanation: Option<Explanation>,
@@ -170,9 +239,10 @@ impl QueryRequest {
     /// The source asked for, or the one the inputs point to: `region` with a region,
     /// `langsplat` with latents or a checkpoint, `features` with phrase or feature inputs, else
     /// `labels` when the scene has labels. Inputs of another source are refused (they would be
-    /// silently ignored), as is a source without the inputs it needs.
+    /// silently ignored), as is a built-in source without the inputs it needs (a registered
+    /// source checks its own table).
     pub fn choose_source(&self, scene: &Scene, scene_name: &str) -> Result<SourceKind> {
-        use SourceKind::{Features, Labels, Langsplat, Region};
+        use SourceKind::{Custom, Features, Labels, Langsplat, Region};
         let phrase_options = self.phrases.is_some()
             || self.text_encoder.is_some()
             || self.text_activation.is_some()
@@ -200,18 +270,24 @@ impl QueryRequest {
                 self.query
             ),
         };
+        // A registered source takes the phrase and synonym options into its table.
+        let custom = matches!(kind, Custom(_));
         let stray: Vec<&str> = [
-            (kind != Labels && !self.synonyms.is_empty(), "--synonym"),
+            (
+                !matches!(kind, Labels | Custom(_)) && !self.synonyms.is_empty(),
+                "--synonym",
+            ),
             (kind != Region && has_region, "--box/--sphere"),
             (kind != Features && self.features.is_some(), "--features"),
             (
-                !matches!(kind, Features | Langsplat) && phrase_options,
+                !matches!(kind, Features | Langsplat | Custom(_)) && phrase_options,
                 "--phrases/--text-encoder/--phrase-names/--negative/--temperature",
             ),
             (
                 kind != Langsplat && langsplat_options,
                 "--latents/--checkpoint",
             ),
+            (!custom && !self.source_keys.is_empty(), "--source-key"),
         ]
         .into_iter()
         .filter_map(|(bad, name)| bad.then_some(name))
@@ -220,7 +296,9 @@ impl QueryRequest {
             bail!(
                 "{} do not apply to the {kind} source (--synonym is for labels, --box/--sphere for \
                  region, --features for features, --phrases/--phrase-names/--negative/--temperature \
-                 for features and langsplat, --latents/--checkpoint for langsplat)",
+                 for features and langsplat, --latents/--checkpoint for langsplat, --source-key \
+                 for a registered source, custom.<name>, which also takes --synonym and the \
+                 phrase options)",
                 stray.join(", ")
             );
         }
@@ -244,8 +322,17 @@ impl QueryRequest {
     }
 
     /// The `[targets]` table a run config would hold for this request with source `kind`.
-    pub fn targets_config(&self, kind: SourceKind) -> TargetsConfig {
-        TargetsConfig {
+    pub fn targets_config(&self, kind: SourceKind) -> Result<TargetsConfig> {
+        if let SourceKind::Custom(name) = &kind {
+            let table = toml::Value::Table(self.custom_table()?);
+            return Ok(TargetsConfig {
+                source: kind.clone(),
+                selection: self.selection,
+                custom: BTreeMap::from([(name.clone(), table)]),
+                ..TargetsConfig::default()
+            });
+        }
+        Ok(TargetsConfig {
             source: kind,
             synonyms: self.synonyms.clone(),
             regions: self
@@ -264,68 +351,145 @@ impl QueryRequest {
             selection: self.selection,
             label_names: BTreeMap::new(),
             custom: BTreeMap::new(),
+        })
+    }
+
+    /// A registered source's `[targets.custom.<name>]` table: the `--source-key` entries, and
+    /// the phrase options and `--synonym` under their config keys (the keys the shipped
+    /// language fields share, [`TextKeys`]). A key set both ways is refused.
+    fn custom_table(&self) -> Result<toml::Table> {
+        let text_keys = TextKeys {
+            phrases: self.phrases.clone(),
+            phrase_names: self.phrase_names.clone(),
+            text_encoder: self.text_encoder.clone(),
+            text_activation: self.text_activation,
+            negatives: (!self.negatives.is_empty()).then(|| self.negatives.clone()),
+            temperature: self.temperature,
+        };
+        let mut from_options =
+            toml::Table::try_from(&text_keys).context("the phrase options as a source table")?;
+        if !self.synonyms.is_empty() {
+            from_options.insert(
+                "synonyms".into(),
+                toml::Value::try_from(&self.synonyms).context("--synonym as a source table")?,
+            );
         }
+        let mut table = self.source_keys.clone();
+        for (key, value) in from_options {
+            if table.contains_key(&key) {
+                bail!(
+                    "--source-key {key}=… and {} both set `{key}`: give it once",
+                    option_of_key(&key)
+                );
+            }
+            table.insert(key, value);
+        }
+        Ok(table)
     }
 
     /// Grounds the query in `scene` (read from `scene_name`) through the `[targets]` path of
-    /// run configs (paths relative to the working directory, a LangSplat decoder on `device`)
-    /// and draws the picture; writes nothing.
-    pub fn run(&self, scene: &Scene, scene_name: &str, device: &Device) -> Result<QueryOutcome> {
+    /// run configs with the sources of `registry` (paths relative to the working directory,
+    /// models such as a LangSplat decoder on `device`) and draws the picture; writes nothing.
+    pub fn run(
+        &self,
+        scene: &Scene,
+        scene_name: &str,
+        registry: &SourceRegistry,
+        device: &Device,
+    ) -> Result<QueryOutcome> {
         let kind = self.choose_source(scene, scene_name)?;
         self.selection.validate_as("--")?;
-        let config = self.targets_config(kind.clone());
-        let registry = SourceRegistry::default();
+        let config = self.targets_config(kind.clone())?;
         let source = config
-            .build_named(Path::new(""), device, &registry, &option_of_key)
+            .build_named(Path::new(""), device, registry, &option_of_key)
             .with_context(|| format!("{scene_name} ({kind} source)"))?;
-        if scene.is_empty() {
-            bail!("{scene_name} holds no Gaussian: there is nothing to select");
-        }
-        let in_scene = || format!("{scene_name} ({} source)", source.kind());
-        let relevancy = source
-            .relevancy(scene, &self.query)
-            .with_context(in_scene)?;
-        // Explained before the selection, so that a query that selects nothing says why.
-        let explanation = explain(scene, &self.query, &relevancy, &self.selection)?;
-        let target = select(scene, &self.query, &relevancy, &self.selection).map_err(|e| {
-            let message = format!("{}: {e}", in_scene());
-            match explanation.clone() {
-                Some(explanation) => anyhow!(SelectionFailed {
-                    message,
-                    explanation
-                }),
-                None => anyhow!(message),
-            }
-        })?;
-        let uploaded = DeviceScene::new(scene, device, Precision::F32.dtype());
-        let (pose, camera) =
-            diagnostic_camera(scene, &uploaded, &target, &self.intrinsics, self.view)?;
-        let (png, highlighted_share) = match self.rejected {
-            RejectedView::Hidden => {
-                highlighted_picture(&uploaded, &target, &pose, &self.intrinsics)?
-            }
-            RejectedView::Tinted => {
-                picture_with_rejected(&uploaded, &target, &pose, &self.intrinsics)?
-            }
+        let grounding = Grounding {
+            scene,
+            scene_name,
+            source: source.as_ref(),
+            kind,
         };
-        Ok(QueryOutcome {
-            source: kind,
-            target,
-            explanation,
-            camera,
-            png,
-            highlighted_share,
-        })
+        find_and_draw(
+            &grounding,
+            &self.query,
+            &self.selection,
+            &self.picture,
+            device,
+        )
     }
 }
 
+/// A scene and the target source that grounds queries in it.
+#[derive(Debug, Clone)]
+pub struct Grounding<'a> {
+    /// The scene.
+    pub scene: &'a Scene,
+    /// Its name for messages (the file).
+    pub scene_name: &'a str,
+    /// The source, built.
+    pub source: &'a dyn TargetSource,
+    /// Its kind, as configs name it (`custom.gaussian_grouping`).
+    pub kind: SourceKind,
+}
+
+/// Grounds `query` in `grounding`'s scene through its source with `selection`, explains a graded relevancy
+/// (before selecting, so that a query that selects nothing says why: [`SelectionFailed`]) and
+/// draws the picture on `device`; writes nothing.
+pub fn find_and_draw(
+    grounding: &Grounding,
+    query: &str,
+    selection: &SelectionOptions,
+    picture: &PictureOptions,
+    device: &Device,
+) -> Result<QueryOutcome> {
+    let Grounding {
+        scene,
+        scene_name,
+        source,
+        ..
+    } = *grounding;
+    if scene.is_empty() {
+        bail!("{scene_name} holds no Gaussian: there is nothing to select");
+    }
+    let in_scene = || format!("{scene_name} ({} source)", grounding.kind);
+    let relevancy = source.relevancy(scene, query).with_context(in_scene)?;
+    let explanation = explain(scene, query, &relevancy, selection)?;
+    let target = select(scene, query, &relevancy, selection).map_err(|e| {
+        let message = format!("{}: {e}", in_scene());
+        match explanation.clone() {
+            Some(explanation) => anyhow!(SelectionFailed {
+                message,
+                explanation
+            }),
+            None => anyhow!(message),
+        }
+    })?;
+    let k = &picture.intrinsics;
+    let uploaded = DeviceScene::new(scene, device, Precision::F32.dtype());
+    let (pose, camera) = diagnostic_camera(scene, &uploaded, &target, k, picture.view)?;
+    let (png, highlighted_share) = match picture.rejected {
+        RejectedView::Hidden => highlighted_picture(&uploaded, &target, &pose, k)?,
+        RejectedView::Tinted => picture_with_rejected(&uploaded, &target, &pose, k)?,
+    };
+    Ok(QueryOutcome {
+        scene: scene_name.to_string(),
+        gaussians: scene.len(),
+        source: grounding.kind.clone(),
+        target,
+        explanation,
+        camera,
+        png,
+        highlighted_share,
+    })
+}
+
 impl QueryOutcome {
-    /// The report of a scene of `gaussians` Gaussians read from `scene_name`, its picture
-    /// written to `image`.
-    pub fn report(&self, scene_name: &str, gaussians: usize, image: &Path) -> QueryReport {
+    /// The report, its picture written to `image`.
+    pub fn report(&self, image: &Path) -> QueryReport {
         let t = &self.target;
+        let gaussians = self.gaussians;
         QueryReport {
-            scene: scene_name.to_string(),
+            scene: self.scene.clone(),
             source: self.source.name(),
             query: t.query.clone(),
             name: t.name.clone(),
@@ -338,7 +502,7 @@ impl QueryOutcome {
             noise: t.noise,
             rejected: t.rejected.len(),
             percentile_threshold: t.percentile_threshold,
-            relevancy: t.relevancy_spread,
+            selected_relevancy: t.relevancy_spread,
             explanation: self.explanation.clone(),
             centre: t.centre,
             extent: t.extent,
@@ -388,8 +552,20 @@ pub fn option_of_key(key: &str) -> String {
         "synonyms" => "--synonym".to_string(),
         "regions" => "--box/--sphere".to_string(),
         "negatives" => "--negative".to_string(),
+        // A registered source's table: `custom.<name>` is the --source value.
+        "custom" => format!("--source {key}"),
         other => format!("--{}", other.replace('_', "-")),
     }
+}
+
+/// `--source-key KEY=VALUE` items (values parsed as TOML, a bare word as a string; dotted
+/// keys make subtables, `label_names.34=bear`) into a registered source's table.
+pub fn parse_source_keys(items: &[String]) -> Result<toml::Table> {
+    let mut table = toml::Table::new();
+    for item in items {
+        apply_assignment(&mut table, item, "--source-key")?;
+    }
+    Ok(table)
 }
 
 /// `--box MINX,MINY,MINZ,MAXX,MAXY,MAXZ` or `--sphere CX,CY,CZ,R` (at most one), parsed and
@@ -531,9 +707,10 @@ impl QueryReport {
                 runner_ups.len() - LISTED_RUNNER_UPS
             ));
         }
+        let spread = &r.selected_relevancy;
         s.push_str(&format!(
-            "relevancy: min {:.4}, median {:.4}, max {:.4}\n",
-            r.relevancy.min, r.relevancy.median, r.relevancy.max
+            "relevancy of the {} selected Gaussians: min {:.4}, median {:.4}, max {:.4}\n",
+            r.count, spread.min, spread.median, spread.max
         ));
         if let Some(x) = &r.explanation {
             s.push_str(&x.text());
