@@ -175,8 +175,10 @@ pub struct Decisions {
 ///
 /// With `focus` (a mask pass's object, one flag per Gaussian), the object's Gaussians are
 /// decided first; the others are then decided only where their bounded square reaches the box
-/// of tiles the object touches in that pose, and are marked not visible elsewhere. That
-/// changes no tile list the pass uses (binning keeps only the object's tiles).
+/// of tiles the object touches in that pose and they are no deeper than the object's deepest
+/// Gaussian there, and are marked not visible elsewhere. That changes no tile list the pass
+/// uses: binning keeps only the object's tiles, and cuts each list after the object's last
+/// Gaussian, which a deeper one always follows.
 pub fn decide(
     geometry: &HostGeometry,
     poses: &[Pose],
@@ -211,10 +213,15 @@ pub fn decide(
             visible: &mut decisions.visible[range],
         };
         let Some(focus) = focus else {
-            out.pass(&camera, geometry, &|_| true, whole_grid);
+            out.pass(&camera, geometry, &|_| true, Reach::everywhere(whole_grid));
             continue;
         };
-        out.pass(&camera, geometry, &|g| focus[g], whole_grid);
+        out.pass(
+            &camera,
+            geometry,
+            &|g| focus[g],
+            Reach::everywhere(whole_grid),
+        );
         // The box of tiles the object touches (in pixels), then everything else against it.
         let mut tiles = [
             f64::INFINITY,
@@ -222,6 +229,7 @@ pub fn decide(
             f64::NEG_INFINITY,
             f64::NEG_INFINITY,
         ];
+        let mut deepest = f32::NEG_INFINITY;
         for g in (0..n).filter(|&g| focus[g] && out.visible[g]) {
             let (u, v) = (
                 f64::from(out.means_2d[2 * g]),
@@ -231,6 +239,7 @@ pub fn decide(
             if xs.is_empty() || ys.is_empty() {
                 continue;
             }
+            deepest = deepest.max(out.depth[g]);
             let size = TILE_SIZE as f64;
             tiles[0] = tiles[0].min(xs.start as f64 * size);
             tiles[1] = tiles[1].min(ys.start as f64 * size);
@@ -238,10 +247,34 @@ pub fn decide(
             tiles[3] = tiles[3].max(ys.end as f64 * size);
         }
         if tiles[0] < tiles[2] {
-            out.pass(&camera, geometry, &|g| !focus[g], tiles);
+            let reach = Reach {
+                bounds: tiles,
+                max_depth: deepest,
+            };
+            out.pass(&camera, geometry, &|g| !focus[g], reach);
         }
     }
     decisions
+}
+
+/// Where a pass's Gaussians must land to matter.
+#[derive(Debug, Clone, Copy)]
+struct Reach {
+    /// Pixel box [x0, y0, x1, y1] a Gaussian's bounded square must touch.
+    bounds: [f64; 4],
+    /// Largest stored (f32) depth that can matter: binning orders by the f32 depth, so the
+    /// comparison is made on the same value.
+    max_depth: f32,
+}
+
+impl Reach {
+    /// Anything touching `bounds`, at any depth.
+    fn everywhere(bounds: [f64; 4]) -> Self {
+        Reach {
+            bounds,
+            max_depth: f32::INFINITY,
+        }
+    }
 }
 
 /// Gaussians per parallel block of the decision pass.
@@ -256,18 +289,18 @@ struct Out<'a> {
 }
 
 impl Out<'_> {
-    /// Decides the Gaussians `select` picks, in parallel blocks, against `bounds`.
+    /// Decides the Gaussians `select` picks, in parallel blocks, against `reach`.
     fn pass(
         &mut self,
         camera: &Camera,
         geometry: &HostGeometry,
         select: &(dyn Fn(usize) -> bool + Sync),
-        bounds: [f64; 4],
+        reach: Reach,
     ) {
         let reachable: Vec<bool> = geometry
             .blocks
             .par_iter()
-            .map(|block| camera.may_reach(block, bounds))
+            .map(|block| camera.may_reach(block, reach))
             .collect();
         let select = |g: usize| select(g) && reachable[geometry.block_of[g] as usize];
         self.means_2d
@@ -282,7 +315,7 @@ impl Out<'_> {
                     if !select(g) {
                         continue;
                     }
-                    let (uv, z, radius) = camera.decide(geometry, g, bounds);
+                    let (uv, z, radius) = camera.decide(geometry, g, reach);
                     means_2d[2 * j] = uv[0] as f32;
                     means_2d[2 * j + 1] = uv[1] as f32;
                     depth[j] = z as f32;
@@ -315,9 +348,11 @@ impl Camera {
         }
     }
 
-    /// False only when no member of `block` can reach `bounds` in this pose: each is behind the
-    /// near plane or, by [`Camera::decide`]'s own bound, lands outside `bounds`.
-    fn may_reach(&self, block: &Block, bounds: [f64; 4]) -> bool {
+    /// False only when no member of `block` can matter in this pose: each is behind the near
+    /// plane, deeper than `reach.max_depth` or, by [`Camera::decide`]'s own bound, lands
+    /// outside `reach.bounds`.
+    fn may_reach(&self, block: &Block, reach: Reach) -> bool {
+        let bounds = reach.bounds;
         let Intrinsics { fx, fy, cx, cy, .. } = self.intrinsics;
         let [r0, r1, r2] = self.r;
         let d = block.centre - self.centre;
@@ -329,6 +364,10 @@ impl Camera {
             return false;
         }
         let z_min = z - r;
+        // Rounding to f32 is monotone: every member's stored depth is at least this one.
+        if (z_min as f32) > reach.max_depth {
+            return false;
+        }
         if z_min <= self.near {
             return true; // straddles the near plane: decide each member
         }
@@ -361,14 +400,16 @@ impl Camera {
     }
 
     /// Pixel position, depth and radius (`None` if culled) of Gaussian `g`. A Gaussian whose
-    /// bounded square misses `bounds` ([x0, y0, x1, y1], pixels) gets `None` without its
-    /// covariance being projected: it would touch no tile there.
+    /// bounded square misses `reach.bounds` ([x0, y0, x1, y1], pixels), or whose stored depth
+    /// is beyond `reach.max_depth`, gets `None` without its covariance being projected: it
+    /// would be in no tile list there.
     fn decide(
         &self,
         geometry: &HostGeometry,
         g: usize,
-        bounds: [f64; 4],
+        reach: Reach,
     ) -> ([f64; 2], f64, Option<f32>) {
+        let bounds = reach.bounds;
         let Intrinsics { fx, fy, cx, cy, .. } = self.intrinsics;
         let [r0, r1, r2] = self.r;
         let d = DVec3::from(geometry.means[g].map(f64::from)) - self.centre;
@@ -384,6 +425,7 @@ impl Camera {
         let j_norm2 = (fx * fx * (1.0 + tx * tx) + fy * fy * (1.0 + ty * ty)) / (z_safe * z_safe);
         let bound = 3.0 * (j_norm2 * f64::from(geometry.max_variance[g]) + LOW_PASS).sqrt() + 1.0;
         if z <= self.near
+            || (z as f32) > reach.max_depth
             || u + bound < bounds[0]
             || v + bound < bounds[1]
             || u - bound > bounds[2]

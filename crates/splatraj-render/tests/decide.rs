@@ -139,7 +139,7 @@ fn clustered_scene() -> Scene {
 }
 
 #[test]
-fn focused_decisions_keep_every_gaussian_that_reaches_the_object_tiles() {
+fn focused_decisions_keep_every_gaussian_in_front_of_the_object_on_its_tiles() {
     let scene = clustered_scene();
     // The "object": Gaussians near (0.5, 0, 0); the camera sees much more than its tiles.
     let focus: Vec<bool> = scene
@@ -164,6 +164,13 @@ fn focused_decisions_keep_every_gaussian_that_reaches_the_object_tiles() {
     let tensors = SceneTensors::new(&scene, None, &device, DType::F64);
     let projected = project(&tensors, pose_tensor, &k);
     let (radii, visible) = radii_and_visibility(&projected, NEAR_PLANE);
+    let depth: Vec<f64> = projected
+        .depth
+        .clone()
+        .into_data()
+        .convert::<f64>()
+        .try_to_vec::<f64>()
+        .unwrap();
     let means: Vec<f64> = projected
         .means_2d
         .into_data()
@@ -180,16 +187,20 @@ fn focused_decisions_keep_every_gaussian_that_reaches_the_object_tiles() {
 
     let n = scene.len();
     let tiles = |i: usize| grid.touched(means[2 * i], means[2 * i + 1], radii[i] as f64);
-    let (mut needed, mut skipped) = (0, 0);
+    let (mut needed, mut skipped, mut behind) = (0, 0, 0);
     for b in 0..poses.len() {
         // The object's tile box in this pose, from the tensor projection.
         // [x0, x1) × [y0, y1) in tiles, grown from empty.
         let (mut xs, mut ys) = ((usize::MAX, 0), (usize::MAX, 0));
+        // Binning cuts each list after the object's last Gaussian: nothing deeper than its
+        // deepest one is ever composited.
+        let mut deepest = f64::NEG_INFINITY;
         for g in (0..n).filter(|&g| focus[g] && visible[b * n + g]) {
             let (gx, gy) = tiles(b * n + g);
             if gx.is_empty() || gy.is_empty() {
                 continue;
             }
+            deepest = deepest.max(depth[b * n + g]);
             xs = (xs.0.min(gx.start), xs.1.max(gx.end));
             ys = (ys.0.min(gy.start), ys.1.max(gy.end));
         }
@@ -198,7 +209,11 @@ fn focused_decisions_keep_every_gaussian_that_reaches_the_object_tiles() {
             let i = b * n + g;
             let (gx, gy) = tiles(i);
             let overlaps = gx.start < xs.1 && xs.0 < gx.end && gy.start < ys.1 && ys.0 < gy.end;
-            if visible[i] && overlaps {
+            // A relative margin keeps the f32 rounding of stored depths out of the comparison.
+            let in_front = depth[i] < deepest * (1.0 - 1e-6);
+            if visible[i] && overlaps && !in_front && !focus[g] {
+                behind += usize::from(depth[i] > deepest * (1.0 + 1e-6) && !host.visible[i]);
+            } else if visible[i] && overlaps {
                 needed += 1;
                 assert!(
                     host.visible[i],
@@ -222,5 +237,9 @@ fn focused_decisions_keep_every_gaussian_that_reaches_the_object_tiles() {
     assert!(
         skipped > 500,
         "the host skips what cannot reach them ({skipped})"
+    );
+    assert!(
+        behind > 100,
+        "the host skips what lies behind the object ({behind})"
     );
 }
