@@ -10,9 +10,14 @@ use splatraj_render::project::{NEAR_PLANE, SceneTensors, project, radii_and_visi
 use splatraj_render::tiles::TileGrid;
 use splatraj_scene::Scene;
 
-/// 3000 Gaussians of many sizes around the origin, some far off-screen, some behind the camera.
-fn scene() -> Scene {
-    let mut state = 0x1234_5678_u64;
+/// `count` Gaussians from a seeded uniform stream: `place(i, next)` gives the i-th centre and
+/// size; rotations and opacities are random.
+fn random_scene(
+    seed: u64,
+    count: usize,
+    place: impl Fn(usize, &mut dyn FnMut() -> f64) -> ([f64; 3], f64),
+) -> Scene {
+    let mut state = seed;
     let mut next = move || {
         state ^= state << 13;
         state ^= state >> 7;
@@ -20,12 +25,9 @@ fn scene() -> Scene {
         (state >> 11) as f64 / (1u64 << 53) as f64
     };
     let mut scene = Scene::default();
-    for i in 0..3000 {
-        let spread = if i % 5 == 0 { 30.0 } else { 3.0 };
-        scene
-            .means
-            .push([0, 1, 2].map(|_| ((next() - 0.5) * spread) as f32));
-        let size = 0.005 * 200f64.powf(next());
+    for i in 0..count {
+        let (mean, size) = place(i, &mut next);
+        scene.means.push(mean.map(|v| v as f32));
         scene
             .scales
             .push([0, 1, 2].map(|_| (size * (0.2 + next())) as f32));
@@ -35,6 +37,38 @@ fn scene() -> Scene {
         scene.opacities.push(next() as f32);
     }
     scene
+}
+
+/// 3000 Gaussians of many sizes around the origin, some far off-screen, some behind the camera.
+fn scene() -> Scene {
+    random_scene(0x1234_5678, 3000, |i, next| {
+        let spread = if i % 5 == 0 { 30.0 } else { 3.0 };
+        let mean = [0, 1, 2].map(|_| (next() - 0.5) * spread);
+        (mean, 0.005 * 200f64.powf(next()))
+    })
+}
+
+/// The tensor projection of `scene` for `poses` in f64: radii, visibility, depths, means 2D
+/// (flat, as the host decisions are).
+fn tensor_projection(
+    scene: &Scene,
+    poses: &[Pose],
+    k: &Intrinsics,
+) -> (Vec<f32>, Vec<bool>, Vec<f64>, Vec<f64>) {
+    let device = Device::flex();
+    let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
+    let pose_tensor = Tensor::<2>::from_data(
+        TensorData::new(flat, [poses.len(), 6]),
+        (&device, DType::F64),
+    );
+    let tensors = SceneTensors::new(scene, None, &device, DType::F64);
+    let projected = project(&tensors, pose_tensor, k);
+    let (radii, visible) = radii_and_visibility(&projected, NEAR_PLANE);
+    let values = |t: Tensor<2>| t.into_data().convert::<f64>().try_to_vec::<f64>().unwrap();
+    let depth = values(projected.depth);
+    let [batch, n, _] = projected.means_2d.dims();
+    let means = values(projected.means_2d.reshape([batch, 2 * n]));
+    (radii, visible, depth, means)
 }
 
 #[test]
@@ -52,21 +86,7 @@ fn host_decisions_match_the_tensor_projection() {
         )
         .unwrap(),
     ];
-    let device = Device::flex();
-    let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
-    let pose_tensor = Tensor::<2>::from_data(
-        TensorData::new(flat, [poses.len(), 6]),
-        (&device, DType::F64),
-    );
-    let tensors = SceneTensors::new(&scene, None, &device, DType::F64);
-    let projected = project(&tensors, pose_tensor, &k);
-    let (radii, visible) = radii_and_visibility(&projected, NEAR_PLANE);
-    let means: Vec<f64> = projected
-        .means_2d
-        .into_data()
-        .convert::<f64>()
-        .try_to_vec::<f64>()
-        .unwrap();
+    let (radii, visible, _, means) = tensor_projection(&scene, &poses, &k);
 
     let host = decide(&HostGeometry::new(&scene), &poses, &k, NEAR_PLANE, None);
     let (mut on_grid, mut skipped) = (0, 0);
@@ -107,41 +127,23 @@ fn host_decisions_match_the_tensor_projection() {
 /// neighbourhoods fall outside a view or a mask pass's tiles; a tenth are large enough to reach
 /// the next cluster.
 fn clustered_scene() -> Scene {
-    let mut state = 0x9e37_79b9_u64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
-    let mut scene = Scene::default();
-    for cluster in 0..144 {
+    random_scene(0x9e37_79b9, 144 * 256, |i, next| {
+        let cluster = i / 256;
         let centre = [
             0.8 * ((cluster % 12) as f64 - 5.5),
             0.8 * ((cluster / 12) as f64 - 5.5),
-            0.2 * (next() - 0.5),
+            0.0,
         ];
-        for i in 0..256 {
-            scene
-                .means
-                .push([0, 1, 2].map(|a| (centre[a] + 0.3 * (next() - 0.5)) as f32));
-            let size = if i % 10 == 0 { 0.25 } else { 0.01 } * (0.5 + next());
-            scene
-                .scales
-                .push([0, 1, 2].map(|_| (size * (0.5 + 0.5 * next())) as f32));
-            scene
-                .rotations
-                .push([0, 1, 2, 3].map(|_| (next() - 0.5) as f32));
-            scene.opacities.push(next() as f32);
-        }
-    }
-    scene
+        let mean = centre.map(|c| c + 0.3 * (next() - 0.5));
+        let size = if i % 10 == 0 { 0.25 } else { 0.01 } * (0.5 + next());
+        (mean, size)
+    })
 }
 
 #[test]
 fn focused_decisions_keep_every_gaussian_in_front_of_the_object_on_its_tiles() {
     let scene = clustered_scene();
-    // The "object": Gaussians near (0.5, 0, 0); the camera sees much more than its tiles.
+    // The "object": Gaussians near (0.4, 0.4, 0); the camera sees much more than its tiles.
     let focus: Vec<bool> = scene
         .means
         .iter()
@@ -155,28 +157,7 @@ fn focused_decisions_keep_every_gaussian_in_front_of_the_object_on_its_tiles() {
         Pose::look_at(DVec3::new(0.4, -0.6, 4.0), object, DVec3::Y).unwrap(),
         Pose::look_at(DVec3::new(-2.0, -1.5, 0.3), object, DVec3::Z).unwrap(),
     ];
-    let device = Device::flex();
-    let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
-    let pose_tensor = Tensor::<2>::from_data(
-        TensorData::new(flat, [poses.len(), 6]),
-        (&device, DType::F64),
-    );
-    let tensors = SceneTensors::new(&scene, None, &device, DType::F64);
-    let projected = project(&tensors, pose_tensor, &k);
-    let (radii, visible) = radii_and_visibility(&projected, NEAR_PLANE);
-    let depth: Vec<f64> = projected
-        .depth
-        .clone()
-        .into_data()
-        .convert::<f64>()
-        .try_to_vec::<f64>()
-        .unwrap();
-    let means: Vec<f64> = projected
-        .means_2d
-        .into_data()
-        .convert::<f64>()
-        .try_to_vec::<f64>()
-        .unwrap();
+    let (radii, visible, depth, means) = tensor_projection(&scene, &poses, &k);
     let host = decide(
         &HostGeometry::new(&scene),
         &poses,
