@@ -39,24 +39,18 @@ fn json_report(out: &Output) -> Value {
         .unwrap_or_else(|e| panic!("stdout is not one JSON object ({e}): {}", stdout(out)))
 }
 
-/// `query --config CONFIG --query TEXT --json` (small picture into `dir/out`) plus `extra`.
+/// `query ARGS` with a small picture written into `out`.
+fn query(out: &Path, args: &[&str]) -> Output {
+    let mut all = vec!["query", "--out", s(out), "--width", "64", "--height", "48"];
+    all.extend(args);
+    splatraj(&all)
+}
+
+/// `query --config CONFIG --query TEXT` (picture into `dir/out`) plus `extra`.
 fn query_config(dir: &Path, config: &Path, text: &str, extra: &[&str]) -> Output {
-    let out = dir.join("out");
-    let mut args = vec![
-        "query",
-        "--config",
-        s(config),
-        "--query",
-        text,
-        "--out",
-        s(&out),
-        "--width",
-        "64",
-        "--height",
-        "48",
-    ];
+    let mut args = vec!["--config", s(config), "--query", text];
     args.extend(extra);
-    splatraj(&args)
+    query(&dir.join("out"), &args)
 }
 
 /// A Gaussian Grouping run config beside copies of the fixture's PLY and classifier, its
@@ -234,34 +228,29 @@ text = "green ball"
     ));
     // The same source from the command line: --source-key for its own keys, --text-encoder
     // and --top-fraction as for the built-in sources.
-    let out = dir.path().join("out2");
-    let by_options = json_report(&splatraj(&[
-        "query",
-        "--scene",
-        s(&data("legaussians", "point_cloud.ply")),
-        "--source",
-        "custom.legaussians",
-        "--source-key",
-        &format!(
-            "index_decoder={:?}",
-            s(&data("legaussians", "index_decoder_chkpnt.pth"))
-        ),
-        "--source-key",
-        &format!("codebook={}", s(&data("legaussians", "codebook.pt"))),
-        "--text-encoder",
-        s(&tower()),
-        "--top-fraction",
-        "0.3",
-        "--query",
-        "green ball",
-        "--json",
-        "--out",
-        s(&out),
-        "--width",
-        "64",
-        "--height",
-        "48",
-    ]));
+    let by_options = json_report(&query(
+        &dir.path().join("out2"),
+        &[
+            "--scene",
+            s(&data("legaussians", "point_cloud.ply")),
+            "--source",
+            "custom.legaussians",
+            "--source-key",
+            &format!(
+                "index_decoder={:?}",
+                s(&data("legaussians", "index_decoder_chkpnt.pth"))
+            ),
+            "--source-key",
+            &format!("codebook={}", s(&data("legaussians", "codebook.pt"))),
+            "--text-encoder",
+            s(&tower()),
+            "--top-fraction",
+            "0.3",
+            "--query",
+            "green ball",
+            "--json",
+        ],
+    ));
     for (route, report) in [("--config", &by_config), ("--source", &by_options)] {
         let x = &report["explanation"];
         let printed = x["quantiles"]["max"].as_f64().unwrap() as f32;

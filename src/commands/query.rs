@@ -34,6 +34,7 @@ use splatraj::experiment::{Config, Extensions};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera::Intrinsics;
 use splatraj_semantic::selection::{DEFAULT_FLOOR, DEFAULT_TOP_FRACTION};
+use splatraj_semantic::sources::TextKeys;
 use splatraj_semantic::{Activation, ClusterOptions, SelectionOptions, SourceKind, SourceRegistry};
 
 use crate::cli::ReadArgs;
@@ -88,6 +89,48 @@ pub struct QueryArgs {
     /// (region), a phrase (features, langsplat and the registered language fields).
     #[arg(long)]
     query: String,
+    // Boxed: the source options would make this the largest command by far.
+    #[command(flatten)]
+    source_options: Box<SourceArgs>,
+    /// Also tint, in cyan, the candidates the clustering dropped (runner-up clusters and
+    /// outliers) in query.png.
+    #[arg(long)]
+    show_rejected: bool,
+    /// Output folder for query.png (created if missing).
+    #[arg(long, default_value = ".")]
+    out: PathBuf,
+    /// Picture width in pixels.
+    #[arg(long, default_value_t = 320)]
+    width: usize,
+    /// Picture height in pixels.
+    #[arg(long, default_value_t = 240)]
+    height: usize,
+    /// Elevation of the viewing direction above the horizontal, degrees (the camera looks
+    /// down at the selection from this angle).
+    #[arg(long, default_value_t = DEFAULT_ELEVATION_DEGREES, allow_negative_numbers = true)]
+    elevation: f64,
+    /// Keep the preferred view even when the selection is hidden in it (by default other
+    /// azimuths and the view from below are tried, and the one showing most of the selection
+    /// is used when the preferred one shows less than half as much).
+    #[arg(long)]
+    fixed_view: bool,
+    /// World up of the scene, `X,Y,Z` (e.g. `0,-1,0` for y-down captures); by default the
+    /// config's `[scene] up`, else guessed from the scene.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    up: Option<String>,
+    /// Tensor backend: flex (CPU), ndarray or wgpu, among those compiled in [default: the
+    /// config's, else flex].
+    #[arg(long, value_parser = BackendKind::from_str)]
+    backend: Option<BackendKind>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// The scene's target source and selection, from the command line (a run config's
+/// `[targets]` sets them instead).
+#[derive(Debug, Args)]
+pub struct SourceArgs {
     /// Target source: labels, region, features, langsplat, or a registered one,
     /// custom.<name> (custom.feature3dgs, custom.opengaussian, custom.gaussian_grouping,
     /// custom.legaussians; its keys with --source-key); by default `region` when
@@ -159,39 +202,6 @@ pub struct QueryArgs {
     /// Keep every Gaussian above the thresholds: no density clustering (features).
     #[arg(long)]
     no_cluster: bool,
-    /// Also tint, in cyan, the candidates the clustering dropped (runner-up clusters and
-    /// outliers) in query.png.
-    #[arg(long)]
-    show_rejected: bool,
-    /// Output folder for query.png (created if missing).
-    #[arg(long, default_value = ".")]
-    out: PathBuf,
-    /// Picture width in pixels.
-    #[arg(long, default_value_t = 320)]
-    width: usize,
-    /// Picture height in pixels.
-    #[arg(long, default_value_t = 240)]
-    height: usize,
-    /// Elevation of the viewing direction above the horizontal, degrees (the camera looks
-    /// down at the selection from this angle).
-    #[arg(long, default_value_t = DEFAULT_ELEVATION_DEGREES, allow_negative_numbers = true)]
-    elevation: f64,
-    /// Keep the preferred view even when the selection is hidden in it (by default other
-    /// azimuths and the view from below are tried, and the one showing most of the selection
-    /// is used when the preferred one shows less than half as much).
-    #[arg(long)]
-    fixed_view: bool,
-    /// World up of the scene, `X,Y,Z` (e.g. `0,-1,0` for y-down captures); by default guessed
-    /// from the scene.
-    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
-    up: Option<String>,
-    /// Tensor backend: flex (CPU), ndarray or wgpu, among those compiled in [default: the
-    /// config's, else flex].
-    #[arg(long, value_parser = BackendKind::from_str)]
-    backend: Option<BackendKind>,
-    /// Print one JSON object instead of text.
-    #[arg(long)]
-    json: bool,
 }
 
 /// Runs `splatraj query`.
@@ -282,25 +292,28 @@ fn from_options(
     args: &QueryArgs,
     picture: PictureOptions,
 ) -> Result<splatraj::experiment::query::QueryOutcome> {
+    let options = &args.source_options;
     let request = QueryRequest {
         query: args.query.clone(),
-        source: args.source.clone(),
-        source_keys: parse_source_keys(&args.source_key)?,
-        synonyms: parse_synonyms(&args.synonym)?,
-        region: parse_region(args.region_box.as_deref(), args.sphere.as_deref())?,
-        features: args.features.clone(),
-        phrases: args.phrases.clone(),
-        phrase_names: args.phrase_names.clone(),
-        text_encoder: args.text_encoder.clone(),
-        text_activation: args.text_activation,
-        negatives: args.negative.clone(),
-        temperature: args.temperature,
-        latents: args.latents.clone(),
-        checkpoint: args.checkpoint.clone(),
+        source: options.source.clone(),
+        source_keys: parse_source_keys(&options.source_key)?,
+        synonyms: parse_synonyms(&options.synonym)?,
+        region: parse_region(options.region_box.as_deref(), options.sphere.as_deref())?,
+        features: options.features.clone(),
+        text: TextKeys {
+            phrases: options.phrases.clone(),
+            phrase_names: options.phrase_names.clone(),
+            text_encoder: options.text_encoder.clone(),
+            text_activation: options.text_activation,
+            negatives: (!options.negative.is_empty()).then(|| options.negative.clone()),
+            temperature: options.temperature,
+        },
+        latents: options.latents.clone(),
+        checkpoint: options.checkpoint.clone(),
         selection: SelectionOptions {
-            top_fraction: args.top_fraction,
-            floor: args.floor,
-            cluster: (!args.no_cluster).then(ClusterOptions::default),
+            top_fraction: options.top_fraction,
+            floor: options.floor,
+            cluster: (!options.no_cluster).then(ClusterOptions::default),
         },
         picture,
     };

@@ -21,8 +21,8 @@ use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render};
 use splatraj_scene::{Scene, resolve_up};
 use splatraj_semantic::sources::TextKeys;
 use splatraj_semantic::{
-    Activation, Cluster, ClusteringSummary, Explanation, Region, RegionSpec, SelectionOptions,
-    SourceKind, SourceRegistry, Spread, Target, TargetSource, TargetsConfig, explain, select,
+    Cluster, ClusteringSummary, Explanation, Region, RegionSpec, SelectionOptions, SourceKind,
+    SourceRegistry, Spread, Target, TargetSource, TargetsConfig, explain, select,
 };
 
 use crate::config::{Config, apply_assignment};
@@ -124,18 +124,9 @@ pub struct QueryRequest {
     pub region: Option<RegionSpec>,
     /// features: per-Gaussian feature sidecar; `None`: the scene's own features.
     pub features: Option<PathBuf>,
-    /// features, langsplat: phrase table of text embeddings.
-    pub phrases: Option<PathBuf>,
-    /// features, langsplat: phrases of an `.npy` (or `.safetensors`) table, one per line.
-    pub phrase_names: Option<PathBuf>,
-    /// features, langsplat: CLIP text-tower weights, for free-text queries.
-    pub text_encoder: Option<PathBuf>,
-    /// features, langsplat: the text tower's activation (default: its config, else gelu).
-    pub text_activation: Option<Activation>,
-    /// features, langsplat: canonical negatives (empty: the defaults).
-    pub negatives: Vec<String>,
-    /// features, langsplat: temperature of the relevancy softmax.
-    pub temperature: Option<f32>,
+    /// features, langsplat and the registered language fields: the phrase table, text
+    /// encoder, negatives (`None`: the defaults) and temperature.
+    pub text: TextKeys,
     /// langsplat: per-Gaussian latents `[N, 3]`.
     pub latents: Option<PathBuf>,
     /// langsplat: the autoencoder checkpoint.
@@ -243,12 +234,7 @@ impl QueryRequest {
     /// source checks its own table).
     pub fn choose_source(&self, scene: &Scene, scene_name: &str) -> Result<SourceKind> {
         use SourceKind::{Custom, Features, Labels, Langsplat, Region};
-        let phrase_options = self.phrases.is_some()
-            || self.text_encoder.is_some()
-            || self.text_activation.is_some()
-            || self.phrase_names.is_some()
-            || !self.negatives.is_empty()
-            || self.temperature.is_some();
+        let phrase_options = self.text != TextKeys::default();
         let langsplat_options = self.latents.is_some() || self.checkpoint.is_some();
         let has_region = self.region.is_some();
         let kind = match &self.source {
@@ -307,11 +293,15 @@ impl QueryRequest {
                 "the region source needs a region: give --box MINX,MINY,MINZ,MAXX,MAXY,MAXZ or \
                  --sphere CX,CY,CZ,R"
             ),
-            Features | Langsplat if self.phrases.is_none() && self.text_encoder.is_none() => bail!(
-                "the {kind} source needs text embeddings: give CLIP text-tower weights with \
+            Features | Langsplat
+                if self.text.phrases.is_none() && self.text.text_encoder.is_none() =>
+            {
+                bail!(
+                    "the {kind} source needs text embeddings: give CLIP text-tower weights with \
                  --text-encoder FILE (any phrase), or a phrase table with --phrases TABLE (.json, \
                  .npy with --phrase-names, or .safetensors)"
-            ),
+                )
+            }
             Langsplat if self.latents.is_none() || self.checkpoint.is_none() => bail!(
                 "the langsplat source needs the per-Gaussian latents (--latents LATENTS.npy, [N, 3]) \
                  and the scene's autoencoder checkpoint (--checkpoint best_ckpt.pth)"
@@ -340,12 +330,12 @@ impl QueryRequest {
                 .map(|r| BTreeMap::from([(self.query.trim().to_string(), r)]))
                 .unwrap_or_default(),
             features: self.features.clone(),
-            phrases: self.phrases.clone(),
-            phrase_names: self.phrase_names.clone(),
-            text_encoder: self.text_encoder.clone(),
-            text_activation: self.text_activation,
-            negatives: (!self.negatives.is_empty()).then(|| self.negatives.clone()),
-            temperature: self.temperature,
+            phrases: self.text.phrases.clone(),
+            phrase_names: self.text.phrase_names.clone(),
+            text_encoder: self.text.text_encoder.clone(),
+            text_activation: self.text.text_activation,
+            negatives: self.text.negatives.clone(),
+            temperature: self.text.temperature,
             latents: self.latents.clone(),
             checkpoint: self.checkpoint.clone(),
             selection: self.selection,
@@ -358,16 +348,8 @@ impl QueryRequest {
     /// the phrase options and `--synonym` under their config keys (the keys the shipped
     /// language fields share, [`TextKeys`]). A key set both ways is refused.
     fn custom_table(&self) -> Result<toml::Table> {
-        let text_keys = TextKeys {
-            phrases: self.phrases.clone(),
-            phrase_names: self.phrase_names.clone(),
-            text_encoder: self.text_encoder.clone(),
-            text_activation: self.text_activation,
-            negatives: (!self.negatives.is_empty()).then(|| self.negatives.clone()),
-            temperature: self.temperature,
-        };
         let mut from_options =
-            toml::Table::try_from(&text_keys).context("the phrase options as a source table")?;
+            toml::Table::try_from(&self.text).context("the phrase options as a source table")?;
         if !self.synonyms.is_empty() {
             from_options.insert(
                 "synonyms".into(),
