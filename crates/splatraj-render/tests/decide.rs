@@ -186,13 +186,13 @@ fn focused_decisions_keep_every_gaussian_in_front_of_the_object_on_its_tiles() {
             ys = (ys.0.min(gy.start), ys.1.max(gy.end));
         }
         assert!(xs.0 < xs.1, "pose {b} sees the object");
-        for g in 0..n {
+        for (g, &in_object) in focus.iter().enumerate() {
             let i = b * n + g;
             let (gx, gy) = tiles(i);
             let overlaps = gx.start < xs.1 && xs.0 < gx.end && gy.start < ys.1 && ys.0 < gy.end;
             // A relative margin keeps the f32 rounding of stored depths out of the comparison.
             let in_front = depth[i] < deepest * (1.0 - 1e-6);
-            if visible[i] && overlaps && !in_front && !focus[g] {
+            if visible[i] && overlaps && !in_front && !in_object {
                 behind += usize::from(depth[i] > deepest * (1.0 + 1e-6) && !host.visible[i]);
             } else if visible[i] && overlaps {
                 needed += 1;
