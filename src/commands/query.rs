@@ -167,20 +167,20 @@ pub struct SourceArgs {
     /// --phrase-names, or .safetensors).
     #[arg(long, value_name = "TABLE")]
     phrases: Option<PathBuf>,
-    /// features, langsplat, custom.<name>: phrases of an .npy (or .safetensors) table, one per line in row
-    /// order.
+    /// features, langsplat, custom.<name>: phrases of an .npy (or .safetensors) table, one
+    /// per line in row order.
     #[arg(long, value_name = "FILE.txt")]
     phrase_names: Option<PathBuf>,
     /// features, langsplat, custom.<name>: CLIP text-tower weights (open_clip_model.safetensors,
     /// open_clip_pytorch_model.bin): the query can then be any phrase.
     #[arg(long, value_name = "FILE")]
     text_encoder: Option<PathBuf>,
-    /// features, langsplat, custom.<name>: the text tower's activation, gelu (open_clip) or quick-gelu
-    /// (OpenAI) [default: open_clip_config.json beside the weights, else gelu].
+    /// features, langsplat, custom.<name>: the text tower's activation, gelu (open_clip) or
+    /// quick-gelu (OpenAI) [default: open_clip_config.json beside the weights, else gelu].
     #[arg(long, value_name = "gelu|quick-gelu", value_parser = Activation::from_str)]
     text_activation: Option<Activation>,
-    /// features, langsplat, custom.<name>: canonical negative phrase (repeatable; default: object, things,
-    /// stuff, texture).
+    /// features, langsplat, custom.<name>: canonical negative phrase (repeatable; default:
+    /// object, things, stuff, texture).
     #[arg(long)]
     negative: Vec<String>,
     /// features, langsplat, custom.<name>: temperature of the relevancy softmax [default: 10].

@@ -414,9 +414,9 @@ pub struct Grounding<'a> {
     pub kind: SourceKind,
 }
 
-/// Grounds `query` in `grounding`'s scene through its source with `selection`, explains a graded relevancy
-/// (before selecting, so that a query that selects nothing says why: [`SelectionFailed`]) and
-/// draws the picture on `device`; writes nothing.
+/// Grounds `query` in `grounding`'s scene through its source with `selection`, explains a
+/// graded relevancy (before selecting, so that a query that selects nothing says why:
+/// [`SelectionFailed`]) and draws the picture on `device`; writes nothing.
 pub fn find_and_draw(
     grounding: &Grounding,
     query: &str,
