@@ -901,9 +901,9 @@ fn set_path(
                 .parse()
                 .with_context(|| format!("{key}: `{here}` must index a list (0-based)"))?;
             let len = a.len();
-            let slot = a.get_mut(i).with_context(|| {
-                format!("{key}: `{here}` is out of range ({len} entries)")
-            })?;
+            let slot = a
+                .get_mut(i)
+                .with_context(|| format!("{key}: `{here}` is out of range ({len} entries)"))?;
             if last {
                 *slot = value;
                 return Ok(());
