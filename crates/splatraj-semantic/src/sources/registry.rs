@@ -96,8 +96,17 @@ impl SourceRegistry {
     pub fn register<C: SourceConfig>(&mut self, name: &str) -> &mut Self {
         let factory: Factory =
             Arc::new(|table: &toml::Value, context: &SourceContext, key: &str| {
-                let config = C::deserialize(table.clone())
-                    .map_err(|e| SemanticError::option(key, e.message().trim_end()))?;
+                // Through serde_path_to_error so a bad value names its own key inside the
+                // table (`targets.custom.min_probability`), not just the table.
+                let config: C = serde_path_to_error::deserialize(table.clone()).map_err(|e| {
+                    let path = e.path().to_string();
+                    let where_ = if path == "." {
+                        key.to_string()
+                    } else {
+                        format!("{key}.{path}")
+                    };
+                    SemanticError::option(where_, e.into_inner().message().trim_end())
+                })?;
                 config.init(context).map_err(|e| e.in_key(key))
             });
         self.factories.insert(name.to_string(), factory);
@@ -137,5 +146,30 @@ impl SourceRegistry {
                 ),
             )),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_badly_typed_value_names_its_key_inside_the_table() {
+        let registry = SourceRegistry::default();
+        let table: toml::Value = toml::from_str("min_probability = \"abc\"").unwrap();
+        let device = Device::default();
+        let context = SourceContext {
+            base_dir: Path::new("."),
+            device: &device,
+        };
+        let error = registry
+            .build(GAUSSIAN_GROUPING, &table, &context, "targets.custom")
+            .err()
+            .expect("a string where a number belongs is refused")
+            .to_string();
+        assert!(
+            error.contains("targets.custom.min_probability"),
+            "the error names the key: {error}"
+        );
     }
 }
