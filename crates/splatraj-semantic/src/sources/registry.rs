@@ -162,11 +162,11 @@ mod tests {
             base_dir: Path::new("."),
             device: &device,
         };
-        let error = registry
-            .build(GAUSSIAN_GROUPING, &table, &context, "targets.custom")
-            .err()
-            .expect("a string where a number belongs is refused")
-            .to_string();
+        let Err(error) = registry.build(GAUSSIAN_GROUPING, &table, &context, "targets.custom")
+        else {
+            panic!("a string where a number belongs is refused");
+        };
+        let error = error.to_string();
         assert!(
             error.contains("targets.custom.min_probability"),
             "the error names the key: {error}"
