@@ -1,23 +1,7 @@
 //! `splatraj query`: what a semantic query selects in a scene, as text (or JSON) and as a
-//! picture.
-//!
-//! The query goes through one of the semantic sources (labels, a region, per-Gaussian language
-//! features scored against a phrase table, LangSplat latents decoded by the scene's autoencoder
-//! checkpoint and then scored as features, or a registered source such as
-//! `custom.gaussian_grouping`) and the selection (percentile, floor, density clustering against
-//! the scene) of `splatraj-semantic`. The scene and source come from the options, or from a run
-//! config (`--config RUN.toml [--set KEY=VALUE]...`: its `[scene]` and `[targets]`, as `run`
-//! builds them). The command prints the counts, the clustering, the
-//! kept cluster and the runner-ups, the candidates dropped, the relevancy spread, centre and
-//! extent, and for language features the relevancy over all Gaussians with the most relevant groups
-//! (also, on stdout, when nothing is selected; warnings on stderr), and renders `query.png`: the
-//! RGB render from a camera that looks at the selection's centre from 30° above the horizontal
-//! (`--elevation`), at a distance where its extent fills about a third of the frame, with the
-//! selected Gaussians tinted magenta (and the dropped candidates cyan with `--show-rejected`).
-//! Every input is read and checked, and the picture rendered, before the file is written (whole or
-//! not at all).
-//! The work is `splatraj::experiment::query` ([`ConfigQuery`], [`QueryRequest`]); this file
-//! parses and prints.
+//! picture (`query.png`, the selection tinted). The scene and source come from the options or
+//! from a run config (`--config RUN.toml`). The work is `splatraj::experiment::query`
+//! ([`ConfigQuery`], [`QueryRequest`], [`PictureOptions`]); this file parses and prints.
 
 use std::path::PathBuf;
 use std::str::FromStr;
@@ -29,10 +13,9 @@ use splatraj::experiment::query::{
     ConfigQuery, PictureOptions, QueryRequest, RejectedView, SelectionFailed, parse_direction,
     parse_region, parse_source_keys, parse_synonyms,
 };
-use splatraj::experiment::views::{FOV_X_DEGREES, ViewOptions};
+use splatraj::experiment::views::ViewOptions;
 use splatraj::experiment::{Config, Extensions};
 use splatraj_render::backend::BackendKind;
-use splatraj_render::camera::Intrinsics;
 use splatraj_semantic::selection::{DEFAULT_FLOOR, DEFAULT_TOP_FRACTION};
 use splatraj_semantic::sources::TextKeys;
 use splatraj_semantic::{Activation, ClusterOptions, SelectionOptions, SourceKind, SourceRegistry};
@@ -210,36 +193,22 @@ pub fn run(args: QueryArgs) -> Result<()> {
     if args.query.trim().is_empty() {
         bail!("--query is empty: give a label name, a phrase or a region name");
     }
-    if args.width == 0 || args.height == 0 {
-        bail!(
-            "--width and --height must be at least 1 (got {}×{})",
-            args.width,
-            args.height
-        );
-    }
-    if !(args.elevation.is_finite() && args.elevation.abs() <= 89.0) {
-        bail!(
-            "--elevation {} must lie in [-89, 89] degrees (at ±90 the view is along the up axis)",
-            args.elevation
-        );
-    }
-    let picture = PictureOptions {
-        rejected: if args.show_rejected {
-            RejectedView::Tinted
-        } else {
-            RejectedView::Hidden
-        },
-        view: ViewOptions {
-            elevation_degrees: args.elevation,
-            search: !args.fixed_view,
-            up: args
-                .up
-                .as_deref()
-                .map(|up| parse_direction(up, "--up"))
-                .transpose()?,
-        },
-        intrinsics: Intrinsics::from_fov_x(FOV_X_DEGREES, args.width, args.height)?,
+    let view = ViewOptions {
+        elevation_degrees: args.elevation,
+        search: !args.fixed_view,
+        up: args
+            .up
+            .as_deref()
+            .map(|up| parse_direction(up, "--up"))
+            .transpose()?,
     };
+    let rejected = if args.show_rejected {
+        RejectedView::Tinted
+    } else {
+        RejectedView::Hidden
+    };
+    let picture = PictureOptions::new(args.width, args.height, view, rejected)
+        .context("the picture (--width, --height, --elevation)")?;
     let outcome = match &args.config {
         Some(path) => {
             let extensions = Extensions::default();

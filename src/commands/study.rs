@@ -11,19 +11,17 @@
 //! spawns, shows progress and writes.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use splatraj::experiment::Extensions;
 use splatraj::experiment::outputs::create_run_dir;
-use splatraj::experiment::study::context::rows_from_child;
-use splatraj::experiment::study::files::Failure;
+use splatraj::experiment::study::context::{measure_in_child, measure_runs};
 use splatraj::experiment::study::measure::MemoryReading;
-use splatraj::experiment::study::plan::PlanOptions;
+use splatraj::experiment::study::plan::{PlanOptions, Run};
 use splatraj::experiment::study::summary::StudyContext;
 use splatraj::experiment::study::{
-    Factor, Preset, Shard, StudyFile, StudyPlan, StudyRow, measure_run, merge_studies, write_study,
+    Factor, Preset, Shard, StudyFile, StudyPlan, measure_run, merge_studies, write_study,
 };
 
 /// Arguments of `splatraj study`.
@@ -145,7 +143,8 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
         bail!("give a config file (splatraj study CONFIG.toml), or `splatraj study merge DIR...`");
     };
     let extensions = Extensions::default();
-    let plan = StudyPlan::new(config, &plan_options(args)?, &extensions)?;
+    let options = plan_options(args)?;
+    let plan = StudyPlan::new(config, &options, &extensions)?;
     if let Some(index) = args.one {
         let run = plan
             .runs
@@ -187,43 +186,32 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
     };
     eprintln!("study folder: {}", dir.display());
     let exe = std::env::current_exe().context("cannot find the splatraj binary to re-run")?;
-    let mut rows: Vec<StudyRow> = Vec::new();
-    let mut failures = Vec::new();
-    for (i, run) in runs.iter().enumerate() {
-        let label = &plan.variants[run.variant].label;
-        let measured = if args.in_process {
+    let measure = |run: &Run| {
+        if args.in_process {
             measure_run(&plan, run, &extensions, MemoryReading::Shared)
                 .map_err(|e| format!("{e:#}"))
         } else {
-            in_child(&exe, args, run.index)
-        };
-        match measured {
-            Ok(new) => {
-                if !args.quiet {
-                    for r in &new {
-                        eprintln!(
-                            "[{}/{}] {label} (repeat {}): error {:.4}, optimisation {:.2} s, peak {}",
-                            i + 1,
-                            runs.len(),
-                            r.repeat,
-                            r.error,
-                            r.optimisation_s,
-                            r.peak_mb.map_or("–".into(), |m| format!("{m:.0} MB"))
-                        );
-                    }
-                }
-                rows.extend(new);
-            }
-            Err(error) => {
-                eprintln!("[{}/{}] {label}: failed: {error}", i + 1, runs.len());
-                failures.push(Failure {
-                    run: run.index,
-                    label: label.clone(),
-                    error,
-                });
-            }
+            measure_in_child(&exe, config, &options, run.index)
         }
-    }
+    };
+    let (rows, failures) = measure_runs(&plan, &runs, measure, |i, label, measured| {
+        let at = format!("[{}/{}] {label}", i + 1, runs.len());
+        match measured {
+            Ok(rows) if !args.quiet => {
+                for r in rows {
+                    eprintln!(
+                        "{at} (repeat {}): error {:.4}, optimisation {:.2} s, peak {}",
+                        r.repeat,
+                        r.error,
+                        r.optimisation_s,
+                        r.peak_mb.map_or("–".into(), |m| format!("{m:.0} MB"))
+                    );
+                }
+            }
+            Ok(_) => {}
+            Err(error) => eprintln!("{at}: failed: {error}"),
+        }
+    });
     let context = StudyContext::new(&plan, &base, std::env::args());
     let failed = failures.len();
     let study = StudyFile::new(plan, args.shard, context, rows, failures);
@@ -244,39 +232,4 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
         );
     }
     Ok(())
-}
-
-/// Runs run `index` in a child process of this binary with the same plan arguments.
-fn in_child(exe: &Path, args: &StudyRunArgs, index: usize) -> Result<Vec<StudyRow>, String> {
-    let mut child = Command::new(exe);
-    child.arg("study");
-    if let Some(config) = &args.config {
-        child.arg(config);
-    }
-    for s in &args.set {
-        child.args(["--set", s]);
-    }
-    for v in &args.vary {
-        child.args(["--vary", v]);
-    }
-    if args.grid {
-        child.arg("--grid");
-    }
-    if let Some(seeds) = args.seeds {
-        child.args(["--seeds", &seeds.to_string()]);
-    }
-    if let Some(preset) = args.preset {
-        child.args([
-            "--preset",
-            match preset {
-                Preset::Table1 => "table1",
-                Preset::Table2 => "table2",
-            },
-        ]);
-    }
-    child.args(["--one", &index.to_string()]);
-    let output = child
-        .output()
-        .map_err(|e| format!("cannot start a study process: {e}"))?;
-    rows_from_child(&output)
 }

@@ -29,7 +29,8 @@ use crate::config::{Config, apply_assignment};
 use crate::experiment::load_scene;
 use crate::extensions::Extensions;
 use crate::views::{
-    CameraReport, ViewOptions, diagnostic_camera, highlighted_picture, highlighted_png,
+    CameraReport, FOV_X_DEGREES, ViewOptions, diagnostic_camera, highlighted_picture,
+    highlighted_png,
 };
 
 /// Colour of the rejected candidates in `query.png` (cyan, against the selection's magenta).
@@ -58,6 +59,33 @@ pub struct PictureOptions {
     pub rejected: RejectedView,
     /// The picture's camera.
     pub intrinsics: Intrinsics,
+}
+
+impl PictureOptions {
+    /// Checked options for a `width` × `height` picture with the horizontal field of view the
+    /// query pictures use; the view's elevation must lie within ±89° (at ±90° the camera looks
+    /// along the up axis and its roll is undefined).
+    pub fn new(
+        width: usize,
+        height: usize,
+        view: ViewOptions,
+        rejected: RejectedView,
+    ) -> Result<Self> {
+        if width == 0 || height == 0 {
+            bail!("width and height must be at least 1 (got {width}×{height})");
+        }
+        let elevation = view.elevation_degrees;
+        if !(elevation.is_finite() && elevation.abs() <= 89.0) {
+            bail!(
+                "elevation {elevation}° must lie in [-89, 89] (at ±90 the view is along the up axis)"
+            );
+        }
+        Ok(PictureOptions {
+            view,
+            rejected,
+            intrinsics: Intrinsics::from_fov_x(FOV_X_DEGREES, width, height)?,
+        })
+    }
 }
 
 /// A query against a run config's scene and target source: `[scene]`, and `[targets]` (the

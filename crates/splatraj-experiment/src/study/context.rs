@@ -1,10 +1,12 @@
 //! Where and how a study ran, for its files: the machine, the fixed evaluation in words, the
 //! command that regenerates it; and the rows a child process reports.
 
-use std::process::Output;
+use std::path::Path;
+use std::process::{Command, Output};
 
 use super::StudyRow;
-use super::plan::StudyPlan;
+use super::files::Failure;
+use super::plan::{PlanOptions, Preset, Run, StudyPlan};
 use super::summary::StudyContext;
 use crate::config::Config;
 
@@ -80,6 +82,85 @@ pub fn rows_from_child(output: &Output) -> Result<Vec<StudyRow>, String> {
             })
         }
     }
+}
+
+impl Preset {
+    /// The name `--preset` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::Table1 => "table1",
+            Preset::Table2 => "table2",
+        }
+    }
+}
+
+impl PlanOptions {
+    /// The `splatraj study` arguments that rebuild this plan from `config` in another process.
+    pub fn study_args(&self, config: &Path) -> Vec<String> {
+        let mut args = vec!["study".to_string(), config.display().to_string()];
+        for s in &self.set {
+            args.extend(["--set".into(), s.clone()]);
+        }
+        for factor in &self.vary {
+            // Values are TOML text; commas inside brackets or quotes do not split on re-parsing.
+            args.extend([
+                "--vary".into(),
+                format!("{}={}", factor.key, factor.values.join(",")),
+            ]);
+        }
+        if self.grid {
+            args.push("--grid".into());
+        }
+        if let Some(seeds) = self.seeds {
+            args.extend(["--seeds".into(), seeds.to_string()]);
+        }
+        if let Some(preset) = self.preset {
+            args.extend(["--preset".into(), preset.name().into()]);
+        }
+        args
+    }
+}
+
+/// Runs run `index` of the plan `options` builds from `config` in a child process of `exe`
+/// (`splatraj study … --one index`), so that its peak memory is its own.
+pub fn measure_in_child(
+    exe: &Path,
+    config: &Path,
+    options: &PlanOptions,
+    index: usize,
+) -> Result<Vec<StudyRow>, String> {
+    let output = Command::new(exe)
+        .args(options.study_args(config))
+        .args(["--one", &index.to_string()])
+        .output()
+        .map_err(|e| format!("cannot start a study process: {e}"))?;
+    rows_from_child(&output)
+}
+
+/// Measures `runs` of `plan` one after another with `measure`, keeping going past failures;
+/// `progress` hears each run's position, label and outcome. Returns the rows and the failures.
+pub fn measure_runs(
+    plan: &StudyPlan,
+    runs: &[Run],
+    mut measure: impl FnMut(&Run) -> Result<Vec<StudyRow>, String>,
+    mut progress: impl FnMut(usize, &str, &Result<Vec<StudyRow>, String>),
+) -> (Vec<StudyRow>, Vec<Failure>) {
+    let mut rows = Vec::new();
+    let mut failures = Vec::new();
+    for (i, run) in runs.iter().enumerate() {
+        let label = &plan.variants[run.variant].label;
+        let measured = measure(run);
+        progress(i, label, &measured);
+        match measured {
+            Ok(new) => rows.extend(new),
+            Err(error) => failures.push(Failure {
+                run: run.index,
+                label: label.clone(),
+                error,
+            }),
+        }
+    }
+    (rows, failures)
 }
 
 #[cfg(test)]
