@@ -15,66 +15,14 @@
 //! space (ln T summed); here T is a running product. Both are the same rule; they can disagree
 //! only when T lands within rounding of 1e-4.
 
+use std::ops::Range;
+
 use rayon::prelude::*;
 
 use super::plan::CompositePlan;
+pub use super::real::Real;
 use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
 use crate::tiles::{TILE_PIXELS, TILE_SIZE, ceil_small, floor_small};
-
-/// The float types the kernels run in.
-pub trait Real:
-    Copy
-    + Send
-    + Sync
-    + PartialOrd
-    + std::fmt::Debug
-    + std::ops::Add<Output = Self>
-    + std::ops::Sub<Output = Self>
-    + std::ops::Mul<Output = Self>
-    + std::ops::Div<Output = Self>
-    + std::ops::AddAssign
-    + std::ops::Neg<Output = Self>
-    + 'static
-{
-    /// 0.
-    const ZERO: Self;
-    /// 1.
-    const ONE: Self;
-    /// The nearest value to `x`.
-    fn of(x: f64) -> Self;
-    /// e^self.
-    fn exp(self) -> Self;
-    /// The value as f64.
-    fn to_f64(self) -> f64;
-}
-
-impl Real for f32 {
-    const ZERO: Self = 0.0;
-    const ONE: Self = 1.0;
-    fn of(x: f64) -> Self {
-        x as f32
-    }
-    fn exp(self) -> Self {
-        f32::exp(self)
-    }
-    fn to_f64(self) -> f64 {
-        self as f64
-    }
-}
-
-impl Real for f64 {
-    const ZERO: Self = 0.0;
-    const ONE: Self = 1.0;
-    fn of(x: f64) -> Self {
-        x
-    }
-    fn exp(self) -> Self {
-        f64::exp(self)
-    }
-    fn to_f64(self) -> f64 {
-        self
-    }
-}
 
 /// Screen-space Gaussians on the host, rows b·U + u (as [`crate::rasterize::SplatInputs`]).
 #[derive(Debug, Clone)]
@@ -98,6 +46,8 @@ pub struct ForwardState<E> {
     pub final_t: Vec<E>,
     /// Number of list entries up to and including the last contributor. `[work, 256]`
     pub last: Vec<u32>,
+    /// Each row's footprint, for the backward to reuse. `[R]`
+    pub footprints: Vec<Footprint<E>>,
 }
 
 /// Gradients of the four inputs, shaped like them.
@@ -113,7 +63,170 @@ pub struct HostGradients<E> {
     pub values: Vec<E>,
 }
 
-/// One Gaussian of a list, loaded once per tile step.
+/// What compositing needs of one row, whatever the tile: computed once per row and pass (it
+/// used to be once per tile–Gaussian pair, in the forward and again in the backward, and that
+/// logarithm, two square roots and a division were a fifth of a real capture's pass), and kept
+/// in one record so that a pair reads one cache line rather than three arrays.
+#[derive(Debug, Clone, Copy)]
+pub struct Footprint<E> {
+    mx: E,
+    my: E,
+    a: E,
+    b: E,
+    c: E,
+    opacity: E,
+    /// Below this power α < 1/255 for sure (−ln(255·o) less a margin for rounding).
+    skip_below: E,
+    extent: Extent<E>,
+}
+
+/// Where a row can reach α ≥ 1/255.
+#[derive(Debug, Clone, Copy)]
+enum Extent<E> {
+    /// Nowhere: o < 1/255 (or NaN).
+    Nowhere,
+    /// Anywhere, as far as the bound can tell (it is not finite): test every pixel of a tile.
+    Anywhere,
+    /// Within these half-widths, in pixels, of the centre.
+    Ellipse { half_x: E, half_y: E },
+}
+
+impl<E: Real> Footprint<E> {
+    fn new(splats: &HostSplats<E>, row: usize) -> Self {
+        let [mx, my] = [splats.means[2 * row], splats.means[2 * row + 1]];
+        let [a, b, c] = [0, 1, 2].map(|k| splats.conics[3 * row + k]);
+        let opacity = splats.opacities[row];
+        // In f64 like the bound it feeds: α at exactly 1/255 must not round out of the box.
+        let reach = (255.0 * opacity.to_f64()).ln();
+        Footprint {
+            mx,
+            my,
+            a,
+            b,
+            c,
+            opacity,
+            skip_below: E::of(-reach) - E::of(1e-3),
+            extent: Self::extent([mx, my, a, b, c].map(E::to_f64), reach),
+        }
+    }
+
+    /// The box of the ellipse ½dᵀ·conic·d ≤ t with t = ln(255·o): its half-widths are
+    /// sqrt(2t·Σ_xx), sqrt(2t·Σ_yy) with Σ = conic⁻¹ (Σ_xx = c/det, Σ_yy = a/det).
+    fn extent([mx, my, a, b, c]: [f64; 5], t: f64) -> Extent<E> {
+        if t.is_nan() || t < 0.0 {
+            return Extent::Nowhere;
+        }
+        let det = a * c - b * b;
+        if det.is_nan() || det <= 0.0 {
+            return Extent::Anywhere;
+        }
+        let half_x = (2.0 * t * c / det).sqrt();
+        let half_y = (2.0 * t * a / det).sqrt();
+        if !(half_x.is_finite() && half_y.is_finite() && mx.is_finite() && my.is_finite()) {
+            return Extent::Anywhere;
+        }
+        // Rounding the half-widths to E moves the box by far less than its pixel of margin.
+        Extent::Ellipse {
+            half_x: E::of(half_x),
+            half_y: E::of(half_y),
+        }
+    }
+
+    /// This row on the tile with corner (x0, y0), and the tile pixels `(xs, ys)` whose centre
+    /// can reach α ≥ 1/255, with a pixel of margin; `None` if there are none. The rest of the
+    /// tile is skipped: the 1/255 rule would skip it anyway, so this changes no value and no
+    /// decision.
+    fn on_tile(&self, x0: E, y0: E) -> Option<(Splat<E>, Range<usize>, Range<usize>)> {
+        // Coordinates relative to the tile's corner keep dx, dy small (as the tensor path does
+        // with its tile centre), so f32 loses nothing to cancellation.
+        let splat = Splat {
+            mx: self.mx - x0,
+            my: self.my - y0,
+            a: self.a,
+            b: self.b,
+            c: self.c,
+            opacity: self.opacity,
+            skip_below: self.skip_below,
+        };
+        let (half_x, half_y) = match self.extent {
+            Extent::Nowhere => return None,
+            Extent::Anywhere => return Some((splat, 0..TILE_SIZE, 0..TILE_SIZE)),
+            Extent::Ellipse { half_x, half_y } => (half_x.to_f64(), half_y.to_f64()),
+        };
+        // Pixel i's centre is i + 0.5: keep i with |i + 0.5 − m| ≤ half + 1. Clamping to the
+        // tile first (integer bounds commute with floor and ceil) keeps the values small, so
+        // the rounding is a cast: the baseline x86-64 target has no rounding instruction and
+        // calls into libm for f64::floor/ceil, once per tile–Gaussian pair.
+        let span = |m: f64, half: f64| {
+            let lo = ceil_small((m - half - 1.5).clamp(0.0, TILE_SIZE as f64)) as usize;
+            let hi = floor_small((m + half + 0.5).clamp(-1.0, TILE_SIZE as f64 - 1.0)) + 1;
+            lo..(hi.max(lo as i64) as usize)
+        };
+        let xs = span(splat.mx.to_f64(), half_x);
+        let ys = span(splat.my.to_f64(), half_y);
+        (!xs.is_empty() && !ys.is_empty()).then_some((splat, xs, ys))
+    }
+}
+
+/// List entries whose footprints are read in one go.
+const GATHER: usize = 32;
+
+/// The footprints of a tile's list entries, read [`GATHER`] at a time. Lists are in depth
+/// order, so their rows are scattered over memory: read one by one between the pixel loops,
+/// each stalled the kernel on a cache miss (a sixth of a real capture's pass), while a tight
+/// loop of independent reads has the processor fetch them all at once.
+struct Gathered<'a, E> {
+    footprints: &'a [Footprint<E>],
+    list: &'a [u32],
+    /// First list entry of `block` (`usize::MAX` before the first read).
+    start: usize,
+    block: [Footprint<E>; GATHER],
+}
+
+impl<'a, E: Real> Gathered<'a, E> {
+    fn new(footprints: &'a [Footprint<E>], list: &'a [u32]) -> Self {
+        let nowhere = Footprint {
+            mx: E::ZERO,
+            my: E::ZERO,
+            a: E::ZERO,
+            b: E::ZERO,
+            c: E::ZERO,
+            opacity: E::ZERO,
+            skip_below: E::ZERO,
+            extent: Extent::Nowhere,
+        };
+        Gathered {
+            footprints,
+            list,
+            start: usize::MAX,
+            block: [nowhere; GATHER],
+        }
+    }
+
+    /// The footprint of list entry `j`; blocks are aligned, so walking the list either way
+    /// reads each block once.
+    fn get(&mut self, j: usize) -> &Footprint<E> {
+        let start = j / GATHER * GATHER;
+        if start != self.start {
+            self.start = start;
+            let rows = &self.list[start..(start + GATHER).min(self.list.len())];
+            for (slot, &row) in self.block.iter_mut().zip(rows) {
+                *slot = self.footprints[row as usize];
+            }
+        }
+        &self.block[j - start]
+    }
+}
+
+/// Every row's footprint, in parallel.
+fn footprints<E: Real>(splats: &HostSplats<E>) -> Vec<Footprint<E>> {
+    (0..splats.opacities.len())
+        .into_par_iter()
+        .map(|row| Footprint::new(splats, row))
+        .collect()
+}
+
+/// One Gaussian of a list on one tile, in the tile's coordinates.
 #[derive(Clone, Copy)]
 struct Splat<E> {
     mx: E,
@@ -122,32 +235,10 @@ struct Splat<E> {
     b: E,
     c: E,
     opacity: E,
-    /// ln(255·o): α ≥ 1/255 needs ½dᵀ·conic·d ≤ this (NaN or negative: nowhere).
-    reach: E,
-    /// Below this power α < 1/255 for sure (−reach less a margin for rounding).
     skip_below: E,
 }
 
 impl<E: Real> Splat<E> {
-    fn load(splats: &HostSplats<E>, row: usize, x0: E, y0: E) -> Self {
-        // One logarithm per list entry, shared by the pixel box and the per-pixel skip: this
-        // runs once per tile–Gaussian pair, which on real captures is about as often as pixels.
-        // In f64 like the bound it feeds: α at exactly 1/255 must not round out of the box.
-        let reach = E::of((255.0 * splats.opacities[row].to_f64()).ln());
-        // Coordinates relative to the tile's corner keep dx, dy small (as the tensor path does
-        // with its tile centre), so f32 loses nothing to cancellation.
-        Splat {
-            mx: splats.means[2 * row] - x0,
-            my: splats.means[2 * row + 1] - y0,
-            a: splats.conics[3 * row],
-            b: splats.conics[3 * row + 1],
-            c: splats.conics[3 * row + 2],
-            opacity: splats.opacities[row],
-            reach,
-            skip_below: -reach - E::of(1e-3),
-        }
-    }
-
     /// (dx, dy, power before the clamp, e^min(power, 0)) at tile pixel `p`, or `None` where
     /// α is surely below 1/255 (no exp needed there).
     #[inline(always)]
@@ -161,42 +252,6 @@ impl<E: Real> Splat<E> {
         }
         let clamped = if power > E::ZERO { E::ZERO } else { power };
         Some((dx, dy, power, clamped.exp()))
-    }
-}
-
-impl<E: Real> Splat<E> {
-    /// Tile pixels `(xs, ys)` whose centre can reach α ≥ 1/255, with a pixel of margin; the
-    /// rest of the tile is skipped (it would be skipped by the 1/255 rule anyway, so this
-    /// changes no value and no decision). The whole tile when the bound is not finite.
-    fn pixel_box(&self) -> Option<(std::ops::Range<usize>, std::ops::Range<usize>)> {
-        let [mx, my, a, b, c, t] =
-            [self.mx, self.my, self.a, self.b, self.c, self.reach].map(E::to_f64);
-        // ½dᵀ·conic·d ≤ t with t = ln(255·o); the ellipse's half-widths are sqrt(2t·Σ_xx),
-        // sqrt(2t·Σ_yy) with Σ = conic⁻¹ (Σ_xx = c/det, Σ_yy = a/det).
-        if t.is_nan() || t < 0.0 {
-            return None; // o < 1/255: α < 1/255 everywhere
-        }
-        let det = a * c - b * b;
-        let full = Some((0..TILE_SIZE, 0..TILE_SIZE));
-        if det.is_nan() || det <= 0.0 {
-            return full;
-        }
-        let half_x = (2.0 * t * c / det).sqrt();
-        let half_y = (2.0 * t * a / det).sqrt();
-        if !(half_x.is_finite() && half_y.is_finite() && mx.is_finite() && my.is_finite()) {
-            return full;
-        }
-        // Pixel i's centre is i + 0.5: keep i with |i + 0.5 − m| ≤ half + 1. Clamping to the
-        // tile first (integer bounds commute with floor and ceil) keeps the values small, so
-        // the rounding is a cast: the baseline x86-64 target has no rounding instruction and
-        // calls into libm for f64::floor/ceil, once per tile–Gaussian pair.
-        let span = |m: f64, half: f64| {
-            let lo = ceil_small((m - half - 1.5).clamp(0.0, TILE_SIZE as f64)) as usize;
-            let hi = floor_small((m + half + 0.5).clamp(-1.0, TILE_SIZE as f64 - 1.0)) + 1;
-            lo..(hi.max(lo as i64) as usize)
-        };
-        let (xs, ys) = (span(mx, half_x), span(my, half_y));
-        (!xs.is_empty() && !ys.is_empty()).then_some((xs, ys))
     }
 }
 
@@ -215,6 +270,26 @@ struct TileForward<E> {
     last: Vec<u32>,
 }
 
+/// One bit per tile pixel: bit x of entry y stands for pixel 16·y + x.
+type RowBits = [u16; TILE_SIZE];
+
+/// The pixels 16·y + x of the box `xs` × `ys` whose bit is set, in row-major order. Most of a
+/// footprint's box has stopped (forward) or not yet started (backward) on real captures, three
+/// pixels in four; visiting only the set bits skips them without a test each.
+fn pixels_of(rows: RowBits, xs: Range<usize>, ys: Range<usize>) -> impl Iterator<Item = usize> {
+    let columns = ((1u32 << xs.end) - (1u32 << xs.start)) as u16;
+    ys.flat_map(move |y| {
+        let mut bits = rows[y] & columns;
+        std::iter::from_fn(move || {
+            (bits != 0).then(|| {
+                let x = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                y * TILE_SIZE + x
+            })
+        })
+    })
+}
+
 /// Pixels of tile `tile` that lie inside the image (partial tiles at the right/bottom edge).
 fn valid_pixels(plan: &CompositePlan, tile: usize) -> [bool; TILE_PIXELS] {
     let (x0, y0) = plan.tile_origin(tile);
@@ -225,32 +300,40 @@ fn valid_pixels(plan: &CompositePlan, tile: usize) -> [bool; TILE_PIXELS] {
     valid
 }
 
-fn forward_tile<E: Real>(splats: &HostSplats<E>, plan: &CompositePlan, w: usize) -> TileForward<E> {
+fn forward_tile<E: Real>(
+    splats: &HostSplats<E>,
+    footprints: &[Footprint<E>],
+    plan: &CompositePlan,
+    w: usize,
+) -> TileForward<E> {
     let channels = splats.channels;
     let (x0, y0) = plan.tile_origin(plan.tiles[w]);
     let (x0, y0) = (E::of(x0 as f64), E::of(y0 as f64));
     let min_alpha = E::of(MIN_ALPHA);
     let min_t = E::of(plan.stop_transmittance);
 
-    let mut open = valid_pixels(plan, plan.tiles[w]);
+    let valid = valid_pixels(plan, plan.tiles[w]);
+    let mut open: RowBits = std::array::from_fn(|y| {
+        (0..TILE_SIZE).fold(0, |bits, x| {
+            bits | (u16::from(valid[y * TILE_SIZE + x]) << x)
+        })
+    });
     let mut t = vec![E::ONE; TILE_PIXELS];
     let mut last = vec![0u32; TILE_PIXELS];
     let mut planes = vec![E::ZERO; (channels + 1) * TILE_PIXELS];
-    let mut open_count = open.iter().filter(|&&o| o).count();
-    for (j, &row) in plan.list(w).iter().enumerate() {
+    let mut open_count = valid.iter().filter(|&&v| v).count();
+    let list = plan.list(w);
+    let mut gathered = Gathered::new(footprints, list);
+    for (j, &row) in list.iter().enumerate() {
         if open_count == 0 {
             break;
         }
         let row = row as usize;
-        let splat = Splat::load(splats, row, x0, y0);
-        let Some((xs, ys)) = splat.pixel_box() else {
+        let Some((splat, xs, ys)) = gathered.get(j).on_tile(x0, y0) else {
             continue;
         };
         let values = &splats.values[row * channels..(row + 1) * channels];
-        for p in ys.flat_map(|y| xs.clone().map(move |x| y * TILE_SIZE + x)) {
-            if !open[p] {
-                continue;
-            }
+        for p in pixels_of(open, xs, ys) {
             let Some((_, _, _, exp_power)) = splat.at(p) else {
                 continue;
             };
@@ -260,7 +343,7 @@ fn forward_tile<E: Real>(splats: &HostSplats<E>, plan: &CompositePlan, w: usize)
             }
             let t_next = t[p] * (E::ONE - alpha);
             if t_next < min_t {
-                open[p] = false;
+                open[p / TILE_SIZE] &= !(1 << (p % TILE_SIZE));
                 open_count -= 1;
                 continue;
             }
@@ -284,9 +367,10 @@ fn forward_tile<E: Real>(splats: &HostSplats<E>, plan: &CompositePlan, w: usize)
 
 /// Forward pass of every work tile. Returns the packed image `[B, H, W, C + 1]` and the state.
 pub fn forward<E: Real>(splats: &HostSplats<E>, plan: &CompositePlan) -> (Vec<E>, ForwardState<E>) {
+    let footprints = footprints(splats);
     let tiles: Vec<TileForward<E>> = (0..plan.tiles.len())
         .into_par_iter()
-        .map(|w| forward_tile(splats, plan, w))
+        .map(|w| forward_tile(splats, &footprints, plan, w))
         .collect();
     let channels = splats.channels;
     let grid = plan.grid;
@@ -294,6 +378,7 @@ pub fn forward<E: Real>(splats: &HostSplats<E>, plan: &CompositePlan) -> (Vec<E>
     let mut state = ForwardState {
         final_t: Vec::with_capacity(tiles.len() * TILE_PIXELS),
         last: Vec::with_capacity(tiles.len() * TILE_PIXELS),
+        footprints,
     };
     for (w, tile) in tiles.into_iter().enumerate() {
         let (x0, y0) = plan.tile_origin(plan.tiles[w]);
@@ -351,18 +436,29 @@ fn backward_tile<E: Real>(
     let mut slots = vec![E::ZERO; list.len() * stride];
     let mut t = final_t.to_vec();
     let mut behind = vec![E::ZERO; channels * TILE_PIXELS]; // Σ over later contributors of f·α·T
+    let mut gathered = Gathered::new(&state.footprints, list);
+    // Pixels in the order they join the replay: pixel p takes part from entry last[p] − 1 down.
+    let mut joining: Vec<(u32, usize)> = (0..TILE_PIXELS)
+        .filter(|&p| last[p] > 0)
+        .map(|p| (last[p], p))
+        .collect();
+    joining.sort_unstable_by(|a, b| b.cmp(a));
+    let mut joined = 0;
+    let mut replaying: RowBits = [0; TILE_SIZE];
     for j in (0..replay).rev() {
+        while let Some(&(count, p)) = joining.get(joined)
+            && count as usize > j
+        {
+            replaying[p / TILE_SIZE] |= 1 << (p % TILE_SIZE);
+            joined += 1;
+        }
         let row = list[j] as usize;
-        let splat = Splat::load(splats, row, x0, y0);
-        let Some((xs, ys)) = splat.pixel_box() else {
+        let Some((splat, xs, ys)) = gathered.get(j).on_tile(x0, y0) else {
             continue;
         };
         let values = &splats.values[row * channels..(row + 1) * channels];
         let slot = &mut slots[j * stride..(j + 1) * stride];
-        for p in ys.flat_map(|y| xs.clone().map(move |x| y * TILE_SIZE + x)) {
-            if j as u32 >= last[p] {
-                continue;
-            }
+        for p in pixels_of(replaying, xs, ys) {
             let Some((dx, dy, power, exp_power)) = splat.at(p) else {
                 continue;
             };

@@ -17,6 +17,7 @@ pub mod cpu;
 #[cfg(feature = "wgpu")]
 pub mod cube;
 pub mod plan;
+pub mod real;
 
 use std::sync::Arc;
 
