@@ -69,14 +69,8 @@ pub struct HostGradients<E> {
 /// in one record so that a pair reads one cache line rather than three arrays.
 #[derive(Debug, Clone, Copy)]
 pub struct Footprint<E> {
-    mx: E,
-    my: E,
-    a: E,
-    b: E,
-    c: E,
-    opacity: E,
-    /// Below this power α < 1/255 for sure (−ln(255·o) less a margin for rounding).
-    skip_below: E,
+    /// The Gaussian in image coordinates.
+    splat: Splat<E>,
     extent: Extent<E>,
 }
 
@@ -99,13 +93,15 @@ impl<E: Real> Footprint<E> {
         // In f64 like the bound it feeds: α at exactly 1/255 must not round out of the box.
         let reach = (255.0 * opacity.to_f64()).ln();
         Footprint {
-            mx,
-            my,
-            a,
-            b,
-            c,
-            opacity,
-            skip_below: E::of(-reach) - E::of(1e-3),
+            splat: Splat {
+                mx,
+                my,
+                a,
+                b,
+                c,
+                opacity,
+                skip_below: E::of(-reach) - E::of(1e-3),
+            },
             extent: Self::extent([mx, my, a, b, c].map(E::to_f64), reach),
         }
     }
@@ -140,13 +136,9 @@ impl<E: Real> Footprint<E> {
         // Coordinates relative to the tile's corner keep dx, dy small (as the tensor path does
         // with its tile centre), so f32 loses nothing to cancellation.
         let splat = Splat {
-            mx: self.mx - x0,
-            my: self.my - y0,
-            a: self.a,
-            b: self.b,
-            c: self.c,
-            opacity: self.opacity,
-            skip_below: self.skip_below,
+            mx: self.splat.mx - x0,
+            my: self.splat.my - y0,
+            ..self.splat
         };
         let (half_x, half_y) = match self.extent {
             Extent::Nowhere => return None,
@@ -185,14 +177,17 @@ struct Gathered<'a, E> {
 
 impl<'a, E: Real> Gathered<'a, E> {
     fn new(footprints: &'a [Footprint<E>], list: &'a [u32]) -> Self {
+        let zero = E::ZERO;
         let nowhere = Footprint {
-            mx: E::ZERO,
-            my: E::ZERO,
-            a: E::ZERO,
-            b: E::ZERO,
-            c: E::ZERO,
-            opacity: E::ZERO,
-            skip_below: E::ZERO,
+            splat: Splat {
+                mx: zero,
+                my: zero,
+                a: zero,
+                b: zero,
+                c: zero,
+                opacity: zero,
+                skip_below: zero,
+            },
             extent: Extent::Nowhere,
         };
         Gathered {
@@ -226,8 +221,9 @@ fn footprints<E: Real>(splats: &HostSplats<E>) -> Vec<Footprint<E>> {
         .collect()
 }
 
-/// One Gaussian of a list on one tile, in the tile's coordinates.
-#[derive(Clone, Copy)]
+/// One Gaussian of a list: its mean (in image coordinates in a [`Footprint`], in the tile's
+/// once placed on one), conic, opacity and 1/255 skip threshold.
+#[derive(Debug, Clone, Copy)]
 struct Splat<E> {
     mx: E,
     my: E,
@@ -235,6 +231,7 @@ struct Splat<E> {
     b: E,
     c: E,
     opacity: E,
+    /// Below this power α < 1/255 for sure (−ln(255·o) less a margin for rounding).
     skip_below: E,
 }
 
