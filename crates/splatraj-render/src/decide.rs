@@ -31,9 +31,6 @@ pub struct HostGeometry {
     pub blocks: Vec<Block>,
     /// Index into [`HostGeometry::blocks`] of each Gaussian. `[N]`
     pub block_of: Vec<u32>,
-    /// The Gaussians in Morton order of their means; block b holds entries
-    /// `b · 256 .. (b + 1) · 256`. `[N]`
-    pub spatial_order: Vec<u32>,
 }
 
 /// Neighbouring Gaussians (consecutive in Morton order of their means), bounded as a whole.
@@ -57,8 +54,7 @@ const BLOCK_MEMBERS: usize = 256;
 
 /// Groups the Gaussians into [`Block`]s: sorted by a 30-bit Morton code of their means (10 bits
 /// per axis over the scene's bounding box), then cut into runs of [`BLOCK_MEMBERS`].
-/// Returns the blocks, each Gaussian's block and the Gaussians in Morton order.
-fn spatial_blocks(means: &[[f32; 3]], max_variance: &[f32]) -> (Vec<Block>, Vec<u32>, Vec<u32>) {
+fn spatial_blocks(means: &[[f32; 3]], max_variance: &[f32]) -> (Vec<Block>, Vec<u32>) {
     let finite = means.iter().filter(|m| m.iter().all(|v| v.is_finite()));
     let (lo, hi) = finite.fold(
         (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
@@ -119,8 +115,7 @@ fn spatial_blocks(means: &[[f32; 3]], max_variance: &[f32]) -> (Vec<Block>, Vec<
             block
         })
         .collect();
-    let spatial_order = order.into_iter().map(|(_, g)| g).collect();
-    (blocks, block_of, spatial_order)
+    (blocks, block_of)
 }
 
 impl HostGeometry {
@@ -138,7 +133,7 @@ impl HostGeometry {
             .iter()
             .map(|s| s.iter().fold(0.0f32, |m, &v| m.max(v * v)))
             .collect();
-        let (blocks, block_of, spatial_order) = spatial_blocks(&scene.means, &max_variance);
+        let (blocks, block_of) = spatial_blocks(&scene.means, &max_variance);
         HostGeometry {
             means: scene.means.clone(),
             covariances,
@@ -146,7 +141,6 @@ impl HostGeometry {
             opacities: scene.opacities.clone(),
             blocks,
             block_of,
-            spatial_order,
         }
     }
 

@@ -256,21 +256,13 @@ pub fn render(
     let binned = started.elapsed();
 
     // used[u] = scene index of the u-th Gaussian some tile needs; lists are renumbered to u.
-    // In Morton order of the means: a tile's list holds neighbours in space, so their rows
-    // lie close together and the compositing kernels' random row reads mostly hit the cache.
     let mut is_used = vec![false; n];
     for list in &work {
         for &g in &list.gaussians {
             is_used[g as usize] = true;
         }
     }
-    let used: Vec<usize> = scene
-        .host
-        .spatial_order
-        .iter()
-        .map(|&g| g as usize)
-        .filter(|&g| is_used[g])
-        .collect();
+    let used: Vec<usize> = (0..n).filter(|&g| is_used[g]).collect();
     let mut compact_from_scene = vec![u32::MAX; n];
     for (u, &g) in used.iter().enumerate() {
         compact_from_scene[g] = u as u32;

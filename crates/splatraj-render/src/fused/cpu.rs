@@ -464,16 +464,14 @@ fn backward_tile<E: Real>(
             if alpha < min_alpha {
                 continue;
             }
-            // One division per pixel and entry, not 2 + C: a division costs several
-            // multiplications, and this is the innermost loop.
-            let inv_keep = E::ONE / (E::ONE - alpha);
-            let t_before = t[p] * inv_keep;
+            let keep = E::ONE - alpha;
+            let t_before = t[p] / keep;
             let weight = alpha * t_before;
             // dL/dα = Σ_k v_k (f_k T_i − S_k / (1 − α)) + v_A · T_final / (1 − α)
-            let mut v_alpha = v_planes[channels * TILE_PIXELS + p] * final_t[p] * inv_keep;
+            let mut v_alpha = v_planes[channels * TILE_PIXELS + p] * final_t[p] / keep;
             for k in 0..channels {
                 let v_k = v_planes[k * TILE_PIXELS + p];
-                v_alpha += v_k * (values[k] * t_before - behind[k * TILE_PIXELS + p] * inv_keep);
+                v_alpha += v_k * (values[k] * t_before - behind[k * TILE_PIXELS + p] / keep);
                 slot[6 + k] += v_k * weight;
                 behind[k * TILE_PIXELS + p] += values[k] * weight;
             }
