@@ -52,17 +52,19 @@ pub struct Block {
 /// cost nothing next to the Gaussians they skip.
 const BLOCK_MEMBERS: usize = 256;
 
+/// Smallest and largest coordinates of `points` (NaN coordinates are skipped by min/max).
+fn bounding_box(points: impl Iterator<Item = DVec3>) -> (DVec3, DVec3) {
+    points.fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(p), hi.max(p)),
+    )
+}
+
 /// Groups the Gaussians into [`Block`]s: sorted by a 30-bit Morton code of their means (10 bits
 /// per axis over the scene's bounding box), then cut into runs of [`BLOCK_MEMBERS`].
 fn spatial_blocks(means: &[[f32; 3]], max_variance: &[f32]) -> (Vec<Block>, Vec<u32>) {
     let finite = means.iter().filter(|m| m.iter().all(|v| v.is_finite()));
-    let (lo, hi) = finite.fold(
-        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-        |(lo, hi), m| {
-            let m = DVec3::from(m.map(f64::from));
-            (lo.min(m), hi.max(m))
-        },
-    );
+    let (lo, hi) = bounding_box(finite.map(|m| DVec3::from(m.map(f64::from))));
     let cells = 1023.0;
     let extent = (hi - lo).max(DVec3::splat(f64::MIN_POSITIVE));
     let morton = |m: &[f32; 3]| -> u32 {
@@ -89,10 +91,7 @@ fn spatial_blocks(means: &[[f32; 3]], max_variance: &[f32]) -> (Vec<Block>, Vec<
         .enumerate()
         .map(|(b, members)| {
             let point = |g: u32| DVec3::from(means[g as usize].map(f64::from));
-            let (lo, hi) = members.iter().fold(
-                (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-                |(lo, hi), &(_, g)| (lo.min(point(g)), hi.max(point(g))),
-            );
+            let (lo, hi) = bounding_box(members.iter().map(|&(_, g)| point(g)));
             let centre = 0.5 * (lo + hi);
             let mut block = Block {
                 centre,

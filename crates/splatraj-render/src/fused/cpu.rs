@@ -172,29 +172,16 @@ struct Gathered<'a, E> {
     list: &'a [u32],
     /// First list entry of `block` (`usize::MAX` before the first read).
     start: usize,
-    block: [Footprint<E>; GATHER],
+    block: Vec<Footprint<E>>,
 }
 
 impl<'a, E: Real> Gathered<'a, E> {
     fn new(footprints: &'a [Footprint<E>], list: &'a [u32]) -> Self {
-        let zero = E::ZERO;
-        let nowhere = Footprint {
-            splat: Splat {
-                mx: zero,
-                my: zero,
-                a: zero,
-                b: zero,
-                c: zero,
-                opacity: zero,
-                skip_below: zero,
-            },
-            extent: Extent::Nowhere,
-        };
         Gathered {
             footprints,
             list,
             start: usize::MAX,
-            block: [nowhere; GATHER],
+            block: Vec::with_capacity(GATHER),
         }
     }
 
@@ -205,9 +192,9 @@ impl<'a, E: Real> Gathered<'a, E> {
         if start != self.start {
             self.start = start;
             let rows = &self.list[start..(start + GATHER).min(self.list.len())];
-            for (slot, &row) in self.block.iter_mut().zip(rows) {
-                *slot = self.footprints[row as usize];
-            }
+            self.block.clear();
+            self.block
+                .extend(rows.iter().map(|&row| self.footprints[row as usize]));
         }
         &self.block[j - start]
     }

@@ -178,26 +178,31 @@ impl Occupancy {
     /// (None when none does). Exact whenever the returned distance is ≤ `radius`.
     pub fn nearest_within(&self, p: DVec3, radius: f64) -> Option<Contact> {
         let mut best: Option<Contact> = None;
-        for tier in &self.inner.tiers {
-            let reach = radius + tier.reach;
-            let found = tier
-                .tree
-                .query(&p.to_array())
-                .within::<SquaredEuclidean<f64>>(reach * reach)
-                .unsorted()
-                .execute();
-            for neighbour in found {
-                let index = tier.members[neighbour.item as usize];
-                let surface = self.inner.ellipsoids[index].nearest(p);
-                if best.is_none_or(|b| surface.distance < b.surface.distance) {
-                    best = Some(Contact {
-                        ellipsoid: index,
-                        surface,
-                    });
-                }
+        for (index, _) in self.candidates(p, radius) {
+            let surface = self.inner.ellipsoids[index].nearest(p);
+            if best.is_none_or(|b| surface.distance < b.surface.distance) {
+                best = Some(Contact {
+                    ellipsoid: index,
+                    surface,
+                });
             }
         }
         best
+    }
+
+    /// (index, squared distance from `p` to its centre) of each ellipsoid whose surface may
+    /// lie within `radius` of `p`: a tier's centres within `radius` plus its largest semi-axis.
+    fn candidates(&self, p: DVec3, radius: f64) -> impl Iterator<Item = (usize, f64)> + '_ {
+        self.inner.tiers.iter().flat_map(move |tier| {
+            let reach = radius + tier.reach;
+            tier.tree
+                .query(&p.to_array())
+                .within::<SquaredEuclidean<f64>>(reach * reach)
+                .unsorted()
+                .execute()
+                .into_iter()
+                .map(|neighbour| (tier.members[neighbour.item as usize], neighbour.distance))
+        })
     }
 
     /// Whether no surface lies closer to `p` than `radius` (≥ 0): `p` is outside every
@@ -205,23 +210,14 @@ impl Occupancy {
     /// an ellipsoid whose inscribed or circumscribed sphere decides it is not measured
     /// exactly (the distance to its surface lies between the distances to those spheres).
     pub fn is_clear(&self, p: DVec3, radius: f64) -> bool {
-        for tier in &self.inner.tiers {
-            let reach = radius + tier.reach;
-            let found = tier
-                .tree
-                .query(&p.to_array())
-                .within::<SquaredEuclidean<f64>>(reach * reach)
-                .unsorted()
-                .execute();
-            for neighbour in found {
-                let e = &self.inner.ellipsoids[tier.members[neighbour.item as usize]];
-                let to_centre = neighbour.distance.sqrt();
-                if to_centre - e.radii.max_element() >= radius {
-                    continue;
-                }
-                if to_centre < e.radii.min_element() + radius || e.nearest(p).distance < radius {
-                    return false;
-                }
+        for (index, squared) in self.candidates(p, radius) {
+            let e = &self.inner.ellipsoids[index];
+            let to_centre = squared.sqrt();
+            if to_centre - e.radii.max_element() >= radius {
+                continue;
+            }
+            if to_centre < e.radii.min_element() + radius || e.nearest(p).distance < radius {
+                return false;
             }
         }
         true

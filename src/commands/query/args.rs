@@ -1,31 +1,27 @@
-//! `splatraj query`: what a semantic query selects in a scene, as text (or JSON) and as a
-//! picture (`query.png`, the selection tinted). The scene and source come from the options or
-//! from a run config (`--config RUN.toml`). The work is `splatraj::experiment::query`
-//! ([`ConfigQuery`], [`QueryRequest`], [`PictureOptions`]); this file parses and prints.
+//! The arguments of `splatraj query`, and how they become the library's [`QueryRequest`] and
+//! [`PictureOptions`].
 
 use std::path::PathBuf;
 use std::str::FromStr;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::Args;
-use splatraj::experiment::outputs::write_bytes;
 use splatraj::experiment::query::{
-    ConfigQuery, PictureOptions, QueryRequest, RejectedView, SelectionFailed, parse_direction,
-    parse_region, parse_source_keys, parse_synonyms,
+    PictureOptions, QueryRequest, RejectedView, parse_direction, parse_region, parse_source_keys,
+    parse_synonyms,
 };
 use splatraj::experiment::views::ViewOptions;
-use splatraj::experiment::{Config, Extensions};
 use splatraj_render::backend::BackendKind;
 use splatraj_semantic::selection::{DEFAULT_FLOOR, DEFAULT_TOP_FRACTION};
 use splatraj_semantic::sources::TextKeys;
-use splatraj_semantic::{Activation, ClusterOptions, SelectionOptions, SourceKind, SourceRegistry};
+use splatraj_semantic::{Activation, ClusterOptions, SelectionOptions, SourceKind};
 
 use crate::cli::ReadArgs;
 
 /// Default elevation of the viewing direction above the horizontal, degrees.
 const DEFAULT_ELEVATION_DEGREES: f64 = 30.0;
 /// Name of the picture written into `--out`.
-const IMAGE_NAME: &str = "query.png";
+pub(super) const IMAGE_NAME: &str = "query.png";
 
 /// Options that set the scene or the source, which a run config sets instead.
 const SET_BY_CONFIG: [&str; 20] = [
@@ -58,20 +54,20 @@ pub struct QueryArgs {
     /// keys and text encoder; `[targets.selection]`) are read and built as `splatraj run`
     /// builds them, instead of the scene and source options.
     #[arg(long, value_name = "RUN.toml", conflicts_with_all = SET_BY_CONFIG)]
-    config: Option<PathBuf>,
+    pub(super) config: Option<PathBuf>,
     /// With --config: override a config key, e.g. `targets.selection.floor=0.6`
     /// (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE", requires = "config")]
-    set: Vec<String>,
+    pub(super) set: Vec<String>,
     /// Scene file (INRIA PLY, compressed PLY or SPZ).
     #[arg(long, required_unless_present = "config")]
-    scene: Option<PathBuf>,
+    pub(super) scene: Option<PathBuf>,
     #[command(flatten)]
-    read: ReadArgs,
+    pub(super) read: ReadArgs,
     /// What to look for: a label name or id (labels, custom.gaussian_grouping), any name
     /// (region), a phrase (features, langsplat and the registered language fields).
     #[arg(long)]
-    query: String,
+    pub(super) query: String,
     // Boxed: the source options would make this the largest command by far.
     #[command(flatten)]
     source_options: Box<SourceArgs>,
@@ -81,13 +77,13 @@ pub struct QueryArgs {
     show_rejected: bool,
     /// Output folder for query.png (created if missing).
     #[arg(long, default_value = ".")]
-    out: PathBuf,
+    pub(super) out: PathBuf,
     /// Picture width in pixels.
     #[arg(long, default_value_t = 320)]
-    width: usize,
+    pub(super) width: usize,
     /// Picture height in pixels.
     #[arg(long, default_value_t = 240)]
-    height: usize,
+    pub(super) height: usize,
     /// Elevation of the viewing direction above the horizontal, degrees (the camera looks
     /// down at the selection from this angle).
     #[arg(long, default_value_t = DEFAULT_ELEVATION_DEGREES, allow_negative_numbers = true)]
@@ -104,16 +100,16 @@ pub struct QueryArgs {
     /// Tensor backend: flex (CPU), ndarray or wgpu, among those compiled in [default: the
     /// config's, else flex].
     #[arg(long, value_parser = BackendKind::from_str)]
-    backend: Option<BackendKind>,
+    pub(super) backend: Option<BackendKind>,
     /// Print one JSON object instead of text.
     #[arg(long)]
-    json: bool,
+    pub(super) json: bool,
 }
 
 /// The scene's target source and selection, from the command line (a run config's
 /// `[targets]` sets them instead).
 #[derive(Debug, Args)]
-pub struct SourceArgs {
+pub(super) struct SourceArgs {
     /// Target source: labels, region, features, langsplat, or a registered one,
     /// custom.<name> (custom.feature3dgs, custom.opengaussian, custom.gaussian_grouping,
     /// custom.legaussians; its keys with --source-key); by default `region` when
@@ -187,111 +183,54 @@ pub struct SourceArgs {
     no_cluster: bool,
 }
 
-/// Runs `splatraj query`.
-pub fn run(args: QueryArgs) -> Result<()> {
-    // Cheap checks first, then the scene and the source, then the render; the file last.
-    if args.query.trim().is_empty() {
-        bail!("--query is empty: give a label name, a phrase or a region name");
+impl QueryArgs {
+    /// The picture these options ask for.
+    pub(super) fn picture(&self) -> Result<PictureOptions> {
+        let view = ViewOptions {
+            elevation_degrees: self.elevation,
+            search: !self.fixed_view,
+            up: self
+                .up
+                .as_deref()
+                .map(|up| parse_direction(up, "--up"))
+                .transpose()?,
+        };
+        let rejected = if self.show_rejected {
+            RejectedView::Tinted
+        } else {
+            RejectedView::Hidden
+        };
+        PictureOptions::new(self.width, self.height, view, rejected)
+            .context("the picture (--width, --height, --elevation)")
     }
-    let view = ViewOptions {
-        elevation_degrees: args.elevation,
-        search: !args.fixed_view,
-        up: args
-            .up
-            .as_deref()
-            .map(|up| parse_direction(up, "--up"))
-            .transpose()?,
-    };
-    let rejected = if args.show_rejected {
-        RejectedView::Tinted
-    } else {
-        RejectedView::Hidden
-    };
-    let picture = PictureOptions::new(args.width, args.height, view, rejected)
-        .context("the picture (--width, --height, --elevation)")?;
-    let outcome = match &args.config {
-        Some(path) => {
-            let extensions = Extensions::default();
-            let config = Config::load_with(path, &args.set, &extensions)?;
-            let query = ConfigQuery {
-                query: args.query.clone(),
-                picture,
-                backend: args.backend,
-            };
-            query.run(&config, &extensions)
-        }
-        None => from_options(&args, picture),
-    }
-    .inspect_err(|e| {
-        // Nothing selected: show why before the error.
-        if let Some(failed) = e.downcast_ref::<SelectionFailed>() {
-            match serde_json::to_string_pretty(&failed.explanation) {
-                Ok(json) if args.json => println!("{json}"),
-                _ => print!("{}", failed.explanation.text()),
-            }
-        }
-    })?;
 
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create the output folder {}", args.out.display()))?;
-    let path = args.out.join(IMAGE_NAME);
-    write_bytes(&path, &outcome.png)?;
-    let report = outcome.report(&path);
-    for w in &report.warnings {
-        eprintln!("warning: {w}");
+    /// The request the scene and source options make: they fill the same `[targets]` table a
+    /// run config holds (paths relative to the working directory).
+    pub(super) fn request(&self, picture: PictureOptions) -> Result<QueryRequest> {
+        let options = &self.source_options;
+        Ok(QueryRequest {
+            query: self.query.clone(),
+            source: options.source.clone(),
+            source_keys: parse_source_keys(&options.source_key)?,
+            synonyms: parse_synonyms(&options.synonym)?,
+            region: parse_region(options.region_box.as_deref(), options.sphere.as_deref())?,
+            features: options.features.clone(),
+            text: TextKeys {
+                phrases: options.phrases.clone(),
+                phrase_names: options.phrase_names.clone(),
+                text_encoder: options.text_encoder.clone(),
+                text_activation: options.text_activation,
+                negatives: (!options.negative.is_empty()).then(|| options.negative.clone()),
+                temperature: options.temperature,
+            },
+            latents: options.latents.clone(),
+            checkpoint: options.checkpoint.clone(),
+            selection: SelectionOptions {
+                top_fraction: options.top_fraction,
+                floor: options.floor,
+                cluster: (!options.no_cluster).then(ClusterOptions::default),
+            },
+            picture,
+        })
     }
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
-    } else {
-        print!("{}", report.text());
-    }
-    eprintln!(
-        "wrote {} ({}×{}, {:.1}% of the pixels highlighted)",
-        path.display(),
-        args.width,
-        args.height,
-        100.0 * outcome.highlighted_share
-    );
-    Ok(())
-}
-
-/// The query through the scene and source options: they fill the same `[targets]` table a run
-/// config holds (paths relative to the working directory).
-fn from_options(
-    args: &QueryArgs,
-    picture: PictureOptions,
-) -> Result<splatraj::experiment::query::QueryOutcome> {
-    let options = &args.source_options;
-    let request = QueryRequest {
-        query: args.query.clone(),
-        source: options.source.clone(),
-        source_keys: parse_source_keys(&options.source_key)?,
-        synonyms: parse_synonyms(&options.synonym)?,
-        region: parse_region(options.region_box.as_deref(), options.sphere.as_deref())?,
-        features: options.features.clone(),
-        text: TextKeys {
-            phrases: options.phrases.clone(),
-            phrase_names: options.phrase_names.clone(),
-            text_encoder: options.text_encoder.clone(),
-            text_activation: options.text_activation,
-            negatives: (!options.negative.is_empty()).then(|| options.negative.clone()),
-            temperature: options.temperature,
-        },
-        latents: options.latents.clone(),
-        checkpoint: options.checkpoint.clone(),
-        selection: SelectionOptions {
-            top_fraction: options.top_fraction,
-            floor: options.floor,
-            cluster: (!options.no_cluster).then(ClusterOptions::default),
-        },
-        picture,
-    };
-    let device = args.backend.unwrap_or(BackendKind::Flex).device()?;
-    let path = args
-        .scene
-        .as_deref()
-        .context("--scene (or --config) is needed")?;
-    let scene = args.read.load(path)?.scene;
-    let name = path.display().to_string();
-    request.run(&scene, &name, &SourceRegistry::default(), &device)
 }
