@@ -52,7 +52,7 @@ pub struct BenchRenderArgs {
     /// Timed runs per measurement (the median is reported), after one untimed warm-up.
     #[arg(long, default_value_t = 3)]
     repeats: usize,
-    /// Threads of rayon's global pool (default: rayon's choice, one per core).
+    /// Threads of the rayon pool the passes run in (default: rayon's choice, one per core).
     #[arg(long)]
     threads: Option<usize>,
     /// Tensor backend, among those compiled in.
@@ -90,20 +90,21 @@ pub struct BenchRenderArgs {
 pub fn run(command: BenchCommand) -> Result<()> {
     match command {
         BenchCommand::Render(args) => {
-            if let Some(threads) = args.threads {
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build_global()
-                    .map_err(|e| anyhow!("cannot set up {threads} rayon threads: {e}"))?;
-            }
-            match &args.one {
+            let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
+            // A pool of its own (the global one already runs this command), entered once so
+            // the measured passes start their parallel loops from inside it, as `run` does.
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .map_err(|e| anyhow!("cannot set up {threads} rayon threads: {e}"))?;
+            pool.install(|| match &args.one {
                 Some(spec) => {
                     let row = run_one(&settings(&args), &BenchConfig::parse(spec)?)?;
                     println!("{}", serde_json::to_string(&row)?);
                     Ok(())
                 }
                 None => run_all(&args),
-            }
+            })
         }
     }
 }

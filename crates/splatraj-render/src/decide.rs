@@ -17,20 +17,25 @@ use crate::project::{FOV_CLAMP, LOW_PASS, NORMALISED_DET_FLOOR, world_covariance
 use crate::tiles::{TILE_SIZE, TileGrid};
 
 /// Pose-independent geometry on the host, for the decisions (computed once per scene).
+///
+/// Means, covariances and largest variances are stored **sorted**: in the Morton order of the
+/// means, so block b's members are the positions `b · BLOCK_MEMBERS ..` and a pass reads them
+/// sequentially. In scene order, a block's members are scattered over the arrays and each read
+/// was a cache miss (a perf profile put half of the deciding time on those two loads).
 #[derive(Debug, Clone, Default)]
 pub struct HostGeometry {
-    /// Means, world coordinates.
+    /// Means, world coordinates, sorted. `[N]`
     pub means: Vec<[f32; 3]>,
-    /// World covariances (xx, xy, xz, yy, yz, zz).
+    /// World covariances (xx, xy, xz, yy, yz, zz), sorted. `[N]`
     pub covariances: Vec<[f32; 6]>,
-    /// Largest eigenvalue of each world covariance (the squared largest scale).
+    /// Largest eigenvalue of each world covariance (the squared largest scale), sorted. `[N]`
     pub max_variance: Vec<f32>,
-    /// Opacities (for the `min_opacity` approximation).
+    /// Opacities in scene order (for the `min_opacity` approximation). `[N]`
     pub opacities: Vec<f32>,
     /// Gaussians grouped by place, so a pose can skip the groups it cannot see.
     pub blocks: Vec<Block>,
-    /// Index into [`HostGeometry::blocks`] of each Gaussian. `[N]`
-    pub block_of: Vec<u32>,
+    /// Scene index of the Gaussian at each sorted position. `[N]`
+    pub scene_from_sorted: Vec<u32>,
 }
 
 /// Neighbouring Gaussians (consecutive in Morton order of their means), bounded as a whole.
@@ -62,6 +67,7 @@ fn bounding_box(points: impl Iterator<Item = DVec3>) -> (DVec3, DVec3) {
 
 /// Groups the Gaussians into [`Block`]s: sorted by a 30-bit Morton code of their means (10 bits
 /// per axis over the scene's bounding box), then cut into runs of [`BLOCK_MEMBERS`].
+/// Returns the blocks and the Gaussian indices in block order.
 fn spatial_blocks(means: &[[f32; 3]], max_variance: &[f32]) -> (Vec<Block>, Vec<u32>) {
     let finite = means.iter().filter(|m| m.iter().all(|v| v.is_finite()));
     let (lo, hi) = bounding_box(finite.map(|m| DVec3::from(m.map(f64::from))));
@@ -85,11 +91,9 @@ fn spatial_blocks(means: &[[f32; 3]], max_variance: &[f32]) -> (Vec<Block>, Vec<
         .map(|(g, m)| (morton(m), g as u32))
         .collect();
     order.par_sort_unstable();
-    let mut block_of = vec![0u32; means.len()];
     let blocks = order
-        .chunks(BLOCK_MEMBERS)
-        .enumerate()
-        .map(|(b, members)| {
+        .par_chunks(BLOCK_MEMBERS)
+        .map(|members| {
             let point = |g: u32| DVec3::from(means[g as usize].map(f64::from));
             let (lo, hi) = bounding_box(members.iter().map(|&(_, g)| point(g)));
             let centre = 0.5 * (lo + hi);
@@ -99,7 +103,6 @@ fn spatial_blocks(means: &[[f32; 3]], max_variance: &[f32]) -> (Vec<Block>, Vec<
                 max_variance: 0.0,
             };
             for &(_, g) in members {
-                block_of[g as usize] = b as u32;
                 // f64::max skips NaN: a non-finite member makes the radius infinite below.
                 let distance = (point(g) - centre).length();
                 block.radius = if distance.is_finite() {
@@ -114,32 +117,39 @@ fn spatial_blocks(means: &[[f32; 3]], max_variance: &[f32]) -> (Vec<Block>, Vec<
             block
         })
         .collect();
-    (blocks, block_of)
+    (blocks, order.into_iter().map(|(_, g)| g).collect())
 }
 
 impl HostGeometry {
     /// From a scene's means, scales and rotations (Σ computed in f64, stored in f32).
     pub fn new(scene: &Scene) -> Self {
-        let covariances = (0..scene.len())
-            .into_par_iter()
-            .map(|i| {
-                let s = world_covariance(scene.scales[i], scene.rotations[i]);
-                [s[0], s[1], s[2], s[4], s[5], s[8]].map(|v| v as f32)
-            })
-            .collect();
         let max_variance: Vec<f32> = scene
             .scales
             .iter()
             .map(|s| s.iter().fold(0.0f32, |m, &v| m.max(v * v)))
             .collect();
-        let (blocks, block_of) = spatial_blocks(&scene.means, &max_variance);
+        let (blocks, scene_from_sorted) = spatial_blocks(&scene.means, &max_variance);
+        let covariances = scene_from_sorted
+            .par_iter()
+            .map(|&g| {
+                let g = g as usize;
+                let s = world_covariance(scene.scales[g], scene.rotations[g]);
+                [s[0], s[1], s[2], s[4], s[5], s[8]].map(|v| v as f32)
+            })
+            .collect();
         HostGeometry {
-            means: scene.means.clone(),
+            means: scene_from_sorted
+                .iter()
+                .map(|&g| scene.means[g as usize])
+                .collect(),
             covariances,
-            max_variance,
+            max_variance: scene_from_sorted
+                .iter()
+                .map(|&g| max_variance[g as usize])
+                .collect(),
             opacities: scene.opacities.clone(),
             blocks,
-            block_of,
+            scene_from_sorted,
         }
     }
 
@@ -154,30 +164,51 @@ impl HostGeometry {
     }
 }
 
-/// Screen data of every Gaussian for every pose, flat `[B · N]` (means `[B · N · 2]`).
-///
-/// Positions and depths are meaningful only where `visible`: a Gaussian whose whole block the
-/// pose cannot see is skipped and keeps zeros.
-#[derive(Debug, Clone, Default)]
-pub struct Decisions {
-    /// Pixel coordinates (u, v) of the projected means.
-    pub means_2d: Vec<f32>,
-    /// Camera depths z.
-    pub depth: Vec<f32>,
-    /// Pixel radii ceil(3·sqrt(λ_max(Σ_2D))); 0 where culled.
-    pub radii: Vec<f32>,
-    /// In front of the near plane with an invertible 2D covariance.
-    pub visible: Vec<bool>,
+/// What one pose decided about one Gaussian it keeps (in front of the near plane, with an
+/// invertible 2D covariance, and able to reach the pass's tiles).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Decided {
+    /// Index of the Gaussian in the scene.
+    pub gaussian: u32,
+    /// Pixel coordinates (u, v) of the projected mean.
+    pub means_2d: [f32; 2],
+    /// Camera depth z.
+    pub depth: f32,
+    /// Pixel radius ceil(3·sqrt(λ_max(Σ_2D))), positive.
+    pub radius: f32,
 }
 
-/// Projects every Gaussian for every pose and decides its cull, radius and depth.
+/// The Gaussians each pose keeps, `[B][kept]` in no particular order.
+///
+/// Sparse on purpose: a pass visits only the spatial blocks a pose can see (or, in a mask pass,
+/// the object and what can cover it), and nothing in it allocates or scans `[B · N]`; on large
+/// scenes that fixed cost was most of a pruned pass.
+#[derive(Debug, Clone, Default)]
+pub struct Decisions {
+    /// Per pose, the Gaussians it keeps.
+    pub kept: Vec<Vec<Decided>>,
+}
+
+impl Decisions {
+    /// Pose `b`'s decision for each of the scene's `n` Gaussians (`None` where culled or
+    /// skipped): a dense view for tests and diagnostics.
+    pub fn dense(&self, b: usize, n: usize) -> Vec<Option<Decided>> {
+        let mut dense = vec![None; n];
+        for decided in &self.kept[b] {
+            dense[decided.gaussian as usize] = Some(*decided);
+        }
+        dense
+    }
+}
+
+/// Projects the Gaussians each pose can see and decides their cull, radius and depth.
 ///
 /// With `focus` (a mask pass's object, one flag per Gaussian), the object's Gaussians are
 /// decided first; the others are then decided only where their bounded square reaches the box
 /// of tiles the object touches in that pose and they are no deeper than the object's deepest
-/// Gaussian there, and are marked not visible elsewhere. That changes no tile list the pass
-/// uses: binning keeps only the object's tiles, and cuts each list after the object's last
-/// Gaussian, which a deeper one always follows.
+/// Gaussian there, and are left out elsewhere. That changes no tile list the pass uses:
+/// binning keeps only the object's tiles, and cuts each list after the object's last Gaussian,
+/// which a deeper one always follows.
 pub fn decide(
     geometry: &HostGeometry,
     poses: &[Pose],
@@ -185,14 +216,6 @@ pub fn decide(
     near: f64,
     focus: Option<&[bool]>,
 ) -> Decisions {
-    let n = geometry.len();
-    let total = n * poses.len();
-    let mut decisions = Decisions {
-        means_2d: vec![0.0; 2 * total],
-        depth: vec![0.0; total],
-        radii: vec![0.0; total],
-        visible: vec![false; total],
-    };
     let grid = TileGrid::new(intrinsics.width, intrinsics.height);
     // The tile grid's extent in whole tiles: a square that reaches into the last partial tile
     // is listed there, as the binning rule says.
@@ -202,58 +225,64 @@ pub fn decide(
         (grid.tiles_x * TILE_SIZE) as f64,
         (grid.tiles_y * TILE_SIZE) as f64,
     ];
-    for (b, pose) in poses.iter().enumerate() {
-        let camera = Camera::new(pose, intrinsics, near);
-        let range = b * n..(b + 1) * n;
-        let mut out = Out {
-            means_2d: &mut decisions.means_2d[2 * range.start..2 * range.end],
-            depth: &mut decisions.depth[range.clone()],
-            radii: &mut decisions.radii[range.clone()],
-            visible: &mut decisions.visible[range],
-        };
-        let Some(focus) = focus else {
-            out.pass(&camera, geometry, &|_| true, Reach::everywhere(whole_grid));
-            continue;
-        };
-        out.pass(
-            &camera,
-            geometry,
-            &|g| focus[g],
-            Reach::everywhere(whole_grid),
-        );
-        // The box of tiles the object touches (in pixels), then everything else against it.
-        let mut tiles = [
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-        ];
-        let mut deepest = f32::NEG_INFINITY;
-        for g in (0..n).filter(|&g| focus[g] && out.visible[g]) {
-            let (u, v) = (
-                f64::from(out.means_2d[2 * g]),
-                f64::from(out.means_2d[2 * g + 1]),
-            );
-            let (xs, ys) = grid.touched(u, v, f64::from(out.radii[g]));
-            if xs.is_empty() || ys.is_empty() {
-                continue;
-            }
-            deepest = deepest.max(out.depth[g]);
-            let size = TILE_SIZE as f64;
-            tiles[0] = tiles[0].min(xs.start as f64 * size);
-            tiles[1] = tiles[1].min(ys.start as f64 * size);
-            tiles[2] = tiles[2].max(xs.end as f64 * size);
-            tiles[3] = tiles[3].max(ys.end as f64 * size);
-        }
-        if tiles[0] < tiles[2] {
-            let reach = Reach {
-                bounds: tiles,
-                max_depth: deepest,
+    // The object's sorted positions, listed once for all poses (an object is a small part of
+    // a scene, and its positions are close together).
+    let in_focus =
+        |k: usize| focus.is_some_and(|focus| focus[geometry.scene_from_sorted[k] as usize]);
+    let object: Option<Vec<u32>> = focus.map(|_| {
+        (0..geometry.len() as u32)
+            .into_par_iter()
+            .filter(|&k| in_focus(k as usize))
+            .collect()
+    });
+    let kept = poses
+        .iter()
+        .map(|pose| {
+            let camera = Camera::new(pose, intrinsics, near);
+            let Some(object) = &object else {
+                return camera.decide_blocks(geometry, &|_| true, Reach::everywhere(whole_grid));
             };
-            out.pass(&camera, geometry, &|g| !focus[g], reach);
-        }
-    }
-    decisions
+            let mut kept: Vec<Decided> = object
+                .par_chunks(CHUNK)
+                .flat_map_iter(|chunk| {
+                    let (camera, reach) = (&camera, Reach::everywhere(whole_grid));
+                    chunk
+                        .iter()
+                        .filter_map(move |&k| camera.kept(geometry, k, reach))
+                })
+                .collect();
+            // The box of tiles the object touches (in pixels), then everything else against it.
+            let mut tiles = [
+                f64::INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::NEG_INFINITY,
+            ];
+            let mut deepest = f32::NEG_INFINITY;
+            for decided in &kept {
+                let [u, v] = decided.means_2d.map(f64::from);
+                let (xs, ys) = grid.touched(u, v, f64::from(decided.radius));
+                if xs.is_empty() || ys.is_empty() {
+                    continue;
+                }
+                deepest = deepest.max(decided.depth);
+                let size = TILE_SIZE as f64;
+                tiles[0] = tiles[0].min(xs.start as f64 * size);
+                tiles[1] = tiles[1].min(ys.start as f64 * size);
+                tiles[2] = tiles[2].max(xs.end as f64 * size);
+                tiles[3] = tiles[3].max(ys.end as f64 * size);
+            }
+            if tiles[0] < tiles[2] {
+                let reach = Reach {
+                    bounds: tiles,
+                    max_depth: deepest,
+                };
+                kept.extend(camera.decide_blocks(geometry, &|k| !in_focus(k), reach));
+            }
+            kept
+        })
+        .collect();
+    Decisions { kept }
 }
 
 /// Where a pass's Gaussians must land to matter.
@@ -276,54 +305,8 @@ impl Reach {
     }
 }
 
-/// Gaussians per parallel block of the decision pass.
-const BLOCK: usize = 4096;
-
-/// One pose's share of [`Decisions`].
-struct Out<'a> {
-    means_2d: &'a mut [f32],
-    depth: &'a mut [f32],
-    radii: &'a mut [f32],
-    visible: &'a mut [bool],
-}
-
-impl Out<'_> {
-    /// Decides the Gaussians `select` picks, in parallel blocks, against `reach`.
-    fn pass(
-        &mut self,
-        camera: &Camera,
-        geometry: &HostGeometry,
-        select: &(dyn Fn(usize) -> bool + Sync),
-        reach: Reach,
-    ) {
-        let reachable: Vec<bool> = geometry
-            .blocks
-            .par_iter()
-            .map(|block| camera.may_reach(block, reach))
-            .collect();
-        let select = |g: usize| select(g) && reachable[geometry.block_of[g] as usize];
-        self.means_2d
-            .par_chunks_mut(2 * BLOCK)
-            .zip(self.depth.par_chunks_mut(BLOCK))
-            .zip(self.radii.par_chunks_mut(BLOCK))
-            .zip(self.visible.par_chunks_mut(BLOCK))
-            .enumerate()
-            .for_each(|(block, (((means_2d, depth), radii), visible))| {
-                for j in 0..depth.len() {
-                    let g = block * BLOCK + j;
-                    if !select(g) {
-                        continue;
-                    }
-                    let (uv, z, radius) = camera.decide(geometry, g, reach);
-                    means_2d[2 * j] = uv[0] as f32;
-                    means_2d[2 * j + 1] = uv[1] as f32;
-                    depth[j] = z as f32;
-                    radii[j] = radius.unwrap_or(0.0);
-                    visible[j] = radius.is_some();
-                }
-            });
-    }
-}
+/// Gaussians per parallel task when deciding a list of them.
+const CHUNK: usize = 1024;
 
 /// One pose's camera, set up for deciding Gaussians.
 struct Camera {
@@ -335,6 +318,41 @@ struct Camera {
 }
 
 impl Camera {
+    /// The Gaussians `select` picks (by sorted position) that this pose keeps, from the blocks
+    /// that may reach `reach` (in parallel over blocks).
+    fn decide_blocks(
+        &self,
+        geometry: &HostGeometry,
+        select: &(dyn Fn(usize) -> bool + Sync),
+        reach: Reach,
+    ) -> Vec<Decided> {
+        let n = geometry.len();
+        geometry
+            .blocks
+            .par_iter()
+            .enumerate()
+            .filter(|(_, block)| self.may_reach(block, reach))
+            .flat_map_iter(|(b, _)| {
+                let members = b * BLOCK_MEMBERS..((b + 1) * BLOCK_MEMBERS).min(n);
+                members
+                    .filter(|&k| select(k))
+                    .filter_map(move |k| self.kept(geometry, k as u32, reach))
+            })
+            .collect()
+    }
+
+    /// The decision on the Gaussian at sorted position `k`, if this pose keeps it
+    /// ([`Camera::decide`]).
+    fn kept(&self, geometry: &HostGeometry, k: u32, reach: Reach) -> Option<Decided> {
+        let (uv, z, radius) = self.decide(geometry, k as usize, reach);
+        Some(Decided {
+            gaussian: geometry.scene_from_sorted[k as usize],
+            means_2d: uv.map(|c| c as f32),
+            depth: z as f32,
+            radius: radius?,
+        })
+    }
+
     fn new(pose: &Pose, intrinsics: &Intrinsics, near: f64) -> Self {
         let r = pose.rotation_wc();
         let (tan_x, tan_y) = intrinsics.tan_half_fov();
@@ -398,20 +416,20 @@ impl Camera {
             || v_lo - bound > bounds[3])
     }
 
-    /// Pixel position, depth and radius (`None` if culled) of Gaussian `g`. A Gaussian whose
-    /// bounded square misses `reach.bounds` ([x0, y0, x1, y1], pixels), or whose stored depth
-    /// is beyond `reach.max_depth`, gets `None` without its covariance being projected: it
-    /// would be in no tile list there.
+    /// Pixel position, depth and radius (`None` if culled) of the Gaussian at sorted position
+    /// `k`. A Gaussian whose bounded square misses `reach.bounds` ([x0, y0, x1, y1], pixels),
+    /// or whose stored depth is beyond `reach.max_depth`, gets `None` without its covariance
+    /// being projected: it would be in no tile list there.
     fn decide(
         &self,
         geometry: &HostGeometry,
-        g: usize,
+        k: usize,
         reach: Reach,
     ) -> ([f64; 2], f64, Option<f32>) {
         let bounds = reach.bounds;
         let Intrinsics { fx, fy, cx, cy, .. } = self.intrinsics;
         let [r0, r1, r2] = self.r;
-        let d = DVec3::from(geometry.means[g].map(f64::from)) - self.centre;
+        let d = DVec3::from(geometry.means[k].map(f64::from)) - self.centre;
         let (x, y, z) = (d.dot(r0), d.dot(r1), d.dot(r2));
         let z_safe = z.max(self.near);
         let (xz, yz) = (x / z_safe, y / z_safe);
@@ -422,7 +440,7 @@ impl Camera {
         );
         // λ_max(Σ_2D) ≤ ‖J‖²_F·λ_max(Σ) + 0.3 bounds the radius.
         let j_norm2 = (fx * fx * (1.0 + tx * tx) + fy * fy * (1.0 + ty * ty)) / (z_safe * z_safe);
-        let bound = 3.0 * (j_norm2 * f64::from(geometry.max_variance[g]) + LOW_PASS).sqrt() + 1.0;
+        let bound = 3.0 * (j_norm2 * f64::from(geometry.max_variance[k]) + LOW_PASS).sqrt() + 1.0;
         if z <= self.near
             || (z as f32) > reach.max_depth
             || u + bound < bounds[0]
@@ -434,7 +452,7 @@ impl Camera {
         }
         let t1 = r0 * (fx / z_safe) + r2 * (-fx * tx / z_safe);
         let t2 = r1 * (fy / z_safe) + r2 * (-fy * ty / z_safe);
-        let [sxx, sxy, sxz, syy, syz, szz] = geometry.covariances[g].map(f64::from);
+        let [sxx, sxy, sxz, syy, syz, szz] = geometry.covariances[k].map(f64::from);
         let sigma = |t: DVec3| {
             DVec3::new(
                 sxx * t.x + sxy * t.y + sxz * t.z,

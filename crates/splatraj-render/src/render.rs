@@ -18,7 +18,7 @@ use crate::rasterize::{
 };
 use crate::sh::{ShTensors, sh_colours};
 use crate::stages::{self, Stage};
-use crate::tiles::{ScreenData, TileGrid, TileSelection, bin_tiles};
+use crate::tiles::{TileGrid, TileSelection, bin_tiles};
 
 /// One channel of a render.
 #[derive(Debug, Clone)]
@@ -232,27 +232,16 @@ pub fn render(
     );
     let min_opacity = request.approximations.min_opacity as f32;
     if min_opacity > 0.0 {
-        for (visible, &opacity) in decisions
-            .visible
-            .iter_mut()
-            .zip(scene.host.opacities.iter().cycle())
-        {
-            *visible &= opacity >= min_opacity;
+        for kept in &mut decisions.kept {
+            kept.retain(|decided| scene.host.opacities[decided.gaussian as usize] >= min_opacity);
         }
     }
     let decided = started.elapsed();
-    let screen = ScreenData {
-        n,
-        means_2d: &decisions.means_2d,
-        depth: &decisions.depth,
-        radii: &decisions.radii,
-        visible: &decisions.visible,
-    };
     let selection = match &in_object {
         Some(in_object) => TileSelection::Object(in_object),
         None => TileSelection::All,
     };
-    let mut work = bin_tiles(&screen, batch, &grid, selection);
+    let mut work = bin_tiles(&decisions, &grid, selection);
     let binned = started.elapsed();
 
     // used[u] = scene index of the u-th Gaussian some tile needs; lists are renumbered to u.

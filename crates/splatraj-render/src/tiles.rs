@@ -8,6 +8,8 @@
 
 use rayon::prelude::*;
 
+use crate::decide::{Decided, Decisions};
+
 /// Tile edge in pixels (INRIA 3DGS).
 pub const TILE_SIZE: usize = 16;
 /// Pixels per tile.
@@ -89,61 +91,39 @@ pub struct TileWork {
     pub gaussians: Vec<u32>,
 }
 
-/// Per-pose screen-space data pulled to the host, flat `[B · N]` (means `[B · N · 2]`).
-#[derive(Debug, Clone, Copy)]
-pub struct ScreenData<'a> {
-    /// Number of Gaussians per pose.
-    pub n: usize,
-    /// Pixel coordinates (u, v) of the projected means.
-    pub means_2d: &'a [f32],
-    /// Camera depths z.
-    pub depth: &'a [f32],
-    /// Pixel radii ceil(3·sqrt(λ_max)).
-    pub radii: &'a [f32],
-    /// Cull decisions (in front of the near plane, invertible 2D covariance).
-    pub visible: &'a [bool],
-}
-
-/// Bins every visible Gaussian of every pose into tiles and sorts each tile front to back.
+/// Bins the Gaussians every pose keeps into tiles and sorts each tile front to back.
 ///
 /// Returns only non-empty tiles (after pruning), ordered by (batch, tile).
 pub fn bin_tiles(
-    screen: &ScreenData,
-    batch: usize,
+    decisions: &Decisions,
     grid: &TileGrid,
     selection: TileSelection,
 ) -> Vec<TileWork> {
-    (0..batch)
-        .into_par_iter()
-        .flat_map_iter(|b| bin_one_pose(screen, b, grid, selection))
+    decisions
+        .kept
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(b, kept)| bin_one_pose(kept, b, grid, selection))
         .collect()
 }
 
 fn bin_one_pose(
-    screen: &ScreenData,
+    kept: &[Decided],
     b: usize,
     grid: &TileGrid,
     selection: TileSelection,
 ) -> Vec<TileWork> {
-    let n = screen.n;
-    // Tile rectangle [x0, x1) × [y0, y1) of every visible Gaussian, computed once.
-    let rects: Vec<[u16; 4]> = (0..n)
-        .into_par_iter()
-        .map(|g| {
-            let i = b * n + g;
-            if !screen.visible[i] || screen.radii[i] <= 0.0 {
-                return [0; 4];
-            }
-            let (u, v) = (
-                screen.means_2d[2 * i] as f64,
-                screen.means_2d[2 * i + 1] as f64,
-            );
-            let (xs, ys) = grid.touched(u, v, screen.radii[i] as f64);
+    // Tile rectangle [x0, x1) × [y0, y1) of every kept Gaussian, computed once. `[kept]`
+    let rects: Vec<[u16; 4]> = kept
+        .par_iter()
+        .map(|decided| {
+            let [u, v] = decided.means_2d.map(f64::from);
+            let (xs, ys) = grid.touched(u, v, f64::from(decided.radius));
             [xs.start, xs.end, ys.start, ys.end].map(|t| t as u16)
         })
         .collect();
-    let tiles_of = |g: usize| {
-        let [x0, x1, y0, y1] = rects[g].map(usize::from);
+    let tiles_of = |k: usize| {
+        let [x0, x1, y0, y1] = rects[k].map(usize::from);
         (y0..y1).flat_map(move |ty| (x0..x1).map(move |tx| ty * grid.tiles_x + tx))
     };
     // A mask pass needs only the tiles its object touches.
@@ -151,26 +131,31 @@ fn bin_one_pose(
         TileSelection::All => vec![true; grid.len()],
         TileSelection::Object(in_object) => {
             let mut wanted = vec![false; grid.len()];
-            for g in (0..n).filter(|&g| in_object[g]) {
-                for tile in tiles_of(g) {
+            for k in (0..kept.len()).filter(|&k| in_object[kept[k].gaussian as usize]) {
+                for tile in tiles_of(k) {
                     wanted[tile] = true;
                 }
             }
             wanted
         }
     };
-    // Gaussians that touch a wanted tile, front to back (ties by index), sorted once for all
-    // tiles: pushing them in this order leaves every list sorted. (depth, index) is one u64.
-    let mut order: Vec<u64> = (0..n)
+    // Gaussians that touch a wanted tile, front to back (ties by scene index), sorted once for
+    // all tiles: pushing them in this order leaves every list sorted. (depth, index) is one
+    // u64, unique within a pose; the position in `kept` rides along to find the rectangle.
+    let mut order: Vec<(u64, u32)> = (0..kept.len())
         .into_par_iter()
-        .filter(|&g| tiles_of(g).any(|tile| wanted[tile]))
-        .map(|g| (u64::from(ordered_bits(screen.depth[b * n + g])) << 32) | g as u64)
+        .filter(|&k| tiles_of(k).any(|tile| wanted[tile]))
+        .map(|k| {
+            let decided = &kept[k];
+            let key = (u64::from(ordered_bits(decided.depth)) << 32) | u64::from(decided.gaussian);
+            (key, k as u32)
+        })
         .collect();
-    order.par_sort_unstable();
+    order.par_sort_unstable_by_key(|&(key, _)| key);
     let mut lists: Vec<Vec<u32>> = vec![Vec::new(); grid.len()];
-    for key in order {
+    for (key, k) in order {
         let g = key as u32; // the low 32 bits
-        for tile in tiles_of(g as usize).filter(|&tile| wanted[tile]) {
+        for tile in tiles_of(k as usize).filter(|&tile| wanted[tile]) {
             lists[tile].push(g);
         }
     }

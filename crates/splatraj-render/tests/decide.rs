@@ -88,7 +88,11 @@ fn host_decisions_match_the_tensor_projection() {
     ];
     let (radii, visible, _, means) = tensor_projection(&scene, &poses, &k);
 
-    let host = decide(&HostGeometry::new(&scene), &poses, &k, NEAR_PLANE, None);
+    let decisions = decide(&HostGeometry::new(&scene), &poses, &k, NEAR_PLANE, None);
+    let n = scene.len();
+    let host: Vec<_> = (0..poses.len())
+        .flat_map(|b| decisions.dense(b, n))
+        .collect();
     let (mut on_grid, mut skipped) = (0, 0);
     for i in 0..visible.len() {
         let (u, v, r) = (means[2 * i], means[2 * i + 1], radii[i] as f64);
@@ -96,24 +100,23 @@ fn host_decisions_match_the_tensor_projection() {
         let reaches_grid = visible[i] && !xs.is_empty() && !ys.is_empty();
         if reaches_grid {
             on_grid += 1;
-            assert!(
-                host.visible[i],
-                "Gaussian {i}: visible on the grid, culled by the host"
-            );
-            assert_eq!(host.radii[i], radii[i], "Gaussian {i}: radius");
-            let du = (host.means_2d[2 * i] as f64 - u).abs();
-            let dv = (host.means_2d[2 * i + 1] as f64 - v).abs();
+            let Some(kept) = host[i] else {
+                panic!("Gaussian {i}: visible on the grid, culled by the host");
+            };
+            assert_eq!(kept.radius, radii[i], "Gaussian {i}: radius");
+            let du = (kept.means_2d[0] as f64 - u).abs();
+            let dv = (kept.means_2d[1] as f64 - v).abs();
             assert!(
                 du.max(dv) < 1e-3 * (1.0 + u.abs().max(v.abs())),
                 "Gaussian {i}: position"
             );
         } else if !visible[i] {
             assert!(
-                !host.visible[i],
+                host[i].is_none(),
                 "Gaussian {i}: culled by the tensor path, not by the host"
             );
         } else {
-            skipped += usize::from(!host.visible[i]);
+            skipped += usize::from(host[i].is_none());
         }
     }
     assert!(on_grid > 1000, "enough Gaussians on screen ({on_grid})");
@@ -158,7 +161,7 @@ fn focused_decisions_keep_every_gaussian_in_front_of_the_object_on_its_tiles() {
         Pose::look_at(DVec3::new(-2.0, -1.5, 0.3), object, DVec3::Z).unwrap(),
     ];
     let (radii, visible, depth, means) = tensor_projection(&scene, &poses, &k);
-    let host = decide(
+    let decisions = decide(
         &HostGeometry::new(&scene),
         &poses,
         &k,
@@ -167,6 +170,9 @@ fn focused_decisions_keep_every_gaussian_in_front_of_the_object_on_its_tiles() {
     );
 
     let n = scene.len();
+    let host: Vec<_> = (0..poses.len())
+        .flat_map(|b| decisions.dense(b, n))
+        .collect();
     let tiles = |i: usize| grid.touched(means[2 * i], means[2 * i + 1], radii[i] as f64);
     let (mut needed, mut skipped, mut behind) = (0, 0, 0);
     for b in 0..poses.len() {
@@ -193,21 +199,22 @@ fn focused_decisions_keep_every_gaussian_in_front_of_the_object_on_its_tiles() {
             // A relative margin keeps the f32 rounding of stored depths out of the comparison.
             let in_front = depth[i] < deepest * (1.0 - 1e-6);
             if visible[i] && overlaps && !in_front && !in_object {
-                behind += usize::from(depth[i] > deepest * (1.0 + 1e-6) && !host.visible[i]);
+                behind += usize::from(depth[i] > deepest * (1.0 + 1e-6) && host[i].is_none());
             } else if visible[i] && overlaps {
                 needed += 1;
-                assert!(
-                    host.visible[i],
-                    "pose {b}, Gaussian {g}: reaches the object's tiles, culled by the host"
-                );
-                assert_eq!(host.radii[i], radii[i], "pose {b}, Gaussian {g}: radius");
+                let Some(kept) = host[i] else {
+                    panic!(
+                        "pose {b}, Gaussian {g}: reaches the object's tiles, culled by the host"
+                    );
+                };
+                assert_eq!(kept.radius, radii[i], "pose {b}, Gaussian {g}: radius");
             } else if !visible[i] {
                 assert!(
-                    !host.visible[i],
+                    host[i].is_none(),
                     "pose {b}, Gaussian {g}: culled by the tensor path, not by the host"
                 );
             } else {
-                skipped += usize::from(!host.visible[i]);
+                skipped += usize::from(host[i].is_none());
             }
         }
     }
