@@ -75,6 +75,10 @@ pub fn interrupt_flag() -> Arc<AtomicBool> {
 /// Exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells expect).
 pub const EXIT_INTERRUPTED: u8 = 130;
 
+/// Stack of each rayon worker: commands run on one (`main`), so it gets a main thread's usual
+/// 8 MiB rather than rayon's 2 MiB default.
+pub const WORKER_STACK_BYTES: usize = 8 << 20;
+
 /// A command stopped by Ctrl-C after writing what it had: `main` prints the message and exits
 /// with [`EXIT_INTERRUPTED`].
 #[derive(Debug)]

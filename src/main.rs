@@ -73,6 +73,14 @@ fn main() -> ExitCode {
     }));
 
     let cli = Cli::parse();
+    // Threads: RAYON_NUM_THREADS, else one per core (rayon's rule).
+    if let Err(error) = rayon::ThreadPoolBuilder::new()
+        .stack_size(cli::WORKER_STACK_BYTES)
+        .build_global()
+    {
+        eprintln!("error: cannot start the worker threads: {error}");
+        return ExitCode::FAILURE;
+    }
     // The command runs on a worker of rayon's pool, not on the main thread: a parallel loop
     // started from outside the pool hands its work over and sleeps until a worker wakes it,
     // and a mask pass starts about twenty of them (decide, bin, the compositing kernels, burn's

@@ -95,6 +95,7 @@ pub fn run(command: BenchCommand) -> Result<()> {
             // the measured passes start their parallel loops from inside it, as `run` does.
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
+                .stack_size(crate::cli::WORKER_STACK_BYTES)
                 .build()
                 .map_err(|e| anyhow!("cannot set up {threads} rayon threads: {e}"))?;
             pool.install(|| match &args.one {
