@@ -177,8 +177,21 @@ impl Occupancy {
     /// The nearest surface among the ellipsoids whose surface may lie within `radius` of `p`
     /// (None when none does). Exact whenever the returned distance is ≤ `radius`.
     pub fn nearest_within(&self, p: DVec3, radius: f64) -> Option<Contact> {
+        // An ellipsoid's signed surface distance is at least the distance to its centre minus
+        // its largest semi-axis (it lies inside that ball). Measured in the order of that
+        // bound, the exact solve (a bisection) stops once the bound reaches the best distance:
+        // on a 3M-Gaussian scene the clearance metric spent 76 % of a run solving for
+        // ellipsoids that could not be the nearest.
+        let mut bounded: Vec<(f64, usize)> = self
+            .candidates(p, radius)
+            .map(|(index, squared)| (squared.sqrt() - self.inner.ellipsoids[index].reach(), index))
+            .collect();
+        bounded.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let mut best: Option<Contact> = None;
-        for (index, _) in self.candidates(p, radius) {
+        for (bound, index) in bounded {
+            if best.is_some_and(|b| bound >= b.surface.distance) {
+                break;
+            }
             let surface = self.inner.ellipsoids[index].nearest(p);
             if best.is_none_or(|b| surface.distance < b.surface.distance) {
                 best = Some(Contact {
