@@ -146,13 +146,8 @@ fn config_query_selects_a_gaussian_grouping_instance() {
     );
 }
 
-#[test]
-fn config_query_builds_the_demo_room_as_runs_do() {
-    // A run config of the demo room (labels): the scene is generated, its up is the room's.
-    let dir = tempfile::tempdir().unwrap();
-    let config = dir.path().join("tiny.toml");
-    std::fs::write(&config, TINY_CONFIG).unwrap();
-    let report = json_report(&query_config(dir.path(), &config, "blue box", &["--json"]));
+/// Gaussians of the tiny config's demo room (3000, seed 7) labelled `name`.
+fn demo_label_count(name: &str) -> usize {
     let scene = splatraj_scene::demo::demo_scene(&splatraj_scene::demo::DemoConfig {
         seed: 7,
         gaussians: 3000,
@@ -162,10 +157,20 @@ fn config_query_builds_the_demo_room_as_runs_do() {
     let id = labels
         .names
         .iter()
-        .find(|(_, name)| name.as_str() == "blue box")
+        .find(|(_, label)| label.as_str() == name)
         .map(|(&id, _)| id)
         .unwrap();
-    let expected = labels.ids.iter().filter(|&&i| i == id).count();
+    labels.ids.iter().filter(|&&i| i == id).count()
+}
+
+#[test]
+fn config_query_builds_the_demo_room_as_runs_do() {
+    // A run config of the demo room (labels): the scene is generated, its up is the room's.
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("tiny.toml");
+    std::fs::write(&config, TINY_CONFIG).unwrap();
+    let report = json_report(&query_config(dir.path(), &config, "blue box", &["--json"]));
+    let expected = demo_label_count("blue box");
     assert!(expected > 0);
     assert_eq!(report["count"].as_u64().unwrap() as usize, expected);
     assert_eq!(report["source"], "labels");
@@ -176,6 +181,39 @@ fn config_query_builds_the_demo_room_as_runs_do() {
     for i in 0..3 {
         assert!((up[i] - f64::from(demo_up[i])).abs() < 1e-9, "{up:?}");
     }
+}
+
+#[test]
+fn config_without_query_checks_every_query_of_the_config() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("tiny.toml");
+    std::fs::write(&config, TINY_CONFIG).unwrap();
+    let out = dir.path().join("out");
+    let all = query(&out, &["--config", s(&config), "--json"]);
+    let reports = json_report(&all);
+    let reports = reports.as_array().expect("one JSON array of reports");
+    assert_eq!(reports.len(), 2, "the config's two [[queries]]");
+    for (i, (report, name)) in reports.iter().zip(["red mug", "blue box"]).enumerate() {
+        assert_eq!(report["query"], name);
+        assert_eq!(
+            report["count"].as_u64().unwrap() as usize,
+            demo_label_count(name)
+        );
+        assert!(out.join(format!("query-{}.png", i + 1)).is_file());
+    }
+    assert!(!out.join("query.png").exists());
+
+    // As text: a header per query, then its report.
+    let text = query(&out, &["--config", s(&config)]);
+    assert!(text.status.success(), "{}", stderr(&text));
+    let printed = stdout(&text);
+    assert!(printed.contains("== query 1 of 2: red mug"), "{printed}");
+    assert!(printed.contains("== query 2 of 2: blue box"), "{printed}");
+
+    // Without --config, --query is still required (clap's usage error).
+    let missing = query(&out, &["--scene", s(&config)]);
+    assert!(!missing.status.success());
+    assert!(stderr(&missing).contains("--query"), "{}", stderr(&missing));
 }
 
 /// LEGaussians' own relevancy (scale 100, argmax codes, open_clip's embeddings) of

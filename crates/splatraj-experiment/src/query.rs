@@ -32,6 +32,7 @@ use crate::views::{
     CameraReport, FOV_X_DEGREES, ViewOptions, diagnostic_camera, highlighted_picture,
     highlighted_png,
 };
+use splatraj_traj::shots::ShotSpec;
 
 /// Colour of the rejected candidates in `query.png` (cyan, against the selection's magenta).
 pub const REJECTED_RGB: [f64; 3] = [0.1, 0.85, 1.0];
@@ -93,8 +94,6 @@ impl PictureOptions {
 /// read and built as `splatraj run` reads and builds them.
 #[derive(Debug, Clone)]
 pub struct ConfigQuery {
-    /// What to look for, as a `[[queries]] text` would name it.
-    pub query: String,
     /// The picture; a view without `up` takes the config's world up (`[scene] up`, the demo
     /// room's, or the guess), as runs do.
     pub picture: PictureOptions,
@@ -103,10 +102,10 @@ pub struct ConfigQuery {
 }
 
 impl ConfigQuery {
-    /// Loads `config`'s scene, builds its target source from the sources of `extensions`
-    /// (paths relative to the config's folder) and finds and draws the query; writes nothing.
-    /// Errors name the config file and the key (`targets.custom.legaussians.codebook`).
-    pub fn run(&self, config: &Config, extensions: &Extensions) -> Result<QueryOutcome> {
+    /// Loads `config`'s scene and builds its target source from the sources of `extensions`
+    /// (paths relative to the config's folder), ready to find any number of queries. Errors
+    /// name the config file and the key (`targets.custom.legaussians.codebook`).
+    pub fn prepare(&self, config: &Config, extensions: &Extensions) -> Result<PreparedQueries> {
         let at = || format!("config {}", config.path.display());
         let selection = config
             .targets
@@ -125,14 +124,71 @@ impl ConfigQuery {
         if picture.view.up.is_none() && (config.scene.up.is_some() || demo) {
             picture.view.up = Some(resolve_up(config.scene.up, demo, &scene).up);
         }
-        let grounding = Grounding {
-            scene: &scene,
-            scene_name: &scene_name,
-            source: source.as_ref(),
+        Ok(PreparedQueries {
+            scene,
+            scene_name,
+            source,
             kind: config.targets.source.clone(),
-        };
-        find_and_draw(&grounding, &self.query, &selection, &picture, &device)
+            selection,
+            picture,
+            device,
+        })
     }
+
+    /// [`ConfigQuery::prepare`], then finds and draws `query`; writes nothing.
+    pub fn run(
+        &self,
+        config: &Config,
+        extensions: &Extensions,
+        query: &str,
+    ) -> Result<QueryOutcome> {
+        self.prepare(config, extensions)?.find(query)
+    }
+}
+
+/// A config's scene and built source, ready to answer queries ([`ConfigQuery::prepare`]).
+pub struct PreparedQueries {
+    scene: Scene,
+    scene_name: String,
+    source: Box<dyn TargetSource>,
+    kind: SourceKind,
+    selection: SelectionOptions,
+    picture: PictureOptions,
+    device: Device,
+}
+
+impl PreparedQueries {
+    /// Finds and draws `query` ([`find_and_draw`]); writes nothing.
+    pub fn find(&self, query: &str) -> Result<QueryOutcome> {
+        let grounding = Grounding {
+            scene: &self.scene,
+            scene_name: &self.scene_name,
+            source: self.source.as_ref(),
+            kind: self.kind.clone(),
+        };
+        find_and_draw(
+            &grounding,
+            query,
+            &self.selection,
+            &self.picture,
+            &self.device,
+        )
+    }
+}
+
+/// The texts `config` grounds through its target source, in window order: each
+/// `[[queries]] text`, or for a group shot each of its objects. Queries with a `mask` file do
+/// not use the source and are left out.
+pub fn config_query_texts(config: &Config) -> Vec<String> {
+    config
+        .queries
+        .iter()
+        .filter(|q| q.mask.is_none())
+        .flat_map(|q| match &q.shot {
+            Some(ShotSpec::Group(group)) => group.objects.clone(),
+            _ => vec![q.text.clone()],
+        })
+        .collect()
 }
 
 /// What to look for and how, from command-line options: the query, the source (or `None` to

@@ -65,9 +65,11 @@ pub struct QueryArgs {
     #[command(flatten)]
     pub(super) read: ReadArgs,
     /// What to look for: a label name or id (labels, custom.gaussian_grouping), any name
-    /// (region), a phrase (features, langsplat and the registered language fields).
-    #[arg(long)]
-    pub(super) query: String,
+    /// (region), a phrase (features, langsplat and the registered language fields). With
+    /// --config and no --query: every query of the config (group shots' objects included),
+    /// pictured as query-1.png, query-2.png, ….
+    #[arg(long, required_unless_present = "config")]
+    pub(super) query: Option<String>,
     // Boxed: the source options would make this the largest command by far.
     #[command(flatten)]
     source_options: Box<SourceArgs>,
@@ -209,7 +211,10 @@ impl QueryArgs {
     pub(super) fn request(&self, picture: PictureOptions) -> Result<QueryRequest> {
         let options = &self.source_options;
         Ok(QueryRequest {
-            query: self.query.clone(),
+            query: self
+                .query
+                .clone()
+                .context("--query is needed without --config")?,
             source: options.source.clone(),
             source_keys: parse_source_keys(&options.source_key)?,
             synonyms: parse_synonyms(&options.synonym)?,

@@ -8,7 +8,9 @@ mod args;
 
 use anyhow::{Context, Result, bail};
 use splatraj::experiment::outputs::write_bytes;
-use splatraj::experiment::query::{ConfigQuery, PictureOptions, QueryOutcome, SelectionFailed};
+use splatraj::experiment::query::{
+    ConfigQuery, PictureOptions, QueryOutcome, QueryReport, SelectionFailed, config_query_texts,
+};
 use splatraj::experiment::{Config, Extensions};
 use splatraj_render::backend::BackendKind;
 use splatraj_semantic::SourceRegistry;
@@ -18,26 +20,59 @@ pub use args::QueryArgs;
 
 /// Runs `splatraj query`.
 pub fn run(args: QueryArgs) -> Result<()> {
-    // Cheap checks first, then the scene and the source, then the render; the file last.
-    if args.query.trim().is_empty() {
+    // Cheap checks first, then the scene and the source, then the render; the files last.
+    if args.query.as_ref().is_some_and(|q| q.trim().is_empty()) {
         bail!("--query is empty: give a label name, a phrase or a region name");
     }
     let picture = args.picture()?;
-    let outcome = match &args.config {
-        Some(path) => {
-            let extensions = Extensions::default();
-            let config = Config::load_with(path, &args.set, &extensions)?;
-            let query = ConfigQuery {
-                query: args.query.clone(),
-                picture,
-                backend: args.backend,
-            };
-            query.run(&config, &extensions)
-        }
-        None => from_options(&args, picture),
+    let Some(path) = &args.config else {
+        let report = show(&args, from_options(&args, picture), IMAGE_NAME)?;
+        return print_report(&args, &report);
+    };
+    let extensions = Extensions::default();
+    let config = Config::load_with(path, &args.set, &extensions)?;
+    let texts = match &args.query {
+        Some(query) => vec![query.clone()],
+        None => config_query_texts(&config),
+    };
+    if texts.is_empty() {
+        bail!(
+            "config {}: no query to check (every [[queries]] uses a mask file); give --query",
+            path.display()
+        );
     }
-    .inspect_err(|e| {
-        // Nothing selected: show why before the error.
+    let prepared = ConfigQuery {
+        picture,
+        backend: args.backend,
+    }
+    .prepare(&config, &extensions)?;
+    if args.query.is_some() {
+        let report = show(&args, prepared.find(&texts[0]), IMAGE_NAME)?;
+        return print_report(&args, &report);
+    }
+    // Every query of the config, each with its own picture; JSON as one array.
+    let mut reports = Vec::with_capacity(texts.len());
+    for (i, text) in texts.iter().enumerate() {
+        if !args.json {
+            println!("== query {} of {}: {text}", i + 1, texts.len());
+        }
+        let report = show(&args, prepared.find(text), &format!("query-{}.png", i + 1))
+            .with_context(|| format!("query {} ({text:?})", i + 1))?;
+        if !args.json {
+            print!("{}", report.text());
+        }
+        reports.push(report);
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&reports)?);
+    }
+    Ok(())
+}
+
+/// Prints why nothing was selected when that is the error, else writes the picture as
+/// `image_name` into `--out` and returns the report.
+fn show(args: &QueryArgs, outcome: Result<QueryOutcome>, image_name: &str) -> Result<QueryReport> {
+    let outcome = outcome.inspect_err(|e| {
         if let Some(failed) = e.downcast_ref::<SelectionFailed>() {
             match serde_json::to_string_pretty(&failed.explanation) {
                 Ok(json) if args.json => println!("{json}"),
@@ -45,19 +80,13 @@ pub fn run(args: QueryArgs) -> Result<()> {
             }
         }
     })?;
-
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create the output folder {}", args.out.display()))?;
-    let path = args.out.join(IMAGE_NAME);
+    let path = args.out.join(image_name);
     write_bytes(&path, &outcome.png)?;
     let report = outcome.report(&path);
     for w in &report.warnings {
         eprintln!("warning: {w}");
-    }
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
-    } else {
-        print!("{}", report.text());
     }
     eprintln!(
         "wrote {} ({}×{}, {:.1}% of the pixels highlighted)",
@@ -66,6 +95,16 @@ pub fn run(args: QueryArgs) -> Result<()> {
         args.height,
         100.0 * outcome.highlighted_share
     );
+    Ok(report)
+}
+
+/// One query's report, as text or JSON.
+fn print_report(args: &QueryArgs, report: &QueryReport) -> Result<()> {
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(report)?);
+    } else {
+        print!("{}", report.text());
+    }
     Ok(())
 }
 
