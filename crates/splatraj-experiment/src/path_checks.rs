@@ -22,10 +22,20 @@ impl Experiment {
                  seconds`"
             );
         }
-        Ok(self
-            .costs()?
-            .occupancy()
-            .map(|spec| Occupancy::new(&self.scene, spec)))
+        let Some(spec) = self.costs()?.occupancy() else {
+            return Ok(None);
+        };
+        // Built once per spec (`self.scene` is not expected to change after `prepare`).
+        let mut cache = self
+            .occupancy_cache
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(occupancy) = cache.as_ref().filter(|o| o.spec() == spec) {
+            return Ok(Some(occupancy.clone()));
+        }
+        let occupancy = Occupancy::new(&self.scene, spec);
+        *cache = Some(occupancy.clone());
+        Ok(Some(occupancy))
     }
 
     /// Duration of the whole trajectory in seconds (`[output] seconds`), when given.

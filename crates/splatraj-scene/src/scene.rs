@@ -179,10 +179,17 @@ impl Scene {
 
     /// Keeps only the Gaussians for which `keep[i]` is true, in every array and extra.
     pub fn retain(&mut self, keep: &[bool]) {
+        *self = self.subset(keep);
+    }
+
+    /// A new scene of the Gaussians for which `keep[i]` is true, every array and extra
+    /// included; copies only what it keeps (an object of a 3M-Gaussian scene without a copy of
+    /// the whole scene first).
+    pub fn subset(&self, keep: &[bool]) -> Scene {
         assert_eq!(
             keep.len(),
             self.len(),
-            "retain mask length must match the scene"
+            "subset mask length must match the scene"
         );
         fn filter<T: Copy>(values: &[T], keep: &[bool], stride: usize) -> Vec<T> {
             values
@@ -192,19 +199,34 @@ impl Scene {
                 .flat_map(|(v, _)| v.iter().copied())
                 .collect()
         }
-        self.means = filter(&self.means, keep, 1);
-        self.scales = filter(&self.scales, keep, 1);
-        self.rotations = filter(&self.rotations, keep, 1);
-        self.opacities = filter(&self.opacities, keep, 1);
-        self.sh = filter(&self.sh, keep, 3 * self.sh_coeffs());
-        if let Some(labels) = &mut self.extras.labels {
-            labels.ids = filter(&labels.ids, keep, 1);
-        }
-        if let Some(features) = &mut self.extras.features {
-            features.values = filter(&features.values, keep, features.dim.max(1));
-        }
-        for p in &mut self.extras.properties {
-            p.values = filter(&p.values, keep, 1);
+        let extras = &self.extras;
+        Scene {
+            means: filter(&self.means, keep, 1),
+            scales: filter(&self.scales, keep, 1),
+            rotations: filter(&self.rotations, keep, 1),
+            opacities: filter(&self.opacities, keep, 1),
+            sh_degree: self.sh_degree,
+            sh: filter(&self.sh, keep, 3 * self.sh_coeffs()),
+            extras: Extras {
+                labels: extras.labels.as_ref().map(|labels| Labels {
+                    source: labels.source.clone(),
+                    ids: filter(&labels.ids, keep, 1),
+                    names: labels.names.clone(),
+                }),
+                features: extras.features.as_ref().map(|features| Features {
+                    names: features.names.clone(),
+                    dim: features.dim,
+                    values: filter(&features.values, keep, features.dim.max(1)),
+                }),
+                properties: extras
+                    .properties
+                    .iter()
+                    .map(|p| NamedProperty {
+                        name: p.name.clone(),
+                        values: filter(&p.values, keep, 1),
+                    })
+                    .collect(),
+            },
         }
     }
 }

@@ -243,7 +243,14 @@ impl Occupancy {
             return None;
         }
         let limit = (p - self.inner.centre).length() + self.inner.extent;
-        let mut radius = hint.max(1e-9 * (1.0 + limit));
+        self.nearest_up_to(p, hint, limit)
+    }
+
+    /// [`Occupancy::nearest_within`]`(p, limit)`, found by searching from `hint` and doubling:
+    /// the same answer, without gathering every ellipsoid within `limit` when a surface is
+    /// closer (a 1 m search in a dense 3M-Gaussian room gathers hundreds of thousands).
+    pub fn nearest_up_to(&self, p: DVec3, hint: f64, limit: f64) -> Option<Contact> {
+        let mut radius = hint.min(limit).max(1e-9 * (1.0 + limit));
         loop {
             if let Some(c) = self.nearest_within(p, radius)
                 && (c.surface.distance <= radius || radius >= limit)

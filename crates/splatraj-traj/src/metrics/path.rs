@@ -106,7 +106,7 @@ pub fn path_metrics(
             .par_iter()
             .map(|&c| {
                 occupancy
-                    .nearest_within(c, cap)
+                    .nearest_up_to(c, margin, cap)
                     .map_or(cap, |contact| contact.surface.distance.min(cap))
             })
             .collect::<Vec<f64>>()
