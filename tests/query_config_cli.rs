@@ -190,10 +190,14 @@ fn config_without_query_checks_every_query_of_the_config() {
     std::fs::write(&config, TINY_CONFIG).unwrap();
     let out = dir.path().join("out");
     let all = query(&out, &["--config", s(&config), "--json"]);
-    let reports = json_report(&all);
-    let reports = reports.as_array().expect("one JSON array of reports");
-    assert_eq!(reports.len(), 2, "the config's two [[queries]]");
-    for (i, (report, name)) in reports.iter().zip(["red mug", "blue box"]).enumerate() {
+    let entries = json_report(&all);
+    let entries = entries
+        .as_array()
+        .expect("one JSON array, an entry per query");
+    assert_eq!(entries.len(), 2, "the config's two [[queries]]");
+    for (i, (entry, name)) in entries.iter().zip(["red mug", "blue box"]).enumerate() {
+        assert_eq!(entry["key"], format!("queries.{i}.text"));
+        let report = &entry["report"];
         assert_eq!(report["query"], name);
         assert_eq!(
             report["count"].as_u64().unwrap() as usize,
@@ -207,8 +211,45 @@ fn config_without_query_checks_every_query_of_the_config() {
     let text = query(&out, &["--config", s(&config)]);
     assert!(text.status.success(), "{}", stderr(&text));
     let printed = stdout(&text);
-    assert!(printed.contains("== query 1 of 2: red mug"), "{printed}");
-    assert!(printed.contains("== query 2 of 2: blue box"), "{printed}");
+    assert!(printed.contains("== queries.0.text: red mug"), "{printed}");
+    assert!(printed.contains("== queries.1.text: blue box"), "{printed}");
+
+    // A query that finds nothing does not stop the others; the run fails naming its key.
+    let with_unknown = dir.path().join("unknown.toml");
+    std::fs::write(
+        &with_unknown,
+        TINY_CONFIG.replace(
+            "[camera]",
+            "[[queries]]\ntext = \"purple unicorn\"\n[[queries]]\ntext = \"plant\"\n[camera]",
+        ),
+    )
+    .unwrap();
+    let out = dir.path().join("out-unknown");
+    let partial = query(&out, &["--config", s(&with_unknown), "--json"]);
+    assert!(!partial.status.success());
+    let err = stderr(&partial);
+    let last = err.trim_end().lines().last().unwrap_or_default();
+    assert!(
+        last.starts_with("error: ") && !err.contains("panicked"),
+        "{err}"
+    );
+    for mention in ["unknown.toml", "queries.2.text", "purple unicorn"] {
+        assert!(
+            last.contains(mention),
+            "{last:?} does not mention {mention:?}"
+        );
+    }
+    let entries: Value = serde_json::from_slice(&partial.stdout).expect("the array still prints");
+    let entries = entries.as_array().unwrap();
+    assert_eq!(entries.len(), 4);
+    assert!(
+        entries[2]["error"]
+            .as_str()
+            .unwrap()
+            .contains("purple unicorn")
+    );
+    assert_eq!(entries[3]["report"]["query"], "plant");
+    assert!(out.join("query-4.png").is_file() && !out.join("query-3.png").exists());
 
     // Without --config, --query is still required (clap's usage error).
     let missing = query(&out, &["--scene", s(&config)]);

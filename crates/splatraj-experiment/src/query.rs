@@ -176,19 +176,52 @@ impl PreparedQueries {
     }
 }
 
+/// One text a config grounds through its target source.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConfigQueryText {
+    /// Index of its `[[queries]]` entry.
+    pub window: usize,
+    /// For a group shot, the index of the object in `shot.objects`.
+    pub object: Option<usize>,
+    /// The text.
+    pub text: String,
+}
+
+impl ConfigQueryText {
+    /// The config key that holds it (`queries.0.text`, `queries.2.shot.objects.1`).
+    pub fn key(&self) -> String {
+        match self.object {
+            None => format!("queries.{}.text", self.window),
+            Some(j) => format!("queries.{}.shot.objects.{j}", self.window),
+        }
+    }
+}
+
 /// The texts `config` grounds through its target source, in window order: each
 /// `[[queries]] text`, or for a group shot each of its objects. Queries with a `mask` file do
 /// not use the source and are left out.
-pub fn config_query_texts(config: &Config) -> Vec<String> {
-    config
-        .queries
-        .iter()
-        .filter(|q| q.mask.is_none())
-        .flat_map(|q| match &q.shot {
-            Some(ShotSpec::Group(group)) => group.objects.clone(),
-            _ => vec![q.text.clone()],
-        })
-        .collect()
+pub fn config_query_texts(config: &Config) -> Vec<ConfigQueryText> {
+    let mut texts = Vec::new();
+    for (window, q) in config.queries.iter().enumerate() {
+        if q.mask.is_some() {
+            continue;
+        }
+        match &q.shot {
+            Some(ShotSpec::Group(group)) => texts.extend(group.objects.iter().enumerate().map(
+                |(j, text)| ConfigQueryText {
+                    window,
+                    object: Some(j),
+                    text: text.clone(),
+                },
+            )),
+            _ => texts.push(ConfigQueryText {
+                window,
+                object: None,
+                text: q.text.clone(),
+            }),
+        }
+    }
+    texts
 }
 
 /// What to look for and how, from command-line options: the query, the source (or `None` to

@@ -67,7 +67,8 @@ pub struct QueryArgs {
     /// What to look for: a label name or id (labels, custom.gaussian_grouping), any name
     /// (region), a phrase (features, langsplat and the registered language fields). With
     /// --config and no --query: every query of the config (group shots' objects included),
-    /// pictured as query-1.png, query-2.png, ….
+    /// pictured as query-N.png (query-N-M.png for a group's objects), N the `[[queries]]`
+    /// entry from 1.
     #[arg(long, required_unless_present = "config")]
     pub(super) query: Option<String>,
     // Boxed: the source options would make this the largest command by far.

@@ -26,16 +26,12 @@ pub fn run(args: QueryArgs) -> Result<()> {
     }
     let picture = args.picture()?;
     let Some(path) = &args.config else {
-        let report = show(&args, from_options(&args, picture), IMAGE_NAME)?;
-        return print_report(&args, &report);
+        return show_one(&args, from_options(&args, picture));
     };
     let extensions = Extensions::default();
     let config = Config::load_with(path, &args.set, &extensions)?;
-    let texts = match &args.query {
-        Some(query) => vec![query.clone()],
-        None => config_query_texts(&config),
-    };
-    if texts.is_empty() {
+    let texts = config_query_texts(&config);
+    if args.query.is_none() && texts.is_empty() {
         bail!(
             "config {}: no query to check (every [[queries]] uses a mask file); give --query",
             path.display()
@@ -46,32 +42,70 @@ pub fn run(args: QueryArgs) -> Result<()> {
         backend: args.backend,
     }
     .prepare(&config, &extensions)?;
-    if args.query.is_some() {
-        let report = show(&args, prepared.find(&texts[0]), IMAGE_NAME)?;
-        return print_report(&args, &report);
+    if let Some(query) = &args.query {
+        return show_one(&args, prepared.find(query));
     }
-    // Every query of the config, each with its own picture; JSON as one array.
-    let mut reports = Vec::with_capacity(texts.len());
-    for (i, text) in texts.iter().enumerate() {
+    // Every query of the config, each with its own picture; one failing does not stop the
+    // others. JSON: one array of {key, report} or {key, query, error, explanation}.
+    let mut entries = Vec::with_capacity(texts.len());
+    let mut failed = Vec::new();
+    for item in &texts {
+        let key = item.key();
         if !args.json {
-            println!("== query {} of {}: {text}", i + 1, texts.len());
+            println!("== {key}: {}", item.text);
         }
-        let report = show(&args, prepared.find(text), &format!("query-{}.png", i + 1))
-            .with_context(|| format!("query {} ({text:?})", i + 1))?;
-        if !args.json {
-            print!("{}", report.text());
+        let picture = match item.object {
+            None => format!("query-{}.png", item.window + 1),
+            Some(j) => format!("query-{}-{}.png", item.window + 1, j + 1),
+        };
+        match prepared
+            .find(&item.text)
+            .and_then(|outcome| write_picture(&args, &outcome, &picture))
+        {
+            Ok(report) => {
+                if !args.json {
+                    print!("{}", report.text());
+                }
+                entries.push(serde_json::json!({ "key": key, "report": report }));
+            }
+            Err(error) => {
+                let explanation = error
+                    .downcast_ref::<SelectionFailed>()
+                    .map(|failed| &failed.explanation);
+                if !args.json {
+                    if let Some(explanation) = explanation {
+                        print!("{}", explanation.text());
+                    }
+                    println!("failed: {error:#}");
+                }
+                entries.push(serde_json::json!({
+                    "key": key,
+                    "query": item.text,
+                    "error": format!("{error:#}"),
+                    "explanation": explanation,
+                }));
+                failed.push(format!("{key} ({:?})", item.text));
+            }
         }
-        reports.push(report);
     }
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&reports)?);
+        println!("{}", serde_json::to_string_pretty(&entries)?);
+    }
+    if !failed.is_empty() {
+        bail!(
+            "config {}: {} of {} queries failed: {}",
+            path.display(),
+            failed.len(),
+            texts.len(),
+            failed.join(", ")
+        );
     }
     Ok(())
 }
 
-/// Prints why nothing was selected when that is the error, else writes the picture as
-/// `image_name` into `--out` and returns the report.
-fn show(args: &QueryArgs, outcome: Result<QueryOutcome>, image_name: &str) -> Result<QueryReport> {
+/// One query: why nothing was selected when that is the error, else the picture
+/// (`query.png` in `--out`) and the report, as text or JSON.
+fn show_one(args: &QueryArgs, outcome: Result<QueryOutcome>) -> Result<()> {
     let outcome = outcome.inspect_err(|e| {
         if let Some(failed) = e.downcast_ref::<SelectionFailed>() {
             match serde_json::to_string_pretty(&failed.explanation) {
@@ -80,6 +114,21 @@ fn show(args: &QueryArgs, outcome: Result<QueryOutcome>, image_name: &str) -> Re
             }
         }
     })?;
+    let report = write_picture(args, &outcome, IMAGE_NAME)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", report.text());
+    }
+    Ok(())
+}
+
+/// Writes the outcome's picture as `image_name` into `--out` and returns its report.
+fn write_picture(
+    args: &QueryArgs,
+    outcome: &QueryOutcome,
+    image_name: &str,
+) -> Result<QueryReport> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create the output folder {}", args.out.display()))?;
     let path = args.out.join(image_name);
@@ -96,16 +145,6 @@ fn show(args: &QueryArgs, outcome: Result<QueryOutcome>, image_name: &str) -> Re
         100.0 * outcome.highlighted_share
     );
     Ok(report)
-}
-
-/// One query's report, as text or JSON.
-fn print_report(args: &QueryArgs, report: &QueryReport) -> Result<()> {
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(report)?);
-    } else {
-        print!("{}", report.text());
-    }
-    Ok(())
 }
 
 /// The query on the scene file of `--scene` with the built-in sources.
