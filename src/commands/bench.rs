@@ -90,22 +90,25 @@ pub struct BenchRenderArgs {
 pub fn run(command: BenchCommand) -> Result<()> {
     match command {
         BenchCommand::Render(args) => {
-            let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
-            // A pool of its own (the global one already runs this command), entered once so
-            // the measured passes start their parallel loops from inside it, as `run` does.
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .stack_size(crate::cli::WORKER_STACK_BYTES)
-                .build()
-                .map_err(|e| anyhow!("cannot set up {threads} rayon threads: {e}"))?;
-            pool.install(|| match &args.one {
+            let bench = || match &args.one {
                 Some(spec) => {
                     let row = run_one(&settings(&args), &BenchConfig::parse(spec)?)?;
                     println!("{}", serde_json::to_string(&row)?);
                     Ok(())
                 }
                 None => run_all(&args),
-            })
+            };
+            let Some(threads) = args.threads else {
+                return bench(); // already on a worker of the global pool (`main`)
+            };
+            // A pool of that size (the global one already runs this command), entered once so
+            // the measured passes start their parallel loops from inside it, as `run` does.
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .stack_size(crate::cli::WORKER_STACK_BYTES)
+                .build()
+                .map_err(|e| anyhow!("cannot set up {threads} rayon threads: {e}"))?
+                .install(bench)
         }
     }
 }

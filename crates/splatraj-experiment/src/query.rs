@@ -134,16 +134,6 @@ impl ConfigQuery {
             device,
         })
     }
-
-    /// [`ConfigQuery::prepare`], then finds and draws `query`; writes nothing.
-    pub fn run(
-        &self,
-        config: &Config,
-        extensions: &Extensions,
-        query: &str,
-    ) -> Result<QueryOutcome> {
-        self.prepare(config, extensions)?.find(query)
-    }
 }
 
 /// A config's scene and built source, ready to answer queries ([`ConfigQuery::prepare`]).
