@@ -75,6 +75,23 @@ pub fn interrupt_flag() -> Arc<AtomicBool> {
 /// Exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells expect).
 pub const EXIT_INTERRUPTED: u8 = 130;
 
+/// Exit status of a run that finished and wrote its folder, but whose verdict failed on some
+/// window (an object not shown as asked: docs/first-try.md). 1 stays "error", 130 "stopped".
+pub const EXIT_VERDICT: u8 = 3;
+
+/// A run whose folder is complete but whose verdict failed: `main` prints the message and
+/// exits with [`EXIT_VERDICT`].
+#[derive(Debug)]
+pub struct VerdictFailed(pub String);
+
+impl std::fmt::Display for VerdictFailed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for VerdictFailed {}
+
 /// Stack of each rayon worker: commands run on one (`main`), so it gets a main thread's usual
 /// 8 MiB rather than rayon's 2 MiB default.
 pub const WORKER_STACK_BYTES: usize = 8 << 20;

@@ -100,16 +100,18 @@ fn main() -> ExitCode {
     });
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(error) => match error.downcast_ref::<cli::Interrupted>() {
-            Some(interrupted) => {
+        Err(error) => {
+            if let Some(interrupted) = error.downcast_ref::<cli::Interrupted>() {
                 eprintln!("{interrupted}");
                 ExitCode::from(cli::EXIT_INTERRUPTED)
-            }
-            None => {
+            } else if let Some(failed) = error.downcast_ref::<cli::VerdictFailed>() {
+                eprintln!("{failed}");
+                ExitCode::from(cli::EXIT_VERDICT)
+            } else {
                 eprintln!("error: {}", message(&error));
                 ExitCode::FAILURE
             }
-        },
+        }
     }
 }
 

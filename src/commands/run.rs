@@ -30,7 +30,9 @@ use splatraj::experiment::run_folder::{
 };
 use splatraj::experiment::{Evaluation, Experiment, RunOptions, RunStop};
 
-use crate::cli::{Interrupted, MemoryArgs, bar_observer, interrupt_flag, progress_bar};
+use crate::cli::{
+    Interrupted, MemoryArgs, VerdictFailed, bar_observer, interrupt_flag, progress_bar,
+};
 
 /// Arguments of `splatraj run`.
 #[derive(Debug, Args)]
@@ -107,9 +109,10 @@ pub fn run(args: RunArgs) -> Result<()> {
         }
         None => {
             let dir = create_run_dir(&config.output.runs_dir, &config.name)?;
+            // The config as run: every `"auto"` replaced by what was derived from the scene.
             write_bytes(
                 &dir.join("config.toml"),
-                toml::to_string(&config)?.as_bytes(),
+                toml::to_string(&experiment.config)?.as_bytes(),
             )?;
             dir
         }
@@ -160,6 +163,15 @@ pub fn run(args: RunArgs) -> Result<()> {
 
     let report = RunReport::new(&experiment, &run, times);
     print_summary(&evaluation, &report);
+    let problems = evaluation.problems();
+    let failing = evaluation
+        .windows
+        .iter()
+        .filter(|w| w.verdict.as_ref().is_some_and(|v| !v.pass))
+        .count();
+    for problem in &problems {
+        eprintln!("warning: {problem}");
+    }
     write_json(
         &dir.join("metrics.json"),
         &MetricsFile::new(evaluation, config.output.ldj_samples, report),
@@ -168,15 +180,30 @@ pub fn run(args: RunArgs) -> Result<()> {
     println!("{}", dir.display());
     match run.stop {
         // A finished run needs no checkpoint; a stopped one keeps it for --resume.
-        RunStop::Finished => remove_checkpoint(&dir),
-        RunStop::TimeLimit => Ok(()),
-        RunStop::Interrupted => Err(Interrupted(format!(
-            "interrupted: {} holds the best trajectory so far; `splatraj run --resume {}` \
-             continues the optimisation",
-            dir.display(),
-            dir.display()
+        RunStop::Finished => remove_checkpoint(&dir)?,
+        RunStop::TimeLimit => {}
+        RunStop::Interrupted => {
+            return Err(Interrupted(format!(
+                "interrupted: {} holds the best trajectory so far; `splatraj run --resume {}` \
+                 continues the optimisation",
+                dir.display(),
+                dir.display()
+            ))
+            .into());
+        }
+    }
+    if problems.is_empty() {
+        Ok(())
+    } else {
+        Err(VerdictFailed(format!(
+            "verdict: {} of {} windows do not show their object as asked (see the warnings \
+             above, `metrics.json`'s `verdict` and {}); exit status {}",
+            failing,
+            experiment.windows.len(),
+            dir.join("report.html").display(),
+            crate::cli::EXIT_VERDICT
         ))
-        .into()),
+        .into())
     }
 }
 
@@ -190,7 +217,33 @@ fn print_plan(experiment: &Experiment) {
         experiment.config.backend,
         experiment.config.rasterizer
     );
+    for d in &experiment.derived {
+        eprintln!("derived from the scene: {} = {:.4} ({})", d.key, d.value, d.why);
+    }
+    let views = match experiment.config.start.kind {
+        splatraj::experiment::config::StartKind::Search if experiment.config.start.pose.is_none()
+            && experiment.config.start.trajectory.is_none() =>
+        {
+            experiment
+                .searched_views(
+                    &(0..experiment.windows.len()).collect::<Vec<_>>(),
+                    experiment.config.start.restarts,
+                )
+                .ok()
+        }
+        _ => None,
+    };
     for (i, w) in experiment.windows.iter().enumerate() {
+        if let Some(view) = views.as_ref().and_then(|v| v.first()).and_then(|v| v.get(i)) {
+            eprintln!(
+                "query {i}: starts from azimuth {:.0}°, elevation {:.0}°, distance {:.3}: {:.0} % \
+                 of it visible there",
+                view.azimuth_degrees,
+                view.elevation_degrees,
+                view.distance,
+                100.0 * view.visible_share
+            );
+        }
         let c = w.context.object_centre;
         eprintln!(
             "query {i}: {:?} → {} Gaussians, centre [{:.3}, {:.3}, {:.3}], prior radius {:.3}, target ratio {}",
@@ -206,16 +259,49 @@ fn print_plan(experiment: &Experiment) {
 }
 
 fn print_summary(evaluation: &Evaluation, report: &RunReport) {
-    eprintln!("window  query                  TCE     TRE     IoU   visible");
+    eprintln!(
+        "window  query                  TCE     TRE   in view  visible  hidden  clearance  verdict"
+    );
     for w in &evaluation.windows {
+        // An object never in view has no framing error: show a dash, not the empty mask's 0.
+        let tce = w
+            .framing
+            .tce_in_view
+            .map_or("      -".to_string(), |t| format!("{t:>7.4}"));
+        let clearance = w
+            .path
+            .as_ref()
+            .and_then(|p| p.clearance.as_ref())
+            .map_or("-".to_string(), |c| format!("{:.3}", c.min_clearance));
+        let verdict = match &w.verdict {
+            Some(v) if v.pass => "ok".to_string(),
+            Some(v) => {
+                let failed: Vec<String> = v
+                    .checks
+                    .iter()
+                    .filter(|c| !c.pass)
+                    .map(|c| {
+                        serde_json::to_value(c.check)
+                            .ok()
+                            .and_then(|v| v.as_str().map(String::from))
+                            .unwrap_or_default()
+                    })
+                    .collect();
+                format!("FAIL ({})", failed.join(", "))
+            }
+            None => "-".to_string(),
+        };
         eprintln!(
-            "{:>6}  {:<20} {:>7.4} {:>7.4} {:>7.3}   {:.0}%",
+            "{:>6}  {:<20} {} {:>7.4}  {:>6.0}%  {:>6.0}%  {:>5.0}%  {:>9}  {}",
             w.window,
             w.name,
-            w.tce,
+            tce,
             w.tre,
-            w.iou,
-            100.0 * w.visible_fraction
+            100.0 * w.visible_fraction,
+            100.0 * (1.0 - w.occlusion.mean_occluded),
+            100.0 * w.occlusion.hidden_fraction,
+            clearance,
+            verdict
         );
     }
     let show = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));

@@ -111,8 +111,9 @@ pub struct Config {
     /// Trajectory model.
     #[serde(default)]
     pub trajectory: TrajectoryModel,
-    /// Costs and weights.
-    #[serde(default)]
+    /// Costs and weights. Without a `[costs]` table: [`CostsConfig::first_try`] (the paper's
+    /// four, clearance and motion limits derived from the scene).
+    #[serde(default = "CostsConfig::first_try")]
     pub costs: CostsConfig,
     /// Trajectory optimiser.
     #[serde(default)]
@@ -236,12 +237,20 @@ pub struct CameraConfig {
     pub target_ratio: f64,
 }
 
+/// Width of the default optimisation camera, pixels: enough to resolve an object covering
+/// 2 % of the frame (about 11 × 11 pixels), few enough for a step in well under a second on
+/// 2 cores.
+pub const DEFAULT_CAMERA_WIDTH: usize = 96;
+/// Height of the default optimisation camera: the default output's 16:9.
+pub const DEFAULT_CAMERA_HEIGHT: usize = 54;
+
 impl Default for CameraConfig {
-    /// 64 × 48, 60° horizontal, r_t = 0.15.
+    /// [`DEFAULT_CAMERA_WIDTH`] × [`DEFAULT_CAMERA_HEIGHT`] (the output's 16:9), 60°
+    /// horizontal, r_t = 0.15.
     fn default() -> Self {
         Self {
-            width: 64,
-            height: 48,
+            width: DEFAULT_CAMERA_WIDTH,
+            height: DEFAULT_CAMERA_HEIGHT,
             fov_x: 60.0,
             fx: None,
             fy: None,
@@ -292,9 +301,13 @@ impl CameraConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum StartKind {
-    /// Each window starts at a camera looking at its object from its prior radius (restarts
-    /// jitter the azimuth by up to ±`jitter` degrees).
+    /// Each window starts from the viewpoint a search finds where its object shows, unhidden
+    /// and framed, with short moves between windows (`splatraj_traj::optimise::views`);
+    /// restarts try other viewpoints.
     #[default]
+    Search,
+    /// Each window starts at a camera looking at its object from its prior radius, all from
+    /// one side (restarts jitter the azimuth by up to ±`jitter` degrees).
     Objects,
     /// Seeded random cameras in the scene looking at its centre (`spread`).
     Random,
@@ -352,7 +365,7 @@ impl StartConfig {
 impl Default for StartConfig {
     fn default() -> Self {
         Self {
-            kind: StartKind::Objects,
+            kind: StartKind::Search,
             jitter: ObjectView::default().jitter_degrees,
             elevation: ObjectView::default().elevation_degrees,
             spread: StartDistribution::default().spread,
@@ -383,12 +396,14 @@ pub struct OutputConfig {
     /// directory, unlike input paths).
     pub runs_dir: PathBuf,
     /// Frames rendered along the whole trajectory (0: none), at evenly spaced times over
-    /// [0, 1]; ignored when `seconds` is given.
-    pub frames: usize,
+    /// [0, 1]; ignored when `seconds` is given. Default: `fps ×` the duration.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frames: Option<usize>,
     /// Frame rate of `video.mp4` and of the exports (`exports/<format>/`), frames per second.
     pub fps: f64,
     /// Length of the video in seconds: when given, `fps × seconds` frames (rounded) are
-    /// rendered instead of `frames`.
+    /// rendered instead of `frames`. Default: `frames / fps` when `frames` is given, else
+    /// [`SECONDS_PER_QUERY`] per query.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub seconds: Option<f64>,
     /// Frame width in pixels.
@@ -405,16 +420,22 @@ pub struct OutputConfig {
     pub ldj_samples: usize,
 }
 
+/// Seconds of video per query when neither `frames` nor `seconds` is given: long enough to
+/// see an object and the move to the next, short enough that three parts make a 9 s clip.
+pub const SECONDS_PER_QUERY: f64 = 3.0;
+
 impl Default for OutputConfig {
+    /// 1280 × 720 at 30 fps, [`SECONDS_PER_QUERY`] per query, plain frames (the report's
+    /// keyframes tint the object).
     fn default() -> Self {
         Self {
             runs_dir: PathBuf::from("runs"),
-            frames: 60,
+            frames: None,
             fps: 30.0,
             seconds: None,
-            width: 320,
-            height: 240,
-            mask_overlay: MaskOverlay::Tint,
+            width: 1280,
+            height: 720,
+            mask_overlay: MaskOverlay::None,
             trajectory_samples: 201,
             metric_samples: 16,
             ldj_samples: splatraj_traj::metrics::DEFAULT_LDJ_SAMPLES,
@@ -423,12 +444,23 @@ impl Default for OutputConfig {
 }
 
 impl OutputConfig {
-    /// Frames to render: `fps × seconds` (rounded, at least 1) when `seconds` is given, else
-    /// `frames`.
-    pub fn frame_count(&self) -> usize {
-        match self.seconds {
-            Some(s) => ((self.fps * s).round() as usize).max(1),
-            None => self.frames,
+    /// Frames to render for `queries` windows: `fps × seconds` (rounded, at least 1) when
+    /// `seconds` is given, else `frames`, else `fps ×` [`SECONDS_PER_QUERY`] per query.
+    pub fn frame_count(&self, queries: usize) -> usize {
+        match (self.seconds, self.frames) {
+            (Some(s), _) => ((self.fps * s).round() as usize).max(1),
+            (None, Some(frames)) => frames,
+            (None, None) => ((self.fps * self.duration(queries)).round() as usize).max(1),
+        }
+    }
+
+    /// Duration of the whole path in seconds for `queries` windows: `seconds`, else
+    /// `frames / fps` (when `frames` ≥ 1), else [`SECONDS_PER_QUERY`] per query.
+    pub fn duration(&self, queries: usize) -> f64 {
+        match (self.seconds, self.frames) {
+            (Some(s), _) => s,
+            (None, Some(frames)) if frames > 0 => frames as f64 / self.fps,
+            _ => SECONDS_PER_QUERY * queries.max(1) as f64,
         }
     }
 

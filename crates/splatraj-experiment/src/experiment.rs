@@ -9,11 +9,22 @@ use splatraj_render::render::DeviceScene;
 use splatraj_scene::demo::{DemoConfig, demo_scene};
 use splatraj_scene::{InvalidPolicy, ReadOptions, ResolvedUp, Scene, read_scene, resolve_up};
 use splatraj_semantic::{Relevancy, Scoring, Target, read_mask_file, select};
-use splatraj_traj::costs::{QueryContext, WeightedCosts, default_prior_radius};
+use splatraj_traj::costs::{OrAuto, QueryContext, WeightedCosts, default_prior_radius};
 use splatraj_traj::optimise::WindowTarget;
 
 use crate::config::Config;
 use crate::extensions::Extensions;
+
+/// A setting derived from the scene because the config left it `"auto"` (or out).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Derived {
+    /// Its config key.
+    pub key: &'static str,
+    /// The value now in the config.
+    pub value: f64,
+    /// How it was derived, in words.
+    pub why: String,
+}
 
 /// Everything loaded and checked for a run of one config.
 #[derive(Debug)]
@@ -34,6 +45,11 @@ pub struct Experiment {
     pub windows: Vec<WindowTarget>,
     /// The selected Gaussians of each query (counts for the report).
     pub selected: Vec<usize>,
+    /// Each query's object box as (centre, half extent): its robust extent around its centre.
+    pub boxes: Vec<([f64; 3], [f64; 3])>,
+    /// The settings that were `"auto"` in the config and were derived from the scene, in the
+    /// order they were resolved (`config` holds the values).
+    pub derived: Vec<Derived>,
     /// The plain device (frames, metrics); [`Experiment::autodiff_scene`] wraps it.
     pub device: Device,
     /// Float dtype of every tensor.
@@ -44,6 +60,10 @@ pub struct Experiment {
     /// planning, the optimisation and the metrics all ask for it, and on a 3M-Gaussian scene
     /// each k-d tree build took seconds.
     pub(crate) occupancy_cache: std::sync::Mutex<Option<splatraj_traj::clearance::Occupancy>>,
+    /// The view search's choice for all windows, per restart ([`Experiment::searched_views`]):
+    /// `run` checks the starts before it runs them, and each search renders hundreds of views.
+    pub(crate) views_cache:
+        std::sync::Mutex<Option<Vec<Vec<splatraj_traj::optimise::Candidate>>>>,
 }
 
 impl Experiment {
@@ -78,13 +98,69 @@ impl Experiment {
             bounds: (centre, half),
             windows: Vec::new(),
             selected: Vec::new(),
+            boxes: Vec::new(),
+            derived: Vec::new(),
             device,
             dtype: config.precision.dtype(),
             intrinsics,
             occupancy_cache: Default::default(),
+            views_cache: Default::default(),
         };
         experiment.ground_queries()?;
+        experiment.derive_from_scene();
         Ok(experiment)
+    }
+
+    /// Replaces the config's `"auto"` settings by values derived from the scene and the
+    /// queries' working distances, and records them in [`Experiment::derived`].
+    fn derive_from_scene(&mut self) {
+        let radii: Vec<f64> = self.windows.iter().map(|w| w.context.prior_radius).collect();
+        let smallest = radii.iter().copied().fold(f64::INFINITY, f64::min);
+        let mean = radii.iter().sum::<f64>() / radii.len().max(1) as f64;
+        let diagonal = 2.0 * glam::DVec3::from(self.bounds.1).length();
+        if let Some(clearance) = &mut self.config.costs.clearance
+            && clearance.margin.is_auto()
+        {
+            let margin = splatraj_traj::costs::auto_margin(smallest, diagonal);
+            clearance.margin = OrAuto::Value(margin);
+            self.derived.push(Derived {
+                key: "costs.clearance.margin",
+                value: margin,
+                why: format!(
+                    "{} × the smallest working distance ({smallest:.3}), at most {} × the \
+                     scene's diagonal ({diagonal:.3})",
+                    splatraj_traj::costs::clearance::AUTO_MARGIN_OF_RADIUS,
+                    splatraj_traj::costs::clearance::AUTO_MARGIN_OF_SCENE
+                ),
+            });
+        }
+        let window_seconds =
+            self.config.output.duration(self.windows.len()) / self.windows.len().max(1) as f64;
+        let largest_join = self
+            .windows
+            .windows(2)
+            .map(|w| {
+                glam::DVec3::from(w[0].context.object_centre)
+                    .distance(glam::DVec3::from(w[1].context.object_centre))
+            })
+            .fold(0.0, f64::max);
+        if let Some(motion) = &mut self.config.costs.motion
+            && motion.max_speed == Some(OrAuto::Auto)
+        {
+            let speed = splatraj_traj::costs::auto_max_speed(mean, largest_join, window_seconds);
+            motion.max_speed = Some(OrAuto::Value(speed));
+            self.derived.push(Derived {
+                key: "costs.motion.max_speed",
+                value: speed,
+                why: format!(
+                    "{} mean working distances ({mean:.3}) per second, or the largest move \
+                     between consecutive objects ({largest_join:.3}) in {} of a {window_seconds:.1} s \
+                     window",
+                    splatraj_traj::costs::motion::AUTO_SPEED_RADII_PER_SECOND,
+                    splatraj_traj::costs::motion::AUTO_SPEED_JOIN_SHARE
+                ),
+            });
+        }
     }
 
     /// One target per query: from its mask file or the `[targets]` source.
@@ -153,6 +229,8 @@ impl Experiment {
                 })
                 .with_context(|| format!("`queries.{i}`: prior radius"))?;
             self.selected.push(target.count);
+            let half = target.extent.map(|e| 0.5 * f64::from(e));
+            self.boxes.push((target.centre.map(f64::from), half));
             self.windows.push(WindowTarget {
                 name: query.text.clone(),
                 mask: target.mask,
@@ -187,8 +265,27 @@ impl Experiment {
 
     /// Window `i`'s object alone (its Gaussians only), on the plain device.
     pub fn object_alone(&self, i: usize) -> DeviceScene {
+        self.object_alone_on(i, &self.device)
+    }
+
+    /// Window `i`'s object alone on `device`.
+    fn object_alone_on(&self, i: usize, device: &Device) -> DeviceScene {
         let keep: Vec<bool> = self.windows[i].mask.iter().map(|&m| m != 0.0).collect();
-        DeviceScene::new(&self.scene.subset(&keep), &self.device, self.dtype)
+        DeviceScene::new(&self.scene.subset(&keep), device, self.dtype)
+    }
+
+    /// Every window's object alone on the autodiff device, when `costs` read it (the
+    /// visibility cost); None otherwise.
+    pub fn autodiff_alone(&self, costs: &WeightedCosts) -> Option<Vec<DeviceScene>> {
+        let needed = costs
+            .channels()
+            .contains(&splatraj_traj::costs::ImageChannel::MaskAlone);
+        let device = self.device.clone().autodiff();
+        needed.then(|| {
+            (0..self.windows.len())
+                .map(|i| self.object_alone_on(i, &device))
+                .collect()
+        })
     }
 
     /// The output camera: the optimisation camera at `[output]`'s size.

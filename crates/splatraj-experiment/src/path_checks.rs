@@ -10,6 +10,16 @@ use splatraj_traj::trajectory::Trajectory;
 use crate::experiment::Experiment;
 
 impl Experiment {
+    /// The clearance cost's margin (resolved from the scene when it was `"auto"`), when the
+    /// cost is on.
+    pub fn clearance_margin(&self) -> Option<f64> {
+        self.config
+            .costs
+            .clearance
+            .as_ref()
+            .and_then(|c| c.margin.value())
+    }
+
     /// The scene's solid ellipsoids, indexed, when a configured cost reads them (clearance);
     /// None otherwise. Errors when a motion limit is set without the path's duration.
     pub fn occupancy(&self) -> Result<Option<Occupancy>> {
@@ -38,9 +48,10 @@ impl Experiment {
         Ok(Some(occupancy))
     }
 
-    /// Duration of the whole trajectory in seconds (`[output] seconds`), when given.
+    /// Duration of the whole trajectory in seconds (`[output] seconds`, else `frames / fps`,
+    /// else the default seconds per query: [`crate::config::OutputConfig::duration`]).
     pub fn path_seconds(&self) -> Option<f64> {
-        self.config.output.seconds
+        Some(self.config.output.duration(self.windows.len()))
     }
 
     /// `windows` with each window's clearance (when the clearance cost is on) and motion
@@ -53,7 +64,7 @@ impl Experiment {
         trajectory: &Trajectory,
     ) -> Result<Vec<WindowMetrics>> {
         let occupancy = self.occupancy()?;
-        let margin = self.config.costs.clearance.as_ref().map(|c| c.margin);
+        let margin = self.clearance_margin();
         let clearance = occupancy.as_ref().zip(margin);
         let paths = path_metrics(
             &|t: &[f64]| trajectory.poses_at(t),

@@ -82,15 +82,30 @@ impl Experiment {
 
     /// The start poses of `[pose]`'s query: `start.pose`, or one per restart.
     pub fn pose_starts(&self) -> Result<Vec<Pose>> {
-        let window = &self.windows[self.config.pose.query];
         Ok(match self.config.start.pose {
             Some(p) => vec![Pose(p)],
             None => self
-                .start_poses(std::slice::from_ref(window))?
+                .start_poses(&[self.config.pose.query])?
                 .into_iter()
                 .map(|per_window| per_window[0])
                 .collect(),
         })
+    }
+
+    /// The single-window problem of `[pose]`'s query on `scene` (autodiff) with `costs`.
+    fn pose_problem<'a>(
+        &'a self,
+        scene: &'a splatraj_render::render::DeviceScene,
+        costs: &'a splatraj_traj::costs::WeightedCosts,
+        occupancy: Option<&'a splatraj_traj::clearance::Occupancy>,
+        alone: Option<&'a [splatraj_render::render::DeviceScene]>,
+    ) -> Result<Problem<'a>> {
+        Ok(Problem::new(scene, &self.windows, costs, self.intrinsics)
+            .with_rasterizer(self.config.rasterizer)
+            .with_approximations(self.config.approximations)
+            .with_occupancy(occupancy)
+            .with_alone(alone)
+            .window(self.config.pose.query)?)
     }
 
     /// Optimises `[pose]`'s query from every start at once (`[pose.optimiser]`); `observer`
@@ -101,11 +116,8 @@ impl Experiment {
         let starts = self.pose_starts()?;
         let scene = self.autodiff_scene();
         let occupancy = self.occupancy()?;
-        let problem = Problem::new(&scene, &self.windows, &costs, self.intrinsics)
-            .with_rasterizer(self.config.rasterizer)
-            .with_approximations(self.config.approximations)
-            .with_occupancy(occupancy.as_ref())
-            .window(window)?;
+        let alone = self.autodiff_alone(&costs);
+        let problem = self.pose_problem(&scene, &costs, occupancy.as_ref(), alone.as_deref())?;
         let options = &self.config.pose.optimiser;
         let started = Instant::now();
         let results = optimise_poses_observed(&problem, &starts, options, &mut |step, best| {
@@ -136,11 +148,8 @@ impl Experiment {
         let costs = self.pose_costs()?;
         let scene = self.autodiff_scene();
         let occupancy = self.occupancy()?;
-        let problem = Problem::new(&scene, &self.windows, &costs, self.intrinsics)
-            .with_rasterizer(self.config.rasterizer)
-            .with_approximations(self.config.approximations)
-            .with_occupancy(occupancy.as_ref())
-            .window(index)?;
+        let alone = self.autodiff_alone(&costs);
+        let problem = self.pose_problem(&scene, &costs, occupancy.as_ref(), alone.as_deref())?;
         let units = PoseUnits::with_position(self.windows[index].context.prior_radius);
         let sampled = sample_poses_sgld(
             &problem,

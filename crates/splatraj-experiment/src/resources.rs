@@ -235,7 +235,7 @@ impl Experiment {
             splatraj_traj::optimise::start::START_FIT_SAMPLES,
             output.trajectory_samples,
             output.ldj_samples,
-            output.frames,
+            output.frame_count(windows),
             windows.saturating_mul(spw),
         ]
         .into_iter()

@@ -17,7 +17,7 @@ impl Experiment {
     /// The frames of the run's output: `output.frame_count()` evenly spaced times over [0, 1],
     /// the trajectory's poses there, the output camera, at `output.fps`.
     pub fn output_frames(&self, trajectory: &Trajectory) -> Result<PathFrames> {
-        let times = uniform_times(self.config.output.frame_count());
+        let times = uniform_times(self.config.output.frame_count(self.windows.len()));
         let poses = trajectory.poses_at(&times);
         Ok(PathFrames {
             cameras: vec![self.output_intrinsics()?; times.len()],

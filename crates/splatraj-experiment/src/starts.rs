@@ -12,8 +12,9 @@ use splatraj_traj::costs::{ShotCost, WeightedCosts};
 use splatraj_traj::optimise::start::START_FIT_SAMPLES;
 use splatraj_traj::optimise::start::window_joins;
 use splatraj_traj::optimise::{
-    RouteKind, RoutePlanner, WindowStart, WindowTarget, object_side, object_start_poses,
-    plan_transitions, random_start_poses, routed_start_trajectory,
+    Candidate, RouteKind, RoutePlanner, ViewSearch, ViewWeights, ViewedObject, WindowStart,
+    WindowViews, choose_views, object_side, object_start_poses, plan_transitions,
+    random_start_poses, routed_start_trajectory, search_views,
 };
 use splatraj_traj::shots::{ShotFrame, ShotPath};
 use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord, uniform_times};
@@ -63,7 +64,7 @@ impl Experiment {
         let n = self.windows.len();
         let per_restart = match config.start.pose {
             Some(pose) => vec![vec![Pose(pose); n]],
-            None => self.start_poses(&self.windows)?,
+            None => self.start_poses(&(0..n).collect::<Vec<_>>())?,
         };
         // A fixed `start.pose` is taken as given; object and random starts follow the shots.
         let shots = match config.start.pose {
@@ -141,12 +142,8 @@ impl Experiment {
         {
             (lo, hi) = (lo.min(c), hi.max(c));
         }
-        Ok(Some(RoutePlanner::new(
-            &occupancy,
-            clearance.margin,
-            lo,
-            hi,
-        )))
+        let margin = clearance.margin().map_err(anyhow::Error::msg)?;
+        Ok(Some(RoutePlanner::new(&occupancy, margin, lo, hi)))
     }
 
     /// Each window's shot (`queries.<i>.shot`) placed around its object, seen at azimuth 0
@@ -218,17 +215,25 @@ impl Experiment {
             .context("`trajectory`")
     }
 
-    /// For each restart, one start pose per window in `windows` (object-facing or random; a
-    /// random start is the same pose for every window).
-    pub fn start_poses(&self, windows: &[WindowTarget]) -> Result<Vec<Vec<Pose>>> {
+    /// For each restart, one start pose per window of `which` (indices into the windows):
+    /// searched, object-facing or random (a random start is the same pose for every window).
+    pub fn start_poses(&self, which: &[usize]) -> Result<Vec<Vec<Pose>>> {
         let config = &self.config;
         let (centre, half) = self.bounds;
         let restarts = config.start.restarts;
         Ok(match config.start.kind {
+            StartKind::Search => self
+                .searched_views(which, restarts)?
+                .into_iter()
+                .map(|views| views.iter().map(|c| Pose(c.pose)).collect())
+                .collect(),
             StartKind::Objects => {
-                let objects: Vec<([f64; 3], f64)> = windows
+                let objects: Vec<([f64; 3], f64)> = which
                     .iter()
-                    .map(|w| (w.context.object_centre, w.context.prior_radius))
+                    .map(|&i| {
+                        let w = &self.windows[i];
+                        (w.context.object_centre, w.context.prior_radius)
+                    })
                     .collect();
                 (0..restarts)
                     .map(|r| {
@@ -252,8 +257,103 @@ impl Experiment {
                 config.seed,
             )?
             .into_iter()
-            .map(|p| vec![p; windows.len()])
+            .map(|p| vec![p; which.len()])
             .collect(),
         })
+    }
+
+    /// The view search's choice for the windows of `which`, one list per restart: restart 0
+    /// takes the best sequence, each later one the best that avoids earlier restarts' views
+    /// (`splatraj_traj::optimise::views`). Measured at the optimisation camera's aspect, with
+    /// the clearance cost's geometry and margin when it is on.
+    pub fn searched_views(&self, which: &[usize], restarts: usize) -> Result<Vec<Vec<Candidate>>> {
+        let all: Vec<usize> = (0..self.windows.len()).collect();
+        let cacheable = which == all.as_slice();
+        if cacheable {
+            let cache = self
+                .views_cache
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            if let Some(views) = cache.as_ref().filter(|v| v.len() == restarts.max(1)) {
+                return Ok(views.clone());
+            }
+        }
+        let chosen = self.search_and_choose(which, restarts)?;
+        if cacheable {
+            *self
+                .views_cache
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(chosen.clone());
+        }
+        Ok(chosen)
+    }
+
+    /// [`Experiment::searched_views`] without the cache.
+    fn search_and_choose(&self, which: &[usize], restarts: usize) -> Result<Vec<Vec<Candidate>>> {
+        let windows = self.measured_views(which)?;
+        let margin = self.clearance_margin();
+        let mut windows = windows;
+        let weights = ViewWeights::default();
+        let mut chosen = Vec::with_capacity(restarts);
+        for _ in 0..restarts.max(1) {
+            let picks = choose_views(&windows, &weights, margin);
+            let views: Vec<Candidate> = picks
+                .iter()
+                .zip(&windows)
+                .map(|(&k, w)| w.candidates[k])
+                .collect();
+            for (w, &k) in windows.iter_mut().zip(&picks) {
+                w.used.push(k);
+            }
+            chosen.push(views);
+        }
+        Ok(chosen)
+    }
+
+    /// Every candidate view of the windows of `which`, measured (renders of each object's
+    /// mask with the scene and alone, the camera's clearance).
+    pub fn measured_views(&self, which: &[usize]) -> Result<Vec<WindowViews>> {
+        let scene = self.plain_scene();
+        let occupancy = self.occupancy()?;
+        let margin = self.clearance_margin();
+        let geometry = occupancy.as_ref().zip(margin);
+        let centres: Vec<[f64; 3]> = self
+            .windows
+            .iter()
+            .map(|w| w.context.object_centre)
+            .collect();
+        let reference = object_side(&centres, self.bounds.0, self.up.up);
+        which
+            .iter()
+            .map(|&i| {
+                let w = &self.windows[i];
+                let alone = self.object_alone(i);
+                let object = ViewedObject {
+                    scene: &scene,
+                    alone: &alone,
+                    mask: &w.mask,
+                    centre: w.context.object_centre,
+                    half_extent: self.boxes[i].1,
+                    radius: w.context.prior_radius,
+                    target_ratio: w.context.target_ratio,
+                };
+                let candidates = search_views(
+                    &object,
+                    &ViewSearch::default(),
+                    reference,
+                    self.up.up,
+                    &self.intrinsics,
+                    self.config.rasterizer,
+                    geometry,
+                )
+                .with_context(|| format!("view search of `queries.{i}` ({:?})", w.name))?;
+                Ok(WindowViews {
+                    candidates,
+                    radius: w.context.prior_radius,
+                    target_ratio: w.context.target_ratio,
+                    used: Vec::new(),
+                })
+            })
+            .collect()
     }
 }

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use serde::Serialize;
 use splatraj_traj::metrics::{
-    Smoothness, WindowMetrics, WindowObject, trajectory_ldj, window_metrics,
+    Smoothness, WindowMetrics, WindowObject, trajectory_ldj, verdict, window_metrics,
 };
 use splatraj_traj::optimise::{
     Flow, Problem, StopReason, TrajectoryResult, TrajectoryStep, optimise_trajectory,
@@ -74,10 +74,29 @@ impl TrajectoryRun {
 /// Metrics of a trajectory: per window and smoothness.
 #[derive(Debug, Clone)]
 pub struct Evaluation {
-    /// Per-window TCE, TRE, IoU, visibility at the output resolution.
+    /// Per-window TCE, TRE, IoU, visibility at the output resolution, each with its verdict.
     pub windows: Vec<WindowMetrics>,
     /// LDJ of the camera centre and rotation.
     pub ldj: Smoothness,
+}
+
+impl Evaluation {
+    /// Every failed check of every window, as sentences naming the query, what is wrong and
+    /// the likely fix (empty when every window passes).
+    pub fn problems(&self) -> Vec<String> {
+        self.windows
+            .iter()
+            .filter_map(|w| w.verdict.as_ref())
+            .flat_map(|v| v.problems.iter().cloned())
+            .collect()
+    }
+
+    /// Whether every window passes its verdict.
+    pub fn passed(&self) -> bool {
+        self.windows
+            .iter()
+            .all(|w| w.verdict.as_ref().is_none_or(|v| v.pass))
+    }
 }
 
 /// The best trajectory seen so far in a run, for the checkpoint.
@@ -199,6 +218,7 @@ impl Experiment {
             });
         }
         let occupancy = self.occupancy()?;
+        let alone = self.autodiff_alone(&costs);
         let started = Instant::now();
         let mut stop = RunStop::Finished;
         for (r, fresh_start) in starts.iter().enumerate().skip(first_restart) {
@@ -230,6 +250,7 @@ impl Experiment {
                 .with_rasterizer(self.config.rasterizer)
                 .with_approximations(self.config.approximations)
                 .with_occupancy(occupancy.as_ref())
+                .with_alone(alone.as_deref())
                 .with_seconds(self.path_seconds());
             let mut restart_options = optimiser.clone();
             restart_options.iterations = steps - steps_before;
@@ -336,7 +357,10 @@ impl Experiment {
                 self.window_metrics(&plain, i, (i, n), samples, &output, &pose_at)
             })
             .collect::<Result<Vec<_>>>()?;
-        let windows = self.with_path_metrics(windows, trajectory)?;
+        let mut windows = self.with_path_metrics(windows, trajectory)?;
+        for w in &mut windows {
+            w.verdict = Some(verdict(w));
+        }
         let ldj = trajectory_ldj(trajectory, self.config.output.ldj_samples);
         Ok(Evaluation { windows, ldj })
     }
@@ -360,6 +384,7 @@ impl Experiment {
             alone: &alone,
             target_ratio: w.context.target_ratio,
             rasterizer: self.config.rasterizer,
+            bounds: self.boxes.get(i).copied(),
         };
         window_metrics(plain, &object, index, n, samples, intrinsics, pose_at)
             .with_context(|| format!("metrics of window {i}"))

@@ -25,7 +25,7 @@ use burn::tensor::{Tensor, TensorData};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostDomain, CostError, CostInputs, check_weight, invalid};
+use super::{Cost, CostDomain, CostError, CostInputs, OrAuto, check_weight, invalid};
 use crate::clearance::OccupancySpec;
 
 /// Default ellipsoid size: 2σ holds most of a Gaussian's visible mass (3σ is where the
@@ -56,16 +56,18 @@ pub fn clearance(
 }
 
 /// The clearance cost: table `[costs.clearance]`, keys `weight` (default 1), `margin` (scene
-/// units, required), `sigma` (ellipsoid size in standard deviations, default 2) and
-/// `min_opacity` (default 0.2).
+/// units, or `"auto"`, the default: derived from the scene, see [`auto_margin`]), `sigma`
+/// (ellipsoid size in standard deviations, default 2) and `min_opacity` (default 0.2).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ClearanceCost {
     /// Weight (≥ 0).
     #[serde(default = "one")]
     pub weight: f64,
-    /// Margin m (scene units, > 0): the clearance the camera keeps.
-    pub margin: f64,
+    /// Margin m (scene units, > 0): the clearance the camera keeps; `"auto"` until the
+    /// experiment resolves it from the scene ([`auto_margin`]).
+    #[serde(default)]
+    pub margin: OrAuto,
     /// Ellipsoid size in standard deviations (> 0).
     #[serde(default = "default_sigma")]
     pub sigma: f64,
@@ -86,15 +88,66 @@ fn default_min_opacity() -> f64 {
     DEFAULT_MIN_OPACITY
 }
 
+/// Share of the smallest working distance (prior radius) the automatic margin keeps.
+///
+/// The camera has to reach each object's working distance, so the margin must stay well below
+/// it; a quarter still keeps the camera clear of a table edge or a wall it passes on the way
+/// (the demo's hand-tuned 10 cm is a fifth of its smallest working distance, 0.5 m).
+pub const AUTO_MARGIN_OF_RADIUS: f64 = 0.25;
+
+/// Cap of the automatic margin as a share of the scene's robust diagonal: in a large scene
+/// with one large object the margin stays a small part of the room.
+pub const AUTO_MARGIN_OF_SCENE: f64 = 0.03;
+
+/// The margin `"auto"` stands for: [`AUTO_MARGIN_OF_RADIUS`] × the smallest working distance
+/// of the queries, at most [`AUTO_MARGIN_OF_SCENE`] × the scene's robust diagonal.
+pub fn auto_margin(smallest_radius: f64, scene_diagonal: f64) -> f64 {
+    let by_radius = AUTO_MARGIN_OF_RADIUS * smallest_radius;
+    let by_scene = AUTO_MARGIN_OF_SCENE * scene_diagonal;
+    match (by_radius > 0.0, by_scene > 0.0) {
+        (true, true) => by_radius.min(by_scene),
+        (true, false) => by_radius,
+        _ => by_scene,
+    }
+}
+
+impl Default for ClearanceCost {
+    /// Weight 30, margin `"auto"`, the default geometry: what a config without `[costs]`
+    /// gets. Weight 30 because the image costs are of order 1 per sample and a camera inside
+    /// the margin must lose against them (the demo config measured 1, 10 and 30: only 30 kept
+    /// the margin everywhere).
+    fn default() -> Self {
+        Self {
+            weight: 30.0,
+            margin: OrAuto::Auto,
+            sigma: DEFAULT_CLEARANCE_SIGMA,
+            min_opacity: DEFAULT_MIN_OPACITY,
+        }
+    }
+}
+
 impl ClearanceCost {
     /// A clearance cost of weight 1 with margin `margin` and the default geometry.
     pub fn with_margin(margin: f64) -> Self {
         Self {
             weight: 1.0,
-            margin,
+            margin: OrAuto::Value(margin),
             sigma: DEFAULT_CLEARANCE_SIGMA,
             min_opacity: DEFAULT_MIN_OPACITY,
         }
+    }
+
+    /// The margin in scene units, or an error naming the key when it is still `"auto"`.
+    pub fn margin(&self) -> Result<f64, CostError> {
+        self.margin.value().ok_or_else(|| {
+            invalid(
+                "clearance",
+                "margin",
+                "is \"auto\" but was never derived from a scene (prepare the experiment \
+                 first, or give a number)"
+                    .into(),
+            )
+        })
     }
 }
 
@@ -116,7 +169,8 @@ impl Cost for ClearanceCost {
     }
     fn validate(&self) -> Result<(), CostError> {
         check_weight(self.name(), "weight", self.weight)?;
-        for (field, value) in [("margin", self.margin), ("sigma", self.sigma)] {
+        let margin = self.margin.value().unwrap_or(1.0);
+        for (field, value) in [("margin", margin), ("sigma", self.sigma)] {
             if !(value.is_finite() && value > 0.0) {
                 return Err(invalid(
                     self.name(),
@@ -136,6 +190,7 @@ impl Cost for ClearanceCost {
     }
     fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
         let occupancy = inputs.require_occupancy(self.name())?;
+        let margin = self.margin()?;
         let poses = inputs.path_or_sample_poses();
         let [batch, _] = poses.dims();
         let centres = poses.narrow(1, 3, 3); // [P, 3]
@@ -144,8 +199,8 @@ impl Cost for ClearanceCost {
         let mut normals = Vec::with_capacity(3 * batch);
         for c in host.chunks_exact(3) {
             let c = DVec3::new(c[0], c[1], c[2]);
-            match occupancy.nearest_within(c, self.margin) {
-                Some(contact) if contact.surface.distance < self.margin => {
+            match occupancy.nearest_within(c, margin) {
+                Some(contact) if contact.surface.distance < margin => {
                     points.extend(contact.surface.point.to_array());
                     normals.extend(contact.surface.normal.to_array());
                 }
@@ -164,7 +219,7 @@ impl Cost for ClearanceCost {
             centres,
             tensor(points),
             tensor(normals.clone()),
-            self.margin,
+            margin,
         );
         let clear: Vec<f64> = normals
             .chunks_exact(3)

@@ -40,6 +40,7 @@
 //! and for an empty mask (object out of view) TCE has a zero gradient and TRE a constant one,
 //! so that nothing but the prior moves a camera that sees nothing (see each function's docs).
 
+pub mod auto;
 pub mod clearance;
 pub mod iou;
 pub mod motion;
@@ -49,6 +50,7 @@ pub mod shot;
 pub mod tce;
 pub mod tre;
 pub mod upright;
+pub mod visibility;
 
 use std::collections::BTreeMap;
 
@@ -57,15 +59,19 @@ use serde::{Deserialize, Serialize};
 
 use crate::clearance::{Occupancy, OccupancySpec};
 
-pub use clearance::{ClearanceCost, DEFAULT_CLEARANCE_SIGMA, DEFAULT_MIN_OPACITY, clearance};
+pub use auto::OrAuto;
+pub use clearance::{
+    ClearanceCost, DEFAULT_CLEARANCE_SIGMA, DEFAULT_MIN_OPACITY, auto_margin, clearance,
+};
 pub use iou::{IOU_THRESHOLD, PixelBox, bbox_iou, bbox_iou_batch, mask_box};
-pub use motion::MotionCost;
+pub use motion::{MotionCost, auto_max_speed};
 pub use prior::{PRIOR_EPSILON_FRACTION, PriorCost, default_prior_radius, prior};
 pub use registry::{CostConfig, CostRegistry};
 pub use shot::ShotCost;
 pub use tce::{MASS_FLOOR, NORM_EPSILON, TceCost, centroid_offset, tce};
 pub use tre::{DEFAULT_TARGET_RATIO, TreCost, coverage, tre};
 pub use upright::{UprightCost, UprightMode, upright};
+pub use visibility::{VisibilityCost, hidden_share};
 
 /// Prefix of every config key named in errors: the costs live in the config's `[costs]` table.
 pub const CONFIG_TABLE: &str = "costs";
@@ -179,6 +185,7 @@ pub struct CostInputs {
     poses: Tensor<2>,
     rotations: Tensor<3>,
     masks: Option<Tensor<3>>,
+    mask_alone: Option<Tensor<3>>,
     depth: Option<Tensor<3>>,
     rgb: Option<Tensor<4>>,
     path: Option<PathSamples>,
@@ -230,6 +237,9 @@ pub enum ImageChannel {
     Depth,
     /// Colour `[B, H, W, 3]` of the whole scene.
     Rgb,
+    /// The query's object mask `[B, H, W]` rendered with the object's Gaussians alone
+    /// (nothing in front of it): what [`mod@visibility`] compares the seen mask with.
+    MaskAlone,
 }
 
 impl CostInputs {
@@ -269,6 +279,7 @@ impl CostInputs {
             poses,
             rotations,
             masks,
+            mask_alone: None,
             depth: None,
             rgb: None,
             path: None,
@@ -277,6 +288,22 @@ impl CostInputs {
             step,
             query,
         })
+    }
+
+    /// Adds the object's mask rendered alone `[B, H, W]`.
+    pub fn with_mask_alone(mut self, mask: Tensor<3>) -> Self {
+        self.mask_alone = Some(mask);
+        self
+    }
+
+    /// The object's mask rendered alone, or [`CostError::MissingChannel`] naming `cost`.
+    pub fn require_mask_alone(&self, cost: &'static str) -> Result<Tensor<3>, CostError> {
+        self.mask_alone
+            .clone()
+            .ok_or(CostError::MissingChannel {
+                cost,
+                channel: ImageChannel::MaskAlone,
+            })
     }
 
     /// Adds the rendered depth `[B, H, W]`.
@@ -478,9 +505,11 @@ pub fn invalid(cost: &str, field: &str, reason: String) -> CostError {
 /// gamma = 0.99
 /// ```
 ///
-/// Without a `[costs]` table ([`Default`]) all four optimised costs are on with their default
-/// weights (the paper's L = TCE + TRE + L_upright + α·L_prior); a `[costs]` table lists exactly
-/// the costs that are on (the ablations: prior only, prior + TCE, …). Unknown keys are errors.
+/// [`Default`] is the paper's objective: the four optimised costs with their default weights
+/// (L = TCE + TRE + L_upright + α·L_prior). An experiment config without a `[costs]` table
+/// gets [`CostsConfig::first_try`] instead (those four, the horizon-only upright, clearance and
+/// motion limits derived from the scene); a `[costs]` table lists exactly the costs that are
+/// on (the ablations: prior only, prior + TCE, …). Unknown keys are errors.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CostsConfig {
@@ -502,6 +531,10 @@ pub struct CostsConfig {
     /// Motion limits (path cost; off unless its table is given).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub motion: Option<MotionCost>,
+    /// Visibility: the share of the object other geometry hides (off unless its table is
+    /// given; renders the object alone too).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub visibility: Option<VisibilityCost>,
     /// Costs registered by other crates ([`CostRegistry`]), by name: `[costs.custom.<name>]`
     /// holds that cost's config table.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
@@ -518,14 +551,32 @@ impl Default for CostsConfig {
             prior: Some(PriorCost::default()),
             clearance: None,
             motion: None,
+            visibility: None,
             custom: BTreeMap::new(),
         }
     }
 }
 
 impl CostsConfig {
+    /// The costs of a config that names none: the paper's four, with the horizon-only
+    /// upright (`roll`: a camera may pitch down to an object on the floor), clearance with an
+    /// automatic margin and motion limits (an automatic speed, [`motion`]'s default turning
+    /// rate). What a new user's capture needs on the first run (docs/first-try.md).
+    pub fn first_try() -> Self {
+        Self {
+            upright: Some(UprightCost {
+                mode: UprightMode::Roll,
+                ..UprightCost::default()
+            }),
+            clearance: Some(ClearanceCost::default()),
+            motion: Some(MotionCost::first_try()),
+            visibility: Some(VisibilityCost::default()),
+            ..Self::default()
+        }
+    }
+
     /// Validates every configured cost and collects them, in the order tce, tre, upright, prior,
-    /// clearance, motion.
+    /// clearance, motion, visibility.
     /// A `custom` cost is an error here: build those with [`CostsConfig::build_with`].
     pub fn build(&self) -> Result<WeightedCosts, CostError> {
         self.build_with(&CostRegistry::default())
@@ -550,6 +601,9 @@ impl CostsConfig {
             costs.push(Box::new(c.clone()));
         }
         if let Some(c) = &self.motion {
+            costs.push(Box::new(c.clone()));
+        }
+        if let Some(c) = &self.visibility {
             costs.push(Box::new(c.clone()));
         }
         for (name, table) in &self.custom {

@@ -24,7 +24,7 @@
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostDomain, CostError, CostInputs, check_weight, invalid};
+use super::{Cost, CostDomain, CostError, CostInputs, OrAuto, check_weight, invalid};
 
 /// The motion-limit cost: table `[costs.motion]`, keys `weight` (default 1), `max_speed`
 /// (scene units per second), `max_acceleration` (scene units per second²),
@@ -35,9 +35,10 @@ use super::{Cost, CostDomain, CostError, CostInputs, check_weight, invalid};
 pub struct MotionCost {
     /// Weight (≥ 0).
     pub weight: f64,
-    /// Largest camera speed, scene units per second (> 0).
+    /// Largest camera speed, scene units per second (> 0), or `"auto"`: derived from the
+    /// scene when the experiment is prepared ([`auto_max_speed`]).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub max_speed: Option<f64>,
+    pub max_speed: Option<OrAuto>,
     /// Largest camera acceleration, scene units per second² (> 0).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub max_acceleration: Option<f64>,
@@ -61,7 +62,45 @@ impl Default for MotionCost {
     }
 }
 
+/// Turning rate a viewer follows comfortably, degrees per second: the default limit of a
+/// config without `[costs]` (a pan of 90° takes two seconds; cinematographers' rule of thumb
+/// for a pan that does not strobe at 30 fps is 3–7 seconds for a whole frame width, 10–20°/s
+/// for a 60° lens, so this is brisk but not a whip pan; what a 3 s window leaves for the turn
+/// between two sides of an object needs about this much).
+pub const FIRST_TRY_MAX_ANGULAR_SPEED: f64 = 60.0;
+
+/// How many working distances (prior radii) per second the automatic speed limit allows.
+pub const AUTO_SPEED_RADII_PER_SECOND: f64 = 1.5;
+
+/// Share of a window's duration the automatic speed limit allows for the move from one
+/// object to the next (the joins are where the camera travels).
+pub const AUTO_SPEED_JOIN_SHARE: f64 = 0.5;
+
+/// The speed `"auto"` stands for: [`AUTO_SPEED_RADII_PER_SECOND`] mean working distances per
+/// second, raised where consecutive objects lie farther apart than that allows in
+/// [`AUTO_SPEED_JOIN_SHARE`] of a window (`largest_join`: the largest distance between
+/// consecutive objects, `window_seconds`: one window's duration).
+pub fn auto_max_speed(mean_radius: f64, largest_join: f64, window_seconds: f64) -> f64 {
+    let steady = AUTO_SPEED_RADII_PER_SECOND * mean_radius;
+    let travel = largest_join / (AUTO_SPEED_JOIN_SHARE * window_seconds).max(1e-9);
+    steady.max(travel)
+}
+
 impl MotionCost {
+    /// The motion limits of a config without `[costs]`: speed `"auto"`, turning at most
+    /// [`FIRST_TRY_MAX_ANGULAR_SPEED`], weight 1: a preference the image costs can overrule
+    /// (at 10 the limits won against framing on the first-try tray: the camera backed away
+    /// from its objects to turn less).
+    pub fn first_try() -> Self {
+        Self {
+            weight: 1.0,
+            max_speed: Some(OrAuto::Auto),
+            max_acceleration: None,
+            max_angular_speed: Some(FIRST_TRY_MAX_ANGULAR_SPEED),
+            even_speed: 0.0,
+        }
+    }
+
     /// Whether any limit needs the path's duration.
     pub fn needs_duration(&self) -> bool {
         self.max_speed.is_some()
@@ -93,7 +132,7 @@ impl Cost for MotionCost {
         check_weight(self.name(), "weight", self.weight)?;
         check_weight(self.name(), "even_speed", self.even_speed)?;
         for (field, value) in [
-            ("max_speed", self.max_speed),
+            ("max_speed", self.max_speed.and_then(OrAuto::value)),
             ("max_acceleration", self.max_acceleration),
             ("max_angular_speed", self.max_angular_speed),
         ] {
@@ -144,8 +183,20 @@ impl Cost for MotionCost {
             .reshape([count - 1])
             .div_scalar(dt * dt); // [P − 1]
         let mut total = zero;
-        if let Some(limit) = self.max_speed {
-            total = total + over_limit(squared_speed.clone(), limit);
+        match self.max_speed {
+            Some(OrAuto::Value(limit)) => {
+                total = total + over_limit(squared_speed.clone(), limit);
+            }
+            Some(OrAuto::Auto) => {
+                return Err(invalid(
+                    self.name(),
+                    "max_speed",
+                    "is \"auto\" but was never derived from a scene (prepare the experiment \
+                     first, or give a number)"
+                        .into(),
+                ));
+            }
+            None => {}
         }
         if let Some(limit) = self.max_acceleration {
             let second = steps.clone().narrow(0, 1, count - 2) - steps.narrow(0, 0, count - 2);

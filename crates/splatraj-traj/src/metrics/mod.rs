@@ -5,14 +5,17 @@
 //! - [`window`]: per query window TCE, TRE, bounding-box IoU, visibility and occlusion, on a
 //!   fixed grid;
 //! - [`path`]: per window clearance and motion peaks on a dense grid;
-//! - [`shot`]: per window with a shot preset, the deviation from what the shot asks.
+//! - [`shot`]: per window with a shot preset, the deviation from what the shot asks;
+//! - [`verdict`](mod@verdict): per window, whether it shows its object as a viewer expects.
 
 pub mod ldj;
 pub mod path;
 pub mod shot;
+pub mod verdict;
 pub mod window;
 
 pub use ldj::{DEFAULT_LDJ_SAMPLES, Smoothness, ldj, pose_ldj, trajectory_ldj};
 pub use path::{ClearanceMetrics, MotionMetrics, PathMetrics, path_metrics};
 pub use shot::{Deviation, ShotMetrics, shot_metrics};
-pub use window::{Occlusion, WindowMetrics, WindowObject, window_metrics};
+pub use verdict::{Check, CheckKind, Verdict, verdict};
+pub use window::{Framing, Occlusion, WindowMetrics, WindowObject, window_metrics};

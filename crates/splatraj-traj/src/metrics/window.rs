@@ -15,6 +15,14 @@
 //! share of the window (consecutive samples are adjacent strata, each 1/`samples` of the
 //! window), and in seconds when the caller knows the window's duration. An object out of
 //! frame is not "hidden": `visible_fraction` reports that.
+//!
+//! **Framing where it is judged** ([`Framing`]). The window's first and last quarters are where
+//! the camera pans from the previous object and on to the next; the framing a viewer judges
+//! is the middle half's. `framing` holds TCE and coverage averaged over the middle half's
+//! samples that show the object (None when none does: an object never seen has no framing
+//! error, rather than the 0 an empty mask's TCE would give), the same TCE over the whole
+//! window's samples that show it, and the share of samples whose camera centre lies inside the
+//! object's box (a camera inside the object sees its inside, or nothing).
 
 use burn::tensor::Tensor;
 use serde::Serialize;
@@ -45,6 +53,8 @@ pub struct WindowMetrics {
     pub iou: f64,
     /// Mean share of the frame the visible object covers.
     pub coverage: f64,
+    /// The share it should cover (TRE's target).
+    pub target_ratio: f64,
     /// Share of samples that show the object.
     pub visible_fraction: f64,
     /// Whether every sample shows the object.
@@ -63,6 +73,25 @@ pub struct WindowMetrics {
     /// from [`super::shot_metrics`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub shot: Option<super::ShotMetrics>,
+    /// Framing where it is judged, and the camera inside the object (module docs).
+    pub framing: Framing,
+    /// Whether the window passes the first-try checks (filled in by the caller from
+    /// [`super::verdict()`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub verdict: Option<super::Verdict>,
+}
+
+/// Framing over the samples that show the object (module docs).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Framing {
+    /// Mean TCE over the middle half's samples that show the object.
+    pub tce_middle: Option<f64>,
+    /// Mean coverage over the same samples.
+    pub coverage_middle: Option<f64>,
+    /// Mean TCE over all of the window's samples that show the object.
+    pub tce_in_view: Option<f64>,
+    /// Share of the samples whose camera centre lies inside the object's box.
+    pub inside_object: f64,
 }
 
 /// What occluders hide of a window's object (see the module docs).
@@ -121,6 +150,8 @@ pub struct WindowObject<'a> {
     pub target_ratio: f64,
     /// Which rasterizer renders the masks.
     pub rasterizer: Rasterizer,
+    /// The object's box as (centre, half extent), for `framing.inside_object` (None: 0).
+    pub bounds: Option<([f64; 3], [f64; 3])>,
 }
 
 /// Metrics of window `index` of `windows`, at the poses `pose_at` gives for the grid times.
@@ -136,6 +167,15 @@ pub fn window_metrics(
     let times = stratified_times(index, windows, samples.max(1), None);
     let poses = pose_at(&times);
     let poses: Vec<CameraPose> = poses.into_iter().map(CameraPose).collect();
+    let inside = poses
+        .iter()
+        .filter(|p| {
+            object.bounds.is_some_and(|(centre, half)| {
+                let offset = (p.centre() - glam::DVec3::from(centre)).abs();
+                offset.cmple(glam::DVec3::from(half)).all()
+            })
+        })
+        .count();
     let poses = scene.poses(&poses);
     let mask_of = |scene: &DeviceScene, mask: Vec<f32>| -> Result<Tensor<3>, RenderError> {
         let request = RenderRequest {
@@ -158,10 +198,29 @@ pub fn window_metrics(
     let pixels = host(visible.reshape([batch * height * width]));
     let alone_pixels = host(alone.reshape([batch * height * width]));
     let in_frame = |m: &[f64]| mask_box(m, width, height, IOU_THRESHOLD).is_some();
-    let shown = pixels
+    let shows: Vec<bool> = pixels
         .chunks_exact(height * width)
-        .filter(|m| in_frame(m))
-        .count();
+        .map(|m| in_frame(m))
+        .collect();
+    let shown = shows.iter().filter(|&&s| s).count();
+    // The middle half of the window: samples whose stratum middle lies in [¼, ¾] of it.
+    let middle = |k: usize| {
+        let s = (k as f64 + 0.5) / batch.max(1) as f64;
+        (0.25..=0.75).contains(&s)
+    };
+    let mean_where = |values: &[f64], keep: &dyn Fn(usize) -> bool| {
+        let picked: Vec<f64> = (0..values.len())
+            .filter(|&k| shows[k] && keep(k))
+            .map(|k| values[k])
+            .collect();
+        (!picked.is_empty()).then(|| picked.iter().sum::<f64>() / picked.len() as f64)
+    };
+    let framing = Framing {
+        tce_middle: mean_where(&tces, &middle),
+        coverage_middle: mean_where(&coverages, &middle),
+        tce_in_view: mean_where(&tces, &|_| true),
+        inside_object: inside as f64 / batch.max(1) as f64,
+    };
     let occluded: Vec<Option<f64>> = pixels
         .chunks_exact(height * width)
         .zip(alone_pixels.chunks_exact(height * width))
@@ -181,6 +240,7 @@ pub fn window_metrics(
         tre: mean(&tres),
         iou: mean(&ious),
         coverage: mean(&coverages),
+        target_ratio: object.target_ratio,
         visible_fraction: shown as f64 / batch.max(1) as f64,
         visible: shown == batch,
         tce_max: max(&tces),
@@ -188,5 +248,7 @@ pub fn window_metrics(
         occlusion: Occlusion::from_shares(&occluded),
         path: None,
         shot: None,
+        framing,
+        verdict: None,
     })
 }

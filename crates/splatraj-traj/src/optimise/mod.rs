@@ -8,6 +8,7 @@
 //!   samples of the pose posterior ∝ exp(−L/τ);
 //! - [`start`]: starting poses (seeded random ones, or ones that look at each object);
 //! - [`route`]: planned starts that go around the scene's geometry between windows;
+//! - [`views`]: the search for each window's starting viewpoint, where its object shows;
 //! - [`sampling`] and [`units`]: the stratified times and the normalised parameter units the
 //!   loops share.
 
@@ -19,6 +20,7 @@ pub mod single_pose;
 pub mod start;
 pub mod trajectory;
 pub mod units;
+pub mod views;
 
 use burn::tensor::Tensor;
 use splatraj_render::camera::Pose;
@@ -44,6 +46,9 @@ pub use trajectory::{
     WindowTarget, optimise_trajectory,
 };
 pub use units::PoseUnits;
+pub use views::{
+    Candidate, ViewSearch, ViewWeights, ViewedObject, WindowViews, choose_views, search_views,
+};
 
 /// Why an optimisation could not run.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -45,6 +45,9 @@ pub struct Problem<'a> {
     pub seconds: Option<f64>,
     /// Rendering shortcuts of the optimisation passes (exact by default).
     pub approximations: Approximations,
+    /// Each window's object alone (its Gaussians only, on the scene's device), for costs
+    /// that read [`ImageChannel::MaskAlone`].
+    pub alone: Option<&'a [DeviceScene]>,
 }
 
 /// One evaluation: the cost terms and the object mask when one was rendered.
@@ -101,7 +104,14 @@ impl<'a> Problem<'a> {
             occupancy: None,
             seconds: None,
             approximations: Approximations::default(),
+            alone: None,
         }
+    }
+
+    /// The same problem with each window's object alone (needed by the visibility cost).
+    pub fn with_alone(mut self, alone: Option<&'a [DeviceScene]>) -> Self {
+        self.alone = alone;
+        self
     }
 
     /// The same problem with rendering shortcuts (`[approximations]`; not for metrics).
@@ -137,7 +147,12 @@ impl<'a> Problem<'a> {
                     field: "window",
                     reason: format!("= {index}, but there are {} windows", self.windows.len()),
                 })?;
-        Ok(Problem { windows, ..*self })
+        let alone = self.alone.and_then(|a| a.get(index..=index));
+        Ok(Problem {
+            windows,
+            alone,
+            ..*self
+        })
     }
 
     /// The one window of a single-pose problem.
@@ -157,7 +172,13 @@ impl<'a> Problem<'a> {
     /// The render request for window `index`: the channels the costs read, pruned to the
     /// object when the mask is the only one; None when no cost reads an image.
     pub fn request(&self, index: usize) -> Option<RenderRequest> {
-        let needed = self.costs.channels();
+        // The object alone is another scene's render (see `evaluate_along`).
+        let needed: Vec<ImageChannel> = self
+            .costs
+            .channels()
+            .into_iter()
+            .filter(|c| *c != ImageChannel::MaskAlone)
+            .collect();
         if needed.is_empty() {
             return None;
         }
@@ -167,6 +188,7 @@ impl<'a> Problem<'a> {
                 ImageChannel::Mask => Channel::Mask(self.windows[index].mask.clone()),
                 ImageChannel::Depth => Channel::Depth,
                 ImageChannel::Rgb => Channel::Rgb,
+                ImageChannel::MaskAlone => unreachable!("filtered out above"),
             })
             .collect();
         let mut request = RenderRequest::new(self.intrinsics, channels);
@@ -279,12 +301,22 @@ impl<'a> Problem<'a> {
                 Channel::Features { .. } => {}
             }
         }
-        let mut inputs = attach(CostInputs::new(poses, masks.clone(), step, window.context)?);
+        let mut inputs = attach(CostInputs::new(
+            poses.clone(),
+            masks.clone(),
+            step,
+            window.context,
+        )?);
         if let Some(d) = depth {
             inputs = inputs.with_depth(d);
         }
         if let Some(c) = rgb {
             inputs = inputs.with_rgb(c);
+        }
+        if self.costs.channels().contains(&ImageChannel::MaskAlone)
+            && let Some(alone) = self.alone.and_then(|a| a.get(index))
+        {
+            inputs = inputs.with_mask_alone(self.render_alone(alone, poses, request)?);
         }
         let terms = self.costs.evaluate(&inputs)?;
         Ok(Evaluated {
@@ -292,6 +324,22 @@ impl<'a> Problem<'a> {
             masks,
             stats: Some(rendered.stats),
         })
+    }
+
+    /// The object alone's mask `[B, H, W]` at `poses`, rendered as `request` renders the
+    /// scene (camera, rasterizer, approximations), pruned to the object (all of it).
+    fn render_alone(
+        &self,
+        alone: &DeviceScene,
+        poses: Tensor<2>,
+        request: &RenderRequest,
+    ) -> Result<Tensor<3>, OptimiseError> {
+        let mut request = request.clone();
+        request.channels = vec![Channel::Mask(vec![1.0; alone.len()])];
+        request.pruning = Pruning::ObjectOnly;
+        let images = render(alone, poses, &request)?.images;
+        let [batch, height, width, _] = images.dims();
+        Ok(images.reshape([batch, height, width]))
     }
 
     /// The loss of `pose` for window `index` (step 0), read back to the host, and its

@@ -22,7 +22,7 @@
 //! toward, made explicit, so the image costs are in play from the first step. Its poses are
 //! meant for a piecewise-constant fit per window (the caller fits the model).
 
-use glam::DVec3;
+use glam::{DMat3, DQuat, DVec3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -31,7 +31,7 @@ use splatraj_render::camera::Pose;
 use burn::tensor::{DType, Device};
 
 use super::OptimiseError;
-use super::route::Transition;
+use super::route::{ROUTE_TRANSITION, Transition};
 use super::sampling::{window_bounds, window_of};
 use crate::shots::ShotPath;
 use crate::trajectory::{Trajectory, TrajectoryModel, uniform_times};
@@ -273,6 +273,17 @@ pub fn window_joins(per_window: &[WindowStart]) -> Vec<(DVec3, DVec3)> {
 
 /// [`start_trajectory`] whose camera centres follow `transitions` (planned routes around the
 /// geometry, [`crate::optimise::route`]) over their times.
+///
+/// **Joins.** Around each join of two windows the start does not jump from one window's pose
+/// to the next: over the last [`ROUTE_TRANSITION`] of the earlier window and the first of the
+/// later one (not inside a window with a shot, whose path is the shot's), the orientation
+/// turns from the one to the other (slerp) and the centre moves along the join's route, or
+/// straight, both by the smoothstep 3x² − 2x³ of time, at rest at both ends: a pan from one
+/// framed object to the next. A step is what no smooth model can hold: fitted by 3 RBF
+/// centres per window, a jump rang through the whole window (the first-try donut's windows
+/// started at TCE 0.24 before any step); a blend is a smooth target the model fits. The
+/// path's first and last windows hold their poses to t = 0 and t = 1: it starts and ends at
+/// rest.
 pub fn routed_start_trajectory(
     model: TrajectoryModel,
     per_window: &[WindowStart],
@@ -282,6 +293,7 @@ pub fn routed_start_trajectory(
 ) -> Result<Trajectory, OptimiseError> {
     let n = per_window.len();
     let times = uniform_times(START_FIT_SAMPLES);
+    let joins = join_spans(per_window);
     let mut poses: Vec<[f64; 6]> = Vec::with_capacity(times.len());
     for &t in &times {
         let i = window_of(t, n);
@@ -289,6 +301,14 @@ pub fn routed_start_trajectory(
         let mut pose = per_window[i]
             .pose_at(((t - start) / (end - start)).clamp(0.0, 1.0))
             .0;
+        if let Some(&(k, from, to)) = joins.iter().find(|(_, a, b)| t > *a && t < *b) {
+            let s = smoothstep((t - from) / (to - from));
+            let (a, b) = (per_window[k].pose_at(1.0), per_window[k + 1].pose_at(0.0));
+            let turn = DQuat::from_mat3(&a.rotation_wc())
+                .slerp(DQuat::from_mat3(&b.rotation_wc()), s);
+            let centre = a.centre().lerp(b.centre(), s);
+            pose = Pose::from_rotation_and_centre(DMat3::from_quat(turn), centre).0;
+        }
         if let Some(route) = transitions
             .iter()
             .find(|r| t >= r.times.0 && t <= r.times.1)
@@ -302,4 +322,33 @@ pub fn routed_start_trajectory(
         poses.push(pose);
     }
     Ok(Trajectory::fit(model, &times, &poses, device, dtype)?)
+}
+
+/// (join k, from, to): the time span over which the start turns from window k's end pose to
+/// window k + 1's start pose (see [`routed_start_trajectory`]); none beside a shot's window.
+fn join_spans(per_window: &[WindowStart]) -> Vec<(usize, f64, f64)> {
+    let n = per_window.len().max(1) as f64;
+    let held = |w: &WindowStart| matches!(w, WindowStart::Hold(_));
+    (0..per_window.len().saturating_sub(1))
+        .filter_map(|k| {
+            let join = (k + 1) as f64 / n;
+            let before = if held(&per_window[k]) {
+                ROUTE_TRANSITION / n
+            } else {
+                0.0
+            };
+            let after = if held(&per_window[k + 1]) {
+                ROUTE_TRANSITION / n
+            } else {
+                0.0
+            };
+            (before + after > 0.0).then_some((k, join - before, join + after))
+        })
+        .collect()
+}
+
+/// 3x² − 2x³ on [0, 1]: 0 to 1 at rest at both ends.
+fn smoothstep(x: f64) -> f64 {
+    let x = x.clamp(0.0, 1.0);
+    x * x * (3.0 - 2.0 * x)
 }

@@ -1,0 +1,208 @@
+//! The verdict on each window: does it show its object the way a viewer expects?
+//!
+//! A run judges its own result with the figures the metrics already hold
+//! ([`WindowMetrics`]: the fixed-grid evaluation at the output resolution and the dense path
+//! checks), against named thresholds. Each [`Check`] carries its figure, its limit and, when
+//! it fails, a sentence naming the window's query, what went wrong and the likely fix, so the
+//! console, `metrics.json` and `report.html` all say the same thing. A verdict is a check,
+//! never a cost: nothing here changes the trajectory.
+//!
+//! | check | figure | passes when | why that limit |
+//! |---|---|---|---|
+//! | `in_view` | share of samples showing the object | ≥ [`MIN_IN_VIEW`] | a viewer forgives a glance away, not a window without its object |
+//! | `framed` | mean TCE over the middle half's samples in view | ≤ [`MAX_TCE`] | the object's centre within 15 % of the frame's size from the middle, outside the pans |
+//! | `size` | middle half's mean coverage / target ratio | within [`SIZE_RANGE`] | a factor 3 either way is a different shot (a speck, or a close-up of a part) |
+//! | `visible` | 1 − mean occluded share | ≥ [`MIN_VISIBLE_SHARE`] | most of the object must be seen, not what stands in front of it |
+//! | `hidden` | share of samples more than half hidden | ≤ [`MAX_HIDDEN`] | a fifth of the window behind something is a visible failure |
+//! | `clearance` | smallest clearance of the camera from the solid geometry | ≥ 0 | below 0 the camera is inside geometry and films its inside |
+//! | `inside_object` | share of samples whose camera is inside the object's box | ≤ [`MAX_INSIDE_OBJECT`] | a camera inside the object cannot show it |
+
+use serde::Serialize;
+
+use super::WindowMetrics;
+
+/// Least share of a window's samples that must show the object.
+pub const MIN_IN_VIEW: f64 = 0.9;
+/// Largest mean centring error (TCE) of the middle half's samples in view.
+pub const MAX_TCE: f64 = 0.15;
+/// Range of the middle half's coverage over the target ratio.
+pub const SIZE_RANGE: (f64, f64) = (1.0 / 3.0, 3.0);
+/// Least mean share of the object not hidden by other geometry.
+pub const MIN_VISIBLE_SHARE: f64 = 0.6;
+/// Largest share of samples with more than half of the object hidden.
+pub const MAX_HIDDEN: f64 = 0.2;
+/// Smallest clearance of the camera centre from the solid geometry (scene units): below 0 it
+/// is inside.
+pub const MIN_CLEARANCE: f64 = 0.0;
+/// Largest share of samples whose camera centre is inside the object's box.
+pub const MAX_INSIDE_OBJECT: f64 = 0.0;
+
+/// What a check looks at.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CheckKind {
+    /// The object is in frame.
+    InView,
+    /// Its centre is near the frame's middle.
+    Framed,
+    /// It covers about the share of the frame asked for.
+    Size,
+    /// Little of it is hidden by other geometry.
+    Visible,
+    /// It is rarely more than half hidden.
+    Hidden,
+    /// The camera stays out of the geometry.
+    Clearance,
+    /// The camera stays out of the object.
+    InsideObject,
+}
+
+/// One check of a window (module docs).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Check {
+    /// What it checks.
+    pub check: CheckKind,
+    /// The figure (None: undefined, e.g. the framing of an object never in view).
+    pub value: Option<f64>,
+    /// The limit it is held to (the lower and upper ends for `size`).
+    pub limit: Vec<f64>,
+    /// Whether it passes.
+    pub pass: bool,
+}
+
+/// Every check of one window, and what to tell the user when one fails.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Verdict {
+    /// Whether every check passes.
+    pub pass: bool,
+    /// The checks, in the order of the module's table.
+    pub checks: Vec<Check>,
+    /// One sentence per failed check: the query, what is wrong, the likely fix.
+    pub problems: Vec<String>,
+}
+
+/// The verdict on window `m` (module docs).
+pub fn verdict(m: &WindowMetrics) -> Verdict {
+    let mut checks = Vec::new();
+    let mut problems = Vec::new();
+    let name = &m.name;
+    let mut add = |check: CheckKind, value: Option<f64>, limit: Vec<f64>, pass: bool, why: String| {
+        if !pass {
+            problems.push(format!("window {} {name:?}: {why}", m.window));
+        }
+        checks.push(Check {
+            check,
+            value,
+            limit,
+            pass,
+        });
+    };
+
+    add(
+        CheckKind::InView,
+        Some(m.visible_fraction),
+        vec![MIN_IN_VIEW],
+        m.visible_fraction >= MIN_IN_VIEW,
+        format!(
+            "the object is in frame in {:.0} % of the window (at least {:.0} % expected); \
+             likely fix: check what the query selects (`splatraj query`), or raise \
+             `optimiser.iterations`",
+            100.0 * m.visible_fraction,
+            100.0 * MIN_IN_VIEW
+        ),
+    );
+    let tce = m.framing.tce_middle;
+    add(
+        CheckKind::Framed,
+        tce,
+        vec![MAX_TCE],
+        tce.is_some_and(|t| t <= MAX_TCE),
+        match tce {
+            Some(t) => format!(
+                "the object's centre is {t:.2} of the frame from its middle in the window's \
+                 middle half (at most {MAX_TCE} expected); likely fix: raise \
+                 `optimiser.iterations` or `optimiser.samples_per_window`"
+            ),
+            None => "the object is never in frame in the window's middle half, so it is not \
+                     framed; likely fix: check what the query selects (`splatraj query`)"
+                .to_string(),
+        },
+    );
+    let size = m.framing.coverage_middle.map(|c| c / m.target_ratio);
+    add(
+        CheckKind::Size,
+        size,
+        vec![SIZE_RANGE.0, SIZE_RANGE.1],
+        size.is_some_and(|s| s >= SIZE_RANGE.0 && s <= SIZE_RANGE.1),
+        match size {
+            Some(s) if s < SIZE_RANGE.0 => format!(
+                "the object covers {s:.2}× the share of the frame asked for (at least {:.2}× \
+                 expected); likely fix: more steps, or a larger `target_ratio` for this query",
+                SIZE_RANGE.0
+            ),
+            Some(s) => format!(
+                "the object covers {s:.2}× the share of the frame asked for (at most {}× \
+                 expected); likely fix: a smaller `target_ratio`, or check that the query \
+                 selects only the object",
+                SIZE_RANGE.1
+            ),
+            None => "the object is never in frame in the window's middle half".to_string(),
+        },
+    );
+    let visible_share = 1.0 - m.occlusion.mean_occluded;
+    add(
+        CheckKind::Visible,
+        Some(visible_share),
+        vec![MIN_VISIBLE_SHARE],
+        visible_share >= MIN_VISIBLE_SHARE,
+        format!(
+            "{:.0} % of the object is hidden behind other geometry on average (at most {:.0} % \
+             expected); likely fix: a selection that reaches inside a surface is hidden by it \
+             (shrink the region or sphere), or give the query a `shot` with another `azimuth`",
+            100.0 * m.occlusion.mean_occluded,
+            100.0 * (1.0 - MIN_VISIBLE_SHARE)
+        ),
+    );
+    add(
+        CheckKind::Hidden,
+        Some(m.occlusion.hidden_fraction),
+        vec![MAX_HIDDEN],
+        m.occlusion.hidden_fraction <= MAX_HIDDEN,
+        format!(
+            "the object is more than half hidden in {:.0} % of the window (at most {:.0} % \
+             expected); likely fix: the same as for a hidden object, or fewer \
+             `trajectory.centres_per_window` if the camera swings behind something",
+            100.0 * m.occlusion.hidden_fraction,
+            100.0 * MAX_HIDDEN
+        ),
+    );
+    if let Some(clearance) = m.path.as_ref().and_then(|p| p.clearance.as_ref()) {
+        add(
+            CheckKind::Clearance,
+            Some(clearance.min_clearance),
+            vec![MIN_CLEARANCE],
+            clearance.min_clearance >= MIN_CLEARANCE,
+            format!(
+                "the camera goes {:.3} scene units inside the scene's geometry; likely fix: \
+                 raise `costs.clearance.weight`, or check `scene.up`",
+                -clearance.min_clearance
+            ),
+        );
+    }
+    add(
+        CheckKind::InsideObject,
+        Some(m.framing.inside_object),
+        vec![MAX_INSIDE_OBJECT],
+        m.framing.inside_object <= MAX_INSIDE_OBJECT,
+        format!(
+            "the camera is inside the object's box in {:.0} % of the window; likely fix: a \
+             smaller `target_ratio`, or check that the query selects only the object",
+            100.0 * m.framing.inside_object
+        ),
+    );
+    Verdict {
+        pass: problems.is_empty(),
+        checks,
+        problems,
+    }
+}
