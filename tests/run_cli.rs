@@ -148,9 +148,17 @@ fn pose_runs_ablations_restarts_and_sgld() {
     let pose: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(run.join("pose.json")).unwrap()).unwrap();
     assert_eq!(pose["ablation"], "prior-tce");
+    // The config names no costs: the first-try set, less TRE (the ablation's).
     assert_eq!(
         pose["costs"],
-        serde_json::json!(["tce", "upright", "prior"])
+        serde_json::json!([
+            "tce",
+            "upright",
+            "prior",
+            "clearance",
+            "motion",
+            "visibility"
+        ])
     );
     assert_eq!(pose["starts"].as_array().unwrap().len(), 2);
     let best = pose["total"].as_f64().unwrap();

@@ -20,7 +20,7 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 use clap::Args;
-use splatraj::experiment::config::Config;
+use splatraj::experiment::config::{Config, VerdictPolicy};
 use splatraj::experiment::outputs::{create_run_dir, write_bytes, write_csv, write_json};
 use splatraj::experiment::records::trajectory_history;
 use splatraj::experiment::resources::RAISE_LIMIT;
@@ -192,7 +192,7 @@ pub fn run(args: RunArgs) -> Result<()> {
             .into());
         }
     }
-    if problems.is_empty() {
+    if problems.is_empty() || config.output.verdict == VerdictPolicy::Warn {
         Ok(())
     } else {
         Err(VerdictFailed(format!(
@@ -218,11 +218,15 @@ fn print_plan(experiment: &Experiment) {
         experiment.config.rasterizer
     );
     for d in &experiment.derived {
-        eprintln!("derived from the scene: {} = {:.4} ({})", d.key, d.value, d.why);
+        eprintln!(
+            "derived from the scene: {} = {:.4} ({})",
+            d.key, d.value, d.why
+        );
     }
     let views = match experiment.config.start.kind {
-        splatraj::experiment::config::StartKind::Search if experiment.config.start.pose.is_none()
-            && experiment.config.start.trajectory.is_none() =>
+        splatraj::experiment::config::StartKind::Search
+            if experiment.config.start.pose.is_none()
+                && experiment.config.start.trajectory.is_none() =>
         {
             experiment
                 .searched_views(
@@ -234,7 +238,11 @@ fn print_plan(experiment: &Experiment) {
         _ => None,
     };
     for (i, w) in experiment.windows.iter().enumerate() {
-        if let Some(view) = views.as_ref().and_then(|v| v.first()).and_then(|v| v.get(i)) {
+        if let Some(view) = views
+            .as_ref()
+            .and_then(|v| v.first())
+            .and_then(|v| v.get(i))
+        {
             eprintln!(
                 "query {i}: starts from azimuth {:.0}°, elevation {:.0}°, distance {:.3}: {:.0} % \
                  of it visible there",

@@ -28,24 +28,28 @@
 //! #   query's text only names the group; elevation°, radius, azimuth°, weight)
 //!
 //! [camera]                 # optimisation camera; [output] sets the final render's size
-//! width = 64
-//! height = 48
+//! width = 96               # default 96 × 54 (the output's 16:9)
+//! height = 54
 //! fov_x = 60.0
 //!
 //! [trajectory]             # kind = "rbf" | "waypoint" | "polynomial" and its parameters,
 //!                          # or kind = "custom.<name>" and [trajectory.custom.<name>]: a
 //!                          # model registered in `Extensions` (as `source = "custom.<name>"`
 //!                          # and [targets.custom.<name>] for a target source)
-//! [costs]                  # tce, tre, upright, prior tables (all four by default);
-//!                          # clearance (margin, sigma, min_opacity) and motion (max_speed,
-//!                          # max_acceleration, max_angular_speed, even_speed; needs
-//!                          # [output] seconds) on request;
+//! [costs]                  # tce, tre, upright, prior, clearance (margin, sigma, min_opacity),
+//!                          # motion (max_speed, max_acceleration, max_angular_speed,
+//!                          # even_speed), visibility (tolerance) tables; without `[costs]`
+//!                          # the first-try set (all of them, margin and speed "auto": derived
+//!                          # from the scene; `--set costs.<cost>.<key>=…` edits that set);
+//!                          # with it, exactly the costs it lists;
 //!                          # [costs.custom.<name>]: a cost registered in `Extensions`
 //! [optimiser]              # iterations, samples_per_window, learning_rate, position_unit,
 //!                          # path_samples (path points per window for clearance/motion) …
-//! [start]                  # kind = "objects" (jitter) | "random" (spread), restarts; or pose = [...], or trajectory = "…";
+//! [start]                  # kind = "search" (default: views where each object shows) | "objects"
+//!                          # (jitter) | "random" (spread), restarts; or pose = [...], or trajectory = "…";
 //!                          # route = "auto" | "planned" | "straight" (around the geometry between windows)
-//! [output]                 # frames (or fps × seconds), width, height, mask_overlay, runs_dir …
+//! [output]                 # frames (or fps × seconds; default 3 s per query at 30 fps),
+//!                          # width, height (1280 × 720), mask_overlay (none), runs_dir …
 //! [pose]                   # `splatraj pose`: query, ablation; [pose.optimiser]: its Adam
 //! [approximations]         # optimisation renders only: stop_transmittance, min_opacity (exact by default)
 //! [study]                  # `splatraj study`: factors, design, seeds, quality, evaluation
@@ -388,6 +392,18 @@ pub enum MaskOverlay {
     Tint,
 }
 
+/// What a run whose verdict fails on some window does after writing its folder
+/// (`splatraj_traj::metrics::verdict`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum VerdictPolicy {
+    /// Warn and exit with status 3, so that scripts notice (the default).
+    #[default]
+    Fail,
+    /// Warn, and exit 0 (a study's variants, smoke runs).
+    Warn,
+}
+
 /// `[output]`: what is written and where.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -412,6 +428,8 @@ pub struct OutputConfig {
     pub height: usize,
     /// Mask overlay on the frames.
     pub mask_overlay: MaskOverlay,
+    /// What a failed verdict does: `fail` (exit status 3, the default) or `warn`.
+    pub verdict: VerdictPolicy,
     /// Poses written to `trajectory.json` (evenly spaced over [0, 1]).
     pub trajectory_samples: usize,
     /// Samples per window for the metrics.
@@ -436,6 +454,7 @@ impl Default for OutputConfig {
             width: 1280,
             height: 720,
             mask_overlay: MaskOverlay::None,
+            verdict: VerdictPolicy::Fail,
             trajectory_samples: 201,
             metric_samples: 16,
             ldj_samples: splatraj_traj::metrics::DEFAULT_LDJ_SAMPLES,
@@ -600,6 +619,17 @@ impl Config {
     /// sources registered in `extensions`.
     pub fn load_with(path: &Path, overrides: &[String], extensions: &Extensions) -> Result<Config> {
         let mut value = read_table(path, 0)?;
+        // `--set costs.motion.weight=0` on a config without `[costs]` tunes the first-try
+        // costs it runs with; without this, the override's table would be the only cost.
+        if !value.contains_key("costs")
+            && overrides
+                .iter()
+                .any(|o| o.trim_start().starts_with("costs."))
+        {
+            let defaults = toml::Value::try_from(CostsConfig::first_try())
+                .context("the default `[costs]` as TOML")?;
+            value.insert("costs".into(), defaults);
+        }
         let mut set_keys = Vec::with_capacity(overrides.len());
         for o in overrides {
             set_keys.push((apply_override(&mut value, o)?, o.as_str()));

@@ -62,8 +62,7 @@ pub struct Experiment {
     pub(crate) occupancy_cache: std::sync::Mutex<Option<splatraj_traj::clearance::Occupancy>>,
     /// The view search's choice for all windows, per restart ([`Experiment::searched_views`]):
     /// `run` checks the starts before it runs them, and each search renders hundreds of views.
-    pub(crate) views_cache:
-        std::sync::Mutex<Option<Vec<Vec<splatraj_traj::optimise::Candidate>>>>,
+    pub(crate) views_cache: std::sync::Mutex<Option<Vec<Vec<splatraj_traj::optimise::Candidate>>>>,
 }
 
 impl Experiment {
@@ -107,14 +106,56 @@ impl Experiment {
             views_cache: Default::default(),
         };
         experiment.ground_queries()?;
+        if experiment.config.start.kind == crate::config::StartKind::Search
+            && experiment.config.start.pose.is_none()
+            && experiment.config.start.trajectory.is_none()
+        {
+            experiment.measure_working_distances()?;
+        }
         experiment.derive_from_scene();
         Ok(experiment)
+    }
+
+    /// Replaces each window's working distance (prior radius, estimated from its box) by the
+    /// one measured on renders of its object alone
+    /// ([`splatraj_traj::optimise::calibrated_radius`]), when the config leaves the prior's
+    /// `radius` to the windows.
+    fn measure_working_distances(&mut self) -> Result<()> {
+        if self
+            .config
+            .costs
+            .prior
+            .as_ref()
+            .is_some_and(|p| p.radius.is_some())
+        {
+            return Ok(());
+        }
+        for i in 0..self.windows.len() {
+            let alone = self.object_alone(i);
+            let context = &self.windows[i].context;
+            let measured = splatraj_traj::optimise::calibrated_radius(
+                &alone,
+                context.object_centre,
+                context.prior_radius,
+                context.target_ratio,
+                self.up.up,
+                &self.intrinsics,
+                self.config.rasterizer,
+            )
+            .with_context(|| format!("`queries.{i}`: measuring its working distance"))?;
+            self.windows[i].context.prior_radius = measured;
+        }
+        Ok(())
     }
 
     /// Replaces the config's `"auto"` settings by values derived from the scene and the
     /// queries' working distances, and records them in [`Experiment::derived`].
     fn derive_from_scene(&mut self) {
-        let radii: Vec<f64> = self.windows.iter().map(|w| w.context.prior_radius).collect();
+        let radii: Vec<f64> = self
+            .windows
+            .iter()
+            .map(|w| w.context.prior_radius)
+            .collect();
         let smallest = radii.iter().copied().fold(f64::INFINITY, f64::min);
         let mean = radii.iter().sum::<f64>() / radii.len().max(1) as f64;
         let diagonal = 2.0 * glam::DVec3::from(self.bounds.1).length();

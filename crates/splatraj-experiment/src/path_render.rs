@@ -5,6 +5,10 @@
 //!
 //! Every file is written whole or not at all; the video is encoded in memory while the frames
 //! are rendered and written once the last frame is in.
+//!
+//! **Keyframes.** The frames stay clean by default (`[output] mask_overlay = "none"`: what a
+//! talk shows); the report's keyframes ([`keyframe_indices`]) are also written tinted and
+//! small into `keyframes/`, so the report still shows which part each window is about.
 
 use std::path::{Path, PathBuf};
 
@@ -124,6 +128,21 @@ pub fn render_path(
     let frames_dir = dir.join("frames");
     std::fs::create_dir_all(&frames_dir)
         .with_context(|| format!("cannot create {}", frames_dir.display()))?;
+    // Tinted keyframes for the report, when the frames themselves are not tinted.
+    let keyframes: Vec<usize> = match job.overlay {
+        MaskOverlay::None if !job.objects.is_empty() => {
+            keyframe_indices(&frames.times, job.objects.len())
+                .into_iter()
+                .flatten()
+                .collect()
+        }
+        _ => Vec::new(),
+    };
+    let keyframes_dir = dir.join(KEYFRAMES_DIR);
+    if !keyframes.is_empty() {
+        std::fs::create_dir_all(&keyframes_dir)
+            .with_context(|| format!("cannot create {}", keyframes_dir.display()))?;
+    }
     let mut metrics = Vec::new();
     for (index, ((&t, &pose), intrinsics)) in frames
         .times
@@ -159,6 +178,13 @@ pub fn render_path(
             });
         }
         let values = to_host(images)?;
+        if keyframes.contains(&index) {
+            let tinted = png_rgb(&highlight(&values, TINT_ALPHA), intrinsics)?;
+            write_bytes(
+                &keyframes_dir.join(frame_name(index)),
+                &shrunk_png(&tinted, KEYFRAME_WIDTH)?,
+            )?;
+        }
         let rgb = match (object, job.overlay) {
             (Some(_), MaskOverlay::Tint) => highlight(&values, TINT_ALPHA),
             (Some(_), MaskOverlay::None) => values
@@ -204,6 +230,59 @@ pub fn render_path(
         None => None,
     };
     Ok(RenderedPath { metrics, video })
+}
+
+/// The folder of the report's tinted keyframes in a rendered folder.
+pub const KEYFRAMES_DIR: &str = "keyframes";
+
+/// Width of the tinted keyframes (the report shows them 220 pixels wide).
+const KEYFRAME_WIDTH: u32 = 480;
+
+/// Keyframes shown per window.
+pub const KEYFRAMES_PER_WINDOW: usize = 5;
+
+/// The frames the report shows for each of `windows` windows: up to
+/// [`KEYFRAMES_PER_WINDOW`] of the frames at `times` in each window, evenly spread over them.
+pub fn keyframe_indices(times: &[f64], windows: usize) -> Vec<Vec<usize>> {
+    let windows = windows.max(1);
+    (0..windows)
+        .map(|w| {
+            let mine: Vec<usize> = (0..times.len())
+                .filter(|&i| window_of(times[i], windows) == w)
+                .collect();
+            let take = mine.len().min(KEYFRAMES_PER_WINDOW);
+            (0..take)
+                .map(|k| {
+                    mine[if take == 1 {
+                        mine.len() / 2
+                    } else {
+                        k * (mine.len() - 1) / (take - 1)
+                    }]
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// `png` scaled down to `width` pixels wide (kept when narrower), as PNG bytes.
+fn shrunk_png(png: &[u8], width: u32) -> Result<Vec<u8>> {
+    let image = image::load_from_memory_with_format(png, image::ImageFormat::Png)
+        .context("reading back a keyframe")?
+        .into_rgb8();
+    if image.width() <= width {
+        return Ok(png.to_vec());
+    }
+    let height =
+        ((image.height() as f64 * width as f64 / image.width() as f64).round() as u32).max(1);
+    let small = image::imageops::resize(&image, width, height, image::imageops::Triangle);
+    let mut bytes = Vec::new();
+    small
+        .write_to(
+            &mut std::io::Cursor::new(&mut bytes),
+            image::ImageFormat::Png,
+        )
+        .context("encoding a keyframe")?;
+    Ok(bytes)
 }
 
 /// The file name of frame `index`.

@@ -19,18 +19,16 @@ use splatraj_report::report::{
 };
 use splatraj_scene::demo::{DemoConfig, demo_scene};
 use splatraj_scene::{InvalidPolicy, ReadOptions, Scene, read_scene};
-use splatraj_traj::optimise::sampling::window_of;
 use splatraj_traj::trajectory::uniform_times;
 
 use crate::outputs::write_bytes;
-use crate::path_render::{FRAME_METRICS_FILE, VIDEO_FILE, frame_name};
+use crate::path_render::{
+    FRAME_METRICS_FILE, KEYFRAMES_DIR, VIDEO_FILE, frame_name, keyframe_indices,
+};
 use crate::records::Csv;
 
 /// The report's file name in a run folder.
 pub const REPORT_FILE: &str = "report.html";
-
-/// Keyframes shown per window.
-const KEYFRAMES_PER_WINDOW: usize = 5;
 
 /// Scene points drawn in each view (more makes the page heavy without showing more).
 const VIEW_POINTS: usize = 6000;
@@ -67,6 +65,7 @@ pub fn run_report(dir: &Path, scene: Option<&Scene>) -> Result<RunReport> {
         title,
         folder: dir.display().to_string(),
         summary: summary_of(&metrics),
+        verdict: verdict_of(&metrics),
         metrics: window_table(&metrics),
         keyframes: keyframes(dir, &along, windows.len())?,
         history: read_history(&dir.join("history.csv"))?,
@@ -163,6 +162,23 @@ fn window_table(metrics: &Value) -> Table {
         })
         .collect();
     Table { header, rows }
+}
+
+/// Every window's failed checks, as `metrics.json` words them (None: no window has a verdict).
+fn verdict_of(metrics: &Value) -> Option<Vec<String>> {
+    let windows = metrics.get("windows").and_then(Value::as_array)?;
+    let verdicts: Vec<&Value> = windows.iter().filter_map(|w| w.get("verdict")).collect();
+    if verdicts.is_empty() {
+        return None;
+    }
+    Some(
+        verdicts
+            .iter()
+            .filter_map(|v| v.get("problems").and_then(Value::as_array))
+            .flatten()
+            .filter_map(|p| p.as_str().map(String::from))
+            .collect(),
+    )
 }
 
 fn windows_of(trajectory: &Value) -> Vec<Window> {
@@ -279,7 +295,9 @@ fn read_history(path: &Path) -> Result<Option<CostHistory>> {
     }))
 }
 
-/// Up to [`KEYFRAMES_PER_WINDOW`] frames of each window, evenly spread over its frames.
+/// Up to [`crate::path_render::KEYFRAMES_PER_WINDOW`] frames of each window, evenly spread over its frames
+/// ([`keyframe_indices`]): the tinted copies in `keyframes/` when the run wrote them, else the
+/// frames themselves.
 fn keyframes(dir: &Path, along: &[FrameMetrics], windows: usize) -> Result<Vec<Vec<Keyframe>>> {
     let frames_dir = dir.join("frames");
     let count = (0..)
@@ -291,29 +309,29 @@ fn keyframes(dir: &Path, along: &[FrameMetrics], windows: usize) -> Result<Vec<V
     } else {
         uniform_times(count)
     };
-    let mut strips = vec![Vec::new(); windows.max(1)];
-    for (w, strip) in strips.iter_mut().enumerate() {
-        let mine: Vec<usize> = (0..count)
-            .filter(|&i| window_of(times[i], windows.max(1)) == w)
-            .collect();
-        let take = mine.len().min(KEYFRAMES_PER_WINDOW);
-        for k in 0..take {
-            let i = mine[if take == 1 {
-                mine.len() / 2
-            } else {
-                k * (mine.len() - 1) / (take - 1)
-            }];
-            let name = frame_name(i);
-            let path = frames_dir.join(&name);
-            strip.push(Keyframe {
-                t: times[i],
-                png: std::fs::read(&path)
-                    .with_context(|| format!("cannot read {}", path.display()))?,
-                name,
-            });
-        }
-    }
-    Ok(strips)
+    keyframe_indices(&times, windows)
+        .into_iter()
+        .map(|indices| {
+            indices
+                .into_iter()
+                .map(|i| {
+                    let name = frame_name(i);
+                    let tinted = dir.join(KEYFRAMES_DIR).join(&name);
+                    let path = if tinted.is_file() {
+                        tinted
+                    } else {
+                        frames_dir.join(&name)
+                    };
+                    Ok(Keyframe {
+                        t: times[i],
+                        png: std::fs::read(&path)
+                            .with_context(|| format!("cannot read {}", path.display()))?,
+                        name,
+                    })
+                })
+                .collect()
+        })
+        .collect()
 }
 
 fn video_of(dir: &Path) -> Result<Option<VideoSource>> {

@@ -137,7 +137,7 @@ fn start_clearance(experiment: &Experiment) -> f64 {
         .map(|p| DVec3::new(p[3], p[4], p[5]))
         .collect();
     occupancy
-        .clearances(&centres, clearance.margin)
+        .clearances(&centres, clearance.margin().unwrap())
         .into_iter()
         .fold(f64::INFINITY, f64::min)
 }
@@ -155,7 +155,7 @@ fn the_demo_rooms_planned_start_keeps_clearer_than_the_straight_one() {
         let config = config(
             &plain,
             &[
-                ("start", &format!("route = \"{route}\"")),
+                ("start", &format!("route = \"{route}\"\nkind = \"objects\"")),
                 ("trajectory", "kind = \"rbf\"\ncentres_per_window = 8"),
             ],
         )

@@ -27,6 +27,11 @@ height = 24
 [optimiser]
 iterations = 3
 samples_per_window = 2
+# The paper's four costs: no clearance, so the study has no clearance to report.
+[costs.tce]
+[costs.tre]
+[costs.upright]
+[costs.prior]
 [output]
 width = 40
 height = 30
@@ -205,7 +210,7 @@ fn a_clearance_config_reports_the_paths_clearance() {
     let config = TINY.replace(
         "samples_per_window = 2",
         "samples_per_window = 2\npath_samples = 6",
-    ) + "[costs.tce]\nweight = 1.0\n[costs.tre]\nweight = 1.0\n[costs.clearance]\nweight = 1.0\nmargin = 0.1\n";
+    ) + "[costs.clearance]\nweight = 1.0\nmargin = 0.1\n";
     std::fs::write(&path, config).unwrap();
     let extensions = Extensions::default();
     let options = PlanOptions {

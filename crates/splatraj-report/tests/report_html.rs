@@ -57,6 +57,9 @@ fn made_up_run(video: VideoSource) -> RunReport {
         title: "demo".into(),
         folder: "runs/demo/2026-01-01T00-00-00Z".into(),
         summary: vec![("scene".into(), "demo (seed 7)".into())],
+        verdict: Some(vec![
+            "window 1 \"a <b> & \"c\"\": 78 % of the object is hidden behind other geometry".into(),
+        ]),
         metrics: Table {
             header: vec!["window".into(), "query".into(), "tce".into()],
             rows: vec![
@@ -192,6 +195,30 @@ fn the_page_is_well_formed_self_contained_and_complete() {
     );
     assert!(texts.iter().any(|t| t.contains("gaussians = 3000")));
     assert!(texts.contains(&"0.0456"));
+
+    // A failed verdict opens the page: its banner comes before the summary and holds the
+    // console's words.
+    let verdict = doc
+        .descendants()
+        .find(|n| n.attribute("id") == Some("verdict"))
+        .expect("a verdict banner");
+    let summary = doc
+        .descendants()
+        .find(|n| n.attribute("id") == Some("summary"))
+        .unwrap();
+    assert!(verdict.range().start < summary.range().start);
+    let words: String = verdict.descendants().filter_map(|n| n.text()).collect();
+    assert!(
+        words.contains("window 1 \"a <b> & \"c\"\": 78 % of the object is hidden"),
+        "{words}"
+    );
+    let passing = RunReport {
+        verdict: Some(Vec::new()),
+        ..made_up_run(VideoSource::Link("video.mp4".into()))
+    }
+    .to_html()
+    .unwrap();
+    assert!(!passing.contains("id=\"verdict\"") && passing.contains("every window shows"));
 }
 
 #[test]

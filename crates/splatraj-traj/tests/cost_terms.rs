@@ -429,6 +429,7 @@ fn weighted_sum_equals_hand_weighted_terms() {
         }),
         clearance: None,
         motion: None,
+        visibility: None,
         custom: Default::default(),
     };
     let costs = config.build().unwrap();

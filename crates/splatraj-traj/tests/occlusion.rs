@@ -53,6 +53,7 @@ fn occlusion(occluder: bool) -> Occlusion {
         alone: &alone,
         target_ratio: 0.05,
         rasterizer: Rasterizer::default(),
+        bounds: None,
     };
     // The camera slides from y = −1 to y = 1 at x = 2, looking at the object.
     let pose_at = |times: &[f64]| -> Vec<[f64; 6]> {

@@ -87,6 +87,7 @@ fn roll_only() -> WeightedCosts {
         prior: None,
         clearance: None,
         motion: None,
+        visibility: None,
         custom: Default::default(),
     }
     .build()
@@ -376,6 +377,7 @@ fn trajectory_frames_two_objects_in_turn() {
                     alone: &alone,
                     target_ratio: TARGET_RATIO,
                     rasterizer: Default::default(),
+                    bounds: None,
                 };
                 window_metrics(&scene_plain, &object, i, 2, 8, &k, &|t: &[f64]| {
                     trajectory.poses_at(t)

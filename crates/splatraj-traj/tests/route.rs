@@ -155,11 +155,12 @@ fn walled_run(planned: bool) -> f64 {
         }),
         clearance: Some(ClearanceCost {
             weight: 30.0,
-            margin: MARGIN,
+            margin: MARGIN.into(),
             sigma: SPEC.sigma,
             min_opacity: SPEC.min_opacity,
         }),
         motion: None,
+        visibility: None,
         custom: Default::default(),
     }
     .build()

@@ -209,6 +209,7 @@ fn costs_with(shot: Option<ShotPath>) -> WeightedCosts {
         }),
         clearance: None,
         motion: None,
+        visibility: None,
         custom: Default::default(),
     }
     .build()
@@ -294,6 +295,7 @@ fn tce_only() -> WeightedCosts {
         prior: None,
         clearance: None,
         motion: None,
+        visibility: None,
         custom: Default::default(),
     }
     .build()

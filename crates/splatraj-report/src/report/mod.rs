@@ -102,6 +102,9 @@ pub struct RunReport {
     pub folder: String,
     /// Key facts (scene, stop reason, times, smoothness …).
     pub summary: Vec<(String, String)>,
+    /// The run's verdict: None when the run folder holds none (an older run), else one
+    /// sentence per failed check of any window (empty: every window passes).
+    pub verdict: Option<Vec<String>>,
     /// Per-window metrics.
     pub metrics: Table,
     /// The query windows.
@@ -131,7 +134,9 @@ th{background:#f2f2f2}td:first-child,th:first-child{text-align:left}
 .strip{display:flex;gap:8px;overflow-x:auto}figure{margin:0}figure img{width:220px;display:block;border:1px solid #ccc}
 figcaption{font-size:12px;color:#555;text-align:center}.views{display:flex;flex-wrap:wrap;gap:12px}
 pre{background:#f6f6f6;padding:10px;font-size:13px;overflow-x:auto}video{width:640px;max-width:100%;border:1px solid #ccc;background:#000}
-.note{color:#666;font-size:13px}";
+.note{color:#666;font-size:13px}
+.fail{border:2px solid #b00020;background:#fdecee;padding:8px 14px;margin-top:14px}
+.fail h2{color:#b00020;margin:4px 0}.pass{border:1px solid #2e7d32;background:#edf7ee;padding:6px 14px;margin-top:14px}";
 
 impl RunReport {
     /// The page as one HTML string.
@@ -156,6 +161,27 @@ impl RunReport {
             page.push_str(&format!("<a href=\"#{id}\">{name}</a>"));
         }
         page.push_str("</nav>\n");
+        match &self.verdict {
+            Some(problems) if !problems.is_empty() => {
+                page.push_str(
+                    "<section class=\"fail\" id=\"verdict\"><h2>Verdict: some windows do not \
+                     show their object as asked</h2><ul>",
+                );
+                for problem in problems {
+                    page.push_str(&format!("<li>{}</li>", escape(problem)));
+                }
+                page.push_str(
+                    "</ul><p class=\"note\">The same warnings as on the console, and \
+                     <code>verdict</code> in metrics.json; <code>splatraj run</code> exited with \
+                     status 3.</p></section>\n",
+                );
+            }
+            Some(_) => page.push_str(
+                "<p class=\"pass\">Verdict: every window shows its object in frame, framed, \
+                 unhidden, with the camera clear of the geometry.</p>\n",
+            ),
+            None => {}
+        }
 
         page.push_str("<section id=\"summary\"><h2>Summary</h2>");
         let summary = Table {

@@ -215,12 +215,7 @@ impl Cost for ClearanceCost {
         let device = (&centres.device(), centres.dtype());
         let tensor = |v: Vec<f64>| Tensor::<2>::from_data(TensorData::new(v, [batch, 3]), device);
         // With a zero normal d = 0 < m: shift those rows' distance to the margin instead.
-        let value = clearance(
-            centres,
-            tensor(points),
-            tensor(normals.clone()),
-            margin,
-        );
+        let value = clearance(centres, tensor(points), tensor(normals.clone()), margin);
         let clear: Vec<f64> = normals
             .chunks_exact(3)
             .map(|n| if n == [0.0; 3] { 0.0 } else { 1.0 })

@@ -298,12 +298,10 @@ impl CostInputs {
 
     /// The object's mask rendered alone, or [`CostError::MissingChannel`] naming `cost`.
     pub fn require_mask_alone(&self, cost: &'static str) -> Result<Tensor<3>, CostError> {
-        self.mask_alone
-            .clone()
-            .ok_or(CostError::MissingChannel {
-                cost,
-                channel: ImageChannel::MaskAlone,
-            })
+        self.mask_alone.clone().ok_or(CostError::MissingChannel {
+            cost,
+            channel: ImageChannel::MaskAlone,
+        })
     }
 
     /// Adds the rendered depth `[B, H, W]`.

@@ -42,7 +42,11 @@ pub fn hidden_share(seen: Tensor<3>, alone: Tensor<3>) -> Tensor<1> {
     let sum = |t: Tensor<3>| t.sum_dim(2).sum_dim(1).reshape([batch]);
     let whole = sum(alone);
     // 1 where the object alone is in frame, else 0 (off the graph: a switch, not a slope).
-    let in_frame = whole.clone().detach().greater_equal_elem(MIN_ALONE_PIXELS).float();
+    let in_frame = whole
+        .clone()
+        .detach()
+        .greater_equal_elem(MIN_ALONE_PIXELS)
+        .float();
     let ratio = sum(seen) / whole.clamp_min(MIN_ALONE_PIXELS);
     ratio.neg().add_scalar(1.0).clamp_min(0.0) * in_frame
 }

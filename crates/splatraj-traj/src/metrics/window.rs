@@ -200,7 +200,7 @@ pub fn window_metrics(
     let in_frame = |m: &[f64]| mask_box(m, width, height, IOU_THRESHOLD).is_some();
     let shows: Vec<bool> = pixels
         .chunks_exact(height * width)
-        .map(|m| in_frame(m))
+        .map(&in_frame)
         .collect();
     let shown = shows.iter().filter(|&&s| s).count();
     // The middle half of the window: samples whose stratum middle lies in [¼, ¾] of it.

@@ -47,7 +47,8 @@ pub use trajectory::{
 };
 pub use units::PoseUnits;
 pub use views::{
-    Candidate, ViewSearch, ViewWeights, ViewedObject, WindowViews, choose_views, search_views,
+    Candidate, ViewSearch, ViewWeights, ViewedObject, WindowViews, calibrated_radius, choose_views,
+    search_views,
 };
 
 /// Why an optimisation could not run.

@@ -304,8 +304,8 @@ pub fn routed_start_trajectory(
         if let Some(&(k, from, to)) = joins.iter().find(|(_, a, b)| t > *a && t < *b) {
             let s = smoothstep((t - from) / (to - from));
             let (a, b) = (per_window[k].pose_at(1.0), per_window[k + 1].pose_at(0.0));
-            let turn = DQuat::from_mat3(&a.rotation_wc())
-                .slerp(DQuat::from_mat3(&b.rotation_wc()), s);
+            let turn =
+                DQuat::from_mat3(&a.rotation_wc()).slerp(DQuat::from_mat3(&b.rotation_wc()), s);
             let centre = a.centre().lerp(b.centre(), s);
             pose = Pose::from_rotation_and_centre(DMat3::from_quat(turn), centre).0;
         }

@@ -91,10 +91,7 @@ impl ViewSearch {
         {
             return bad(
                 "views",
-                format!(
-                    "distances {:?} must be non-empty, each > 0",
-                    self.distances
-                ),
+                format!("distances {:?} must be non-empty, each > 0", self.distances),
             );
         }
         Ok(())
@@ -194,6 +191,49 @@ pub fn candidate_views(
 /// Renders batches of at most this many poses at once (bounds the search's memory).
 const BATCH: usize = 32;
 
+/// Σ of the mask `mask` (one value per Gaussian of `scene`) at each pose, rendered pruned to
+/// the mask at `intrinsics`, in batches of [`BATCH`].
+fn mask_sums(
+    scene: &DeviceScene,
+    mask: &[f32],
+    poses: &[Pose],
+    intrinsics: &Intrinsics,
+    rasterizer: Rasterizer,
+) -> Result<Vec<f64>, RenderError> {
+    let request = RenderRequest {
+        pruning: Pruning::ObjectOnly,
+        rasterizer,
+        ..RenderRequest::new(*intrinsics, vec![Channel::Mask(mask.to_vec())])
+    };
+    let per_view = intrinsics.width * intrinsics.height;
+    let mut sums = Vec::with_capacity(poses.len());
+    for batch in poses.chunks(BATCH) {
+        let images = render(scene, scene.poses(batch), &request)?.images; // [B, H, W, 1]
+        let values = to_host(images).unwrap_or_default();
+        sums.extend(
+            values
+                .chunks_exact(per_view)
+                .map(|image| image.iter().sum::<f64>()),
+        );
+    }
+    Ok(sums)
+}
+
+/// Share of the frame the object alone (`alone`: its Gaussians only) covers at each pose.
+pub fn alone_coverage(
+    alone: &DeviceScene,
+    poses: &[Pose],
+    intrinsics: &Intrinsics,
+    rasterizer: Rasterizer,
+) -> Result<Vec<f64>, RenderError> {
+    let pixels = (intrinsics.width * intrinsics.height) as f64;
+    let ones = vec![1.0; alone.len()];
+    Ok(mask_sums(alone, &ones, poses, intrinsics, rasterizer)?
+        .into_iter()
+        .map(|s| s / pixels)
+        .collect())
+}
+
 /// (visible share, coverage of the object alone) at each pose (module docs, step 2), rendered
 /// at `intrinsics` (small: see [`ViewSearch::width`]).
 pub fn measure_views(
@@ -202,38 +242,79 @@ pub fn measure_views(
     intrinsics: &Intrinsics,
     rasterizer: Rasterizer,
 ) -> Result<Vec<(f64, f64)>, RenderError> {
-    let mask_sums = |scene: &DeviceScene, mask: Vec<f32>, batch: &[Pose]| {
-        let request = RenderRequest {
-            pruning: Pruning::ObjectOnly,
-            rasterizer,
-            ..RenderRequest::new(*intrinsics, vec![Channel::Mask(mask)])
-        };
-        let images = render(scene, scene.poses(batch), &request)?.images; // [B, H, W, 1]
-        let values = to_host(images).unwrap_or_default();
-        let per_view = intrinsics.width * intrinsics.height;
-        Ok::<Vec<f64>, RenderError>(
-            values
-                .chunks_exact(per_view)
-                .map(|image| image.iter().sum::<f64>())
-                .collect(),
-        )
-    };
     let pixels = (intrinsics.width * intrinsics.height) as f64;
-    let mut measured = Vec::with_capacity(poses.len());
-    for batch in poses.chunks(BATCH) {
-        let seen = mask_sums(object.scene, object.mask.to_vec(), batch)?;
-        let alone = mask_sums(object.alone, vec![1.0; object.alone.len()], batch)?;
-        for (s, a) in seen.iter().zip(&alone) {
+    let seen = mask_sums(object.scene, object.mask, poses, intrinsics, rasterizer)?;
+    let alone = alone_coverage(object.alone, poses, intrinsics, rasterizer)?;
+    Ok(seen
+        .iter()
+        .zip(alone)
+        .map(|(s, coverage)| {
+            let a = coverage * pixels;
             // Less than a pixel of the object alone: out of frame (or behind the camera).
-            let visible = if *a >= 1.0 {
+            let visible = if a >= 1.0 {
                 (s / a).clamp(0.0, 1.0)
             } else {
                 0.0
             };
-            measured.push((visible, a / pixels));
+            (visible, coverage)
+        })
+        .collect())
+}
+
+/// Directions a working distance is measured from ([`calibrated_radius`]): a ring of 8
+/// azimuths at 20° elevation, and one from above and one from below (45°).
+const CALIBRATION_VIEWS: [(f64, f64); 10] = [
+    (0.0, 20.0),
+    (45.0, 20.0),
+    (90.0, 20.0),
+    (135.0, 20.0),
+    (180.0, 20.0),
+    (-135.0, 20.0),
+    (-90.0, 20.0),
+    (-45.0, 20.0),
+    (0.0, 45.0),
+    (0.0, -45.0),
+];
+
+/// The working distance at which the object alone covers `target_ratio` of the frame on
+/// average over [`CALIBRATION_VIEWS`], measured: from `radius` (an estimate from the object's
+/// box), twice scaled by √(mean coverage / target) (coverage falls as 1/d² far from the
+/// object). The box estimate is off by a factor 1.3–1.6 on real parts (a sphere cut from a
+/// surface is thinner than its box; the first-try biker's jacket covered 0.45 of the frame at
+/// 0.7 of its estimate, not 0.3), and every later choice (the views' distances, the prior's
+/// pull, the clearance margin, the speed limit) scales with it. The estimate is kept when the
+/// object is out of every view. Measured with `intrinsics`, the optimisation camera: its
+/// rasterizer dilation (0.3 px²) widens a small silhouette, and TRE sees the same.
+pub fn calibrated_radius(
+    alone: &DeviceScene,
+    centre: [f64; 3],
+    radius: f64,
+    target_ratio: f64,
+    up: [f64; 3],
+    intrinsics: &Intrinsics,
+    rasterizer: Rasterizer,
+) -> Result<f64, OptimiseError> {
+    let up = DVec3::from(up);
+    let orbit = Orbit::new(DVec3::from(centre), up, up.any_orthonormal_vector(), radius);
+    let mut r = radius;
+    for _ in 0..2 {
+        let poses = CALIBRATION_VIEWS
+            .iter()
+            .map(|&(a, e)| orbit.pose_degrees(a, e, r))
+            .collect::<Result<Vec<Pose>, _>>()
+            .map_err(|e| OptimiseError::InvalidOptions {
+                field: "radius",
+                reason: format!("calibration view: {e}"),
+            })?;
+        let coverage = alone_coverage(alone, &poses, intrinsics, rasterizer)?;
+        let mean = coverage.iter().sum::<f64>() / coverage.len() as f64;
+        if !(mean > 0.0 && mean.is_finite()) {
+            return Ok(radius);
         }
+        // At most a factor 3 per round: a camera inside the object sees coverage near 1.
+        r *= (mean / target_ratio).sqrt().clamp(1.0 / 3.0, 3.0);
     }
-    Ok(measured)
+    Ok(r)
 }
 
 /// The candidates of `search` around `object` with everything measured: renders at
@@ -388,7 +469,11 @@ pub struct WindowViews {
 
 /// One candidate index per window minimising the summed window and move costs (module docs,
 /// step 3); `margin` is the clearance margin the candidates' clearances are judged by.
-pub fn choose_views(windows: &[WindowViews], weights: &ViewWeights, margin: Option<f64>) -> Vec<usize> {
+pub fn choose_views(
+    windows: &[WindowViews],
+    weights: &ViewWeights,
+    margin: Option<f64>,
+) -> Vec<usize> {
     let unary = |w: &WindowViews, k: usize| {
         weights.unary(&w.candidates[k], w.target_ratio, margin)
             + if w.used.contains(&k) {
@@ -401,7 +486,9 @@ pub fn choose_views(windows: &[WindowViews], weights: &ViewWeights, margin: Opti
         return Vec::new();
     };
     // best[k]: the cheapest sequence ending at candidate k of the current window.
-    let mut best: Vec<f64> = (0..first.candidates.len()).map(|k| unary(first, k)).collect();
+    let mut best: Vec<f64> = (0..first.candidates.len())
+        .map(|k| unary(first, k))
+        .collect();
     let mut back: Vec<Vec<usize>> = Vec::with_capacity(windows.len());
     for pair in windows.windows(2) {
         let (previous, current) = (&pair[0], &pair[1]);
