@@ -244,3 +244,68 @@ fn region_sources_and_mask_files_ground_queries() {
         stderr(&out)
     );
 }
+
+/// A planted failure: the camera held near the mug's centre (start there, steps too small to
+/// move; one RBF per window holds it only roughly), where it sees neither object. The run
+/// writes its whole folder, warns naming the query and the fix, records the
+/// verdict in metrics.json and report.html, and exits with status 3; `output.verdict =
+/// "warn"` keeps the warnings and exits 0.
+#[test]
+fn a_failed_verdict_warns_names_the_query_and_exits_3() {
+    let text = TINY.replace("verdict = \"warn\"\n", "");
+    let (dir, config) = setup(&text);
+    let prepared = splatraj::experiment::Experiment::prepare(
+        &splatraj::experiment::Config::load(&config, &[]).unwrap(),
+    )
+    .unwrap();
+    let [x, y, z] = prepared.windows[0].context.object_centre;
+    let held = [
+        "--set".to_string(),
+        format!("start.pose=[0.0, 0.0, 0.0, {x}, {y}, {z}]"),
+        "--set".to_string(),
+        "optimiser.learning_rate=1e-12".to_string(),
+    ];
+    let mut args = vec!["run", s(&config), "--quiet", "--set"];
+    let runs = runs_set(dir.path());
+    args.push(&runs);
+    args.extend(held.iter().map(String::as_str));
+    let out = splatraj(&args);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(3), "{err}");
+    assert!(
+        !err.contains("panicked") && !err.contains("error:"),
+        "{err}"
+    );
+    assert!(
+        err.contains("warning: window 0 \"red mug\": the object is in frame in 0 %"),
+        "{err}"
+    );
+    assert!(err.contains("likely fix"), "{err}");
+    assert!(err.contains("exit status 3"), "{err}");
+    let run = PathBuf::from(stdout(&out).lines().last().unwrap().trim());
+    no_partial_files(&run);
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("metrics.json")).unwrap()).unwrap();
+    let verdict = &metrics["windows"][0]["verdict"];
+    assert_eq!(verdict["pass"], false);
+    let in_view = verdict["checks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["check"] == "in_view")
+        .unwrap();
+    assert_eq!(
+        (&in_view["pass"], &in_view["value"]),
+        (&false.into(), &0.0.into())
+    );
+    // Never in view: no framing error (not the 0 an empty mask's TCE would give).
+    assert!(metrics["windows"][0]["framing"]["tce_in_view"].is_null());
+    let report = std::fs::read_to_string(run.join("report.html")).unwrap();
+    assert!(report.contains("id=\"verdict\""));
+    assert!(report.contains("window 0 &quot;red mug&quot;: the object is in frame in 0 %"));
+
+    args.extend(["--set", "output.verdict=\"warn\""]);
+    let warned = splatraj(&args);
+    assert!(warned.status.success(), "{}", stderr(&warned));
+    assert!(stderr(&warned).contains("warning: window 0 \"red mug\""));
+}

@@ -32,6 +32,91 @@ pub enum BenchCommand {
     /// Time the mask pass (render + TCE + TRE), forward and forward + backward, on demo scenes
     /// of several sizes (and optionally a real scene), pruned and unpruned.
     Render(BenchRenderArgs),
+    /// Run minimal first-try configs (default: `configs/first-try/*.toml`) as a new user
+    /// would, each with `splatraj run` in a child process, and tabulate each window's verdict,
+    /// framing, visible and hidden shares, clearance, turn per frame, wobble and the time.
+    FirstTry(BenchFirstTryArgs),
+}
+
+/// Arguments of `splatraj bench first-try`.
+#[derive(Debug, Args)]
+pub struct BenchFirstTryArgs {
+    /// Configs to run (default: every `.toml` in `configs/first-try/`).
+    configs: Vec<PathBuf>,
+    /// Override a config value in every run, e.g. `--set output.width=320` (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Folder of the run folders (default: a fresh one under the system's temporary folder).
+    #[arg(long)]
+    runs_dir: Option<PathBuf>,
+    /// Print one JSON array instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// `splatraj bench first-try`: each config through `splatraj run` in a child process (the
+/// verdict only warns there, so that every run's folder is read), then the table.
+fn first_try(args: &BenchFirstTryArgs) -> Result<()> {
+    let configs = if args.configs.is_empty() {
+        let dir = PathBuf::from("configs/first-try");
+        let mut found: Vec<PathBuf> = std::fs::read_dir(&dir)
+            .with_context(|| format!("cannot list {} (give configs)", dir.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+            .collect();
+        found.sort();
+        found
+    } else {
+        args.configs.clone()
+    };
+    let runs_dir = match &args.runs_dir {
+        Some(dir) => dir.clone(),
+        None => std::env::temp_dir().join(format!("splatraj-first-try-{}", std::process::id())),
+    };
+    let exe = std::env::current_exe().context("cannot find the splatraj binary to re-run")?;
+    let mut runs = Vec::new();
+    for config in &configs {
+        eprintln!("running {} …", config.display());
+        let mut command = Command::new(&exe);
+        command.arg("run").arg(config).arg("--quiet");
+        command.args(["--set", "output.verdict=\"warn\""]);
+        command.args([
+            "--set".to_string(),
+            format!("output.runs_dir={}", toml_string(&runs_dir)),
+        ]);
+        for s in &args.set {
+            command.args(["--set", s]);
+        }
+        let output = command
+            .output()
+            .with_context(|| format!("cannot start a run of {}", config.display()))?;
+        if !output.status.success() {
+            bail!(
+                "the run of {} failed: {}",
+                config.display(),
+                String::from_utf8_lossy(&output.stderr).trim()
+            );
+        }
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        let folder = stdout
+            .lines()
+            .last()
+            .map(|l| PathBuf::from(l.trim()))
+            .ok_or_else(|| anyhow!("the run of {} printed no folder", config.display()))?;
+        runs.push(splatraj::experiment::quality::read_run_quality(&folder)?);
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&runs)?);
+    } else {
+        print!("{}", splatraj::experiment::quality::quality_table(&runs));
+        println!("run folders: {}", runs_dir.display());
+    }
+    Ok(())
+}
+
+/// `path` as a TOML basic string (for `--set key=…`).
+fn toml_string(path: &std::path::Path) -> String {
+    toml::Value::String(path.display().to_string()).to_string()
 }
 
 /// Arguments of `splatraj bench render`.
@@ -89,6 +174,7 @@ pub struct BenchRenderArgs {
 /// Runs one `bench` subcommand.
 pub fn run(command: BenchCommand) -> Result<()> {
     match command {
+        BenchCommand::FirstTry(args) => first_try(&args),
         BenchCommand::Render(args) => {
             let bench = || match &args.one {
                 Some(spec) => {

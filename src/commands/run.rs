@@ -142,7 +142,7 @@ pub fn run(args: RunArgs) -> Result<()> {
     )?;
 
     let metrics_started = Instant::now();
-    let evaluation = experiment.evaluate(&trajectory)?;
+    let mut evaluation = experiment.evaluate(&trajectory)?;
     let metrics = metrics_started.elapsed();
 
     let frames_started = Instant::now();
@@ -150,9 +150,12 @@ pub fn run(args: RunArgs) -> Result<()> {
     let output = experiment.output_frames(&trajectory)?;
     let frame_bar = progress_bar(output.poses.len() as u64, args.quiet);
     frame_bar.set_message("frames");
-    experiment.write_output_frames(&output, &dir, &mut |done| {
+    let rendered = experiment.write_output_frames(&output, &dir, &mut |done| {
         frame_bar.set_position(done as u64)
     })?;
+    if let Some(rendered) = &rendered {
+        evaluation.with_frames(&rendered.metrics, output.fps);
+    }
     frame_bar.finish_and_clear();
     experiment.write_exports(&output, &dir)?;
     let times = StageTimes {
@@ -209,14 +212,23 @@ pub fn run(args: RunArgs) -> Result<()> {
 
 fn print_plan(experiment: &Experiment) {
     eprintln!(
-        "scene: {} ({} Gaussians), up {:?} ({}), backend {:?}, rasterizer {:?}",
+        "scene: {} ({} Gaussians), backend {:?}, rasterizer {:?}",
         experiment.scene_name,
         experiment.scene.len(),
-        experiment.up.up,
-        experiment.up.source.name(),
         experiment.config.backend,
         experiment.config.rasterizer
     );
+    eprintln!("{}", experiment.up.describe());
+    if experiment
+        .up
+        .guess
+        .is_some_and(|g| g.confidence < splatraj::scene::up_axis::DOUBTFUL_UP)
+    {
+        eprintln!(
+            "warning: the up guess is unsure; if the frames come out tilted, set `scene.up` \
+             (y-down captures: [0, -1, 0]; z-up: [0, 0, 1])"
+        );
+    }
     for d in &experiment.derived {
         eprintln!(
             "derived from the scene: {} = {:.4} ({})",

@@ -112,8 +112,8 @@ pub struct Config {
     /// The optimisation camera.
     #[serde(default)]
     pub camera: CameraConfig,
-    /// Trajectory model.
-    #[serde(default)]
+    /// Trajectory model. Without `[trajectory]`: [`first_try_model`].
+    #[serde(default = "first_try_model")]
     pub trajectory: TrajectoryModel,
     /// Costs and weights. Without a `[costs]` table: [`CostsConfig::first_try`] (the paper's
     /// four, clearance and motion limits derived from the scene).
@@ -152,6 +152,20 @@ pub struct Config {
     /// The file it was loaded from (for messages); empty when built in code.
     #[serde(skip)]
     pub path: PathBuf,
+}
+
+/// RBF centres per window of a config without `[trajectory]`, chosen on the first-try
+/// captures (docs/results.md, "First try on real captures").
+pub const FIRST_TRY_CENTRES_PER_WINDOW: usize = 3;
+
+/// The trajectory model of a config without `[trajectory]`: RBF with
+/// [`FIRST_TRY_CENTRES_PER_WINDOW`] centres per window, normalised to a partition of unity so
+/// that the path's ends hold their poses (`splatraj_traj::trajectory::rbf`).
+pub fn first_try_model() -> TrajectoryModel {
+    TrajectoryModel::Rbf(splatraj_traj::trajectory::Rbf {
+        normalisation: splatraj_traj::trajectory::RbfNormalisation::PartitionOfUnity,
+        ..splatraj_traj::trajectory::Rbf::new(1, FIRST_TRY_CENTRES_PER_WINDOW, None)
+    })
 }
 
 fn default_backend() -> BackendKind {
@@ -619,17 +633,7 @@ impl Config {
     /// sources registered in `extensions`.
     pub fn load_with(path: &Path, overrides: &[String], extensions: &Extensions) -> Result<Config> {
         let mut value = read_table(path, 0)?;
-        // `--set costs.motion.weight=0` on a config without `[costs]` tunes the first-try
-        // costs it runs with; without this, the override's table would be the only cost.
-        if !value.contains_key("costs")
-            && overrides
-                .iter()
-                .any(|o| o.trim_start().starts_with("costs."))
-        {
-            let defaults = toml::Value::try_from(CostsConfig::first_try())
-                .context("the default `[costs]` as TOML")?;
-            value.insert("costs".into(), defaults);
-        }
+        write_first_try_tables(&mut value, overrides)?;
         let mut set_keys = Vec::with_capacity(overrides.len());
         for o in overrides {
             set_keys.push((apply_override(&mut value, o)?, o.as_str()));
@@ -808,6 +812,30 @@ impl Config {
         self.study.validate().map_err(anyhow::Error::msg)?;
         Ok(())
     }
+}
+
+/// Writes the first-try `[costs]` and `[trajectory]` into a config that leaves them out, when
+/// an override edits them: `--set costs.motion.weight=0` or `--set
+/// trajectory.centres_per_window=4` then tunes the set the config runs with, instead of
+/// becoming the only cost (a `[costs]` table lists exactly the costs that are on) or a model
+/// without its `kind`.
+fn write_first_try_tables(value: &mut toml::Table, overrides: &[String]) -> Result<()> {
+    let edits = |table: &str| {
+        overrides
+            .iter()
+            .any(|o| o.trim_start().starts_with(&format!("{table}.")))
+    };
+    if !value.contains_key("costs") && edits("costs") {
+        let defaults = toml::Value::try_from(CostsConfig::first_try())
+            .context("the default `[costs]` as TOML")?;
+        value.insert("costs".into(), defaults);
+    }
+    if !value.contains_key("trajectory") && edits("trajectory") {
+        let defaults = toml::Value::try_from(first_try_model())
+            .context("the default `[trajectory]` as TOML")?;
+        value.insert("trajectory".into(), defaults);
+    }
+    Ok(())
 }
 
 /// Deserialises the whole config, or says at which key (dotted, list entries by index:

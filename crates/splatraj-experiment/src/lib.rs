@@ -35,6 +35,7 @@ pub mod path_checks;
 pub mod path_render;
 pub mod pose_run;
 pub mod probe;
+pub mod quality;
 pub mod query;
 pub mod records;
 pub mod resources;

@@ -71,6 +71,12 @@ impl TrajectoryRun {
     }
 }
 
+/// Share of a window at each end left out of its wobble (see [`Evaluation::with_frames`]): the
+/// quarters where the start pans from and to the neighbours (`ROUTE_TRANSITION`), as the
+/// `framed` check leaves them out. Measured at 0.15 on the first-try biker, the turn of a pan
+/// away (the framing error's V as the camera leaves the jacket) counted as a wobble of 0.10.
+pub const WOBBLE_EDGE: f64 = 0.25;
+
 /// Metrics of a trajectory: per window and smoothness.
 #[derive(Debug, Clone)]
 pub struct Evaluation {
@@ -89,6 +95,29 @@ impl Evaluation {
             .filter_map(|w| w.verdict.as_ref())
             .flat_map(|v| v.problems.iter().cloned())
             .collect()
+    }
+
+    /// Adds what the rendered frames tell (each window's framing wobble over its frames at
+    /// `fps`, [`splatraj_traj::metrics::wobble()`]) and judges every window again.
+    ///
+    /// A window's wobble is taken over its frames that show the object, leaving out the first
+    /// and last [`WOBBLE_EDGE`] of the window, where the camera pans from and to the
+    /// neighbouring objects (a pan is a change the wobble must not count).
+    pub fn with_frames(&mut self, frames: &[crate::path_render::FrameMetrics], fps: f64) {
+        let n = self.windows.len().max(1);
+        for (i, w) in self.windows.iter_mut().enumerate() {
+            let (start, end) = splatraj_traj::optimise::sampling::window_bounds(i, n);
+            let edge = WOBBLE_EDGE * (end - start);
+            let series: Vec<f64> = frames
+                .iter()
+                .filter(|f| {
+                    f.window == i && f.coverage > 0.0 && f.t >= start + edge && f.t <= end - edge
+                })
+                .map(|f| f.tce)
+                .collect();
+            w.framing.wobble = splatraj_traj::metrics::wobble(&series, fps);
+            w.verdict = Some(verdict(w));
+        }
     }
 
     /// Whether every window passes its verdict.

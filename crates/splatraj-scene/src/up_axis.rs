@@ -278,19 +278,54 @@ pub struct ResolvedUp {
     pub up: [f64; 3],
     /// Its origin.
     pub source: UpSource,
+    /// The guess, when up was guessed (its confidence and method).
+    pub guess: Option<UpGuess>,
+}
+
+/// Below this confidence a guessed up is worth a warning: the normals or the extent hardly
+/// prefer one axis.
+pub const DOUBTFUL_UP: f32 = 0.5;
+
+impl ResolvedUp {
+    /// One line saying where up came from and how sure the guess is, with how to override it:
+    /// `up [0, -1, 0] (guessed from the normals of flat splats, confidence 0.44 …)`.
+    pub fn describe(&self) -> String {
+        let [x, y, z] = self.up;
+        let up = format!("up [{x:.3}, {y:.3}, {z:.3}]");
+        match (self.source, self.guess) {
+            (UpSource::Guess, Some(g)) => {
+                let how = match g.method {
+                    UpMethod::Normals => "the normals of flat splats (a floor, a table, a base)",
+                    UpMethod::Extent => "the longest side of an object captured all around",
+                    UpMethod::Spread => "the direction the centres spread least along",
+                };
+                let doubt = if g.confidence < DOUBTFUL_UP {
+                    ", low: check the frames"
+                } else {
+                    ""
+                };
+                format!(
+                    "{up} (guessed from {how}, confidence {:.2} of 1{doubt}; set `scene.up = [x, \
+                     y, z]` to override)",
+                    g.confidence
+                )
+            }
+            (source, _) => format!("{up} ({})", source.name()),
+        }
+    }
 }
 
 /// The one rule for world up: an explicit `given` (any non-zero length) wins, then the demo
 /// room's known up when `is_demo`, then [`guess_up_axis`], then +z (with a warning).
 pub fn resolve_up(given: Option<[f64; 3]>, is_demo: bool, scene: &Scene) -> ResolvedUp {
-    let (up, source) = match given {
-        Some(up) => (up, UpSource::Config),
-        None if is_demo => (crate::demo::DEMO_UP.map(f64::from), UpSource::Demo),
+    let (up, source, guess) = match given {
+        Some(up) => (up, UpSource::Config, None),
+        None if is_demo => (crate::demo::DEMO_UP.map(f64::from), UpSource::Demo, None),
         None => match guess_up_axis(scene) {
-            Some(g) => (g.up.map(f64::from), UpSource::Guess),
+            Some(g) => (g.up.map(f64::from), UpSource::Guess, Some(g)),
             None => {
                 tracing::warn!("could not guess world up; using +z (set scene.up)");
-                ([0.0, 0.0, 1.0], UpSource::Default)
+                ([0.0, 0.0, 1.0], UpSource::Default, None)
             }
         },
     };
@@ -300,5 +335,5 @@ pub fn resolve_up(given: Option<[f64; 3]>, is_demo: bool, scene: &Scene) -> Reso
     } else {
         [0.0, 0.0, 1.0]
     };
-    ResolvedUp { up, source }
+    ResolvedUp { up, source, guess }
 }

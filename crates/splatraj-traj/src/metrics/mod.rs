@@ -6,16 +6,19 @@
 //!   fixed grid;
 //! - [`path`]: per window clearance and motion peaks on a dense grid;
 //! - [`shot`]: per window with a shot preset, the deviation from what the shot asks;
-//! - [`verdict`](mod@verdict): per window, whether it shows its object as a viewer expects.
+//! - [`verdict`](mod@verdict): per window, whether it shows its object as a viewer expects;
+//! - [`wobble`](mod@wobble): the part of the framing error along t faster than about 1 Hz.
 
 pub mod ldj;
 pub mod path;
 pub mod shot;
 pub mod verdict;
 pub mod window;
+pub mod wobble;
 
 pub use ldj::{DEFAULT_LDJ_SAMPLES, Smoothness, ldj, pose_ldj, trajectory_ldj};
 pub use path::{ClearanceMetrics, MotionMetrics, PathMetrics, path_metrics};
 pub use shot::{Deviation, ShotMetrics, shot_metrics};
 pub use verdict::{Check, CheckKind, Verdict, verdict};
 pub use window::{Framing, Occlusion, WindowMetrics, WindowObject, window_metrics};
+pub use wobble::wobble;

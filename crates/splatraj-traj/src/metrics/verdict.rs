@@ -16,6 +16,7 @@
 //! | `hidden` | share of samples more than half hidden | ≤ [`MAX_HIDDEN`] | a fifth of the window behind something is a visible failure |
 //! | `clearance` | smallest clearance of the camera from the solid geometry | ≥ 0 | below 0 the camera is inside geometry and films its inside |
 //! | `inside_object` | share of samples whose camera is inside the object's box | ≤ [`MAX_INSIDE_OBJECT`] | a camera inside the object cannot show it |
+//! | `steady` | the frames' framing wobble ([`super::wobble()`]), once frames exist | ≤ [`MAX_WOBBLE`] | a swing of a tenth of the frame several times a second is seen as shaking |
 
 use serde::Serialize;
 
@@ -36,6 +37,8 @@ pub const MAX_HIDDEN: f64 = 0.2;
 pub const MIN_CLEARANCE: f64 = 0.0;
 /// Largest share of samples whose camera centre is inside the object's box.
 pub const MAX_INSIDE_OBJECT: f64 = 0.0;
+/// Largest wobble of the frames' TCE (the part faster than about 1 Hz).
+pub const MAX_WOBBLE: f64 = 0.1;
 
 /// What a check looks at.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -55,6 +58,8 @@ pub enum CheckKind {
     Clearance,
     /// The camera stays out of the object.
     InsideObject,
+    /// The framing does not swing faster than a viewer follows.
+    Steady,
 }
 
 /// One check of a window (module docs).
@@ -207,6 +212,19 @@ pub fn verdict(m: &WindowMetrics) -> Verdict {
             100.0 * m.framing.inside_object
         )),
     );
+    if let Some(w) = m.framing.wobble {
+        add(
+            CheckKind::Steady,
+            Some(w),
+            vec![MAX_WOBBLE],
+            w <= MAX_WOBBLE,
+            Some(format!(
+                "the object's framing swings by {w:.2} of the frame faster than once a second \
+                 (at most {MAX_WOBBLE} expected); likely fix: fewer \
+                 `trajectory.centres_per_window`"
+            )),
+        );
+    }
     Verdict {
         pass: problems.is_empty(),
         checks,

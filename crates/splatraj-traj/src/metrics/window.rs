@@ -92,6 +92,10 @@ pub struct Framing {
     pub tce_in_view: Option<f64>,
     /// Share of the samples whose camera centre lies inside the object's box.
     pub inside_object: f64,
+    /// The wobble of the frames' TCE in the window ([`super::wobble()`]), once frames were
+    /// rendered (filled in by the caller).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wobble: Option<f64>,
 }
 
 /// What occluders hide of a window's object (see the module docs).
@@ -198,10 +202,7 @@ pub fn window_metrics(
     let pixels = host(visible.reshape([batch * height * width]));
     let alone_pixels = host(alone.reshape([batch * height * width]));
     let in_frame = |m: &[f64]| mask_box(m, width, height, IOU_THRESHOLD).is_some();
-    let shows: Vec<bool> = pixels
-        .chunks_exact(height * width)
-        .map(&in_frame)
-        .collect();
+    let shows: Vec<bool> = pixels.chunks_exact(height * width).map(&in_frame).collect();
     let shown = shows.iter().filter(|&&s| s).count();
     // The middle half of the window: samples whose stratum middle lies in [¼, ¾] of it.
     let middle = |k: usize| {
@@ -220,6 +221,7 @@ pub fn window_metrics(
         coverage_middle: mean_where(&coverages, &middle),
         tce_in_view: mean_where(&tces, &|_| true),
         inside_object: inside as f64 / batch.max(1) as f64,
+        wobble: None,
     };
     let occluded: Vec<Option<f64>> = pixels
         .chunks_exact(height * width)

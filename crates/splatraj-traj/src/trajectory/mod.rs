@@ -55,7 +55,7 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 pub use lstsq::DEFAULT_RIDGE;
 pub use polynomial::Polynomial;
-pub use rbf::Rbf;
+pub use rbf::{Rbf, RbfNormalisation};
 pub use registry::{CUSTOM_PREFIX, CustomModel, ModelConfig, ModelRegistry};
 pub use waypoint::Waypoint;
 

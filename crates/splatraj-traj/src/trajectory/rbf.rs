@@ -9,7 +9,14 @@
 //! smooth.
 //!
 //! All centres lie inside [0, 1], so near t = 0 and t = 1 only one side's bases contribute: the
-//! model is stiffest at the trajectory's ends. Measured: a least-squares fit (4 windows × 5
+//! model is stiffest at the trajectory's ends, and the bases' sum falls there (to about 0.6 of
+//! its value inside at t = 0 with σ = spacing): a pose held through the first window sags
+//! toward the origin at t = 0 unless the weights make up for it, which is the lurch a first
+//! frame shows. `normalisation = "partition-of-unity"` divides the bases by their sum at every
+//! t (ψ̃_k = ψ_k / Σ_j ψ_j, a normalised RBF network): the bases then sum to 1 everywhere, a
+//! constant pose is one weight vector, and the path's ends are a weighted average of the
+//! nearest weights. The paper's model (`none`) stays the default of `kind = "rbf"`; a config
+//! without `[trajectory]` gets the normalised one (docs/first-try.md). Measured: a least-squares fit (4 windows × 5
 //! centres, σ = spacing) of a degree-5 polynomial with coefficients of size ~2 is off by ~0.24 at
 //! t = 0 and 1 but ~0.01 at t = ½; σ = 0.1 brings both under 0.004 (at larger weights).
 
@@ -20,6 +27,23 @@ use super::{Basis, TrajectoryError};
 
 /// Centres per window when the config gives none: one, as in the paper.
 pub const DEFAULT_CENTRES_PER_WINDOW: usize = 1;
+
+/// Whether the bases are divided by their sum (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RbfNormalisation {
+    /// The paper's bases as they are.
+    #[default]
+    None,
+    /// ψ_k / Σ_j ψ_j: the bases sum to 1 at every t.
+    PartitionOfUnity,
+}
+
+impl RbfNormalisation {
+    fn is_none(&self) -> bool {
+        *self == RbfNormalisation::None
+    }
+}
 
 /// The RBF model's parameters.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -34,6 +58,9 @@ pub struct Rbf {
     /// Width σ in normalised time; `None` means the centre spacing 1/(n·c).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sigma: Option<f64>,
+    /// Whether the bases are divided by their sum (module docs).
+    #[serde(default, skip_serializing_if = "RbfNormalisation::is_none")]
+    pub normalisation: RbfNormalisation,
 }
 
 fn one() -> usize {
@@ -51,6 +78,7 @@ impl Default for Rbf {
             windows: 1,
             centres_per_window: DEFAULT_CENTRES_PER_WINDOW,
             sigma: None,
+            normalisation: RbfNormalisation::None,
         }
     }
 }
@@ -63,6 +91,7 @@ impl Rbf {
             windows,
             centres_per_window,
             sigma,
+            normalisation: RbfNormalisation::None,
         }
     }
 
@@ -121,6 +150,10 @@ impl Basis for Rbf {
         for (psi, centre) in row.iter_mut().zip(self.centres()) {
             *psi = (-(t - centre).powi(2) * inv_two_var).exp();
         }
+        if self.normalisation == RbfNormalisation::PartitionOfUnity {
+            let sum = row.iter().sum::<f64>().max(f64::MIN_POSITIVE);
+            row.iter_mut().for_each(|psi| *psi /= sum);
+        }
     }
 
     /// exp(−(t − t_k)²/(2σ²)) by broadcasting `[B, 1] − [1, K]`, on the times' device and dtype.
@@ -132,6 +165,15 @@ impl Basis for Rbf {
         );
         let diff = times.unsqueeze_dim::<2>(1) - centres; // [B, 1] − [1, K] → [B, K]
         let inv_two_var = 1.0 / (2.0 * self.effective_sigma().powi(2));
-        (diff.clone() * diff).mul_scalar(-inv_two_var).exp()
+        let psi = (diff.clone() * diff).mul_scalar(-inv_two_var).exp(); // [B, K]
+        match self.normalisation {
+            RbfNormalisation::None => psi,
+            RbfNormalisation::PartitionOfUnity => {
+                // Inside [0, 1] the sum is at least e^(−1/8) of one basis: no floor needed
+                // there; the floor only guards times far outside.
+                let sum = psi.clone().sum_dim(1).clamp_min(f64::MIN_POSITIVE); // [B, 1]
+                psi / sum
+            }
+        }
     }
 }

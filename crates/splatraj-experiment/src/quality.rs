@@ -1,0 +1,169 @@
+//! The first-try quality benchmark's figures, read from a finished run folder
+//! (`splatraj bench first-try`, docs/first-try.md): per window whether its verdict passes,
+//! its framing in the middle half, the visible and hidden shares, the smallest clearance, the
+//! largest turn between two frames and the framing's wobble; per run its wall time.
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use serde::Serialize;
+use serde_json::Value;
+
+/// One window's figures.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct WindowQuality {
+    /// The query.
+    pub name: String,
+    /// Whether its verdict passes.
+    pub pass: bool,
+    /// Names of the failed checks.
+    pub failed: Vec<String>,
+    /// Share of the window's samples that show the object.
+    pub in_view: f64,
+    /// Mean TCE of the middle half's samples in view (None: never in view).
+    pub tce_middle: Option<f64>,
+    /// 1 − mean occluded share.
+    pub visible: f64,
+    /// Share of samples more than half hidden.
+    pub hidden: f64,
+    /// Smallest clearance from the geometry (None: no clearance cost).
+    pub min_clearance: Option<f64>,
+    /// Largest turn of the view between two consecutive frames, degrees.
+    pub turn_per_frame: f64,
+    /// The framing's wobble over the frames (None: no frames).
+    pub wobble: Option<f64>,
+}
+
+/// One run's figures.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunQuality {
+    /// The run's name (`config.toml`'s `name`).
+    pub name: String,
+    /// Gaussians in its scene.
+    pub gaussians: u64,
+    /// Wall time of the whole run, seconds.
+    pub total_s: f64,
+    /// Of it, optimising.
+    pub optimisation_s: f64,
+    /// Per window.
+    pub windows: Vec<WindowQuality>,
+}
+
+impl RunQuality {
+    /// Whether every window passes.
+    pub fn pass(&self) -> bool {
+        self.windows.iter().all(|w| w.pass)
+    }
+}
+
+/// The figures of the run folder `dir` (its `metrics.json` and `config.toml`).
+pub fn read_run_quality(dir: &Path) -> Result<RunQuality> {
+    let path = dir.join("metrics.json");
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    let metrics: Value = serde_json::from_str(&text)
+        .with_context(|| format!("{} is not valid JSON", path.display()))?;
+    let config: toml::Table = std::fs::read_to_string(dir.join("config.toml"))
+        .ok()
+        .and_then(|t| toml::from_str(&t).ok())
+        .unwrap_or_default();
+    let fps = config
+        .get("output")
+        .and_then(|o| o.get("fps"))
+        .and_then(toml::Value::as_float)
+        .unwrap_or(30.0);
+    let number = |v: &Value| v.as_f64();
+    let windows = metrics["windows"]
+        .as_array()
+        .with_context(|| format!("{} holds no windows", path.display()))?
+        .iter()
+        .map(|w| {
+            let checks = w["verdict"]["checks"]
+                .as_array()
+                .cloned()
+                .unwrap_or_default();
+            let motion = &w["path"]["motion"];
+            // Degrees per second over frames per second; per unit time when no duration.
+            let per_second = number(&motion["peak_angular_speed"]).unwrap_or(0.0);
+            let turn_per_frame = match number(&motion["seconds"]) {
+                Some(_) => per_second / fps,
+                None => f64::NAN,
+            };
+            WindowQuality {
+                name: w["name"].as_str().unwrap_or_default().to_string(),
+                pass: w["verdict"]["pass"].as_bool().unwrap_or(false),
+                failed: checks
+                    .iter()
+                    .filter(|c| c["pass"] == Value::Bool(false))
+                    .filter_map(|c| c["check"].as_str().map(String::from))
+                    .collect(),
+                in_view: number(&w["visible_fraction"]).unwrap_or(f64::NAN),
+                tce_middle: number(&w["framing"]["tce_middle"]),
+                visible: 1.0 - number(&w["occlusion"]["mean_occluded"]).unwrap_or(f64::NAN),
+                hidden: number(&w["occlusion"]["hidden_fraction"]).unwrap_or(f64::NAN),
+                min_clearance: number(&w["path"]["clearance"]["min_clearance"]),
+                turn_per_frame,
+                wobble: number(&w["framing"]["wobble"]),
+            }
+        })
+        .collect();
+    Ok(RunQuality {
+        name: config
+            .get("name")
+            .and_then(toml::Value::as_str)
+            .unwrap_or("run")
+            .to_string(),
+        gaussians: metrics["run"]["gaussians"].as_u64().unwrap_or(0),
+        total_s: number(&metrics["run"]["total_s"]).unwrap_or(f64::NAN),
+        optimisation_s: number(&metrics["run"]["optimisation_s"]).unwrap_or(f64::NAN),
+        windows,
+    })
+}
+
+/// The runs as a Markdown table, one row per window, and a last line counting the passes.
+pub fn quality_table(runs: &[RunQuality]) -> String {
+    let show = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.3}"));
+    let mut out = String::from(
+        "| scene | Gaussians | window | verdict | in view | TCE (middle) | visible | hidden \
+         | min clearance | turn/frame | wobble | time (optimisation) |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for run in runs {
+        for (i, w) in run.windows.iter().enumerate() {
+            let verdict = if w.pass {
+                "pass".to_string()
+            } else {
+                format!("FAIL: {}", w.failed.join(", "))
+            };
+            let time = if i == 0 {
+                format!("{:.0} s ({:.0} s)", run.total_s, run.optimisation_s)
+            } else {
+                String::new()
+            };
+            out.push_str(&format!(
+                "| {} | {} | {} | {verdict} | {:.0} % | {} | {:.0} % | {:.0} % | {} | {:.2}° | {} | {time} |\n",
+                if i == 0 { run.name.as_str() } else { "" },
+                if i == 0 { run.gaussians.to_string() } else { String::new() },
+                w.name,
+                100.0 * w.in_view,
+                show(w.tce_middle),
+                100.0 * w.visible,
+                100.0 * w.hidden,
+                show(w.min_clearance),
+                w.turn_per_frame,
+                show(w.wobble),
+            ));
+        }
+    }
+    let windows: usize = runs.iter().map(|r| r.windows.len()).sum();
+    let passed: usize = runs
+        .iter()
+        .map(|r| r.windows.iter().filter(|w| w.pass).count())
+        .sum();
+    let scenes = runs.iter().filter(|r| r.pass()).count();
+    out.push_str(&format!(
+        "\n{passed} of {windows} windows pass their verdict; {scenes} of {} scenes pass whole.\n",
+        runs.len()
+    ));
+    out
+}
