@@ -156,7 +156,7 @@ pub struct Config {
 
 /// RBF centres per window of a config without `[trajectory]`, chosen on the first-try
 /// captures (docs/results.md, "First try on real captures").
-pub const FIRST_TRY_CENTRES_PER_WINDOW: usize = 3;
+pub const FIRST_TRY_CENTRES_PER_WINDOW: usize = 4;
 
 /// The trajectory model of a config without `[trajectory]`: RBF with
 /// [`FIRST_TRY_CENTRES_PER_WINDOW`] centres per window, normalised to a partition of unity so

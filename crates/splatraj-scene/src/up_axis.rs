@@ -10,13 +10,15 @@
 //! splats: the direction of least spread of the centres.
 //!
 //! **Sign**, from where the scene sits relative to the world origin, which trainers put at
-//! one of two places. Where the origin lies on the scene's extent along the axis (within
-//! [`ORIGIN_ON_SCENE`] half-extents of its centre), it is a ground point (Blender and
-//! SuperSplat scenes stand on the origin): up points from the origin into the scene. Where it
-//! lies far outside ([`ORIGIN_AT_CAMERAS`] half-extents or more), it is where the cameras were
-//! (COLMAP-style captures centre the world on their cameras, which look down at a tabletop):
-//! up points toward it. In between, the densest slab of Gaussians along the axis is taken as
-//! the ground at the bottom of the scene.
+//! one of three places. Where the origin lies near the scene's end along the axis (between
+//! [`ORIGIN_AT_CENTRE`] and [`ORIGIN_ON_SCENE`] half-extents from its centre), it is a ground
+//! point (Blender and SuperSplat scenes stand on the origin): up points from the origin into
+//! the scene. Where it lies far outside ([`ORIGIN_AT_CAMERAS`] half-extents or more), it is
+//! where the cameras were (COLMAP-style captures centre the world on their cameras, which look
+//! down at a tabletop): up points toward it. Where it lies near the middle (an object filmed
+//! all around, on a turntable or a plinth: the cameras' centre is the object's), the origin
+//! says nothing; there, and between the bands, the densest slab of Gaussians along the axis
+//! (the floor, the base, the turntable) is taken as the ground at the bottom of the scene.
 //!
 //! Judged on real captures whose up we know (see the scene crate's README): biker and guitar
 //! (PlayCanvas, y-down, standing on y = 0: −y), donut (Blender synthetic, z-up, lying on
@@ -63,8 +65,13 @@ pub const STRONG_NORMALS: f32 = 0.5;
 /// Without a dominant normal, a scene this many times longer along one side than along the
 /// normals' axis is a standing object, and that side is up.
 pub const TALL: f32 = 2.0;
-/// The origin is a ground point when within this many half-extents of the scene's centre.
+/// The origin is a ground point when within this many half-extents of the scene's centre
+/// (and not within [`ORIGIN_AT_CENTRE`]).
 pub const ORIGIN_ON_SCENE: f32 = 1.5;
+/// The origin says nothing of the sign when within this many half-extents of the scene's
+/// centre: it is the middle of an object captured all around. The known ground-standing
+/// captures sit at about 1 (biker, guitar, donut).
+pub const ORIGIN_AT_CENTRE: f32 = 0.5;
 /// The origin is where the cameras were when this many half-extents or more away.
 pub const ORIGIN_AT_CAMERAS: f32 = 3.0;
 
@@ -185,7 +192,10 @@ fn orient_by_origin(axis: Vec3, bounds: &crate::scene::Bounds) -> Option<Vec3> {
         return None;
     }
     let offset = centre / half; // where the scene's centre is, in half-extents from the origin
-    if offset.abs() <= ORIGIN_ON_SCENE {
+    if offset.abs() < ORIGIN_AT_CENTRE {
+        // The origin is the object's middle (a turntable's or a plinth's capture).
+        None
+    } else if offset.abs() <= ORIGIN_ON_SCENE {
         // The origin is a ground point: up points from it into the scene.
         Some(if centre >= 0.0 { axis } else { -axis })
     } else if offset.abs() >= ORIGIN_AT_CAMERAS {

@@ -42,6 +42,49 @@ fn y_down_room() -> Scene {
     scene
 }
 
+/// An object captured all around on a turntable, COLMAP-style (y down) with the world origin
+/// at the object's middle (the cameras circled it): a dense flat base at y = 0.5, a cylinder
+/// of radius 0.15 standing on it up to y = −0.5. Read as a ground point, the origin put up
+/// along +y, through the base (the guess before the centre band).
+fn turntable_object() -> Scene {
+    let mut scene = Scene::default();
+    let mut push = |mean: [f32; 3], scale: [f32; 3], rotation: [f32; 4]| {
+        scene.means.push(mean);
+        scene.scales.push(scale);
+        scene.rotations.push(rotation);
+        scene.opacities.push(0.9);
+        scene.sh.extend([0.0; 3]);
+    };
+    for i in -20..=20 {
+        for j in -20..=20 {
+            let (x, z) = (i as f32 * 0.02, j as f32 * 0.02);
+            if x * x + z * z <= 0.16 {
+                // The base: flat along y.
+                push([x, 0.5, z], [0.02, 0.002, 0.02], [1.0, 0.0, 0.0, 0.0]);
+            }
+        }
+    }
+    for k in 0..60 {
+        let a = std::f32::consts::TAU * k as f32 / 60.0;
+        for h in 0..40 {
+            // The side: round splats (not flat: they do not vote for a normal).
+            let y = 0.5 - h as f32 * 0.025;
+            push(
+                [0.15 * a.cos(), y, 0.15 * a.sin()],
+                [0.01, 0.01, 0.01],
+                [1.0, 0.0, 0.0, 0.0],
+            );
+        }
+    }
+    scene
+}
+
+#[test]
+fn an_object_on_a_turntable_centred_on_the_origin_stands_on_its_base() {
+    let guess = guess_up_axis(&turntable_object()).unwrap();
+    assert_eq!(guess.up, [0.0, -1.0, 0.0], "{guess:?}");
+}
+
 #[test]
 fn y_down_capture_gives_minus_y() {
     let guess = guess_up_axis(&y_down_room()).unwrap();
