@@ -42,6 +42,66 @@ fn every_shipped_config_parses_and_validates() {
     );
 }
 
+/// The first-try configs name only the scene, the targets and the queries, and get the
+/// defaults docs/first-try.md lists.
+#[test]
+fn first_try_configs_are_minimal_and_get_the_documented_defaults() {
+    let dir = configs_dir().join("first-try");
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "toml") {
+            continue;
+        }
+        let table: toml::Table = toml::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        for key in table.keys() {
+            assert!(
+                ["name", "scene", "targets", "queries"].contains(&key.as_str()),
+                "{}: `{key}` is not a first-try key",
+                path.display()
+            );
+        }
+        let config =
+            Config::load(&path, &[]).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
+        let costs = &config.costs;
+        assert!(costs.tce.is_some() && costs.tre.is_some() && costs.prior.is_some());
+        assert_eq!(
+            costs.upright.as_ref().unwrap().mode,
+            splatraj::traj::costs::UprightMode::Roll
+        );
+        assert!(costs.clearance.as_ref().unwrap().margin.is_auto());
+        assert!(costs.motion.as_ref().unwrap().max_speed.unwrap().is_auto());
+        assert_eq!(costs.motion.as_ref().unwrap().max_angular_speed, Some(60.0));
+        assert!(costs.visibility.is_some());
+        match &config.trajectory {
+            splatraj::traj::trajectory::TrajectoryModel::Rbf(rbf) => {
+                assert_eq!(rbf.centres_per_window, 4);
+                assert_eq!(
+                    rbf.normalisation,
+                    splatraj::traj::trajectory::RbfNormalisation::PartitionOfUnity
+                );
+            }
+            other => panic!("{}: {other:?}", path.display()),
+        }
+        assert_eq!(
+            config.start.kind,
+            splatraj::experiment::config::StartKind::Search
+        );
+        let output = &config.output;
+        assert_eq!((output.width, output.height, output.fps), (1280, 720, 30.0));
+        assert_eq!(
+            output.frame_count(config.queries.len()),
+            90 * config.queries.len()
+        );
+        assert_eq!(
+            output.mask_overlay,
+            splatraj::experiment::config::MaskOverlay::None
+        );
+        seen += 1;
+    }
+    assert_eq!(seen, 4, "guitar, biker, donut, fruit_drops");
+}
+
 #[test]
 fn model_variants_differ_only_in_their_model() {
     let base = Config::load(&configs_dir().join("demo.toml"), &[]).unwrap();

@@ -245,9 +245,9 @@ fn region_sources_and_mask_files_ground_queries() {
     );
 }
 
-/// A planted failure: the camera held near the mug's centre (start there, steps too small to
-/// move; one RBF per window holds it only roughly), where it sees neither object. The run
-/// writes its whole folder, warns naming the query and the fix, records the
+/// A planted failure: the camera held at the mug's centre (start there, steps too small to
+/// move; the default normalised RBF holds a pose exactly), inside the object. The run writes
+/// its whole folder, warns naming the query and the fix, records the
 /// verdict in metrics.json and report.html, and exits with status 3; `output.verdict =
 /// "warn"` keeps the warnings and exits 0.
 #[test]
@@ -277,7 +277,7 @@ fn a_failed_verdict_warns_names_the_query_and_exits_3() {
         "{err}"
     );
     assert!(
-        err.contains("warning: window 0 \"red mug\": the object is in frame in 0 %"),
+        err.contains("warning: window 0 \"red mug\": the camera is inside the object's box"),
         "{err}"
     );
     assert!(err.contains("likely fix"), "{err}");
@@ -288,21 +288,24 @@ fn a_failed_verdict_warns_names_the_query_and_exits_3() {
         serde_json::from_str(&std::fs::read_to_string(run.join("metrics.json")).unwrap()).unwrap();
     let verdict = &metrics["windows"][0]["verdict"];
     assert_eq!(verdict["pass"], false);
-    let in_view = verdict["checks"]
+    let inside = verdict["checks"]
         .as_array()
         .unwrap()
         .iter()
-        .find(|c| c["check"] == "in_view")
+        .find(|c| c["check"] == "inside_object")
         .unwrap();
     assert_eq!(
-        (&in_view["pass"], &in_view["value"]),
-        (&false.into(), &0.0.into())
+        (&inside["pass"], &inside["value"]),
+        (&false.into(), &1.0.into())
     );
-    // Never in view: no framing error (not the 0 an empty mask's TCE would give).
-    assert!(metrics["windows"][0]["framing"]["tce_in_view"].is_null());
+    // The blue box's window looks out of the mug and never sees the box: no framing error
+    // (not the 0 an empty mask's TCE would give).
+    assert!(metrics["windows"][1]["framing"]["tce_in_view"].is_null());
     let report = std::fs::read_to_string(run.join("report.html")).unwrap();
     assert!(report.contains("id=\"verdict\""));
-    assert!(report.contains("window 0 &quot;red mug&quot;: the object is in frame in 0 %"));
+    assert!(
+        report.contains("window 0 &quot;red mug&quot;: the camera is inside the object&#39;s box")
+    );
 
     args.extend(["--set", "output.verdict=\"warn\""]);
     let warned = splatraj(&args);

@@ -830,7 +830,12 @@ fn write_first_try_tables(value: &mut toml::Table, overrides: &[String]) -> Resu
             .context("the default `[costs]` as TOML")?;
         value.insert("costs".into(), defaults);
     }
-    if !value.contains_key("trajectory") && edits("trajectory") {
+    // A new `kind` is a new model: its own keys, not the first-try RBF's.
+    let new_kind = overrides.iter().any(|o| {
+        let key = o.split_once('=').map_or(o.as_str(), |(k, _)| k).trim();
+        key == "trajectory" || key == "trajectory.kind"
+    });
+    if !value.contains_key("trajectory") && edits("trajectory") && !new_kind {
         let defaults = toml::Value::try_from(first_try_model())
             .context("the default `[trajectory]` as TOML")?;
         value.insert("trajectory".into(), defaults);
