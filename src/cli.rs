@@ -75,39 +75,65 @@ pub fn interrupt_flag() -> Arc<AtomicBool> {
 /// Exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells expect).
 pub const EXIT_INTERRUPTED: u8 = 130;
 
-/// Exit status of a run that finished and wrote its folder, but whose verdict failed on some
-/// window (an object not shown as asked: docs/first-try.md). 1 stays "error", 130 "stopped".
-pub const EXIT_VERDICT: u8 = 3;
-
-/// A run whose folder is complete but whose verdict failed: `main` prints the message and
-/// exits with [`EXIT_VERDICT`].
-#[derive(Debug)]
-pub struct VerdictFailed(pub String);
-
-impl std::fmt::Display for VerdictFailed {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for VerdictFailed {}
-
 /// Stack of each rayon worker: commands run on one (`main`), so it gets a main thread's usual
 /// 8 MiB rather than rayon's 2 MiB default.
 pub const WORKER_STACK_BYTES: usize = 8 << 20;
 
-/// A command stopped by Ctrl-C after writing what it had: `main` prints the message and exits
-/// with [`EXIT_INTERRUPTED`].
-#[derive(Debug)]
-pub struct Interrupted(pub String);
+/// Exit status of a run that finished and wrote its folder, but whose verdict failed on some
+/// window (an object not shown as asked: docs/first-try.md). 1 stays "error", 130 "stopped".
+pub const EXIT_VERDICT: u8 = 3;
 
-impl std::fmt::Display for Interrupted {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
+/// How a command that wrote whole files still ends with a status of its own.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Ending {
+    /// Stopped by Ctrl-C after writing what it had ([`EXIT_INTERRUPTED`]).
+    Interrupted,
+    /// A run whose folder is whole but whose verdict failed ([`EXIT_VERDICT`]).
+    VerdictFailed,
+}
+
+/// A command that ends with [`Ending`]'s status: `main` prints the message and exits with it.
+#[derive(Debug)]
+pub struct Ended {
+    /// How it ended.
+    pub how: Ending,
+    /// What to tell the user.
+    pub message: String,
+}
+
+impl Ended {
+    /// Stopped by Ctrl-C.
+    pub fn interrupted(message: String) -> Self {
+        Self {
+            how: Ending::Interrupted,
+            message,
+        }
+    }
+
+    /// The verdict failed.
+    pub fn verdict_failed(message: String) -> Self {
+        Self {
+            how: Ending::VerdictFailed,
+            message,
+        }
+    }
+
+    /// The process's exit status.
+    pub fn status(&self) -> u8 {
+        match self.how {
+            Ending::Interrupted => EXIT_INTERRUPTED,
+            Ending::VerdictFailed => EXIT_VERDICT,
+        }
     }
 }
 
-impl std::error::Error for Interrupted {}
+impl std::fmt::Display for Ended {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl std::error::Error for Ended {}
 
 /// `--max-memory GB` of the commands that render or optimise.
 #[derive(Debug, Args)]

@@ -101,12 +101,9 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
-            if let Some(interrupted) = error.downcast_ref::<cli::Interrupted>() {
-                eprintln!("{interrupted}");
-                ExitCode::from(cli::EXIT_INTERRUPTED)
-            } else if let Some(failed) = error.downcast_ref::<cli::VerdictFailed>() {
-                eprintln!("{failed}");
-                ExitCode::from(cli::EXIT_VERDICT)
+            if let Some(ended) = error.downcast_ref::<cli::Ended>() {
+                eprintln!("{ended}");
+                ExitCode::from(ended.status())
             } else {
                 eprintln!("error: {}", message(&error));
                 ExitCode::FAILURE

@@ -25,7 +25,7 @@ use splatraj::experiment::{Experiment, Posterior};
 use splatraj_traj::metrics::WindowMetrics;
 use splatraj_traj::optimise::StopReason;
 
-use crate::cli::{Interrupted, MemoryArgs, bar_observer, interrupt_flag, progress_bar};
+use crate::cli::{Ended, MemoryArgs, bar_observer, interrupt_flag, progress_bar};
 
 /// Arguments of `splatraj pose`.
 #[derive(Debug, Args)]
@@ -182,7 +182,7 @@ pub fn run(args: PoseArgs) -> Result<()> {
     write_json(&dir.join("metrics.json"), &PoseMetrics { metrics, sgld })?;
     println!("{}", dir.display());
     if interrupted {
-        return Err(Interrupted(format!(
+        return Err(Ended::interrupted(format!(
             "interrupted: {} holds the best pose so far",
             dir.display()
         ))

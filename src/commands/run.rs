@@ -30,9 +30,7 @@ use splatraj::experiment::run_folder::{
 };
 use splatraj::experiment::{Evaluation, Experiment, RunOptions, RunStop};
 
-use crate::cli::{
-    Interrupted, MemoryArgs, VerdictFailed, bar_observer, interrupt_flag, progress_bar,
-};
+use crate::cli::{Ended, MemoryArgs, bar_observer, interrupt_flag, progress_bar};
 
 /// Arguments of `splatraj run`.
 #[derive(Debug, Args)]
@@ -186,7 +184,7 @@ pub fn run(args: RunArgs) -> Result<()> {
         RunStop::Finished => remove_checkpoint(&dir)?,
         RunStop::TimeLimit => {}
         RunStop::Interrupted => {
-            return Err(Interrupted(format!(
+            return Err(Ended::interrupted(format!(
                 "interrupted: {} holds the best trajectory so far; `splatraj run --resume {}` \
                  continues the optimisation",
                 dir.display(),
@@ -198,7 +196,7 @@ pub fn run(args: RunArgs) -> Result<()> {
     if problems.is_empty() || config.output.verdict == VerdictPolicy::Warn {
         Ok(())
     } else {
-        Err(VerdictFailed(format!(
+        Err(Ended::verdict_failed(format!(
             "verdict: {} of {} windows do not show their object as asked (see the warnings \
              above, `metrics.json`'s `verdict` and {}); exit status {}",
             failing,
