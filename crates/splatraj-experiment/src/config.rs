@@ -31,6 +31,7 @@
 //! width = 96               # default 96 × 54 (the output's 16:9)
 //! height = 54
 //! fov_x = 60.0
+//! # working_distance = "measured"   # or "box": the prior radius measured on renders, or estimated
 //!
 //! [trajectory]             # kind = "rbf" | "waypoint" | "polynomial" and its parameters,
 //!                          # or kind = "custom.<name>" and [trajectory.custom.<name>]: a
@@ -116,7 +117,7 @@ pub struct Config {
     #[serde(default = "first_try_model")]
     pub trajectory: TrajectoryModel,
     /// Costs and weights. Without a `[costs]` table: [`CostsConfig::first_try`] (the paper's
-    /// four, clearance and motion limits derived from the scene).
+    /// four, clearance and motion limits derived from the scene, visibility).
     #[serde(default = "CostsConfig::first_try")]
     pub costs: CostsConfig,
     /// Trajectory optimiser.
@@ -253,6 +254,23 @@ pub struct CameraConfig {
     pub cy: Option<f64>,
     /// Default target ratio r_t of every query.
     pub target_ratio: f64,
+    /// How each query's working distance (the prior radius, the distance at which its object
+    /// covers r_t) is found: `measured` (default) or `box`.
+    pub working_distance: WorkingDistance,
+}
+
+/// How a query's working distance is found (`[camera] working_distance`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum WorkingDistance {
+    /// Estimated from the object's box, then measured on renders of the object alone from ten
+    /// directions and corrected (`splatraj_traj::optimise::calibrated_radius`); a prior
+    /// `radius` in `[costs.prior]` is kept as given.
+    #[default]
+    Measured,
+    /// Estimated from the object's box alone (Cauchy's mean silhouette): what runs did before
+    /// measuring, and what the tuned demo configs keep.
+    Box,
 }
 
 /// Width of the default optimisation camera, pixels: enough to resolve an object covering
@@ -275,6 +293,7 @@ impl Default for CameraConfig {
             cx: None,
             cy: None,
             target_ratio: DEFAULT_TARGET_RATIO,
+            working_distance: WorkingDistance::Measured,
         }
     }
 }

@@ -62,7 +62,10 @@ pub struct Experiment {
     pub(crate) occupancy_cache: std::sync::Mutex<Option<splatraj_traj::clearance::Occupancy>>,
     /// The view search's choice for all windows, per restart ([`Experiment::searched_views`]):
     /// `run` checks the starts before it runs them, and each search renders hundreds of views.
-    pub(crate) views_cache: std::sync::Mutex<Option<Vec<Vec<splatraj_traj::optimise::Candidate>>>>,
+    /// Keyed by what else the search depends on ([`Experiment::searched_views`]).
+    #[allow(clippy::type_complexity)]
+    pub(crate) views_cache:
+        std::sync::Mutex<Option<(String, Vec<Vec<splatraj_traj::optimise::Candidate>>)>>,
 }
 
 impl Experiment {
@@ -106,13 +109,10 @@ impl Experiment {
             views_cache: Default::default(),
         };
         experiment.ground_queries()?;
-        if experiment.config.start.kind == crate::config::StartKind::Search
-            && experiment.config.start.pose.is_none()
-            && experiment.config.start.trajectory.is_none()
-        {
+        if experiment.config.camera.working_distance == crate::config::WorkingDistance::Measured {
             experiment.measure_working_distances()?;
         }
-        experiment.derive_from_scene();
+        experiment.derive_from_scene()?;
         Ok(experiment)
     }
 
@@ -150,7 +150,7 @@ impl Experiment {
 
     /// Replaces the config's `"auto"` settings by values derived from the scene and the
     /// queries' working distances, and records them in [`Experiment::derived`].
-    fn derive_from_scene(&mut self) {
+    fn derive_from_scene(&mut self) -> Result<()> {
         let radii: Vec<f64> = self
             .windows
             .iter()
@@ -163,6 +163,12 @@ impl Experiment {
             && clearance.margin.is_auto()
         {
             let margin = splatraj_traj::costs::auto_margin(smallest, diagonal);
+            if !(margin.is_finite() && margin > 0.0) {
+                bail!(
+                    "`costs.clearance.margin` = \"auto\": the scene's size and the working \
+                     distances give no margin ({margin}); give `margin` in scene units"
+                );
+            }
             clearance.margin = OrAuto::Value(margin);
             self.derived.push(Derived {
                 key: "costs.clearance.margin",
@@ -177,31 +183,36 @@ impl Experiment {
         }
         let window_seconds =
             self.config.output.duration(self.windows.len()) / self.windows.len().max(1) as f64;
-        let largest_join = self
+        // The camera's way between two windows' views is at most the objects' distance plus
+        // both working distances.
+        let largest_travel = self
             .windows
             .windows(2)
             .map(|w| {
                 glam::DVec3::from(w[0].context.object_centre)
                     .distance(glam::DVec3::from(w[1].context.object_centre))
+                    + w[0].context.prior_radius
+                    + w[1].context.prior_radius
             })
             .fold(0.0, f64::max);
         if let Some(motion) = &mut self.config.costs.motion
             && motion.max_speed == Some(OrAuto::Auto)
         {
-            let speed = splatraj_traj::costs::auto_max_speed(mean, largest_join, window_seconds);
+            let speed = splatraj_traj::costs::auto_max_speed(mean, largest_travel, window_seconds);
             motion.max_speed = Some(OrAuto::Value(speed));
             self.derived.push(Derived {
                 key: "costs.motion.max_speed",
                 value: speed,
                 why: format!(
-                    "{} mean working distances ({mean:.3}) per second, or the largest move \
-                     between consecutive objects ({largest_join:.3}) in {} of a {window_seconds:.1} s \
-                     window",
+                    "{} mean working distances ({mean:.3}) per second, or the longest pan \
+                     between views ({largest_travel:.3}) in {} of a {window_seconds:.1} s window \
+                     at the eased pan's peak",
                     splatraj_traj::costs::motion::AUTO_SPEED_RADII_PER_SECOND,
                     splatraj_traj::costs::motion::AUTO_SPEED_JOIN_SHARE
                 ),
             });
         }
+        Ok(())
     }
 
     /// One target per query: from its mask file or the `[targets]` source.

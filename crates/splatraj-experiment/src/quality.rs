@@ -28,8 +28,9 @@ pub struct WindowQuality {
     pub hidden: f64,
     /// Smallest clearance from the geometry (None: no clearance cost).
     pub min_clearance: Option<f64>,
-    /// Largest turn of the view between two consecutive frames, degrees.
-    pub turn_per_frame: f64,
+    /// Largest turn of the view between two consecutive frames, degrees (None: the run
+    /// folder gives no duration).
+    pub turn_per_frame: Option<f64>,
     /// The framing's wobble over the frames (None: no frames).
     pub wobble: Option<f64>,
 }
@@ -85,10 +86,9 @@ pub fn read_run_quality(dir: &Path) -> Result<RunQuality> {
             let motion = &w["path"]["motion"];
             // Degrees per second over frames per second; per unit time when no duration.
             let per_second = number(&motion["peak_angular_speed"]).unwrap_or(0.0);
-            let turn_per_frame = match number(&motion["seconds"]) {
-                Some(_) => per_second / fps,
-                None => f64::NAN,
-            };
+            // Per second when the path has a duration (every run has one now; older run
+            // folders may not).
+            let turn_per_frame = number(&motion["seconds"]).map(|_| per_second / fps);
             WindowQuality {
                 name: w["name"].as_str().unwrap_or_default().to_string(),
                 pass: w["verdict"]["pass"].as_bool().unwrap_or(false),
@@ -141,7 +141,7 @@ pub fn quality_table(runs: &[RunQuality]) -> String {
                 String::new()
             };
             out.push_str(&format!(
-                "| {} | {} | {} | {verdict} | {:.0} % | {} | {:.0} % | {:.0} % | {} | {:.2}° | {} | {time} |\n",
+                "| {} | {} | {} | {verdict} | {:.0} % | {} | {:.0} % | {:.0} % | {} | {} | {} | {time} |\n",
                 if i == 0 { run.name.as_str() } else { "" },
                 if i == 0 { run.gaussians.to_string() } else { String::new() },
                 w.name,
@@ -150,7 +150,8 @@ pub fn quality_table(runs: &[RunQuality]) -> String {
                 100.0 * w.visible,
                 100.0 * w.hidden,
                 show(w.min_clearance),
-                w.turn_per_frame,
+                w.turn_per_frame
+                    .map_or("–".to_string(), |d| format!("{d:.2}°")),
                 show(w.wobble),
             ));
         }

@@ -170,7 +170,7 @@ pub fn check_writable(dir: &Path) -> Result<()> {
 
 /// Removes the temporary files a killed process left in a run folder (and its `frames/`).
 pub fn remove_partial_files(dir: &Path) -> Result<()> {
-    for folder in [dir.to_path_buf(), dir.join("frames")] {
+    for folder in [dir.to_path_buf(), dir.join("frames"), dir.join("keyframes")] {
         let Ok(entries) = std::fs::read_dir(&folder) else {
             continue;
         };

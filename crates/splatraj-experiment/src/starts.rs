@@ -263,18 +263,27 @@ impl Experiment {
     }
 
     /// The view search's choice for the windows of `which`, one list per restart: restart 0
-    /// takes the best sequence, each later one the best that avoids earlier restarts' views
+    /// takes the best sequence, each later one the best with earlier restarts' views (and
+    /// their neighbours) charged extra
     /// (`splatraj_traj::optimise::views`). Measured at the optimisation camera's aspect, with
     /// the clearance cost's geometry and margin when it is on.
     pub fn searched_views(&self, which: &[usize], restarts: usize) -> Result<Vec<Vec<Candidate>>> {
         let all: Vec<usize> = (0..self.windows.len()).collect();
+        // What the search depends on besides the scene and the windows (fixed by `prepare`):
+        // a config edited since gets a fresh search.
+        let key = format!(
+            "{restarts} {:?} {:?} {:?}",
+            self.clearance_margin(),
+            self.intrinsics,
+            self.config.rasterizer
+        );
         let cacheable = which == all.as_slice();
         if cacheable {
             let cache = self
                 .views_cache
                 .lock()
                 .unwrap_or_else(std::sync::PoisonError::into_inner);
-            if let Some(views) = cache.as_ref().filter(|v| v.len() == restarts.max(1)) {
+            if let Some((_, views)) = cache.as_ref().filter(|(k, _)| *k == key) {
                 return Ok(views.clone());
             }
         }
@@ -283,7 +292,7 @@ impl Experiment {
             *self
                 .views_cache
                 .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(chosen.clone());
+                .unwrap_or_else(std::sync::PoisonError::into_inner) = Some((key, chosen.clone()));
         }
         Ok(chosen)
     }
@@ -296,7 +305,8 @@ impl Experiment {
         let weights = ViewWeights::default();
         let mut chosen = Vec::with_capacity(restarts);
         for _ in 0..restarts.max(1) {
-            let picks = choose_views(&windows, &weights, margin);
+            let picks = choose_views(&windows, &weights, margin)
+                .context("the view search found no candidate view for some window")?;
             let views: Vec<Candidate> = picks
                 .iter()
                 .zip(&windows)

@@ -102,20 +102,28 @@ impl Evaluation {
     ///
     /// A window's wobble is taken over its frames that show the object, leaving out the first
     /// and last [`WOBBLE_EDGE`] of the window, where the camera pans from and to the
-    /// neighbouring objects (a pan is a change the wobble must not count).
+    /// neighbouring objects (a pan is a change the wobble must not count), over each unbroken
+    /// run of such frames.
     pub fn with_frames(&mut self, frames: &[crate::path_render::FrameMetrics], fps: f64) {
         let n = self.windows.len().max(1);
         for (i, w) in self.windows.iter_mut().enumerate() {
             let (start, end) = splatraj_traj::optimise::sampling::window_bounds(i, n);
             let edge = WOBBLE_EDGE * (end - start);
-            let series: Vec<f64> = frames
+            let kept: Vec<&crate::path_render::FrameMetrics> = frames
                 .iter()
                 .filter(|f| {
                     f.window == i && f.coverage > 0.0 && f.t >= start + edge && f.t <= end - edge
                 })
-                .map(|f| f.tce)
                 .collect();
-            w.framing.wobble = splatraj_traj::metrics::wobble(&series, fps);
+            // Each unbroken run of frames on its own: frames on either side of a moment out
+            // of frame are not neighbours, and the jump between them is no swing.
+            w.framing.wobble = kept
+                .chunk_by(|a, b| b.frame == a.frame + 1)
+                .filter_map(|run| {
+                    let series: Vec<f64> = run.iter().map(|f| f.tce).collect();
+                    splatraj_traj::metrics::wobble(&series, fps)
+                })
+                .reduce(f64::max);
             w.verdict = Some(verdict(w));
         }
     }

@@ -25,6 +25,8 @@ shot = { kind = "reveal", pan = 80 }
 [camera]
 width = 32
 height = 24
+# The box's working distances, as the planned-route case below was measured with.
+working_distance = "box"
 [costs.tce]
 [costs.tre]
 [costs.prior]

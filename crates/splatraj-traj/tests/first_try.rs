@@ -136,7 +136,7 @@ fn the_view_search_finds_the_open_side_as_a_brute_force_scan_does() {
         target_ratio: 0.05,
         used: Vec::new(),
     }];
-    let chosen = candidates[choose_views(&windows, &ViewWeights::default(), Some(0.1))[0]];
+    let chosen = candidates[choose_views(&windows, &ViewWeights::default(), Some(0.1)).unwrap()[0]];
 
     // Brute force: every 5° of azimuth and 10° of elevation at the same distance.
     let mut poses = Vec::new();
@@ -198,6 +198,13 @@ fn random_window(rng: &mut ChaCha8Rng, count: usize) -> WindowViews {
 
 #[test]
 fn the_chosen_views_are_the_cheapest_sequence_of_all() {
+    // A window without a candidate has no choice.
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let mut empty = random_window(&mut rng, 2);
+    empty.candidates.clear();
+    empty.used.clear();
+    let full = random_window(&mut rng, 2);
+    assert!(choose_views(&[full, empty], &ViewWeights::default(), None).is_none());
     let weights = ViewWeights::default();
     let margin = Some(0.1);
     let mut rng = ChaCha8Rng::seed_from_u64(11);
@@ -206,10 +213,7 @@ fn the_chosen_views_are_the_cheapest_sequence_of_all() {
         let cost = |seq: &[usize]| -> f64 {
             let mut total = 0.0;
             for (w, &k) in windows.iter().zip(seq) {
-                total += weights.unary(&w.candidates[k], w.target_ratio, margin);
-                if w.used.contains(&k) {
-                    total += weights.repeat;
-                }
+                total += w.cost(k, &weights, margin);
             }
             for i in 1..seq.len() {
                 let (a, b) = (&windows[i - 1], &windows[i]);
@@ -230,7 +234,7 @@ fn the_chosen_views_are_the_cheapest_sequence_of_all() {
                 }
             }
         }
-        let chosen = choose_views(&windows, &weights, margin);
+        let chosen = choose_views(&windows, &weights, margin).unwrap();
         assert!(
             (cost(&chosen) - best).abs() < 1e-12,
             "{chosen:?}: {} against the best {best}",

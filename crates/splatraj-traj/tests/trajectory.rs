@@ -3,8 +3,8 @@
 
 use burn::tensor::{DType, Device, Tensor, TensorData};
 use splatraj_traj::trajectory::{
-    Basis, POSE_DIM, Polynomial, Pose, Rbf, Trajectory, TrajectoryError, TrajectoryModel,
-    TrajectoryRecord, Waypoint, uniform_times,
+    Basis, POSE_DIM, Polynomial, Pose, Rbf, RbfNormalisation, Trajectory, TrajectoryError,
+    TrajectoryModel, TrajectoryRecord, Waypoint, uniform_times,
 };
 
 fn host<const D: usize>(t: Tensor<D>) -> Vec<f64> {
@@ -35,9 +35,17 @@ fn odd_times(count: usize) -> Vec<f64> {
 fn models() -> Vec<TrajectoryModel> {
     vec![
         TrajectoryModel::Rbf(Rbf::new(3, 2, None)),
+        TrajectoryModel::Rbf(normalised(3, 2, None)),
         TrajectoryModel::Waypoint(Waypoint::default()),
         TrajectoryModel::Polynomial(Polynomial::default()),
     ]
+}
+
+fn normalised(windows: usize, centres: usize, sigma: Option<f64>) -> Rbf {
+    Rbf {
+        normalisation: RbfNormalisation::PartitionOfUnity,
+        ..Rbf::new(windows, centres, sigma)
+    }
 }
 
 fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
@@ -140,6 +148,37 @@ fn polynomial_basis_is_exact() {
         poly.eval_into(t, &mut row);
         assert_eq!(row, want, "t = {t}");
     }
+}
+
+/// The normalised bases sum to 1 at every t (so a held pose is one weight vector, exactly),
+/// equal the paper's bases over their sum, and stay finite in f32 with a σ so narrow that the
+/// paper's bases all underflow between centres.
+#[test]
+fn normalised_rbf_bases_are_a_partition_of_unity() {
+    let plain = Rbf::new(3, 4, None);
+    let unit = normalised(3, 4, None);
+    let times = odd_times(41);
+    let (p, u) = (plain.matrix(&times), unit.matrix(&times));
+    for (row_p, row_u) in p.chunks(12).zip(u.chunks(12)) {
+        let sum: f64 = row_p.iter().sum();
+        assert!((row_u.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        for (a, b) in row_p.iter().zip(row_u) {
+            assert!((a / sum - b).abs() < 1e-12, "{a} / {sum} against {b}");
+        }
+    }
+    let held = [[0.1, -0.2, 0.3, 1.5, -2.5, 0.7]; 12];
+    let device = Device::flex();
+    let trajectory =
+        Trajectory::from_weights(TrajectoryModel::Rbf(unit), &held, &device, DType::F64).unwrap();
+    for pose in trajectory.poses_at(&[0.0, 0.37, 1.0]) {
+        assert!(max_abs_diff(&pose, &held[0]) < 1e-12, "{pose:?}");
+    }
+    // σ = spacing / 40: exp(−d²/2σ²) is 0 in f32 halfway between centres.
+    let narrow = normalised(3, 4, Some(1.0 / 12.0 / 40.0));
+    let got = host(narrow.tensor(times_tensor(&times, &device, DType::F32)));
+    assert!(got.iter().all(|v| v.is_finite()), "NaN in the f32 bases");
+    let want = narrow.matrix(&times);
+    assert!(max_abs_diff(&got, &want) < 1e-5);
 }
 
 #[test]
@@ -354,6 +393,17 @@ fn models_parse_from_toml_and_name_bad_keys() {
         .unwrap_err()
         .to_string();
     assert!(kind.contains("spline"), "{kind}");
+    assert!(kind.contains("custom.<name>"), "{kind}");
+    // A bad value of a built-in model's key is that key's, not a registered model's name.
+    let normalisation =
+        toml::from_str::<TrajectoryModel>("kind = \"rbf\"\nnormalisation = \"bogus\"")
+            .unwrap_err()
+            .to_string();
+    assert!(
+        normalisation.contains("partition-of-unity"),
+        "{normalisation}"
+    );
+    assert!(!normalisation.contains("custom."), "{normalisation}");
 
     let device = Device::flex();
     for (model, key) in [

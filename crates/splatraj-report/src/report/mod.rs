@@ -172,8 +172,9 @@ impl RunReport {
                 }
                 page.push_str(
                     "</ul><p class=\"note\">The same warnings as on the console, and \
-                     <code>verdict</code> in metrics.json; <code>splatraj run</code> exited with \
-                     status 3.</p></section>\n",
+                     <code>verdict</code> in metrics.json. With <code>[output] verdict = \
+                     \"fail\"</code> (the default) <code>splatraj run</code> exits with status \
+                     3 after writing its folder.</p></section>\n",
                 );
             }
             Some(_) => page.push_str(

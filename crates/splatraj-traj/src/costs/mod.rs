@@ -506,7 +506,7 @@ pub fn invalid(cost: &str, field: &str, reason: String) -> CostError {
 /// [`Default`] is the paper's objective: the four optimised costs with their default weights
 /// (L = TCE + TRE + L_upright + α·L_prior). An experiment config without a `[costs]` table
 /// gets [`CostsConfig::first_try`] instead (those four, the horizon-only upright, clearance and
-/// motion limits derived from the scene); a `[costs]` table lists exactly the costs that are
+/// motion limits derived from the scene, visibility); a `[costs]` table lists exactly the costs that are
 /// on (the ablations: prior only, prior + TCE, …). Unknown keys are errors.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -558,8 +558,9 @@ impl Default for CostsConfig {
 impl CostsConfig {
     /// The costs of a config that names none: the paper's four, with the horizon-only
     /// upright (`roll`: a camera may pitch down to an object on the floor), clearance with an
-    /// automatic margin and motion limits (an automatic speed, [`motion`]'s default turning
-    /// rate). What a new user's capture needs on the first run (docs/first-try.md).
+    /// automatic margin, motion limits (an automatic speed, [`motion`]'s default turning
+    /// rate) and visibility. What a new user's capture needs on the first run
+    /// (docs/first-try.md).
     pub fn first_try() -> Self {
         Self {
             upright: Some(UprightCost {

@@ -73,16 +73,22 @@ pub const FIRST_TRY_MAX_ANGULAR_SPEED: f64 = 60.0;
 pub const AUTO_SPEED_RADII_PER_SECOND: f64 = 1.5;
 
 /// Share of a window's duration the automatic speed limit allows for the move from one
-/// object to the next (the joins are where the camera travels).
+/// object to the next: the start pans over the last and first quarter of the windows at a
+/// join (`optimise::route::ROUTE_TRANSITION`), half a window in all.
 pub const AUTO_SPEED_JOIN_SHARE: f64 = 0.5;
 
+/// Peak over mean speed of the start's eased pans (the smoothstep 3x² − 2x³).
+pub const SMOOTHSTEP_PEAK: f64 = 1.5;
+
 /// The speed `"auto"` stands for: [`AUTO_SPEED_RADII_PER_SECOND`] mean working distances per
-/// second, raised where consecutive objects lie farther apart than that allows in
-/// [`AUTO_SPEED_JOIN_SHARE`] of a window (`largest_join`: the largest distance between
-/// consecutive objects, `window_seconds`: one window's duration).
-pub fn auto_max_speed(mean_radius: f64, largest_join: f64, window_seconds: f64) -> f64 {
+/// second, raised to what the start's longest pan needs: `largest_travel` (a bound on the
+/// camera's way from one window's view to the next: the objects' distance plus both working
+/// distances) in [`AUTO_SPEED_JOIN_SHARE`] of a window of `window_seconds`, at the eased pan's
+/// peak ([`SMOOTHSTEP_PEAK`]). A limit below that would fight the start from the first step.
+pub fn auto_max_speed(mean_radius: f64, largest_travel: f64, window_seconds: f64) -> f64 {
     let steady = AUTO_SPEED_RADII_PER_SECOND * mean_radius;
-    let travel = largest_join / (AUTO_SPEED_JOIN_SHARE * window_seconds).max(1e-9);
+    let travel =
+        SMOOTHSTEP_PEAK * largest_travel / (AUTO_SPEED_JOIN_SHARE * window_seconds).max(1e-9);
     steady.max(travel)
 }
 

@@ -22,18 +22,17 @@
 //!    programming over the windows (Viterbi): the best sequence, not a greedy one, so one
 //!    window's awkward side does not drag its neighbours after it.
 //!
-//! The weights make visibility dominant: a candidate that shows the whole object always beats
-//! one that hides half of it unless that saves a trip around the scene of more than about
-//! six working distances.
+//! The weights make visibility dominant: half of the object hidden costs 2, one move at most
+//! 1.1 (8 working distances of travel and a half turn), so a view that shows the whole object
+//! beats one that hides half of it unless it costs about 14 working distances more of travel
+//! over the window's two moves.
 
 use glam::DVec3;
 use serde::Serialize;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::orbit::Orbit;
-use splatraj_render::render::{
-    Channel, DeviceScene, Pruning, Rasterizer, RenderError, RenderRequest, render,
-};
+use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
 
 use super::OptimiseError;
 use crate::clearance::Occupancy;
@@ -199,7 +198,7 @@ fn mask_sums(
     poses: &[Pose],
     intrinsics: &Intrinsics,
     rasterizer: Rasterizer,
-) -> Result<Vec<f64>, RenderError> {
+) -> Result<Vec<f64>, OptimiseError> {
     let request = RenderRequest {
         pruning: Pruning::ObjectOnly,
         rasterizer,
@@ -209,12 +208,19 @@ fn mask_sums(
     let mut sums = Vec::with_capacity(poses.len());
     for batch in poses.chunks(BATCH) {
         let images = render(scene, scene.poses(batch), &request)?.images; // [B, H, W, 1]
-        let values = to_host(images).unwrap_or_default();
+        let values = to_host(images).map_err(|e| OptimiseError::ReadBack(e.to_string()))?;
         sums.extend(
             values
                 .chunks_exact(per_view)
                 .map(|image| image.iter().sum::<f64>()),
         );
+    }
+    if sums.len() != poses.len() {
+        return Err(OptimiseError::ReadBack(format!(
+            "the view search's renders gave {} masks for {} views",
+            sums.len(),
+            poses.len()
+        )));
     }
     Ok(sums)
 }
@@ -225,7 +231,7 @@ pub fn alone_coverage(
     poses: &[Pose],
     intrinsics: &Intrinsics,
     rasterizer: Rasterizer,
-) -> Result<Vec<f64>, RenderError> {
+) -> Result<Vec<f64>, OptimiseError> {
     let pixels = (intrinsics.width * intrinsics.height) as f64;
     let ones = vec![1.0; alone.len()];
     Ok(mask_sums(alone, &ones, poses, intrinsics, rasterizer)?
@@ -241,7 +247,7 @@ pub fn measure_views(
     poses: &[Pose],
     intrinsics: &Intrinsics,
     rasterizer: Rasterizer,
-) -> Result<Vec<(f64, f64)>, RenderError> {
+) -> Result<Vec<(f64, f64)>, OptimiseError> {
     let pixels = (intrinsics.width * intrinsics.height) as f64;
     let seen = mask_sums(object.scene, object.mask, poses, intrinsics, rasterizer)?;
     let alone = alone_coverage(object.alone, poses, intrinsics, rasterizer)?;
@@ -399,13 +405,14 @@ pub struct ViewWeights {
     pub travel: f64,
     /// Per 180° the view turns between consecutive windows.
     pub turn: f64,
-    /// For a candidate an earlier restart already started from (so restarts try other views).
+    /// For a candidate within half a working distance of one an earlier restart started from
+    /// (so restarts try other views).
     pub repeat: f64,
 }
 
 impl Default for ViewWeights {
     /// Hidden 4, size 0.5, clearance 2, inside 4, elevation 0.3 from 20°, travel 0.1, turn
-    /// 0.3, repeat 0.5.
+    /// 0.3, repeat 2 (as much as half the object hidden).
     fn default() -> Self {
         Self {
             hidden: 4.0,
@@ -416,7 +423,7 @@ impl Default for ViewWeights {
             eye_line_degrees: 20.0,
             travel: 0.1,
             turn: 0.3,
-            repeat: 0.5,
+            repeat: 2.0,
         }
     }
 }
@@ -463,31 +470,39 @@ pub struct WindowViews {
     pub radius: f64,
     /// Its target ratio.
     pub target_ratio: f64,
-    /// Candidates earlier restarts chose (charged [`ViewWeights::repeat`]).
+    /// Candidates earlier restarts chose (those and their neighbours are charged
+    /// [`ViewWeights::repeat`]).
     pub used: Vec<usize>,
 }
 
+impl WindowViews {
+    /// Candidate `k`'s window cost: [`ViewWeights::unary`], plus [`ViewWeights::repeat`] when
+    /// its camera is within half a working distance of a view an earlier restart used.
+    pub fn cost(&self, k: usize, weights: &ViewWeights, margin: Option<f64>) -> f64 {
+        let c = &self.candidates[k];
+        let near_used = self.used.iter().any(|&u| {
+            let used = Pose(self.candidates[u].pose).centre();
+            used.distance(Pose(c.pose).centre()) < 0.5 * self.radius
+        });
+        weights.unary(c, self.target_ratio, margin) + if near_used { weights.repeat } else { 0.0 }
+    }
+}
+
 /// One candidate index per window minimising the summed window and move costs (module docs,
-/// step 3); `margin` is the clearance margin the candidates' clearances are judged by.
+/// step 3); `margin` is the clearance margin the candidates' clearances are judged by. None
+/// when a window has no candidate.
 pub fn choose_views(
     windows: &[WindowViews],
     weights: &ViewWeights,
     margin: Option<f64>,
-) -> Vec<usize> {
-    let unary = |w: &WindowViews, k: usize| {
-        weights.unary(&w.candidates[k], w.target_ratio, margin)
-            + if w.used.contains(&k) {
-                weights.repeat
-            } else {
-                0.0
-            }
-    };
-    let Some(first) = windows.first() else {
-        return Vec::new();
-    };
+) -> Option<Vec<usize>> {
+    if windows.iter().any(|w| w.candidates.is_empty()) {
+        return None;
+    }
+    let first = windows.first()?;
     // best[k]: the cheapest sequence ending at candidate k of the current window.
     let mut best: Vec<f64> = (0..first.candidates.len())
-        .map(|k| unary(first, k))
+        .map(|k| first.cost(k, weights, margin))
         .collect();
     let mut back: Vec<Vec<usize>> = Vec::with_capacity(windows.len());
     for pair in windows.windows(2) {
@@ -506,21 +521,19 @@ pub fn choose_views(
                     )
                 })
                 .min_by(|x, y| x.1.total_cmp(&y.1).then(x.0.cmp(&y.0)))
-                .unwrap_or((0, f64::INFINITY));
-            next.push(cost + unary(current, k));
+                .unwrap_or((0, f64::INFINITY)); // no candidate: excluded above
+            next.push(cost + current.cost(k, weights, margin));
             from.push(j);
         }
         best = next;
         back.push(from);
     }
-    let mut k = (0..best.len())
-        .min_by(|&a, &b| best[a].total_cmp(&best[b]).then(a.cmp(&b)))
-        .unwrap_or(0);
+    let mut k = (0..best.len()).min_by(|&a, &b| best[a].total_cmp(&best[b]).then(a.cmp(&b)))?;
     let mut chosen = vec![k];
     for from in back.iter().rev() {
         k = from[k];
         chosen.push(k);
     }
     chosen.reverse();
-    chosen
+    Some(chosen)
 }

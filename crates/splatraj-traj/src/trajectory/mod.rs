@@ -190,6 +190,7 @@ impl<'de> Deserialize<'de> for TrajectoryModel {
         let custom_name = kind
             .and_then(|k| k.strip_prefix(CUSTOM_PREFIX))
             .map(str::to_string);
+        let builtin = matches!(kind, Some("rbf" | "waypoint" | "polynomial"));
         let Some(name) = custom_name else {
             return Builtin::deserialize(value)
                 .map(|b| match b {
@@ -199,7 +200,9 @@ impl<'de> Deserialize<'de> for TrajectoryModel {
                 })
                 .map_err(|e| {
                     let message = e.message().trim_end().to_string();
-                    if message.contains("unknown variant") {
+                    // Only an unknown `kind` may be a registered model's name; an unknown
+                    // value of another key (`normalisation`) is that key's.
+                    if message.contains("unknown variant") && !builtin {
                         D::Error::custom(format!(
                             "{message}, or `custom.<name>` for a registered model"
                         ))

@@ -147,11 +147,21 @@ impl Basis for Rbf {
 
     fn eval_into(&self, t: f64, row: &mut [f64]) {
         let inv_two_var = 1.0 / (2.0 * self.effective_sigma().powi(2));
-        for (psi, centre) in row.iter_mut().zip(self.centres()) {
-            *psi = (-(t - centre).powi(2) * inv_two_var).exp();
+        let centres = self.centres();
+        // Normalised, the bases are exp(−(d² − min d²)/(2σ²)) over their sum: the same
+        // ratios, and the nearest basis is exactly 1, so nothing underflows to 0/0.
+        let shift = match self.normalisation {
+            RbfNormalisation::None => 0.0,
+            RbfNormalisation::PartitionOfUnity => centres
+                .iter()
+                .map(|c| (t - c).powi(2))
+                .fold(f64::INFINITY, f64::min),
+        };
+        for (psi, centre) in row.iter_mut().zip(centres) {
+            *psi = (-((t - centre).powi(2) - shift) * inv_two_var).exp();
         }
         if self.normalisation == RbfNormalisation::PartitionOfUnity {
-            let sum = row.iter().sum::<f64>().max(f64::MIN_POSITIVE);
+            let sum = row.iter().sum::<f64>();
             row.iter_mut().for_each(|psi| *psi /= sum);
         }
     }
@@ -165,13 +175,16 @@ impl Basis for Rbf {
         );
         let diff = times.unsqueeze_dim::<2>(1) - centres; // [B, 1] − [1, K] → [B, K]
         let inv_two_var = 1.0 / (2.0 * self.effective_sigma().powi(2));
-        let psi = (diff.clone() * diff).mul_scalar(-inv_two_var).exp(); // [B, K]
+        let squared = diff.clone() * diff; // [B, K]
         match self.normalisation {
-            RbfNormalisation::None => psi,
+            RbfNormalisation::None => squared.mul_scalar(-inv_two_var).exp(),
             RbfNormalisation::PartitionOfUnity => {
-                // Inside [0, 1] the sum is at least e^(−1/8) of one basis: no floor needed
-                // there; the floor only guards times far outside.
-                let sum = psi.clone().sum_dim(1).clamp_min(f64::MIN_POSITIVE); // [B, 1]
+                // Shifted by each row's smallest squared distance (a constant: the ratios do
+                // not depend on it), so the nearest basis is 1 and the sum is ≥ 1 in any
+                // dtype, whatever σ and t (see `eval_into`).
+                let nearest = squared.clone().min_dim(1).detach(); // [B, 1]
+                let psi = (squared - nearest).mul_scalar(-inv_two_var).exp();
+                let sum = psi.clone().sum_dim(1); // [B, 1]
                 psi / sum
             }
         }
