@@ -215,19 +215,38 @@ impl Experiment {
         let windows = self.windows.len();
         let spw = self.config.optimiser.samples_per_window;
         let camera = &self.config.camera;
+        let camera_pixels = camera.width as f64 * camera.height as f64;
+        // The visibility cost also renders each part alone, from its own copy of the part's
+        // Gaussians on the autodiff device.
+        let alone = if self.config.costs.visibility.is_some() {
+            let largest = self.selected.iter().copied().max().unwrap_or(0);
+            self.selected
+                .iter()
+                .map(|&s| scene_bytes(s, fb))
+                .sum::<f64>()
+                + render_bytes(
+                    windows.saturating_mul(spw),
+                    camera_pixels,
+                    largest,
+                    true,
+                    fb,
+                )
+        } else {
+            0.0
+        };
         plan.stage(
             format!(
                 "an optimisation step: {windows} windows × `optimiser.samples_per_window` = {spw} \
-                 poses at `camera.width` × `camera.height` = {} × {}",
-                camera.width, camera.height
+                 poses at `camera.width` × `camera.height` = {} × {}{}",
+                camera.width,
+                camera.height,
+                if alone > 0.0 {
+                    " (and each part alone, for the visibility cost)"
+                } else {
+                    ""
+                }
             ),
-            base + render_bytes(
-                windows.saturating_mul(spw),
-                camera.width as f64 * camera.height as f64,
-                n,
-                true,
-                fb,
-            ),
+            base + render_bytes(windows.saturating_mul(spw), camera_pixels, n, true, fb) + alone,
         );
         let basis = self.model()?.basis().count();
         let output = &self.config.output;
