@@ -7,17 +7,20 @@ use splatraj_scene::demo::{DEMO_UP, DemoConfig, demo_scene};
 use splatraj_scene::up_axis::UpMethod;
 use splatraj_scene::{ReadOptions, Scene, guess_up_axis, read_scene};
 
+/// Adds one opaque splat (grey) to `scene`.
+fn push_splat(scene: &mut Scene, mean: [f32; 3], scale: [f32; 3], rotation: [f32; 4]) {
+    scene.means.push(mean);
+    scene.scales.push(scale);
+    scene.rotations.push(rotation);
+    scene.opacities.push(0.9);
+    scene.sh.extend([0.0; 3]);
+}
+
 /// A COLMAP-style y-down world: a floor of flat splats at y = 0 (normals along y) and a few
 /// upright flat "walls" of splats standing on it at negative y (above the floor).
 fn y_down_room() -> Scene {
     let mut scene = Scene::default();
-    let mut push = |mean: [f32; 3], scale: [f32; 3], rotation: [f32; 4]| {
-        scene.means.push(mean);
-        scene.scales.push(scale);
-        scene.rotations.push(rotation);
-        scene.opacities.push(0.9);
-        scene.sh.extend([0.0; 3]);
-    };
+    let mut push = |mean, scale, rotation| push_splat(&mut scene, mean, scale, rotation);
     let half = std::f32::consts::FRAC_1_SQRT_2;
     for i in 0..40 {
         for j in 0..40 {
@@ -48,13 +51,7 @@ fn y_down_room() -> Scene {
 /// along +y, through the base (the guess before the centre band).
 fn turntable_object() -> Scene {
     let mut scene = Scene::default();
-    let mut push = |mean: [f32; 3], scale: [f32; 3], rotation: [f32; 4]| {
-        scene.means.push(mean);
-        scene.scales.push(scale);
-        scene.rotations.push(rotation);
-        scene.opacities.push(0.9);
-        scene.sh.extend([0.0; 3]);
-    };
+    let mut push = |mean, scale, rotation| push_splat(&mut scene, mean, scale, rotation);
     for i in -20..=20 {
         for j in -20..=20 {
             let (x, z) = (i as f32 * 0.02, j as f32 * 0.02);
