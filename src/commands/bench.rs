@@ -54,69 +54,34 @@ pub struct BenchFirstTryArgs {
     json: bool,
 }
 
-/// `splatraj bench first-try`: each config through `splatraj run` in a child process (the
-/// verdict only warns there, so that every run's folder is read), then the table.
+/// `splatraj bench first-try`: the runs and their figures are the library's
+/// (`splatraj::experiment::quality`); this prints them.
 fn first_try(args: &BenchFirstTryArgs) -> Result<()> {
-    let configs = if args.configs.is_empty() {
-        let dir = PathBuf::from("configs/first-try");
-        let mut found: Vec<PathBuf> = std::fs::read_dir(&dir)
-            .with_context(|| format!("cannot list {} (give configs)", dir.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-            .collect();
-        found.sort();
-        found
-    } else {
-        args.configs.clone()
+    use splatraj::experiment::quality::{
+        FIRST_TRY_CONFIGS, FirstTryBench, configs_in, quality_table, run_first_try,
     };
-    let runs_dir = match &args.runs_dir {
-        Some(dir) => dir.clone(),
-        None => std::env::temp_dir().join(format!("splatraj-first-try-{}", std::process::id())),
+    let bench = FirstTryBench {
+        configs: if args.configs.is_empty() {
+            configs_in(std::path::Path::new(FIRST_TRY_CONFIGS))?
+        } else {
+            args.configs.clone()
+        },
+        set: args.set.clone(),
+        runs_dir: args.runs_dir.clone().unwrap_or_else(|| {
+            std::env::temp_dir().join(format!("splatraj-first-try-{}", std::process::id()))
+        }),
     };
     let exe = std::env::current_exe().context("cannot find the splatraj binary to re-run")?;
-    let mut runs = Vec::new();
-    for config in &configs {
-        eprintln!("running {} …", config.display());
-        let mut command = Command::new(&exe);
-        command.arg("run").arg(config).arg("--quiet");
-        command.args(["--set", "output.verdict=\"warn\""]);
-        command.args([
-            "--set".to_string(),
-            format!("output.runs_dir={}", toml_string(&runs_dir)),
-        ]);
-        for s in &args.set {
-            command.args(["--set", s]);
-        }
-        let output = command
-            .output()
-            .with_context(|| format!("cannot start a run of {}", config.display()))?;
-        if !output.status.success() {
-            bail!(
-                "the run of {} failed: {}",
-                config.display(),
-                String::from_utf8_lossy(&output.stderr).trim()
-            );
-        }
-        let stdout = String::from_utf8_lossy(&output.stdout);
-        let folder = stdout
-            .lines()
-            .last()
-            .map(|l| PathBuf::from(l.trim()))
-            .ok_or_else(|| anyhow!("the run of {} printed no folder", config.display()))?;
-        runs.push(splatraj::experiment::quality::read_run_quality(&folder)?);
-    }
+    let runs = run_first_try(&exe, &bench, &mut |config| {
+        eprintln!("running {} …", config.display())
+    })?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&runs)?);
     } else {
-        print!("{}", splatraj::experiment::quality::quality_table(&runs));
-        println!("run folders: {}", runs_dir.display());
+        print!("{}", quality_table(&runs));
+        println!("run folders: {}", bench.runs_dir.display());
     }
     Ok(())
-}
-
-/// `path` as a TOML basic string (for `--set key=…`).
-fn toml_string(path: &std::path::Path) -> String {
-    toml::Value::String(path.display().to_string()).to_string()
 }
 
 /// Arguments of `splatraj bench render`.

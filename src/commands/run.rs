@@ -139,37 +139,24 @@ pub fn run(args: RunArgs) -> Result<()> {
         &experiment.trajectory_file(&trajectory)?,
     )?;
 
-    let metrics_started = Instant::now();
-    let mut evaluation = experiment.evaluate(&trajectory)?;
-    let metrics = metrics_started.elapsed();
-
-    let frames_started = Instant::now();
-    // Frames, frame_metrics.csv and video.mp4, then the same poses in every export format.
-    let output = experiment.output_frames(&trajectory)?;
-    let frame_bar = progress_bar(output.poses.len() as u64, args.quiet);
-    frame_bar.set_message("frames");
-    let rendered = experiment.write_output_frames(&output, &dir, &mut |done| {
+    // Metrics and verdicts, frames, video and exports.
+    let frame_count = config.output.frame_count(experiment.windows.len());
+    let frame_bar = progress_bar(frame_count as u64, args.quiet);
+    frame_bar.set_message("metrics, frames");
+    let outputs = experiment.write_outputs(&trajectory, &dir, &mut |done| {
         frame_bar.set_position(done as u64)
     })?;
-    if let Some(rendered) = &rendered {
-        evaluation.with_frames(&rendered.metrics, output.fps);
-    }
     frame_bar.finish_and_clear();
-    experiment.write_exports(&output, &dir)?;
+    let evaluation = outputs.evaluation;
     let times = StageTimes {
-        metrics,
-        frames: frames_started.elapsed(),
+        metrics: outputs.metrics,
+        frames: outputs.frames,
         total: started.elapsed(),
     };
 
     let report = RunReport::new(&experiment, &run, times);
     print_summary(&evaluation, &report);
-    let problems = evaluation.problems();
-    let failing = evaluation
-        .windows
-        .iter()
-        .filter(|w| w.verdict.as_ref().is_some_and(|v| !v.pass))
-        .count();
+    let (problems, failing) = (evaluation.problems(), evaluation.failing());
     for problem in &problems {
         eprintln!("warning: {problem}");
     }
@@ -217,11 +204,7 @@ fn print_plan(experiment: &Experiment) {
         experiment.config.rasterizer
     );
     eprintln!("{}", experiment.up.describe());
-    if experiment
-        .up
-        .guess
-        .is_some_and(|g| g.confidence < splatraj::scene::up_axis::DOUBTFUL_UP)
-    {
+    if experiment.up.doubtful() {
         eprintln!(
             "warning: the up guess is unsure; if the frames come out tilted, set `scene.up` \
              (y-down captures: [0, -1, 0]; z-up: [0, 0, 1])"
@@ -233,26 +216,10 @@ fn print_plan(experiment: &Experiment) {
             d.key, d.value, d.why
         );
     }
-    let views = match experiment.config.start.kind {
-        splatraj::experiment::config::StartKind::Search
-            if experiment.config.start.pose.is_none()
-                && experiment.config.start.trajectory.is_none() =>
-        {
-            experiment
-                .searched_views(
-                    &(0..experiment.windows.len()).collect::<Vec<_>>(),
-                    experiment.config.start.restarts,
-                )
-                .ok()
-        }
-        _ => None,
-    };
+    // The search already ran for the start check (`start_trajectories`), which caches it.
+    let views = experiment.start_views().ok().flatten();
     for (i, w) in experiment.windows.iter().enumerate() {
-        if let Some(view) = views
-            .as_ref()
-            .and_then(|v| v.first())
-            .and_then(|v| v.get(i))
-        {
+        if let Some(view) = views.as_ref().and_then(|v| v.get(i)) {
             eprintln!(
                 "query {i}: starts from azimuth {:.0}°, elevation {:.0}°, distance {:.3}: {:.0} % \
                  of it visible there",
@@ -293,20 +260,7 @@ fn print_summary(evaluation: &Evaluation, report: &RunReport) {
             .map_or("-".to_string(), |c| format!("{:.3}", c.min_clearance));
         let verdict = match &w.verdict {
             Some(v) if v.pass => "ok".to_string(),
-            Some(v) => {
-                let failed: Vec<String> = v
-                    .checks
-                    .iter()
-                    .filter(|c| !c.pass)
-                    .map(|c| {
-                        serde_json::to_value(c.check)
-                            .ok()
-                            .and_then(|v| v.as_str().map(String::from))
-                            .unwrap_or_default()
-                    })
-                    .collect();
-                format!("FAIL ({})", failed.join(", "))
-            }
+            Some(v) => format!("FAIL ({})", v.failed().join(", ")),
             None => "-".to_string(),
         };
         eprintln!(

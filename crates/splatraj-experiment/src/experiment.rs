@@ -60,9 +60,9 @@ pub struct Experiment {
     /// planning, the optimisation and the metrics all ask for it, and on a 3M-Gaussian scene
     /// each k-d tree build took seconds.
     pub(crate) occupancy_cache: std::sync::Mutex<Option<splatraj_traj::clearance::Occupancy>>,
-    /// The view search's choice for all windows, per restart ([`Experiment::searched_views`]):
-    /// `run` checks the starts before it runs them, and each search renders hundreds of views.
-    /// Keyed by what else the search depends on ([`Experiment::searched_views`]).
+    /// The view search's choice for all windows, per restart, keyed by what else the search
+    /// reads ([`Experiment::searched_views`]): `run` checks the starts before it runs them,
+    /// and each search renders hundreds of views.
     #[allow(clippy::type_complexity)]
     pub(crate) views_cache:
         std::sync::Mutex<Option<(String, Vec<Vec<splatraj_traj::optimise::Candidate>>)>>,

@@ -1,11 +1,13 @@
 //! The first-try quality benchmark's figures, read from a finished run folder
 //! (`splatraj bench first-try`, docs/first-try.md): per window whether its verdict passes,
 //! its framing in the middle half, the visible and hidden shares, the smallest clearance, the
-//! largest turn between two frames and the framing's wobble; per run its wall time.
+//! largest turn between two frames and the framing's wobble; per run its wall time. The runs
+//! themselves are `splatraj run` in child processes ([`run_first_try`]), as a user runs them.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::process::Command;
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, anyhow, bail};
 use serde::Serialize;
 use serde_json::Value;
 
@@ -167,4 +169,69 @@ pub fn quality_table(runs: &[RunQuality]) -> String {
         runs.len()
     ));
     out
+}
+
+/// Where the first-try configs live, relative to the repository root.
+pub const FIRST_TRY_CONFIGS: &str = "configs/first-try";
+
+/// Every `.toml` in `dir`, sorted.
+pub fn configs_in(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut found: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot list {} (give configs)", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    found.sort();
+    Ok(found)
+}
+
+/// What [`run_first_try`] runs.
+#[derive(Debug, Clone)]
+pub struct FirstTryBench {
+    /// The configs, each run once.
+    pub configs: Vec<PathBuf>,
+    /// `key=value` overrides given to every run.
+    pub set: Vec<String>,
+    /// The folder the run folders go to (`output.runs_dir`).
+    pub runs_dir: PathBuf,
+}
+
+/// Runs each config of `bench` with `exe run CONFIG --quiet` in a child process, the verdict
+/// only warning (so that a failing run's folder is read too), and reads each run folder's
+/// figures; `starting` hears each config before it runs.
+pub fn run_first_try(
+    exe: &Path,
+    bench: &FirstTryBench,
+    starting: &mut dyn FnMut(&Path),
+) -> Result<Vec<RunQuality>> {
+    let runs_dir = toml::Value::String(bench.runs_dir.display().to_string());
+    let mut runs = Vec::with_capacity(bench.configs.len());
+    for config in &bench.configs {
+        starting(config);
+        let mut command = Command::new(exe);
+        command.arg("run").arg(config).arg("--quiet");
+        command.args(["--set", "output.verdict=\"warn\""]);
+        command.args(["--set".to_string(), format!("output.runs_dir={runs_dir}")]);
+        for s in &bench.set {
+            command.args(["--set", s]);
+        }
+        let output = command
+            .output()
+            .with_context(|| format!("cannot start a run of {}", config.display()))?;
+        if !output.status.success() {
+            bail!(
+                "the run of {} failed: {}",
+                config.display(),
+                String::from_utf8_lossy(&output.stderr).trim()
+            );
+        }
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        let folder = stdout
+            .lines()
+            .last()
+            .map(|l| PathBuf::from(l.trim()))
+            .ok_or_else(|| anyhow!("the run of {} printed no folder", config.display()))?;
+        runs.push(read_run_quality(&folder)?);
+    }
+    Ok(runs)
 }

@@ -4,6 +4,7 @@
 //! ([`Experiment::output_frames`]), so an exported path rendered back gives the run's frames.
 
 use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 
 use anyhow::Result;
 use splatraj_traj::trajectory::{Trajectory, uniform_times};
@@ -12,8 +13,47 @@ use crate::camera_paths::{PathFrames, write_all_exports};
 use crate::experiment::Experiment;
 use crate::path_render::{PathObject, PathRender, RenderedPath, Video, render_path};
 use crate::run_report::write_run_report;
+use crate::trajectory_run::Evaluation;
+
+/// What [`Experiment::write_outputs`] measured, and how long its parts took.
+#[derive(Debug, Clone)]
+pub struct Outputs {
+    /// The metrics, each window judged with what its frames show too.
+    pub evaluation: Evaluation,
+    /// Time of the metrics.
+    pub metrics: Duration,
+    /// Time of the frames, video and exports.
+    pub frames: Duration,
+}
 
 impl Experiment {
+    /// The outputs of a finished `trajectory` in the run folder `dir`: its metrics and
+    /// verdicts ([`Experiment::evaluate`]), the frames, `frame_metrics.csv` and `video.mp4`
+    /// (the verdicts judged again with the frames' wobble: [`Evaluation::with_frames`]), then
+    /// the same poses in every export format. `progress` hears each frame done (of
+    /// `output.frame_count`).
+    pub fn write_outputs(
+        &self,
+        trajectory: &Trajectory,
+        dir: &Path,
+        progress: &mut dyn FnMut(usize),
+    ) -> Result<Outputs> {
+        let started = Instant::now();
+        let mut evaluation = self.evaluate(trajectory)?;
+        let metrics = started.elapsed();
+        let started = Instant::now();
+        let frames = self.output_frames(trajectory)?;
+        if let Some(rendered) = self.write_output_frames(&frames, dir, progress)? {
+            evaluation.with_frames(&rendered.metrics, frames.fps);
+        }
+        self.write_exports(&frames, dir)?;
+        Ok(Outputs {
+            evaluation,
+            metrics,
+            frames: started.elapsed(),
+        })
+    }
+
     /// The frames of the run's output: `output.frame_count()` evenly spaced times over [0, 1],
     /// the trajectory's poses there, the output camera, at `output.fps`.
     pub fn output_frames(&self, trajectory: &Trajectory) -> Result<PathFrames> {

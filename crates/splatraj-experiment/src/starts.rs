@@ -146,15 +146,21 @@ impl Experiment {
         Ok(Some(RoutePlanner::new(&occupancy, margin, lo, hi)))
     }
 
-    /// Each window's shot (`queries.<i>.shot`) placed around its object, seen at azimuth 0
-    /// from the side object starts look from; None for a window without one.
-    pub fn shot_paths(&self) -> Result<Vec<Option<ShotPath>>> {
+    /// Azimuth 0 of shots and of the view search: the horizontal direction from the windows'
+    /// mean object centre toward the scene's middle ([`object_side`]).
+    pub fn azimuth_zero(&self) -> [f64; 3] {
         let centres: Vec<[f64; 3]> = self
             .windows
             .iter()
             .map(|w| w.context.object_centre)
             .collect();
-        let side = object_side(&centres, self.bounds.0, self.up.up);
+        object_side(&centres, self.bounds.0, self.up.up)
+    }
+
+    /// Each window's shot (`queries.<i>.shot`) placed around its object, seen at azimuth 0
+    /// ([`Experiment::azimuth_zero`]); None for a window without one.
+    pub fn shot_paths(&self) -> Result<Vec<Option<ShotPath>>> {
+        let side = self.azimuth_zero();
         self.config
             .queries
             .iter()
@@ -262,6 +268,21 @@ impl Experiment {
         })
     }
 
+    /// The views the first restart starts from, one per window, when the start is the view
+    /// search (`[start] kind = "search"` without a fixed `pose` or `trajectory`); None for
+    /// another start.
+    pub fn start_views(&self) -> Result<Option<Vec<Candidate>>> {
+        let start = &self.config.start;
+        if start.kind != StartKind::Search || start.pose.is_some() || start.trajectory.is_some() {
+            return Ok(None);
+        }
+        let all: Vec<usize> = (0..self.windows.len()).collect();
+        Ok(self
+            .searched_views(&all, start.restarts)?
+            .into_iter()
+            .next())
+    }
+
     /// The view search's choice for the windows of `which`, one list per restart: restart 0
     /// takes the best sequence, each later one the best with earlier restarts' views (and
     /// their neighbours) charged extra
@@ -327,12 +348,7 @@ impl Experiment {
         let occupancy = self.occupancy()?;
         let margin = self.clearance_margin();
         let geometry = occupancy.as_ref().zip(margin);
-        let centres: Vec<[f64; 3]> = self
-            .windows
-            .iter()
-            .map(|w| w.context.object_centre)
-            .collect();
-        let reference = object_side(&centres, self.bounds.0, self.up.up);
+        let reference = self.azimuth_zero();
         which
             .iter()
             .map(|&i| {

@@ -128,11 +128,12 @@ impl Evaluation {
         }
     }
 
-    /// Whether every window passes its verdict.
-    pub fn passed(&self) -> bool {
+    /// How many windows fail their verdict.
+    pub fn failing(&self) -> usize {
         self.windows
             .iter()
-            .all(|w| w.verdict.as_ref().is_none_or(|v| v.pass))
+            .filter(|w| w.verdict.as_ref().is_some_and(|v| !v.pass))
+            .count()
     }
 }
 

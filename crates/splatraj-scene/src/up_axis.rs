@@ -297,6 +297,11 @@ pub struct ResolvedUp {
 pub const DOUBTFUL_UP: f32 = 0.5;
 
 impl ResolvedUp {
+    /// Whether up was guessed with a confidence below [`DOUBTFUL_UP`].
+    pub fn doubtful(&self) -> bool {
+        self.guess.is_some_and(|g| g.confidence < DOUBTFUL_UP)
+    }
+
     /// One line saying where up came from and how sure the guess is, with how to override it:
     /// `up [0, -1, 0] (guessed from the normals of flat splats, confidence 0.44 …)`.
     pub fn describe(&self) -> String {
@@ -309,7 +314,7 @@ impl ResolvedUp {
                     UpMethod::Extent => "the longest side of an object captured all around",
                     UpMethod::Spread => "the direction the centres spread least along",
                 };
-                let doubt = if g.confidence < DOUBTFUL_UP {
+                let doubt = if self.doubtful() {
                     ", low: check the frames"
                 } else {
                     ""

@@ -4,7 +4,10 @@
 //! measured right (against the closed form of a sphere's silhouette), and the verdict fails a
 //! camera inside its object and an object behind an occluder, naming the query.
 
+mod common;
+
 use burn::tensor::{DType, Device};
+use common::scene_of;
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -17,19 +20,6 @@ use splatraj_traj::optimise::views::{measure_views, search_views};
 use splatraj_traj::optimise::{
     Candidate, ViewSearch, ViewWeights, ViewedObject, WindowViews, calibrated_radius, choose_views,
 };
-
-fn scene_of(means: Vec<[f32; 3]>, scales: Vec<[f32; 3]>) -> Scene {
-    let n = means.len();
-    Scene {
-        means,
-        scales,
-        rotations: vec![[1.0, 0.0, 0.0, 0.0]; n],
-        opacities: vec![0.99; n],
-        sh_degree: 0,
-        sh: vec![0.0; n * 3],
-        extras: Default::default(),
-    }
-}
 
 /// Points on a sphere of radius `r` about `centre` (a Fibonacci lattice of `n` points).
 fn sphere_points(centre: [f32; 3], r: f32, n: usize) -> Vec<[f32; 3]> {

@@ -2,7 +2,10 @@
 //! square occluder while it looks at an object hides the object for the share of the window
 //! during which the line of sight crosses the occluder.
 
+mod common;
+
 use burn::tensor::{DType, Device};
+use common::scene_of;
 use glam::DVec3;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::render::{DeviceScene, Rasterizer};
@@ -28,16 +31,7 @@ fn scene(occluder: bool) -> Scene {
             }
         }
     }
-    let n = means.len();
-    Scene {
-        means,
-        scales,
-        rotations: vec![[1.0, 0.0, 0.0, 0.0]; n],
-        opacities: vec![0.99; n],
-        sh_degree: 0,
-        sh: vec![0.0; n * 3],
-        extras: Default::default(),
-    }
+    scene_of(means, scales)
 }
 
 fn occlusion(occluder: bool) -> Occlusion {

@@ -62,6 +62,22 @@ pub enum CheckKind {
     Steady,
 }
 
+impl CheckKind {
+    /// Its name in `metrics.json` and on the console (`in_view`, `framed`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            CheckKind::InView => "in_view",
+            CheckKind::Framed => "framed",
+            CheckKind::Size => "size",
+            CheckKind::Visible => "visible",
+            CheckKind::Hidden => "hidden",
+            CheckKind::Clearance => "clearance",
+            CheckKind::InsideObject => "inside_object",
+            CheckKind::Steady => "steady",
+        }
+    }
+}
+
 /// One check of a window (module docs).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Check {
@@ -84,6 +100,17 @@ pub struct Verdict {
     pub checks: Vec<Check>,
     /// One sentence per failed check: the query, what is wrong, the likely fix.
     pub problems: Vec<String>,
+}
+
+impl Verdict {
+    /// The names of the failed checks, in order.
+    pub fn failed(&self) -> Vec<&'static str> {
+        self.checks
+            .iter()
+            .filter(|c| !c.pass)
+            .map(|c| c.check.name())
+            .collect()
+    }
 }
 
 /// The verdict on window `m` (module docs).
