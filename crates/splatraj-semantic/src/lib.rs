@@ -29,6 +29,7 @@
 
 #![warn(missing_docs)]
 
+mod clip;
 pub mod cluster;
 pub mod config;
 pub mod embeddings;

@@ -27,24 +27,20 @@ mod weights;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use burn::module::Param;
-use burn::nn::{Embedding, Linear};
-use burn::tensor::{DType, Device, Tensor, TensorData};
+use burn::nn::Embedding;
+use burn::tensor::Device;
 
+use crate::clip::{
+    Loader, block_shapes, check_known, choose, config_activation, config_count, count_layers,
+};
 use crate::embeddings::{Matrix, PhraseTable};
 use crate::error::{Result, SemanticError};
 
-pub use model::Activation;
+pub use crate::clip::{Activation, HEAD_WIDTH, OPEN_CLIP_CONFIG};
 pub use tokenizer::{CONTEXT_LENGTH, ClipTokenizer, END_OF_TEXT, START_OF_TEXT, VOCAB_SIZE, clean};
 pub use weights::StateDict;
 
-use model::{Block, Tower, layer_norm};
-
-/// Width of one attention head in every CLIP text tower (heads = width / 64).
-pub const HEAD_WIDTH: usize = 64;
-
-/// open_clip's model config file, beside its weights on the Hugging Face hub.
-pub const OPEN_CLIP_CONFIG: &str = "open_clip_config.json";
+use model::Tower;
 
 /// Phrases encoded per forward pass: bounds the activations held at once.
 const BATCH: usize = 64;
@@ -127,22 +123,7 @@ impl TowerShape {
             ));
         };
         let blocks = format!("{prefix}transformer.resblocks.");
-        let mut layers = 0;
-        for key in shapes.keys() {
-            let Some(rest) = key.strip_prefix(&blocks) else {
-                continue;
-            };
-            let index = rest.split('.').next().and_then(|i| i.parse::<usize>().ok());
-            match index {
-                Some(i) => layers = layers.max(i + 1),
-                None => {
-                    return Err(SemanticError::file(
-                        path,
-                        format!("unexpected tensor {key:?} in the text transformer"),
-                    ));
-                }
-            }
-        }
+        let layers = count_layers(shapes, &blocks, path, "text")?;
         let tower = TowerShape {
             prefix,
             vocab,
@@ -168,20 +149,7 @@ impl TowerShape {
                 ));
             }
         }
-        // A block tensor this tower does not know (layer scale, qk norm) would be ignored,
-        // and the embeddings silently wrong.
-        for key in shapes.keys().filter(|k| k.starts_with(&blocks)) {
-            if !expected.contains_key(key) {
-                return Err(SemanticError::file(
-                    path,
-                    format!(
-                        "tensor {key:?} belongs to a text-tower variant splatraj does not \
-                         implement (it knows ln_1, attn.in_proj, attn.out_proj, ln_2, mlp.c_fc, \
-                         mlp.c_proj)"
-                    ),
-                ));
-            }
-        }
+        check_known(shapes, &blocks, &expected, path, "text")?;
         if vocab != VOCAB_SIZE {
             return Err(SemanticError::file(
                 path,
@@ -215,23 +183,7 @@ impl TowerShape {
         out.insert(format!("{p}ln_final.bias"), vec![w]);
         out.insert(format!("{p}text_projection"), vec![w, self.embed_dim]);
         for i in 0..self.layers {
-            let b = format!("{p}transformer.resblocks.{i}.");
-            for (name, shape) in [
-                ("ln_1.weight", vec![w]),
-                ("ln_1.bias", vec![w]),
-                ("attn.in_proj_weight", vec![3 * w, w]),
-                ("attn.in_proj_bias", vec![3 * w]),
-                ("attn.out_proj.weight", vec![w, w]),
-                ("attn.out_proj.bias", vec![w]),
-                ("ln_2.weight", vec![w]),
-                ("ln_2.bias", vec![w]),
-                ("mlp.c_fc.weight", vec![m, w]),
-                ("mlp.c_fc.bias", vec![m]),
-                ("mlp.c_proj.weight", vec![w, m]),
-                ("mlp.c_proj.bias", vec![w]),
-            ] {
-                out.insert(format!("{b}{name}"), shape);
-            }
+            out.extend(block_shapes(&format!("{p}transformer.resblocks."), i, w, m));
         }
         out
     }
@@ -248,37 +200,11 @@ fn bad_rank(path: &Path, prefix: &str, name: &str, rank: usize) -> SemanticError
 fn open_clip_config(
     weights: &Path,
 ) -> Result<(Option<usize>, Option<Activation>, Option<PathBuf>)> {
-    let path = weights
-        .parent()
-        .unwrap_or(Path::new(""))
-        .join(OPEN_CLIP_CONFIG);
-    if !path.is_file() {
+    let Some((model, path)) = crate::clip::open_clip_config(weights)? else {
         return Ok((None, None, None));
-    }
-    let text = std::fs::read_to_string(&path).map_err(|e| SemanticError::io(&path, e))?;
-    let json: serde_json::Value = serde_json::from_str(&text)
-        .map_err(|e| SemanticError::file(&path, format!("not valid JSON: {e}")))?;
-    let model = json.get("model_cfg").unwrap_or(&json);
-    let heads = match model.pointer("/text_cfg/heads") {
-        None => None,
-        Some(v) => Some(v.as_u64().filter(|&h| h > 0).ok_or_else(|| {
-            SemanticError::file(
-                &path,
-                format!("model_cfg.text_cfg.heads is {v}: expected a positive integer"),
-            )
-        })? as usize),
     };
-    let activation = match model.get("quick_gelu") {
-        None => None,
-        Some(serde_json::Value::Bool(true)) => Some(Activation::QuickGelu),
-        Some(serde_json::Value::Bool(false)) => Some(Activation::Gelu),
-        Some(v) => {
-            return Err(SemanticError::file(
-                &path,
-                format!("model_cfg.quick_gelu is {v}: expected true or false"),
-            ));
-        }
-    };
+    let heads = config_count(&model, "/text_cfg/heads", &path)?;
+    let activation = config_activation(&model, &path)?;
     Ok((heads, activation, Some(path)))
 }
 
@@ -301,23 +227,20 @@ impl TextEncoder {
         let dict = StateDict::open(path)?;
         let shape = TowerShape::find(dict.shapes(), path)?;
         let (config_heads, config_activation, config_path) = open_clip_config(path)?;
-        let from_config = |what: &str| {
-            config_path
-                .as_ref()
-                .map_or(format!("{what}: default"), |p| {
-                    format!("{what}: {}", p.display())
-                })
-        };
-        let (heads, heads_from) = match (options.heads, config_heads) {
-            (Some(h), _) => (h, "heads: given".to_string()),
-            (None, Some(h)) => (h, from_config("heads")),
-            (None, None) => (shape.width / HEAD_WIDTH, "heads: width / 64".to_string()),
-        };
-        let (activation, activation_from) = match (options.activation, config_activation) {
-            (Some(a), _) => (a, "activation: given".to_string()),
-            (None, Some(a)) => (a, from_config("activation")),
-            (None, None) => (Activation::Gelu, "activation: default".to_string()),
-        };
+        let (heads, heads_from) = choose(
+            "heads",
+            options.heads,
+            config_heads,
+            config_path.as_deref(),
+            (shape.width / HEAD_WIDTH, "width / 64"),
+        );
+        let (activation, activation_from) = choose(
+            "activation",
+            options.activation,
+            config_activation,
+            config_path.as_deref(),
+            (Activation::Gelu, "default"),
+        );
         if heads == 0 || shape.width % heads != 0 {
             return Err(SemanticError::file(
                 path,
@@ -328,78 +251,23 @@ impl TextEncoder {
             ));
         }
 
-        let p = shape.prefix.clone();
-        let tensor = |name: &str, dims: &[usize]| -> Result<TensorData> {
-            let values = dict.f32(&format!("{p}{name}"))?;
-            Ok(TensorData::new(values, dims.to_vec()))
-        };
-        let float = |data: TensorData| -> Param<Tensor<2>> {
-            Param::from_tensor(Tensor::<2>::from_data(data, (device, DType::F32)))
-        };
-        let vector = |name: &str, len: usize| -> Result<Tensor<1>> {
-            Ok(Tensor::<1>::from_data(
-                tensor(name, &[len])?,
-                (device, DType::F32),
-            ))
-        };
-        // PyTorch's Linear keeps [out, in]; burn's computes x·W with W as [in, out].
-        let linear = |name: &str, out: usize, input: usize| -> Result<Linear> {
-            let w = Tensor::<2>::from_data(
-                tensor(&format!("{name}weight"), &[out, input])?,
-                (device, DType::F32),
-            )
-            .transpose();
-            let b = vector(&format!("{name}bias"), out)?;
-            Ok(Linear {
-                weight: Param::from_tensor(w),
-                bias: Some(Param::from_tensor(b)),
-            })
+        let p = &shape.prefix;
+        let load = Loader {
+            dict: &dict,
+            device,
         };
         let (w, m) = (shape.width, shape.mlp_width);
-        let mut blocks = Vec::with_capacity(shape.layers);
-        for i in 0..shape.layers {
-            let b = format!("transformer.resblocks.{i}.");
-            let in_proj = {
-                let weight = Tensor::<2>::from_data(
-                    tensor(&format!("{b}attn.in_proj_weight"), &[3 * w, w])?,
-                    (device, DType::F32),
-                )
-                .transpose();
-                let bias = vector(&format!("{b}attn.in_proj_bias"), 3 * w)?;
-                Linear {
-                    weight: Param::from_tensor(weight),
-                    bias: Some(Param::from_tensor(bias)),
-                }
-            };
-            blocks.push(Block {
-                ln_1: layer_norm(
-                    vector(&format!("{b}ln_1.weight"), w)?,
-                    vector(&format!("{b}ln_1.bias"), w)?,
-                    device,
-                ),
-                in_proj,
-                out_proj: linear(&format!("{b}attn.out_proj."), w, w)?,
-                ln_2: layer_norm(
-                    vector(&format!("{b}ln_2.weight"), w)?,
-                    vector(&format!("{b}ln_2.bias"), w)?,
-                    device,
-                ),
-                c_fc: linear(&format!("{b}mlp.c_fc."), m, w)?,
-                c_proj: linear(&format!("{b}mlp.c_proj."), w, m)?,
-            });
-        }
+        let blocks = (0..shape.layers)
+            .map(|i| load.block(&format!("{p}transformer.resblocks."), i, w, m))
+            .collect::<Result<Vec<_>>>()?;
         let tower = Tower {
             token_embedding: Embedding {
-                weight: float(tensor("token_embedding.weight", &[shape.vocab, w])?),
+                weight: load.param(&format!("{p}token_embedding.weight"), [shape.vocab, w])?,
             },
-            positional: float(tensor("positional_embedding", &[shape.context, w])?),
+            positional: load.param(&format!("{p}positional_embedding"), [shape.context, w])?,
             blocks,
-            ln_final: layer_norm(
-                vector("ln_final.weight", w)?,
-                vector("ln_final.bias", w)?,
-                device,
-            ),
-            projection: float(tensor("text_projection", &[w, shape.embed_dim])?),
+            ln_final: load.layer_norm(&format!("{p}ln_final."), w)?,
+            projection: load.param(&format!("{p}text_projection"), [w, shape.embed_dim])?,
         };
         Ok(TextEncoder {
             tower,

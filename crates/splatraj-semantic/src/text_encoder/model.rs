@@ -3,59 +3,10 @@
 //! projection, L2 norm (open_clip's `CLIP.encode_text(normalize=True)`).
 
 use burn::module::{Module, Param};
-use burn::nn::{Embedding, LayerNorm, LayerNormConfig, Linear};
-use burn::tensor::activation::{gelu, sigmoid, softmax};
-use burn::tensor::{DType, Device, Int, Tensor, TensorData};
+use burn::nn::{Embedding, LayerNorm};
+use burn::tensor::{DType, Int, Tensor, TensorData};
 
-/// The MLP's activation: open_clip's laion towers use GELU (erf form), OpenAI's QuickGELU.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Activation {
-    /// `x·Φ(x)` (PyTorch `nn.GELU()`), as open_clip trains its own towers.
-    Gelu,
-    /// `x·σ(1.702·x)`, as OpenAI trained CLIP.
-    QuickGelu,
-}
-
-impl Activation {
-    /// The name configs use.
-    pub fn name(self) -> &'static str {
-        match self {
-            Activation::Gelu => "gelu",
-            Activation::QuickGelu => "quick-gelu",
-        }
-    }
-}
-
-impl std::str::FromStr for Activation {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "gelu" => Ok(Activation::Gelu),
-            "quick-gelu" => Ok(Activation::QuickGelu),
-            other => Err(format!(
-                "unknown text activation {other:?}: use gelu (open_clip's towers) or quick-gelu \
-                 (OpenAI's)"
-            )),
-        }
-    }
-}
-
-/// LayerNorm epsilon of CLIP's text towers (PyTorch's default).
-pub const LAYER_NORM_EPS: f64 = 1e-5;
-
-/// One residual attention block (pre-norm).
-#[derive(Module, Debug)]
-pub struct Block {
-    pub ln_1: LayerNorm,
-    /// Query, key and value in one projection, as PyTorch's `in_proj_weight` holds them.
-    pub in_proj: Linear,
-    pub out_proj: Linear,
-    pub ln_2: LayerNorm,
-    pub c_fc: Linear,
-    pub c_proj: Linear,
-}
+use crate::clip::{Activation, Block, normalize_rows};
 
 /// The whole tower's weights.
 #[derive(Module, Debug)]
@@ -67,17 +18,6 @@ pub struct Tower {
     pub ln_final: LayerNorm,
     /// `[width, embed]`, applied as `x · P`.
     pub projection: Param<Tensor<2>>,
-}
-
-/// A LayerNorm of `width` with the given scale and shift.
-pub fn layer_norm(gamma: Tensor<1>, beta: Tensor<1>, device: &Device) -> LayerNorm {
-    let [width] = gamma.dims();
-    let mut ln = LayerNormConfig::new(width)
-        .with_epsilon(LAYER_NORM_EPS)
-        .init(device);
-    ln.gamma = Param::from_tensor(gamma);
-    ln.beta = Some(Param::from_tensor(beta));
-    ln
 }
 
 impl Tower {
@@ -111,13 +51,7 @@ impl Tower {
             .unsqueeze::<4>(); // [1, 1, len, len]
 
         for block in &self.blocks {
-            x = x.clone() + attention(block, block.ln_1.forward(x), &mask, heads);
-            let h = block.c_fc.forward(block.ln_2.forward(x.clone()));
-            let h = match activation {
-                Activation::Gelu => gelu(h),
-                Activation::QuickGelu => h.clone() * sigmoid(h * 1.702),
-            };
-            x = x + block.c_proj.forward(h);
+            x = block.forward(x, Some(&mask), heads, activation);
         }
         let x = self.ln_final.forward(x);
         let [_, _, width] = x.dims();
@@ -136,31 +70,6 @@ impl Tower {
         let eot = Tensor::<1, Int>::from_data(TensorData::new(eot, [batch]), &device);
         let pooled = x.reshape([batch * len, width]).select(0, eot); // [B, W]
         let projected = pooled.matmul(self.projection.val()); // [B, embed]
-        let norm = (projected.clone() * projected.clone())
-            .sum_dim(1)
-            .sqrt()
-            .clamp_min(1e-12);
-        projected / norm
+        normalize_rows(projected)
     }
-}
-
-/// Causal multi-head self-attention of PyTorch's `nn.MultiheadAttention` on `x` `[B, L, W]`.
-fn attention(block: &Block, x: Tensor<3>, mask: &Tensor<4>, heads: usize) -> Tensor<3> {
-    let [batch, len, width] = x.dims();
-    let head = width / heads;
-    let qkv = block.in_proj.forward(x); // [B, L, 3W]
-    let split = |k: usize| {
-        qkv.clone()
-            .slice([0..batch, 0..len, k * width..(k + 1) * width])
-            .reshape([batch, len, heads, head])
-            .swap_dims(1, 2) // [B, H, L, head]
-    };
-    let (q, k, v) = (split(0), split(1), split(2));
-    let scores = q.matmul(k.swap_dims(2, 3)) / (head as f64).sqrt() + mask.clone(); // [B, H, L, L]
-    let weights = softmax(scores, 3);
-    let out = weights
-        .matmul(v)
-        .swap_dims(1, 2)
-        .reshape([batch, len, width]);
-    block.out_proj.forward(out)
 }
