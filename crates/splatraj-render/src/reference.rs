@@ -6,7 +6,8 @@
 //! difference ≤ 1e-5 in f64). It is also the CPU preview of a scene (see `examples/preview.rs`),
 //! which is why the work is organised like INRIA's rasterizer: every Gaussian is projected once,
 //! binned into the 16×16 tiles it touches, each tile's list is sorted front to back, and each pixel
-//! walks only its tile's list.
+//! walks only its tile's list. [`reference_weights`] exposes each pixel's blending weights
+//! `α·T` from the same walk (the yardstick of [`crate::lift`]).
 //!
 //! # Rules, as implemented (cite these when comparing with another renderer)
 //!
@@ -275,34 +276,7 @@ pub fn render_reference(scene: &Scene, camera: &RefCamera, channels: &RefChannel
         );
     }
     let (width, height) = (camera.width, camera.height);
-    let tiles_x = width.div_ceil(TILE_SIZE);
-    let tiles_y = height.div_ceil(TILE_SIZE);
-
-    // Rules 2–7 and 12 (per-Gaussian values): once per Gaussian, independent of the pixel.
-    let center = camera.center();
-    let splats: Vec<Splat> = (0..scene.len())
-        .into_par_iter()
-        .filter_map(|i| project(scene, camera, center, i, channels.rgb))
-        .collect();
-
-    // Rule 8: bin each splat into the tiles its square touches.
-    let mut tiles: Vec<Vec<u32>> = vec![Vec::new(); tiles_x * tiles_y];
-    for (s, splat) in splats.iter().enumerate() {
-        let (x0, x1) = tile_span(splat.u, splat.radius, tiles_x);
-        let (y0, y1) = tile_span(splat.v, splat.radius, tiles_y);
-        for ty in y0..y1 {
-            for tx in x0..x1 {
-                tiles[ty * tiles_x + tx].push(s as u32);
-            }
-        }
-    }
-    // Rule 10: front to back by z, ties by scene index.
-    tiles.par_iter_mut().for_each(|list| {
-        list.sort_by(|&a, &b| {
-            let (a, b) = (&splats[a as usize], &splats[b as usize]);
-            a.z.total_cmp(&b.z).then(a.index.cmp(&b.index))
-        });
-    });
+    let binned = Binned::new(scene, camera, channels.rgb);
 
     // Rules 9 and 11, one pixel at a time; rows in parallel.
     let n_masks = channels.masks.len();
@@ -310,10 +284,7 @@ pub fn render_reference(scene: &Scene, camera: &RefCamera, channels: &RefChannel
         .into_par_iter()
         .map(|j| {
             (0..width)
-                .map(|i| {
-                    let list = &tiles[(j / TILE_SIZE) * tiles_x + i / TILE_SIZE];
-                    shade_pixel(i, j, list, &splats, channels, n_masks)
-                })
+                .map(|i| shade_pixel(i, j, &binned, channels, n_masks))
                 .collect()
         })
         .collect();
@@ -354,25 +325,79 @@ struct PixelOut {
     transmittance: f64,
 }
 
-/// Composites pixel `(i, j)` over its tile's front-to-back `list` (rules 9 and 11).
-fn shade_pixel(
-    i: usize,
-    j: usize,
-    list: &[u32],
-    splats: &[Splat],
-    channels: &RefChannels,
-    n_masks: usize,
-) -> PixelOut {
+/// The blending weights of every pixel: for pixel `j·width + i`, the pairs (scene index of a
+/// Gaussian, `α·T`) in front-to-back order, i.e. the weight with which that Gaussian's channel
+/// value enters the pixel (rule 11). Gaussians skipped by rules 8–11 are absent.
+pub fn reference_weights(scene: &Scene, camera: &RefCamera) -> Vec<Vec<(usize, f64)>> {
+    let binned = Binned::new(scene, camera, false);
+    (0..camera.height)
+        .into_par_iter()
+        .flat_map_iter(|j| {
+            let binned = &binned;
+            (0..camera.width).map(move |i| {
+                let mut weights = Vec::new();
+                walk_pixel(i, j, binned, |g, w| weights.push((g.index, w)));
+                weights
+            })
+        })
+        .collect()
+}
+
+/// Projected splats binned into tiles, each tile's list sorted front to back.
+struct Binned {
+    splats: Vec<Splat>,
+    /// Per tile (row-major), indices into `splats`.
+    tiles: Vec<Vec<u32>>,
+    tiles_x: usize,
+}
+
+impl Binned {
+    fn new(scene: &Scene, camera: &RefCamera, want_rgb: bool) -> Self {
+        let tiles_x = camera.width.div_ceil(TILE_SIZE);
+        let tiles_y = camera.height.div_ceil(TILE_SIZE);
+
+        // Rules 2–7 and 12 (per-Gaussian values): once per Gaussian, independent of the pixel.
+        let center = camera.center();
+        let splats: Vec<Splat> = (0..scene.len())
+            .into_par_iter()
+            .filter_map(|i| project(scene, camera, center, i, want_rgb))
+            .collect();
+
+        // Rule 8: bin each splat into the tiles its square touches.
+        let mut tiles: Vec<Vec<u32>> = vec![Vec::new(); tiles_x * tiles_y];
+        for (s, splat) in splats.iter().enumerate() {
+            let (x0, x1) = tile_span(splat.u, splat.radius, tiles_x);
+            let (y0, y1) = tile_span(splat.v, splat.radius, tiles_y);
+            for ty in y0..y1 {
+                for tx in x0..x1 {
+                    tiles[ty * tiles_x + tx].push(s as u32);
+                }
+            }
+        }
+        // Rule 10: front to back by z, ties by scene index.
+        tiles.par_iter_mut().for_each(|list| {
+            list.sort_by(|&a, &b| {
+                let (a, b) = (&splats[a as usize], &splats[b as usize]);
+                a.z.total_cmp(&b.z).then(a.index.cmp(&b.index))
+            });
+        });
+        Binned {
+            splats,
+            tiles,
+            tiles_x,
+        }
+    }
+}
+
+/// Walks pixel `(i, j)`'s tile list front to back (rules 9 and 11), calling `visit` with each
+/// Gaussian that contributes and its weight `α·T`. Returns the final transmittance.
+fn walk_pixel(i: usize, j: usize, binned: &Binned, mut visit: impl FnMut(&Splat, f64)) -> f64 {
     // Rule 1: the pixel's centre.
     let (px, py) = (i as f64 + 0.5, j as f64 + 0.5);
-    let mut out = PixelOut {
-        rgb: [0.0; 3],
-        depth: 0.0,
-        masks: vec![0.0; n_masks],
-        transmittance: 1.0,
-    };
+    let list = &binned.tiles[(j / TILE_SIZE) * binned.tiles_x + i / TILE_SIZE];
+    let mut transmittance = 1.0;
     for &s in list {
-        let g = &splats[s as usize];
+        let g = &binned.splats[s as usize];
         // Rule 9: Gaussian falloff at the pixel centre.
         let (dx, dy) = (g.u - px, g.v - py);
         let [a, b, c] = g.conic;
@@ -385,12 +410,31 @@ fn shade_pixel(
             continue;
         }
         // Rule 11: stop before the Gaussian that would bring T below 1e-4.
-        let t = out.transmittance;
-        let next_t = t * (1.0 - alpha);
+        let next_t = transmittance * (1.0 - alpha);
         if next_t < T_MIN {
             break;
         }
-        let w = alpha * t;
+        visit(g, alpha * transmittance);
+        transmittance = next_t;
+    }
+    transmittance
+}
+
+/// Composites pixel `(i, j)` (rules 9, 11 and 12).
+fn shade_pixel(
+    i: usize,
+    j: usize,
+    binned: &Binned,
+    channels: &RefChannels,
+    n_masks: usize,
+) -> PixelOut {
+    let mut out = PixelOut {
+        rgb: [0.0; 3],
+        depth: 0.0,
+        masks: vec![0.0; n_masks],
+        transmittance: 1.0,
+    };
+    let transmittance = walk_pixel(i, j, binned, |g, w| {
         if channels.rgb {
             for k in 0..3 {
                 out.rgb[k] += g.rgb[k] * w;
@@ -402,8 +446,8 @@ fn shade_pixel(
         for (acc, mask) in out.masks.iter_mut().zip(&channels.masks) {
             *acc += f64::from(mask[g.index]) * w;
         }
-        out.transmittance = next_t;
-    }
+    });
+    out.transmittance = transmittance;
     out
 }
 

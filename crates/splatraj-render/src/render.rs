@@ -101,6 +101,10 @@ pub struct RenderRequest {
     pub rasterizer: Rasterizer,
     /// Shortcuts that trade accuracy for time (default: none, the exact rendering).
     pub approximations: Approximations,
+    /// Per-Gaussian channel values as a tensor `[N, C]` on the scene's device, composited after
+    /// `channels`; unlike [`Channel::Features`] the render is differentiable in it (the route
+    /// of [`crate::lift`]).
+    pub gaussian_values: Option<Tensor<2>>,
 }
 
 impl RenderRequest {
@@ -114,6 +118,7 @@ impl RenderRequest {
             composite: CompositeOptions::default(),
             rasterizer: Rasterizer::default(),
             approximations: Approximations::default(),
+            gaussian_values: None,
         }
     }
 }
@@ -137,6 +142,32 @@ pub enum RenderError {
     /// The request has no channel.
     #[error("a render needs at least one channel")]
     NoChannel,
+    /// A channel has no values per Gaussian.
+    #[error("channel {index} has width 0")]
+    ZeroWidth {
+        /// Position of the channel in the request (`channels.len()` for `gaussian_values`).
+        index: usize,
+    },
+    /// Lifting got a pixel buffer whose length is not `B·H·W·dim`.
+    #[error("lifting needs B·H·W·dim = {expected} pixel values, got {got}")]
+    PixelCount {
+        /// Values given.
+        got: usize,
+        /// Values the poses, intrinsics and dim call for.
+        expected: usize,
+    },
+    /// Lifting got a NaN or infinite pixel value (it would poison every Gaussian of its tile).
+    #[error("pixel value {index} is not finite")]
+    NonFinitePixel {
+        /// Position in the flat pixel buffer.
+        index: usize,
+    },
+    /// Lifting takes a gradient, which needs the scene on an autodiff device.
+    #[error("lifting needs the scene on an autodiff device (`device.autodiff()`)")]
+    NeedsAutodiff,
+    /// A gradient could not be read back to the host.
+    #[error("reading a gradient back to the host: {0}")]
+    ReadBack(String),
 }
 
 /// A scene uploaded to a device, ready to render many times.
@@ -184,10 +215,13 @@ pub fn render(
     let [batch, _] = poses.dims();
     let device = poses.device();
     let dtype = scene.geometry.means.dtype();
-    if request.channels.is_empty() {
+    if request.channels.is_empty() && request.gaussian_values.is_none() {
         return Err(RenderError::NoChannel);
     }
     for (index, channel) in request.channels.iter().enumerate() {
+        if channel.width() == 0 {
+            return Err(RenderError::ZeroWidth { index });
+        }
         let got = match channel {
             Channel::Mask(values) => values.len(),
             Channel::Features { dim, values } => values.len() / (*dim).max(1),
@@ -201,12 +235,34 @@ pub fn render(
             });
         }
     }
-    let in_object: Option<Vec<bool>> = match (request.pruning, request.channels.as_slice()) {
-        (Pruning::None, _) => None,
-        (Pruning::ObjectOnly, [Channel::Mask(mask)]) => {
+    let tensor_width = match &request.gaussian_values {
+        Some(values) => {
+            let [rows, width] = values.dims();
+            let index = request.channels.len();
+            if width == 0 {
+                return Err(RenderError::ZeroWidth { index });
+            }
+            if rows != n {
+                return Err(RenderError::ChannelLength {
+                    index,
+                    got: rows,
+                    gaussians: n,
+                });
+            }
+            width
+        }
+        None => 0,
+    };
+    let in_object: Option<Vec<bool>> = match (
+        request.pruning,
+        request.channels.as_slice(),
+        &request.gaussian_values,
+    ) {
+        (Pruning::None, _, _) => None,
+        (Pruning::ObjectOnly, [Channel::Mask(mask)], None) => {
             Some(mask.iter().map(|&m| m != 0.0).collect())
         }
-        (Pruning::ObjectOnly, _) => return Err(RenderError::PruningNeedsOneMask),
+        (Pruning::ObjectOnly, _, _) => return Err(RenderError::PruningNeedsOneMask),
     };
 
     // Decisions (cull, tiles, order, pruning) on all Gaussians without gradient, then the
@@ -261,7 +317,7 @@ pub fn render(
             *g = compact_from_scene[*g as usize];
         }
     }
-    let width: usize = request.channels.iter().map(Channel::width).sum();
+    let width: usize = request.channels.iter().map(Channel::width).sum::<usize>() + tensor_width;
     if used.is_empty() {
         // Nothing to draw: zeros that still hang off the pose graph, so a gradient exists (0).
         let zero = poses.sum().mul_scalar(0.0);
@@ -304,6 +360,16 @@ pub fn render(
                 per_gaussian(&rows, u, *dim, batch, &device, dtype)
             }
         });
+    }
+    if let Some(tensor) = &request.gaussian_values {
+        // A differentiable select: the gradient of each used row reaches the caller's [N, C].
+        let tensor = if tensor.dtype() == dtype {
+            tensor.clone()
+        } else {
+            tensor.clone().cast(dtype)
+        };
+        let rows = tensor.select(0, index.clone()); // [U, C]
+        values.push(rows.unsqueeze_dim::<3>(0).repeat_dim(0, batch)); // [B, U, C]
     }
     let values = Tensor::cat(values, 2).reshape([batch * u, width]);
     let inputs = SplatInputs {
