@@ -22,7 +22,9 @@
 //! quantiles, thresholds, the most relevant Gaussians grouped in space).
 //!
 //! [`text_encoder`] is a CLIP text tower in burn (open_clip/OpenAI weights from a file the user
-//! has) that makes `features` and `langsplat` queries free text.
+//! has) that makes `features` and `langsplat` queries free text. [`image_encoder`] is the
+//! image tower of the same file: global image embeddings, and dense text-aligned patch
+//! features by ClearCLIP (Lan et al., ECCV 2024).
 //!
 //! It does not render anything or read whole config files (the caller parses the file and hands
 //! over its `[targets]` table): those belong to other parts of splatraj.
@@ -35,6 +37,7 @@ pub mod config;
 pub mod embeddings;
 pub mod error;
 pub mod explain;
+pub mod image_encoder;
 pub mod mask_file;
 pub mod names;
 pub mod selection;
@@ -46,6 +49,7 @@ pub use config::{RegionSpec, SourceKind, TargetsConfig};
 pub use embeddings::{Matrix, PhraseTable, read_feature_sidecar};
 pub use error::{Result, SemanticError};
 pub use explain::{Explanation, explain};
+pub use image_encoder::{DenseFeatures, ImageEncoder, ImageEncoderOptions, RgbImage};
 pub use mask_file::read_mask_file;
 pub use selection::{
     Cluster, ClusterOptions, ClusteringSummary, EpsRule, KeepClusters, SelectionOptions, Spread,
