@@ -215,12 +215,17 @@ pub fn check_known(
     path: &Path,
     tower: &str,
 ) -> Result<()> {
+    let article = if tower.starts_with(['a', 'e', 'i', 'o', 'u']) {
+        "an"
+    } else {
+        "a"
+    };
     for key in shapes.keys().filter(|k| k.starts_with(blocks)) {
         if !expected.contains_key(key) {
             return Err(SemanticError::file(
                 path,
                 format!(
-                    "tensor {key:?} belongs to a {tower}-tower variant splatraj does not \
+                    "tensor {key:?} belongs to {article} {tower}-tower variant splatraj does not \
                      implement (it knows ln_1, attn.in_proj, attn.out_proj, ln_2, mlp.c_fc, \
                      mlp.c_proj)"
                 ),

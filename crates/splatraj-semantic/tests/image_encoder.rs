@@ -365,7 +365,7 @@ fn bad_weights_name_the_file_and_the_tensor() {
             Box::new(|t| {
                 t.insert("visual.transformer.resblocks.0.ls_1.gamma".into(), vec![16]);
             }),
-            "\"visual.transformer.resblocks.0.ls_1.gamma\" belongs to a image-tower variant",
+            "\"visual.transformer.resblocks.0.ls_1.gamma\" belongs to an image-tower variant",
         ),
         (
             Box::new(|t| {
