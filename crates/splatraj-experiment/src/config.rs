@@ -703,6 +703,11 @@ impl Config {
         }
     }
 
+    /// The scene file, resolved (`None` for the demo room).
+    pub fn scene_file(&self) -> Option<PathBuf> {
+        self.scene.path.as_deref().map(|p| self.resolve(p))
+    }
+
     /// Range checks that serde cannot express, with the built-in costs only; errors name the
     /// key.
     pub fn validate(&self) -> Result<()> {

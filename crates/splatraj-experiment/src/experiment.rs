@@ -225,8 +225,7 @@ impl Experiment {
             .map_err(|e| anyhow::anyhow!("{}: {e}", at()))?;
         let source = if config.queries.iter().any(|q| q.mask.is_none()) {
             Some(
-                config
-                    .targets
+                crate::lifted::with_lifted_cache(&config.targets, config.scene_file().as_deref())
                     .build_with(&config.base_dir, &self.device, &self.extensions.sources)
                     .map_err(|e| anyhow::anyhow!("{}: {e}", at()))?,
             )

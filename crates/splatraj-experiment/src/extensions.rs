@@ -11,12 +11,13 @@
 //! let experiment = Experiment::prepare_with(&config, &extensions)?;
 //! ```
 
+use splatraj_lift::LiftedConfig;
 use splatraj_semantic::SourceRegistry;
 use splatraj_traj::costs::CostRegistry;
 use splatraj_traj::trajectory::ModelRegistry;
 
 /// The registries an experiment builds its parts from.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct Extensions {
     /// Costs a config can turn on with `[costs.custom.<name>]`.
     pub costs: CostRegistry,
@@ -26,4 +27,18 @@ pub struct Extensions {
     /// Target sources a config can choose with `[targets] source = "custom.<name>"`
     /// (parameters in `[targets.custom.<name>]`).
     pub sources: SourceRegistry,
+}
+
+impl Default for Extensions {
+    /// The shipped parts; sources also hold `lifted` (splatraj-lift), which the semantic crate
+    /// cannot register itself because lifting renders and rendering comes after it.
+    fn default() -> Self {
+        let mut sources = SourceRegistry::default();
+        sources.register::<LiftedConfig>(splatraj_lift::LIFTED);
+        Extensions {
+            costs: CostRegistry::default(),
+            models: ModelRegistry::default(),
+            sources,
+        }
+    }
 }

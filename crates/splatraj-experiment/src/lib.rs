@@ -29,6 +29,7 @@ pub mod config;
 pub mod experiment;
 pub mod extensions;
 pub mod io;
+pub mod lifted;
 pub mod observer;
 pub mod outputs;
 pub mod path_checks;

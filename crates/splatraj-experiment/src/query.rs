@@ -113,10 +113,10 @@ impl ConfigQuery {
             .map_err(|e| anyhow!("{}: {e}", at()))?;
         let device = self.backend.unwrap_or(config.backend).device()?;
         let (scene, scene_name) = load_scene(config)?;
-        let source = config
-            .targets
-            .build_with(&config.base_dir, &device, &extensions.sources)
-            .map_err(|e| anyhow!("{}: {e}", at()))?;
+        let source =
+            crate::lifted::with_lifted_cache(&config.targets, config.scene_file().as_deref())
+                .build_with(&config.base_dir, &device, &extensions.sources)
+                .map_err(|e| anyhow!("{}: {e}", at()))?;
         // The config's up (or the demo room's) as runs take it; else the picture guesses it
         // by the same rule and says so.
         let mut picture = self.picture.clone();
@@ -340,7 +340,7 @@ impl QueryRequest {
     /// silently ignored), as is a built-in source without the inputs it needs (a registered
     /// source checks its own table).
     pub fn choose_source(&self, scene: &Scene, scene_name: &str) -> Result<SourceKind> {
-        use SourceKind::{Custom, Features, Labels, Langsplat, Region};
+        use SourceKind::{Custom, Features, Labels, Langsplat, Lifted, Region};
         let phrase_options = self.text != TextKeys::default();
         let langsplat_options = self.latents.is_some() || self.checkpoint.is_some();
         let has_region = self.region.is_some();
@@ -348,6 +348,14 @@ impl QueryRequest {
             Some(kind) => kind.clone(),
             None if has_region => Region,
             None if langsplat_options => Langsplat,
+            // CLIP weights and nothing to score them against: the field is lifted from renders.
+            None if self.text.text_encoder.is_some()
+                && self.text.phrases.is_none()
+                && self.features.is_none()
+                && scene.extras.features.is_none() =>
+            {
+                Lifted
+            }
             None if phrase_options || self.features.is_some() => Features,
             None if scene.extras.labels.is_some() => Labels,
             None if scene.extras.features.is_some() => bail!(
@@ -373,14 +381,18 @@ impl QueryRequest {
             (kind != Region && has_region, "--box/--sphere"),
             (kind != Features && self.features.is_some(), "--features"),
             (
-                !matches!(kind, Features | Langsplat | Custom(_)) && phrase_options,
+                !matches!(kind, Features | Langsplat | Lifted | Custom(_)) && phrase_options,
                 "--phrases/--text-encoder/--phrase-names/--negative/--temperature",
             ),
             (
                 kind != Langsplat && langsplat_options,
                 "--latents/--checkpoint",
             ),
-            (!custom && !self.source_keys.is_empty(), "--source-key"),
+            (
+                !custom && kind != Lifted && !self.source_keys.is_empty(),
+                "--source-key",
+            ),
+            (kind == Lifted && self.text.phrases.is_some(), "--phrases"),
         ]
         .into_iter()
         .filter_map(|(bad, name)| bad.then_some(name))
@@ -391,7 +403,8 @@ impl QueryRequest {
                  region, --features for features, --phrases/--phrase-names/--negative/--temperature \
                  for features and langsplat, --latents/--checkpoint for langsplat, --source-key \
                  for a registered source, custom.<name>, which also takes --synonym and the \
-                 phrase options)",
+                 phrase options, and for lifted, which takes --text-encoder, --negative and \
+                 --temperature)",
                 stray.join(", ")
             );
         }
@@ -409,6 +422,10 @@ impl QueryRequest {
                  .npy with --phrase-names, or .safetensors)"
                 )
             }
+            Lifted if self.text.text_encoder.is_none() => bail!(
+                "the lifted source needs CLIP weights holding both towers: give --text-encoder \
+                 FILE (open_clip_model.safetensors or open_clip_pytorch_model.bin)"
+            ),
             Langsplat if self.latents.is_none() || self.checkpoint.is_none() => bail!(
                 "the langsplat source needs the per-Gaussian latents (--latents LATENTS.npy, [N, 3]) \
                  and the scene's autoencoder checkpoint (--checkpoint best_ckpt.pth)"
@@ -429,6 +446,7 @@ impl QueryRequest {
                 ..TargetsConfig::default()
             });
         }
+        let kind_is_lifted = kind == SourceKind::Lifted;
         Ok(TargetsConfig {
             source: kind,
             synonyms: self.synonyms.clone(),
@@ -447,6 +465,9 @@ impl QueryRequest {
             checkpoint: self.checkpoint.clone(),
             selection: self.selection,
             label_names: BTreeMap::new(),
+            // `--source-key views.count=8` style keys are the lifted source's own table.
+            lifted: (kind_is_lifted && !self.source_keys.is_empty())
+                .then(|| self.source_keys.clone()),
             custom: BTreeMap::new(),
         })
     }
@@ -488,7 +509,11 @@ impl QueryRequest {
     ) -> Result<QueryOutcome> {
         let kind = self.choose_source(scene, scene_name)?;
         self.selection.validate_as("--")?;
-        let config = self.targets_config(kind.clone())?;
+        // The CLI names the scene by its path: the lifted field's cache goes beside it.
+        let config = crate::lifted::with_lifted_cache(
+            &self.targets_config(kind.clone())?,
+            Some(Path::new(scene_name)).filter(|p| p.is_file()),
+        );
         let source = config
             .build_named(Path::new(""), device, registry, &option_of_key)
             .with_context(|| format!("{scene_name} ({kind} source)"))?;

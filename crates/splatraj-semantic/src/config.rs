@@ -72,20 +72,28 @@ pub enum SourceKind {
     Features,
     /// LangSplat latents decoded by the checkpoint's decoder, then as `features`.
     Langsplat,
+    /// A language field lifted from the scene's own renders (no training): built by the
+    /// source registered as [`LIFTED`] (splatraj-lift), from `text_encoder` and `[targets.lifted]`.
+    Lifted,
     /// A registered source, by its registered name (configs write `custom.<name>`).
     Custom(String),
 }
+
+/// The registry name of the `lifted` source (registered by splatraj-lift's users: the
+/// experiment crate's registry holds it).
+pub const LIFTED: &str = "lifted";
 
 /// How configs name a registered source: `source = "custom.<name>"`.
 pub const CUSTOM_PREFIX: &str = "custom.";
 
 impl SourceKind {
     /// The built-in kinds, in documentation order.
-    pub const ALL: [SourceKind; 4] = [
+    pub const ALL: [SourceKind; 5] = [
         SourceKind::Labels,
         SourceKind::Region,
         SourceKind::Features,
         SourceKind::Langsplat,
+        SourceKind::Lifted,
     ];
 
     /// The name used in configs and on the command line (`custom.<name>` for a registered
@@ -96,6 +104,7 @@ impl SourceKind {
             SourceKind::Region => "region".into(),
             SourceKind::Features => "features".into(),
             SourceKind::Langsplat => "langsplat".into(),
+            SourceKind::Lifted => LIFTED.into(),
             SourceKind::Custom(name) => format!("{CUSTOM_PREFIX}{name}"),
         }
     }
@@ -121,8 +130,8 @@ impl FromStr for SourceKind {
             .find(|k| k.name() == s)
             .ok_or_else(|| {
                 format!(
-                    "unknown source {s:?}: use labels, region, features or langsplat, or \
-                     custom.<name> for a registered source"
+                    "unknown source {s:?}: use labels, region, features, langsplat or lifted, \
+                     or custom.<name> for a registered source"
                 )
             })
     }
@@ -217,6 +226,10 @@ pub struct TargetsConfig {
     /// langsplat: the LangSplat autoencoder checkpoint (`.pth`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub checkpoint: Option<PathBuf>,
+    /// lifted: views, field and cache options (`[targets.lifted]`, read by the registered
+    /// `lifted` source: `views.count`, `field.components`, `cache_dir`, …).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lifted: Option<toml::Table>,
     /// Percentile, floor and DBSCAN settings.
     pub selection: SelectionOptions,
     /// custom.<name>: the config table of each registered source, by name; only the one
@@ -226,7 +239,7 @@ pub struct TargetsConfig {
 }
 
 /// Which sources each optional key applies to, for refusing stray keys.
-const KEY_SOURCES: [(&str, &[SourceKind]); 12] = [
+const KEY_SOURCES: [(&str, &[SourceKind]); 13] = [
     ("label_names", &[SourceKind::Labels]),
     ("synonyms", &[SourceKind::Labels]),
     ("regions", &[SourceKind::Region]),
@@ -236,21 +249,41 @@ const KEY_SOURCES: [(&str, &[SourceKind]); 12] = [
         "phrase_names",
         &[SourceKind::Features, SourceKind::Langsplat],
     ),
-    ("negatives", &[SourceKind::Features, SourceKind::Langsplat]),
+    (
+        "negatives",
+        &[
+            SourceKind::Features,
+            SourceKind::Langsplat,
+            SourceKind::Lifted,
+        ],
+    ),
     (
         "text_encoder",
-        &[SourceKind::Features, SourceKind::Langsplat],
+        &[
+            SourceKind::Features,
+            SourceKind::Langsplat,
+            SourceKind::Lifted,
+        ],
     ),
     (
         "text_activation",
-        &[SourceKind::Features, SourceKind::Langsplat],
+        &[
+            SourceKind::Features,
+            SourceKind::Langsplat,
+            SourceKind::Lifted,
+        ],
     ),
     (
         "temperature",
-        &[SourceKind::Features, SourceKind::Langsplat],
+        &[
+            SourceKind::Features,
+            SourceKind::Langsplat,
+            SourceKind::Lifted,
+        ],
     ),
     ("latents", &[SourceKind::Langsplat]),
     ("checkpoint", &[SourceKind::Langsplat]),
+    ("lifted", &[SourceKind::Lifted]),
 ];
 
 impl TargetsConfig {
@@ -294,6 +327,53 @@ impl TargetsConfig {
                 let table = self.custom.get(name).unwrap_or(&empty);
                 let context = SourceContext { base_dir, device };
                 registry.build(name, table, &context, &key(&format!("custom.{name}")))?
+            }
+            SourceKind::Lifted => {
+                let Some(weights) = &self.text_encoder else {
+                    return Err(SemanticError::option(
+                        key("text_encoder"),
+                        "the lifted source needs CLIP weights with both towers (text_encoder = \
+                         \"open_clip_model.safetensors\"): the image tower makes the field, the \
+                         text tower reads the queries",
+                    ));
+                };
+                // The shared keys join the source's own table, which it deserialises.
+                let mut table = self.lifted.clone().unwrap_or_default();
+                let mut shared = |name: &str, value: Option<toml::Value>| {
+                    if let Some(value) = value {
+                        table.insert(name.to_string(), value);
+                    }
+                };
+                shared(
+                    "weights",
+                    Some(toml::Value::String(weights.to_string_lossy().into())),
+                );
+                shared(
+                    "activation",
+                    self.text_activation
+                        .map(|a| toml::Value::String(a.name().into())),
+                );
+                shared(
+                    "negatives",
+                    self.negatives.as_ref().map(|n| {
+                        toml::Value::Array(
+                            n.iter().map(|s| toml::Value::String(s.clone())).collect(),
+                        )
+                    }),
+                );
+                shared(
+                    "temperature",
+                    self.temperature.map(|t| toml::Value::Float(f64::from(t))),
+                );
+                if !registry.contains(LIFTED) {
+                    return Err(SemanticError::option(
+                        key("source"),
+                        "the lifted source is built by splatraj-lift: use a registry that holds it \
+                         (splatraj-experiment's does)",
+                    ));
+                }
+                let context = SourceContext { base_dir, device };
+                registry.build(LIFTED, &toml::Value::Table(table), &context, &key("lifted"))?
             }
             SourceKind::Labels => {
                 let mut names = BTreeMap::new();
@@ -401,6 +481,7 @@ impl TargetsConfig {
                 "temperature" => self.temperature.is_some(),
                 "latents" => self.latents.is_some(),
                 "checkpoint" => self.checkpoint.is_some(),
+                "lifted" => self.lifted.is_some(),
                 _ => false,
             };
             if set && !sources.contains(&self.source) {

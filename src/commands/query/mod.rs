@@ -13,7 +13,6 @@ use splatraj::experiment::query::{
 };
 use splatraj::experiment::{Config, Extensions};
 use splatraj_render::backend::BackendKind;
-use splatraj_semantic::SourceRegistry;
 
 use args::IMAGE_NAME;
 pub use args::QueryArgs;
@@ -157,5 +156,5 @@ fn from_options(args: &QueryArgs, picture: PictureOptions) -> Result<QueryOutcom
         .context("--scene (or --config) is needed")?;
     let scene = args.read.load(path)?.scene;
     let name = path.display().to_string();
-    request.run(&scene, &name, &SourceRegistry::default(), &device)
+    request.run(&scene, &name, &Extensions::default().sources, &device)
 }
