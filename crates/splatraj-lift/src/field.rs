@@ -14,8 +14,8 @@
 //! and because lifting is linear the result equals lifting the full features and projecting,
 //! up to the share of variance the subspace leaves out ([`LiftedField::explained`]).
 
-use burn::tensor::{DType, Device};
 use splatraj_render::camera::Intrinsics;
+use splatraj_render::host::OnDevice;
 use splatraj_render::lift::{LiftSums, lift_views};
 use splatraj_render::render::{Channel, DeviceScene, Rasterizer, RenderRequest, render};
 use splatraj_semantic::image_encoder::{DenseFeatures, ImageEncoder, RgbImage};
@@ -134,31 +134,44 @@ impl LiftedField {
         views: &[View],
         encoder: &ImageEncoder,
         options: &FieldOptions,
-        device: &Device,
         progress: &Progress,
     ) -> Result<LiftedField> {
-        options.check("lifted")?;
-        if views.is_empty() {
-            return Err(LiftError::Scene("no views to lift from".into()));
+        let dense = encode_views(scene, views, encoder, options, progress)?;
+        LiftedField::lift(scene, views, &dense, options, progress)
+    }
+
+    /// Lifts the dense features `dense` of `views` (one per view) onto the scene: the subspace
+    /// of all their patch features, then each view's patch coordinates upsampled and lifted.
+    pub fn lift(
+        scene: &DeviceScene,
+        views: &[View],
+        dense: &[DenseFeatures],
+        options: &FieldOptions,
+        progress: &Progress,
+    ) -> Result<LiftedField> {
+        options.check("lifted.field")?;
+        if views.is_empty() || views.len() != dense.len() {
+            return Err(LiftError::Scene(format!(
+                "{} views with {} feature grids: need one grid per view, at least one",
+                views.len(),
+                dense.len()
+            )));
         }
-        let mut dense: Vec<DenseFeatures> = Vec::with_capacity(views.len());
-        for (v, view) in views.iter().enumerate() {
-            progress(LiftStage::Render, v, views.len());
-            let image = render_rgb(scene, view, options.render_size, device)?;
-            progress(LiftStage::Encode, v, views.len());
-            dense.push(encoder.dense(&image)?);
-        }
-        progress(LiftStage::Encode, views.len(), views.len());
         let dim = dense[0].dim;
+        if let Some(d) = dense.iter().find(|d| d.dim != dim) {
+            return Err(LiftError::Scene(format!(
+                "feature grids of lengths {dim} and {} cannot share a field",
+                d.dim
+            )));
+        }
         let samples: Vec<f32> = dense
             .iter()
             .flat_map(|d| d.values.iter().copied())
             .collect();
         let subspace = Subspace::fit(&samples, dim, options.components);
         let k = subspace.components();
-
         let mut sums = LiftSums::zeros(scene.len(), k);
-        for (v, (view, features)) in views.iter().zip(&dense).enumerate() {
+        for (v, (view, features)) in views.iter().zip(dense).enumerate() {
             progress(LiftStage::Lift, v, views.len());
             let intrinsics = sized(&view.intrinsics, options.lift_size)?;
             let codes: Vec<f32> = features
@@ -180,6 +193,26 @@ impl LiftedField {
         progress(LiftStage::Lift, views.len(), views.len());
         Ok(from_sums(subspace, &sums))
     }
+}
+
+/// Renders each view in RGB at `options.render_size` and takes its dense ClearCLIP features.
+pub fn encode_views(
+    scene: &DeviceScene,
+    views: &[View],
+    encoder: &ImageEncoder,
+    options: &FieldOptions,
+    progress: &Progress,
+) -> Result<Vec<DenseFeatures>> {
+    options.check("lifted.field")?;
+    let mut dense = Vec::with_capacity(views.len());
+    for (v, view) in views.iter().enumerate() {
+        progress(LiftStage::Render, v, views.len());
+        let image = render_rgb(scene, view, options.render_size)?;
+        progress(LiftStage::Encode, v, views.len());
+        dense.push(encoder.dense(&image)?);
+    }
+    progress(LiftStage::Encode, views.len(), views.len());
+    Ok(dense)
 }
 
 /// The field of lifted sums: codes are the weighted means (zeros where nothing was seen).
@@ -209,22 +242,15 @@ pub fn sized(intrinsics: &Intrinsics, size: usize) -> Result<Intrinsics> {
     Ok(intrinsics.rescaled(width, height)?)
 }
 
-/// An RGB render of `view` at `size` pixels on its longer side, clamped to [0, 1].
-pub fn render_rgb(
-    scene: &DeviceScene,
-    view: &View,
-    size: usize,
-    device: &Device,
-) -> Result<RgbImage> {
+/// An RGB render of `view` at `size` pixels on its longer side, clamped to [0, 1]. Rendered
+/// on the scene's device without a gradient (the image is only read).
+pub fn render_rgb(scene: &DeviceScene, view: &View, size: usize) -> Result<RgbImage> {
     let intrinsics = sized(&view.intrinsics, size)?;
-    let pose = burn::tensor::Tensor::<2>::from_data(
-        burn::tensor::TensorData::new(view.pose.0.to_vec(), [1, 6]),
-        (device, DType::F32),
-    );
     let request = RenderRequest::new(intrinsics, vec![Channel::Rgb]);
-    let out = render(scene, pose, &request)?;
+    let out = render(scene, scene.poses(&[view.pose]), &request)?;
     let pixels: Vec<f32> = out
         .images
+        .without_autodiff()
         .into_data()
         .convert::<f32>()
         .try_into_vec::<f32>()

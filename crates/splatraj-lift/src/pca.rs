@@ -132,25 +132,28 @@ fn times(m: &[f64], v: &[f64], dim: usize) -> Vec<f64> {
         .collect()
 }
 
-/// Modified Gram–Schmidt; a vector that collapses is replaced by a unit axis not yet spanned.
+/// Modified Gram–Schmidt. A vector that collapses (the samples have fewer directions than
+/// components) is replaced by the first unit axis that survives orthogonalisation against the
+/// earlier vectors, so the basis stays orthonormal.
 fn orthonormalise(q: &mut [Vec<f64>]) {
+    let dim = q.first().map_or(0, Vec::len);
     for j in 0..q.len() {
-        for i in 0..j {
-            let (done, rest) = q.split_at_mut(j);
-            let d: f64 = done[i].iter().zip(&rest[0]).map(|(a, b)| a * b).sum();
-            rest[0]
-                .iter_mut()
-                .zip(&done[i])
-                .for_each(|(x, y)| *x -= d * y);
-        }
-        let norm = q[j].iter().map(|x| x * x).sum::<f64>().sqrt();
-        if norm > 1e-12 {
-            q[j].iter_mut().for_each(|x| *x /= norm);
-        } else {
-            let dim = q[j].len();
-            q[j] = (0..dim)
-                .map(|a| f64::from(u8::from(a == j % dim)))
-                .collect();
+        let (done, rest) = q.split_at_mut(j);
+        let candidates = std::iter::once(rest[0].clone()).chain((0..dim).map(|a| {
+            (0..dim)
+                .map(|b| f64::from(u8::from(a == b)))
+                .collect::<Vec<f64>>()
+        }));
+        for mut v in candidates {
+            for u in done.iter() {
+                let d: f64 = u.iter().zip(&v).map(|(a, b)| a * b).sum();
+                v.iter_mut().zip(u).for_each(|(x, y)| *x -= d * y);
+            }
+            let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if norm > 1e-6 {
+                rest[0] = v.iter().map(|x| x / norm).collect();
+                break;
+            }
         }
     }
 }
@@ -174,6 +177,17 @@ mod tests {
         }
         let sub = Subspace::fit(&samples, 5, 2);
         assert!((sub.explained - 1.0).abs() < 1e-6, "{}", sub.explained);
+        // Five components of rank-2 samples: still an orthonormal basis.
+        let all = Subspace::fit(&samples, 5, 5);
+        for i in 0..5 {
+            for j in 0..5 {
+                let d: f32 = (0..5)
+                    .map(|k| all.basis[i * 5 + k] * all.basis[j * 5 + k])
+                    .sum();
+                let want = if i == j { 1.0 } else { 0.0 };
+                assert!((d - want).abs() < 1e-5, "basis {i}·{j} = {d}");
+            }
+        }
         for v in [a, b] {
             let c = sub.coordinates(&v);
             let back: f32 = c.iter().map(|x| x * x).sum();

@@ -255,14 +255,7 @@ impl LiftedSource {
             },
             &self.device,
         )?;
-        LiftedField::build(
-            &device_scene,
-            &views,
-            &image,
-            &self.config.field,
-            &autodiff,
-            progress,
-        )
+        LiftedField::build(&device_scene, &views, &image, &self.config.field, progress)
     }
 
     /// The unit text embedding of `phrase`.
