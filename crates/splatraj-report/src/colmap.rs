@@ -222,6 +222,15 @@ pub fn import(
     file: &str,
     cameras: Option<&HashMap<u64, Pinhole>>,
 ) -> Result<CameraPath> {
+    import_named(text, file, cameras).map(|(path, _)| path)
+}
+
+/// [`import`] with each image's `NAME`, in the same order.
+pub fn import_named(
+    text: &str,
+    file: &str,
+    cameras: Option<&HashMap<u64, Pinhole>>,
+) -> Result<(CameraPath, Vec<String>)> {
     let mut images: Vec<(String, u64, Frame)> = Vec::new();
     // COLMAP's reader: an image line, then its points line, which may be empty.
     let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim()));
@@ -297,14 +306,17 @@ pub fn import(
         return Err(invalid(file, "images", "the file lists no images"));
     }
     images.sort_by_key(|(_, id, _)| *id);
-    Ok(CameraPath {
-        frames: images.into_iter().map(|(_, _, f)| f).collect(),
-        fps: None,
-    })
+    let (names, frames) = images.into_iter().map(|(n, _, f)| (n, f)).unzip();
+    Ok((CameraPath { frames, fps: None }, names))
 }
 
 /// Reads `images.txt` and, when it is there, `cameras.txt` beside it.
 pub fn read(images: &Path) -> Result<CameraPath> {
+    read_named(images).map(|(path, _)| path)
+}
+
+/// [`read`] with each image's `NAME`.
+pub fn read_named(images: &Path) -> Result<(CameraPath, Vec<String>)> {
     let cameras_path = images.with_file_name("cameras.txt");
     let cameras = if cameras_path.is_file() {
         Some(import_cameras(
@@ -314,7 +326,7 @@ pub fn read(images: &Path) -> Result<CameraPath> {
     } else {
         None
     };
-    import(
+    import_named(
         &read_text(images)?,
         &images.display().to_string(),
         cameras.as_ref(),

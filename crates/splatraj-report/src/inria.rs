@@ -60,6 +60,11 @@ pub fn export(path: &CameraPath) -> Result<String> {
 
 /// The path of `cameras.json` text (`file` names it in errors), in file order.
 pub fn import(text: &str, file: &str) -> Result<CameraPath> {
+    import_named(text, file).map(|(path, _)| path)
+}
+
+/// [`import`] with each camera's `img_name` (where the file has one).
+pub fn import_named(text: &str, file: &str) -> Result<(CameraPath, Vec<Option<String>>)> {
     let entries: Vec<Entry> =
         serde_json::from_str(text).map_err(|source| InterchangeError::Json {
             file: file.to_string(),
@@ -99,10 +104,16 @@ pub fn import(text: &str, file: &str) -> Result<CameraPath> {
             })
         })
         .collect::<Result<Vec<_>>>()?;
-    Ok(CameraPath { frames, fps: None })
+    let names = entries.into_iter().map(|e| e.img_name).collect();
+    Ok((CameraPath { frames, fps: None }, names))
 }
 
 /// Reads a `cameras.json`.
 pub fn read(path: &std::path::Path) -> Result<CameraPath> {
-    import(&read_text(path)?, &path.display().to_string())
+    read_named(path).map(|(path, _)| path)
+}
+
+/// Reads a `cameras.json` with each camera's `img_name`.
+pub fn read_named(path: &std::path::Path) -> Result<(CameraPath, Vec<Option<String>>)> {
+    import_named(&read_text(path)?, &path.display().to_string())
 }

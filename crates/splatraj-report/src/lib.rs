@@ -8,8 +8,9 @@
 //! - [`inria`] `cameras.json` (INRIA 3DGS viewers, SuperSplat's camera import),
 //! - [`supersplat`] `settings.json` with one animation track (the SuperSplat viewer),
 //!
-//! and reads the first three (and the SuperSplat track) back into poses and, where the file has
-//! them, intrinsics. Each module's documentation states its format's axes and units;
+//! and reads the first three (and the SuperSplat track, and nerfstudio's training-data
+//! [`transforms`] `transforms.json`) back into poses and, where the file has them, intrinsics
+//! and image names ([`read_named_cameras`]). Each module's documentation states its format's axes and units;
 //! `docs/interchange.md` gathers them. Errors name the file, the element and the problem
 //! ([`InterchangeError`]); nothing panics on a bad file. The crate does not depend on burn.
 
@@ -22,6 +23,7 @@ pub mod inria;
 pub mod nerfstudio;
 pub mod report;
 pub mod supersplat;
+pub mod transforms;
 pub mod video;
 
 use std::path::Path;
@@ -31,7 +33,7 @@ pub use error::{InterchangeError, Result};
 
 use error::{export_error, read_text};
 
-/// The formats this crate writes.
+/// The camera file formats this crate reads; it writes all but [`Format::Transforms`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Format {
     /// nerfstudio `camera_path.json`.
@@ -42,10 +44,12 @@ pub enum Format {
     Inria,
     /// SuperSplat viewer `settings.json`.
     Supersplat,
+    /// nerfstudio training data `transforms.json` (read only).
+    Transforms,
 }
 
 impl Format {
-    /// Every format, in the order the CLI lists them.
+    /// Every format written, in the order the CLI lists them.
     pub const ALL: [Format; 4] = [
         Format::Nerfstudio,
         Format::Colmap,
@@ -60,6 +64,7 @@ impl Format {
             Format::Colmap => "colmap",
             Format::Inria => "inria",
             Format::Supersplat => "supersplat",
+            Format::Transforms => "transforms",
         }
     }
 
@@ -70,6 +75,7 @@ impl Format {
             Format::Colmap => &["cameras.txt", "images.txt", "points3D.txt"],
             Format::Inria => &["cameras.json"],
             Format::Supersplat => &["settings.json"],
+            Format::Transforms => &["transforms.json"],
         }
     }
 }
@@ -150,11 +156,19 @@ pub fn export(
                 },
             )?,
         )],
+        Format::Transforms => {
+            return Err(export_error(
+                "nerfstudio transforms.json",
+                "training-data cameras are read, not written (export nerfstudio for \
+                 camera_path.json)",
+            ));
+        }
     })
 }
 
 /// Which format a camera file is in: `images.txt` (or `*.txt` that is not `cameras.txt`) is
-/// COLMAP; a JSON object with `camera_path` is nerfstudio, one with `animTracks` SuperSplat; a
+/// COLMAP; a JSON object with `camera_path` is nerfstudio, one with `animTracks` SuperSplat,
+/// one with `frames` whose first entry has `transform_matrix` nerfstudio's `transforms.json`; a
 /// JSON array of objects with `rotation` is INRIA.
 pub fn detect(path: &Path) -> Result<Format> {
     let file = path.display().to_string();
@@ -183,6 +197,13 @@ pub fn detect(path: &Path) -> Result<Format> {
     } else if value.get("animTracks").is_some() {
         Ok(Format::Supersplat)
     } else if value
+        .get("frames")
+        .and_then(|f| f.as_array())
+        .and_then(|f| f.first())
+        .is_some_and(|e| e.get("transform_matrix").is_some())
+    {
+        Ok(Format::Transforms)
+    } else if value
         .as_array()
         .and_then(|a| a.first())
         .is_some_and(|e| e.get("rotation").is_some())
@@ -193,8 +214,8 @@ pub fn detect(path: &Path) -> Result<Format> {
             file,
             problem: "not a camera file this reads: expected a nerfstudio camera_path.json \
                       (`camera_path`), an INRIA cameras.json (an array of cameras with \
-                      `rotation`), a SuperSplat settings.json (`animTracks`) or COLMAP's \
-                      images.txt"
+                      `rotation`), a SuperSplat settings.json (`animTracks`), a nerfstudio \
+                      transforms.json (`frames` with `transform_matrix`) or COLMAP's images.txt"
                 .into(),
         })
     }
@@ -203,14 +224,49 @@ pub fn detect(path: &Path) -> Result<Format> {
 /// Reads a camera file of any format this crate reads (see [`detect`]); a SuperSplat track,
 /// which has no image size, gets 480-pixel-high 4:3 cameras.
 pub fn read_camera_path(path: &Path) -> Result<(Format, CameraPath)> {
+    let cameras = read_named_cameras(path)?;
+    Ok((cameras.format, cameras.path))
+}
+
+/// A camera file's frames with the image each was taken for.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NamedCameras {
+    /// The file's format.
+    pub format: Format,
+    /// The frames.
+    pub path: CameraPath,
+    /// Per frame, the image name as the file gives it (INRIA `img_name`, COLMAP `NAME`,
+    /// transforms `file_path`); `None` where the format or the entry has none.
+    pub names: Vec<Option<String>>,
+}
+
+/// [`read_camera_path`] with the image names of the formats that have them.
+pub fn read_named_cameras(path: &Path) -> Result<NamedCameras> {
     let format = detect(path)?;
-    let camera_path = match format {
-        Format::Nerfstudio => nerfstudio::read(path)?,
-        Format::Colmap => colmap::read(path)?,
-        Format::Inria => inria::read(path)?,
-        Format::Supersplat => supersplat::read(path, 480, 4.0 / 3.0)?,
+    let some = |names: Vec<String>| names.into_iter().map(Some).collect();
+    let (camera_path, names) = match format {
+        Format::Nerfstudio => (nerfstudio::read(path)?, Vec::new()),
+        Format::Colmap => {
+            let (p, n) = colmap::read_named(path)?;
+            (p, some(n))
+        }
+        Format::Inria => inria::read_named(path)?,
+        Format::Supersplat => (supersplat::read(path, 480, 4.0 / 3.0)?, Vec::new()),
+        Format::Transforms => {
+            let (p, n) = transforms::read_named(path)?;
+            (p, some(n))
+        }
     };
-    Ok((format, camera_path))
+    let names = if names.is_empty() {
+        vec![None; camera_path.frames.len()]
+    } else {
+        names
+    };
+    Ok(NamedCameras {
+        format,
+        path: camera_path,
+        names,
+    })
 }
 
 /// The frames of `path` with their intrinsics, checked for export (at least one frame, every

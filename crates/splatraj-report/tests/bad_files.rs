@@ -3,7 +3,7 @@
 
 use splatraj_report::camera::{CameraPath, Frame, Pinhole};
 use splatraj_report::supersplat::{Focus, SupersplatOptions};
-use splatraj_report::{ExportOptions, Format, colmap, inria, nerfstudio, supersplat};
+use splatraj_report::{ExportOptions, Format, colmap, inria, nerfstudio, supersplat, transforms};
 
 fn message(result: Result<CameraPath, splatraj_report::InterchangeError>) -> String {
     match result {
@@ -322,6 +322,7 @@ fn truncated_files_never_panic() {
                         colmap::import_cameras(prefix, name).map(|_| ())
                     }
                     (Format::Colmap, _) => colmap::import(prefix, name, None).map(|_| ()),
+                    (Format::Transforms, _) => transforms::import(prefix, name).map(|_| ()),
                 };
             }
         }
