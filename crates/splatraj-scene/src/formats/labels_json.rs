@@ -6,12 +6,16 @@
 //!   id per Gaussian, 0 = unlabelled; names from `annotations[].category_id` and
 //!   `dataset.task_attributes.categories[]`);
 //! - a plain array of integers, one per Gaussian (no names).
+//!
+//! [`write_label_sidecar`] writes the plain array when no label has a name, else the
+//! Segments.ai form (each named id its own category, of the same id).
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use serde_json::Value;
+use serde_json::{Value, json};
 
+use crate::atomic::write_atomically;
 use crate::error::{Result, SceneError};
 use crate::scene::Labels;
 
@@ -110,4 +114,57 @@ fn ids_from_array(values: &[Value], what: &str, path: &Path) -> Result<Vec<i32>>
                 })
         })
         .collect()
+}
+
+/// `labels` as sidecar JSON that [`labels_from_json`] reads back to the same ids and names.
+pub fn label_sidecar_json(labels: &crate::scene::Labels) -> Value {
+    if labels.names.is_empty() {
+        return json!(labels.ids);
+    }
+    let annotations: Vec<Value> = labels
+        .names
+        .keys()
+        .map(|&id| json!({ "id": id, "category_id": id }))
+        .collect();
+    let categories: Vec<Value> = labels
+        .names
+        .iter()
+        .map(|(&id, name)| json!({ "id": id, "name": name }))
+        .collect();
+    json!({
+        "dataset": {
+            "task_attributes": { "format_version": "0.1", "categories": categories },
+            "samples": [{
+                "labels": {
+                    "ground-truth": {
+                        "attributes": {
+                            "format_version": "0.2",
+                            "annotations": annotations,
+                            "point_annotations": labels.ids,
+                        }
+                    }
+                }
+            }]
+        }
+    })
+}
+
+/// Writes `labels` as a sidecar at `path` ([`label_sidecar_json`]), whole or not at all;
+/// refuses to replace anything but a regular file (a folder, a device, a pipe).
+pub fn write_label_sidecar(path: &Path, labels: &crate::scene::Labels) -> Result<()> {
+    if let Ok(meta) = std::fs::metadata(path)
+        && !meta.is_file()
+    {
+        return Err(SceneError::sidecar(
+            path,
+            "exists and is not a regular file: not replacing it",
+        ));
+    }
+    let text = serde_json::to_string(&label_sidecar_json(labels))
+        .map_err(|e| SceneError::sidecar(path, e.to_string()))?;
+    write_atomically(path, |out| {
+        out.write_all(text.as_bytes())?;
+        out.write_all(b"\n")
+    })
+    .map_err(|e| SceneError::io(path, e))
 }

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
-pub use labels_json::read_label_sidecar;
+pub use labels_json::{read_label_sidecar, write_label_sidecar};
 pub use ply_writer::write_inria_ply;
 
 use crate::error::{Result, SceneError};
