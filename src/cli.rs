@@ -3,8 +3,8 @@
 //! other.)
 
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 
 use anyhow::Result;
 use clap::Args;
@@ -164,6 +164,39 @@ pub fn progress_bar(len: u64, quiet: bool) -> ProgressBar {
         .expect("valid template"),
     );
     bar
+}
+
+/// Draws the phases of building a lifted field (choosing views, rendering and encoding views,
+/// lifting) as one progress bar each on stderr, for every lift the command starts (a `lifted`
+/// source is built from a config, so it cannot be handed a bar directly).
+pub fn install_lift_progress() {
+    use splatraj::lift::LiftStage;
+    let current: Mutex<Option<(LiftStage, ProgressBar)>> = Mutex::new(None);
+    splatraj::lift::progress::install(Arc::new(move |stage, done, total| {
+        // Rendering and encoding alternate view by view: one bar for both.
+        let stage = match stage {
+            LiftStage::Render => LiftStage::Encode,
+            other => other,
+        };
+        let mut current = current.lock().unwrap_or_else(|e| e.into_inner());
+        if current.as_ref().map(|c| c.0) != Some(stage) {
+            if let Some((_, bar)) = current.take() {
+                bar.finish();
+            }
+            let bar = progress_bar(total as u64, false);
+            bar.set_message(match stage {
+                LiftStage::Encode => "rendering and encoding views",
+                other => other.name(),
+            });
+            *current = Some((stage, bar));
+        }
+        if let Some((_, bar)) = current.as_ref() {
+            bar.set_position(done as u64);
+            if done >= total {
+                bar.finish();
+            }
+        }
+    }));
 }
 
 /// An observer that draws `bar` and stops once Ctrl-C set `interrupted`.

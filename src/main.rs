@@ -73,6 +73,7 @@ fn main() -> ExitCode {
     }));
 
     let cli = Cli::parse();
+    cli::install_lift_progress();
     // Threads: RAYON_NUM_THREADS, else one per core (rayon's rule).
     if let Err(error) = rayon::ThreadPoolBuilder::new()
         .stack_size(cli::WORKER_STACK_BYTES)

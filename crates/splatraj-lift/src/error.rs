@@ -14,6 +14,9 @@ pub enum LiftError {
     /// A camera could not be built.
     #[error("camera: {0}")]
     Camera(#[from] splatraj_render::camera::CameraError),
+    /// A camera file could not be read (the error names the file and the element).
+    #[error(transparent)]
+    Cameras(#[from] splatraj_report::InterchangeError),
     /// The CLIP towers or their weights failed.
     #[error(transparent)]
     Semantic(#[from] splatraj_semantic::SemanticError),

@@ -9,6 +9,8 @@
 //! stored compressed to a principal subspace ([`pca`]) and cached beside the scene ([`cache`]);
 //! the `lifted` target source ([`source`]) scores free-text queries against them. The same
 //! lifting turns 2D label masks with their cameras into per-Gaussian labels ([`masks`]).
+//! [`mask_files`] reads such masks from a segmenter's PNGs, matched by name to the capture's
+//! cameras ([`cameras`]).
 //!
 //! It does not read config files or scene files, choose objects among the relevant Gaussians
 //! (the semantic crate's selection does that) or draw progress (callers get [`progress`]
@@ -17,8 +19,10 @@
 #![warn(missing_docs)]
 
 pub mod cache;
+pub mod cameras;
 pub mod error;
 pub mod field;
+pub mod mask_files;
 pub mod masks;
 pub mod pca;
 pub mod progress;
@@ -30,7 +34,9 @@ pub use error::{LiftError, Result};
 /// A Gaussian whose blending weights sum to less than this over all views (in pixels at the
 /// lifting size) has no vote: no view showed it.
 pub const MIN_WEIGHT: f32 = 1e-3;
+pub use cameras::{NamedView, read_views};
 pub use field::{FieldOptions, LiftedField};
+pub use mask_files::{MaskFiles, MaskLift, lift_mask_files, read_masks};
 pub use masks::{LiftedLabels, MaskOptions, MaskView, lift_masks};
 pub use progress::{LiftStage, Progress};
 pub use source::{LIFTED, LiftedConfig, LiftedSource, default_cache_dir};

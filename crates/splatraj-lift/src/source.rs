@@ -22,7 +22,7 @@ use splatraj_semantic::vectors::{self, DEFAULT_NEGATIVES, DEFAULT_TEMPERATURE};
 
 use crate::cache::{self, Fnv};
 use crate::error::{LiftError, Result};
-use crate::field::{FieldOptions, LiftedField};
+use crate::field::{FieldOptions, LiftedField, encode_views};
 use crate::progress::Progress;
 use crate::views::{View, ViewOptions, plan_views};
 
@@ -222,6 +222,7 @@ impl LiftedSource {
             (Some(p), _) | (None, Some(p)) => p.as_ref(),
             (None, None) => &silent,
         };
+        let started = std::time::Instant::now();
         let autodiff = self.device.clone().autodiff();
         let device_scene = DeviceScene::new(scene, &autodiff, DType::F32);
         let views = match &self.cameras {
@@ -247,6 +248,7 @@ impl LiftedSource {
                 plan.views
             }
         };
+        let planned = started.elapsed();
         let image = ImageEncoder::from_file(
             &self.config.weights,
             ImageEncoderOptions {
@@ -255,7 +257,28 @@ impl LiftedSource {
             },
             &self.device,
         )?;
-        LiftedField::build(&device_scene, &views, &image, &self.config.field, progress)
+        let loaded = started.elapsed();
+        let dense = encode_views(&device_scene, &views, &image, &self.config.field, progress)?;
+        let encoded = started.elapsed();
+        let field = LiftedField::lift(&device_scene, &views, &dense, &self.config.field, progress)?;
+        let lifted = started.elapsed();
+        tracing::info!(
+            plan_s = planned.as_secs_f64(),
+            load_image_tower_s = (loaded - planned).as_secs_f64(),
+            render_and_encode_s = (encoded - loaded).as_secs_f64(),
+            lift_s = (lifted - encoded).as_secs_f64(),
+            explained = field.explained(),
+            voted = field
+                .weights
+                .iter()
+                .filter(|&&w| w >= crate::MIN_WEIGHT)
+                .count() as f64
+                / scene.len().max(1) as f64,
+            "lifted field of {} Gaussians from {} views",
+            scene.len(),
+            views.len()
+        );
+        Ok(field)
     }
 
     /// The unit text embedding of `phrase`.

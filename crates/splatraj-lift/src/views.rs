@@ -39,7 +39,7 @@ impl Default for ViewOptions {
             count: 24,
             fov_degrees: 60.0,
             sides: 3,
-            probe_size: 48,
+            probe_size: 64,
         }
     }
 }
@@ -118,9 +118,11 @@ pub struct ViewPlan {
     pub seen_share: f64,
 }
 
-/// A probe weight below this share of a pixel does not count as showing the Gaussian: it
-/// keeps far, faint or almost hidden Gaussians from counting as covered.
-const SHOWN_WEIGHT: f32 = 0.05;
+/// A probe weight (in pixels of the probe) from which a view counts as showing the Gaussian:
+/// small enough that a Gaussian far smaller than a probe pixel but in plain sight counts, large
+/// enough that one behind others (T ≈ 0) does not. Counting shown/not shown rather than the
+/// weight itself keeps the choice from favouring views that show large splats large.
+const SHOWN_WEIGHT: f32 = 0.01;
 /// A candidate whose median shown depth is below this share of the content's radius is
 /// inside geometry (a camera in a wall, inside an object).
 const BURIED_DEPTH: f64 = 0.12;
@@ -271,14 +273,13 @@ fn median_depth(scene: &Scene, pose: &Pose, shown: &[f32]) -> f64 {
     f64::INFINITY
 }
 
-/// Greedy maximum coverage: repeatedly the candidate that adds the most soft coverage, where a
-/// Gaussian's coverage is the number of chosen views showing it (a probe weight of one pixel or
-/// more counts fully, less counts in proportion), capped at `sides`.
+/// Greedy maximum coverage: repeatedly the candidate that adds the most coverage, where a
+/// Gaussian's coverage is the number of chosen views showing it, capped at `sides`.
 fn greedy_cover(candidates: &[Candidate], count: usize, sides: f32) -> Vec<usize> {
     let n = candidates[0].shown.len();
     let mut covered = vec![0.0f32; n];
     let mut chosen: Vec<usize> = Vec::new();
-    let soft = |w: f32| if w < SHOWN_WEIGHT { 0.0 } else { w.min(1.0) };
+    let soft = |w: f32| f32::from(u8::from(w >= SHOWN_WEIGHT));
     while chosen.len() < count.min(candidates.len()) {
         let best = candidates
             .iter()
