@@ -293,3 +293,80 @@ fn encode_text_tables_hold_open_clips_embeddings() {
             .unwrap();
     assert_eq!(json["red mug"].as_array().unwrap().len(), 16);
 }
+
+/// A plain scene (no labels, no features) with CLIP weights: `query` lifts a language field
+/// from the scene's own renders (the `lifted` source, chosen without being named), caches it
+/// beside the scene, and the next query reads the cache. The fixture towers have random
+/// weights, so `--floor 0` lets the mechanics run to a selection.
+#[test]
+fn a_plain_scene_is_queried_through_a_lifted_field_and_the_field_is_cached() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = splatraj_scene::demo::demo_scene(&splatraj_scene::demo::DemoConfig {
+        seed: 5,
+        gaussians: 3_000,
+    })
+    .unwrap();
+    let plain = Scene {
+        extras: Default::default(),
+        ..scene
+    };
+    let path = dir.path().join("room.ply");
+    write_inria_ply(&plain, &path).unwrap();
+    let weights = clip("gelu/open_clip_model.safetensors");
+    let query = |extra: &[&str]| {
+        let mut args = vec![
+            "query",
+            "--scene",
+            s(&path),
+            "--text-encoder",
+            s(&weights),
+            "--query",
+            "red mug",
+            "--floor",
+            "0",
+            "--out",
+            s(dir.path()),
+        ];
+        args.extend_from_slice(extra);
+        splatraj(&args)
+    };
+    let first = query(&[]);
+    assert!(first.status.success(), "{}", stderr(&first));
+    let cache = dir.path().join("room.ply.splatraj-lifted");
+    let files: Vec<_> = std::fs::read_dir(&cache)
+        .expect("the field is cached beside the scene")
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(files.len(), 1, "{files:?}");
+    let written = std::fs::metadata(&files[0]).unwrap().modified().unwrap();
+
+    let second = query(&["--source", "lifted"]);
+    assert!(second.status.success(), "{}", stderr(&second));
+    assert_eq!(
+        stdout(&first),
+        stdout(&second),
+        "the cached field gives the same answer"
+    );
+    assert_eq!(std::fs::read_dir(&cache).unwrap().count(), 1);
+    assert_eq!(
+        std::fs::metadata(&files[0]).unwrap().modified().unwrap(),
+        written,
+        "the cache was read, not written again"
+    );
+
+    let without = splatraj(&[
+        "query",
+        "--scene",
+        s(&path),
+        "--source",
+        "lifted",
+        "--query",
+        "red mug",
+    ]);
+    assert!(!without.status.success());
+    assert!(
+        stderr(&without).contains("--text-encoder"),
+        "{}",
+        stderr(&without)
+    );
+}
