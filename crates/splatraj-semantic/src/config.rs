@@ -2,7 +2,7 @@
 //!
 //! ```toml
 //! [targets]
-//! source = "features"              # labels | region | features | langsplat
+//! source = "features"              # labels | region | features | langsplat | lifted
 //! phrases = "clip_table.json"      # relative paths are read from the config file's folder
 //! negatives = ["object", "things", "stuff", "texture"]
 //! temperature = 10
@@ -25,6 +25,11 @@
 //!   of `phrases` and `text_encoder`;
 //! - `langsplat`: `latents` (`.npy` `[N, 3]`), `checkpoint` (LangSplat `.pth`), and the phrase
 //!   keys of `features`.
+//!
+//! - `lifted`: a language field lifted from the scene's own renders (built by splatraj-lift,
+//!   registered in the experiment's registry): `text_encoder` (CLIP weights with both towers),
+//!   `text_activation`, `negatives`, `temperature`, and `[targets.lifted]` (`views`, `field`,
+//!   `up`, `cache_dir`); see `docs/lifted.md`.
 //!
 //! - `custom.<name>`: a source another crate registered in a [`SourceRegistry`]; its keys go in
 //!   `[targets.custom.<name>]` (deserialised by its [`crate::sources::SourceConfig`]).
