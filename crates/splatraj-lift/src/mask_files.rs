@@ -265,17 +265,20 @@ fn decode(path: &Path) -> Result<(usize, usize, Decoded)> {
         .map_err(|e| LiftError::file(path, format!("not a readable PNG: {e}")))?;
     let (width, height) = (image.width() as usize, image.height() as usize);
     let decoded = match &image {
-        DynamicImage::ImageLuma8(_) | DynamicImage::ImageLuma16(_) => Decoded::Grey(
-            image
-                .to_luma16()
-                .pixels()
-                .map(|p| i32::from(p.0[0]))
+        // The values themselves, not scaled to another depth (to_luma16 would make 3 → 771).
+        DynamicImage::ImageLuma8(g) => {
+            Decoded::Grey(g.pixels().map(|p| i32::from(p.0[0])).collect())
+        }
+        DynamicImage::ImageLuma16(g) => {
+            Decoded::Grey(g.pixels().map(|p| i32::from(p.0[0])).collect())
+        }
+        DynamicImage::ImageLumaA8(g) => Decoded::Grey(
+            g.pixels()
+                .map(|p| if p.0[1] == 0 { 0 } else { i32::from(p.0[0]) })
                 .collect(),
         ),
-        DynamicImage::ImageLumaA8(_) | DynamicImage::ImageLumaA16(_) => Decoded::Grey(
-            image
-                .to_luma_alpha16()
-                .pixels()
+        DynamicImage::ImageLumaA16(g) => Decoded::Grey(
+            g.pixels()
                 .map(|p| if p.0[1] == 0 { 0 } else { i32::from(p.0[0]) })
                 .collect(),
         ),
@@ -423,7 +426,7 @@ pub fn render_label_mask(
     let read = |t: Tensor<4>| -> Result<Vec<f32>> {
         t.into_data()
             .convert::<f32>()
-            .into_vec::<f32>()
+            .try_into_vec::<f32>()
             .map_err(|e| RenderError::ReadBack(format!("{e:?}")).into())
     };
     let image = read(out.images)?;
