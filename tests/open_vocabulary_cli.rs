@@ -370,3 +370,27 @@ fn a_plain_scene_is_queried_through_a_lifted_field_and_the_field_is_cached() {
         stderr(&without)
     );
 }
+
+/// A run config with `source = "lifted"`: its field's memory is estimated before any view is
+/// rendered, and a limit below the estimate is refused naming the stage and the key.
+#[test]
+fn a_lifted_field_over_the_memory_limit_is_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("lifted.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "name = \"lifted\"\nmax_memory_gb = 0.001\n[scene]\ndemo = {{ gaussians = 2000 }}\n\
+             [targets]\nsource = \"lifted\"\ntext_encoder = {:?}\n[[queries]]\ntext = \"red mug\"\n",
+            s(&clip("gelu/open_clip_model.safetensors"))
+        ),
+    )
+    .unwrap();
+    let out = splatraj(&["run", s(&config), "--check"]);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert!(
+        err.contains("lifted field") && err.contains("max_memory_gb"),
+        "{err}"
+    );
+}

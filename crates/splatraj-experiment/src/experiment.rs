@@ -223,6 +223,9 @@ impl Experiment {
             .targets
             .selection()
             .map_err(|e| anyhow::anyhow!("{}: {e}", at()))?;
+        if config.queries.iter().any(|q| q.mask.is_none()) {
+            crate::lifted::check_lifted_memory(config, self.scene.len())?;
+        }
         let source = if config.queries.iter().any(|q| q.mask.is_none()) {
             Some(
                 crate::lifted::with_lifted_cache(&config.targets, config.scene_file().as_deref())

@@ -1,8 +1,15 @@
-//! Where the `lifted` source keeps its field: beside the scene file, unless the config says.
+//! The `lifted` source in an experiment: where its field is cached (beside the scene file,
+//! unless the config says) and whether building it fits the memory limit.
 
 use std::path::Path;
 
+use anyhow::{Context, Result};
+use splatraj_lift::field::{FieldOptions, memory_bytes};
+use splatraj_lift::views::ViewOptions;
 use splatraj_semantic::{SourceKind, TargetsConfig};
+
+use crate::config::Config;
+use crate::resources::{MemoryLimit, MemoryPlan, RAISE_LIMIT};
 
 /// `targets` with `[targets.lifted] cache_dir` set to the default folder beside `scene_path`
 /// when the source is `lifted` and the config left it out (the demo scene, made in memory,
@@ -22,4 +29,42 @@ pub fn with_lifted_cache(targets: &TargetsConfig, scene_path: Option<&Path>) -> 
         }
     }
     targets
+}
+
+/// Refuses, before any view is rendered, a `lifted` field whose estimated peak memory is over
+/// the limit (`max_memory_gb`); other sources pass.
+pub fn check_lifted_memory(config: &Config, gaussians: usize) -> Result<()> {
+    let targets = &config.targets;
+    if targets.source != SourceKind::Lifted {
+        return Ok(());
+    }
+    let Some(weights) = &targets.text_encoder else {
+        return Ok(()); // building the source names the missing key
+    };
+    let table = targets.lifted.clone().unwrap_or_default();
+    fn part<T: serde::de::DeserializeOwned + Default>(table: &toml::Table, key: &str) -> Result<T> {
+        Ok(table
+            .get(key)
+            .cloned()
+            .map(toml::Value::try_into)
+            .transpose()
+            .with_context(|| format!("`targets.lifted.{key}`"))?
+            .unwrap_or_default())
+    }
+    let views: ViewOptions = part(&table, "views")?;
+    let field: FieldOptions = part(&table, "field")?;
+    let path = config.resolve(weights);
+    let weights_bytes = std::fs::metadata(&path)
+        .with_context(|| format!("`targets.text_encoder` {}", path.display()))?
+        .len();
+    let mut plan = MemoryPlan::default();
+    plan.stage(
+        format!(
+            "the lifted field: {gaussians} Gaussians, `targets.lifted.views.count` = {} views, \
+             `targets.lifted.field.components` = {}",
+            views.count, field.components
+        ),
+        memory_bytes(gaussians, views.count, &field, weights_bytes, 512),
+    );
+    plan.check(MemoryLimit::new(config.max_memory_gb)?, RAISE_LIMIT)
 }

@@ -67,6 +67,33 @@ impl FieldOptions {
     }
 }
 
+/// Estimated peak bytes of building a field of `n` Gaussians from `views` views with
+/// `options`, for an image tower whose weights file has `weights_bytes` bytes (loaded as f32,
+/// so up to twice a half-precision file) and embeddings of `dim` values: the tower and its
+/// activations, every view's dense features, the lift sums (f64) beside the gradient of one
+/// pass, and the field.
+pub fn memory_bytes(
+    n: usize,
+    views: usize,
+    options: &FieldOptions,
+    weights_bytes: u64,
+    dim: usize,
+) -> f64 {
+    let k = options.components as f64;
+    let n = n as f64;
+    let patches = (options.render_size as f64 / 16.0).powi(2);
+    let tower = 2.0 * weights_bytes as f64;
+    // Activations of one ViT-B/16 pass: ~16 token buffers of width 768 and 12 attention maps.
+    let tokens = patches + 1.0;
+    let activations = 4.0 * (16.0 * tokens * 768.0 + 12.0 * tokens * tokens);
+    let dense = views as f64 * patches * dim as f64 * 4.0;
+    let lift_pixels = (options.lift_size as f64).powi(2);
+    let lift_pass = lift_pixels * (k + 1.0) * 4.0 * 4.0 + n * (k + 1.0) * 4.0 * 3.0;
+    let sums = n * (k + 1.0) * 8.0;
+    let field = n * (k + 1.0) * 4.0;
+    tower + activations + dense + lift_pass + sums + field
+}
+
 /// Per-Gaussian compressed features and how much each Gaussian was seen.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LiftedField {
