@@ -2,15 +2,21 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::str::FromStr;
 
-use anyhow::Result;
+use anyhow::{Context, Result, bail};
 use clap::Subcommand;
 use serde::Serialize;
+use splatraj::lift::mask_files::{MaskCoding, MaskLift, lift_mask_files};
+use splatraj::lift::{LiftStage, MaskOptions};
+use splatraj_render::backend::BackendKind;
 use splatraj_scene::demo::{DemoConfig, demo_scene};
-use splatraj_scene::formats::LoadedScene;
-use splatraj_scene::{Bounds, Scene, SceneFormat, UpGuess, guess_up_axis, write_inria_ply};
+use splatraj_scene::formats::{LoadedScene, write_label_sidecar};
+use splatraj_scene::{
+    Bounds, InvalidPolicy, ReadOptions, Scene, SceneFormat, UpGuess, guess_up_axis, write_inria_ply,
+};
 
-use crate::cli::ReadArgs;
+use crate::cli::{ReadArgs, progress_bar};
 
 /// The `scene` subcommands.
 #[derive(Debug, Subcommand)]
@@ -46,6 +52,40 @@ pub enum SceneCommand {
         #[arg(long, default_value_t = DemoConfig::default().gaussians)]
         gaussians: usize,
     },
+    /// Lift 2D label masks (a segmenter's PNGs, one per camera) onto the Gaussians and write
+    /// them as a label sidecar that `--labels` reads (docs/open-vocabulary.md).
+    LiftMasks(LiftMasksArgs),
+}
+
+/// Arguments of `scene lift-masks`.
+#[derive(Debug, clap::Args)]
+pub struct LiftMasksArgs {
+    /// Scene file (INRIA PLY, compressed PLY or SPZ).
+    #[arg(long)]
+    scene: PathBuf,
+    /// The capture's cameras: INRIA cameras.json, COLMAP images.txt (cameras.txt beside it),
+    /// nerfstudio transforms.json or camera_path.json.
+    #[arg(long)]
+    cameras: PathBuf,
+    /// Folder of PNG masks named after the cameras' images (frame_0001.png for
+    /// images/frame_0001.jpg): grey values are label ids, or colours are labels (black = none).
+    #[arg(long)]
+    masks: PathBuf,
+    /// Label sidecar to write (JSON; written whole or not at all).
+    #[arg(long)]
+    out: PathBuf,
+    /// The least share of a Gaussian's blending weight its object must hold, in (0, 1].
+    #[arg(long, default_value_t = MaskOptions::default().min_share)]
+    min_share: f32,
+    /// Nearest Gaussians asked by one left without an object (0: no consensus pass).
+    #[arg(long, default_value_t = MaskOptions::default().neighbours)]
+    neighbours: usize,
+    /// Drop Gaussians with invalid values with a warning, instead of stopping with an error.
+    #[arg(long)]
+    drop_invalid: bool,
+    /// Tensor backend: flex (CPU), ndarray or wgpu, among those compiled in.
+    #[arg(long, default_value = "flex", value_parser = BackendKind::from_str)]
+    backend: BackendKind,
 }
 
 /// Runs one `scene` subcommand.
@@ -87,8 +127,137 @@ pub fn run(command: SceneCommand) -> Result<()> {
                 out.display()
             );
         }
+        SceneCommand::LiftMasks(args) => lift_masks(&args)?,
     }
     Ok(())
+}
+
+/// Most neighbours `--neighbours` may ask.
+const MAX_NEIGHBOURS: usize = 64;
+
+/// `scene lift-masks`: parses, lifts with the library, writes the sidecar and prints a summary.
+fn lift_masks(args: &LiftMasksArgs) -> Result<()> {
+    if !(args.min_share > 0.0 && args.min_share <= 1.0) {
+        bail!("--min-share {} must be in (0, 1]", args.min_share);
+    }
+    if args.neighbours > MAX_NEIGHBOURS {
+        bail!(
+            "--neighbours {} must be at most {MAX_NEIGHBOURS}",
+            args.neighbours
+        );
+    }
+    // Written last, after minutes of work: refuse a target that would destroy the scene.
+    if let (Ok(out), Ok(scene)) = (args.out.canonicalize(), args.scene.canonicalize())
+        && out == scene
+    {
+        bail!("--out {} is the scene file itself", args.out.display());
+    }
+    let device = args.backend.device()?;
+    let loaded = splatraj_scene::read_scene(
+        &args.scene,
+        &ReadOptions {
+            invalid: if args.drop_invalid {
+                InvalidPolicy::Drop
+            } else {
+                InvalidPolicy::Reject
+            },
+            labels: None,
+        },
+    )?;
+    if loaded.dropped > 0 {
+        eprintln!(
+            "warning: {}: dropped {} invalid Gaussians",
+            args.scene.display(),
+            loaded.dropped
+        );
+    }
+    let scene = loaded.scene;
+    let bar = progress_bar(0, false);
+    bar.set_message(LiftStage::Lift.name());
+    let drawn = bar.clone();
+    let progress = move |_: LiftStage, done: usize, total: usize| {
+        drawn.set_length(total as u64);
+        drawn.set_position(done as u64);
+    };
+    let options = MaskOptions {
+        min_share: args.min_share,
+        neighbours: args.neighbours,
+    };
+    let lift = lift_mask_files(
+        &scene,
+        &args.cameras,
+        &args.masks,
+        &options,
+        &device,
+        &progress,
+    )?;
+    bar.finish_and_clear();
+    let labels = lift.scene_labels(args.out.display().to_string());
+    write_label_sidecar(&args.out, &labels)
+        .with_context(|| format!("cannot write the labels to {}", args.out.display()))?;
+    print!("{}", lift_summary(&lift));
+    eprintln!(
+        "wrote {} ({} Gaussians labelled)",
+        args.out.display(),
+        lift.labels.ids.iter().filter(|&&id| id != 0).count()
+    );
+    Ok(())
+}
+
+/// What `scene lift-masks` prints: cameras used, the labels with their Gaussians, the unseen
+/// share.
+fn lift_summary(lift: &MaskLift) -> String {
+    let cameras = lift.masked.len() + lift.unmasked.len();
+    let mut out = format!("cameras:    {} of {cameras} with a mask", lift.masked.len());
+    if !lift.unmasked.is_empty() {
+        let shown: Vec<&str> = lift.unmasked.iter().take(5).map(String::as_str).collect();
+        out += &format!(
+            " ({} skipped: {}{})",
+            lift.unmasked.len(),
+            shown.join(", "),
+            if lift.unmasked.len() > shown.len() {
+                ", …"
+            } else {
+                ""
+            }
+        );
+    }
+    out += &format!(
+        "\nmasks:      {}\n",
+        match lift.coding {
+            MaskCoding::Grey => "grey (values are label ids)".to_string(),
+            MaskCoding::Colour => format!("colour-coded ({} colours)", lift.legend.len()),
+        }
+    );
+    let mut counts: BTreeMap<i32, usize> = BTreeMap::new();
+    for &id in &lift.labels.ids {
+        *counts.entry(id).or_insert(0) += 1;
+    }
+    let found: Vec<i32> = lift
+        .labels
+        .labels
+        .iter()
+        .copied()
+        .filter(|&l| l != 0)
+        .collect();
+    out += &format!("labels:     {} in the masks\n", found.len());
+    let names: BTreeMap<i32, String> = lift.legend.iter().map(|e| (e.id, e.name())).collect();
+    for id in &found {
+        out += &format!(
+            "  {id:>6}  {:>9} Gaussians  {}\n",
+            counts.get(id).copied().unwrap_or(0),
+            names.get(id).map_or("-", String::as_str)
+        );
+    }
+    let n = lift.labels.ids.len().max(1) as f64;
+    out += &format!(
+        "unlabelled: {} Gaussians ({:.1} %)\nunseen:     {:.1} % of the Gaussians (no masked \
+         camera shows them)\n",
+        counts.get(&0).copied().unwrap_or(0),
+        100.0 * counts.get(&0).copied().unwrap_or(0) as f64 / n,
+        100.0 * lift.unseen_share()
+    );
+    out
 }
 
 /// What `scene info` reports.

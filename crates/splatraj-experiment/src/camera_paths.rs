@@ -8,10 +8,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use serde::Deserialize;
-use splatraj_render::camera::Intrinsics;
+use splatraj_lift::cameras::{camera_pose_of, intrinsics_of, pinhole_of};
+use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::camera_file::resize;
 use splatraj_report::supersplat::Focus;
-use splatraj_report::{CameraPath, CameraPose, ExportOptions, Format, Frame, Pinhole};
+use splatraj_report::{CameraPath, ExportOptions, Format, Frame};
 use splatraj_traj::optimise::sampling::window_of;
 use splatraj_traj::trajectory::{Basis, TrajectoryRecord, uniform_times};
 
@@ -45,23 +46,12 @@ impl PathFrames {
                 .iter()
                 .zip(&self.cameras)
                 .map(|(&pose, k)| Frame {
-                    pose: CameraPose::from_phi(pose),
-                    camera: Some(pinhole(k)),
+                    pose: camera_pose_of(&Pose(pose)),
+                    camera: Some(pinhole_of(k)),
                 })
                 .collect(),
             fps: Some(self.fps),
         }
-    }
-}
-
-fn pinhole(k: &Intrinsics) -> Pinhole {
-    Pinhole {
-        fx: k.fx,
-        fy: k.fy,
-        cx: k.cx,
-        cy: k.cy,
-        width: k.width,
-        height: k.height,
     }
 }
 
@@ -335,14 +325,7 @@ fn imported_frames(file: &Path, path: &CameraPath, request: &FrameRequest) -> Re
             let p = f.camera.with_context(|| {
                 format!("{}: frame {i} has no camera intrinsics", file.display())
             })?;
-            let k = Intrinsics {
-                fx: p.fx,
-                fy: p.fy,
-                cx: p.cx,
-                cy: p.cy,
-                width: p.width,
-                height: p.height,
-            };
+            let k = intrinsics_of(&p).with_context(|| format!("{}: frame {i}", file.display()))?;
             resize(&k, request.width, request.height)
                 .with_context(|| format!("{}: frame {i}", file.display()))
         })
