@@ -269,6 +269,31 @@ pub fn sized(intrinsics: &Intrinsics, size: usize) -> Result<Intrinsics> {
     Ok(intrinsics.rescaled(width, height)?)
 }
 
+/// Reads each photo (any format the `image` crate decodes here: PNG) and takes its dense
+/// ClearCLIP features.
+pub fn encode_photos(
+    photos: &[std::path::PathBuf],
+    encoder: &ImageEncoder,
+    progress: &Progress,
+) -> Result<Vec<DenseFeatures>> {
+    let mut dense = Vec::with_capacity(photos.len());
+    for (v, path) in photos.iter().enumerate() {
+        progress(LiftStage::Render, v, photos.len());
+        let rgb = image::open(path)
+            .map_err(|e| LiftError::file(path, e))?
+            .to_rgb32f();
+        let image = RgbImage {
+            width: rgb.width() as usize,
+            height: rgb.height() as usize,
+            pixels: rgb.into_raw(),
+        };
+        progress(LiftStage::Encode, v, photos.len());
+        dense.push(encoder.dense(&image)?);
+    }
+    progress(LiftStage::Encode, photos.len(), photos.len());
+    Ok(dense)
+}
+
 /// An RGB render of `view` at `size` pixels on its longer side, clamped to [0, 1]. Rendered
 /// on the scene's device without a gradient (the image is only read).
 pub fn render_rgb(scene: &DeviceScene, view: &View, size: usize) -> Result<RgbImage> {

@@ -21,10 +21,11 @@ use splatraj_semantic::text_encoder::{Activation, TextEncoder, TextEncoderOption
 use splatraj_semantic::vectors::{self, DEFAULT_NEGATIVES, DEFAULT_TEMPERATURE};
 
 use crate::cache::{self, Fnv};
+use crate::cameras::{NamedView, read_views};
 use crate::error::{LiftError, Result};
-use crate::field::{FieldOptions, LiftedField, encode_views};
+use crate::field::{FieldOptions, LiftedField, encode_photos, encode_views};
 use crate::progress::Progress;
-use crate::views::{View, ViewOptions, plan_views};
+use crate::views::{ViewOptions, plan_views};
 
 /// The name configs use: `[targets] source = "lifted"`.
 pub const LIFTED: &str = "lifted";
@@ -47,6 +48,15 @@ pub struct LiftedConfig {
     /// World up for planning views; `None` guesses it from the scene.
     #[serde(default)]
     pub up: Option<[f64; 3]>,
+    /// The capture's cameras (INRIA `cameras.json`, COLMAP `images.txt`, nerfstudio
+    /// `transforms.json` or `camera_path.json`) to lift from instead of planned views.
+    #[serde(default)]
+    pub cameras: Option<PathBuf>,
+    /// With `cameras`: the folder of the capture's real photos, matched to the cameras by image
+    /// name, encoded instead of renders (the features then see the real scene; the lifting still
+    /// goes through renders from those cameras).
+    #[serde(default)]
+    pub photos: Option<PathBuf>,
     /// Folder of the field cache; `None`: no cache (the field lives as long as the source).
     #[serde(default)]
     pub cache_dir: Option<PathBuf>,
@@ -75,6 +85,8 @@ impl LiftedConfig {
             views: ViewOptions::default(),
             field: FieldOptions::default(),
             up: None,
+            cameras: None,
+            photos: None,
             cache_dir: None,
             negatives: default_negatives(),
             temperature: default_temperature(),
@@ -87,11 +99,9 @@ impl SourceConfig for LiftedConfig {
         let mut config = self.clone();
         config.weights = context.resolve(&self.weights);
         config.cache_dir = self.cache_dir.as_ref().map(|d| context.resolve(d));
-        Ok(Box::new(LiftedSource::new(
-            config,
-            context.device.clone(),
-            None,
-        )?))
+        config.cameras = self.cameras.as_ref().map(|d| context.resolve(d));
+        config.photos = self.photos.as_ref().map(|d| context.resolve(d));
+        Ok(Box::new(LiftedSource::new(config, context.device.clone())?))
     }
 }
 
@@ -100,8 +110,8 @@ pub struct LiftedSource {
     config: LiftedConfig,
     text: TextEncoder,
     device: Device,
-    /// Given cameras instead of planned views.
-    cameras: Option<Vec<View>>,
+    /// The capture's cameras instead of planned views, with their photos when given.
+    cameras: Option<Vec<NamedView>>,
     /// The field of the last scene queried, with its cache key.
     field: Mutex<Option<(String, Arc<LiftedField>)>>,
     progress: Option<Arc<Progress>>,
@@ -117,8 +127,8 @@ impl std::fmt::Debug for LiftedSource {
 }
 
 impl LiftedSource {
-    /// Loads the text tower and checks the options; `cameras` replaces the planned views.
-    pub fn new(config: LiftedConfig, device: Device, cameras: Option<Vec<View>>) -> Result<Self> {
+    /// Loads the text tower, reads the capture's cameras when given and checks the options.
+    pub fn new(config: LiftedConfig, device: Device) -> Result<Self> {
         config.views.check("targets.lifted.views")?;
         config.field.check("targets.lifted.field")?;
         if !(config.temperature.is_finite() && config.temperature > 0.0) {
@@ -132,6 +142,16 @@ impl LiftedSource {
                 "targets.lifted.negatives",
                 "at least one canonical negative phrase is needed",
             ));
+        }
+        if config.photos.is_some() && config.cameras.is_none() {
+            return Err(LiftError::option(
+                "targets.lifted.photos",
+                "photos need the cameras they were taken with (targets.lifted.cameras)",
+            ));
+        }
+        let cameras = config.cameras.as_deref().map(read_views).transpose()?;
+        if let (Some(dir), Some(cameras)) = (&config.photos, &cameras) {
+            photos_of(dir, cameras)?;
         }
         let text = TextEncoder::from_file(
             &config.weights,
@@ -166,9 +186,14 @@ impl LiftedSource {
             "field": self.config.field,
             "up": self.config.up,
             "activation": self.config.activation,
-            "cameras": self.cameras.as_ref().map(|c| c.iter().map(|v| (v.pose.0, [v.intrinsics.fx, v.intrinsics.fy, v.intrinsics.cx, v.intrinsics.cy, v.intrinsics.width as f64, v.intrinsics.height as f64])).collect::<Vec<_>>()),
+            "cameras": self.cameras.as_ref().map(|c| c.iter().map(|v| (&v.name, v.view.pose.0, [v.view.intrinsics.fx, v.view.intrinsics.fy, v.view.intrinsics.cx, v.view.intrinsics.cy, v.view.intrinsics.width as f64, v.view.intrinsics.height as f64])).collect::<Vec<_>>()),
         });
         hash.bytes(settings.to_string().as_bytes());
+        if let (Some(dir), Some(cameras)) = (&self.config.photos, &self.cameras) {
+            for photo in photos_of(dir, cameras)? {
+                cache::hash_file_identity(&mut hash, &photo)?;
+            }
+        }
         cache::hash_file_identity(&mut hash, &self.config.weights)?;
         Ok(hash.hex())
     }
@@ -226,7 +251,7 @@ impl LiftedSource {
         let autodiff = self.device.clone().autodiff();
         let device_scene = DeviceScene::new(scene, &autodiff, DType::F32);
         let views = match &self.cameras {
-            Some(views) => views.clone(),
+            Some(views) => views.iter().map(|v| v.view).collect(),
             None => {
                 let up = splatraj_scene::up_axis::resolve_up(self.config.up, false, scene).up;
                 let plan = plan_views(
@@ -258,7 +283,12 @@ impl LiftedSource {
             &self.device,
         )?;
         let loaded = started.elapsed();
-        let dense = encode_views(&device_scene, &views, &image, &self.config.field, progress)?;
+        let dense = match (&self.config.photos, &self.cameras) {
+            (Some(dir), Some(cameras)) => {
+                encode_photos(&photos_of(dir, cameras)?, &image, progress)?
+            }
+            _ => encode_views(&device_scene, &views, &image, &self.config.field, progress)?,
+        };
         let encoded = started.elapsed();
         let field = LiftedField::lift(&device_scene, &views, &dense, &self.config.field, progress)?;
         let lifted = started.elapsed();
@@ -362,4 +392,46 @@ pub fn default_cache_dir(scene_path: &Path) -> PathBuf {
         .parent()
         .unwrap_or(Path::new("."))
         .join(format!("{name}.splatraj-lifted"))
+}
+
+/// The photo of each camera in `dir`, matched by image stem (any image extension).
+fn photos_of(dir: &Path, cameras: &[NamedView]) -> Result<Vec<PathBuf>> {
+    let entries = std::fs::read_dir(dir).map_err(|e| LiftError::file(dir, e))?;
+    let mut by_stem = std::collections::BTreeMap::new();
+    for entry in entries {
+        let path = entry.map_err(|e| LiftError::file(dir, e))?.path();
+        if let Some(name) = path.file_name().and_then(|n| n.to_str()) {
+            by_stem.insert(crate::cameras::image_stem(name).to_string(), path.clone());
+        }
+    }
+    let mut missing = Vec::new();
+    let photos: Vec<PathBuf> = cameras
+        .iter()
+        .filter_map(|c| {
+            let found = by_stem.get(c.stem()).cloned();
+            if found.is_none() {
+                missing.push(c.name.clone());
+            }
+            found
+        })
+        .collect();
+    if !missing.is_empty() {
+        return Err(LiftError::file(
+            dir,
+            format!(
+                "no photo for {} of {} cameras ({}{}): each camera's image must be here under its \
+                 name",
+                missing.len(),
+                cameras.len(),
+                missing
+                    .iter()
+                    .take(5)
+                    .cloned()
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                if missing.len() > 5 { ", …" } else { "" }
+            ),
+        ));
+    }
+    Ok(photos)
 }

@@ -39,7 +39,7 @@ fn config(cache: &std::path::Path) -> LiftedConfig {
 fn recorded(config: LiftedConfig) -> (LiftedSource, Arc<Mutex<Vec<LiftStage>>>) {
     let stages = Arc::new(Mutex::new(Vec::new()));
     let seen = stages.clone();
-    let source = LiftedSource::new(config, Device::default(), None)
+    let source = LiftedSource::new(config, Device::default())
         .expect("source builds")
         .with_progress(Arc::new(move |stage, _, _| {
             seen.lock().unwrap().push(stage)
@@ -189,4 +189,93 @@ fn targets_source_lifted_builds_through_a_registry_and_names_bad_keys() {
             .to_string()
             .contains("splatraj-lift")
     );
+}
+
+/// The capture's cameras (an INRIA `cameras.json`) and its photos (here: renders saved as PNG
+/// under the cameras' image names) replace the planned views; a missing photo or photos
+/// without cameras are named errors.
+#[test]
+fn the_captures_cameras_and_photos_replace_planned_views() {
+    use splatraj_lift::cameras::{camera_path, read_views};
+    use splatraj_lift::field::render_rgb;
+    use splatraj_render::render::DeviceScene;
+
+    let scene = demo_scene(&DemoConfig {
+        seed: 3,
+        gaussians: 2_000,
+    })
+    .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let intrinsics = splatraj_render::camera::Intrinsics::from_fov_x(60.0, 80, 60).unwrap();
+    let views: Vec<splatraj_lift::View> = [[-0.3, -1.8, 1.2], [1.5, -1.0, 1.4], [-1.2, 0.5, 1.6]]
+        .into_iter()
+        .map(|eye| splatraj_lift::View {
+            pose: splatraj_render::camera::Pose::look_at(
+                eye.into(),
+                glam::DVec3::new(0.0, 0.3, 0.8),
+                glam::DVec3::Z,
+            )
+            .unwrap(),
+            intrinsics,
+        })
+        .collect();
+    let files = splatraj_report::export(
+        &camera_path(&views),
+        splatraj_report::Format::Inria,
+        &splatraj_report::ExportOptions::default(),
+    )
+    .unwrap();
+    let cameras = dir.path().join(files[0].0);
+    std::fs::write(&cameras, &files[0].1).unwrap();
+    let photos = dir.path().join("photos");
+    std::fs::create_dir(&photos).unwrap();
+    let device_scene = DeviceScene::new(&scene, &Device::default(), burn::tensor::DType::F32);
+    for named in read_views(&cameras).unwrap() {
+        let rgb = render_rgb(&device_scene, &named.view, 80).unwrap();
+        let bytes: Vec<u8> = rgb
+            .pixels
+            .iter()
+            .map(|v| (v * 255.0).round() as u8)
+            .collect();
+        image::RgbImage::from_raw(rgb.width as u32, rgb.height as u32, bytes)
+            .unwrap()
+            .save(photos.join(format!("{}.png", named.stem())))
+            .unwrap();
+    }
+
+    let with = |cameras: Option<&std::path::Path>, photos: Option<&std::path::Path>| {
+        let mut c = config(dir.path());
+        c.cache_dir = None;
+        c.cameras = cameras.map(std::path::Path::to_path_buf);
+        c.photos = photos.map(std::path::Path::to_path_buf);
+        c
+    };
+    let (source, stages) = recorded(with(Some(&cameras), Some(&photos)));
+    let relevancy = source
+        .relevancy(&scene, "red mug")
+        .expect("runs on the capture's views");
+    assert_eq!(relevancy.values.len(), scene.len());
+    let stages = stages.lock().unwrap();
+    assert!(
+        !stages.contains(&LiftStage::Plan),
+        "no views planned: {stages:?}"
+    );
+    assert!(stages.contains(&LiftStage::Lift));
+
+    // Photos are matched to cameras by name: one missing is named.
+    let first = std::fs::read_dir(&photos)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    std::fs::remove_file(&first).unwrap();
+    let error = LiftedSource::new(with(Some(&cameras), Some(&photos)), Device::default())
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("no photo for 1 of 3 cameras"), "{error}");
+    let error = LiftedSource::new(with(None, Some(&photos)), Device::default())
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("targets.lifted.photos"), "{error}");
 }
