@@ -14,6 +14,7 @@
 //! and because lifting is linear the result equals lifting the full features and projecting,
 //! up to the share of variance the subspace leaves out ([`LiftedField::explained`]).
 
+use rayon::prelude::*;
 use splatraj_render::camera::Intrinsics;
 use splatraj_render::host::OnDevice;
 use splatraj_render::lift::{LiftSums, lift_views};
@@ -223,6 +224,8 @@ impl LiftedField {
 }
 
 /// Renders each view in RGB at `options.render_size` and takes its dense ClearCLIP features.
+/// Views are encoded two at a time on worker threads: one ViT pass keeps about one core busy
+/// (its matrix products are too small for burn's CPU backend to split well).
 pub fn encode_views(
     scene: &DeviceScene,
     views: &[View],
@@ -231,15 +234,31 @@ pub fn encode_views(
     progress: &Progress,
 ) -> Result<Vec<DenseFeatures>> {
     options.check("lifted.field")?;
-    let mut dense = Vec::with_capacity(views.len());
+    let mut images = Vec::with_capacity(views.len());
     for (v, view) in views.iter().enumerate() {
         progress(LiftStage::Render, v, views.len());
-        let image = render_rgb(scene, view, options.render_size)?;
-        progress(LiftStage::Encode, v, views.len());
-        dense.push(encoder.dense(&image)?);
+        images.push(render_rgb(scene, view, options.render_size)?);
     }
-    progress(LiftStage::Encode, views.len(), views.len());
-    Ok(dense)
+    encode_images(&images, encoder, progress)
+}
+
+/// Dense features of `images`, in order, encoded in parallel.
+fn encode_images(
+    images: &[RgbImage],
+    encoder: &ImageEncoder,
+    progress: &Progress,
+) -> Result<Vec<DenseFeatures>> {
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    progress(LiftStage::Encode, 0, images.len());
+    images
+        .par_iter()
+        .map(|image| {
+            let features = encoder.dense(image)?;
+            let finished = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            progress(LiftStage::Encode, finished, images.len());
+            Ok(features)
+        })
+        .collect()
 }
 
 /// The field of lifted sums: codes are the weighted means (zeros where nothing was seen).
@@ -269,29 +288,26 @@ pub fn sized(intrinsics: &Intrinsics, size: usize) -> Result<Intrinsics> {
     Ok(intrinsics.rescaled(width, height)?)
 }
 
-/// Reads each photo (any format the `image` crate decodes here: PNG) and takes its dense
-/// ClearCLIP features.
+/// Reads each photo (PNG or JPEG, as captures hold them) and takes its dense ClearCLIP
+/// features.
 pub fn encode_photos(
     photos: &[std::path::PathBuf],
     encoder: &ImageEncoder,
     progress: &Progress,
 ) -> Result<Vec<DenseFeatures>> {
-    let mut dense = Vec::with_capacity(photos.len());
+    let mut images = Vec::with_capacity(photos.len());
     for (v, path) in photos.iter().enumerate() {
         progress(LiftStage::Render, v, photos.len());
         let rgb = image::open(path)
             .map_err(|e| LiftError::file(path, e))?
             .to_rgb32f();
-        let image = RgbImage {
+        images.push(RgbImage {
             width: rgb.width() as usize,
             height: rgb.height() as usize,
             pixels: rgb.into_raw(),
-        };
-        progress(LiftStage::Encode, v, photos.len());
-        dense.push(encoder.dense(&image)?);
+        });
     }
-    progress(LiftStage::Encode, photos.len(), photos.len());
-    Ok(dense)
+    encode_images(&images, encoder, progress)
 }
 
 /// An RGB render of `view` at `size` pixels on its longer side, clamped to [0, 1]. Rendered

@@ -62,23 +62,6 @@ fn views() -> Vec<View> {
         .collect()
 }
 
-fn ref_camera(pose: &Pose, k: &Intrinsics) -> RefCamera {
-    let r_cw = pose.rotation_wc().transpose();
-    let t = -(r_cw * pose.centre());
-    let row = |i: usize| [r_cw.col(0)[i], r_cw.col(1)[i], r_cw.col(2)[i]];
-    RefCamera {
-        fx: k.fx,
-        fy: k.fy,
-        cx: k.cx,
-        cy: k.cy,
-        width: k.width,
-        height: k.height,
-        rotation_cw: [row(0), row(1), row(2)],
-        translation_cw: t.to_array(),
-        near: splatraj_render::project::NEAR_PLANE,
-    }
-}
-
 /// Random unit features on a `rows × cols` grid.
 fn grid(rng: &mut Rng, rows: usize, cols: usize, dim: usize) -> DenseFeatures {
     let mut values = Vec::new();
@@ -145,7 +128,10 @@ fn lifted_cosines_equal_a_brute_force_lift_of_the_features() {
     let mut weights = vec![0f64; n];
     for (view, g) in views.iter().zip(&dense) {
         let k = view.intrinsics;
-        let pixels = reference_weights(&scene, &ref_camera(&view.pose, &k));
+        let pixels = reference_weights(
+            &scene,
+            &RefCamera::from_pose(&view.pose, &k, splatraj_render::project::NEAR_PLANE),
+        );
         for (p, pairs) in pixels.iter().enumerate() {
             let f = feature_at(g, p % k.width, p / k.width, k.width, k.height);
             for &(i, w) in pairs {

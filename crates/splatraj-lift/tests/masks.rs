@@ -5,70 +5,24 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use burn::tensor::{DType, Device, Tensor, TensorData};
+use burn::tensor::{DType, Device};
+use splatraj_lift::mask_files::render_label_mask;
 use splatraj_lift::progress::silent;
 use splatraj_lift::{MaskOptions, MaskView, View, ViewOptions, lift_masks, plan_views};
-use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render};
+use splatraj_render::render::DeviceScene;
 use splatraj_scene::demo::{DEMO_UP, DemoConfig, demo_scene};
 use splatraj_scene::{ReadOptions, Scene, read_scene};
 
-/// Renders each Gaussian's true label as a one-hot feature and takes, per pixel, the label
-/// with the most weight, as a segmenter prompted for the `objects` would hand a mask over:
-/// `id + 1` where one of them leads, 0 where another label (floor, table, unlabelled) leads or
-/// nothing covers the pixel.
-fn label_mask(
-    scene: &DeviceScene,
-    truth: &[i32],
-    objects: &[i32],
-    view: &View,
-    device: &Device,
-) -> Vec<i32> {
-    let ids: Vec<i32> = truth
-        .iter()
-        .copied()
-        .collect::<std::collections::BTreeSet<_>>()
+/// The mask a segmenter prompted for `objects` would hand over: per pixel the true label with
+/// the most weight (the library's [`render_label_mask`]), as `id + 1` where one of `objects`
+/// leads, 0 where another label (floor, table, unlabelled) leads or nothing covers the pixel.
+fn label_mask(scene: &DeviceScene, truth: &[i32], objects: &[i32], view: &View) -> Vec<i32> {
+    render_label_mask(scene, truth, view)
+        .expect("renders")
         .into_iter()
-        .collect();
-    let dim = ids.len();
-    let values: Vec<f32> = truth
-        .iter()
-        .flat_map(|t| ids.iter().map(move |id| f32::from(u8::from(id == t))))
-        .collect();
-    let pose = Tensor::<2>::from_data(
-        TensorData::new(view.pose.0.to_vec(), [1, 6]),
-        (device, DType::F32),
-    );
-    let request = RenderRequest::new(view.intrinsics, vec![Channel::Features { dim, values }]);
-    let out = render(scene, pose, &request).expect("renders");
-    let image: Vec<f32> = out
-        .images
-        .into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .unwrap();
-    let alpha: Vec<f32> = out
-        .alpha
-        .into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .unwrap();
-    image
-        .chunks_exact(dim)
-        .zip(&alpha)
-        .map(|(px, &a)| {
-            if a < 0.5 {
-                return 0;
-            }
-            let (best, _) = px
-                .iter()
-                .enumerate()
-                .max_by(|x, y| x.1.total_cmp(y.1))
-                .unwrap();
-            if objects.contains(&ids[best]) {
-                ids[best] + 1
-            } else {
-                0
-            }
+        .map(|label| match label {
+            Some(id) if objects.contains(&id) => id + 1,
+            _ => 0,
         })
         .collect()
 }
@@ -99,7 +53,7 @@ fn recover(scene: &Scene, up: [f64; 3], objects: &[i32]) -> BTreeMap<i32, f64> {
         .iter()
         .map(|view| MaskView {
             view: *view,
-            labels: label_mask(&device_scene, &truth, objects, view, &device),
+            labels: label_mask(&device_scene, &truth, objects, view),
         })
         .collect();
     let lifted = lift_masks(

@@ -126,6 +126,25 @@ pub struct RefCamera {
 }
 
 impl RefCamera {
+    /// The camera of pose Φ with `intrinsics` and near plane `near` (the tested renderer's
+    /// conventions: `R_cw = R(ω)ᵀ`, `t_cw = −R_cw·c`).
+    pub fn from_pose(pose: &crate::camera::Pose, k: &crate::camera::Intrinsics, near: f64) -> Self {
+        let r_cw = pose.rotation_wc().transpose();
+        let t = -(r_cw * pose.centre());
+        let row = |i: usize| [r_cw.col(0)[i], r_cw.col(1)[i], r_cw.col(2)[i]];
+        RefCamera {
+            fx: k.fx,
+            fy: k.fy,
+            cx: k.cx,
+            cy: k.cy,
+            width: k.width,
+            height: k.height,
+            rotation_cw: [row(0), row(1), row(2)],
+            translation_cw: t.to_array(),
+            near,
+        }
+    }
+
     /// Camera at `eye` looking at `target`, rolled so that image up (−y) lies along `world_up`.
     ///
     /// The optical axis z is `target − eye`, x is `z × world_up` (image right) and y is

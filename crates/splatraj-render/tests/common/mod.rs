@@ -7,20 +7,7 @@ use splatraj_render::reference::RefCamera;
 
 /// The reference renderer's camera for a pose and intrinsics (near plane 0.01).
 pub fn ref_camera(pose: &Pose, k: &Intrinsics) -> RefCamera {
-    let r_cw = pose.rotation_wc().transpose();
-    let t = -(r_cw * pose.centre());
-    let row = |i: usize| [r_cw.col(0)[i], r_cw.col(1)[i], r_cw.col(2)[i]];
-    RefCamera {
-        fx: k.fx,
-        fy: k.fy,
-        cx: k.cx,
-        cy: k.cy,
-        width: k.width,
-        height: k.height,
-        rotation_cw: [row(0), row(1), row(2)],
-        translation_cw: t.to_array(),
-        near: 0.01,
-    }
+    RefCamera::from_pose(pose, k, 0.01)
 }
 
 /// Poses as a `[B, 6]` tensor.
