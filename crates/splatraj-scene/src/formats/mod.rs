@@ -1,10 +1,14 @@
 //! Scene file formats: detection, reading (then validation) and writing.
 
+pub mod bytes;
 pub mod compressed_ply;
 pub mod inria_ply;
+pub mod ksplat;
 pub mod labels_json;
 pub mod ply_table;
 pub mod ply_writer;
+pub mod sog;
+pub mod splat;
 pub mod spz;
 
 use std::path::{Path, PathBuf};
@@ -28,6 +32,12 @@ pub enum SceneFormat {
     CompressedPly,
     /// Niantic SPZ (gzip-wrapped versions 1-3, or version 4).
     Spz,
+    /// PlayCanvas SOG: WebP images and `meta.json`, zipped (`.sog`) or in a folder.
+    Sog,
+    /// antimatter15's `.splat` (32-byte records, no header), the web viewers' format.
+    Splat,
+    /// GaussianSplats3D's `.ksplat` (compression levels 0-2).
+    Ksplat,
 }
 
 /// How to read a scene file.
@@ -70,6 +80,33 @@ pub fn detect_format(bytes: &[u8], path: &Path) -> Result<SceneFormat> {
     if bytes.starts_with(&[0x1f, 0x8b]) || bytes.starts_with(spz::MAGIC_BYTES) {
         return Ok(SceneFormat::Spz);
     }
+    if sog::is_sog_bundle(bytes) || sog::is_sog_meta(bytes) {
+        return Ok(SceneFormat::Sog);
+    }
+    if ksplat::looks_like_ksplat(bytes) {
+        return Ok(SceneFormat::Ksplat);
+    }
+    // Only the name says more: a damaged .ksplat gets the reader's precise error, and a
+    // .splat has no header at all, so its size and records must also look right.
+    let extension = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match extension.as_deref() {
+        Some("ksplat") => return Ok(SceneFormat::Ksplat),
+        Some("splat") if splat::looks_like_splat(bytes) => return Ok(SceneFormat::Splat),
+        Some("splat") => {
+            return Err(SceneError::UnknownFormat {
+                path: path.to_path_buf(),
+                detail: format!(
+                    "named .splat but its {} bytes are not {}-byte records of Gaussians                      (antimatter15 .splat: 3 f32 position, 3 positive f32 scales, RGBA, rotation)",
+                    bytes.len(),
+                    splat::RECORD_LEN
+                ),
+            });
+        }
+        _ => {}
+    }
     let shown: String = String::from_utf8_lossy(&bytes[..bytes.len().min(16)])
         .chars()
         .map(|c| if c.is_ascii_graphic() { c } else { '.' })
@@ -78,7 +115,9 @@ pub fn detect_format(bytes: &[u8], path: &Path) -> Result<SceneFormat> {
         path: path.to_path_buf(),
         detail: format!(
             "the file starts with {shown:?}; expected a PLY ('ply' header: INRIA 3DGS or \
-             compressed), or SPZ (gzip or 'NGSP')"
+             compressed), SPZ (gzip or 'NGSP'), SOG (a zip with meta.json, or meta.json \
+             itself), a GaussianSplats3D .ksplat header, or an antimatter15 .splat (by its \
+             extension)"
         ),
     })
 }
@@ -87,8 +126,25 @@ fn find(haystack: &[u8], needle: &[u8]) -> Option<usize> {
     haystack.windows(needle.len()).position(|w| w == needle)
 }
 
-/// Reads, decodes and validates a scene file of any supported format.
+/// Reads, decodes and validates a scene file of any supported format. A folder is read as an
+/// unbundled SOG scene (its `meta.json`).
 pub fn read_scene(path: &Path, options: &ReadOptions) -> Result<LoadedScene> {
+    let meta;
+    let path = if path.is_dir() {
+        meta = path.join(sog::META_NAME);
+        if !meta.is_file() {
+            return Err(SceneError::UnknownFormat {
+                path: path.to_path_buf(),
+                detail: format!(
+                    "a folder is read as an unbundled SOG scene, but it has no {}",
+                    sog::META_NAME
+                ),
+            });
+        }
+        meta.as_path()
+    } else {
+        path
+    };
     let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
     let format = detect_format(&bytes, path)?;
     let mut scene = decode(&bytes, format, path)?;
@@ -120,5 +176,8 @@ pub fn decode(bytes: &[u8], format: SceneFormat, path: &Path) -> Result<Scene> {
             compressed_ply::scene_from_tables(&ply_table::read_ply_tables(bytes, path)?, path)
         }
         SceneFormat::Spz => spz::decode_spz(bytes, path),
+        SceneFormat::Sog => sog::decode_sog(bytes, path),
+        SceneFormat::Splat => splat::decode_splat(bytes, path),
+        SceneFormat::Ksplat => ksplat::decode_ksplat(bytes, path),
     }
 }

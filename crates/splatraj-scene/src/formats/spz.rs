@@ -50,6 +50,7 @@ use std::f32::consts::FRAC_1_SQRT_2;
 use std::io::Read;
 use std::path::Path;
 
+use super::bytes::{f16_to_f32, read_u32, read_u64, show_bytes};
 use crate::error::{Result, SceneError};
 use crate::scene::{Scene, sh_coeffs_for_degree};
 
@@ -820,48 +821,8 @@ fn quaternion_smallest_three(r: &[u8]) -> [f32; 4] {
     q
 }
 
-/// IEEE 754 half precision to f32 (exact: every half is an f32).
-fn f16_to_f32(bits: u16) -> f32 {
-    let sign = if bits & 0x8000 != 0 { -1.0 } else { 1.0 };
-    let exponent = i32::from((bits >> 10) & 0x1f);
-    let mantissa = f32::from(bits & 0x3ff);
-    let magnitude = match exponent {
-        0 => mantissa * 2f32.powi(-24),
-        31 if mantissa == 0.0 => f32::INFINITY,
-        31 => f32::NAN,
-        e => (1.0 + mantissa / 1024.0) * 2f32.powi(e - 15),
-    };
-    sign * magnitude
-}
-
-fn read_u32(bytes: &[u8], at: usize) -> Option<u32> {
-    let b = bytes.get(at..at.checked_add(4)?)?;
-    Some(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-}
-
-fn read_u64(bytes: &[u8], at: usize) -> Option<u64> {
-    let b = bytes.get(at..at.checked_add(8)?)?;
-    let mut le = [0u8; 8];
-    le.copy_from_slice(b);
-    Some(u64::from_le_bytes(le))
-}
-
 fn checked_sum(sizes: &[usize]) -> Option<usize> {
     sizes.iter().try_fold(0usize, |acc, &s| acc.checked_add(s))
-}
-
-/// The first bytes of a file, readable in an error message.
-fn show_bytes(bytes: &[u8]) -> String {
-    let head = &bytes[..bytes.len().min(8)];
-    if head.is_empty() {
-        return "nothing (the file is empty)".into();
-    }
-    let hex: Vec<String> = head.iter().map(|b| format!("{b:02x}")).collect();
-    let text: String = head
-        .iter()
-        .map(|&b| if b.is_ascii_graphic() { b as char } else { '.' })
-        .collect();
-    format!("{} ({text:?})", hex.join(" "))
 }
 
 fn malformed(path: &Path, detail: impl Into<String>) -> SceneError {
