@@ -56,15 +56,17 @@ const SAME_BYTES: Tolerance = Tolerance {
 };
 
 /// Compares the Gaussians a reference decoded (`[{index, mean, scale, rotation, opacity, sh}]`)
-/// with ours; returns how many were compared.
+/// with ours; prints the largest differences, returns how many Gaussians were compared.
 fn check_against(scene: &Scene, gaussians: &Value, tol: Tolerance, what: &str) -> usize {
     let list = gaussians.as_array().expect("list of Gaussians");
+    let mut worst = [0.0f32; 5];
     for g in list {
         let i = g["index"].as_u64().expect("index") as usize;
         let ctx = format!("{what}: Gaussian {i}");
         let mean = floats(&g["mean"]);
         for k in 0..3 {
             let d = (scene.means[i][k] - mean[k]).abs();
+            worst[0] = worst[0].max(d);
             assert!(
                 d <= tol.mean * (1.0 + mean[k].abs()),
                 "{ctx}: mean {:?} vs reference {mean:?}",
@@ -74,6 +76,7 @@ fn check_against(scene: &Scene, gaussians: &Value, tol: Tolerance, what: &str) -
         let scale = floats(&g["scale"]);
         for k in 0..3 {
             let d = (scene.scales[i][k] - scale[k]).abs();
+            worst[1] = worst[1].max(d / scale[k]);
             assert!(
                 d <= tol.scale * scale[k],
                 "{ctx}: scale {:?} vs reference {scale:?}",
@@ -82,12 +85,14 @@ fn check_against(scene: &Scene, gaussians: &Value, tol: Tolerance, what: &str) -
         }
         let q = floats(&g["rotation"]);
         let dot: f32 = (0..4).map(|k| scene.rotations[i][k] * q[k]).sum();
+        worst[2] = worst[2].max(1.0 - dot.abs());
         assert!(
             1.0 - dot.abs() <= tol.rotation,
             "{ctx}: rotation {:?} vs reference {q:?}",
             scene.rotations[i]
         );
         let opacity = g["opacity"].as_f64().unwrap() as f32;
+        worst[3] = worst[3].max((scene.opacities[i] - opacity).abs());
         assert!(
             (scene.opacities[i] - opacity).abs() <= tol.opacity,
             "{ctx}: opacity {} vs reference {opacity}",
@@ -96,6 +101,7 @@ fn check_against(scene: &Scene, gaussians: &Value, tol: Tolerance, what: &str) -
         let sh = floats(&g["sh"]);
         assert_eq!(sh.len(), scene.sh_of(i).len(), "{ctx}: SH length");
         for (k, (ours, theirs)) in scene.sh_of(i).iter().zip(&sh).enumerate() {
+            worst[4] = worst[4].max((ours - theirs).abs());
             assert!(
                 (ours - theirs).abs() <= tol.sh,
                 "{ctx}: SH value {k} (coefficient {}, channel {}) is {ours}, reference {theirs}",
@@ -104,6 +110,16 @@ fn check_against(scene: &Scene, gaussians: &Value, tol: Tolerance, what: &str) -
             );
         }
     }
+    eprintln!(
+        "{what}: {} Gaussians, largest differences: mean {:.2e}, scale (relative) {:.2e}, \
+         rotation (1-|q.q'|) {:.2e}, opacity {:.2e}, SH {:.2e}",
+        list.len(),
+        worst[0],
+        worst[1],
+        worst[2],
+        worst[3],
+        worst[4]
+    );
     list.len()
 }
 
@@ -246,4 +262,100 @@ fn sog_bad_input_is_named() {
     std::fs::write(&file, &bytes[..bytes.len() - 200]).unwrap();
     let e = error_of(&file);
     assert!(e.contains("cut.sog"), "{e}");
+}
+
+// ------------------------------------------------------------------------- .splat and .ksplat
+
+#[test]
+fn antimatter15_splat_matches_splat_transform() {
+    let expected = &reference("tiny_splat_reference.json")["files"]["tiny.splat"];
+    let loaded = read(&fixture("tiny.splat"));
+    assert_eq!(loaded.format, SceneFormat::Splat);
+    assert_eq!(
+        loaded.scene.len() as u64,
+        expected["count"].as_u64().unwrap()
+    );
+    assert_eq!(loaded.scene.sh_degree, 0);
+    // Rotations: we decode bytes as main.js does, (b − 128)/128; splat-transform uses
+    // b/255·2 − 1. Both normalise, which leaves a difference well under a degree.
+    let tol = Tolerance {
+        rotation: 2e-4,
+        ..SAME_BYTES
+    };
+    check_against(&loaded.scene, &expected["gaussians"], tol, "tiny.splat");
+}
+
+#[test]
+fn ksplat_levels_match_splat_transform() {
+    let files = &reference("tiny_splat_reference.json")["files"];
+    for level in 0..3 {
+        let name = format!("tiny_l{level}.ksplat");
+        let expected = &files[&name];
+        let loaded = read(&fixture(&name));
+        assert_eq!(loaded.format, SceneFormat::Ksplat, "{name}");
+        assert_eq!(
+            loaded.scene.len() as u64,
+            expected["count"].as_u64().unwrap()
+        );
+        assert_eq!(loaded.scene.sh_degree, 2, "{name}");
+        check_against(&loaded.scene, &expected["gaussians"], SAME_BYTES, &name);
+    }
+}
+
+#[test]
+fn ksplat_is_detected_from_its_header_not_its_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let renamed = dir.path().join("scene.bin");
+    std::fs::copy(fixture("tiny_l1.ksplat"), &renamed).unwrap();
+    assert_eq!(read(&renamed).format, SceneFormat::Ksplat);
+    // A .splat is recognised only by its name: the same bytes under another name are refused.
+    let renamed = dir.path().join("scene.bin2");
+    std::fs::copy(fixture("tiny.splat"), &renamed).unwrap();
+    assert!(matches!(
+        read_scene(&renamed, &ReadOptions::default()),
+        Err(SceneError::UnknownFormat { .. })
+    ));
+}
+
+#[test]
+fn splat_and_ksplat_bad_input_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, bytes: &[u8]| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, bytes).unwrap();
+        path
+    };
+    let splat = std::fs::read(fixture("tiny.splat")).unwrap();
+
+    // A .splat cut inside a record is not a whole number of records.
+    let e = error_of(&write("cut.splat", &splat[..splat.len() - 5]));
+    assert!(
+        e.contains("cut.splat") && e.contains("32-byte records"),
+        "{e}"
+    );
+
+    // A NaN position names the Gaussian and the property.
+    let mut nan = splat.clone();
+    nan[32 * 7 + 4..32 * 7 + 8].copy_from_slice(&f32::NAN.to_le_bytes());
+    let e = error_of(&write("nan.splat", &nan));
+    assert!(e.contains("Gaussian 7") && e.contains("x/y/z"), "{e}");
+
+    // A .ksplat cut short, by name and renamed (then it is no longer recognised).
+    let ksplat = std::fs::read(fixture("tiny_l2.ksplat")).unwrap();
+    let e = error_of(&write("cut.ksplat", &ksplat[..ksplat.len() - 100]));
+    assert!(e.contains("cut.ksplat") && e.contains("truncated"), "{e}");
+    let e = error_of(&write("short.ksplat", &ksplat[..1000]));
+    assert!(e.contains("truncated") && e.contains("4096"), "{e}");
+
+    // A compression level GaussianSplats3D does not define.
+    let mut level = ksplat.clone();
+    level[20] = 7;
+    let e = error_of(&write("level.ksplat", &level));
+    assert!(e.contains("compression level 7"), "{e}");
+
+    // A header whose splat count disagrees with its sections.
+    let mut count = ksplat.clone();
+    count[16..20].copy_from_slice(&1000u32.to_le_bytes());
+    let e = error_of(&write("count.ksplat", &count));
+    assert!(e.contains("1000 splats") && e.contains("196"), "{e}");
 }

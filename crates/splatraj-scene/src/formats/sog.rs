@@ -72,9 +72,10 @@ pub fn is_sog_bundle(bytes: &[u8]) -> bool {
 
 /// True when `bytes` look like a SOG `meta.json` (a JSON object naming means and quats).
 pub fn is_sog_meta(bytes: &[u8]) -> bool {
-    let head = &bytes[..bytes.len().min(4096)];
-    let text = String::from_utf8_lossy(head);
-    text.trim_start().starts_with('{') && text.contains("\"means\"") && text.contains("\"quats\"")
+    let contains = |needle: &[u8]| bytes.windows(needle.len()).any(|w| w == needle);
+    // The codebooks come first and run to kilobytes, so the keys are looked for everywhere;
+    // only files that start as a JSON object get that far.
+    bytes.trim_ascii_start().starts_with(b"{") && contains(b"\"means\"") && contains(b"\"quats\"")
 }
 
 /// Decodes a SOG scene: `bytes` are either a `.sog` zip or the `meta.json` of an unbundled
