@@ -6,8 +6,8 @@ own reference writers, with reference values decoded by PlayCanvas's splat-trans
   from 200 Gaussians of `fruit_drops_minimal.ply`.
 - `tiny_l0.ksplat`, `tiny_l1.ksplat`, `tiny_l2.ksplat`: GaussianSplats3D's generator
   (`scripts/ksplat_write.mjs`, the calls of its `util/create-ksplat.js`) at compression levels
-  0, 1 and 2, SH degree 2, small blocks (0.05) and buckets (16) so that positions use several
-  full and partial buckets.
+  0, 1 and 2, SH degree 2, blocks of 0.2 and buckets of 16 so that positions use both full
+  and partially filled buckets.
 - `tiny_splat_reference.json`: for every file, the Gaussians that splat-transform (another
   implementation than both writers and than ours) decodes from it (every 7th Gaussian and the
   last), activated in splatraj's convention. (The .ksplat generator drops Gaussians with alpha
@@ -76,7 +76,7 @@ def main():
             out = OUT / f"tiny_l{level}.ksplat"
             subprocess.run(
                 ["node", str(script), str(source), str(out), str(level),
-                 str(KSPLAT_SH_DEGREE), "0.05", "16"],
+                 str(KSPLAT_SH_DEGREE), "0.2", "16"],
                 check=True,
             )
             files.append((out.name, out))

@@ -470,8 +470,8 @@ fn decode_palette(
         }
         for j in 0..rest {
             let texel = centroids.at(row * centroids.width + first + j);
-            for c in 0..3 {
-                scene.sh[i * stride + (1 + j) * 3 + c] = dequantise(texel[c], i)?;
+            for (c, &byte) in texel[..3].iter().enumerate() {
+                scene.sh[i * stride + (1 + j) * 3 + c] = dequantise(byte, i)?;
             }
         }
     }
@@ -536,8 +536,8 @@ fn decode_v2(meta: &MetaV2, source: &mut Source<'_>, path: &Path) -> Result<Scen
     let stride = 3 * scene.sh_coeffs();
     for i in 0..n {
         let t = sh0.at(i);
-        for c in 0..3 {
-            scene.sh[i * stride + c] = lookup(&meta.sh0.codebook, t[c], i, "sh0", path)?;
+        for (c, &byte) in t[..3].iter().enumerate() {
+            scene.sh[i * stride + c] = lookup(&meta.sh0.codebook, byte, i, "sh0", path)?;
         }
         scene.opacities.push(f32::from(t[3]) / 255.0);
     }

@@ -37,7 +37,7 @@ const MAX_PLAUSIBLE_COORD: f32 = 1e7;
 /// (most of them: a real capture may hold a few invalid Gaussians, which validation reports)
 /// have finite positions and positive finite scales.
 pub fn looks_like_splat(bytes: &[u8]) -> bool {
-    if bytes.is_empty() || bytes.len() % RECORD_LEN != 0 {
+    if bytes.is_empty() || !bytes.len().is_multiple_of(RECORD_LEN) {
         return false;
     }
     let sampled = (bytes.len() / RECORD_LEN).min(SAMPLE_RECORDS);
@@ -55,7 +55,7 @@ pub fn looks_like_splat(bytes: &[u8]) -> bool {
 
 /// Decodes a `.splat` file into an unvalidated scene (SH degree 0).
 pub fn decode_splat(bytes: &[u8], path: &Path) -> Result<Scene> {
-    if bytes.is_empty() || bytes.len() % RECORD_LEN != 0 {
+    if bytes.is_empty() || !bytes.len().is_multiple_of(RECORD_LEN) {
         return Err(SceneError::malformed(
             path,
             format!(
