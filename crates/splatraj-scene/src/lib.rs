@@ -2,7 +2,8 @@
 //!
 //! This crate holds the scene model ([`Scene`], a struct of arrays of activated values), the
 //! readers for the files users have (INRIA 3DGS PLY in binary and ASCII, PlayCanvas/SuperSplat
-//! compressed PLY, Niantic SPZ, label sidecars), the INRIA PLY writer, validation with clear
+//! compressed PLY, Niantic SPZ, PlayCanvas SOG, antimatter15 `.splat`, GaussianSplats3D
+//! `.ksplat`, label sidecars), the INRIA PLY writer, validation with clear
 //! errors, a guess of the scene's up axis, and the procedural demo scene. It does not render,
 //! select objects or depend on burn: those live in the crates further down the pipeline.
 
