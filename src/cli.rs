@@ -222,6 +222,8 @@ pub fn bar_observer(bar: &ProgressBar, interrupted: Arc<AtomicBool>) -> impl Obs
                 bar.set_message(format!("best {best:.4}"));
             }
             Progress::Frame { done, .. } => bar.set_position(done as u64),
+            // Each command draws its phases its own way.
+            Progress::Phase(_) => {}
         }
         if interrupted.load(Ordering::SeqCst) {
             Flow::Stop

@@ -8,22 +8,16 @@
 //! `pose.json` (best pose and every start's result), `history.csv`, `metrics.json` (TCE, TRE,
 //! IoU of the best pose at the output resolution), `frame.png`, and with `--sgld`
 //! `sgld_samples.csv`. Ctrl-C during the optimisation stops it and keeps each start's best.
-//! The work is the library's ([`splatraj::experiment::Experiment`]).
+//! The work, and every file, is the library's ([`splatraj::experiment::process`]).
 
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use serde::Serialize;
-use splatraj::experiment::config::{Ablation, Config, MaskOverlay};
-use splatraj::experiment::outputs::{
-    FrameSpec, create_run_dir, frame_png, write_bytes, write_csv, write_json,
-};
-use splatraj::experiment::records::{PoseFile, pose_history, sgld_samples};
-use splatraj::experiment::resources::RAISE_LIMIT;
-use splatraj::experiment::{Experiment, Posterior};
-use splatraj_traj::metrics::WindowMetrics;
-use splatraj_traj::optimise::StopReason;
+use splatraj::experiment::Experiment;
+use splatraj::experiment::config::{Ablation, Config};
+use splatraj::experiment::observer::{Flow, Observer, Phase, Progress};
+use splatraj::experiment::process::RunFolder;
 
 use crate::cli::{Ended, MemoryArgs, bar_observer, interrupt_flag, progress_bar};
 
@@ -57,38 +51,6 @@ fn parse_ablation(s: &str) -> Result<Ablation, String> {
     s.parse()
 }
 
-/// `metrics.json` of a pose run.
-#[derive(Debug, Serialize)]
-struct PoseMetrics {
-    metrics: WindowMetrics,
-    sgld: Option<SgldSummary>,
-}
-
-/// Spread of the SGLD samples.
-#[derive(Debug, Serialize)]
-struct SgldSummary {
-    chains: usize,
-    samples: usize,
-    /// Mean and standard deviation of each pose component over the samples.
-    mean: [f64; 6],
-    std: [f64; 6],
-    skipped_updates: usize,
-    seconds: f64,
-}
-
-impl From<&Posterior> for SgldSummary {
-    fn from(p: &Posterior) -> Self {
-        SgldSummary {
-            chains: p.chains,
-            samples: p.samples.len(),
-            mean: p.mean,
-            std: p.std,
-            skipped_updates: p.skipped_updates,
-            seconds: p.elapsed.as_secs_f64(),
-        }
-    }
-}
-
 /// Runs `splatraj pose`.
 pub fn run(args: PoseArgs) -> Result<()> {
     let mut overrides = args.set.clone();
@@ -103,88 +65,52 @@ pub fn run(args: PoseArgs) -> Result<()> {
     }
     overrides.extend(args.memory.overrides());
     let config = Config::load(&args.config, &overrides)?;
-    if args.sgld == Some(0) {
-        anyhow::bail!("--sgld needs at least one chain");
-    }
     let experiment = Experiment::prepare(&config)?;
-    experiment
-        .pose_memory(args.sgld.unwrap_or(0))
-        .check(experiment.memory_limit()?, RAISE_LIMIT)?;
+    let plan = experiment.check_pose_run(args.sgld)?;
     let index = config.pose.query;
     let window = &experiment.windows[index];
-    let costs = experiment.pose_costs()?;
-    let starts = experiment.pose_starts()?;
     eprintln!(
         "query {:?}: {} Gaussians, {} start(s), costs {:?}",
         window.name,
         experiment.selected[index],
-        starts.len(),
-        costs.names()
+        experiment.pose_starts()?.len(),
+        experiment.pose_costs()?.names()
     );
+    let folder = RunFolder::create(&experiment)?;
+    eprintln!("run folder: {}", folder.dir().display());
 
-    let dir = create_run_dir(&config.output.runs_dir, &config.name)?;
-    eprintln!("run folder: {}", dir.display());
-    write_bytes(
-        &dir.join("config.toml"),
-        toml::to_string(&config)?.as_bytes(),
-    )?;
-
-    let bar = progress_bar(config.pose.optimiser.iterations as u64, args.quiet);
-    let run = experiment.optimise_pose(&mut bar_observer(&bar, interrupt_flag()))?;
-    bar.finish_and_clear();
-    let interrupted = run.stop() == StopReason::Interrupted;
-    if interrupted {
-        eprintln!("stopped by Ctrl-C: writing the best pose so far");
-    }
-    let (header, rows) = pose_history(&run.results);
-    write_csv(&dir.join("history.csv"), &header, &rows)?;
-    let best = run.best();
-
-    let sgld = match args.sgld {
-        Some(chains) => {
-            let bar = progress_bar(1, args.quiet);
-            bar.set_message(format!("SGLD, {chains} chains"));
-            bar.enable_steady_tick(std::time::Duration::from_millis(200));
-            let posterior = experiment.sample_posterior(best.pose, chains)?;
+    let bar = progress_bar(plan.steps as u64, args.quiet);
+    let interrupted = interrupt_flag();
+    let mut observer = |p: &Progress| {
+        if let Progress::Phase(Phase::Sgld { chains }) = *p {
             bar.finish_and_clear();
-            let (header, rows) = sgld_samples(&posterior);
-            write_csv(&dir.join("sgld_samples.csv"), &header, &rows)?;
-            Some(SgldSummary::from(&posterior))
+            eprintln!("SGLD, {chains} chains");
+            return Flow::Continue;
         }
-        None => None,
+        bar_observer(&bar, interrupted.clone()).progress(p)
     };
-    let pose_file = PoseFile::new(&experiment, &run);
-    write_json(&dir.join("pose.json"), &pose_file)?;
-
-    let metrics = experiment.evaluate_pose(best.pose)?;
+    let outcome = experiment.run_pose_in(&folder, args.sgld, &mut observer)?;
+    bar.finish_and_clear();
+    if outcome.interrupted {
+        eprintln!("stopped by Ctrl-C: wrote the best pose so far");
+    }
+    let (metrics, pose) = (&outcome.metrics.metrics, &outcome.pose);
     eprintln!(
         "best pose {:?}\nTCE {:.4}  TRE {:.4}  IoU {:.3}  visible {}  ({:.1} s, {:.0} ms/iteration for {} start(s))",
-        best.pose.0,
+        pose.pose,
         metrics.tce,
         metrics.tre,
         metrics.iou,
         metrics.visible,
-        pose_file.optimisation_s,
-        pose_file.per_iteration_ms,
-        starts.len()
+        pose.optimisation_s,
+        pose.per_iteration_ms,
+        pose.starts.len()
     );
-    let tint = (config.output.mask_overlay == MaskOverlay::Tint).then_some(window.mask.as_slice());
-    let camera = (&experiment.output_intrinsics()?, config.rasterizer);
-    let png = frame_png(
-        &experiment.plain_scene(),
-        camera,
-        &FrameSpec {
-            pose: best.pose.0,
-            tint,
-        },
-    )?;
-    write_bytes(&dir.join("frame.png"), &png)?;
-    write_json(&dir.join("metrics.json"), &PoseMetrics { metrics, sgld })?;
-    println!("{}", dir.display());
-    if interrupted {
+    println!("{}", outcome.dir.display());
+    if outcome.interrupted {
         return Err(Ended::interrupted(format!(
             "interrupted: {} holds the best pose so far",
-            dir.display()
+            outcome.dir.display()
         ))
         .into());
     }

@@ -5,8 +5,8 @@
 //! made; optimise from each start (a progress bar shows iteration, cost and time left; Ctrl-C
 //! or `optimiser.time_limit_s` stops early and keeps the best so far); then evaluate the
 //! per-window metrics on a fixed time grid at the output resolution, LDJ, and render frames.
-//! The work is the library's ([`splatraj::experiment::Experiment`]); this file draws progress
-//! and writes files.
+//! The work, and every file, is the library's ([`splatraj::experiment::process`]); this file
+//! parses, draws progress and prints.
 //!
 //! Nothing is lost: the estimated peak memory is checked against the limit before any work
 //! (`--check` runs the same checks, reads every input and tests that the runs folder is
@@ -16,19 +16,17 @@
 //! files for the best trajectory so far and exits 130.
 
 use std::path::PathBuf;
-use std::time::Instant;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 
 use anyhow::{Result, bail};
 use clap::Args;
+use indicatif::ProgressBar;
 use splatraj::experiment::config::{Config, VerdictPolicy};
-use splatraj::experiment::outputs::{create_run_dir, write_bytes, write_csv, write_json};
-use splatraj::experiment::records::trajectory_history;
-use splatraj::experiment::resources::RAISE_LIMIT;
-use splatraj::experiment::run_folder::{
-    MetricsFile, RunReport, StageTimes, check_writable, remove_checkpoint, remove_partial_files,
-    resumable,
-};
-use splatraj::experiment::{Evaluation, Experiment, RunOptions, RunStop};
+use splatraj::experiment::observer::{Flow, Observer, Phase, Progress};
+use splatraj::experiment::process::RunFolder;
+use splatraj::experiment::run_folder::{RunReport, resumable};
+use splatraj::experiment::{Evaluation, Experiment, RunStop};
 
 use crate::cli::{Ended, MemoryArgs, bar_observer, interrupt_flag, progress_bar};
 
@@ -58,10 +56,9 @@ pub struct RunArgs {
 
 /// Runs `splatraj run`.
 pub fn run(args: RunArgs) -> Result<()> {
-    let started = Instant::now();
     let mut overrides = args.set.clone();
     overrides.extend(args.memory.overrides());
-    let (config, resume) = match (&args.resume, &args.config) {
+    let (config, checkpoint) = match (&args.resume, &args.config) {
         (Some(dir), _) => {
             let (config, checkpoint) = resumable(dir, &overrides)?;
             eprintln!(
@@ -73,24 +70,16 @@ pub fn run(args: RunArgs) -> Result<()> {
                 checkpoint.steps,
                 checkpoint.best_total
             );
-            (config, Some((dir.clone(), checkpoint)))
+            (config, Some(checkpoint))
         }
         (None, Some(path)) => (Config::load(path, &overrides)?, None),
         (None, None) => bail!("give a config file, or --resume RUN_DIR"),
     };
     let experiment = Experiment::prepare(&config)?;
-    // Everything that can fail before the work is checked before any folder exists: the costs,
-    // the starts (reading `start.trajectory`), the memory, the runs folder.
-    experiment.costs()?;
-    let memory = experiment.trajectory_memory()?;
-    memory.check(experiment.memory_limit()?, RAISE_LIMIT)?;
-    let restarts = experiment.start_trajectories()?.len();
-    if resume.is_none() {
-        check_writable(&config.output.runs_dir.join(&config.name))?;
-    }
+    let plan = experiment.check_trajectory_run(checkpoint.is_some())?;
     print_plan(&experiment);
     if args.check {
-        if let Some(peak) = memory.peak() {
+        if let Some(peak) = plan.memory.peak() {
             eprintln!(
                 "check passed; peak memory about {} ({})",
                 splatraj::experiment::resources::show_bytes(peak.bytes),
@@ -99,99 +88,87 @@ pub fn run(args: RunArgs) -> Result<()> {
         }
         return Ok(());
     }
-
-    let dir = match &resume {
-        Some((dir, _)) => {
-            remove_partial_files(dir)?;
-            dir.clone()
-        }
-        None => {
-            let dir = create_run_dir(&config.output.runs_dir, &config.name)?;
-            // The config as run: every `"auto"` replaced by what was derived from the scene.
-            write_bytes(
-                &dir.join("config.toml"),
-                toml::to_string(&experiment.config)?.as_bytes(),
-            )?;
-            dir
-        }
+    let folder = match (&args.resume, checkpoint) {
+        (Some(dir), Some(checkpoint)) => RunFolder::resume(dir, checkpoint)?,
+        _ => RunFolder::create(&experiment)?,
     };
-    eprintln!("run folder: {}", dir.display());
+    eprintln!("run folder: {}", folder.dir().display());
 
-    let bar = progress_bar((config.optimiser.iterations * restarts) as u64, args.quiet);
-    let options = RunOptions {
-        checkpoint_dir: Some(&dir),
-        resume: resume.as_ref().map(|(_, c)| c),
-    };
-    let run = experiment.run_trajectory_with(options, &mut bar_observer(&bar, interrupt_flag()))?;
-    bar.finish_and_clear();
-    match run.stop {
-        RunStop::Interrupted => eprintln!("stopped by Ctrl-C: writing the best trajectory so far"),
-        RunStop::TimeLimit => {
-            eprintln!("`optimiser.time_limit_s` reached: writing the best trajectory so far")
-        }
-        RunStop::Finished => {}
-    }
-    let (header, rows) = trajectory_history(&run, experiment.windows.len());
-    write_csv(&dir.join("history.csv"), &header, &rows)?;
-    let trajectory = experiment.trajectory(&run.best().best)?;
-    write_json(
-        &dir.join("trajectory.json"),
-        &experiment.trajectory_file(&trajectory)?,
-    )?;
-
-    // Metrics and verdicts, frames, video and exports.
-    let frame_count = config.output.frame_count(experiment.windows.len());
-    let frame_bar = progress_bar(frame_count as u64, args.quiet);
-    frame_bar.set_message("metrics, frames");
-    let outputs = experiment.write_outputs(&trajectory, &dir, &mut |done| {
-        frame_bar.set_position(done as u64)
-    })?;
-    frame_bar.finish_and_clear();
-    let evaluation = outputs.evaluation;
-    let times = StageTimes {
-        metrics: outputs.metrics,
-        frames: outputs.frames,
-        total: started.elapsed(),
-    };
-
-    let report = RunReport::new(&experiment, &run, times);
-    print_summary(&evaluation, &report);
-    let (problems, failing) = (evaluation.problems(), evaluation.failing());
-    for problem in &problems {
+    let mut progress = RunProgress::new(plan.steps as u64, args.quiet);
+    let outcome = experiment.run_trajectory_in(&folder, &mut progress)?;
+    progress.finish();
+    print_summary(&outcome.evaluation, &outcome.report);
+    for problem in &outcome.problems {
         eprintln!("warning: {problem}");
     }
-    write_json(
-        &dir.join("metrics.json"),
-        &MetricsFile::new(evaluation, config.output.ldj_samples, report),
-    )?;
-    experiment.write_report(&dir)?;
+    let dir = &outcome.dir;
     println!("{}", dir.display());
-    match run.stop {
-        // A finished run needs no checkpoint; a stopped one keeps it for --resume.
-        RunStop::Finished => remove_checkpoint(&dir)?,
-        RunStop::TimeLimit => {}
-        RunStop::Interrupted => {
-            return Err(Ended::interrupted(format!(
-                "interrupted: {} holds the best trajectory so far; `splatraj run --resume {}` \
-                 continues the optimisation",
-                dir.display(),
-                dir.display()
-            ))
-            .into());
-        }
+    if outcome.stop == RunStop::Interrupted {
+        return Err(Ended::interrupted(format!(
+            "interrupted: {} holds the best trajectory so far; `splatraj run --resume {}` \
+             continues the optimisation",
+            dir.display(),
+            dir.display()
+        ))
+        .into());
     }
-    if problems.is_empty() || config.output.verdict == VerdictPolicy::Warn {
+    if outcome.problems.is_empty() || config.output.verdict == VerdictPolicy::Warn {
         Ok(())
     } else {
         Err(Ended::verdict_failed(format!(
             "verdict: {} of {} windows do not show their object as asked (see the warnings \
              above, `metrics.json`'s `verdict` and {}); exit status {}",
-            failing,
+            outcome.failing,
             experiment.windows.len(),
             dir.join("report.html").display(),
             crate::cli::EXIT_VERDICT
         ))
         .into())
+    }
+}
+
+/// The bars of a run: the optimisation's, then the outputs' (metrics, frames), with the
+/// reason a stopped optimisation ended.
+struct RunProgress {
+    bar: ProgressBar,
+    quiet: bool,
+    interrupted: Arc<AtomicBool>,
+}
+
+impl RunProgress {
+    fn new(steps: u64, quiet: bool) -> Self {
+        RunProgress {
+            bar: progress_bar(steps, quiet),
+            quiet,
+            interrupted: interrupt_flag(),
+        }
+    }
+
+    fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
+}
+
+impl Observer for RunProgress {
+    fn progress(&mut self, progress: &Progress) -> Flow {
+        if let Progress::Phase(Phase::Outputs { frames, stop }) = *progress {
+            self.bar.finish_and_clear();
+            match stop {
+                RunStop::Interrupted => {
+                    eprintln!("stopped by Ctrl-C: writing the best trajectory so far")
+                }
+                RunStop::TimeLimit => {
+                    eprintln!(
+                        "`optimiser.time_limit_s` reached: writing the best trajectory so far"
+                    )
+                }
+                RunStop::Finished => {}
+            }
+            self.bar = progress_bar(frames as u64, self.quiet);
+            self.bar.set_message("metrics, frames");
+            return Flow::Continue;
+        }
+        bar_observer(&self.bar, self.interrupted.clone()).progress(progress)
     }
 }
 

@@ -66,6 +66,8 @@ pub struct Experiment {
     #[allow(clippy::type_complexity)]
     pub(crate) views_cache:
         std::sync::Mutex<Option<(String, Vec<Vec<splatraj_traj::optimise::Candidate>>)>>,
+    /// When [`Experiment::prepare`] started: a run's total time counts from here.
+    pub prepared_at: std::time::Instant,
 }
 
 impl Experiment {
@@ -77,6 +79,7 @@ impl Experiment {
     /// [`Experiment::prepare`] for a config that may use the costs, trajectory models and
     /// target sources of `extensions`.
     pub fn prepare_with(config: &Config, extensions: &Extensions) -> Result<Self> {
+        let prepared_at = std::time::Instant::now();
         let (scene, scene_name) = load_scene(config)?;
         if scene.is_empty() {
             bail!("scene {scene_name} has no Gaussians");
@@ -107,6 +110,7 @@ impl Experiment {
             intrinsics,
             occupancy_cache: Default::default(),
             views_cache: Default::default(),
+            prepared_at,
         };
         experiment.ground_queries()?;
         if experiment.config.camera.working_distance == crate::config::WorkingDistance::Measured {

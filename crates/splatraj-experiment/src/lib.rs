@@ -36,6 +36,7 @@ pub mod path_checks;
 pub mod path_render;
 pub mod pose_run;
 pub mod probe;
+pub mod process;
 pub mod quality;
 pub mod query;
 pub mod records;

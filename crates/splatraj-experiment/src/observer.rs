@@ -30,12 +30,31 @@ pub enum Progress {
         /// Lowest total so far over all starts.
         best: f64,
     },
+    /// The work moved on to its next phase.
+    Phase(Phase),
     /// A frame was rendered.
     Frame {
         /// Frames done.
         done: usize,
         /// Frames in all.
         frames: usize,
+    },
+}
+
+/// A phase of an experiment after its optimisation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Phase {
+    /// The optimisation ended (`stop` says why); metrics, frames, video and exports follow.
+    Outputs {
+        /// Frames to render.
+        frames: usize,
+        /// Why the optimisation ended.
+        stop: crate::RunStop,
+    },
+    /// SGLD chains start from the best pose.
+    Sgld {
+        /// Chains.
+        chains: usize,
     },
 }
 

@@ -46,7 +46,7 @@ impl MetricsFile {
 }
 
 /// How the optimisation went (`metrics.json`'s `run`).
-#[derive(Debug, Serialize)]
+#[derive(Debug, Clone, Serialize)]
 pub struct RunReport {
     /// Scene name.
     pub scene: String,

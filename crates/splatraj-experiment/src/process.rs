@@ -1,0 +1,314 @@
+//! One process API: a whole experiment, trajectory (`splatraj run`) or pose (`splatraj pose`),
+//! into a run folder the library owns.
+//!
+//! A library user gets exactly the folder the command line gets, because the commands call
+//! these same functions and only draw progress and print. The order of work is the
+//! commands': every check that can fail before the work ([`Experiment::check_trajectory_run`],
+//! [`Experiment::check_pose_run`]) runs before any folder exists; [`RunFolder::create`] makes
+//! `runs_dir/name/<timestamp>/` with the config as run, or [`RunFolder::resume`] reopens a
+//! stopped run's folder; then [`Experiment::run_trajectory_in`] / [`Experiment::run_pose_in`]
+//! optimise (checkpointing a trajectory run) and write every file. Progress of every kind
+//! (steps, restarts, the switch to the outputs, frames, SGLD) reaches the [`Observer`].
+//!
+//! ```no_run
+//! use splatraj_experiment::{Config, Experiment, observer, process::RunFolder};
+//! # fn main() -> anyhow::Result<()> {
+//! let config = Config::load(std::path::Path::new("configs/demo.toml"), &[])?;
+//! let experiment = Experiment::prepare(&config)?;
+//! experiment.check_trajectory_run(false)?;
+//! let folder = RunFolder::create(&experiment)?;
+//! let outcome = experiment.run_trajectory_in(&folder, &mut observer::quiet())?;
+//! println!("{} ({} windows failing)", outcome.dir.display(), outcome.failing);
+//! # Ok(())
+//! # }
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Result, bail};
+use serde::Serialize;
+use splatraj_traj::metrics::WindowMetrics;
+use splatraj_traj::optimise::StopReason;
+
+use crate::checkpoint::Checkpoint;
+use crate::config::MaskOverlay;
+use crate::experiment::Experiment;
+use crate::observer::{Observer, Phase, Progress};
+use crate::outputs::{FrameSpec, create_run_dir, frame_png, write_bytes, write_csv, write_json};
+use crate::records::{PoseFile, pose_history, sgld_samples, trajectory_history};
+use crate::resources::{MemoryPlan, RAISE_LIMIT};
+use crate::run_folder::{
+    MetricsFile, RunReport, StageTimes, check_writable, remove_checkpoint, remove_partial_files,
+};
+use crate::{Evaluation, Posterior, RunOptions, RunStop};
+
+/// The run's config as run: every `"auto"` replaced by what was derived from the scene.
+pub const CONFIG_FILE: &str = "config.toml";
+
+/// A run's folder: where every file of one run goes.
+#[derive(Debug)]
+pub struct RunFolder {
+    dir: PathBuf,
+    checkpoint: Option<Checkpoint>,
+}
+
+impl RunFolder {
+    /// A new folder `output.runs_dir/name/<timestamp>/` holding the experiment's config as run.
+    pub fn create(experiment: &Experiment) -> Result<RunFolder> {
+        let config = &experiment.config;
+        let dir = create_run_dir(&config.output.runs_dir, &config.name)?;
+        write_bytes(&dir.join(CONFIG_FILE), toml::to_string(config)?.as_bytes())?;
+        Ok(RunFolder {
+            dir,
+            checkpoint: None,
+        })
+    }
+
+    /// The folder of a stopped trajectory run, cleared of the temporaries a killed process
+    /// left, to continue from `checkpoint` ([`crate::run_folder::resumable`] reads both).
+    pub fn resume(dir: &Path, checkpoint: Checkpoint) -> Result<RunFolder> {
+        remove_partial_files(dir)?;
+        Ok(RunFolder {
+            dir: dir.to_path_buf(),
+            checkpoint: Some(checkpoint),
+        })
+    }
+
+    /// The folder.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The checkpoint a resumed run continues from.
+    pub fn checkpoint(&self) -> Option<&Checkpoint> {
+        self.checkpoint.as_ref()
+    }
+}
+
+/// What a trajectory experiment did and found.
+#[derive(Debug)]
+pub struct TrajectoryOutcome {
+    /// Its run folder.
+    pub dir: PathBuf,
+    /// Why the optimisation ended.
+    pub stop: RunStop,
+    /// The per-window metrics, verdicts and LDJ (as written to `metrics.json`).
+    pub evaluation: Evaluation,
+    /// How the optimisation went (`metrics.json`'s `run`).
+    pub report: RunReport,
+    /// One line per window that fails its verdict (what is wrong and the likely fix).
+    pub problems: Vec<String>,
+    /// Windows failing their verdict.
+    pub failing: usize,
+}
+
+/// `metrics.json` of a pose run.
+#[derive(Debug, Serialize)]
+pub struct PoseMetrics {
+    /// The best pose's metrics at the output resolution.
+    pub metrics: WindowMetrics,
+    /// The SGLD samples' spread, when chains ran.
+    pub sgld: Option<SgldSummary>,
+}
+
+/// Spread of the SGLD samples.
+#[derive(Debug, Serialize)]
+pub struct SgldSummary {
+    /// Chains run.
+    pub chains: usize,
+    /// Samples kept.
+    pub samples: usize,
+    /// Mean of each pose component over the samples.
+    pub mean: [f64; 6],
+    /// Standard deviation of each pose component over the samples.
+    pub std: [f64; 6],
+    /// Updates skipped for a non-finite gradient.
+    pub skipped_updates: usize,
+    /// Wall time.
+    pub seconds: f64,
+}
+
+impl From<&Posterior> for SgldSummary {
+    fn from(p: &Posterior) -> Self {
+        SgldSummary {
+            chains: p.chains,
+            samples: p.samples.len(),
+            mean: p.mean,
+            std: p.std,
+            skipped_updates: p.skipped_updates,
+            seconds: p.elapsed.as_secs_f64(),
+        }
+    }
+}
+
+/// What a pose experiment did and found.
+#[derive(Debug)]
+pub struct PoseOutcome {
+    /// Its run folder.
+    pub dir: PathBuf,
+    /// Whether Ctrl-C (the observer) stopped the optimisation.
+    pub interrupted: bool,
+    /// `pose.json`: the best pose and every start's result.
+    pub pose: PoseFile,
+    /// `metrics.json`.
+    pub metrics: PoseMetrics,
+}
+
+/// What the checks before a run found.
+#[derive(Debug)]
+pub struct RunPlan {
+    /// Estimated peak memory, stage by stage (checked against the limit).
+    pub memory: MemoryPlan,
+    /// Optimisation steps in all (restarts × iterations), for a progress bar.
+    pub steps: usize,
+}
+
+impl Experiment {
+    /// Every check of a trajectory run that can fail before the work: its costs, the memory
+    /// against the limit, the starts (reading `start.trajectory`), and, for a new run
+    /// (`resuming` false), that the runs folder can be written.
+    pub fn check_trajectory_run(&self, resuming: bool) -> Result<RunPlan> {
+        self.costs()?;
+        let memory = self.trajectory_memory()?;
+        memory.check(self.memory_limit()?, RAISE_LIMIT)?;
+        let restarts = self.start_trajectories()?.len();
+        if !resuming {
+            check_writable(&self.config.output.runs_dir.join(&self.config.name))?;
+        }
+        Ok(RunPlan {
+            memory,
+            steps: restarts * self.config.optimiser.iterations,
+        })
+    }
+
+    /// Runs the trajectory experiment into `folder` and writes every file: the optimisation
+    /// (checkpointed to `checkpoint.json`; a resumed folder continues its checkpoint),
+    /// `history.csv`, `trajectory.json`, then the metrics, frames, `video.mp4`, exports,
+    /// `metrics.json` and `report.html`. A finished run drops its checkpoint; a stopped one
+    /// keeps it for a resume. The observer hears every step (and may stop the optimisation,
+    /// keeping the best so far), then [`Phase::Outputs`] and every frame.
+    pub fn run_trajectory_in(
+        &self,
+        folder: &RunFolder,
+        observer: &mut dyn Observer,
+    ) -> Result<TrajectoryOutcome> {
+        let dir = folder.dir();
+        let options = RunOptions {
+            checkpoint_dir: Some(dir),
+            resume: folder.checkpoint(),
+        };
+        let run = self.run_trajectory_with(options, observer)?;
+        let (header, rows) = trajectory_history(&run, self.windows.len());
+        write_csv(&dir.join("history.csv"), &header, &rows)?;
+        let trajectory = self.trajectory(&run.best().best)?;
+        write_json(
+            &dir.join("trajectory.json"),
+            &self.trajectory_file(&trajectory)?,
+        )?;
+
+        let frames = self.config.output.frame_count(self.windows.len());
+        observer.progress(&Progress::Phase(Phase::Outputs {
+            frames,
+            stop: run.stop,
+        }));
+        let outputs = self.write_outputs(&trajectory, dir, &mut |done| {
+            // The frames are the run's result: a stop request does not cut them short.
+            observer.progress(&Progress::Frame { done, frames });
+        })?;
+        let times = StageTimes {
+            metrics: outputs.metrics,
+            frames: outputs.frames,
+            total: self.prepared_at.elapsed(),
+        };
+        let report = RunReport::new(self, &run, times);
+        let evaluation = outputs.evaluation;
+        let (problems, failing) = (evaluation.problems(), evaluation.failing());
+        write_json(
+            &dir.join("metrics.json"),
+            &MetricsFile::new(
+                evaluation.clone(),
+                self.config.output.ldj_samples,
+                report.clone(),
+            ),
+        )?;
+        self.write_report(dir)?;
+        if run.stop == RunStop::Finished {
+            remove_checkpoint(dir)?;
+        }
+        Ok(TrajectoryOutcome {
+            dir: dir.to_path_buf(),
+            stop: run.stop,
+            evaluation,
+            report,
+            problems,
+            failing,
+        })
+    }
+
+    /// Every check of a pose run that can fail before the work: the SGLD chain count, the
+    /// memory against the limit, the costs and the starts.
+    pub fn check_pose_run(&self, sgld: Option<usize>) -> Result<RunPlan> {
+        if sgld == Some(0) {
+            bail!("SGLD needs at least one chain (--sgld)");
+        }
+        let memory = self.pose_memory(sgld.unwrap_or(0));
+        memory.check(self.memory_limit()?, RAISE_LIMIT)?;
+        self.pose_costs()?;
+        self.pose_starts()?;
+        Ok(RunPlan {
+            memory,
+            steps: self.config.pose.optimiser.iterations,
+        })
+    }
+
+    /// Runs the pose experiment (`[pose]`) into `folder`: the batched optimisation
+    /// (`history.csv`), `sgld` chains from the best pose when asked (`sgld_samples.csv`),
+    /// `pose.json`, `frame.png` and `metrics.json`. The observer hears every step (and may stop
+    /// the optimisation, keeping each start's best), then [`Phase::Sgld`].
+    pub fn run_pose_in(
+        &self,
+        folder: &RunFolder,
+        sgld: Option<usize>,
+        observer: &mut dyn Observer,
+    ) -> Result<PoseOutcome> {
+        let dir = folder.dir();
+        let run = self.optimise_pose(observer)?;
+        let interrupted = run.stop() == StopReason::Interrupted;
+        let (header, rows) = pose_history(&run.results);
+        write_csv(&dir.join("history.csv"), &header, &rows)?;
+        let best = run.best();
+        let sgld = match sgld {
+            Some(chains) => {
+                observer.progress(&Progress::Phase(Phase::Sgld { chains }));
+                let posterior = self.sample_posterior(best.pose, chains)?;
+                let (header, rows) = sgld_samples(&posterior);
+                write_csv(&dir.join("sgld_samples.csv"), &header, &rows)?;
+                Some(SgldSummary::from(&posterior))
+            }
+            None => None,
+        };
+        let pose = PoseFile::new(self, &run);
+        write_json(&dir.join("pose.json"), &pose)?;
+        let metrics = self.evaluate_pose(best.pose)?;
+        let window = &self.windows[self.config.pose.query];
+        let tint = (self.config.output.mask_overlay == MaskOverlay::Tint)
+            .then_some(window.mask.as_slice());
+        let png = frame_png(
+            &self.plain_scene(),
+            (&self.output_intrinsics()?, self.config.rasterizer),
+            &FrameSpec {
+                pose: best.pose.0,
+                tint,
+            },
+        )?;
+        write_bytes(&dir.join("frame.png"), &png)?;
+        let metrics = PoseMetrics { metrics, sgld };
+        write_json(&dir.join("metrics.json"), &metrics)?;
+        Ok(PoseOutcome {
+            dir: dir.to_path_buf(),
+            interrupted,
+            pose,
+            metrics,
+        })
+    }
+}
