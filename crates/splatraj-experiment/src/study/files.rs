@@ -7,6 +7,7 @@ use std::path::Path;
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 
+use super::context::command_line;
 use super::plan::{Shard, StudyPlan};
 use super::plot::frontier_svg;
 use super::rows::{StudyRow, study_csv};
@@ -197,8 +198,58 @@ pub fn merge_studies(dirs: &[&Path]) -> Result<StudyFile> {
         }
     }
     let context = StudyContext {
-        command: None,
+        command: Some(merge_command(dirs, std::env::args())),
         ..first.context.clone()
     };
     Ok(StudyFile::new(first.plan, None, context, rows, failures))
+}
+
+/// The command that regenerates a merged study, for its `summary.md`: the process's own command
+/// line when it is a `study merge` (only that one names `--out`, which this function is not
+/// told), else a merge of `dirs` into a folder left for the reader to fill in.
+fn merge_command(dirs: &[&Path], process: impl IntoIterator<Item = String>) -> String {
+    let args: Vec<String> = process.into_iter().collect();
+    if args.windows(2).any(|w| w[0] == "study" && w[1] == "merge") {
+        return command_line(args);
+    }
+    let named = ["splatraj", "study", "merge"]
+        .into_iter()
+        .map(String::from)
+        .chain(dirs.iter().map(|d| d.display().to_string()));
+    format!("{} --out <folder>", command_line(named))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn strings(args: &[&str]) -> Vec<String> {
+        args.iter().map(|a| a.to_string()).collect()
+    }
+
+    #[test]
+    fn a_merge_names_the_command_that_regenerates_it() {
+        let dirs = [
+            Path::new("studies/demo/shard-1"),
+            Path::new("studies/demo/shard 2"),
+        ];
+        let typed = strings(&[
+            "/usr/local/bin/splatraj",
+            "study",
+            "merge",
+            "studies/demo/shard-1",
+            "studies/demo/shard 2",
+            "--out",
+            "studies/demo/all",
+        ]);
+        assert_eq!(
+            merge_command(&dirs, typed),
+            "splatraj study merge studies/demo/shard-1 'studies/demo/shard 2' --out studies/demo/all"
+        );
+        // Called from elsewhere (a test binary, a library user): the folders, --out to fill in.
+        assert_eq!(
+            merge_command(&dirs, strings(&["tests-1234", "--nocapture"])),
+            "splatraj study merge studies/demo/shard-1 'studies/demo/shard 2' --out <folder>"
+        );
+    }
 }
