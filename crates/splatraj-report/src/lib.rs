@@ -107,6 +107,8 @@ pub struct ExportOptions {
     pub keyframes_per_second: f64,
     /// SuperSplat: focus distance of the look-at targets.
     pub focus: supersplat::Focus,
+    /// SuperSplat: which frames become keyframes.
+    pub supersplat_keyframes: supersplat::Keyframes,
 }
 
 impl Default for ExportOptions {
@@ -115,6 +117,7 @@ impl Default for ExportOptions {
             fps: 30.0,
             keyframes_per_second: nerfstudio::NerfstudioOptions::default().keyframes_per_second,
             focus: supersplat::Focus::Distance(1.0),
+            supersplat_keyframes: supersplat::SupersplatOptions::default().keyframes,
         }
     }
 }
@@ -153,6 +156,7 @@ pub fn export(
                 &supersplat::SupersplatOptions {
                     fps: options.fps,
                     focus: options.focus.clone(),
+                    keyframes: options.supersplat_keyframes,
                 },
             )?,
         )],

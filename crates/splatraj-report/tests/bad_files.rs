@@ -285,6 +285,7 @@ fn exports_refuse_what_they_cannot_write() {
         &SupersplatOptions {
             fps: 30.0,
             focus: Focus::PerFrame(vec![1.0, 2.0]),
+            ..SupersplatOptions::default()
         },
     )
     .unwrap_err()

@@ -224,6 +224,7 @@ fn supersplat_export_flips_x_and_y_and_targets_along_the_view() {
     let options = SupersplatOptions {
         fps: 30.0,
         focus: Focus::Distance(4.0),
+        ..SupersplatOptions::default()
     };
     let text = supersplat::export(&path, &options).unwrap();
     let json: Value = serde_json::from_str(&text).unwrap();

@@ -5,7 +5,7 @@
 use std::f64::consts::PI;
 
 use splatraj_report::camera::{CameraPath, CameraPose, Frame, Pinhole};
-use splatraj_report::supersplat::{Focus, SupersplatOptions};
+use splatraj_report::supersplat::{Focus, Keyframes, SupersplatOptions};
 use splatraj_report::{ExportOptions, Format, colmap, inria, nerfstudio, supersplat};
 
 const TOL: f64 = 1e-6;
@@ -209,6 +209,8 @@ fn supersplat_round_trip_of_upright_cameras() {
     let options = SupersplatOptions {
         fps: 30.0,
         focus: Focus::PerFrame(vec![1.0, 2.0, 0.5, 10.0]),
+        // Every frame keyed: exact at each frame (sparse keys: tests/supersplat_keys.rs).
+        keyframes: Keyframes::EveryFrame,
     };
     let text = supersplat::export(&path, &options).unwrap();
     let back = supersplat::import(&text, "settings.json", 240, 320.0 / 240.0).unwrap();
@@ -241,7 +243,12 @@ fn every_format_round_trips_through_files_and_detection() {
     for format in Format::ALL {
         let folder = dir.join(format.name());
         std::fs::create_dir_all(&folder).unwrap();
-        let files = splatraj_report::export(&path, format, &ExportOptions::default()).unwrap();
+        // Every SuperSplat frame keyed, so each format reads back exactly.
+        let options = ExportOptions {
+            supersplat_keyframes: Keyframes::EveryFrame,
+            ..ExportOptions::default()
+        };
+        let files = splatraj_report::export(&path, format, &options).unwrap();
         let names: Vec<&str> = files.iter().map(|f| f.0).collect();
         assert_eq!(names, format.file_names());
         for (name, text) in &files {
