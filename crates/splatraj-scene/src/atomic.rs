@@ -42,11 +42,15 @@ fn track(tmp: &Path, writing: bool) {
 /// Writes a file through `fill` so that `path` appears complete or not at all.
 ///
 /// The temporary file lives in the same folder (a rename across file systems would not be
-/// atomic) and is removed if `fill` fails.
+/// atomic) and is removed if `fill` fails. Only a new path or a regular file is replaced:
+/// a device (`/dev/null`, `/dev/full`), a pipe, a socket, a folder or a symbolic link at
+/// `path` is refused before anything is written, since the rename would put a regular file in
+/// its place (a device node or a link the user made would be gone).
 pub fn write_atomically(
     path: &Path,
     fill: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
+    refuse_special(path)?;
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
@@ -70,4 +74,70 @@ pub fn write_atomically(
     }
     track(&tmp, false);
     result
+}
+
+/// An error unless `path` is free or a regular file (not followed if it is a link).
+pub fn refuse_special(path: &Path) -> std::io::Result<()> {
+    let Ok(meta) = std::fs::symlink_metadata(path) else {
+        return Ok(()); // a new path
+    };
+    let kind = meta.file_type();
+    let what = if kind.is_file() {
+        return Ok(());
+    } else if kind.is_dir() {
+        "a folder"
+    } else if kind.is_symlink() {
+        "a symbolic link"
+    } else {
+        "a special file (a device, a pipe or a socket)"
+    };
+    Err(std::io::Error::new(
+        std::io::ErrorKind::AlreadyExists,
+        format!(
+            "{} is {what}: splatraj replaces only regular files",
+            path.display()
+        ),
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn special_files_are_refused_and_left_alone() {
+        let dir = tempfile::tempdir().unwrap();
+        let folder = dir.path().join("folder");
+        std::fs::create_dir(&folder).unwrap();
+        let target = dir.path().join("target.txt");
+        std::fs::write(&target, "theirs").unwrap();
+        let link = dir.path().join("link.txt");
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        for (path, what) in [
+            (Path::new("/dev/null"), "special file"),
+            (folder.as_path(), "folder"),
+            (link.as_path(), "symbolic link"),
+        ] {
+            let err = write_atomically(path, |w| w.write_all(b"ours")).unwrap_err();
+            assert!(err.to_string().contains(what), "{path:?}: {err}");
+        }
+        assert!(
+            std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink()
+        );
+        assert_eq!(std::fs::read_to_string(&target).unwrap(), "theirs");
+        {
+            use std::os::unix::fs::FileTypeExt;
+            let null = std::fs::metadata("/dev/null").unwrap().file_type();
+            assert!(null.is_char_device(), "/dev/null is still a device");
+        }
+        // A regular file and a new path are written.
+        write_atomically(&target, |w| w.write_all(b"ours")).unwrap();
+        assert_eq!(std::fs::read_to_string(&target).unwrap(), "ours");
+        let fresh = dir.path().join("fresh.txt");
+        write_atomically(&fresh, |w| w.write_all(b"new")).unwrap();
+        assert_eq!(std::fs::read_to_string(&fresh).unwrap(), "new");
+    }
 }
