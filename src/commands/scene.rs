@@ -13,7 +13,8 @@ use splatraj_render::backend::BackendKind;
 use splatraj_scene::demo::{DemoConfig, demo_scene};
 use splatraj_scene::formats::{LoadedScene, write_label_sidecar};
 use splatraj_scene::{
-    Bounds, InvalidPolicy, ReadOptions, Scene, SceneFormat, UpGuess, guess_up_axis, write_inria_ply,
+    Bounds, InvalidPolicy, ReadOptions, Scene, SceneFormat, UpGuess, guess_up_axis,
+    write_inria_ply, write_scene,
 };
 
 use crate::cli::{ReadArgs, progress_bar};
@@ -31,12 +32,17 @@ pub enum SceneCommand {
         #[arg(long)]
         json: bool,
     },
-    /// Convert any readable scene to INRIA binary PLY (with labels and other extras).
+    /// Convert any readable scene to INRIA binary PLY (with labels and other extras),
+    /// PlayCanvas compressed PLY or Niantic SPZ, chosen by the output's name or `--format`.
     Convert {
         /// Input scene file.
         input: PathBuf,
-        /// Output `.ply` file (written whole or not at all).
+        /// Output file (written whole or not at all): `.ply` (INRIA), `.compressed.ply` or
+        /// `.spz`.
         output: PathBuf,
+        /// Output format, whatever the output's name: inria-ply, compressed-ply or spz.
+        #[arg(long, value_parser = parse_output_format)]
+        format: Option<SceneFormat>,
         #[command(flatten)]
         read: ReadArgs,
     },
@@ -103,15 +109,39 @@ pub fn run(command: SceneCommand) -> Result<()> {
         SceneCommand::Convert {
             input,
             output,
+            format,
             read,
         } => {
+            // Decided before reading, so a wrong name fails at once.
+            let format = match format {
+                Some(format) => {
+                    // An explicit format may name any file, but not one whose name says
+                    // another format: that file would mislead whoever opens it by its name.
+                    if let Some(named) = SceneFormat::from_extension(&output)
+                        && named != format
+                    {
+                        bail!(
+                            "{}: the name says {} ({}) but --format is {}; rename the output \
+                             or drop --format",
+                            output.display(),
+                            named.name(),
+                            named.extension(),
+                            format.name()
+                        );
+                    }
+                    format
+                }
+                None => SceneFormat::for_output(&output)?,
+            };
             let loaded = read.load(&input)?;
-            write_inria_ply(&loaded.scene, &output)?;
+            warn_dropped_extras(&loaded.scene, format);
+            write_scene(&loaded.scene, &output, format)?;
             eprintln!(
-                "wrote {} Gaussians (SH degree {}) to {}",
+                "wrote {} Gaussians (SH degree {}) to {} ({})",
                 loaded.scene.len(),
                 loaded.scene.sh_degree,
-                output.display()
+                output.display(),
+                format.name()
             );
         }
         SceneCommand::Demo {
@@ -130,6 +160,47 @@ pub fn run(command: SceneCommand) -> Result<()> {
         SceneCommand::LiftMasks(args) => lift_masks(&args)?,
     }
     Ok(())
+}
+
+/// `--format` of `scene convert`: a format splatraj writes.
+fn parse_output_format(name: &str) -> std::result::Result<SceneFormat, String> {
+    let names: Vec<&str> = SceneFormat::WRITABLE.iter().map(|f| f.name()).collect();
+    match SceneFormat::from_name(name) {
+        Some(format) if SceneFormat::WRITABLE.contains(&format) => Ok(format),
+        Some(_) => Err(format!(
+            "splatraj reads {name} but does not write it (it writes {})",
+            names.join(", ")
+        )),
+        None => Err(format!(
+            "unknown format '{name}' (splatraj writes {})",
+            names.join(", ")
+        )),
+    }
+}
+
+/// Says which of the scene's extras the output format has no place for.
+fn warn_dropped_extras(scene: &Scene, format: SceneFormat) {
+    if format == SceneFormat::InriaPly {
+        return;
+    }
+    let extras = &scene.extras;
+    let mut dropped = Vec::new();
+    if extras.labels.is_some() {
+        dropped.push("labels".to_string());
+    }
+    if let Some(features) = &extras.features {
+        dropped.push(format!("{} feature channels", features.dim));
+    }
+    if !extras.properties.is_empty() {
+        dropped.push(format!("{} other properties", extras.properties.len()));
+    }
+    if !dropped.is_empty() {
+        eprintln!(
+            "warning: {} cannot hold {}; they are not written (INRIA .ply keeps them)",
+            format.name(),
+            dropped.join(", ")
+        );
+    }
 }
 
 /// Most neighbours `--neighbours` may ask.

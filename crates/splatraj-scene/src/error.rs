@@ -46,6 +46,15 @@ pub enum SceneError {
         /// What is wrong with it.
         problem: String,
     },
+    /// The scene cannot be written there: a format splatraj does not write, or a target that
+    /// is not a regular file.
+    #[error("{path}: cannot write: {detail}")]
+    Unwritable {
+        /// Target file concerned.
+        path: PathBuf,
+        /// Why, naming the extension or the kind of file found.
+        detail: String,
+    },
     /// A sidecar (labels, features) does not fit the scene it was given for.
     #[error("{path}: {detail}")]
     Sidecar {

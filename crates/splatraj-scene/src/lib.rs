@@ -3,7 +3,7 @@
 //! This crate holds the scene model ([`Scene`], a struct of arrays of activated values), the
 //! readers for the files users have (INRIA 3DGS PLY in binary and ASCII, PlayCanvas/SuperSplat
 //! compressed PLY, Niantic SPZ, PlayCanvas SOG, antimatter15 `.splat`, GaussianSplats3D
-//! `.ksplat`, label sidecars), the INRIA PLY writer, validation with clear
+//! `.ksplat`, label sidecars), writers of INRIA PLY, compressed PLY and SPZ, validation with clear
 //! errors, a guess of the scene's up axis, and the procedural demo scene. It does not render,
 //! select objects or depend on burn: those live in the crates further down the pipeline.
 
@@ -18,7 +18,10 @@ pub mod up_axis;
 pub mod validate;
 
 pub use error::{Result, SceneError};
-pub use formats::{ReadOptions, SceneFormat, read_scene, write_inria_ply};
+pub use formats::{
+    ReadOptions, SceneFormat, read_scene, write_compressed_ply, write_inria_ply, write_scene,
+    write_spz,
+};
 pub use scene::{Bounds, Extras, Features, Labels, NamedProperty, SH_C0, Scene};
 pub use up_axis::{ResolvedUp, UpGuess, UpSource, guess_up_axis, resolve_up};
 pub use validate::InvalidPolicy;

@@ -65,6 +65,48 @@ pub fn decode_sh_byte(byte: u8) -> f32 {
     (n - 0.5) * 8.0
 }
 
+/// `value` in [0, 1] as a `bits`-bit unsigned field (rounded, saturating): the inverse of
+/// [`unorm`].
+pub fn pack_unorm(value: f64, bits: u32) -> u32 {
+    let max = f64::from((1u32 << bits) - 1);
+    // NaN saturates to 0 through the cast.
+    (value * max + 0.5).floor().clamp(0.0, max) as u32
+}
+
+/// Packs three fractions in [0, 1] as 11/10/11 bits: the inverse of [`unpack_111011`].
+pub fn pack_111011(v: [f64; 3]) -> u32 {
+    (pack_unorm(v[0], 11) << 21) | (pack_unorm(v[1], 10) << 11) | pack_unorm(v[2], 11)
+}
+
+/// Packs a quaternion (w, x, y, z), not necessarily normalised, as 2-10-10-10 "smallest
+/// three": the inverse of [`unpack_rotation`]. `q` and −q are the same rotation, so the sign is
+/// chosen to make the dropped largest component positive.
+pub fn pack_rotation(q: [f32; 4]) -> u32 {
+    let norm = q
+        .iter()
+        .map(|&c| f64::from(c) * f64::from(c))
+        .sum::<f64>()
+        .sqrt();
+    let mut a = q.map(|c| f64::from(c) / norm);
+    let largest = (1..4).fold(0, |l, i| if a[i].abs() > a[l].abs() { i } else { l });
+    if a[largest] < 0.0 {
+        a = a.map(|c| -c);
+    }
+    let mut bits = largest as u32;
+    for (_, &c) in a.iter().enumerate().filter(|&(i, _)| i != largest) {
+        bits = (bits << 10) | pack_unorm(c * std::f64::consts::FRAC_1_SQRT_2 + 0.5, 10);
+    }
+    bits
+}
+
+/// The byte of an SH coefficient (degree ≥ 1): [-4, 4] in 256 steps, truncated as SuperSplat
+/// writes it; [`decode_sh_byte`] returns the middle of the step.
+pub fn encode_sh_byte(value: f32) -> u8 {
+    ((f64::from(value) / 8.0 + 0.5) * 256.0)
+        .trunc()
+        .clamp(0.0, 255.0) as u8
+}
+
 /// Per-chunk ranges of three channels: `[channel][chunk]`.
 type ChannelRanges = Vec<Vec<f32>>;
 

@@ -2,6 +2,7 @@
 
 pub mod bytes;
 pub mod compressed_ply;
+pub mod compressed_ply_writer;
 pub mod inria_ply;
 pub mod ksplat;
 pub mod labels_json;
@@ -10,13 +11,16 @@ pub mod ply_writer;
 pub mod sog;
 pub mod splat;
 pub mod spz;
+pub mod spz_writer;
 
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
+pub use compressed_ply_writer::write_compressed_ply;
 pub use labels_json::{read_label_sidecar, write_label_sidecar};
 pub use ply_writer::write_inria_ply;
+pub use spz_writer::write_spz;
 
 use crate::error::{Result, SceneError};
 use crate::scene::Scene;
@@ -38,6 +42,156 @@ pub enum SceneFormat {
     Splat,
     /// GaussianSplats3D's `.ksplat` (compression levels 0-2).
     Ksplat,
+}
+
+impl SceneFormat {
+    /// The formats [`write_scene`] writes.
+    pub const WRITABLE: [SceneFormat; 3] = [
+        SceneFormat::InriaPly,
+        SceneFormat::CompressedPly,
+        SceneFormat::Spz,
+    ];
+
+    /// The format's name on the command line (`--format`) and in JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            SceneFormat::InriaPly => "inria-ply",
+            SceneFormat::CompressedPly => "compressed-ply",
+            SceneFormat::Spz => "spz",
+            SceneFormat::Sog => "sog",
+            SceneFormat::Splat => "splat",
+            SceneFormat::Ksplat => "ksplat",
+        }
+    }
+
+    /// The file-name ending that selects the format for writing.
+    pub fn extension(self) -> &'static str {
+        match self {
+            SceneFormat::InriaPly => ".ply",
+            SceneFormat::CompressedPly => ".compressed.ply",
+            SceneFormat::Spz => ".spz",
+            SceneFormat::Sog => ".sog",
+            SceneFormat::Splat => ".splat",
+            SceneFormat::Ksplat => ".ksplat",
+        }
+    }
+
+    /// The format a name means (`inria-ply` or `ply`, `compressed-ply`, `spz`, …).
+    pub fn from_name(name: &str) -> Option<SceneFormat> {
+        let name = name.to_ascii_lowercase();
+        if name == "ply" {
+            return Some(SceneFormat::InriaPly);
+        }
+        [
+            SceneFormat::InriaPly,
+            SceneFormat::CompressedPly,
+            SceneFormat::Spz,
+            SceneFormat::Sog,
+            SceneFormat::Splat,
+            SceneFormat::Ksplat,
+        ]
+        .into_iter()
+        .find(|f| f.name() == name)
+    }
+
+    /// The format a file's name ends in (`.compressed.ply`, `.ply`, `.spz`, `.sog`, `.splat`,
+    /// `.ksplat`, case-insensitive), if any.
+    pub fn from_extension(path: &Path) -> Option<SceneFormat> {
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().to_ascii_lowercase())?;
+        // Longest ending first: `.compressed.ply` also ends in `.ply`.
+        [
+            SceneFormat::CompressedPly,
+            SceneFormat::Ksplat,
+            SceneFormat::Splat,
+            SceneFormat::InriaPly,
+            SceneFormat::Spz,
+            SceneFormat::Sog,
+        ]
+        .into_iter()
+        .find(|f| name.ends_with(f.extension()))
+    }
+
+    /// The format an output file's name asks for: `.compressed.ply`, `.ply` or `.spz`. Any
+    /// other ending is refused, naming it, rather than guessed.
+    pub fn for_output(path: &Path) -> Result<SceneFormat> {
+        if let Some(format) = SceneFormat::from_extension(path) {
+            format.check_writable(path)?;
+            return Ok(format);
+        }
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let extension = match name.rfind('.') {
+            Some(dot) if dot > 0 => format!("the extension '{}'", &name[dot..]),
+            _ => "a name without an extension".to_string(),
+        };
+        Err(SceneError::Unwritable {
+            path: path.to_path_buf(),
+            detail: format!(
+                "{extension} names no format splatraj writes; use {} (or name the format \
+                 explicitly)",
+                written_extensions()
+            ),
+        })
+    }
+
+    /// Refuses a format splatraj reads but does not write.
+    pub fn check_writable(self, path: &Path) -> Result<()> {
+        if SceneFormat::WRITABLE.contains(&self) {
+            return Ok(());
+        }
+        Err(SceneError::Unwritable {
+            path: path.to_path_buf(),
+            detail: format!(
+                "splatraj reads {} ({}) but does not write it; it writes {}",
+                self.name(),
+                self.extension(),
+                written_extensions()
+            ),
+        })
+    }
+}
+
+/// The written formats' endings, for messages.
+fn written_extensions() -> String {
+    let shown: Vec<String> = SceneFormat::WRITABLE
+        .iter()
+        .map(|f| format!("{} ({})", f.extension(), f.name()))
+        .collect();
+    shown.join(", ")
+}
+
+/// Writes `scene` to `path` in `format` (one of [`SceneFormat::WRITABLE`]), whole or not at all.
+/// An existing target that is not a regular file (a folder, a link, a device) is not replaced.
+pub fn write_scene(scene: &Scene, path: &Path, format: SceneFormat) -> Result<()> {
+    format.check_writable(path)?;
+    if let Ok(meta) = std::fs::symlink_metadata(path) {
+        let kind = meta.file_type();
+        if !kind.is_file() {
+            let what = if kind.is_dir() {
+                "a folder"
+            } else if kind.is_symlink() {
+                "a symbolic link (write to its target instead)"
+            } else {
+                "not a regular file"
+            };
+            return Err(SceneError::Unwritable {
+                path: path.to_path_buf(),
+                detail: format!("the target exists and is {what}; it is not replaced"),
+            });
+        }
+    }
+    match format {
+        SceneFormat::InriaPly => write_inria_ply(scene, path),
+        SceneFormat::CompressedPly => write_compressed_ply(scene, path),
+        SceneFormat::Spz => write_spz(scene, path),
+        SceneFormat::Sog | SceneFormat::Splat | SceneFormat::Ksplat => {
+            unreachable!("check_writable refused {format:?}")
+        }
+    }
 }
 
 /// How to read a scene file.

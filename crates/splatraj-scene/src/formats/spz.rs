@@ -72,6 +72,11 @@ const MAX_FILE_SH_DEGREE: u8 = 4;
 const MAX_SCENE_SH_DEGREE: u8 = 3;
 /// DC colour scale of the format (see the module docs).
 const COLOR_SCALE: f32 = 0.15;
+/// Log-scales are stored as `(log s + LOG_SCALE_OFFSET) · LOG_SCALE_STEPS`.
+const LOG_SCALE_OFFSET: f32 = 10.0;
+const LOG_SCALE_STEPS: f32 = 16.0;
+/// SH coefficients are stored as `128 + 128 · value`.
+const SH_STEPS: f32 = 128.0;
 /// Deflate cannot expand data more than about 1032-fold, so a header claiming more than that
 /// from the file's size is corrupt, whatever the content.
 const MAX_DEFLATE_RATIO: usize = 1032;
@@ -547,20 +552,21 @@ fn parse_extension_records(block: &[u8]) -> std::result::Result<Vec<ExtensionRec
     Ok(records)
 }
 
-/// Sign flips that take the file's axes to the scene's RDF axes.
+/// Sign flips that take the file's axes to the scene's RDF axes. Each flip is its own inverse,
+/// so the same signs take the scene's axes back to the file's (the writer uses them so).
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct AxisFlips([f32; 3]);
+pub(crate) struct AxisFlips(pub(crate) [f32; 3]);
 
 impl AxisFlips {
-    /// SPZ's default storage axes, RUB, to RDF: y and z change sign.
-    const RUB_TO_RDF: AxisFlips = AxisFlips([1.0, -1.0, -1.0]);
+    /// SPZ's default storage axes, RUB, to RDF (and back): y and z change sign.
+    pub(crate) const RUB_TO_RDF: AxisFlips = AxisFlips([1.0, -1.0, -1.0]);
 
     /// Signs of the quaternion's x, y, z under the flip.
     ///
     /// Flipping axes with F = diag(f) maps a rotation R to F R F. Whether F is a rotation or a
     /// reflection, F R F = G R G⁻¹ for the rotation G = det(F)·F, a half turn (or identity) about
     /// a coordinate axis, and conjugating by it scales the quaternion's vector part by det(F)·f.
-    fn quaternion_signs(self) -> [f32; 3] {
+    pub(crate) fn quaternion_signs(self) -> [f32; 3] {
         let [x, y, z] = self.0;
         let det = x * y * z;
         [det * x, det * y, det * z]
@@ -568,7 +574,7 @@ impl AxisFlips {
 
     /// Sign of each SH coefficient beyond DC (degrees 1-3, 15 of them) under the flip: the
     /// product of the flips of the axes that the basis polynomial is odd in.
-    fn sh_signs(self) -> [f32; 15] {
+    pub(crate) fn sh_signs(self) -> [f32; 15] {
         // Odd-in (x, y, z) of the real SH basis in the usual 3DGS order: y, z, x; xy, yz,
         // 3z²−1, xz, x²−y²; y(3x²−y²), xyz, y(4z²−x²−y²), z(2z²−3x²−3y²), x(4z²−x²−y²),
         // z(x²−y²), x(x²−3y²).
@@ -729,7 +735,7 @@ fn unpack(header: &Header, arrays: &[&[u8]; 6], flips: AxisFlips, path: &Path) -
     let opacities: Vec<f32> = alphas.iter().map(|&a| f32::from(a) / 255.0).collect();
     let scales: Vec<[f32; 3]> = scales
         .chunks_exact(3)
-        .map(|s| std::array::from_fn(|k| (f32::from(s[k]) / 16.0 - 10.0).exp()))
+        .map(|s| std::array::from_fn(|k| log_scale_from_byte(s[k]).exp()))
         .collect();
     let to_scene_quaternion =
         |[x, y, z, w]: [f32; 4]| [w, q_signs[0] * x, q_signs[1] * y, q_signs[2] * z];
@@ -747,9 +753,7 @@ fn unpack(header: &Header, arrays: &[&[u8]; 6], flips: AxisFlips, path: &Path) -
 
     let stride = 3 * (kept_dim + 1);
     let mut sh = Vec::with_capacity(n * stride);
-    let dc_of = |dc: &[u8]| -> [f32; 3] {
-        std::array::from_fn(|c| (f32::from(dc[c]) / 255.0 - 0.5) / COLOR_SCALE)
-    };
+    let dc_of = |dc: &[u8]| -> [f32; 3] { std::array::from_fn(|c| dc_from_byte(dc[c])) };
     if kept_dim == 0 {
         for dc in colours.chunks_exact(3) {
             sh.extend(dc_of(dc));
@@ -762,7 +766,7 @@ fn unpack(header: &Header, arrays: &[&[u8]; 6], flips: AxisFlips, path: &Path) -
         {
             sh.extend(dc_of(dc));
             for (coeff, sign) in rest.chunks_exact(3).take(kept_dim).zip(sh_signs) {
-                sh.extend(coeff.iter().map(|&b| sign * (f32::from(b) - 128.0) / 128.0));
+                sh.extend(coeff.iter().map(|&b| sign * sh_from_byte(b)));
             }
         }
     }
@@ -819,6 +823,62 @@ fn quaternion_smallest_three(r: &[u8]) -> [f32; 4] {
     }
     q[largest] = (1.0 - sum_sq).max(0.0).sqrt();
     q
+}
+
+/// Rounds to the nearest byte, saturating: how the reference writer stores every 8-bit value.
+pub(crate) fn to_byte(x: f32) -> u8 {
+    x.round().clamp(0.0, 255.0) as u8
+}
+
+/// A log-scale from its byte.
+pub(crate) fn log_scale_from_byte(byte: u8) -> f32 {
+    f32::from(byte) / LOG_SCALE_STEPS - LOG_SCALE_OFFSET
+}
+
+/// The byte of a log-scale (saturating outside about [-10, 5.9], i.e. scales e⁻¹⁰ to 380).
+pub(crate) fn log_scale_to_byte(log_scale: f32) -> u8 {
+    to_byte((log_scale + LOG_SCALE_OFFSET) * LOG_SCALE_STEPS)
+}
+
+/// The SH DC term from its colour byte.
+pub(crate) fn dc_from_byte(byte: u8) -> f32 {
+    (f32::from(byte) / 255.0 - 0.5) / COLOR_SCALE
+}
+
+/// The colour byte of an SH DC term.
+pub(crate) fn dc_to_byte(dc: f32) -> u8 {
+    to_byte(dc * (COLOR_SCALE * 255.0) + 0.5 * 255.0)
+}
+
+/// An SH coefficient (degree ≥ 1) from its byte.
+pub(crate) fn sh_from_byte(byte: u8) -> f32 {
+    (f32::from(byte) - SH_STEPS) / SH_STEPS
+}
+
+/// The byte of an SH coefficient kept to `bits` significant bits: the 8-bit value is rounded to
+/// a multiple of 2^(8 − bits), so 0 stays exact and gzip finds more repeats.
+pub(crate) fn sh_to_byte(value: f32, bits: u32) -> u8 {
+    let bucket = 1i32 << (8 - bits);
+    let q = (value * SH_STEPS).round() as i32 + SH_STEPS as i32;
+    // Below zero everything saturates to 0 whichever way the division rounds.
+    ((q + bucket / 2).max(0) / bucket * bucket).clamp(0, 255) as u8
+}
+
+/// Versions 3-4: packs a unit quaternion (x, y, z, w) as "smallest three" (see the module docs);
+/// the inverse of [`quaternion_smallest_three`]. `q` and −q are the same rotation, so the sign
+/// is chosen to make the dropped largest component positive.
+pub(crate) fn pack_quaternion_smallest_three(q: [f32; 4]) -> [u8; 4] {
+    let largest = (1..4).fold(0, |l, i| if q[i].abs() > q[l].abs() { i } else { l });
+    let negate = q[largest] < 0.0;
+    let mut bits = largest as u32;
+    for (_, &v) in q.iter().enumerate().filter(|&(i, _)| i != largest) {
+        let sign = u32::from((v < 0.0) != negate);
+        // Truncating `+ 0.5` rounds half up, as the reference writer does; at most 511 for a
+        // unit quaternion's non-largest components (|v| ≤ 1/√2), clamped against rounding.
+        let magnitude = ((v.abs() / FRAC_1_SQRT_2 * 511.0 + 0.5) as u32).min(511);
+        bits = (bits << 10) | (sign << 9) | magnitude;
+    }
+    bits.to_le_bytes()
 }
 
 fn checked_sum(sizes: &[usize]) -> Option<usize> {
