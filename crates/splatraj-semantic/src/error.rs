@@ -110,6 +110,12 @@ fn no_match_message(what: &str, query: &str, closest: &[String]) -> String {
     }
 }
 
+impl From<splatraj_config::ConfigError> for SemanticError {
+    fn from(e: splatraj_config::ConfigError) -> Self {
+        SemanticError::option(e.key, e.reason)
+    }
+}
+
 impl SemanticError {
     /// A [`SemanticError::Io`] for `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {

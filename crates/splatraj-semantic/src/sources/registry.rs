@@ -12,13 +12,12 @@
 //! let source = config.targets.build_with(base_dir, &device, &sources)?;
 //! ```
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
 use burn::tensor::Device;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
+use splatraj_config::{Kind, Registry};
 
 use super::TargetSource;
 use super::feature3dgs::{FEATURE3DGS, Feature3dgsConfig};
@@ -55,17 +54,23 @@ pub trait SourceConfig: Serialize + DeserializeOwned + 'static {
     fn init(&self, context: &SourceContext) -> Result<Box<dyn TargetSource>>;
 }
 
-type Factory =
-    Arc<dyn Fn(&toml::Value, &SourceContext, &str) -> Result<Box<dyn TargetSource>> + Send + Sync>;
+/// What the source registry builds: a target source from its config table and context.
+#[derive(Debug)]
+pub struct SourceParts;
+
+impl Kind for SourceParts {
+    type Context<'a> = SourceContext<'a>;
+    type Output = Box<dyn TargetSource>;
+    type Error = SemanticError;
+    const WHAT: &'static str = "target source";
+}
 
 /// Names → source configs, for `[targets] source = "custom.<name>"`. The default registry
 /// holds the language fields that ship with splatraj as registered sources
 /// (`custom.feature3dgs`, `custom.opengaussian`, `custom.gaussian_grouping`,
 /// `custom.legaussians`); [`SourceRegistry::empty`] holds none.
-#[derive(Clone)]
-pub struct SourceRegistry {
-    factories: BTreeMap<String, Factory>,
-}
+#[derive(Clone, Debug)]
+pub struct SourceRegistry(Registry<SourceParts>);
 
 impl Default for SourceRegistry {
     fn default() -> Self {
@@ -78,49 +83,28 @@ impl Default for SourceRegistry {
     }
 }
 
-impl std::fmt::Debug for SourceRegistry {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_list().entries(self.factories.keys()).finish()
-    }
-}
-
 impl SourceRegistry {
     /// A registry without any source.
     pub fn empty() -> Self {
-        SourceRegistry {
-            factories: BTreeMap::new(),
-        }
+        SourceRegistry(Registry::default())
     }
 
     /// Registers `C` under `name` (replacing an earlier registration of that name).
     pub fn register<C: SourceConfig>(&mut self, name: &str) -> &mut Self {
-        let factory: Factory =
-            Arc::new(|table: &toml::Value, context: &SourceContext, key: &str| {
-                // Through serde_path_to_error so a bad value names its own key inside the
-                // table (`targets.custom.min_probability`), not just the table.
-                let config: C = serde_path_to_error::deserialize(table.clone()).map_err(|e| {
-                    let path = e.path().to_string();
-                    let where_ = if path == "." {
-                        key.to_string()
-                    } else {
-                        format!("{key}.{path}")
-                    };
-                    SemanticError::option(where_, e.into_inner().message().trim_end())
-                })?;
-                config.init(context).map_err(|e| e.in_key(key))
-            });
-        self.factories.insert(name.to_string(), factory);
+        self.0.insert::<C>(name, |config, context, key| {
+            config.init(context).map_err(|e| e.in_key(key))
+        });
         self
     }
 
     /// The registered names, sorted.
     pub fn names(&self) -> Vec<&str> {
-        self.factories.keys().map(String::as_str).collect()
+        self.0.names()
     }
 
     /// Whether `name` is registered.
     pub fn contains(&self, name: &str) -> bool {
-        self.factories.contains_key(name)
+        self.0.contains(name)
     }
 
     /// Builds the source registered as `name` from its config table; errors name `key` (the
@@ -132,20 +116,7 @@ impl SourceRegistry {
         context: &SourceContext,
         key: &str,
     ) -> Result<Box<dyn TargetSource>> {
-        match self.factories.get(name) {
-            Some(factory) => factory(table, context, key),
-            None => Err(SemanticError::option(
-                key,
-                format!(
-                    "names no registered target source (registered: {})",
-                    if self.factories.is_empty() {
-                        "none".to_string()
-                    } else {
-                        self.names().join(", ")
-                    }
-                ),
-            )),
-        }
+        self.0.build(name, table, context, key)
     }
 }
 

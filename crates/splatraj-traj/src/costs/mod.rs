@@ -483,6 +483,15 @@ pub fn check_weight(cost: &str, field: &str, value: f64) -> Result<(), CostError
     }
 }
 
+impl From<splatraj_config::ConfigError> for CostError {
+    fn from(e: splatraj_config::ConfigError) -> Self {
+        CostError::InvalidConfig {
+            key: e.key,
+            reason: e.reason,
+        }
+    }
+}
+
 /// An [`CostError::InvalidConfig`] for key `costs.<cost>.<field>`.
 pub fn invalid(cost: &str, field: &str, reason: String) -> CostError {
     CostError::InvalidConfig {

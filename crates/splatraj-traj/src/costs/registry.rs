@@ -10,11 +10,9 @@
 //! let weighted = config.costs.build_with(&costs)?;
 //! ```
 
-use std::collections::BTreeMap;
-use std::sync::Arc;
-
 use serde::Serialize;
 use serde::de::DeserializeOwned;
+use splatraj_config::{Kind, Registry};
 
 use super::{
     CONFIG_TABLE, ClearanceCost, Cost, CostError, MotionCost, PriorCost, TceCost, TreCost,
@@ -49,60 +47,41 @@ self_config!(
     MotionCost
 );
 
-type Factory = Arc<dyn Fn(&toml::Value) -> Result<Box<dyn Cost>, CostError> + Send + Sync>;
+/// What the cost registry builds: costs from their `[costs.custom.<name>]` tables.
+#[derive(Debug)]
+pub struct CostParts;
+
+impl Kind for CostParts {
+    type Context<'a> = ();
+    type Output = Box<dyn Cost>;
+    type Error = CostError;
+    const WHAT: &'static str = "cost";
+}
 
 /// Names → cost configs, for the `[costs.custom.<name>]` tables of a config.
-#[derive(Clone, Default)]
-pub struct CostRegistry {
-    factories: BTreeMap<String, Factory>,
-}
-
-impl std::fmt::Debug for CostRegistry {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_list().entries(self.factories.keys()).finish()
-    }
-}
+#[derive(Clone, Default, Debug)]
+pub struct CostRegistry(Registry<CostParts>);
 
 impl CostRegistry {
     /// Registers `C` under `name` (replacing an earlier registration of that name).
     pub fn register<C: CostConfig>(&mut self, name: &str) -> &mut Self {
-        let key = name.to_string();
-        let factory: Factory = Arc::new(move |table: &toml::Value| {
-            let config = C::deserialize(table.clone()).map_err(|e| CostError::InvalidConfig {
-                key: format!("{CONFIG_TABLE}.custom.{key}"),
-                reason: e.message().trim_end().to_string(),
-            })?;
-            config.init()
-        });
-        self.factories.insert(name.to_string(), factory);
+        self.0.insert::<C>(name, |config, (), _| config.init());
         self
     }
 
     /// The registered names, sorted.
     pub fn names(&self) -> Vec<&str> {
-        self.factories.keys().map(String::as_str).collect()
+        self.0.names()
     }
 
     /// Whether `name` is registered.
     pub fn contains(&self, name: &str) -> bool {
-        self.factories.contains_key(name)
+        self.0.contains(name)
     }
 
     /// Builds the cost registered as `name` from its config table.
     pub fn build(&self, name: &str, table: &toml::Value) -> Result<Box<dyn Cost>, CostError> {
-        match self.factories.get(name) {
-            Some(factory) => factory(table),
-            None => Err(CostError::InvalidConfig {
-                key: format!("{CONFIG_TABLE}.custom.{name}"),
-                reason: format!(
-                    "names no registered cost (registered: {})",
-                    if self.factories.is_empty() {
-                        "none".to_string()
-                    } else {
-                        self.names().join(", ")
-                    }
-                ),
-            }),
-        }
+        self.0
+            .build(name, table, &(), &format!("{CONFIG_TABLE}.custom.{name}"))
     }
 }

@@ -98,6 +98,15 @@ pub enum TrajectoryError {
     },
 }
 
+impl From<splatraj_config::ConfigError> for TrajectoryError {
+    fn from(e: splatraj_config::ConfigError) -> Self {
+        TrajectoryError::Custom {
+            key: e.key,
+            reason: e.reason,
+        }
+    }
+}
+
 /// A family of K scalar basis functions ψ_k(t); one implementation per trajectory model.
 /// `Debug + Send + Sync` so that a built custom basis can sit in the [`Trajectory`] module.
 pub trait Basis: std::fmt::Debug + Send + Sync {

@@ -16,11 +16,11 @@
 //! config table (kept to be written back to configs and `trajectory.json`), the window count it
 //! was built for, and the [`Basis`] its config's `init` built.
 
-use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use serde::Serialize;
 use serde::de::DeserializeOwned;
+use splatraj_config::{Kind, Registry};
 
 use super::{Basis, TrajectoryError, TrajectoryModel};
 
@@ -35,67 +35,54 @@ pub trait ModelConfig: Serialize + DeserializeOwned + 'static {
     fn init(&self, windows: usize) -> Result<Box<dyn Basis>, TrajectoryError>;
 }
 
-type Factory =
-    Arc<dyn Fn(&toml::Value, usize) -> Result<Box<dyn Basis>, TrajectoryError> + Send + Sync>;
+/// What the model registry builds: a basis from a `[trajectory.custom.<name>]` table and the
+/// window count.
+#[derive(Debug)]
+pub struct ModelParts;
+
+impl Kind for ModelParts {
+    type Context<'a> = usize;
+    type Output = Box<dyn Basis>;
+    type Error = TrajectoryError;
+    const WHAT: &'static str = "trajectory model";
+}
 
 /// Names → model configs, for `[trajectory] kind = "custom.<name>"`.
-#[derive(Clone, Default)]
-pub struct ModelRegistry {
-    factories: BTreeMap<String, Factory>,
-}
-
-impl std::fmt::Debug for ModelRegistry {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_list().entries(self.factories.keys()).finish()
-    }
-}
+#[derive(Clone, Default, Debug)]
+pub struct ModelRegistry(Registry<ModelParts>);
 
 impl ModelRegistry {
     /// Registers `C` under `name` (replacing an earlier registration of that name).
     pub fn register<C: ModelConfig>(&mut self, name: &str) -> &mut Self {
-        let key = name.to_string();
-        let factory: Factory = Arc::new(move |table: &toml::Value, windows: usize| {
-            let config = C::deserialize(table.clone()).map_err(|e| TrajectoryError::Custom {
-                key: format!("trajectory.custom.{key}"),
-                reason: e.message().trim_end().to_string(),
-            })?;
-            config.init(windows)
-        });
-        self.factories.insert(name.to_string(), factory);
+        self.0
+            .insert::<C>(name, |config, &windows, _| config.init(windows));
         self
     }
 
     /// The registered names, sorted.
     pub fn names(&self) -> Vec<&str> {
-        self.factories.keys().map(String::as_str).collect()
+        self.0.names()
     }
 
     /// Whether `name` is registered.
     pub fn contains(&self, name: &str) -> bool {
-        self.factories.contains_key(name)
+        self.0.contains(name)
     }
 
-    /// Builds the basis registered as `name` from its config table, for `windows` windows.
+    /// Builds the basis registered as `name` from its config table, for `windows` windows; an
+    /// unknown name is an error on `trajectory.kind`, where the user wrote it.
     pub fn build(
         &self,
         name: &str,
         table: &toml::Value,
         windows: usize,
     ) -> Result<Box<dyn Basis>, TrajectoryError> {
-        match self.factories.get(name) {
-            Some(factory) => factory(table, windows),
-            None => Err(TrajectoryError::Custom {
-                key: format!("trajectory.kind = \"{CUSTOM_PREFIX}{name}\""),
-                reason: format!(
-                    "names no registered trajectory model (registered: {})",
-                    if self.factories.is_empty() {
-                        "none".to_string()
-                    } else {
-                        self.names().join(", ")
-                    }
-                ),
-            }),
-        }
+        let key = if self.contains(name) {
+            format!("trajectory.custom.{name}")
+        } else {
+            format!("trajectory.kind = \"{CUSTOM_PREFIX}{name}\"")
+        };
+        self.0.build(name, table, &windows, &key)
     }
 }
 
