@@ -6,121 +6,13 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{fixture, shared_data};
+use common::{SAME_BYTES, Tolerance, check_against, fixture, reference, shared_data};
 use serde_json::Value;
 use splatraj_scene::formats::{LoadedScene, ReadOptions, SceneFormat};
-use splatraj_scene::{Scene, SceneError, read_scene};
+use splatraj_scene::{SceneError, read_scene};
 
 fn read(path: &Path) -> LoadedScene {
     read_scene(path, &ReadOptions::default()).unwrap_or_else(|e| panic!("{e}"))
-}
-
-fn reference(name: &str) -> Value {
-    let text = std::fs::read_to_string(fixture(name)).expect("reference fixture");
-    serde_json::from_str(&text).expect("reference JSON")
-}
-
-fn floats(v: &Value) -> Vec<f32> {
-    v.as_array()
-        .expect("array")
-        .iter()
-        .flat_map(|x| match x {
-            Value::Array(_) => floats(x),
-            x => vec![x.as_f64().expect("number") as f32],
-        })
-        .collect()
-}
-
-/// How far ours may be from the reference decoding, per quantity.
-#[derive(Clone, Copy)]
-struct Tolerance {
-    /// Absolute on positions.
-    mean: f32,
-    /// Relative on scales.
-    scale: f32,
-    /// On 1 − |q·q'| of unit quaternions.
-    rotation: f32,
-    /// Absolute on opacities.
-    opacity: f32,
-    /// Absolute on SH coefficients.
-    sh: f32,
-}
-
-/// The float-for-float decodings of the same bytes (both read the codebook or the float).
-const SAME_BYTES: Tolerance = Tolerance {
-    mean: 1e-5,
-    scale: 1e-5,
-    rotation: 1e-6,
-    opacity: 1e-5,
-    sh: 1e-5,
-};
-
-/// Compares the Gaussians a reference decoded (`[{index, mean, scale, rotation, opacity, sh}]`)
-/// with ours; prints the largest differences, returns how many Gaussians were compared.
-fn check_against(scene: &Scene, gaussians: &Value, tol: Tolerance, what: &str) -> usize {
-    let list = gaussians.as_array().expect("list of Gaussians");
-    let mut worst = [0.0f32; 5];
-    for g in list {
-        let i = g["index"].as_u64().expect("index") as usize;
-        let ctx = format!("{what}: Gaussian {i}");
-        let mean = floats(&g["mean"]);
-        for k in 0..3 {
-            let d = (scene.means[i][k] - mean[k]).abs();
-            worst[0] = worst[0].max(d);
-            assert!(
-                d <= tol.mean * (1.0 + mean[k].abs()),
-                "{ctx}: mean {:?} vs reference {mean:?}",
-                scene.means[i]
-            );
-        }
-        let scale = floats(&g["scale"]);
-        for k in 0..3 {
-            let d = (scene.scales[i][k] - scale[k]).abs();
-            worst[1] = worst[1].max(d / scale[k]);
-            assert!(
-                d <= tol.scale * scale[k],
-                "{ctx}: scale {:?} vs reference {scale:?}",
-                scene.scales[i]
-            );
-        }
-        let q = floats(&g["rotation"]);
-        let dot: f32 = (0..4).map(|k| scene.rotations[i][k] * q[k]).sum();
-        worst[2] = worst[2].max(1.0 - dot.abs());
-        assert!(
-            1.0 - dot.abs() <= tol.rotation,
-            "{ctx}: rotation {:?} vs reference {q:?}",
-            scene.rotations[i]
-        );
-        let opacity = g["opacity"].as_f64().unwrap() as f32;
-        worst[3] = worst[3].max((scene.opacities[i] - opacity).abs());
-        assert!(
-            (scene.opacities[i] - opacity).abs() <= tol.opacity,
-            "{ctx}: opacity {} vs reference {opacity}",
-            scene.opacities[i]
-        );
-        let sh = floats(&g["sh"]);
-        assert_eq!(sh.len(), scene.sh_of(i).len(), "{ctx}: SH length");
-        for (k, (ours, theirs)) in scene.sh_of(i).iter().zip(&sh).enumerate() {
-            worst[4] = worst[4].max((ours - theirs).abs());
-            assert!(
-                (ours - theirs).abs() <= tol.sh,
-                "{ctx}: SH value {k} (coefficient {}, channel {}) is {ours}, reference {theirs}",
-                k / 3,
-                k % 3
-            );
-        }
-    }
-    eprintln!(
-        "{what}: {} Gaussians, largest differences: mean {:.2e}, scale (relative) {:.2e}, \
-         rotation (1-|q.q'|) {:.2e}, opacity {:.2e}, SH {:.2e}",
-        list.len(),
-        worst[0],
-        worst[1],
-        worst[2],
-        worst[3],
-        worst[4]
-    );
-    list.len()
 }
 
 // ---------------------------------------------------------------------------------------- SOG
