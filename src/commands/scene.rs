@@ -11,7 +11,7 @@ use splatraj::lift::mask_files::{MaskCoding, MaskLift, lift_mask_files};
 use splatraj::lift::{LiftStage, MaskOptions};
 use splatraj_render::backend::BackendKind;
 use splatraj_scene::demo::{DemoConfig, demo_scene};
-use splatraj_scene::formats::{LoadedScene, write_label_sidecar};
+use splatraj_scene::formats::{LoadedScene, check_output_target, write_label_sidecar};
 use splatraj_scene::{
     Bounds, InvalidPolicy, ReadOptions, Scene, SceneFormat, UpGuess, guess_up_axis,
     write_inria_ply, write_scene,
@@ -133,6 +133,7 @@ pub fn run(command: SceneCommand) -> Result<()> {
                 }
                 None => SceneFormat::for_output(&output)?,
             };
+            check_output_target(&output)?;
             let loaded = read.load(&input)?;
             warn_dropped_extras(&loaded.scene, format);
             write_scene(&loaded.scene, &output, format)?;
@@ -191,9 +192,7 @@ fn warn_dropped_extras(scene: &Scene, format: SceneFormat) {
     if let Some(features) = &extras.features {
         dropped.push(format!("{} feature channels", features.dim));
     }
-    if !extras.properties.is_empty() {
-        dropped.push(format!("{} other properties", extras.properties.len()));
-    }
+    dropped.extend(extras.properties.iter().map(|p| format!("'{}'", p.name)));
     if !dropped.is_empty() {
         eprintln!(
             "warning: {} cannot hold {}; they are not written (INRIA .ply keeps them)",

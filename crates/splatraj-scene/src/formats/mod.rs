@@ -164,26 +164,34 @@ fn written_extensions() -> String {
     shown.join(", ")
 }
 
+/// Refuses an output path that exists and is not a regular file (a folder, a link, a device):
+/// writing replaces the target by renaming over it, which must not destroy such things.
+pub fn check_output_target(path: &Path) -> Result<()> {
+    let Ok(meta) = std::fs::symlink_metadata(path) else {
+        return Ok(());
+    };
+    let kind = meta.file_type();
+    if kind.is_file() {
+        return Ok(());
+    }
+    let what = if kind.is_dir() {
+        "a folder"
+    } else if kind.is_symlink() {
+        "a symbolic link (write to its target instead)"
+    } else {
+        "not a regular file"
+    };
+    Err(SceneError::Unwritable {
+        path: path.to_path_buf(),
+        detail: format!("the target exists and is {what}; it is not replaced"),
+    })
+}
+
 /// Writes `scene` to `path` in `format` (one of [`SceneFormat::WRITABLE`]), whole or not at all.
-/// An existing target that is not a regular file (a folder, a link, a device) is not replaced.
+/// An existing target that is not a regular file is not replaced ([`check_output_target`]).
 pub fn write_scene(scene: &Scene, path: &Path, format: SceneFormat) -> Result<()> {
     format.check_writable(path)?;
-    if let Ok(meta) = std::fs::symlink_metadata(path) {
-        let kind = meta.file_type();
-        if !kind.is_file() {
-            let what = if kind.is_dir() {
-                "a folder"
-            } else if kind.is_symlink() {
-                "a symbolic link (write to its target instead)"
-            } else {
-                "not a regular file"
-            };
-            return Err(SceneError::Unwritable {
-                path: path.to_path_buf(),
-                detail: format!("the target exists and is {what}; it is not replaced"),
-            });
-        }
-    }
+    check_output_target(path)?;
     match format {
         SceneFormat::InriaPly => write_inria_ply(scene, path),
         SceneFormat::CompressedPly => write_compressed_ply(scene, path),

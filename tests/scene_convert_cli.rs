@@ -1,0 +1,98 @@
+//! `splatraj scene convert` to the written formats: the format follows the output's name (or
+//! `--format`), a name it cannot write is refused before anything is read, and what it writes
+//! `scene info` reads back.
+
+mod common;
+
+use std::path::PathBuf;
+
+use common::{assert_clean_failure, fixture, s, splatraj, stderr, stdout};
+
+/// A real scene from the shared data folder, as the scene crate's tests find it: `SPLATRAJ_DATA`
+/// or `shared/data` beside the repository; skipped with a notice when absent, a failure when
+/// `SPLATRAJ_REQUIRE_DATA=1`.
+fn shared_data(name: &str) -> Option<PathBuf> {
+    let dir = std::env::var_os("SPLATRAJ_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
+    let path = dir.join(name);
+    if path.exists() {
+        return Some(path);
+    }
+    if std::env::var("SPLATRAJ_REQUIRE_DATA").is_ok_and(|v| v == "1") {
+        panic!("{} is missing and SPLATRAJ_REQUIRE_DATA=1", path.display());
+    }
+    eprintln!("skipped: {} not found (set SPLATRAJ_DATA)", path.display());
+    None
+}
+
+#[test]
+fn biker_compressed_ply_to_spz_and_back_through_info() {
+    let Some(input) = shared_data("biker.compressed.ply") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let spz = dir.path().join("out.spz");
+    let out = splatraj(&["scene", "convert", s(&input), s(&spz)]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("(spz)"), "{}", stderr(&out));
+    // A gzip stream (SPZ version 3), not a PLY as before.
+    assert_eq!(std::fs::read(&spz).unwrap()[..2], [0x1f, 0x8b]);
+
+    let info = splatraj(&["scene", "info", s(&spz), "--json"]);
+    assert!(info.status.success(), "{}", stderr(&info));
+    let json: serde_json::Value = serde_json::from_str(&stdout(&info)).unwrap();
+    assert_eq!(json["format"], "spz");
+    assert_eq!(json["gaussians"], 152_746);
+    assert_eq!(json["sh_degree"], 0);
+
+    let compressed = dir.path().join("again.compressed.ply");
+    let out = splatraj(&["scene", "convert", s(&spz), s(&compressed)]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let info = splatraj(&["scene", "info", s(&compressed), "--json"]);
+    let json: serde_json::Value = serde_json::from_str(&stdout(&info)).unwrap();
+    assert_eq!(json["format"], "compressed-ply");
+    assert_eq!(json["gaussians"], 152_746);
+}
+
+#[test]
+fn names_it_cannot_write_are_refused() {
+    let input = fixture("fruit_drops_minimal.ply");
+    let dir = tempfile::tempdir().unwrap();
+    for (name, mentions) in [
+        (
+            "out.xyz",
+            &["out.xyz", "'.xyz'", ".spz", ".compressed.ply"][..],
+        ),
+        ("out.sog", &["out.sog", "does not write"][..]),
+        ("out", &["without an extension"][..]),
+    ] {
+        let target = dir.path().join(name);
+        let out = splatraj(&["scene", "convert", s(&input), s(&target)]);
+        assert_clean_failure(&out, mentions);
+        assert!(!target.exists());
+    }
+    // --format names the format of any file, but not one whose name says another.
+    let target = dir.path().join("out.ply");
+    let out = splatraj(&["scene", "convert", s(&input), s(&target), "--format", "spz"]);
+    assert_clean_failure(&out, &["out.ply", "inria-ply", "spz"]);
+    let out = splatraj(&["scene", "convert", s(&input), s(&target), "--format", "sog"]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("does not write"), "{}", stderr(&out));
+    let target = dir.path().join("out.bin");
+    let out = splatraj(&["scene", "convert", s(&input), s(&target), "--format", "spz"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let info = splatraj(&["scene", "info", s(&target), "--json"]);
+    assert!(stdout(&info).contains("\"spz\""), "{}", stdout(&info));
+}
+
+#[test]
+fn a_folder_in_the_way_is_not_replaced() {
+    let input = fixture("fruit_drops_minimal.ply");
+    let dir = tempfile::tempdir().unwrap();
+    let target = dir.path().join("out.compressed.ply");
+    std::fs::create_dir(&target).unwrap();
+    let out = splatraj(&["scene", "convert", s(&input), s(&target)]);
+    assert_clean_failure(&out, &["out.compressed.ply", "a folder"]);
+    assert!(target.is_dir());
+}
