@@ -1,5 +1,6 @@
 //! `splatraj bench render`: time the object-mask pass, forward and forward + backward, with
-//! each rasterizer.
+//! each rasterizer; `bench first-try` runs the first-try configs; `bench frames` times a run's
+//! output frames.
 //!
 //! Each configuration (scene, resolution, pruning, rasterizer) runs in a fresh child process
 //! of this binary (hidden `--one` flag), so that the peak memory it reports (VmHWM of
@@ -20,6 +21,7 @@ use clap::{Args, Subcommand};
 use splatraj::experiment::bench::{
     BenchConfig, BenchReport, BenchRow, BenchSettings, BenchSource, rasterizer_name, run_one,
 };
+use splatraj::experiment::path_render::FrameSchedule;
 use splatraj_render::backend::BackendKind;
 use splatraj_render::render::Rasterizer;
 use splatraj_traj::costs::DEFAULT_TARGET_RATIO;
@@ -36,6 +38,98 @@ pub enum BenchCommand {
     /// would, each with `splatraj run` in a child process, and tabulate each window's verdict,
     /// framing, visible and hidden shares, clearance, turn per frame, wobble and the time.
     FirstTry(BenchFirstTryArgs),
+    /// Time a run's output frames (render RGB + object mask, metrics, PNG, H.264) at 720p and
+    /// 1080p on the demo scene and a real one, per frame and for a whole video.
+    Frames(BenchFramesArgs),
+}
+
+/// Arguments of `splatraj bench frames`.
+#[derive(Debug, Args)]
+pub struct BenchFramesArgs {
+    /// Real scene to time too (default: `biker.compressed.ply` in `$SPLATRAJ_DATA` or
+    /// `/work/shared/data`, when there).
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Time no real scene.
+    #[arg(long, conflicts_with = "scene")]
+    no_scene: bool,
+    /// Gaussians of the demo scene (0: no demo rows).
+    #[arg(long, default_value_t = 1_000_000)]
+    gaussians: usize,
+    /// Frame sizes: WIDTHxHEIGHT, 720p or 1080p.
+    #[arg(long, value_delimiter = ',', default_values = ["720p", "1080p"], value_parser = parse_size)]
+    sizes: Vec<(usize, usize)>,
+    /// Frames timed per row, spread over the video (the video's own count times it whole).
+    #[arg(long, default_value_t = 8)]
+    frames: usize,
+    /// Length of the video, seconds.
+    #[arg(long, default_value_t = 9.0)]
+    seconds: f64,
+    /// Frames per second of the video.
+    #[arg(long, default_value_t = 30.0)]
+    fps: f64,
+    /// Schedules to time: sequential (one frame at a time, the reference), pipelined or
+    /// pipelined:BATCH.
+    #[arg(long, value_delimiter = ',', default_values = ["sequential", "pipelined"], value_parser = FrameSchedule::from_str)]
+    schedule: Vec<FrameSchedule>,
+    /// Compositing: fused or tensor.
+    #[arg(long, default_value = "fused", value_parser = Rasterizer::from_str)]
+    rasterizer: Rasterizer,
+    /// Tensor backend, among those compiled in.
+    #[arg(long, default_value = "flex", value_parser = BackendKind::from_str)]
+    backend: BackendKind,
+    /// Demo object the camera frames.
+    #[arg(long, default_value = "red mug")]
+    object: String,
+    /// Share of the frame the object covers at the first frame.
+    #[arg(long, default_value_t = DEFAULT_TARGET_RATIO)]
+    target_ratio: f64,
+    /// Horizontal field of view, degrees.
+    #[arg(long, default_value_t = 60.0)]
+    fov: f64,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+fn parse_size(text: &str) -> Result<(usize, usize), String> {
+    splatraj::experiment::bench_frames::parse_size(text).map_err(|e| e.to_string())
+}
+
+/// `splatraj bench frames`: the timing is the library's (`splatraj::experiment::bench_frames`);
+/// this picks the real scene and prints.
+fn frames(args: &BenchFramesArgs) -> Result<()> {
+    use splatraj::experiment::bench_frames::{FramesBench, run_frames};
+    let scene = match (&args.scene, args.no_scene) {
+        (Some(path), _) => Some(path.clone()),
+        (None, true) => None,
+        (None, false) => {
+            let data = std::env::var_os("SPLATRAJ_DATA")
+                .map_or_else(|| PathBuf::from("/work/shared/data"), PathBuf::from);
+            Some(data.join("biker.compressed.ply")).filter(|p| p.is_file())
+        }
+    };
+    let bench = FramesBench {
+        backend: args.backend,
+        demo_gaussians: (args.gaussians > 0).then_some(args.gaussians),
+        scene,
+        sizes: args.sizes.clone(),
+        frames: args.frames,
+        seconds: args.seconds,
+        fps: args.fps,
+        schedules: args.schedule.clone(),
+        rasterizer: args.rasterizer,
+        object: args.object.clone(),
+        target_ratio: args.target_ratio,
+        fov: args.fov,
+    };
+    let report = run_frames(&bench, &mut |row| eprintln!("timing {row} …"))?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", report.table());
+    }
+    Ok(())
 }
 
 /// Arguments of `splatraj bench first-try`.
@@ -140,6 +234,7 @@ pub struct BenchRenderArgs {
 pub fn run(command: BenchCommand) -> Result<()> {
     match command {
         BenchCommand::FirstTry(args) => first_try(&args),
+        BenchCommand::Frames(args) => frames(&args),
         BenchCommand::Render(args) => {
             let bench = || match &args.one {
                 Some(spec) => {

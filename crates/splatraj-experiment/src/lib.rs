@@ -22,6 +22,7 @@
 #![warn(missing_docs)]
 
 pub mod bench;
+pub mod bench_frames;
 pub mod bench_scenes;
 pub mod camera_paths;
 pub mod checkpoint;

@@ -11,11 +11,14 @@
 //! small into `keyframes/`, so the report still shows which part each window is about.
 
 use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result, anyhow, bail};
+use burn::tensor::DType;
+use rayon::prelude::*;
 use splatraj_render::camera::Pose;
 use splatraj_render::host::{OnDevice, to_host};
-use splatraj_render::images::{highlight, png_rgb};
+use splatraj_render::images::{png_rgb8, rgb8};
 use splatraj_render::render::{Channel, DeviceScene, Rasterizer, RenderRequest, render};
 use splatraj_report::video::VideoEncoder;
 use splatraj_traj::costs::{coverage, tce, tre};
@@ -89,6 +92,75 @@ pub struct RenderedPath {
     pub metrics: Vec<FrameMetrics>,
     /// The video, if made.
     pub video: Option<PathBuf>,
+    /// Where the time went.
+    pub timings: PathTimings,
+}
+
+/// Time spent in each part of a path render, summed over its frames (the render stages'
+/// own split is [`splatraj_render::stages`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PathTimings {
+    /// `render()` calls: decide, bin, project, composite.
+    pub render: Duration,
+    /// TCE, TRE and coverage of the object's mask.
+    pub metrics: Duration,
+    /// Reading the images back and making 8-bit pixels (tint included).
+    pub read_back: Duration,
+    /// PNG encoding (frames and keyframes).
+    pub png: Duration,
+    /// H.264 encoding and muxing.
+    pub video: Duration,
+    /// Writing files.
+    pub write: Duration,
+    /// The whole call, wall clock.
+    pub wall: Duration,
+}
+
+/// How [`render_path_with`] orders its work; every schedule writes the same files.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameSchedule {
+    /// One frame at a time: render, read back, encode, write, then the next (the reference).
+    Sequential,
+    /// Up to `batch` frames rendered per pass while one thread encodes and writes the frames
+    /// before them.
+    Pipelined {
+        /// Poses per render pass.
+        batch: usize,
+    },
+}
+
+impl Default for FrameSchedule {
+    fn default() -> Self {
+        FrameSchedule::Pipelined { batch: 1 }
+    }
+}
+
+impl FrameSchedule {
+    /// `sequential` or `pipelined:BATCH`.
+    pub fn name(&self) -> String {
+        match self {
+            FrameSchedule::Sequential => "sequential".into(),
+            FrameSchedule::Pipelined { batch } => format!("pipelined:{batch}"),
+        }
+    }
+}
+
+impl std::str::FromStr for FrameSchedule {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let bad =
+            || format!("unknown schedule {s:?}: expected sequential, pipelined or pipelined:N");
+        match s.split_once(':') {
+            None if s == "sequential" => Ok(FrameSchedule::Sequential),
+            None if s == "pipelined" => Ok(FrameSchedule::default()),
+            Some(("pipelined", n)) => match n.parse() {
+                Ok(batch) if batch > 0 => Ok(FrameSchedule::Pipelined { batch }),
+                _ => Err(bad()),
+            },
+            _ => Err(bad()),
+        }
+    }
 }
 
 /// Renders `job` into `dir` (`frames/`, `frame_metrics.csv` when there are objects,
@@ -99,12 +171,29 @@ pub fn render_path(
     dir: &Path,
     progress: &mut dyn FnMut(usize),
 ) -> Result<RenderedPath> {
+    render_path_with(scene, job, dir, progress, FrameSchedule::default())
+}
+
+/// [`render_path`] with the given schedule.
+///
+/// One loop renders the frames (in passes of up to `batch` poses of one window and size),
+/// computes their metrics and turns them into 8-bit pixels; a [`FrameWriter`] encodes each
+/// frame to PNG and H.264 and writes it, inline ([`FrameSchedule::Sequential`]) or on a thread
+/// of its own fed through a bounded queue, in frame order. The first error stops both.
+pub fn render_path_with(
+    scene: &DeviceScene,
+    job: &PathRender<'_>,
+    dir: &Path,
+    progress: &mut dyn FnMut(usize),
+    schedule: FrameSchedule,
+) -> Result<RenderedPath> {
+    let started = Instant::now();
     let frames = job.frames;
     if frames.poses.is_empty() {
         bail!("the path has no frames");
     }
     let size = (frames.cameras[0].width, frames.cameras[0].height);
-    let mut encoder = match job.video {
+    let encoder = match job.video {
         Video::Mp4 => {
             if let Some((i, k)) = frames
                 .cameras
@@ -143,67 +232,59 @@ pub fn render_path(
         std::fs::create_dir_all(&keyframes_dir)
             .with_context(|| format!("cannot create {}", keyframes_dir.display()))?;
     }
-    let mut metrics = Vec::new();
-    for (index, ((&t, &pose), intrinsics)) in frames
-        .times
-        .iter()
-        .zip(&frames.poses)
-        .zip(&frames.cameras)
-        .enumerate()
-    {
-        let window = window_of(t, job.objects.len());
-        let object = job.objects.get(window);
-        let mut channels = vec![Channel::Rgb];
-        if let Some(o) = object {
-            channels.push(Channel::Mask(o.mask.to_vec()));
-        }
-        let request = RenderRequest {
-            rasterizer: job.rasterizer,
-            ..RenderRequest::new(*intrinsics, channels)
-        };
-        let images = render(scene, scene.poses(&[Pose(pose)]), &request)
-            .with_context(|| format!("rendering frame {index}"))?
-            .images; // [1, H, W, 3 or 4]
-        if let Some(o) = object {
-            let [_, h, w, _] = images.dims();
-            let mask = images.clone().narrow(3, 3, 1).reshape([1, h, w]);
-            let first = |v: Vec<f64>| v.first().copied().unwrap_or(f64::NAN);
-            metrics.push(FrameMetrics {
-                frame: index,
-                t,
-                window,
-                tce: first(to_host(tce(mask.clone()))?),
-                tre: first(to_host(tre(mask.clone(), o.target_ratio))?),
-                coverage: first(to_host(coverage(mask))?),
-            });
-        }
-        let values = to_host(images)?;
-        if keyframes.contains(&index) {
-            let tinted = png_rgb(&highlight(&values, TINT_ALPHA), intrinsics)?;
-            write_bytes(
-                &keyframes_dir.join(frame_name(index)),
-                &shrunk_png(&tinted, KEYFRAME_WIDTH)?,
+    let mut writer = FrameWriter {
+        frames_dir,
+        keyframes_dir,
+        encoder,
+        timings: PathTimings::default(),
+    };
+    let mut timings = PathTimings::default();
+    let (metrics, mut writer) = match schedule {
+        FrameSchedule::Sequential => {
+            let metrics = render_frames(
+                scene,
+                job,
+                1,
+                &keyframes,
+                &mut timings,
+                progress,
+                &mut |frame| writer.write(frame),
             )?;
+            (metrics, writer)
         }
-        let rgb = match (object, job.overlay) {
-            (Some(_), MaskOverlay::Tint) => highlight(&values, TINT_ALPHA),
-            (Some(_), MaskOverlay::None) => values
-                .chunks_exact(4)
-                .flat_map(|p| p[..3].to_vec())
-                .collect(),
-            (None, _) => values,
-        };
-        let png = png_rgb(&rgb, intrinsics)?;
-        if let Some(encoder) = &mut encoder {
-            // The video is made from the PNG's own bytes, so it shows exactly the frames.
-            let decoded = image::load_from_memory_with_format(&png, image::ImageFormat::Png)
-                .context("reading back a frame")?
-                .into_rgb8();
-            encoder.push(decoded.as_raw())?;
-        }
-        write_bytes(&frames_dir.join(frame_name(index)), &png)?;
-        progress(index + 1);
-    }
+        FrameSchedule::Pipelined { batch } => std::thread::scope(|threads| {
+            // Two frames queued: enough to keep the writer busy, and a 1080p frame with its
+            // keyframe is ~12 MB, so the queue stays small.
+            let (queue, frames_in) = std::sync::mpsc::sync_channel::<Frame>(2);
+            let encoding = threads.spawn(move || -> Result<FrameWriter> {
+                for frame in frames_in {
+                    writer.write(frame)?;
+                }
+                Ok(writer)
+            });
+            let rendered = render_frames(
+                scene,
+                job,
+                batch,
+                &keyframes,
+                &mut timings,
+                progress,
+                &mut |frame| {
+                    // A closed queue means the writer failed: its error is reported below.
+                    queue
+                        .send(frame)
+                        .map_err(|_| anyhow!("the frame writer stopped"))
+                },
+            );
+            drop(queue);
+            let written = encoding
+                .join()
+                .map_err(|_| anyhow!("the frame writer panicked"))?;
+            // The writer's error is the cause when both failed.
+            let writer = written?;
+            Ok::<_, anyhow::Error>((rendered?, writer))
+        })?,
+    };
     if !metrics.is_empty() {
         let header = ["frame", "t", "window", "tce", "tre", "coverage"].map(String::from);
         let rows: Vec<Vec<String>> = metrics
@@ -221,15 +302,210 @@ pub fn render_path(
             .collect();
         write_csv(&dir.join(FRAME_METRICS_FILE), &header, &rows)?;
     }
-    let video = match encoder {
+    let video = match writer.encoder.take() {
         Some(encoder) => {
             let path = dir.join(VIDEO_FILE);
-            write_bytes(&path, &encoder.finish()?)?;
+            let clock = Instant::now();
+            let bytes = encoder.finish()?;
+            writer.timings.video += clock.elapsed();
+            write_bytes(&path, &bytes)?;
             Some(path)
         }
         None => None,
     };
-    Ok(RenderedPath { metrics, video })
+    timings.png = writer.timings.png;
+    timings.video = writer.timings.video;
+    timings.write = writer.timings.write;
+    timings.wall = started.elapsed();
+    Ok(RenderedPath {
+        metrics,
+        video,
+        timings,
+    })
+}
+
+/// One rendered frame on its way to the files.
+struct Frame {
+    /// Frame index.
+    index: usize,
+    /// Frame size, pixels.
+    width: usize,
+    height: usize,
+    /// 8-bit RGB as the frame shows it. `[H·W·3]`
+    rgb: Vec<u8>,
+    /// 8-bit RGB with the object tinted, for a keyframe. `[H·W·3]`
+    keyframe: Option<Vec<u8>>,
+}
+
+/// Encodes and writes frames, in the order it is given them.
+struct FrameWriter {
+    frames_dir: PathBuf,
+    keyframes_dir: PathBuf,
+    encoder: Option<VideoEncoder>,
+    /// PNG, video and write times.
+    timings: PathTimings,
+}
+
+impl FrameWriter {
+    /// Writes `frame`'s PNG (and keyframe) and appends it to the video.
+    fn write(&mut self, frame: Frame) -> Result<()> {
+        let clock = Instant::now();
+        let png = png_rgb8(&frame.rgb, frame.width, frame.height)?;
+        let keyframe = match &frame.keyframe {
+            Some(tinted) => Some(shrunk_png(
+                tinted,
+                frame.width,
+                frame.height,
+                KEYFRAME_WIDTH,
+            )?),
+            None => None,
+        };
+        self.timings.png += clock.elapsed();
+        let clock = Instant::now();
+        if let Some(encoder) = &mut self.encoder {
+            // PNG is lossless: these are the bytes the PNG holds, so the video shows exactly
+            // the frames.
+            encoder.push(&frame.rgb)?;
+        }
+        self.timings.video += clock.elapsed();
+        let clock = Instant::now();
+        let name = frame_name(frame.index);
+        if let Some(keyframe) = keyframe {
+            write_bytes(&self.keyframes_dir.join(&name), &keyframe)?;
+        }
+        write_bytes(&self.frames_dir.join(&name), &png)?;
+        self.timings.write += clock.elapsed();
+        Ok(())
+    }
+}
+
+/// Renders every frame of `job` in passes of up to `batch` consecutive frames that share a
+/// window and a size, hands each frame's pixels to `deliver` in order and tells `progress`;
+/// returns the frames' metrics (empty without objects) and adds render, metrics and read-back
+/// times to `timings`.
+fn render_frames(
+    scene: &DeviceScene,
+    job: &PathRender<'_>,
+    batch: usize,
+    keyframes: &[usize],
+    timings: &mut PathTimings,
+    progress: &mut dyn FnMut(usize),
+    deliver: &mut dyn FnMut(Frame) -> Result<()>,
+) -> Result<Vec<FrameMetrics>> {
+    let frames = job.frames;
+    let windows: Vec<usize> = frames
+        .times
+        .iter()
+        .map(|&t| window_of(t, job.objects.len()))
+        .collect();
+    let mut metrics = Vec::new();
+    let mut first = 0;
+    while first < frames.poses.len() {
+        let intrinsics = frames.cameras[first];
+        let same = |i: usize| windows[i] == windows[first] && frames.cameras[i] == intrinsics;
+        let end = (first..frames.poses.len().min(first + batch.max(1)))
+            .take_while(|&i| same(i))
+            .last()
+            .map_or(first + 1, |i| i + 1);
+        let object = job.objects.get(windows[first]);
+        let mut channels = vec![Channel::Rgb];
+        if let Some(o) = object {
+            channels.push(Channel::Mask(o.mask.to_vec()));
+        }
+        let request = RenderRequest {
+            rasterizer: job.rasterizer,
+            ..RenderRequest::new(intrinsics, channels)
+        };
+        let poses: Vec<Pose> = frames.poses[first..end].iter().map(|&p| Pose(p)).collect();
+        let clock = Instant::now();
+        let images = render(scene, scene.poses(&poses), &request)
+            .with_context(|| format!("rendering frame {first}"))?
+            .images; // [B, H, W, 3 or 4]
+        timings.render += clock.elapsed();
+        let [b, h, w, c] = images.dims();
+        if let Some(o) = object {
+            let clock = Instant::now();
+            let mask = images.clone().narrow(3, 3, 1).reshape([b, h, w]);
+            let tce = to_host(tce(mask.clone()))?; // [B]
+            let tre = to_host(tre(mask.clone(), o.target_ratio))?;
+            let coverage = to_host(coverage(mask))?;
+            for (i, index) in (first..end).enumerate() {
+                let at = |v: &[f64]| v.get(i).copied().unwrap_or(f64::NAN);
+                metrics.push(FrameMetrics {
+                    frame: index,
+                    t: frames.times[index],
+                    window: windows[index],
+                    tce: at(&tce),
+                    tre: at(&tre),
+                    coverage: at(&coverage),
+                });
+            }
+            timings.metrics += clock.elapsed();
+        }
+        let clock = Instant::now();
+        // f32 images stay f32 on the host (the f64 copy cost as much as the PNG); any other
+        // dtype is read as f64, as `to_host` reads it.
+        let data = images.into_data();
+        let pixels = match data.dtype() {
+            DType::F32 => Pixels::F32(data.try_into_vec::<f32>().map_err(|e| anyhow!("{e:?}"))?),
+            _ => Pixels::F64(
+                data.convert::<f64>()
+                    .try_into_vec::<f64>()
+                    .map_err(|e| anyhow!("{e:?}"))?,
+            ),
+        };
+        timings.read_back += clock.elapsed();
+        for (i, index) in (first..end).enumerate() {
+            let clock = Instant::now();
+            let tinted = object.is_some() && job.overlay == MaskOverlay::Tint;
+            let frame_pixels = h * w * c;
+            let range = i * frame_pixels..(i + 1) * frame_pixels;
+            let rgb = pixels.rgb8(range.clone(), c, tinted.then_some(TINT_ALPHA));
+            let keyframe = keyframes
+                .contains(&index)
+                .then(|| pixels.rgb8(range, c, Some(TINT_ALPHA)));
+            timings.read_back += clock.elapsed();
+            deliver(Frame {
+                index,
+                width: w,
+                height: h,
+                rgb,
+                keyframe,
+            })?;
+            progress(index + 1);
+        }
+        first = end;
+    }
+    Ok(metrics)
+}
+
+/// A batch's images on the host, `[B·H·W·C]`, in the precision they were rendered in.
+enum Pixels {
+    F32(Vec<f32>),
+    F64(Vec<f64>),
+}
+
+impl Pixels {
+    /// [`rgb8`] of the values in `range`, rows split over the rayon pool.
+    fn rgb8(&self, range: std::ops::Range<usize>, channels: usize, tint: Option<f64>) -> Vec<u8> {
+        fn rows<E: Copy + Into<f64> + Sync>(
+            values: &[E],
+            channels: usize,
+            tint: Option<f64>,
+        ) -> Vec<u8> {
+            // Whole pixels per chunk; the chunks' bytes are joined in order.
+            let chunk = channels * 4096;
+            values
+                .par_chunks(chunk)
+                .map(|part| rgb8(part, channels, tint))
+                .collect::<Vec<Vec<u8>>>()
+                .concat()
+        }
+        match self {
+            Pixels::F32(v) => rows(&v[range], channels, tint),
+            Pixels::F64(v) => rows(&v[range], channels, tint),
+        }
+    }
 }
 
 /// The folder of the report's tinted keyframes in a rendered folder.
@@ -264,14 +540,14 @@ pub fn keyframe_indices(times: &[f64], windows: usize) -> Vec<Vec<usize>> {
         .collect()
 }
 
-/// `png` scaled down to `width` pixels wide (kept when narrower), as PNG bytes.
-fn shrunk_png(png: &[u8], width: u32) -> Result<Vec<u8>> {
-    let image = image::load_from_memory_with_format(png, image::ImageFormat::Png)
-        .context("reading back a keyframe")?
-        .into_rgb8();
-    if image.width() <= width {
-        return Ok(png.to_vec());
+/// The 8-bit RGB picture `rgb` (`[H·W·3]`, `w` × `h`) scaled down to `width` pixels wide
+/// (kept when narrower), as PNG bytes.
+fn shrunk_png(rgb: &[u8], w: usize, h: usize, width: u32) -> Result<Vec<u8>> {
+    if w <= width as usize {
+        return Ok(png_rgb8(rgb, w, h)?);
     }
+    let image = image::RgbImage::from_raw(w as u32, h as u32, rgb.to_vec())
+        .ok_or_else(|| anyhow!("a keyframe of {} bytes is not {w}×{h} RGB", rgb.len()))?;
     let height =
         ((image.height() as f64 * width as f64 / image.width() as f64).round() as u32).max(1);
     let small = image::imageops::resize(&image, width, height, image::imageops::Triangle);

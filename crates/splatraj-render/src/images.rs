@@ -30,8 +30,16 @@ pub enum ImageError {
     Encode(#[from] image::ImageError),
 }
 
-fn to_u8(v: f64) -> u8 {
+/// A value in [0, 1] (clamped) as an 8-bit level, the one rounding rule of every picture.
+pub fn to_u8(v: f64) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// One pixel of [`highlight`]: RGB + mask `px` tinted.
+#[inline]
+fn tint(px: [f64; 4], strength: f64) -> [f64; 3] {
+    let m = strength * px[3].clamp(0.0, 1.0);
+    std::array::from_fn(|c| px[c].clamp(0.0, 1.0) * (1.0 - m) + m * HIGHLIGHT_RGB[c])
 }
 
 /// RGB values `[H·W·3]` from an RGB + mask render `[H·W·4]`, the masked pixels tinted with
@@ -39,26 +47,59 @@ fn to_u8(v: f64) -> u8 {
 pub fn highlight(pixels: &[f64], strength: f64) -> Vec<f64> {
     pixels
         .chunks_exact(4)
-        .flat_map(|px| {
-            let m = strength * px[3].clamp(0.0, 1.0);
-            (0..3).map(move |c| px[c].clamp(0.0, 1.0) * (1.0 - m) + m * HIGHLIGHT_RGB[c])
-        })
+        .flat_map(|px| tint([px[0], px[1], px[2], px[3]], strength))
         .collect()
+}
+
+/// 8-bit RGB `[P·3]` of `pixels` `[P, C]` (C = 3, or 4 with the mask last): the first three
+/// channels as they are, or tinted as [`highlight`] does with `tint_strength`. The same bytes
+/// as [`to_u8`] of [`highlight`] (or of the channels) read back as f64, without the f64 copies.
+pub fn rgb8<E: Copy + Into<f64>>(
+    pixels: &[E],
+    channels: usize,
+    tint_strength: Option<f64>,
+) -> Vec<u8> {
+    assert!(channels >= 3 && (tint_strength.is_none() || channels == 4));
+    let mut out = Vec::with_capacity(pixels.len() / channels * 3);
+    for px in pixels.chunks_exact(channels) {
+        let rgb = match tint_strength {
+            Some(strength) => tint(
+                [px[0].into(), px[1].into(), px[2].into(), px[3].into()],
+                strength,
+            ),
+            None => [px[0].into(), px[1].into(), px[2].into()],
+        };
+        out.extend(rgb.map(to_u8));
+    }
+    out
 }
 
 /// PNG bytes of RGB values `[H·W·3]` in [0, 1] at the size of `k`.
 pub fn png_rgb(rgb: &[f64], k: &Intrinsics) -> Result<Vec<u8>, ImageError> {
-    let size = ImageError::Size {
-        what: "RGB render",
-        got: rgb.len(),
-        width: k.width,
-        height: k.height,
-    };
     let pixels: Vec<u8> = rgb.iter().map(|&v| to_u8(v)).collect();
-    let image = image::RgbImage::from_raw(k.width as u32, k.height as u32, pixels).ok_or(size)?;
-    let mut bytes = Cursor::new(Vec::new());
-    image.write_to(&mut bytes, image::ImageFormat::Png)?;
-    Ok(bytes.into_inner())
+    png_rgb8(&pixels, k.width, k.height)
+}
+
+/// PNG bytes of 8-bit RGB `[H·W·3]` of a `width` × `height` picture (the encoder and settings
+/// `RgbImage::write_to` uses, so the same bytes).
+pub fn png_rgb8(pixels: &[u8], width: usize, height: usize) -> Result<Vec<u8>, ImageError> {
+    use image::ImageEncoder;
+    if pixels.len() != width * height * 3 {
+        return Err(ImageError::Size {
+            what: "RGB render",
+            got: pixels.len(),
+            width,
+            height,
+        });
+    }
+    let mut bytes = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut bytes).write_image(
+        pixels,
+        width as u32,
+        height as u32,
+        image::ExtendedColorType::Rgb8,
+    )?;
+    Ok(bytes)
 }
 
 /// PNG bytes of grey values `[H·W]` in [0, 1] at the size of `k`.
