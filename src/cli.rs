@@ -171,27 +171,21 @@ pub fn progress_bar(len: u64, quiet: bool) -> ProgressBar {
 /// source is built from a config, so it cannot be handed a bar directly).
 pub fn install_lift_progress() {
     use splatraj::lift::LiftStage;
+    // One bar per phase: planning, rendering, encoding and lifting follow each other.
     let current: Mutex<Option<(LiftStage, ProgressBar)>> = Mutex::new(None);
     splatraj::lift::progress::install(Arc::new(move |stage, done, total| {
-        // Rendering and encoding alternate view by view: one bar for both.
-        let stage = match stage {
-            LiftStage::Render => LiftStage::Encode,
-            other => other,
-        };
         let mut current = current.lock().unwrap_or_else(|e| e.into_inner());
         if current.as_ref().map(|c| c.0) != Some(stage) {
             if let Some((_, bar)) = current.take() {
                 bar.finish();
             }
             let bar = progress_bar(total as u64, false);
-            bar.set_message(match stage {
-                LiftStage::Encode => "rendering and encoding views",
-                other => other.name(),
-            });
+            bar.set_message(stage.name());
             *current = Some((stage, bar));
         }
         if let Some((_, bar)) = current.as_ref() {
-            bar.set_position(done as u64);
+            // Views are encoded two at a time: never draw the bar backwards.
+            bar.set_position(bar.position().max(done as u64));
             if done >= total {
                 bar.finish();
             }

@@ -53,6 +53,13 @@ pub fn check_lifted_memory(config: &Config, gaussians: usize) -> Result<()> {
     }
     let views: ViewOptions = part(&table, "views")?;
     let field: FieldOptions = part(&table, "field")?;
+    // The capture's cameras are every one a view (`views.count` is for planned views).
+    let view_count = match table.get("cameras").and_then(toml::Value::as_str) {
+        Some(cameras) => splatraj_lift::cameras::read_views(&config.resolve(Path::new(cameras)))
+            .map(|v| v.len())
+            .with_context(|| format!("`targets.lifted.cameras` {cameras}"))?,
+        None => views.count,
+    };
     let path = config.resolve(weights);
     let weights_bytes = std::fs::metadata(&path)
         .with_context(|| format!("`targets.text_encoder` {}", path.display()))?
@@ -60,11 +67,11 @@ pub fn check_lifted_memory(config: &Config, gaussians: usize) -> Result<()> {
     let mut plan = MemoryPlan::default();
     plan.stage(
         format!(
-            "the lifted field: {gaussians} Gaussians, `targets.lifted.views.count` = {} views, \
-             `targets.lifted.field.components` = {}",
-            views.count, field.components
+            "the lifted field: {gaussians} Gaussians, {view_count} views \
+             (`targets.lifted.views.count` or the cameras), `targets.lifted.field.components` = {}",
+            field.components
         ),
-        memory_bytes(gaussians, views.count, &field, weights_bytes, 512),
+        memory_bytes(gaussians, view_count, &field, weights_bytes, 512),
     );
     plan.check(MemoryLimit::new(config.max_memory_gb)?, RAISE_LIMIT)
 }

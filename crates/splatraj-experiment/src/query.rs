@@ -668,6 +668,11 @@ pub fn option_of_key(key: &str) -> String {
         "negatives" => "--negative".to_string(),
         // A registered source's table: `custom.<name>` is the --source value.
         "custom" => format!("--source {key}"),
+        // The lifted source's own table comes from --source-key items.
+        "lifted" => match key.split_once('.') {
+            Some((_, rest)) => format!("--source-key {rest}"),
+            None => "--source-key".to_string(),
+        },
         other => format!("--{}", other.replace('_', "-")),
     }
 }

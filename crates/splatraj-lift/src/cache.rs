@@ -39,10 +39,12 @@ impl Fnv {
         self
     }
 
-    /// Adds f32 values by their bits.
+    /// Adds f32 values by their bits, a word per step (the key is hashed on every query, over
+    /// about 60 floats per Gaussian: bytewise was a second per 6 M Gaussians).
     pub fn floats(&mut self, values: &[f32]) -> &mut Self {
         for v in values {
-            self.bytes(&v.to_le_bytes());
+            self.0 ^= u64::from(v.to_bits());
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
         }
         self
     }

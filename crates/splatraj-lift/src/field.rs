@@ -14,7 +14,6 @@
 //! and because lifting is linear the result equals lifting the full features and projecting,
 //! up to the share of variance the subspace leaves out ([`LiftedField::explained`]).
 
-use rayon::prelude::*;
 use splatraj_render::camera::Intrinsics;
 use splatraj_render::host::OnDevice;
 use splatraj_render::lift::{LiftSums, lift_views};
@@ -31,7 +30,9 @@ use crate::views::View;
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct FieldOptions {
-    /// Longer side of the RGB renders given to the image tower, pixels.
+    /// Side of the image tower's input for dense features: each view is rendered (or its
+    /// photo shrunk) to about `render_size²` pixels with its own aspect ratio, on whole
+    /// patches (448 with ViT-B/16: 28×28 patches).
     pub render_size: usize,
     /// Longer side of the renders the features are lifted through, pixels.
     pub lift_size: usize,
@@ -70,9 +71,10 @@ impl FieldOptions {
 
 /// Estimated peak bytes of building a field of `n` Gaussians from `views` views with
 /// `options`, for an image tower whose weights file has `weights_bytes` bytes (loaded as f32,
-/// so up to twice a half-precision file) and embeddings of `dim` values: the tower and its
-/// activations, every view's dense features, the lift sums (f64) beside the gradient of one
-/// pass, and the field.
+/// so up to twice a half-precision file) and embeddings of `dim` values: the scene on the
+/// lifting device, the tower and two passes' activations (views are encoded two at a time),
+/// every view's dense features and their copy for the subspace, the lift sums (f64) beside the
+/// gradient of one pass, and the field.
 pub fn memory_bytes(
     n: usize,
     views: usize,
@@ -83,16 +85,19 @@ pub fn memory_bytes(
     let k = options.components as f64;
     let n = n as f64;
     let patches = (options.render_size as f64 / 16.0).powi(2);
+    // Means, covariance factors, opacities and SH up to degree 3 on the device, and its
+    // host geometry for the per-pass decisions.
+    let scene = n * 250.0;
     let tower = 2.0 * weights_bytes as f64;
     // Activations of one ViT-B/16 pass: ~16 token buffers of width 768 and 12 attention maps.
     let tokens = patches + 1.0;
-    let activations = 4.0 * (16.0 * tokens * 768.0 + 12.0 * tokens * tokens);
-    let dense = views as f64 * patches * dim as f64 * 4.0;
+    let activations = 2.0 * 4.0 * (16.0 * tokens * 768.0 + 12.0 * tokens * tokens);
+    let dense = 2.0 * views as f64 * patches * dim as f64 * 4.0;
     let lift_pixels = (options.lift_size as f64).powi(2);
     let lift_pass = lift_pixels * (k + 1.0) * 4.0 * 4.0 + n * (k + 1.0) * 4.0 * 3.0;
     let sums = n * (k + 1.0) * 8.0;
     let field = n * (k + 1.0) * 4.0;
-    tower + activations + dense + lift_pass + sums + field
+    scene + tower + activations + dense + lift_pass + sums + field
 }
 
 /// Per-Gaussian compressed features and how much each Gaussian was seen.
@@ -151,7 +156,10 @@ impl LiftedField {
                     dot_t += zj * f64::from(t_coords[j]);
                     norm_sq += zj * (2.0 * f64::from(mean_coords[j]) + zj);
                 }
-                (norm_sq > 1e-12).then(|| (dot_t / norm_sq.sqrt()) as f32)
+                // |mean + Bᵀz|² comes from cancelling f32 terms: below a millionth of |mean|² it
+                // is rounding, and a direction from it would be noise.
+                (norm_sq > 1e-6 * mean_sq.max(1e-12))
+                    .then(|| (dot_t / norm_sq.sqrt()).clamp(-1.0, 1.0) as f32)
             })
             .collect()
     }
@@ -223,9 +231,9 @@ impl LiftedField {
     }
 }
 
-/// Renders each view in RGB at `options.render_size` and takes its dense ClearCLIP features.
-/// Views are encoded two at a time on worker threads: one ViT pass keeps about one core busy
-/// (its matrix products are too small for burn's CPU backend to split well).
+/// Renders each view in RGB at exactly the tower's patch grid for that view
+/// ([`ImageEncoder::grid_for`]: about `(render_size / patch)²` patches with the view's aspect)
+/// and takes its dense ClearCLIP features.
 pub fn encode_views(
     scene: &DeviceScene,
     views: &[View],
@@ -233,32 +241,42 @@ pub fn encode_views(
     options: &FieldOptions,
     progress: &Progress,
 ) -> Result<Vec<DenseFeatures>> {
-    options.check("lifted.field")?;
+    options.check("targets.lifted.field")?;
     let mut images = Vec::with_capacity(views.len());
     for (v, view) in views.iter().enumerate() {
         progress(LiftStage::Render, v, views.len());
-        images.push(render_rgb(scene, view, options.render_size)?);
+        let (rows, cols) = encoder.grid_for(view.intrinsics.width, view.intrinsics.height);
+        let patch = encoder.shape().patch;
+        let intrinsics = view.intrinsics.rescaled(cols * patch, rows * patch)?;
+        images.push(render_rgb_with(scene, view, &intrinsics)?);
     }
-    encode_images(&images, encoder, progress)
+    progress(LiftStage::Render, views.len(), views.len());
+    encode_images(images.len(), |i| Ok(images[i].clone()), encoder, progress)
 }
 
-/// Dense features of `images`, in order, encoded in parallel.
+/// Dense features of `count` images made by `image(i)`, in order. Two are made and encoded at a
+/// time: one ViT pass keeps about one core busy (its matrix products are too small for burn's
+/// CPU backend to split well), and two bound the images and activations held at once.
 fn encode_images(
-    images: &[RgbImage],
+    count: usize,
+    image: impl Fn(usize) -> Result<RgbImage> + Sync,
     encoder: &ImageEncoder,
     progress: &Progress,
 ) -> Result<Vec<DenseFeatures>> {
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    progress(LiftStage::Encode, 0, images.len());
-    images
-        .par_iter()
-        .map(|image| {
-            let features = encoder.dense(image)?;
-            let finished = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-            progress(LiftStage::Encode, finished, images.len());
-            Ok(features)
-        })
-        .collect()
+    let encode = |i: usize| -> Result<DenseFeatures> { Ok(encoder.dense(&image(i)?)?) };
+    let mut dense = Vec::with_capacity(count);
+    for first in (0..count).step_by(2) {
+        progress(LiftStage::Encode, first, count);
+        if first + 1 < count {
+            let (a, b) = rayon::join(|| encode(first), || encode(first + 1));
+            dense.push(a?);
+            dense.push(b?);
+        } else {
+            dense.push(encode(first)?);
+        }
+    }
+    progress(LiftStage::Encode, count, count);
+    Ok(dense)
 }
 
 /// The field of lifted sums: codes are the weighted means (zeros where nothing was seen).
@@ -288,33 +306,67 @@ pub fn sized(intrinsics: &Intrinsics, size: usize) -> Result<Intrinsics> {
     Ok(intrinsics.rescaled(width, height)?)
 }
 
-/// Reads each photo (PNG or JPEG, as captures hold them) and takes its dense ClearCLIP
-/// features.
+/// Reads each camera's photo (PNG or JPEG, turned upright by its EXIF orientation), checks
+/// it shows that camera's view (same aspect ratio, a pixel of rounding allowed), shrinks it to
+/// the tower's patch grid right away (a capture's 16-megapixel photos are never all held), and
+/// takes its dense ClearCLIP features.
 pub fn encode_photos(
-    photos: &[std::path::PathBuf],
+    photos: &[(std::path::PathBuf, View)],
     encoder: &ImageEncoder,
     progress: &Progress,
 ) -> Result<Vec<DenseFeatures>> {
-    let mut images = Vec::with_capacity(photos.len());
-    for (v, path) in photos.iter().enumerate() {
-        progress(LiftStage::Render, v, photos.len());
-        let rgb = image::open(path)
-            .map_err(|e| LiftError::file(path, e))?
+    let patch = encoder.shape().patch;
+    let read = |i: usize| -> Result<RgbImage> {
+        let (path, view) = &photos[i];
+        let bad = |e: &dyn std::fmt::Display| LiftError::file(path, e);
+        let mut decoder = image::ImageReader::open(path)
+            .map_err(|e| bad(&e))?
+            .with_guessed_format()
+            .map_err(|e| bad(&e))?
+            .into_decoder()
+            .map_err(|e| bad(&e))?;
+        let orientation = image::ImageDecoder::orientation(&mut decoder).map_err(|e| bad(&e))?;
+        let mut photo = image::DynamicImage::from_decoder(decoder).map_err(|e| bad(&e))?;
+        photo.apply_orientation(orientation);
+        let (width, height) = (photo.width() as usize, photo.height() as usize);
+        let k = view.intrinsics;
+        if (width * k.height).abs_diff(height * k.width) > k.width + k.height {
+            return Err(LiftError::file(
+                path,
+                format!(
+                    "the photo is {width}×{height} (upright) but its camera is {}×{}: not the \
+                     same aspect ratio, so not this camera's image (cropped, undistorted to \
+                     another size, or from another image set?)",
+                    k.width, k.height
+                ),
+            ));
+        }
+        let (rows, cols) = encoder.grid_for(k.width, k.height);
+        let small = photo
+            .resize_exact(
+                (cols * patch) as u32,
+                (rows * patch) as u32,
+                image::imageops::FilterType::Triangle,
+            )
             .to_rgb32f();
-        images.push(RgbImage {
-            width: rgb.width() as usize,
-            height: rgb.height() as usize,
-            pixels: rgb.into_raw(),
-        });
-    }
-    encode_images(&images, encoder, progress)
+        Ok(RgbImage {
+            width: small.width() as usize,
+            height: small.height() as usize,
+            pixels: small.into_raw(),
+        })
+    };
+    encode_images(photos.len(), read, encoder, progress)
 }
 
-/// An RGB render of `view` at `size` pixels on its longer side, clamped to [0, 1]. Rendered
-/// on the scene's device without a gradient (the image is only read).
+/// An RGB render of `view` at `size` pixels on its longer side, clamped to [0, 1].
 pub fn render_rgb(scene: &DeviceScene, view: &View, size: usize) -> Result<RgbImage> {
-    let intrinsics = sized(&view.intrinsics, size)?;
-    let request = RenderRequest::new(intrinsics, vec![Channel::Rgb]);
+    render_rgb_with(scene, view, &sized(&view.intrinsics, size)?)
+}
+
+/// An RGB render of `view`'s pose through `intrinsics`, clamped to [0, 1]. Rendered on the
+/// scene's device without a gradient (the image is only read).
+fn render_rgb_with(scene: &DeviceScene, view: &View, intrinsics: &Intrinsics) -> Result<RgbImage> {
+    let request = RenderRequest::new(*intrinsics, vec![Channel::Rgb]);
     let out = render(scene, scene.poses(&[view.pose]), &request)?;
     let pixels: Vec<f32> = out
         .images

@@ -85,6 +85,16 @@ pub fn lift_masks(
     options: &MaskOptions,
     progress: &Progress,
 ) -> Result<LiftedLabels> {
+    if masks.is_empty() {
+        return Err(LiftError::Scene("no masks to lift".into()));
+    }
+    if scene.len() != device_scene.len() {
+        return Err(LiftError::Scene(format!(
+            "the scene has {} Gaussians but its uploaded copy {}",
+            scene.len(),
+            device_scene.len()
+        )));
+    }
     for (m, mask) in masks.iter().enumerate() {
         let expected = mask.view.intrinsics.width * mask.view.intrinsics.height;
         if mask.labels.len() != expected {

@@ -27,6 +27,10 @@ use crate::field::{FieldOptions, LiftedField, encode_photos, encode_views};
 use crate::progress::Progress;
 use crate::views::{ViewOptions, plan_views};
 
+/// Bumped whenever what a field holds for the same inputs changes (view planning, ClearCLIP,
+/// the subspace, the lifting), so that old caches are rebuilt rather than trusted.
+pub const FIELD_VERSION: u32 = 1;
+
 /// The name configs use: `[targets] source = "lifted"`.
 pub const LIFTED: &str = "lifted";
 
@@ -133,13 +137,13 @@ impl LiftedSource {
         config.field.check("targets.lifted.field")?;
         if !(config.temperature.is_finite() && config.temperature > 0.0) {
             return Err(LiftError::option(
-                "targets.lifted.temperature",
+                "targets.temperature",
                 format!("{} must be finite and > 0", config.temperature),
             ));
         }
         if config.negatives.is_empty() {
             return Err(LiftError::option(
-                "targets.lifted.negatives",
+                "targets.negatives",
                 "at least one canonical negative phrase is needed",
             ));
         }
@@ -189,12 +193,21 @@ impl LiftedSource {
             "cameras": self.cameras.as_ref().map(|c| c.iter().map(|v| (&v.name, v.view.pose.0, [v.view.intrinsics.fx, v.view.intrinsics.fy, v.view.intrinsics.cx, v.view.intrinsics.cy, v.view.intrinsics.width as f64, v.view.intrinsics.height as f64])).collect::<Vec<_>>()),
         });
         hash.bytes(settings.to_string().as_bytes());
+        hash.bytes(&FIELD_VERSION.to_le_bytes());
         if let (Some(dir), Some(cameras)) = (&self.config.photos, &self.cameras) {
             for photo in photos_of(dir, cameras)? {
                 cache::hash_file_identity(&mut hash, &photo)?;
             }
         }
         cache::hash_file_identity(&mut hash, &self.config.weights)?;
+        // open_clip_config.json beside the weights sets the towers' heads and activation.
+        let beside = self
+            .config
+            .weights
+            .with_file_name(splatraj_semantic::text_encoder::OPEN_CLIP_CONFIG);
+        if beside.is_file() {
+            cache::hash_file_identity(&mut hash, &beside)?;
+        }
         Ok(hash.hex())
     }
 
@@ -278,6 +291,7 @@ impl LiftedSource {
             &self.config.weights,
             ImageEncoderOptions {
                 activation: self.config.activation,
+                dense_size: self.config.field.render_size,
                 ..ImageEncoderOptions::default()
             },
             &self.device,
@@ -285,7 +299,11 @@ impl LiftedSource {
         let loaded = started.elapsed();
         let dense = match (&self.config.photos, &self.cameras) {
             (Some(dir), Some(cameras)) => {
-                encode_photos(&photos_of(dir, cameras)?, &image, progress)?
+                let photos: Vec<(PathBuf, crate::views::View)> = photos_of(dir, cameras)?
+                    .into_iter()
+                    .zip(cameras.iter().map(|c| c.view))
+                    .collect();
+                encode_photos(&photos, &image, progress)?
             }
             _ => encode_views(&device_scene, &views, &image, &self.config.field, progress)?,
         };

@@ -145,7 +145,9 @@ pub fn plan_views(
         .ok_or_else(|| LiftError::Scene("the scene has no Gaussians to lift onto".into()))?;
     let centre = DVec3::from(bounds.center().map(f64::from));
     let half = DVec3::from(bounds.size().map(|s| 0.5 * f64::from(s)));
-    let radius = half.length().max(1e-6);
+    // A scene of coinciding centres (one splat, a tiny object) still has the splats' extent.
+    let largest_scale = scene.scales.iter().flatten().fold(0f32, |a, &b| a.max(b));
+    let radius = half.length().max(3.0 * f64::from(largest_scale)).max(1e-6);
     let up = DVec3::from(up).normalize_or(DVec3::Z);
     let (east, north) = horizontal_axes(up);
     let fov = options.fov_degrees.to_radians();
@@ -155,7 +157,8 @@ pub fn plan_views(
         for &(elevation, azimuths) in elevations {
             let e = elevation.to_radians();
             for a in 0..azimuths {
-                // Rings are offset by half a step so that two rings never share a meridian.
+                // Rings above 30° are offset by half a step, so neighbouring rings of one
+                // distance do not share a meridian.
                 let az = (a as f64 + 0.5 * (elevation > 30.0) as u8 as f64) * std::f64::consts::TAU
                     / azimuths as f64;
                 let dir = e.cos() * (az.cos() * east + az.sin() * north) + e.sin() * up;
@@ -210,7 +213,10 @@ pub fn plan_views(
     if candidates.is_empty() {
         return Err(LiftError::Scene(format!(
             "none of {offered_count} candidate views sees the scene's content (all were inside \
-             geometry or empty); give the capture's cameras instead"
+             geometry or empty; the content's radius is {radius:.3e}, and a scene much smaller \
+             than the near plane at {near} cannot be seen at all: scale it up); give the \
+             capture's cameras instead",
+            near = splatraj_render::project::NEAR_PLANE
         )));
     }
     let dropped = offered_count - candidates.len();

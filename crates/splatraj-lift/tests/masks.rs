@@ -138,3 +138,15 @@ fn fruit_drops_objects_are_recovered_from_rendered_masks() {
         assert!(*v >= 0.9, "label {id}: IoU {v:.3} < 0.9 ({iou:?})");
     }
 }
+
+#[test]
+fn no_masks_is_an_error_not_a_panic() {
+    let scene = demo_scene(&DemoConfig {
+        seed: 7,
+        gaussians: 1_000,
+    })
+    .unwrap();
+    let device_scene = DeviceScene::new(&scene, &Device::default().autodiff(), DType::F32);
+    let error = lift_masks(&scene, &device_scene, &[], &MaskOptions::default(), &silent);
+    assert!(error.unwrap_err().to_string().contains("no masks"));
+}

@@ -278,4 +278,58 @@ fn the_captures_cameras_and_photos_replace_planned_views() {
         .unwrap_err()
         .to_string();
     assert!(error.contains("targets.lifted.photos"), "{error}");
+
+    // A photo that is not its camera's image (another aspect ratio) is named, not stretched.
+    image::RgbImage::new(60, 60).save(&first).unwrap();
+    let (source, _) = recorded(with(Some(&cameras), Some(&photos)));
+    let error = source.relevancy(&scene, "red mug").unwrap_err().to_string();
+    assert!(
+        error.contains(&first.display().to_string()) && error.contains("aspect ratio"),
+        "{error}"
+    );
+}
+
+/// Keys that the field depends on but that are not options: `open_clip_config.json` beside
+/// the weights (heads, activation) changes the cache key; shared keys set inside
+/// `[targets.lifted]` are refused rather than silently overridden.
+#[test]
+fn the_cache_key_follows_the_towers_config_and_shared_keys_stay_in_targets() {
+    let dir = tempfile::tempdir().unwrap();
+    let weights_copy = dir.path().join("open_clip_model.safetensors");
+    std::fs::copy(weights(), &weights_copy).unwrap();
+    let scene = demo_scene(&DemoConfig {
+        seed: 3,
+        gaussians: 1_000,
+    })
+    .unwrap();
+    let key = || {
+        LiftedSource::new(LiftedConfig::new(weights_copy.clone()), Device::default())
+            .unwrap()
+            .key(&scene)
+            .unwrap()
+    };
+    let config = dir.path().join("open_clip_config.json");
+    std::fs::copy(weights().with_file_name("open_clip_config.json"), &config).unwrap();
+    let before = key();
+    // The same towers' config, edited (another size and time): another key.
+    let text = std::fs::read_to_string(&config).unwrap();
+    std::fs::write(&config, format!("{text}\n")).unwrap();
+    assert_ne!(
+        before,
+        key(),
+        "editing open_clip_config.json changes the key"
+    );
+
+    let mut registry = SourceRegistry::default();
+    registry.register::<LiftedConfig>(splatraj_lift::LIFTED);
+    let both: TargetsConfig = toml::from_str(&format!(
+        "source = \"lifted\"\ntext_encoder = {:?}\ntemperature = 5\n[lifted]\ntemperature = 7\n",
+        weights().display().to_string()
+    ))
+    .unwrap();
+    let error = both
+        .build_with(dir.path(), &Device::default(), &registry)
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("targets.lifted.temperature"), "{error}");
 }

@@ -342,8 +342,22 @@ impl TargetsConfig {
                          text tower reads the queries",
                     ));
                 };
-                // The shared keys join the source's own table, which it deserialises.
+                // The shared keys join the source's own table, which it deserialises; set
+                // there too, one would silently win over the other.
                 let mut table = self.lifted.clone().unwrap_or_default();
+                for (inner, shared) in [
+                    ("weights", "text_encoder"),
+                    ("activation", "text_activation"),
+                    ("negatives", "negatives"),
+                    ("temperature", "temperature"),
+                ] {
+                    if table.contains_key(inner) {
+                        return Err(SemanticError::option(
+                            key(&format!("lifted.{inner}")),
+                            format!("is set in [targets] as `{shared}`, not in [targets.lifted]"),
+                        ));
+                    }
+                }
                 let mut shared = |name: &str, value: Option<toml::Value>| {
                     if let Some(value) = value {
                         table.insert(name.to_string(), value);
