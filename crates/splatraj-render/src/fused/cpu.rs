@@ -356,30 +356,63 @@ pub fn forward<E: Real>(splats: &HostSplats<E>, plan: &CompositePlan) -> (Vec<E>
         .into_par_iter()
         .map(|w| forward_tile(splats, &footprints, plan, w))
         .collect();
-    let channels = splats.channels;
-    let grid = plan.grid;
-    let mut image = vec![E::ZERO; plan.batch * grid.height * grid.width * (channels + 1)];
+    let image = assemble(plan, splats.channels, &tiles);
     let mut state = ForwardState {
         final_t: Vec::with_capacity(tiles.len() * TILE_PIXELS),
         last: Vec::with_capacity(tiles.len() * TILE_PIXELS),
         footprints,
     };
-    for (w, tile) in tiles.into_iter().enumerate() {
-        let (x0, y0) = plan.tile_origin(plan.tiles[w]);
-        for p in 0..TILE_PIXELS {
-            let (x, y) = (x0 + p % TILE_SIZE, y0 + p / TILE_SIZE);
-            if x >= grid.width || y >= grid.height {
-                continue;
-            }
-            let pixel = (plan.batches[w] * grid.height + y) * grid.width + x;
-            for k in 0..=channels {
-                image[pixel * (channels + 1) + k] = tile.planes[k * TILE_PIXELS + p];
-            }
-        }
+    for tile in tiles {
         state.final_t.extend(tile.final_t);
         state.last.extend(tile.last);
     }
     (image, state)
+}
+
+/// The packed image `[B, H, W, C + 1]` of the work tiles' planes (zero where no tile drew),
+/// one band of 16 image rows per task: a 1080p frame is 10 M values to place, and placed
+/// tile by tile on one thread that was a tenth of its compositing.
+fn assemble<E: Real>(plan: &CompositePlan, channels: usize, tiles: &[TileForward<E>]) -> Vec<E> {
+    let grid = plan.grid;
+    let stride = channels + 1;
+    // Work tile of each (pose, tile), or usize::MAX where none. `[B · tiles]`
+    let mut work_of = vec![usize::MAX; plan.batch * grid.len()];
+    for (w, (&b, &tile)) in plan.batches.iter().zip(&plan.tiles).enumerate() {
+        work_of[b * grid.len() + tile] = w;
+    }
+    let mut image = vec![E::ZERO; plan.batch * grid.height * grid.width * stride];
+    let row = grid.width * stride;
+    if row == 0 || grid.height == 0 {
+        return image;
+    }
+    image
+        .par_chunks_mut(grid.height * row) // one pose
+        .enumerate()
+        .for_each(|(b, pose)| {
+            pose.par_chunks_mut(TILE_SIZE * row) // one band of tiles
+                .enumerate()
+                .for_each(|(ty, band)| {
+                    let rows = band.len() / row;
+                    for tx in 0..grid.tiles_x {
+                        let w = work_of[b * grid.len() + ty * grid.tiles_x + tx];
+                        let Some(tile) = tiles.get(w) else {
+                            continue;
+                        };
+                        let x0 = tx * TILE_SIZE;
+                        let columns = TILE_SIZE.min(grid.width - x0);
+                        for y in 0..rows {
+                            for x in 0..columns {
+                                let p = y * TILE_SIZE + x;
+                                let at = y * row + (x0 + x) * stride;
+                                for k in 0..stride {
+                                    band[at + k] = tile.planes[k * TILE_PIXELS + p];
+                                }
+                            }
+                        }
+                    }
+                });
+        });
+    image
 }
 
 /// Per list entry of one tile: [v_mx, v_my, v_a, v_b, v_c, v_o, v_values…]. `[len, 6 + C]`
