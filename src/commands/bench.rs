@@ -12,14 +12,13 @@
 //! 256)), and the fused rasterizer's speed-up over the tensor one.
 
 use std::path::PathBuf;
-use std::process::Command;
 use std::str::FromStr;
 use std::time::Instant;
 
 use anyhow::{Context, Result, anyhow, bail};
 use clap::{Args, Subcommand};
 use splatraj::experiment::bench::{
-    BenchConfig, BenchReport, BenchRow, BenchSettings, BenchSource, rasterizer_name, run_one,
+    BenchConfig, BenchSettings, RenderBenchGrid, run_one, run_render_bench,
 };
 use splatraj::experiment::path_render::FrameSchedule;
 use splatraj_render::backend::BackendKind;
@@ -103,11 +102,7 @@ fn frames(args: &BenchFramesArgs) -> Result<()> {
     let scene = match (&args.scene, args.no_scene) {
         (Some(path), _) => Some(path.clone()),
         (None, true) => None,
-        (None, false) => {
-            let data = std::env::var_os("SPLATRAJ_DATA")
-                .map_or_else(|| PathBuf::from("/work/shared/data"), PathBuf::from);
-            Some(data.join("biker.compressed.ply")).filter(|p| p.is_file())
-        }
+        (None, false) => splatraj::experiment::bench_frames::default_scene(),
     };
     let bench = FramesBench {
         backend: args.backend,
@@ -273,75 +268,22 @@ fn settings(args: &BenchRenderArgs) -> BenchSettings {
 }
 
 fn run_all(args: &BenchRenderArgs) -> Result<()> {
-    if args.repeats == 0 {
-        bail!("--repeats must be at least 1");
-    }
-    let mut sources: Vec<BenchSource> = Vec::new();
-    if !args.no_demo {
-        sources.extend(args.sizes.iter().map(|&n| BenchSource::Demo(n)));
-    }
-    if args.scene.is_some() {
-        sources.push(BenchSource::File);
-    }
-    let configs = BenchConfig::all(&sources, &args.resolutions, &args.rasterizer)?;
-    // Fail early, before spawning children, on an uncompiled backend or missing scene.
-    args.backend.device()?;
-    if let Some(path) = &args.scene
-        && !path.is_file()
-    {
-        bail!("--scene {}: no such file", path.display());
-    }
-    let settings = settings(args);
+    let grid = RenderBenchGrid {
+        sizes: if args.no_demo {
+            Vec::new()
+        } else {
+            args.sizes.clone()
+        },
+        resolutions: args.resolutions.clone(),
+        rasterizers: args.rasterizer.clone(),
+        threads: args.threads,
+        all: args.all,
+    };
     let exe = std::env::current_exe().context("cannot find the splatraj binary to re-run")?;
     let started = Instant::now();
-    let mut rows = Vec::new();
-    let mut failures = Vec::new();
-    for (i, config) in configs.iter().enumerate() {
-        if config.is_slow() && !args.all {
-            rows.push(config.skipped_row(&settings, "slow; run with --all"));
-            continue;
-        }
-        eprintln!("[{}/{}] {}", i + 1, configs.len(), config.spec());
-        let mut child = Command::new(&exe);
-        child.args(["bench", "render", "--one", &config.spec()]);
-        child.args(["--repeats", &args.repeats.to_string()]);
-        child.args(["--backend", &args.backend.to_string()]);
-        child.args(["--dtype", &format!("{:?}", args.dtype).to_lowercase()]);
-        child.args(["--rasterizer", rasterizer_name(config.rasterizer)]);
-        child.args(["--object", &args.object]);
-        child.args(["--target-ratio", &args.target_ratio.to_string()]);
-        child.args(["--fov", &args.fov.to_string()]);
-        if let Some(threads) = args.threads {
-            child.args(["--threads", &threads.to_string()]);
-        }
-        if let Some(scene) = &args.scene {
-            child.arg("--scene").arg(scene);
-        }
-        let output = child.output().context("cannot start a benchmark process")?;
-        let stdout = String::from_utf8_lossy(&output.stdout);
-        let parsed = stdout
-            .lines()
-            .last()
-            .and_then(|line| serde_json::from_str::<BenchRow>(line).ok());
-        match (output.status.success(), parsed) {
-            (true, Some(row)) => rows.push(row),
-            _ => {
-                let err = String::from_utf8_lossy(&output.stderr).trim().to_string();
-                eprintln!("  failed: {err}");
-                failures.push(format!("{}: {err}", config.spec()));
-                rows.push(config.skipped_row(&settings, "failed"));
-            }
-        }
-    }
-    let report = BenchReport {
-        backend: args.backend.to_string(),
-        dtype: format!("{:?}", args.dtype).to_lowercase(),
-        repeats: args.repeats,
-        rayon_threads: args.threads.unwrap_or_else(rayon::current_num_threads),
-        cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
-        target_ratio: args.target_ratio,
-        rows,
-    };
+    let (report, failures) = run_render_bench(&exe, &settings(args), &grid, &mut |event| {
+        eprintln!("{event}")
+    })?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {

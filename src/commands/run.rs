@@ -25,8 +25,8 @@ use indicatif::ProgressBar;
 use splatraj::experiment::config::{Config, VerdictPolicy};
 use splatraj::experiment::observer::{Flow, Observer, Phase, Progress};
 use splatraj::experiment::process::RunFolder;
-use splatraj::experiment::run_folder::{RunReport, resumable};
-use splatraj::experiment::{Evaluation, Experiment, RunStop};
+use splatraj::experiment::run_folder::resumable;
+use splatraj::experiment::{Experiment, RunStop};
 
 use crate::cli::{Ended, MemoryArgs, bar_observer, interrupt_flag, progress_bar};
 
@@ -77,7 +77,9 @@ pub fn run(args: RunArgs) -> Result<()> {
     };
     let experiment = Experiment::prepare(&config)?;
     let plan = experiment.check_trajectory_run(checkpoint.is_some())?;
-    print_plan(&experiment);
+    for line in experiment.plan_lines() {
+        eprintln!("{line}");
+    }
     if args.check {
         if let Some(peak) = plan.memory.peak() {
             eprintln!(
@@ -97,7 +99,9 @@ pub fn run(args: RunArgs) -> Result<()> {
     let mut progress = RunProgress::new(plan.steps as u64, args.quiet);
     let outcome = experiment.run_trajectory_in(&folder, &mut progress)?;
     progress.finish();
-    print_summary(&outcome.evaluation, &outcome.report);
+    for line in outcome.summary_lines() {
+        eprintln!("{line}");
+    }
     for problem in &outcome.problems {
         eprintln!("warning: {problem}");
     }
@@ -170,97 +174,4 @@ impl Observer for RunProgress {
         }
         bar_observer(&self.bar, self.interrupted.clone()).progress(progress)
     }
-}
-
-fn print_plan(experiment: &Experiment) {
-    eprintln!(
-        "scene: {} ({} Gaussians), backend {:?}, rasterizer {:?}",
-        experiment.scene_name,
-        experiment.scene.len(),
-        experiment.config.backend,
-        experiment.config.rasterizer
-    );
-    eprintln!("{}", experiment.up.describe());
-    if experiment.up.doubtful() {
-        eprintln!(
-            "warning: the up guess is unsure; if the frames come out tilted, set `scene.up` \
-             (y-down captures: [0, -1, 0]; z-up: [0, 0, 1])"
-        );
-    }
-    for d in &experiment.derived {
-        eprintln!(
-            "derived from the scene: {} = {:.4} ({})",
-            d.key, d.value, d.why
-        );
-    }
-    // The search already ran for the start check (`start_trajectories`), which caches it.
-    let views = experiment.start_views().ok().flatten();
-    for (i, w) in experiment.windows.iter().enumerate() {
-        if let Some(view) = views.as_ref().and_then(|v| v.get(i)) {
-            eprintln!(
-                "query {i}: starts from azimuth {:.0}°, elevation {:.0}°, distance {:.3}: {:.0} % \
-                 of it visible there",
-                view.azimuth_degrees,
-                view.elevation_degrees,
-                view.distance,
-                100.0 * view.visible_share
-            );
-        }
-        let c = w.context.object_centre;
-        eprintln!(
-            "query {i}: {:?} → {} Gaussians, centre [{:.3}, {:.3}, {:.3}], prior radius {:.3}, target ratio {}",
-            w.name,
-            experiment.selected[i],
-            c[0],
-            c[1],
-            c[2],
-            w.context.prior_radius,
-            w.context.target_ratio
-        );
-    }
-}
-
-fn print_summary(evaluation: &Evaluation, report: &RunReport) {
-    eprintln!(
-        "window  query                  TCE     TRE   in view  visible  hidden  clearance  verdict"
-    );
-    for w in &evaluation.windows {
-        // An object never in view has no framing error: show a dash, not the empty mask's 0.
-        let tce = w
-            .framing
-            .tce_in_view
-            .map_or("      -".to_string(), |t| format!("{t:>7.4}"));
-        let clearance = w
-            .path
-            .as_ref()
-            .and_then(|p| p.clearance.as_ref())
-            .map_or("-".to_string(), |c| format!("{:.3}", c.min_clearance));
-        let verdict = match &w.verdict {
-            Some(v) if v.pass => "ok".to_string(),
-            Some(v) => format!("FAIL ({})", v.failed().join(", ")),
-            None => "-".to_string(),
-        };
-        eprintln!(
-            "{:>6}  {:<20} {} {:>7.4}  {:>6.0}%  {:>6.0}%  {:>5.0}%  {:>9}  {}",
-            w.window,
-            w.name,
-            tce,
-            w.tre,
-            100.0 * w.visible_fraction,
-            100.0 * (1.0 - w.occlusion.mean_occluded),
-            100.0 * w.occlusion.hidden_fraction,
-            clearance,
-            verdict
-        );
-    }
-    let show = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
-    eprintln!(
-        "LDJ positional {}, angular {}; {} iterations in {:.1} s ({:.0} ms each), total {:.1} s",
-        show(evaluation.ldj.positional),
-        show(evaluation.ldj.angular),
-        report.iterations_run,
-        report.optimisation_s,
-        report.per_iteration_ms,
-        report.total_s
-    );
 }

@@ -1,20 +1,19 @@
 //! `splatraj scene …`: inspect, convert and generate scene files.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::str::FromStr;
 
 use anyhow::{Context, Result, bail};
 use clap::Subcommand;
-use serde::Serialize;
 use splatraj::lift::mask_files::{MaskCoding, MaskLift, lift_mask_files};
 use splatraj::lift::{LiftStage, MaskOptions};
 use splatraj_render::backend::BackendKind;
 use splatraj_scene::demo::{DemoConfig, demo_scene};
-use splatraj_scene::formats::{LoadedScene, check_output_target, write_label_sidecar};
+use splatraj_scene::formats::{check_output_target, write_label_sidecar};
+use splatraj_scene::summary::SceneInfo;
 use splatraj_scene::{
-    Bounds, InvalidPolicy, ReadOptions, Scene, SceneFormat, UpGuess, guess_up_axis,
-    write_inria_ply, write_scene,
+    Bounds, InvalidPolicy, ReadOptions, SceneFormat, write_inria_ply, write_scene,
 };
 
 use crate::cli::{ReadArgs, progress_bar};
@@ -41,7 +40,7 @@ pub enum SceneCommand {
         /// `.spz`.
         output: PathBuf,
         /// Output format, whatever the output's name: inria-ply, compressed-ply or spz.
-        #[arg(long, value_parser = parse_output_format)]
+        #[arg(long, value_parser = SceneFormat::writable_from_name)]
         format: Option<SceneFormat>,
         #[command(flatten)]
         read: ReadArgs,
@@ -103,7 +102,7 @@ pub fn run(command: SceneCommand) -> Result<()> {
             if json {
                 println!("{}", serde_json::to_string_pretty(&info)?);
             } else {
-                print!("{}", info.to_text());
+                print!("{}", info_text(&info));
             }
         }
         SceneCommand::Convert {
@@ -113,29 +112,17 @@ pub fn run(command: SceneCommand) -> Result<()> {
             read,
         } => {
             // Decided before reading, so a wrong name fails at once.
-            let format = match format {
-                Some(format) => {
-                    // An explicit format may name any file, but not one whose name says
-                    // another format: that file would mislead whoever opens it by its name.
-                    if let Some(named) = SceneFormat::from_extension(&output)
-                        && named != format
-                    {
-                        bail!(
-                            "{}: the name says {} ({}) but --format is {}; rename the output \
-                             or drop --format",
-                            output.display(),
-                            named.name(),
-                            named.extension(),
-                            format.name()
-                        );
-                    }
-                    format
-                }
-                None => SceneFormat::for_output(&output)?,
-            };
+            let format = SceneFormat::for_output_as(&output, format)?;
             check_output_target(&output)?;
             let loaded = read.load(&input)?;
-            warn_dropped_extras(&loaded.scene, format);
+            let dropped = format.dropped_extras(&loaded.scene);
+            if !dropped.is_empty() {
+                eprintln!(
+                    "warning: {} cannot hold {}; they are not written (INRIA .ply keeps them)",
+                    format.name(),
+                    dropped.join(", ")
+                );
+            }
             write_scene(&loaded.scene, &output, format)?;
             eprintln!(
                 "wrote {} Gaussians (SH degree {}) to {} ({})",
@@ -161,45 +148,6 @@ pub fn run(command: SceneCommand) -> Result<()> {
         SceneCommand::LiftMasks(args) => lift_masks(&args)?,
     }
     Ok(())
-}
-
-/// `--format` of `scene convert`: a format splatraj writes.
-fn parse_output_format(name: &str) -> std::result::Result<SceneFormat, String> {
-    let names: Vec<&str> = SceneFormat::WRITABLE.iter().map(|f| f.name()).collect();
-    match SceneFormat::from_name(name) {
-        Some(format) if SceneFormat::WRITABLE.contains(&format) => Ok(format),
-        Some(_) => Err(format!(
-            "splatraj reads {name} but does not write it (it writes {})",
-            names.join(", ")
-        )),
-        None => Err(format!(
-            "unknown format '{name}' (splatraj writes {})",
-            names.join(", ")
-        )),
-    }
-}
-
-/// Says which of the scene's extras the output format has no place for.
-fn warn_dropped_extras(scene: &Scene, format: SceneFormat) {
-    if format == SceneFormat::InriaPly {
-        return;
-    }
-    let extras = &scene.extras;
-    let mut dropped = Vec::new();
-    if extras.labels.is_some() {
-        dropped.push("labels".to_string());
-    }
-    if let Some(features) = &extras.features {
-        dropped.push(format!("{} feature channels", features.dim));
-    }
-    dropped.extend(extras.properties.iter().map(|p| format!("'{}'", p.name)));
-    if !dropped.is_empty() {
-        eprintln!(
-            "warning: {} cannot hold {}; they are not written (INRIA .ply keeps them)",
-            format.name(),
-            dropped.join(", ")
-        );
-    }
 }
 
 /// Most neighbours `--neighbours` may ask.
@@ -330,129 +278,57 @@ fn lift_summary(lift: &MaskLift) -> String {
     out
 }
 
-/// What `scene info` reports.
-#[derive(Debug, Serialize)]
-struct SceneInfo {
-    file: String,
-    format: SceneFormat,
-    gaussians: usize,
-    dropped_invalid: usize,
-    sh_degree: u8,
-    bounds: Option<Bounds>,
-    /// Bounds of the centres between the 2% and 98% quantiles (ignores floaters).
-    robust_bounds: Option<Bounds>,
-    opacity_mean: f32,
-    up_guess: Option<UpGuess>,
-    labels: Option<LabelInfo>,
-    features: Option<FeatureInfo>,
-    other_properties: Vec<String>,
-}
-
-#[derive(Debug, Serialize)]
-struct LabelInfo {
-    source: String,
-    /// Gaussians per label id, with the id's name when known.
-    counts: BTreeMap<i32, LabelCount>,
-}
-
-#[derive(Debug, Serialize)]
-struct LabelCount {
-    gaussians: usize,
-    name: Option<String>,
-}
-
-#[derive(Debug, Serialize)]
-struct FeatureInfo {
-    dim: usize,
-    first: String,
-    last: String,
-}
-
-impl SceneInfo {
-    fn new(path: &Path, loaded: &LoadedScene) -> Self {
-        let scene: &Scene = &loaded.scene;
-        let extras = &scene.extras;
-        SceneInfo {
-            file: path.display().to_string(),
-            format: loaded.format,
-            gaussians: scene.len(),
-            dropped_invalid: loaded.dropped,
-            sh_degree: scene.sh_degree,
-            bounds: scene.bounds(),
-            robust_bounds: scene.robust_bounds(0.02),
-            opacity_mean: scene.opacities.iter().sum::<f32>() / scene.len().max(1) as f32,
-            up_guess: guess_up_axis(scene),
-            labels: extras.labels.as_ref().map(|labels| LabelInfo {
-                source: labels.source.clone(),
-                counts: labels
-                    .counts()
-                    .into_iter()
-                    .map(|(id, gaussians)| {
-                        let name = labels.names.get(&id).cloned();
-                        (id, LabelCount { gaussians, name })
-                    })
-                    .collect(),
-            }),
-            features: extras.features.as_ref().map(|f| FeatureInfo {
-                dim: f.dim,
-                first: f.names.first().cloned().unwrap_or_default(),
-                last: f.names.last().cloned().unwrap_or_default(),
-            }),
-            other_properties: extras.properties.iter().map(|p| p.name.clone()).collect(),
-        }
-    }
-
-    fn to_text(&self) -> String {
-        let fmt3 = |v: [f32; 3]| format!("[{:.3}, {:.3}, {:.3}]", v[0], v[1], v[2]);
-        let fmt_bounds = |b: &Option<Bounds>| match b {
-            Some(b) => format!("min {} max {}", fmt3(b.min), fmt3(b.max)),
-            None => "none (empty scene)".into(),
-        };
-        let mut out = format!(
-            "file:            {}\nformat:          {:?}\nGaussians:       {}\nSH degree:       {}\n\
+/// `scene info`'s text.
+fn info_text(info: &SceneInfo) -> String {
+    let fmt3 = |v: [f32; 3]| format!("[{:.3}, {:.3}, {:.3}]", v[0], v[1], v[2]);
+    let fmt_bounds = |b: &Option<Bounds>| match b {
+        Some(b) => format!("min {} max {}", fmt3(b.min), fmt3(b.max)),
+        None => "none (empty scene)".into(),
+    };
+    let mut out = format!(
+        "file:            {}\nformat:          {:?}\nGaussians:       {}\nSH degree:       {}\n\
              bounds:          {}\nrobust bounds:   {} (2%-98% quantiles)\nmean opacity:    {:.3}\n",
-            self.file,
-            self.format,
-            self.gaussians,
-            self.sh_degree,
-            fmt_bounds(&self.bounds),
-            fmt_bounds(&self.robust_bounds),
-            self.opacity_mean,
-        );
-        if self.dropped_invalid > 0 {
-            out += &format!("dropped invalid: {}\n", self.dropped_invalid);
-        }
-        if let Some(up) = &self.up_guess {
-            out += &format!(
-                "up (guess):      {} (raw {}, confidence {:.2}, from {:?}); set `up` in the config to override\n",
-                fmt3(up.up),
-                fmt3(up.raw),
-                up.confidence,
-                up.method
-            );
-        }
-        match &self.labels {
-            Some(labels) => {
-                out += &format!("labels:          from {}\n", labels.source);
-                for (id, count) in &labels.counts {
-                    let name = count.name.as_deref().unwrap_or("-");
-                    out += &format!("  {id:>6}  {:>9} Gaussians  {name}\n", count.gaussians);
-                }
-            }
-            None => out += "labels:          none\n",
-        }
-        match &self.features {
-            Some(f) => {
-                out += &format!(
-                    "features:        {} per Gaussian ({} … {})\n",
-                    f.dim, f.first, f.last
-                )
-            }
-            None => out += "features:        none\n",
-        }
-        if !self.other_properties.is_empty() {
-            out += &format!("other properties: {}\n", self.other_properties.join(", "));
-        }
-        out
+        info.file,
+        info.format,
+        info.gaussians,
+        info.sh_degree,
+        fmt_bounds(&info.bounds),
+        fmt_bounds(&info.robust_bounds),
+        info.opacity_mean,
+    );
+    if info.dropped_invalid > 0 {
+        out += &format!("dropped invalid: {}\n", info.dropped_invalid);
     }
+    if let Some(up) = &info.up_guess {
+        out += &format!(
+            "up (guess):      {} (raw {}, confidence {:.2}, from {:?}); set `up` in the config to override\n",
+            fmt3(up.up),
+            fmt3(up.raw),
+            up.confidence,
+            up.method
+        );
+    }
+    match &info.labels {
+        Some(labels) => {
+            out += &format!("labels:          from {}\n", labels.source);
+            for (id, count) in &labels.counts {
+                let name = count.name.as_deref().unwrap_or("-");
+                out += &format!("  {id:>6}  {:>9} Gaussians  {name}\n", count.gaussians);
+            }
+        }
+        None => out += "labels:          none\n",
+    }
+    match &info.features {
+        Some(f) => {
+            out += &format!(
+                "features:        {} per Gaussian ({} … {})\n",
+                f.dim, f.first, f.last
+            )
+        }
+        None => out += "features:        none\n",
+    }
+    if !info.other_properties.is_empty() {
+        out += &format!("other properties: {}\n", info.other_properties.join(", "));
+    }
+    out
 }

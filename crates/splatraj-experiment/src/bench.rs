@@ -477,3 +477,100 @@ pub fn cpu_seconds() -> Option<f64> {
     let stime: f64 = fields.get(12)?.parse().ok()?;
     Some((utime + stime) / 100.0)
 }
+
+/// Which configurations `bench render` runs.
+#[derive(Debug, Clone)]
+pub struct RenderBenchGrid {
+    /// Demo scene sizes, in Gaussians (none: the real scene only).
+    pub sizes: Vec<usize>,
+    /// Square image sizes, in pixels.
+    pub resolutions: Vec<usize>,
+    /// Rasterizers timed on every configuration.
+    pub rasterizers: Vec<Rasterizer>,
+    /// Threads of each child's rayon pool (`None`: one per core).
+    pub threads: Option<usize>,
+    /// Run the slow configurations too.
+    pub all: bool,
+}
+
+/// Runs every configuration of `grid` in its own child process of `exe` (`splatraj bench
+/// render --one SPEC`), so each peak memory is its own; `progress` hears each start and
+/// failure. Returns the report and the failures (each also a skipped row).
+pub fn run_render_bench(
+    exe: &std::path::Path,
+    settings: &BenchSettings,
+    grid: &RenderBenchGrid,
+    progress: &mut dyn FnMut(String),
+) -> Result<(BenchReport, Vec<String>)> {
+    if settings.repeats == 0 {
+        bail!("--repeats must be at least 1");
+    }
+    let mut sources: Vec<BenchSource> = grid.sizes.iter().map(|&n| BenchSource::Demo(n)).collect();
+    if settings.scene.is_some() {
+        sources.push(BenchSource::File);
+    }
+    let configs = BenchConfig::all(&sources, &grid.resolutions, &grid.rasterizers)?;
+    // Fail early, before spawning children, on an uncompiled backend or missing scene.
+    settings.backend.device()?;
+    if let Some(path) = &settings.scene
+        && !path.is_file()
+    {
+        bail!("--scene {}: no such file", path.display());
+    }
+    let dtype = if settings.dtype == DType::F64 {
+        "f64"
+    } else {
+        "f32"
+    };
+    let mut rows = Vec::new();
+    let mut failures = Vec::new();
+    for (i, config) in configs.iter().enumerate() {
+        if config.is_slow() && !grid.all {
+            rows.push(config.skipped_row(settings, "slow; run with --all"));
+            continue;
+        }
+        progress(format!("[{}/{}] {}", i + 1, configs.len(), config.spec()));
+        let mut child = std::process::Command::new(exe);
+        child.args(["bench", "render", "--one", &config.spec()]);
+        child.args(["--repeats", &settings.repeats.to_string()]);
+        child.args(["--backend", &settings.backend.to_string()]);
+        child.args(["--dtype", dtype]);
+        child.args(["--rasterizer", rasterizer_name(config.rasterizer)]);
+        child.args(["--object", &settings.object]);
+        child.args(["--target-ratio", &settings.target_ratio.to_string()]);
+        child.args(["--fov", &settings.fov.to_string()]);
+        if let Some(threads) = grid.threads {
+            child.args(["--threads", &threads.to_string()]);
+        }
+        if let Some(scene) = &settings.scene {
+            child.arg("--scene").arg(scene);
+        }
+        let output = child
+            .output()
+            .map_err(|e| anyhow!("cannot start a benchmark process: {e}"))?;
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        let parsed = stdout
+            .lines()
+            .last()
+            .and_then(|line| serde_json::from_str::<BenchRow>(line).ok());
+        match (output.status.success(), parsed) {
+            (true, Some(row)) => rows.push(row),
+            _ => {
+                let err = String::from_utf8_lossy(&output.stderr).trim().to_string();
+                progress(format!("  failed: {err}"));
+                failures.push(format!("{}: {err}", config.spec()));
+                rows.push(config.skipped_row(settings, "failed"));
+            }
+        }
+    }
+    let report = BenchReport {
+        backend: settings.backend.to_string(),
+        dtype: dtype.to_string(),
+        repeats: settings.repeats,
+        rayon_threads: grid.threads.unwrap_or_else(rayon::current_num_threads),
+        cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
+        target_ratio: settings.target_ratio,
+        rows,
+    };
+    Ok((report, failures))
+}

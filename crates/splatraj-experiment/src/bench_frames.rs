@@ -387,3 +387,13 @@ pub fn parse_size(text: &str) -> Result<(usize, usize)> {
     };
     Ok((parse(w)?, parse(h)?))
 }
+
+/// The real scene `bench frames` times by default: biker from `$SPLATRAJ_DATA` (else
+/// `/work/shared/data`), when it is there.
+pub fn default_scene() -> Option<std::path::PathBuf> {
+    let data = std::env::var_os("SPLATRAJ_DATA").map_or_else(
+        || std::path::PathBuf::from("/work/shared/data"),
+        std::path::PathBuf::from,
+    );
+    Some(data.join("biker.compressed.ply")).filter(|p| p.is_file())
+}

@@ -102,6 +102,58 @@ pub struct TrajectoryOutcome {
     pub failing: usize,
 }
 
+impl TrajectoryOutcome {
+    /// The run's result, a line each: per window TCE, TRE, in view, visible, hidden, clearance
+    /// and verdict, then LDJ and the optimisation's figures.
+    pub fn summary_lines(&self) -> Vec<String> {
+        let (evaluation, report) = (&self.evaluation, &self.report);
+        let mut lines = vec![
+            "window  query                  TCE     TRE   in view  visible  hidden  clearance  verdict"
+                .to_string(),
+        ];
+        for w in &evaluation.windows {
+            // An object never in view has no framing error: show a dash, not the empty mask's 0.
+            let tce = w
+                .framing
+                .tce_in_view
+                .map_or("      -".to_string(), |t| format!("{t:>7.4}"));
+            let clearance = w
+                .path
+                .as_ref()
+                .and_then(|p| p.clearance.as_ref())
+                .map_or("-".to_string(), |c| format!("{:.3}", c.min_clearance));
+            let verdict = match &w.verdict {
+                Some(v) if v.pass => "ok".to_string(),
+                Some(v) => format!("FAIL ({})", v.failed().join(", ")),
+                None => "-".to_string(),
+            };
+            lines.push(format!(
+                "{:>6}  {:<20} {} {:>7.4}  {:>6.0}%  {:>6.0}%  {:>5.0}%  {:>9}  {}",
+                w.window,
+                w.name,
+                tce,
+                w.tre,
+                100.0 * w.visible_fraction,
+                100.0 * (1.0 - w.occlusion.mean_occluded),
+                100.0 * w.occlusion.hidden_fraction,
+                clearance,
+                verdict
+            ));
+        }
+        let show = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
+        lines.push(format!(
+        "LDJ positional {}, angular {}; {} iterations in {:.1} s ({:.0} ms each), total {:.1} s",
+        show(evaluation.ldj.positional),
+        show(evaluation.ldj.angular),
+        report.iterations_run,
+        report.optimisation_s,
+        report.per_iteration_ms,
+        report.total_s
+    ));
+        lines
+    }
+}
+
 /// `metrics.json` of a pose run.
 #[derive(Debug, Serialize)]
 pub struct PoseMetrics {
@@ -164,6 +216,60 @@ pub struct RunPlan {
 }
 
 impl Experiment {
+    /// What a run will do, a line each: scene, backend, up (with a warning when unsure), the
+    /// values derived from the scene, and per query its start view, Gaussians and prior.
+    pub fn plan_lines(&self) -> Vec<String> {
+        let experiment = self;
+        let mut lines = Vec::new();
+        lines.push(format!(
+            "scene: {} ({} Gaussians), backend {:?}, rasterizer {:?}",
+            experiment.scene_name,
+            experiment.scene.len(),
+            experiment.config.backend,
+            experiment.config.rasterizer
+        ));
+        lines.push(experiment.up.describe());
+        if experiment.up.doubtful() {
+            lines.push(
+                "warning: the up guess is unsure; if the frames come out tilted, set `scene.up` \
+                 (y-down captures: [0, -1, 0]; z-up: [0, 0, 1])"
+                    .to_string(),
+            );
+        }
+        for d in &experiment.derived {
+            lines.push(format!(
+                "derived from the scene: {} = {:.4} ({})",
+                d.key, d.value, d.why
+            ));
+        }
+        // The search already ran for the start check (`start_trajectories`), which caches it.
+        let views = experiment.start_views().ok().flatten();
+        for (i, w) in experiment.windows.iter().enumerate() {
+            if let Some(view) = views.as_ref().and_then(|v| v.get(i)) {
+                lines.push(format!(
+                "query {i}: starts from azimuth {:.0}°, elevation {:.0}°, distance {:.3}: {:.0} % \
+                 of it visible there",
+                view.azimuth_degrees,
+                view.elevation_degrees,
+                view.distance,
+                100.0 * view.visible_share
+            ));
+            }
+            let c = w.context.object_centre;
+            lines.push(format!(
+            "query {i}: {:?} → {} Gaussians, centre [{:.3}, {:.3}, {:.3}], prior radius {:.3}, target ratio {}",
+            w.name,
+            experiment.selected[i],
+            c[0],
+            c[1],
+            c[2],
+            w.context.prior_radius,
+            w.context.target_ratio
+        ));
+        }
+        lines
+    }
+
     /// Every check of a trajectory run that can fail before the work: its costs, the memory
     /// against the limit, the starts (reading `start.trajectory`), and, for a new run
     /// (`resuming` false), that the runs folder can be written.

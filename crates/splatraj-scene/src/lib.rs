@@ -14,6 +14,7 @@ pub mod demo;
 pub mod error;
 pub mod formats;
 pub mod scene;
+pub mod summary;
 pub mod up_axis;
 pub mod validate;
 

@@ -138,6 +138,63 @@ impl SceneFormat {
         })
     }
 
+    /// The format to write `path` in: `explicit` (a `--format`) when given, which may name any
+    /// file but not one whose name says another format (that file would mislead whoever opens
+    /// it by its name); else the one its name asks for ([`SceneFormat::for_output`]).
+    pub fn for_output_as(path: &Path, explicit: Option<SceneFormat>) -> Result<SceneFormat> {
+        let Some(format) = explicit else {
+            return SceneFormat::for_output(path);
+        };
+        format.check_writable(path)?;
+        match SceneFormat::from_extension(path) {
+            Some(named) if named != format => Err(SceneError::Unwritable {
+                path: path.to_path_buf(),
+                detail: format!(
+                    "the name says {} ({}) but the format asked is {}; rename the output or \
+                     drop the format",
+                    named.name(),
+                    named.extension(),
+                    format.name()
+                ),
+            }),
+            _ => Ok(format),
+        }
+    }
+
+    /// A format splatraj writes, by its name (`inria-ply`, `compressed-ply`, `spz`), or why not.
+    pub fn writable_from_name(name: &str) -> std::result::Result<SceneFormat, String> {
+        let names: Vec<&str> = SceneFormat::WRITABLE.iter().map(|f| f.name()).collect();
+        match SceneFormat::from_name(name) {
+            Some(format) if SceneFormat::WRITABLE.contains(&format) => Ok(format),
+            Some(_) => Err(format!(
+                "splatraj reads {name} but does not write it (it writes {})",
+                names.join(", ")
+            )),
+            None => Err(format!(
+                "unknown format '{name}' (splatraj writes {})",
+                names.join(", ")
+            )),
+        }
+    }
+
+    /// The extras of `scene` this format has no place for (labels, feature channels, named
+    /// properties); INRIA PLY keeps them all.
+    pub fn dropped_extras(self, scene: &Scene) -> Vec<String> {
+        if self == SceneFormat::InriaPly {
+            return Vec::new();
+        }
+        let extras = &scene.extras;
+        let mut dropped = Vec::new();
+        if extras.labels.is_some() {
+            dropped.push("labels".to_string());
+        }
+        if let Some(features) = &extras.features {
+            dropped.push(format!("{} feature channels", features.dim));
+        }
+        dropped.extend(extras.properties.iter().map(|p| format!("'{}'", p.name)));
+        dropped
+    }
+
     /// Refuses a format splatraj reads but does not write.
     pub fn check_writable(self, path: &Path) -> Result<()> {
         if SceneFormat::WRITABLE.contains(&self) {
@@ -164,26 +221,13 @@ fn written_extensions() -> String {
     shown.join(", ")
 }
 
-/// Refuses an output path that exists and is not a regular file (a folder, a link, a device):
-/// writing replaces the target by renaming over it, which must not destroy such things.
+/// Refuses an output path that exists and is not a regular file (a folder, a link, a device)
+/// before any work: writing replaces the target by renaming over it, which must not destroy
+/// such things (the same rule [`crate::atomic::write_atomically`] applies when it writes).
 pub fn check_output_target(path: &Path) -> Result<()> {
-    let Ok(meta) = std::fs::symlink_metadata(path) else {
-        return Ok(());
-    };
-    let kind = meta.file_type();
-    if kind.is_file() {
-        return Ok(());
-    }
-    let what = if kind.is_dir() {
-        "a folder"
-    } else if kind.is_symlink() {
-        "a symbolic link (write to its target instead)"
-    } else {
-        "not a regular file"
-    };
-    Err(SceneError::Unwritable {
+    crate::atomic::refuse_special(path).map_err(|e| SceneError::Unwritable {
         path: path.to_path_buf(),
-        detail: format!("the target exists and is {what}; it is not replaced"),
+        detail: format!("{e}; it is not replaced"),
     })
 }
 
