@@ -9,6 +9,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
+use splatraj::config::ConfigError;
 use splatraj::experiment::{Config, Experiment, Extensions, observer};
 use splatraj::scene::Scene;
 use splatraj::semantic::{
@@ -50,10 +51,10 @@ impl Basis for Hat {
 
     fn validate(&self) -> Result<(), TrajectoryError> {
         if self.knots < 2 {
-            return Err(TrajectoryError::Custom {
-                key: "trajectory.custom.hat.knots".into(),
-                reason: format!("= {} must be at least 2", self.knots),
-            });
+            return Err(TrajectoryError::Config(ConfigError::new(
+                "trajectory.custom.hat.knots",
+                format!("= {} must be at least 2", self.knots),
+            )));
         }
         Ok(())
     }

@@ -35,6 +35,17 @@ impl ConfigError {
             reason: reason.into(),
         }
     }
+
+    /// The same error with its key inside `table` (`stop_transmittance` within
+    /// `approximations` is `approximations.stop_transmittance`).
+    pub fn within(mut self, table: &str) -> Self {
+        self.key = if self.key.is_empty() {
+            table.to_string()
+        } else {
+            format!("{table}.{}", self.key)
+        };
+        self
+    }
 }
 
 /// Deserialises `table` (the config table at `key`) into `C`; an error names the key inside
@@ -191,6 +202,17 @@ mod tests {
         let mut r = Registry::<Scaled>::default();
         r.insert::<Times>("times", |c, x, _| Ok(c.by * **x));
         r
+    }
+
+    #[test]
+    fn an_error_within_a_table_names_the_full_key() {
+        let e = ConfigError::new("min_opacity", "= 2 must lie in [0, 1)").within("approximations");
+        assert_eq!(e.key, "approximations.min_opacity");
+        assert_eq!(
+            e.to_string(),
+            "`approximations.min_opacity` = 2 must lie in [0, 1)"
+        );
+        assert_eq!(ConfigError::new("", "x").within("costs").key, "costs");
     }
 
     #[test]

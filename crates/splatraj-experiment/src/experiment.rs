@@ -227,14 +227,16 @@ impl Experiment {
             .targets
             .selection()
             .map_err(|e| anyhow::anyhow!("{}: {e}", at()))?;
-        if config.queries.iter().any(|q| q.mask.is_none()) {
-            crate::lifted::check_lifted_memory(config, self.scene.len())?;
-        }
         let source = if config.queries.iter().any(|q| q.mask.is_none()) {
             Some(
-                crate::lifted::with_lifted_cache(&config.targets, config.scene_file().as_deref())
-                    .build_with(&config.base_dir, &self.device, &self.extensions.sources)
-                    .map_err(|e| anyhow::anyhow!("{}: {e}", at()))?,
+                crate::grounding::build_source(
+                    config,
+                    self.scene.len(),
+                    &self.device,
+                    &self.extensions,
+                    &crate::grounding::config_key,
+                )
+                .map_err(|e| anyhow::anyhow!("{}: {e:#}", at()))?,
             )
         } else {
             None
@@ -249,7 +251,7 @@ impl Experiment {
                     bail!("`queries.{i}`: a group shot frames its `shot.objects`; leave out `mask`")
                 }
                 (None, Some(source)) if !group.is_empty() => {
-                    group_target(source.as_ref(), &self.scene, group, &selection)
+                    crate::grounding::group_target(source.as_ref(), &self.scene, group, &selection)
                         .with_context(|| format!("`queries.{i}.shot.objects`"))?
                 }
                 (Some(mask), _) => {
@@ -352,39 +354,6 @@ impl Experiment {
             .intrinsics
             .rescaled(self.config.output.width, self.config.output.height)?)
     }
-}
-
-/// The union of `objects`, each grounded like a query's text: every Gaussian of any of them,
-/// centred on and spanning the box that holds each object's box (`shots::union_box`).
-fn group_target(
-    source: &dyn splatraj_semantic::TargetSource,
-    scene: &Scene,
-    objects: &[String],
-    selection: &splatraj_semantic::SelectionOptions,
-) -> Result<Target> {
-    let mut parts = Vec::with_capacity(objects.len());
-    for (k, text) in objects.iter().enumerate() {
-        let part = splatraj_semantic::find_target(source, scene, text, selection)
-            .with_context(|| format!("object {k} ({text:?})"))?;
-        parts.push(part);
-    }
-    let boxes: Vec<([f64; 3], [f64; 3])> = parts
-        .iter()
-        .map(|p| (p.centre.map(f64::from), p.extent.map(f64::from)))
-        .collect();
-    let (centre, extent) = splatraj_traj::shots::union_box(&boxes);
-    let mut union = parts[0].clone();
-    for part in &parts[1..] {
-        for (u, m) in union.mask.iter_mut().zip(&part.mask) {
-            *u = u.max(*m);
-        }
-        union.warnings.extend(part.warnings.iter().cloned());
-    }
-    union.count = union.mask.iter().filter(|&&m| m > 0.5).count();
-    union.centre = centre.map(|v| v as f32);
-    union.extent = extent.map(|v| v as f32);
-    union.name = objects.join(" + ");
-    Ok(union)
 }
 
 /// The scene of `[scene]` (a file, read as configured, or the demo room) and its name for

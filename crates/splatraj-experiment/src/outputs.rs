@@ -15,6 +15,9 @@ use splatraj_render::images::{highlight, png_rgb};
 use splatraj_render::render::{Channel, DeviceScene, Rasterizer, RenderRequest, render};
 use splatraj_scene::atomic::write_atomically;
 
+/// A CSV table: header and rows ([`write_csv`]).
+pub type Csv = (Vec<String>, Vec<Vec<String>>);
+
 /// Creates a fresh `<runs_dir>/<name>/<UTC timestamp>/` folder.
 pub fn create_run_dir(runs_dir: &Path, name: &str) -> Result<PathBuf> {
     let parent = runs_dir.join(name);

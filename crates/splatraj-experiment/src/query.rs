@@ -1,15 +1,14 @@
 //! One semantic query against a scene, as `splatraj query` runs it: the target source, the
 //! selection, a diagnostic picture of it, and the report (text or JSON).
 //!
-//! The source comes either from a run config ([`ConfigQuery`]: its `[scene]` and `[targets]`
-//! built exactly as `splatraj run` builds them, so every registered source, the four shipped
-//! language fields and any a caller registers in [`Extensions`], is reachable) or from
-//! command-line options ([`QueryRequest`]: they fill the same `[targets]` table; its messages
-//! name the options, `--box`, `--phrases`, …, that set each input). Both end in
-//! [`find_and_draw`].
+//! The scene and source always come from a config ([`ConfigQuery`]): a run config's `[scene]`
+//! and `[targets]`, built exactly as `splatraj run` builds them ([`crate::grounding`]), or the
+//! config the command-line options make (each option sets a `[targets]` key; without
+//! `--source` the source is the one the inputs point to, [`inferred_source`], and errors name
+//! the options, [`option_of_key`]). Both end in [`find_and_draw`].
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::{Context, Result, anyhow, bail};
 use burn::tensor::Device;
@@ -19,10 +18,9 @@ use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render};
 use splatraj_scene::{Scene, resolve_up};
-use splatraj_semantic::sources::TextKeys;
 use splatraj_semantic::{
     Cluster, ClusteringSummary, Explanation, Region, RegionSpec, SelectionOptions, SourceKind,
-    SourceRegistry, Spread, Target, TargetSource, TargetsConfig, explain, select,
+    Spread, Target, TargetSource, TargetsConfig, explain, select,
 };
 
 use crate::config::{Config, apply_assignment};
@@ -89,7 +87,29 @@ impl PictureOptions {
     }
 }
 
-/// A query against a run config's scene and target source: `[scene]`, and `[targets]` (the
+/// Which target source a query uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SourceChoice {
+    /// `[targets] source` (labels when the config leaves it out).
+    #[default]
+    Configured,
+    /// The one the `[targets]` inputs and the scene point to ([`inferred_source`]): what
+    /// `splatraj query` does without `--source`.
+    FromInputs,
+}
+
+/// How errors name a `[targets]` key.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum KeyNaming {
+    /// As a config file writes it (`targets.phrases`), after the config's name.
+    #[default]
+    Config,
+    /// As the command-line option that sets it (`--phrases`, [`option_of_key`]), after the
+    /// scene's name and the source.
+    Options,
+}
+
+/// A query against a config's scene and target source: `[scene]`, and `[targets]` (the
 /// source, built-in or registered, with its keys, text encoder and `[targets.selection]`),
 /// read and built as `splatraj run` reads and builds them.
 #[derive(Debug, Clone)]
@@ -99,24 +119,46 @@ pub struct ConfigQuery {
     pub picture: PictureOptions,
     /// The backend; `None`: the config's `backend`.
     pub backend: Option<BackendKind>,
+    /// The configured source, or the one the inputs point to.
+    pub source: SourceChoice,
+    /// How errors name the keys.
+    pub naming: KeyNaming,
 }
 
 impl ConfigQuery {
     /// Loads `config`'s scene and builds its target source from the sources of `extensions`
     /// (paths relative to the config's folder), ready to find any number of queries. Errors
-    /// name the config file and the key (`targets.custom.legaussians.codebook`).
+    /// name the config file and the key (`targets.custom.legaussians.codebook`), or the
+    /// option ([`KeyNaming::Options`]).
     pub fn prepare(&self, config: &Config, extensions: &Extensions) -> Result<PreparedQueries> {
-        let at = || format!("config {}", config.path.display());
-        let selection = config
-            .targets
-            .selection()
-            .map_err(|e| anyhow!("{}: {e}", at()))?;
         let device = self.backend.unwrap_or(config.backend).device()?;
         let (scene, scene_name) = load_scene(config)?;
-        let source =
-            crate::lifted::with_lifted_cache(&config.targets, config.scene_file().as_deref())
-                .build_with(&config.base_dir, &device, &extensions.sources)
-                .map_err(|e| anyhow!("{}: {e}", at()))?;
+        let mut config = config.clone();
+        if self.source == SourceChoice::FromInputs {
+            let query = config.queries.first().map_or("", |q| q.text.as_str());
+            config.targets.source = inferred_source(&config.targets, &scene, &scene_name, query)?;
+        }
+        let kind = config.targets.source.clone();
+        let (at, key, selection_prefix): (String, &dyn Fn(&str) -> String, &str) = match self.naming
+        {
+            KeyNaming::Config => (
+                format!("config {}", config.path.display()),
+                &crate::grounding::config_key,
+                "targets.selection.",
+            ),
+            KeyNaming::Options => (
+                format!("{scene_name} ({kind} source)"),
+                &option_of_key,
+                "--",
+            ),
+        };
+        config
+            .targets
+            .selection
+            .validate_as(selection_prefix)
+            .map_err(|e| anyhow!("{at}: {e}"))?;
+        let source = crate::grounding::build_source(&config, scene.len(), &device, extensions, key)
+            .map_err(|e| anyhow!("{at}: {e:#}"))?;
         // The config's up (or the demo room's) as runs take it; else the picture guesses it
         // by the same rule and says so.
         let mut picture = self.picture.clone();
@@ -128,8 +170,8 @@ impl ConfigQuery {
             scene,
             scene_name,
             source,
-            kind: config.targets.source.clone(),
-            selection,
+            kind,
+            selection: config.targets.selection,
             picture,
             device,
         })
@@ -212,36 +254,6 @@ pub fn config_query_texts(config: &Config) -> Vec<ConfigQueryText> {
         }
     }
     texts
-}
-
-/// What to look for and how, from command-line options: the query, the source (or `None` to
-/// choose it from the inputs) and every source's inputs, the selection and the picture.
-#[derive(Debug, Clone)]
-pub struct QueryRequest {
-    /// A label name or id (labels), any name (region), a phrase of the phrase table (features).
-    pub query: String,
-    /// The source asked for; `None`: see [`QueryRequest::choose_source`].
-    pub source: Option<SourceKind>,
-    /// custom.<name>: the source's own keys (`--source-key KEY=VALUE`), as its
-    /// `[targets.custom.<name>]` table would hold them.
-    pub source_keys: toml::Table,
-    /// labels (and registered sources that take it): label name → other words that mean it.
-    pub synonyms: BTreeMap<String, Vec<String>>,
-    /// region: the box or sphere (named after the query).
-    pub region: Option<RegionSpec>,
-    /// features: per-Gaussian feature sidecar; `None`: the scene's own features.
-    pub features: Option<PathBuf>,
-    /// features, langsplat and the registered language fields: the phrase table, text
-    /// encoder, negatives (`None`: the defaults) and temperature.
-    pub text: TextKeys,
-    /// langsplat: per-Gaussian latents `[N, 3]`.
-    pub latents: Option<PathBuf>,
-    /// langsplat: the autoencoder checkpoint.
-    pub checkpoint: Option<PathBuf>,
-    /// Percentile, floor and DBSCAN.
-    pub selection: SelectionOptions,
-    /// The picture.
-    pub picture: PictureOptions,
 }
 
 /// A graded query whose selection failed (nothing above the thresholds, no cluster), with
@@ -333,204 +345,49 @@ pub struct QueryReport {
     pub warnings: Vec<String>,
 }
 
-impl QueryRequest {
-    /// The source asked for, or the one the inputs point to: `region` with a region,
-    /// `langsplat` with latents or a checkpoint, `features` with phrase or feature inputs, else
-    /// `labels` when the scene has labels. Inputs of another source are refused (they would be
-    /// silently ignored), as is a built-in source without the inputs it needs (a registered
-    /// source checks its own table).
-    pub fn choose_source(&self, scene: &Scene, scene_name: &str) -> Result<SourceKind> {
-        use SourceKind::{Custom, Features, Labels, Langsplat, Lifted, Region};
-        let phrase_options = self.text != TextKeys::default();
-        let langsplat_options = self.latents.is_some() || self.checkpoint.is_some();
-        let has_region = self.region.is_some();
-        let kind = match &self.source {
-            Some(kind) => kind.clone(),
-            None if has_region => Region,
-            None if langsplat_options => Langsplat,
-            // CLIP weights and nothing to score them against: the field is lifted from renders.
-            None if self.text.text_encoder.is_some()
-                && self.text.phrases.is_none()
-                && self.features.is_none()
-                && scene.extras.features.is_none() =>
-            {
-                Lifted
-            }
-            None if phrase_options || self.features.is_some() => Features,
-            None if scene.extras.labels.is_some() => Labels,
-            None if scene.extras.features.is_some() => bail!(
-                "{scene_name} has per-Gaussian feature vectors but no labels: give a phrase table \
-                 with --phrases TABLE (.json, .npy with --phrase-names, or .safetensors) to query \
-                 them, or --box/--sphere for a region"
-            ),
-            None => bail!(
-                "{scene_name} has neither labels nor feature vectors, so there is nothing to match \
-                 {:?} against: give a label sidecar with --labels SIDECAR.json, feature vectors \
-                 with --features SIDECAR.npy and a phrase table with --phrases TABLE, or a region \
-                 with --box MINX,MINY,MINZ,MAXX,MAXY,MAXZ or --sphere CX,CY,CZ,R",
-                self.query
-            ),
-        };
-        // A registered source takes the phrase and synonym options into its table.
-        let custom = matches!(kind, Custom(_));
-        let stray: Vec<&str> = [
-            (
-                !matches!(kind, Labels | Custom(_)) && !self.synonyms.is_empty(),
-                "--synonym",
-            ),
-            (kind != Region && has_region, "--box/--sphere"),
-            (kind != Features && self.features.is_some(), "--features"),
-            (
-                !matches!(kind, Features | Langsplat | Lifted | Custom(_)) && phrase_options,
-                "--phrases/--text-encoder/--phrase-names/--negative/--temperature",
-            ),
-            (
-                kind != Langsplat && langsplat_options,
-                "--latents/--checkpoint",
-            ),
-            (
-                !custom && kind != Lifted && !self.source_keys.is_empty(),
-                "--source-key",
-            ),
-            (kind == Lifted && self.text.phrases.is_some(), "--phrases"),
-        ]
-        .into_iter()
-        .filter_map(|(bad, name)| bad.then_some(name))
-        .collect();
-        if !stray.is_empty() {
-            bail!(
-                "{} do not apply to the {kind} source (--synonym is for labels, --box/--sphere for \
-                 region, --features for features, --phrases/--phrase-names/--negative/--temperature \
-                 for features and langsplat, --latents/--checkpoint for langsplat, --source-key \
-                 for a registered source, custom.<name>, which also takes --synonym and the \
-                 phrase options, and for lifted, which takes --text-encoder, --negative and \
-                 --temperature)",
-                stray.join(", ")
-            );
+/// The source `targets`' inputs point to (the scene's own data deciding the rest), for a query
+/// that names none: `region` with a region, `langsplat` with latents or a checkpoint,
+/// `lifted` with CLIP weights and nothing else to score them against, `features` with phrase
+/// or feature inputs, else `labels` when the scene has labels. Inputs of another source are
+/// refused when the source is built, as is a source without the inputs it needs.
+pub fn inferred_source(
+    targets: &TargetsConfig,
+    scene: &Scene,
+    scene_name: &str,
+    query: &str,
+) -> Result<SourceKind> {
+    use SourceKind::{Features, Labels, Langsplat, Lifted, Region};
+    let phrase_options = targets.phrases.is_some()
+        || targets.phrase_names.is_some()
+        || targets.text_encoder.is_some()
+        || targets.text_activation.is_some()
+        || targets.negatives.is_some()
+        || targets.temperature.is_some();
+    Ok(match () {
+        () if !targets.regions.is_empty() => Region,
+        () if targets.latents.is_some() || targets.checkpoint.is_some() => Langsplat,
+        // CLIP weights and nothing to score them against: the field is lifted from renders.
+        () if targets.text_encoder.is_some()
+            && targets.phrases.is_none()
+            && targets.features.is_none()
+            && scene.extras.features.is_none() =>
+        {
+            Lifted
         }
-        match kind {
-            Region if !has_region => bail!(
-                "the region source needs a region: give --box MINX,MINY,MINZ,MAXX,MAXY,MAXZ or \
-                 --sphere CX,CY,CZ,R"
-            ),
-            Features | Langsplat
-                if self.text.phrases.is_none() && self.text.text_encoder.is_none() =>
-            {
-                bail!(
-                    "the {kind} source needs text embeddings: give CLIP text-tower weights with \
-                 --text-encoder FILE (any phrase), or a phrase table with --phrases TABLE (.json, \
-                 .npy with --phrase-names, or .safetensors)"
-                )
-            }
-            Lifted if self.text.text_encoder.is_none() => bail!(
-                "the lifted source needs CLIP weights holding both towers: give --text-encoder \
-                 FILE (open_clip_model.safetensors or open_clip_pytorch_model.bin)"
-            ),
-            Langsplat if self.latents.is_none() || self.checkpoint.is_none() => bail!(
-                "the langsplat source needs the per-Gaussian latents (--latents LATENTS.npy, [N, 3]) \
-                 and the scene's autoencoder checkpoint (--checkpoint best_ckpt.pth)"
-            ),
-            _ => {}
-        }
-        Ok(kind)
-    }
-
-    /// The `[targets]` table a run config would hold for this request with source `kind`.
-    pub fn targets_config(&self, kind: SourceKind) -> Result<TargetsConfig> {
-        if let SourceKind::Custom(name) = &kind {
-            let table = toml::Value::Table(self.custom_table()?);
-            return Ok(TargetsConfig {
-                source: kind.clone(),
-                selection: self.selection,
-                custom: BTreeMap::from([(name.clone(), table)]),
-                ..TargetsConfig::default()
-            });
-        }
-        let kind_is_lifted = kind == SourceKind::Lifted;
-        Ok(TargetsConfig {
-            source: kind,
-            synonyms: self.synonyms.clone(),
-            regions: self
-                .region
-                .map(|r| BTreeMap::from([(self.query.trim().to_string(), r)]))
-                .unwrap_or_default(),
-            features: self.features.clone(),
-            phrases: self.text.phrases.clone(),
-            phrase_names: self.text.phrase_names.clone(),
-            text_encoder: self.text.text_encoder.clone(),
-            text_activation: self.text.text_activation,
-            negatives: self.text.negatives.clone(),
-            temperature: self.text.temperature,
-            latents: self.latents.clone(),
-            checkpoint: self.checkpoint.clone(),
-            selection: self.selection,
-            label_names: BTreeMap::new(),
-            // `--source-key views.count=8` style keys are the lifted source's own table.
-            lifted: (kind_is_lifted && !self.source_keys.is_empty())
-                .then(|| self.source_keys.clone()),
-            custom: BTreeMap::new(),
-        })
-    }
-
-    /// A registered source's `[targets.custom.<name>]` table: the `--source-key` entries, and
-    /// the phrase options and `--synonym` under their config keys (the keys the shipped
-    /// language fields share, [`TextKeys`]). A key set both ways is refused.
-    fn custom_table(&self) -> Result<toml::Table> {
-        let mut from_options =
-            toml::Table::try_from(&self.text).context("the phrase options as a source table")?;
-        if !self.synonyms.is_empty() {
-            from_options.insert(
-                "synonyms".into(),
-                toml::Value::try_from(&self.synonyms).context("--synonym as a source table")?,
-            );
-        }
-        let mut table = self.source_keys.clone();
-        for (key, value) in from_options {
-            if table.contains_key(&key) {
-                bail!(
-                    "--source-key {key}=… and {} both set `{key}`: give it once",
-                    option_of_key(&key)
-                );
-            }
-            table.insert(key, value);
-        }
-        Ok(table)
-    }
-
-    /// Grounds the query in `scene` (read from `scene_name`) through the `[targets]` path of
-    /// run configs with the sources of `registry` (paths relative to the working directory,
-    /// models such as a LangSplat decoder on `device`) and draws the picture; writes nothing.
-    pub fn run(
-        &self,
-        scene: &Scene,
-        scene_name: &str,
-        registry: &SourceRegistry,
-        device: &Device,
-    ) -> Result<QueryOutcome> {
-        let kind = self.choose_source(scene, scene_name)?;
-        self.selection.validate_as("--")?;
-        // The CLI names the scene by its path: the lifted field's cache goes beside it.
-        let config = crate::lifted::with_lifted_cache(
-            &self.targets_config(kind.clone())?,
-            Some(Path::new(scene_name)).filter(|p| p.is_file()),
-        );
-        let source = config
-            .build_named(Path::new(""), device, registry, &option_of_key)
-            .with_context(|| format!("{scene_name} ({kind} source)"))?;
-        let grounding = Grounding {
-            scene,
-            scene_name,
-            source: source.as_ref(),
-            kind,
-        };
-        find_and_draw(
-            &grounding,
-            &self.query,
-            &self.selection,
-            &self.picture,
-            device,
-        )
-    }
+        () if phrase_options || targets.features.is_some() => Features,
+        () if scene.extras.labels.is_some() => Labels,
+        () if scene.extras.features.is_some() => bail!(
+            "{scene_name} has per-Gaussian feature vectors but no labels: give a phrase table \
+             with --phrases TABLE (.json, .npy with --phrase-names, or .safetensors) to query \
+             them, or --box/--sphere for a region"
+        ),
+        () => bail!(
+            "{scene_name} has neither labels nor feature vectors, so there is nothing to match \
+             {query:?} against: give a label sidecar with --labels SIDECAR.json, feature vectors \
+             with --features SIDECAR.npy and a phrase table with --phrases TABLE, or a region \
+             with --box MINX,MINY,MINZ,MAXX,MAXY,MAXZ or --sphere CX,CY,CZ,R"
+        ),
+    })
 }
 
 /// A scene and the target source that grounds queries in it.

@@ -11,11 +11,9 @@ use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, uniform_times};
 
 use crate::config::Ablation;
 use crate::experiment::Experiment;
+use crate::outputs::Csv;
 use crate::pose_run::{PoseRun, Posterior};
 use crate::trajectory_run::TrajectoryRun;
-
-/// A CSV table: header and rows.
-pub type Csv = (Vec<String>, Vec<Vec<String>>);
 
 /// One pose of the densely sampled trajectory in `trajectory.json`.
 #[derive(Debug, Serialize)]

@@ -21,11 +21,11 @@ use splatraj_scene::demo::{DemoConfig, demo_scene};
 use splatraj_scene::{InvalidPolicy, ReadOptions, Scene, read_scene};
 use splatraj_traj::trajectory::uniform_times;
 
+use crate::outputs::Csv;
 use crate::outputs::write_bytes;
 use crate::path_render::{
     FRAME_METRICS_FILE, KEYFRAMES_DIR, VIDEO_FILE, frame_name, keyframe_indices,
 };
-use crate::records::Csv;
 
 /// The report's file name in a run folder.
 pub const REPORT_FILE: &str = "report.html";

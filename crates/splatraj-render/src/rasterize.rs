@@ -13,6 +13,7 @@
 //! that are kept, and through the channel values.
 
 use burn::tensor::{Int, Tensor, TensorData};
+use splatraj_config::ConfigError;
 
 use crate::tiles::{TILE_PIXELS, TILE_SIZE, TileGrid, TileWork};
 
@@ -87,18 +88,22 @@ impl Approximations {
         *self == Approximations::default()
     }
 
-    /// Checks the values: `stop_transmittance` in [1e-4, 1), `min_opacity` in [0, 1).
-    pub fn check(&self) -> Result<(), String> {
+    /// Checks the values: `stop_transmittance` in [1e-4, 1), `min_opacity` in [0, 1); an error
+    /// names the key within the approximations' table.
+    pub fn check(&self) -> Result<(), ConfigError> {
         if !(MIN_TRANSMITTANCE..1.0).contains(&self.stop_transmittance) {
-            return Err(format!(
-                "stop_transmittance = {} must lie in [{MIN_TRANSMITTANCE}, 1) ({MIN_TRANSMITTANCE} is exact)",
-                self.stop_transmittance
+            return Err(ConfigError::new(
+                "stop_transmittance",
+                format!(
+                    "= {} must lie in [{MIN_TRANSMITTANCE}, 1) ({MIN_TRANSMITTANCE} is exact)",
+                    self.stop_transmittance
+                ),
             ));
         }
         if !(0.0..1.0).contains(&self.min_opacity) {
-            return Err(format!(
-                "min_opacity = {} must lie in [0, 1) (0 is exact)",
-                self.min_opacity
+            return Err(ConfigError::new(
+                "min_opacity",
+                format!("= {} must lie in [0, 1) (0 is exact)", self.min_opacity),
             ));
         }
         Ok(())

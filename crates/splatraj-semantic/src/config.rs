@@ -485,30 +485,19 @@ impl TargetsConfig {
     }
 
     /// A key set for a source it does not apply to is an error: it would be silently ignored.
+    /// The keys set are those the table writes back (unset ones are skipped when
+    /// serialising), so a new key needs only its field and its entry in [`KEY_SOURCES`].
     fn refuse_stray_keys(&self, key: &dyn Fn(&str) -> String) -> Result<()> {
+        let written = toml::Table::try_from(self).map_err(|e| {
+            SemanticError::option(key("source"), format!("cannot be written back: {e}"))
+        })?;
         for (name, sources) in KEY_SOURCES {
-            let set = match name {
-                "label_names" => !self.label_names.is_empty(),
-                "synonyms" => !self.synonyms.is_empty(),
-                "regions" => !self.regions.is_empty(),
-                "features" => self.features.is_some(),
-                "phrases" => self.phrases.is_some(),
-                "phrase_names" => self.phrase_names.is_some(),
-                "negatives" => self.negatives.is_some(),
-                "text_encoder" => self.text_encoder.is_some(),
-                "text_activation" => self.text_activation.is_some(),
-                "temperature" => self.temperature.is_some(),
-                "latents" => self.latents.is_some(),
-                "checkpoint" => self.checkpoint.is_some(),
-                "lifted" => self.lifted.is_some(),
-                _ => false,
-            };
-            if set && !sources.contains(&self.source) {
+            if written.contains_key(name) && !sources.contains(&self.source) {
                 let names: Vec<String> = sources.iter().map(|s| s.name()).collect();
                 return Err(SemanticError::option(
                     key(name),
                     format!(
-                        "applies to the {} source only, but the source is {}",
+                        "applies to the {} source only, not to the {} source",
                         names.join(" and "),
                         self.source
                     ),
@@ -520,7 +509,7 @@ impl TargetsConfig {
                 return Err(SemanticError::option(
                     key(&format!("custom.{name}")),
                     format!(
-                        "applies to the source custom.{name} only, but the source is {}",
+                        "applies to the source custom.{name} only, not to the {} source",
                         self.source
                     ),
                 ));

@@ -82,14 +82,10 @@ pub enum SemanticError {
         /// What is degenerate.
         detail: String,
     },
-    /// An option is out of range or inconsistent.
-    #[error("option `{key}`: {detail}")]
-    InvalidOption {
-        /// The option's key.
-        key: String,
-        /// What is wrong and the allowed range.
-        detail: String,
-    },
+    /// An option is out of range or inconsistent: the config key (or command-line option)
+    /// and what is wrong, as every crate reports a bad key.
+    #[error("option `{}`: {}", .0.key, .0.reason)]
+    InvalidOption(splatraj_config::ConfigError),
     /// A key of the `[targets]` config (or its command-line option) led to an error, e.g. the
     /// file it names cannot be read; the message names the key, then the error.
     #[error("{key}: {error}")]
@@ -112,7 +108,7 @@ fn no_match_message(what: &str, query: &str, closest: &[String]) -> String {
 
 impl From<splatraj_config::ConfigError> for SemanticError {
     fn from(e: splatraj_config::ConfigError) -> Self {
-        SemanticError::option(e.key, e.reason)
+        SemanticError::InvalidOption(e)
     }
 }
 
@@ -135,10 +131,7 @@ impl SemanticError {
 
     /// A [`SemanticError::InvalidOption`].
     pub fn option(key: impl Into<String>, detail: impl Into<String>) -> Self {
-        SemanticError::InvalidOption {
-            key: key.into(),
-            detail: detail.into(),
-        }
+        SemanticError::InvalidOption(splatraj_config::ConfigError::new(key, detail))
     }
 }
 

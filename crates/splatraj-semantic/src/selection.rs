@@ -196,8 +196,8 @@ impl SelectionOptions {
     /// (`"targets.selection."` for a config file).
     pub fn validate_as(&self, prefix: &str) -> Result<()> {
         validate(self).map_err(|e| match e {
-            SemanticError::InvalidOption { key, detail } => {
-                SemanticError::option(format!("{prefix}{key}"), detail)
+            SemanticError::InvalidOption(e) => {
+                SemanticError::option(format!("{prefix}{}", e.key), e.reason)
             }
             other => other,
         })

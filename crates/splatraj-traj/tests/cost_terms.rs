@@ -386,7 +386,7 @@ fn config_parses_and_rejects_unknown_keys_naming_them() {
     ] {
         let config: CostsConfig = toml::from_str(text).unwrap();
         match config.build() {
-            Err(e @ CostError::InvalidConfig { .. }) => {
+            Err(e @ CostError::InvalidConfig(..)) => {
                 assert!(e.to_string().contains(key), "{text:?}: {e}")
             }
             other => panic!("{text:?}: {other:?}"),

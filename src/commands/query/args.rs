@@ -1,20 +1,20 @@
-//! The arguments of `splatraj query`, and how they become the library's [`QueryRequest`] and
-//! [`PictureOptions`].
+//! The arguments of `splatraj query`, and how they become the library's config (each scene
+//! and source option sets a key of it) and [`PictureOptions`].
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use clap::Args;
 use splatraj::experiment::query::{
-    PictureOptions, QueryRequest, RejectedView, parse_direction, parse_region, parse_source_keys,
+    PictureOptions, RejectedView, option_of_key, parse_direction, parse_region, parse_source_keys,
     parse_synonyms,
 };
 use splatraj::experiment::views::ViewOptions;
 use splatraj_render::backend::BackendKind;
+use splatraj_scene::InvalidPolicy;
 use splatraj_semantic::selection::{DEFAULT_FLOOR, DEFAULT_TOP_FRACTION};
-use splatraj_semantic::sources::TextKeys;
-use splatraj_semantic::{Activation, ClusterOptions, SelectionOptions, SourceKind};
+use splatraj_semantic::{Activation, SourceKind};
 
 use crate::cli::ReadArgs;
 
@@ -23,41 +23,23 @@ const DEFAULT_ELEVATION_DEGREES: f64 = 30.0;
 /// Name of the picture written into `--out`.
 pub(super) const IMAGE_NAME: &str = "query.png";
 
-/// Options that set the scene or the source, which a run config sets instead.
-const SET_BY_CONFIG: [&str; 20] = [
-    "scene",
-    "labels",
-    "drop_invalid",
-    "source",
-    "source_key",
-    "synonym",
-    "region_box",
-    "sphere",
-    "features",
-    "phrases",
-    "phrase_names",
-    "text_encoder",
-    "text_activation",
-    "negative",
-    "temperature",
-    "latents",
-    "checkpoint",
-    "top_fraction",
-    "floor",
-    "no_cluster",
-];
-
 /// Arguments of `splatraj query`.
 #[derive(Debug, Args)]
 pub struct QueryArgs {
     /// A run config: its `[scene]` and `[targets]` (source, built-in or registered, with its
     /// keys and text encoder; `[targets.selection]`) are read and built as `splatraj run`
     /// builds them, instead of the scene and source options.
-    #[arg(long, value_name = "RUN.toml", conflicts_with_all = SET_BY_CONFIG)]
+    // The groups are the flattened structs' options: a config sets all of them.
+    #[arg(
+        long,
+        value_name = "RUN.toml",
+        conflicts_with_all = ["scene", "ReadArgs", "SourceArgs"]
+    )]
     pub(super) config: Option<PathBuf>,
-    /// With --config: override a config key, e.g. `targets.selection.floor=0.6`
-    /// (repeatable).
-    #[arg(long = "set", value_name = "KEY=VALUE", requires = "config")]
+    /// Override a config key, e.g. `targets.selection.floor=0.6` (repeatable); without
+    /// --config, a key of the config the options make (`targets.<key>`: any `[targets]` key,
+    /// also one without an option of its own).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
     pub(super) set: Vec<String>,
     /// Scene file (INRIA PLY, compressed PLY or SPZ).
     #[arg(long, required_unless_present = "config")]
@@ -207,36 +189,125 @@ impl QueryArgs {
             .context("the picture (--width, --height, --elevation)")
     }
 
-    /// The request the scene and source options make: they fill the same `[targets]` table a
-    /// run config holds (paths relative to the working directory).
-    pub(super) fn request(&self, picture: PictureOptions) -> Result<QueryRequest> {
-        let options = &self.source_options;
-        Ok(QueryRequest {
-            query: self
-                .query
-                .clone()
-                .context("--query is needed without --config")?,
-            source: options.source.clone(),
-            source_keys: parse_source_keys(&options.source_key)?,
-            synonyms: parse_synonyms(&options.synonym)?,
-            region: parse_region(options.region_box.as_deref(), options.sphere.as_deref())?,
-            features: options.features.clone(),
-            text: TextKeys {
-                phrases: options.phrases.clone(),
-                phrase_names: options.phrase_names.clone(),
-                text_encoder: options.text_encoder.clone(),
-                text_activation: options.text_activation,
-                negatives: (!options.negative.is_empty()).then(|| options.negative.clone()),
-                temperature: options.temperature,
-            },
-            latents: options.latents.clone(),
-            checkpoint: options.checkpoint.clone(),
-            selection: SelectionOptions {
-                top_fraction: options.top_fraction,
-                floor: options.floor,
-                cluster: (!options.no_cluster).then(ClusterOptions::default),
-            },
-            picture,
-        })
+    /// The config the scene and source options make (paths relative to the working
+    /// directory): `[scene]`, one `[[queries]]`, and `[targets]` with each option as its key.
+    pub(super) fn config_table(&self) -> Result<toml::Table> {
+        let query = self
+            .query
+            .clone()
+            .context("--query is needed without --config")?;
+        let path = self
+            .scene
+            .as_deref()
+            .context("--scene (or --config) is needed")?;
+        let read = self.read.options();
+        let mut scene = toml::Table::new();
+        scene.insert("path".into(), path_value(path));
+        if let Some(labels) = &read.labels {
+            scene.insert("labels".into(), path_value(labels));
+        }
+        scene.insert(
+            "drop_invalid".into(),
+            toml::Value::Boolean(read.invalid == InvalidPolicy::Drop),
+        );
+        let targets = self.source_options.targets_table(&query)?;
+        let mut table = toml::Table::new();
+        table.insert("name".into(), toml::Value::String("query".into()));
+        table.insert("scene".into(), toml::Value::Table(scene));
+        table.insert("targets".into(), toml::Value::Table(targets));
+        table.insert(
+            "queries".into(),
+            toml::Value::Array(vec![toml::Value::Table(toml::Table::from_iter([(
+                "text".to_string(),
+                toml::Value::String(query),
+            )]))]),
+        );
+        Ok(table)
     }
+
+    /// Whether `--source` chose the source (else the inputs point to it).
+    pub(super) fn source_given(&self) -> bool {
+        self.source_options.source.is_some()
+    }
+}
+
+impl SourceArgs {
+    /// The `[targets]` table these options make: each option under its config key; for a
+    /// registered source (`custom.<name>`) the source's keys (`--source-key`, the phrase
+    /// options, `--synonym`) go in its own `[targets.custom.<name>]` table, and for `lifted`
+    /// the `--source-key` items in `[targets.lifted]`.
+    fn targets_table(&self, query: &str) -> Result<toml::Table> {
+        let mut keys = toml::Table::new();
+        let synonyms = parse_synonyms(&self.synonym)?;
+        if !synonyms.is_empty() {
+            keys.insert("synonyms".into(), toml::Value::try_from(synonyms)?);
+        }
+        if let Some(region) = parse_region(self.region_box.as_deref(), self.sphere.as_deref())? {
+            let regions = std::collections::BTreeMap::from([(query.trim().to_string(), region)]);
+            keys.insert("regions".into(), toml::Value::try_from(regions)?);
+        }
+        for (key, path) in [
+            ("features", &self.features),
+            ("phrases", &self.phrases),
+            ("phrase_names", &self.phrase_names),
+            ("text_encoder", &self.text_encoder),
+            ("latents", &self.latents),
+            ("checkpoint", &self.checkpoint),
+        ] {
+            if let Some(path) = path {
+                keys.insert(key.into(), path_value(path));
+            }
+        }
+        if let Some(activation) = self.text_activation {
+            keys.insert("text_activation".into(), toml::Value::try_from(activation)?);
+        }
+        if !self.negative.is_empty() {
+            keys.insert("negatives".into(), toml::Value::try_from(&self.negative)?);
+        }
+        if let Some(t) = self.temperature {
+            keys.insert("temperature".into(), toml::Value::Float(f64::from(t)));
+        }
+        let source_keys = parse_source_keys(&self.source_key)?;
+        let mut targets = toml::Table::new();
+        match &self.source {
+            Some(SourceKind::Custom(name)) => {
+                let mut own = source_keys;
+                for (key, value) in std::mem::take(&mut keys) {
+                    if own.contains_key(&key) {
+                        bail!(
+                            "--source-key {key}=… and {} both set `{key}`: give it once",
+                            option_of_key(&key)
+                        );
+                    }
+                    own.insert(key, value);
+                }
+                let custom = toml::Table::from_iter([(name.clone(), toml::Value::Table(own))]);
+                targets.insert("custom".into(), toml::Value::Table(custom));
+            }
+            _ if !source_keys.is_empty() => {
+                keys.insert("lifted".into(), toml::Value::Table(source_keys));
+            }
+            _ => {}
+        }
+        if let Some(source) = &self.source {
+            targets.insert("source".into(), toml::Value::String(source.name()));
+        }
+        targets.extend(keys);
+        let mut selection = toml::Table::new();
+        selection.insert(
+            "top_fraction".into(),
+            toml::Value::Float(f64::from(self.top_fraction)),
+        );
+        selection.insert("floor".into(), toml::Value::Float(f64::from(self.floor)));
+        if self.no_cluster {
+            selection.insert("cluster".into(), toml::Value::Boolean(false));
+        }
+        targets.insert("selection".into(), toml::Value::Table(selection));
+        Ok(targets)
+    }
+}
+
+/// A path as a TOML string.
+fn path_value(path: &Path) -> toml::Value {
+    toml::Value::String(path.to_string_lossy().into_owned())
 }

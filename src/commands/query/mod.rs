@@ -1,18 +1,18 @@
 //! `splatraj query`: what a semantic query selects in a scene, as text (or JSON) and as a
-//! picture (`query.png`, the selection tinted). The scene and source come from the options or
-//! from a run config (`--config RUN.toml`). The work is `splatraj::experiment::query`
-//! ([`ConfigQuery`], [`QueryRequest`](splatraj::experiment::query::QueryRequest),
-//! [`PictureOptions`]); `args.rs` parses the options, this file prints.
+//! picture (`query.png`, the selection tinted). The scene and source come from a run config
+//! (`--config RUN.toml`) or from the options, which make a config of their own (`args.rs`:
+//! each option sets a key). The work is `splatraj::experiment::query` ([`ConfigQuery`],
+//! [`PictureOptions`]); this file prints.
 
 mod args;
 
 use anyhow::{Context, Result, bail};
 use splatraj::experiment::outputs::write_bytes;
 use splatraj::experiment::query::{
-    ConfigQuery, PictureOptions, QueryOutcome, QueryReport, SelectionFailed, config_query_texts,
+    ConfigQuery, KeyNaming, PictureOptions, QueryOutcome, QueryReport, SelectionFailed,
+    SourceChoice, config_query_texts,
 };
 use splatraj::experiment::{Config, Extensions};
-use splatraj_render::backend::BackendKind;
 
 use args::IMAGE_NAME;
 pub use args::QueryArgs;
@@ -39,6 +39,8 @@ pub fn run(args: QueryArgs) -> Result<()> {
     let prepared = ConfigQuery {
         picture,
         backend: args.backend,
+        source: SourceChoice::Configured,
+        naming: KeyNaming::Config,
     }
     .prepare(&config, &extensions)?;
     if let Some(query) = &args.query {
@@ -146,15 +148,28 @@ fn write_picture(
     Ok(report)
 }
 
-/// The query on the scene file of `--scene` with the built-in sources.
+/// The query on the scene file of `--scene` with the built-in sources: the config the options
+/// make, grounded as a run config is.
 fn from_options(args: &QueryArgs, picture: PictureOptions) -> Result<QueryOutcome> {
-    let request = args.request(picture)?;
-    let device = args.backend.unwrap_or(BackendKind::Flex).device()?;
-    let path = args
-        .scene
-        .as_deref()
-        .context("--scene (or --config) is needed")?;
-    let scene = args.read.load(path)?.scene;
-    let name = path.display().to_string();
-    request.run(&scene, &name, &Extensions::default().sources, &device)
+    let extensions = Extensions::default();
+    let config = Config::from_table(
+        args.config_table()?,
+        std::path::Path::new(""),
+        &args.set,
+        "the query options",
+        &extensions,
+    )?;
+    let query = &config.queries[0].text;
+    ConfigQuery {
+        picture,
+        backend: args.backend,
+        source: if args.source_given() {
+            SourceChoice::Configured
+        } else {
+            SourceChoice::FromInputs
+        },
+        naming: KeyNaming::Options,
+    }
+    .prepare(&config, &extensions)?
+    .find(query)
 }

@@ -16,21 +16,10 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 
-use super::{EvaluationConfig, StudyConfig, StudyTask};
+use super::{Design, EvaluationConfig, Quality, StudyConfig, StudyTask};
 use crate::config::{Ablation, Config};
 use crate::extensions::Extensions;
-use crate::study::summary::{Quality, short_value};
-
-/// How factors combine into variants.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Design {
-    /// The config itself, then each factor's values with every other key as configured.
-    #[default]
-    OneAtATime,
-    /// Every combination of the factors' values.
-    Grid,
-}
+use crate::study::summary::short_value;
 
 /// One factor: a config key and its values as TOML text.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]

@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 use splatraj_traj::metrics::WindowMetrics;
 
-use crate::records::Csv;
+use crate::outputs::Csv;
 
 /// Where the optimisation's time went, seconds (summed over its steps).
 ///

@@ -4,23 +4,9 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::Quality;
 use super::plan::StudyPlan;
 use super::rows::{StageTimes, StudyRow, WindowScore};
-
-/// The error a study judges variants by (lower is better), averaged over the windows.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Quality {
-    /// TCE + TRE: how well each object is centred and sized (the paper's image costs).
-    #[default]
-    Framing,
-    /// TCE alone.
-    Tce,
-    /// TRE alone.
-    Tre,
-    /// 1 − IoU: how much of each object is hidden.
-    Iou,
-}
 
 impl Quality {
     /// The error of one evaluation.

@@ -79,14 +79,10 @@ pub const CONFIG_TABLE: &str = "costs";
 /// Why costs could not be configured or evaluated.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum CostError {
-    /// A config value is out of range; `key` is its full config key (e.g. `costs.prior.gamma`).
-    #[error("`{key}` {reason}")]
-    InvalidConfig {
-        /// Full config key, `costs.<cost>.<field>`.
-        key: String,
-        /// What is wrong and what is allowed.
-        reason: String,
-    },
+    /// A config value is out of range; the error's key is the full config key (e.g.
+    /// `costs.prior.gamma`).
+    #[error(transparent)]
+    InvalidConfig(#[from] splatraj_config::ConfigError),
     /// The per-query context is unusable (a caller bug or a degenerate object).
     #[error("cost context: `{field}` {reason}")]
     InvalidContext {
@@ -483,21 +479,12 @@ pub fn check_weight(cost: &str, field: &str, value: f64) -> Result<(), CostError
     }
 }
 
-impl From<splatraj_config::ConfigError> for CostError {
-    fn from(e: splatraj_config::ConfigError) -> Self {
-        CostError::InvalidConfig {
-            key: e.key,
-            reason: e.reason,
-        }
-    }
-}
-
 /// An [`CostError::InvalidConfig`] for key `costs.<cost>.<field>`.
 pub fn invalid(cost: &str, field: &str, reason: String) -> CostError {
-    CostError::InvalidConfig {
-        key: format!("{CONFIG_TABLE}.{cost}.{field}"),
+    CostError::InvalidConfig(splatraj_config::ConfigError::new(
+        format!("{CONFIG_TABLE}.{cost}.{field}"),
         reason,
-    }
+    ))
 }
 
 /// The `[costs]` table: one optional sub-table per cost; a cost is on when its table is there.

@@ -88,23 +88,10 @@ pub enum TrajectoryError {
     #[error("trajectory fit: {0}")]
     FitData(String),
     /// A custom model ([`ModelRegistry`]) is unknown, its table is malformed, or its own
-    /// `init` refused it; `key` is the config key at fault.
-    #[error("`{key}` {reason}")]
-    Custom {
-        /// Config key (e.g. `trajectory.custom.hat`).
-        key: String,
-        /// What is wrong and what is allowed.
-        reason: String,
-    },
-}
-
-impl From<splatraj_config::ConfigError> for TrajectoryError {
-    fn from(e: splatraj_config::ConfigError) -> Self {
-        TrajectoryError::Custom {
-            key: e.key,
-            reason: e.reason,
-        }
-    }
+    /// `init` refused it; the error's key is the config key at fault (e.g.
+    /// `trajectory.custom.hat`).
+    #[error(transparent)]
+    Config(#[from] splatraj_config::ConfigError),
 }
 
 /// A family of K scalar basis functions ψ_k(t); one implementation per trajectory model.

@@ -163,12 +163,11 @@ impl Basis for Unbuilt {
         0
     }
     fn validate(&self) -> Result<(), TrajectoryError> {
-        Err(TrajectoryError::Custom {
-            key: "trajectory.kind".into(),
-            reason: "names a custom model that was not built: register it in a ModelRegistry \
-                     and build the model with `TrajectoryModel::build_with`"
-                .into(),
-        })
+        Err(TrajectoryError::Config(splatraj_config::ConfigError::new(
+            "trajectory.kind",
+            "names a custom model that was not built: register it in a ModelRegistry and build \
+             the model with `TrajectoryModel::build_with`",
+        )))
     }
     fn eval_into(&self, _t: f64, _row: &mut [f64]) {}
 }

@@ -1,0 +1,184 @@
+//! Reading a config: the file and the files it `extends`, the first-try tables an override
+//! edits, the `--set` overrides, then the schema and [`Config::validate_with`].
+
+use std::path::Path;
+
+use anyhow::{Context, Result, bail};
+use splatraj_traj::costs::CostsConfig;
+
+use super::overrides::apply_override;
+use super::{Config, first_try_model};
+use crate::extensions::Extensions;
+
+impl Config {
+    /// Reads `path` (and the files it `extends`), applies `overrides` (`key=value`), and
+    /// checks the result with the built-in costs only.
+    pub fn load(path: &Path, overrides: &[String]) -> Result<Config> {
+        Self::load_with(path, overrides, &Extensions::default())
+    }
+
+    /// [`Config::load`] for a config that may name the costs, trajectory models and target
+    /// sources registered in `extensions`.
+    pub fn load_with(path: &Path, overrides: &[String], extensions: &Extensions) -> Result<Config> {
+        let table = read_table(path, 0)?;
+        let base_dir = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        let origin = format!("config {}", path.display());
+        let mut config = Self::from_table(table, base_dir, overrides, &origin, extensions)?;
+        config.path = path.to_path_buf();
+        Ok(config)
+    }
+
+    /// A config from TOML text (no `extends`), checked with `extensions`; relative paths are
+    /// resolved against `base_dir`.
+    pub fn from_toml(text: &str, base_dir: &Path, extensions: &Extensions) -> Result<Config> {
+        let table: toml::Table = toml::from_str(text)
+            .map_err(|e| anyhow::anyhow!("config is not valid TOML: {}", e.message().trim_end()))?;
+        Self::from_table(table, base_dir, &[], "config", extensions)
+    }
+
+    /// A config from a TOML table (a file's, or one a command makes of its options) with
+    /// `overrides` (`key=value`) applied, checked with `extensions`; relative paths are
+    /// resolved against `base_dir`, and `origin` (`config run.toml`) names it in errors.
+    pub fn from_table(
+        mut table: toml::Table,
+        base_dir: &Path,
+        overrides: &[String],
+        origin: &str,
+        extensions: &Extensions,
+    ) -> Result<Config> {
+        write_first_try_tables(&mut table, overrides)?;
+        let mut set_keys = Vec::with_capacity(overrides.len());
+        for o in overrides {
+            set_keys.push((apply_override(&mut table, o)?, o.as_str()));
+        }
+        let mut config: Config = deserialize_table(table).map_err(|(key, message)| {
+            // A key an override set, a key below it, or the table holding it (a tagged table
+            // like `[trajectory]` reports its own name) is the option's fault, not the file's.
+            let set_by = set_keys.iter().rev().find(|(k, _)| {
+                key == *k
+                    || key.starts_with(&format!("{k}."))
+                    || (!key.is_empty() && k.starts_with(&format!("{key}.")))
+            });
+            match set_by {
+                Some((_, o)) => anyhow::anyhow!("--set {o}: `{key}`: {message}"),
+                None => anyhow::anyhow!("{origin}: {}", at_key(&key, &message)),
+            }
+        })?;
+        config.base_dir = base_dir.to_path_buf();
+        config
+            .validate_with(extensions)
+            .with_context(|| origin.to_string())?;
+        Ok(config)
+    }
+}
+
+/// Writes the first-try `[costs]` and `[trajectory]` into a config that leaves them out, when
+/// an override edits them: `--set costs.motion.weight=0` or `--set
+/// trajectory.centres_per_window=4` then tunes the set the config runs with, instead of
+/// becoming the only cost (a `[costs]` table lists exactly the costs that are on) or a model
+/// without its `kind`.
+fn write_first_try_tables(value: &mut toml::Table, overrides: &[String]) -> Result<()> {
+    let edits = |table: &str| {
+        overrides
+            .iter()
+            .any(|o| o.trim_start().starts_with(&format!("{table}.")))
+    };
+    if !value.contains_key("costs") && edits("costs") {
+        let defaults = toml::Value::try_from(CostsConfig::first_try())
+            .context("the default `[costs]` as TOML")?;
+        value.insert("costs".into(), defaults);
+    }
+    // A new `kind` is a new model: its own keys, not the first-try RBF's.
+    let new_kind = overrides.iter().any(|o| {
+        let key = o.split_once('=').map_or(o.as_str(), |(k, _)| k).trim();
+        key == "trajectory" || key == "trajectory.kind"
+    });
+    if !value.contains_key("trajectory") && edits("trajectory") && !new_kind {
+        let defaults = toml::Value::try_from(first_try_model())
+            .context("the default `[trajectory]` as TOML")?;
+        value.insert("trajectory".into(), defaults);
+    }
+    Ok(())
+}
+
+/// Deserialises the whole config, or says at which key (dotted, list entries by index:
+/// `queries.0.text`, as `--set` writes it; empty at the top level) and what went wrong.
+fn deserialize_table(table: toml::Table) -> Result<Config, (String, String)> {
+    serde_path_to_error::deserialize(toml::Value::Table(table)).map_err(|e| {
+        let key = e
+            .path()
+            .iter()
+            .map(|segment| match segment {
+                serde_path_to_error::Segment::Seq { index } => index.to_string(),
+                other => other.to_string(),
+            })
+            .collect::<Vec<_>>()
+            .join(".");
+        (key, e.into_inner().message().trim_end().to_string())
+    })
+}
+
+/// "`key`: message", or the message alone at the top level.
+fn at_key(key: &str, message: &str) -> String {
+    if key.is_empty() || key == "?" {
+        message.to_string()
+    } else {
+        format!("`{key}`: {message}")
+    }
+}
+
+/// How many `extends` a config may chain (a cycle ends here with an error).
+const MAX_EXTENDS: usize = 8;
+
+/// Reads a config file as a TOML table, merged over the file its `extends` key names.
+///
+/// `extends = "demo.toml"` (relative to this file) loads that config first; this file's keys
+/// then replace its values, tables merging key by key (so a variant config states only what
+/// differs; see [`merge`]). The `extends` key itself is not part of the schema.
+fn read_table(path: &Path, depth: usize) -> Result<toml::Table> {
+    if depth > MAX_EXTENDS {
+        bail!(
+            "config {}: more than {MAX_EXTENDS} nested `extends` (a cycle?)",
+            path.display()
+        );
+    }
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read config {}", path.display()))?;
+    let mut table: toml::Table = toml::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("config {} is not valid TOML: {e}", path.display()))?;
+    match table.remove("extends") {
+        None => Ok(table),
+        Some(toml::Value::String(base)) => {
+            let dir = path.parent().unwrap_or(Path::new("."));
+            let mut merged = read_table(&dir.join(&base), depth + 1)
+                .with_context(|| format!("`extends` of {}", path.display()))?;
+            merge(&mut merged, table);
+            Ok(merged)
+        }
+        Some(other) => bail!(
+            "config {}: `extends` must be a file name, got {other}",
+            path.display()
+        ),
+    }
+}
+
+/// Merges `over` into `base`: tables recursively, anything else replaced. A table whose
+/// `kind` differs from the base's (`[trajectory] kind = "waypoint"` over an RBF) replaces it
+/// whole: the other keys belonged to the old kind.
+fn merge(base: &mut toml::Table, over: toml::Table) {
+    for (key, value) in over {
+        match (base.get_mut(&key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o))
+                if o.get("kind").is_none_or(|k| Some(k) == b.get("kind")) =>
+            {
+                merge(b, o)
+            }
+            (_, value) => {
+                base.insert(key, value);
+            }
+        }
+    }
+}
