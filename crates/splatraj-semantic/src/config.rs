@@ -20,9 +20,9 @@
 //! - `features`: `features` (`.npy`/`.safetensors` `[N, D]`; default: the scene's own feature
 //!   properties), `phrases` (phrase table: `.json`, `.npy` with `phrase_names`, `.safetensors`),
 //!   `phrase_names`, `negatives`, `temperature`, `text_encoder` (CLIP weights: any phrase can
-//!   then be queried; see [`crate::text_encoder`]) and `text_activation` (`"gelu"` or
-//!   `"quick-gelu"`, for weights without an `open_clip_config.json` beside them); at least one
-//!   of `phrases` and `text_encoder`;
+//!   then be queried; see [`crate::text_encoder`]), `text_activation` (`"gelu"` or
+//!   `"quick-gelu"`) and `text_heads` (attention heads), for weights without an
+//!   `open_clip_config.json` beside them; at least one of `phrases` and `text_encoder`;
 //! - `langsplat`: `latents` (`.npy` `[N, 3]`), `checkpoint` (LangSplat `.pth`), and the phrase
 //!   keys of `features`.
 //!
@@ -215,6 +215,11 @@ pub struct TargetsConfig {
     /// gelu.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub text_activation: Option<Activation>,
+    /// features, langsplat: attention heads of the text tower, for weights without an
+    /// `open_clip_config.json` beside them whose heads are not 64 wide (default: the config
+    /// beside the weights, else width / 64).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub text_heads: Option<usize>,
     /// features, langsplat: phrases of an `.npy` (or `.safetensors`) table, one per line.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub phrase_names: Option<PathBuf>,
@@ -244,7 +249,7 @@ pub struct TargetsConfig {
 }
 
 /// Which sources each optional key applies to, for refusing stray keys.
-const KEY_SOURCES: [(&str, &[SourceKind]); 13] = [
+const KEY_SOURCES: [(&str, &[SourceKind]); 14] = [
     ("label_names", &[SourceKind::Labels]),
     ("synonyms", &[SourceKind::Labels]),
     ("regions", &[SourceKind::Region]),
@@ -286,6 +291,7 @@ const KEY_SOURCES: [(&str, &[SourceKind]); 13] = [
             SourceKind::Lifted,
         ],
     ),
+    ("text_heads", &[SourceKind::Features, SourceKind::Langsplat]),
     ("latents", &[SourceKind::Langsplat]),
     ("checkpoint", &[SourceKind::Langsplat]),
     ("lifted", &[SourceKind::Lifted]),
@@ -536,11 +542,19 @@ impl TargetsConfig {
         if self.phrases.is_none() && self.text_encoder.is_none() {
             return Err(self.no_text_inputs(key));
         }
-        if self.text_activation.is_some() && self.text_encoder.is_none() {
-            return Err(SemanticError::option(
-                key("text_activation"),
-                "applies to a text encoder, but none is given (text_encoder)",
-            ));
+        for (name, set) in [
+            ("text_activation", self.text_activation.is_some()),
+            ("text_heads", self.text_heads.is_some()),
+        ] {
+            if set && self.text_encoder.is_none() {
+                return Err(SemanticError::option(
+                    key(name),
+                    "applies to a text encoder, but none is given (text_encoder)",
+                ));
+            }
+        }
+        if self.text_heads == Some(0) {
+            return Err(SemanticError::option(key("text_heads"), "must be ≥ 1"));
         }
         Ok(())
     }
@@ -559,7 +573,7 @@ impl TargetsConfig {
             Some(p) => {
                 let options = TextEncoderOptions {
                     activation: self.text_activation,
-                    heads: None,
+                    heads: self.text_heads,
                 };
                 let encoder = TextEncoder::from_file(&resolve(p), options, device)
                     .map_err(|e| e.in_key(key("text_encoder")))?;

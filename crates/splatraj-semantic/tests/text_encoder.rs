@@ -386,3 +386,56 @@ fn free_text_query_selects_the_planted_object() {
         .to_string();
     assert!(err.contains("needs text embeddings"), "{err}");
 }
+
+/// `[targets] text_heads` reaches the encoder: the fixture's config says 4 heads, and 5 (which
+/// does not divide its width 32) is refused by the encoder; 0, or heads without an encoder or
+/// for another source, are refused naming the key.
+#[test]
+fn targets_text_heads_reaches_the_text_encoder() {
+    use splatraj_semantic::{SourceKind, TargetsConfig};
+    let dir = tempfile::tempdir().unwrap();
+    common::write_npy(&dir.path().join("features.npy"), &[vec![1.0f32; 16]]);
+    let config = TargetsConfig {
+        source: SourceKind::Features,
+        features: Some("features.npy".into()),
+        text_encoder: Some(fixtures().join("gelu/open_clip_model.safetensors")),
+        ..Default::default()
+    };
+    let device = Device::flex();
+    let error = |config: TargetsConfig| match config.build(dir.path(), &device) {
+        Ok(_) => String::new(),
+        Err(e) => e.to_string(),
+    };
+    assert_eq!(error(config.clone()), "", "the config's 4 heads build");
+    let with = |heads| TargetsConfig {
+        text_heads: Some(heads),
+        ..config.clone()
+    };
+    assert_eq!(error(with(2)), "", "2 heads divide the width 32");
+    let err = error(with(5));
+    assert!(
+        err.contains("targets.text_encoder") && err.contains("5 attention heads"),
+        "{err}"
+    );
+    let err = error(with(0));
+    assert!(
+        err.contains("targets.text_heads") && err.contains("≥ 1"),
+        "{err}"
+    );
+    let err = error(TargetsConfig {
+        text_encoder: None,
+        phrases: Some(fixtures().join("phrases.json")),
+        ..with(2)
+    });
+    assert!(err.contains("targets.text_heads"), "{err}");
+    let err = error(TargetsConfig {
+        source: SourceKind::Labels,
+        features: None,
+        text_encoder: None,
+        ..with(2)
+    });
+    assert!(
+        err.contains("targets.text_heads") && err.contains("not to the labels source"),
+        "{err}"
+    );
+}
