@@ -1,9 +1,12 @@
 //! Experiments for splatraj: a config file made into runs, as a library.
 //!
 //! [`config`] is the TOML schema of `splatraj run` and `splatraj pose` (every knob, `extends`,
-//! `--set` overrides). [`Experiment::prepare`] reads and checks the scene, world up, one
-//! target per query, their windows and prior radii; then [`Experiment::run_trajectory`] (the
-//! paper's method, restarts included), [`Experiment::evaluate`] (per-window metrics, LDJ),
+//! `--set` overrides, checks that name the key), at the bottom of the crate: it imports nothing
+//! of it but the [`Extensions`] registries, and no module imports in a circle.
+//! [`Experiment::prepare`] reads and checks the scene, world up, one target per query
+//! ([`grounding`], shared with `splatraj query`), their windows and prior radii; then
+//! [`Experiment::run_trajectory`] (the paper's method, restarts included),
+//! [`Experiment::evaluate`] (per-window metrics, LDJ),
 //! [`Experiment::optimise_pose`] (the single-pose ablations, restarts as one batch) and
 //! [`Experiment::sample_posterior`] (SGLD) do the work, telling an [`Observer`] of each step
 //! (which may stop them, keeping the best so far). [`records`] and [`outputs`] turn results

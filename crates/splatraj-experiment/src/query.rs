@@ -99,14 +99,13 @@ pub enum SourceChoice {
 }
 
 /// How errors name a `[targets]` key.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy)]
 pub enum KeyNaming {
     /// As a config file writes it (`targets.phrases`), after the config's name.
-    #[default]
     Config,
-    /// As the command-line option that sets it (`--phrases`, [`option_of_key`]), after the
-    /// scene's name and the source.
-    Options,
+    /// As the command-line option that sets it (`--phrases`: the function names it, e.g.
+    /// [`option_of_key`]), after the scene's name and the source.
+    Options(fn(&str) -> String),
 }
 
 /// A query against a config's scene and target source: `[scene]`, and `[targets]` (the
@@ -139,19 +138,15 @@ impl ConfigQuery {
             config.targets.source = inferred_source(&config.targets, &scene, &scene_name, query)?;
         }
         let kind = config.targets.source.clone();
-        let (at, key, selection_prefix): (String, &dyn Fn(&str) -> String, &str) = match self.naming
-        {
-            KeyNaming::Config => (
-                format!("config {}", config.path.display()),
-                &crate::grounding::config_key,
-                "targets.selection.",
-            ),
-            KeyNaming::Options => (
-                format!("{scene_name} ({kind} source)"),
-                &option_of_key,
-                "--",
-            ),
-        };
+        let (at, key, selection_prefix): (String, &dyn Fn(&str) -> String, &str) =
+            match &self.naming {
+                KeyNaming::Config => (
+                    format!("config {}", config.path.display()),
+                    &crate::grounding::config_key,
+                    "targets.selection.",
+                ),
+                KeyNaming::Options(name) => (format!("{scene_name} ({kind} source)"), name, "--"),
+            };
         config
             .targets
             .selection

@@ -307,6 +307,19 @@ impl SourceArgs {
     }
 }
 
+/// The option that sets a `[targets]` key, for errors: its own flag ([`option_of_key`]) when
+/// `query` has it, else `--set targets.<key>`.
+pub(super) fn option_naming(key: &str) -> String {
+    let option = option_of_key(key);
+    let long = option.trim_start_matches('-').split(['/', ' ']).next();
+    let command = QueryArgs::augment_args(clap::Command::new("query"));
+    if command.get_arguments().any(|a| a.get_long() == long) {
+        option
+    } else {
+        format!("--set targets.{key}")
+    }
+}
+
 /// A path as a TOML string.
 fn path_value(path: &Path) -> toml::Value {
     toml::Value::String(path.to_string_lossy().into_owned())

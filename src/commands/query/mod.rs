@@ -168,7 +168,7 @@ fn from_options(args: &QueryArgs, picture: PictureOptions) -> Result<QueryOutcom
         } else {
             SourceChoice::FromInputs
         },
-        naming: KeyNaming::Options,
+        naming: KeyNaming::Options(args::option_naming),
     }
     .prepare(&config, &extensions)?
     .find(query)
