@@ -138,15 +138,17 @@ impl ConfigQuery {
             config.targets.source = inferred_source(&config.targets, &scene, &scene_name, query)?;
         }
         let kind = config.targets.source.clone();
-        let (at, key, selection_prefix): (String, &dyn Fn(&str) -> String, &str) =
-            match &self.naming {
-                KeyNaming::Config => (
-                    format!("config {}", config.path.display()),
-                    &crate::grounding::config_key,
-                    "targets.selection.",
-                ),
-                KeyNaming::Options(name) => (format!("{scene_name} ({kind} source)"), name, "--"),
-            };
+        let key: &dyn Fn(&str) -> String = match &self.naming {
+            KeyNaming::Config => &crate::grounding::config_key,
+            KeyNaming::Options(name) => name,
+        };
+        let (at, selection_prefix) = match self.naming {
+            KeyNaming::Config => (
+                format!("config {}", config.path.display()),
+                "targets.selection.",
+            ),
+            KeyNaming::Options(_) => (format!("{scene_name} ({kind} source)"), "--"),
+        };
         config
             .targets
             .selection
