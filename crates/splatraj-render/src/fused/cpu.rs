@@ -14,7 +14,12 @@
 //! before the Gaussian that would bring T below 1e-4. The tensor path decides the stop in log
 //! space (ln T summed); here T is a running product. Both are the same rule; they can disagree
 //! only when T lands within rounding of 1e-4.
+//!
+//! f32 passes run the 8-lane kernels of [`simd`] where the processor has AVX2 and FMA (checked
+//! at run time, [`Kernels::detect`]); f64 passes, and f32 on other processors, run the scalar
+//! kernels here, which stay the definition.
 
+use std::any::Any;
 use std::ops::Range;
 
 use rayon::prelude::*;
@@ -23,6 +28,45 @@ use super::plan::CompositePlan;
 pub use super::real::Real;
 use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
 use crate::tiles::{TILE_PIXELS, TILE_SIZE, ceil_small, floor_small};
+
+#[cfg(target_arch = "x86_64")]
+mod simd;
+
+/// Which implementation of the tile kernels a pass runs. Both compute the same function; they
+/// differ in f32 rounding only (the lanes' e^x is a polynomial within 2 ulp of libm's, and
+/// their gradient slots sum eight partial sums), so an image moves by a few ulp, never by a rule.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kernels {
+    /// One pixel at a time, plain Rust: every float type and processor.
+    Scalar,
+    /// f32 in 8 lanes, one half row of a tile per Gaussian (AVX2 + FMA on x86-64); f64 passes,
+    /// and processors without AVX2 and FMA, run [`Kernels::Scalar`].
+    Lanes8,
+}
+
+impl Kernels {
+    /// The fastest this processor runs: [`Kernels::Lanes8`] where it has AVX2 and FMA.
+    pub fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        if simd::Lanes::new().is_some() {
+            return Kernels::Lanes8;
+        }
+        Kernels::Scalar
+    }
+}
+
+/// `value` as a `B` where `A` is `B` (how an `E: Real` pass reaches the f32-only kernels).
+fn cast_ref<A: 'static, B: 'static>(value: &A) -> Option<&B> {
+    (value as &dyn Any).downcast_ref()
+}
+
+/// `value` as a `B` where `A` is `B`.
+fn cast<A: 'static, B: 'static>(value: A) -> Option<B> {
+    (Box::new(value) as Box<dyn Any>)
+        .downcast()
+        .ok()
+        .map(|b| *b)
+}
 
 /// Screen-space Gaussians on the host, rows b·U + u (as [`crate::rasterize::SplatInputs`]).
 #[derive(Debug, Clone)]
@@ -261,7 +305,7 @@ type RowBits = [u16; TILE_SIZE];
 /// footprint's box has stopped (forward) or not yet started (backward) on real captures, three
 /// pixels in four; visiting only the set bits skips them without a test each.
 fn pixels_of(rows: RowBits, xs: Range<usize>, ys: Range<usize>) -> impl Iterator<Item = usize> {
-    let columns = ((1u32 << xs.end) - (1u32 << xs.start)) as u16;
+    let columns = column_bits(&xs);
     ys.flat_map(move |y| {
         let mut bits = rows[y] & columns;
         std::iter::from_fn(move || {
@@ -284,6 +328,22 @@ fn valid_pixels(plan: &CompositePlan, tile: usize) -> [bool; TILE_PIXELS] {
     valid
 }
 
+/// The bits of tile `tile`'s pixels inside the image, and how many there are.
+fn valid_bits(plan: &CompositePlan, tile: usize) -> (RowBits, usize) {
+    let valid = valid_pixels(plan, tile);
+    let bits: RowBits = std::array::from_fn(|y| {
+        (0..TILE_SIZE).fold(0, |bits, x| {
+            bits | (u16::from(valid[y * TILE_SIZE + x]) << x)
+        })
+    });
+    (bits, valid.iter().filter(|&&v| v).count())
+}
+
+/// The columns `xs` of a tile row as bits (bit x for column x).
+fn column_bits(xs: &Range<usize>) -> u16 {
+    ((1u32 << xs.end) - (1u32 << xs.start)) as u16
+}
+
 fn forward_tile<E: Real>(
     splats: &HostSplats<E>,
     footprints: &[Footprint<E>],
@@ -296,16 +356,10 @@ fn forward_tile<E: Real>(
     let min_alpha = E::of(MIN_ALPHA);
     let min_t = E::of(plan.stop_transmittance);
 
-    let valid = valid_pixels(plan, plan.tiles[w]);
-    let mut open: RowBits = std::array::from_fn(|y| {
-        (0..TILE_SIZE).fold(0, |bits, x| {
-            bits | (u16::from(valid[y * TILE_SIZE + x]) << x)
-        })
-    });
+    let (mut open, mut open_count) = valid_bits(plan, plan.tiles[w]);
     let mut t = vec![E::ONE; TILE_PIXELS];
     let mut last = vec![0u32; TILE_PIXELS];
     let mut planes = vec![E::ZERO; (channels + 1) * TILE_PIXELS];
-    let mut open_count = valid.iter().filter(|&&v| v).count();
     let list = plan.list(w);
     let mut gathered = Gathered::new(footprints, list);
     for (j, &row) in list.iter().enumerate() {
@@ -349,13 +403,26 @@ fn forward_tile<E: Real>(
     }
 }
 
-/// Forward pass of every work tile. Returns the packed image `[B, H, W, C + 1]` and the state.
+/// Forward pass of every work tile with the fastest kernels this processor runs
+/// ([`Kernels::detect`]). Returns the packed image `[B, H, W, C + 1]` and the state.
 pub fn forward<E: Real>(splats: &HostSplats<E>, plan: &CompositePlan) -> (Vec<E>, ForwardState<E>) {
+    forward_with(splats, plan, Kernels::detect())
+}
+
+/// [`forward`] with the given kernels.
+pub fn forward_with<E: Real>(
+    splats: &HostSplats<E>,
+    plan: &CompositePlan,
+    kernels: Kernels,
+) -> (Vec<E>, ForwardState<E>) {
     let footprints = footprints(splats);
-    let tiles: Vec<TileForward<E>> = (0..plan.tiles.len())
-        .into_par_iter()
-        .map(|w| forward_tile(splats, &footprints, plan, w))
-        .collect();
+    let tiles: Vec<TileForward<E>> = forward_tiles_in_lanes(splats, &footprints, plan, kernels)
+        .unwrap_or_else(|| {
+            (0..plan.tiles.len())
+                .into_par_iter()
+                .map(|w| forward_tile(splats, &footprints, plan, w))
+                .collect()
+        });
     let image = assemble(plan, splats.channels, &tiles);
     let mut state = ForwardState {
         final_t: Vec::with_capacity(tiles.len() * TILE_PIXELS),
@@ -367,6 +434,36 @@ pub fn forward<E: Real>(splats: &HostSplats<E>, plan: &CompositePlan) -> (Vec<E>
         state.last.extend(tile.last);
     }
     (image, state)
+}
+
+/// Every work tile's forward in 8 lanes, where `kernels` asks for them, E is f32 and the
+/// processor has them; `None` otherwise.
+#[cfg(target_arch = "x86_64")]
+fn forward_tiles_in_lanes<E: Real>(
+    splats: &HostSplats<E>,
+    footprints: &Vec<Footprint<E>>,
+    plan: &CompositePlan,
+    kernels: Kernels,
+) -> Option<Vec<TileForward<E>>> {
+    let lanes = simd::Lanes::new().filter(|_| kernels == Kernels::Lanes8)?;
+    let splats = cast_ref::<_, HostSplats<f32>>(splats)?;
+    let footprints = cast_ref::<_, Vec<Footprint<f32>>>(footprints)?;
+    let tiles: Vec<TileForward<f32>> = (0..plan.tiles.len())
+        .into_par_iter()
+        .map(|w| lanes.forward_tile(splats, footprints, plan, w))
+        .collect();
+    cast(tiles)
+}
+
+/// No 8-lane kernels off x86-64.
+#[cfg(not(target_arch = "x86_64"))]
+fn forward_tiles_in_lanes<E: Real>(
+    _: &HostSplats<E>,
+    _: &Vec<Footprint<E>>,
+    _: &CompositePlan,
+    _: Kernels,
+) -> Option<Vec<TileForward<E>>> {
+    None
 }
 
 /// The packed image `[B, H, W, C + 1]` of the work tiles' planes (zero where no tile drew),
@@ -415,27 +512,17 @@ fn assemble<E: Real>(plan: &CompositePlan, channels: usize, tiles: &[TileForward
     image
 }
 
-/// Per list entry of one tile: [v_mx, v_my, v_a, v_b, v_c, v_o, v_values…]. `[len, 6 + C]`
-fn backward_tile<E: Real>(
-    splats: &HostSplats<E>,
+/// The output gradients of work tile `w`'s pixels, planar `[C + 1, 256]` (zero outside the
+/// image), from the gradient of the packed image `[B, H, W, C + 1]`.
+fn tile_output_gradients<E: Real>(
     plan: &CompositePlan,
-    state: &ForwardState<E>,
+    channels: usize,
     v_image: &[E],
     w: usize,
 ) -> Vec<E> {
-    let channels = splats.channels;
-    let stride = 6 + channels;
     let grid = plan.grid;
     let (tx0, ty0) = plan.tile_origin(plan.tiles[w]);
-    let (x0, y0) = (E::of(tx0 as f64), E::of(ty0 as f64));
-    let min_alpha = E::of(MIN_ALPHA);
-    let max_alpha = E::of(MAX_ALPHA);
-    let half = E::of(0.5);
     let valid = valid_pixels(plan, plan.tiles[w]);
-
-    let last = &state.last[w * TILE_PIXELS..(w + 1) * TILE_PIXELS];
-    let final_t = &state.final_t[w * TILE_PIXELS..(w + 1) * TILE_PIXELS];
-    // Output gradients of this tile's pixels, planar `[C + 1, 256]` (zero outside the image).
     let mut v_planes = vec![E::ZERO; (channels + 1) * TILE_PIXELS];
     for p in 0..TILE_PIXELS {
         if !valid[p] {
@@ -447,28 +534,77 @@ fn backward_tile<E: Real>(
             v_planes[k * TILE_PIXELS + p] = v_image[pixel * (channels + 1) + k];
         }
     }
+    v_planes
+}
+
+/// The backward's walk over a tile's list, back to front: which pixels take part at each entry
+/// (pixel p from entry last[p] − 1 down, when its last contributor is reached).
+struct Replay {
+    /// (last, pixel) of the pixels that contributed, in the order they join: last descending.
+    joining: Vec<(u32, usize)>,
+    joined: usize,
+    /// The pixels taking part.
+    replaying: RowBits,
+}
+
+impl Replay {
+    /// The replay of a tile whose pixels saved these counts (`[256]`), and the number of
+    /// entries it walks (the largest count).
+    fn new(last: &[u32]) -> (Self, usize) {
+        let mut joining: Vec<(u32, usize)> = (0..TILE_PIXELS)
+            .filter(|&p| last[p] > 0)
+            .map(|p| (last[p], p))
+            .collect();
+        joining.sort_unstable_by(|a, b| b.cmp(a));
+        let entries = joining.first().map_or(0, |&(count, _)| count as usize);
+        let replay = Replay {
+            joining,
+            joined: 0,
+            replaying: [0; TILE_SIZE],
+        };
+        (replay, entries)
+    }
+
+    /// The pixels taking part at entry `j` (called with j descending).
+    fn at(&mut self, j: usize) -> RowBits {
+        while let Some(&(count, p)) = self.joining.get(self.joined)
+            && count as usize > j
+        {
+            self.replaying[p / TILE_SIZE] |= 1 << (p % TILE_SIZE);
+            self.joined += 1;
+        }
+        self.replaying
+    }
+}
+
+/// Per list entry of one tile: [v_mx, v_my, v_a, v_b, v_c, v_o, v_values…]. `[len, 6 + C]`
+fn backward_tile<E: Real>(
+    splats: &HostSplats<E>,
+    plan: &CompositePlan,
+    state: &ForwardState<E>,
+    v_image: &[E],
+    w: usize,
+) -> Vec<E> {
+    let channels = splats.channels;
+    let stride = 6 + channels;
+    let (tx0, ty0) = plan.tile_origin(plan.tiles[w]);
+    let (x0, y0) = (E::of(tx0 as f64), E::of(ty0 as f64));
+    let min_alpha = E::of(MIN_ALPHA);
+    let max_alpha = E::of(MAX_ALPHA);
+    let half = E::of(0.5);
+
+    let last = &state.last[w * TILE_PIXELS..(w + 1) * TILE_PIXELS];
+    let final_t = &state.final_t[w * TILE_PIXELS..(w + 1) * TILE_PIXELS];
+    let v_planes = tile_output_gradients(plan, channels, v_image, w);
 
     let list = plan.list(w);
-    let replay = last.iter().copied().max().unwrap_or(0) as usize;
     let mut slots = vec![E::ZERO; list.len() * stride];
     let mut t = final_t.to_vec();
     let mut behind = vec![E::ZERO; channels * TILE_PIXELS]; // Σ over later contributors of f·α·T
     let mut gathered = Gathered::new(&state.footprints, list);
-    // Pixels in the order they join the replay: pixel p takes part from entry last[p] − 1 down.
-    let mut joining: Vec<(u32, usize)> = (0..TILE_PIXELS)
-        .filter(|&p| last[p] > 0)
-        .map(|p| (last[p], p))
-        .collect();
-    joining.sort_unstable_by(|a, b| b.cmp(a));
-    let mut joined = 0;
-    let mut replaying: RowBits = [0; TILE_SIZE];
-    for j in (0..replay).rev() {
-        while let Some(&(count, p)) = joining.get(joined)
-            && count as usize > j
-        {
-            replaying[p / TILE_SIZE] |= 1 << (p % TILE_SIZE);
-            joined += 1;
-        }
+    let (mut replay, entries) = Replay::new(last);
+    for j in (0..entries).rev() {
+        let replaying = replay.at(j);
         let row = list[j] as usize;
         let Some((splat, xs, ys)) = gathered.get(j).on_tile(x0, y0) else {
             continue;
@@ -514,19 +650,70 @@ fn backward_tile<E: Real>(
     slots
 }
 
-/// Backward pass: gradients of the inputs from the gradient of the packed image `[B, H, W, C + 1]`.
+/// Every work tile's backward in 8 lanes, where `kernels` asks for them, E is f32 and the
+/// processor has them; `None` otherwise.
+#[cfg(target_arch = "x86_64")]
+fn backward_tiles_in_lanes<E: Real>(
+    splats: &HostSplats<E>,
+    plan: &CompositePlan,
+    state: &ForwardState<E>,
+    v_image: &[E],
+    kernels: Kernels,
+) -> Option<Vec<Vec<E>>> {
+    let lanes = simd::Lanes::new().filter(|_| kernels == Kernels::Lanes8)?;
+    let splats = cast_ref::<_, HostSplats<f32>>(splats)?;
+    let state = cast_ref::<_, ForwardState<f32>>(state)?;
+    let channels = splats.channels;
+    let slots: Option<Vec<Vec<f32>>> = (0..plan.tiles.len())
+        .into_par_iter()
+        .map(|w| {
+            let v_planes = cast(tile_output_gradients(plan, channels, v_image, w))?;
+            Some(lanes.backward_tile(splats, plan, state, v_planes, w))
+        })
+        .collect();
+    cast(slots?)
+}
+
+/// No 8-lane kernels off x86-64.
+#[cfg(not(target_arch = "x86_64"))]
+fn backward_tiles_in_lanes<E: Real>(
+    _: &HostSplats<E>,
+    _: &CompositePlan,
+    _: &ForwardState<E>,
+    _: &[E],
+    _: Kernels,
+) -> Option<Vec<Vec<E>>> {
+    None
+}
+
+/// Backward pass with the fastest kernels this processor runs ([`Kernels::detect`]):
+/// gradients of the inputs from the gradient of the packed image `[B, H, W, C + 1]`.
 pub fn backward<E: Real>(
     splats: &HostSplats<E>,
     plan: &CompositePlan,
     state: &ForwardState<E>,
     v_image: &[E],
 ) -> HostGradients<E> {
+    backward_with(splats, plan, state, v_image, Kernels::detect())
+}
+
+/// [`backward`] with the given kernels.
+pub fn backward_with<E: Real>(
+    splats: &HostSplats<E>,
+    plan: &CompositePlan,
+    state: &ForwardState<E>,
+    v_image: &[E],
+    kernels: Kernels,
+) -> HostGradients<E> {
     let channels = splats.channels;
     let stride = 6 + channels;
-    let slots: Vec<Vec<E>> = (0..plan.tiles.len())
-        .into_par_iter()
-        .map(|w| backward_tile(splats, plan, state, v_image, w))
-        .collect();
+    let slots: Vec<Vec<E>> = backward_tiles_in_lanes(splats, plan, state, v_image, kernels)
+        .unwrap_or_else(|| {
+            (0..plan.tiles.len())
+                .into_par_iter()
+                .map(|w| backward_tile(splats, plan, state, v_image, w))
+                .collect()
+        });
     let rows = splats.opacities.len();
     let mut v = HostGradients {
         means: vec![E::ZERO; 2 * rows],

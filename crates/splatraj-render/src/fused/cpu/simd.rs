@@ -1,0 +1,469 @@
+//! The f32 tile kernels in 8 lanes: AVX2 + FMA, chosen at run time ([`Lanes::new`]).
+//!
+//! Each Gaussian of a tile's list is evaluated on half a tile row (8 pixels) at a time: the
+//! lanes of the half rows its 1/255 box covers and whose pixels are open (forward) or replaying
+//! (backward), the others masked off. The rules, their order and the gradient conventions are
+//! the scalar kernels' in `cpu.rs`, comparison for comparison (an unordered compare where the
+//! scalar code's `<` or `>` is false on NaN), so every decision (skip below 1/255, the α clamp
+//! at 0.99, the stop before T < the stop transmittance, the tile's early exit) is the same.
+//! The power is computed with the same operations in the same order (no fused multiply–add),
+//! so it is bit-identical; what differs is rounding:
+//! - e^x is a polynomial ([`exp`]) within 2 ulp of libm's, not libm's own;
+//! - the backward sums a Gaussian's gradient over a tile in 8 partial sums, one per lane,
+//!   added in a fixed order at the end (the scalar kernel adds pixel after pixel).
+//!
+//! Both are fixed orders within one tile, so results do not depend on the thread count.
+//!
+//! Written with `std::arch` rather than a SIMD crate: the kernels need masked blends, movemask
+//! and a vector e^x, which the portable crates either lack or wrap no more simply.
+
+use std::arch::x86_64::*;
+
+use super::{Footprint, Gathered, HostSplats, Replay, Splat, TileForward, column_bits, valid_bits};
+use crate::fused::plan::CompositePlan;
+use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
+use crate::tiles::{TILE_PIXELS, TILE_SIZE};
+
+/// Lanes of a vector: half a tile row.
+const LANES: usize = 8;
+
+/// Proof that the processor has AVX2 and FMA: only [`Lanes::new`] makes one.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Lanes(());
+
+impl Lanes {
+    /// `Some` where the processor has AVX2 and FMA (the check is cached by the standard
+    /// library: an atomic load).
+    pub(super) fn new() -> Option<Self> {
+        (is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")).then_some(Lanes(()))
+    }
+
+    /// The forward of work tile `w` (as `cpu::forward_tile`).
+    pub(super) fn forward_tile(
+        self,
+        splats: &HostSplats<f32>,
+        footprints: &[Footprint<f32>],
+        plan: &CompositePlan,
+        w: usize,
+    ) -> TileForward<f32> {
+        // SAFETY: `self` exists only where the processor has AVX2 and FMA.
+        unsafe { forward_tile(splats, footprints, plan, w) }
+    }
+
+    /// The gradient slots of work tile `w` (as `cpu::backward_tile`), from its pixels' output
+    /// gradients `v_planes` `[C + 1, 256]`.
+    pub(super) fn backward_tile(
+        self,
+        splats: &HostSplats<f32>,
+        plan: &CompositePlan,
+        state: &super::ForwardState<f32>,
+        v_planes: Vec<f32>,
+        w: usize,
+    ) -> Vec<f32> {
+        // SAFETY: as above.
+        unsafe { backward_tile(splats, plan, state, v_planes, w) }
+    }
+}
+
+/// Eight values of `values` from `at`.
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn load(values: &[f32], at: usize) -> __m256 {
+    let lanes: &[f32; LANES] = values[at..at + LANES].try_into().expect("8 values");
+    // SAFETY: `lanes` is 8 readable f32.
+    unsafe { _mm256_loadu_ps(lanes.as_ptr()) }
+}
+
+/// Writes eight values into `values` from `at`.
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn store(values: &mut [f32], at: usize, v: __m256) {
+    let lanes: &mut [f32; LANES] = (&mut values[at..at + LANES]).try_into().expect("8 values");
+    // SAFETY: `lanes` is 8 writable f32.
+    unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), v) }
+}
+
+/// `v` where `mask`, else `old`, written into `values` from `at`.
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn store_where(values: &mut [f32], at: usize, old: __m256, v: __m256, mask: __m256) {
+    store(values, at, _mm256_blendv_ps(old, v, mask));
+}
+
+/// −v.
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn negate(v: __m256) -> __m256 {
+    _mm256_xor_ps(v, _mm256_set1_ps(-0.0))
+}
+
+/// The lane mask of the low 8 bits of `bits` (lane i set where bit i is).
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn mask_of(bits: u32) -> __m256 {
+    let bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+    let set = _mm256_and_si256(_mm256_set1_epi32(bits as i32), bit);
+    _mm256_castsi256_ps(_mm256_cmpeq_epi32(set, bit))
+}
+
+/// The bits of a lane mask.
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn bits_of(mask: __m256) -> u32 {
+    _mm256_movemask_ps(mask) as u32
+}
+
+/// `a & !b` on masks.
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn and_not(a: __m256, b: __m256) -> __m256 {
+    _mm256_andnot_ps(b, a)
+}
+
+/// e^x in 8 lanes, for x ≤ 0 (the kernels clamp the power at 0), within 2 ulp of libm's expf.
+/// The usual reduction x = n·ln 2 + r (|r| ≤ ½ ln 2, ln 2 in two parts so n·ln 2 is exact),
+/// e^r by its degree-6 Taylor–minimax polynomial, then 2^n put into the exponent bits. x is
+/// held above −87, where 2^n is still a normal number: the kernels only compare o·e^x with
+/// 1/255 there, and e^−87 ≈ 1.6e-38 is as far below it as 0. NaN stays NaN.
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn exp(x: __m256) -> __m256 {
+    // min/max return their second operand when either is NaN: x second keeps NaN.
+    let x = _mm256_min_ps(
+        _mm256_set1_ps(88.0),
+        _mm256_max_ps(_mm256_set1_ps(-87.0), x),
+    );
+    let n = _mm256_round_ps::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(_mm256_mul_ps(
+        x,
+        _mm256_set1_ps(std::f32::consts::LOG2_E),
+    ));
+    let r = _mm256_fnmadd_ps(n, _mm256_set1_ps(0.693_359_4), x);
+    let r = _mm256_fnmadd_ps(n, _mm256_set1_ps(-2.121_944_4e-4), r);
+    let mut p = _mm256_set1_ps(1.987_569_1e-4);
+    for c in [1.398_2e-3, 8.333_452e-3, 4.166_579_6e-2, 0.166_666_65, 0.5] {
+        p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(c));
+    }
+    let e_r = _mm256_add_ps(
+        _mm256_fmadd_ps(p, _mm256_mul_ps(r, r), r),
+        _mm256_set1_ps(1.0),
+    );
+    let two_n = _mm256_slli_epi32::<23>(_mm256_add_epi32(
+        _mm256_cvtps_epi32(n),
+        _mm256_set1_epi32(127),
+    ));
+    _mm256_mul_ps(e_r, _mm256_castsi256_ps(two_n))
+}
+
+/// The Gaussian of one list entry placed on a tile, broadcast to the lanes.
+struct SplatLanes {
+    mx: __m256,
+    my: __m256,
+    a: __m256,
+    b: __m256,
+    c: __m256,
+    opacity: __m256,
+    skip_below: __m256,
+}
+
+/// What a Gaussian is at the 8 pixels of half a tile row (as `Splat::at`).
+struct AtLanes {
+    /// The lanes asked for whose α is not surely below 1/255 (power ≥ the skip threshold).
+    live: __m256,
+    dx: __m256,
+    dy: __m256,
+    /// Before the clamp at 0.
+    power: __m256,
+    /// e^min(power, 0).
+    exp_power: __m256,
+    /// o·e^min(power, 0), before the clamp at 0.99.
+    raw: __m256,
+    /// min(0.99, raw).
+    alpha: __m256,
+}
+
+impl SplatLanes {
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn new(splat: &Splat<f32>) -> Self {
+        SplatLanes {
+            mx: _mm256_set1_ps(splat.mx),
+            my: _mm256_set1_ps(splat.my),
+            a: _mm256_set1_ps(splat.a),
+            b: _mm256_set1_ps(splat.b),
+            c: _mm256_set1_ps(splat.c),
+            opacity: _mm256_set1_ps(splat.opacity),
+            skip_below: _mm256_set1_ps(splat.skip_below),
+        }
+    }
+
+    /// The Gaussian at the pixels (8·half + i, y) of the lanes i set in `lanes`; `None` where
+    /// none of them is live. The operations and their order are `Splat::at`'s and
+    /// `clamp_alpha`'s.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn at(&self, y: usize, half: usize, lanes: u32) -> Option<AtLanes> {
+        let column = _mm256_add_ps(
+            _mm256_setr_ps(0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5),
+            _mm256_set1_ps((half * LANES) as f32),
+        );
+        let dx = _mm256_sub_ps(column, self.mx);
+        let dy = _mm256_sub_ps(_mm256_set1_ps(y as f32 + 0.5), self.my);
+        // −(½ (a dx dx + c dy dy)) − b dx dy, each product left to right.
+        let quadratic = _mm256_add_ps(
+            _mm256_mul_ps(_mm256_mul_ps(self.a, dx), dx),
+            _mm256_mul_ps(_mm256_mul_ps(self.c, dy), dy),
+        );
+        let power = _mm256_sub_ps(
+            negate(_mm256_mul_ps(_mm256_set1_ps(0.5), quadratic)),
+            _mm256_mul_ps(_mm256_mul_ps(self.b, dx), dy),
+        );
+        // Skipped where power < skip_below (false on NaN, as in the scalar code).
+        let skip = _mm256_cmp_ps::<_CMP_LT_OQ>(power, self.skip_below);
+        let live = and_not(mask_of(lanes), skip);
+        if bits_of(live) == 0 {
+            return None;
+        }
+        let zero = _mm256_setzero_ps();
+        let clamped = _mm256_blendv_ps(power, zero, _mm256_cmp_ps::<_CMP_GT_OQ>(power, zero));
+        let exp_power = exp(clamped);
+        let raw = _mm256_mul_ps(self.opacity, exp_power);
+        let max_alpha = _mm256_set1_ps(MAX_ALPHA as f32);
+        let alpha = _mm256_blendv_ps(raw, max_alpha, _mm256_cmp_ps::<_CMP_GT_OQ>(raw, max_alpha));
+        let faint = _mm256_cmp_ps::<_CMP_LT_OQ>(alpha, _mm256_set1_ps(MIN_ALPHA as f32));
+        let live = and_not(live, faint);
+        (bits_of(live) != 0).then_some(AtLanes {
+            live,
+            dx,
+            dy,
+            power,
+            exp_power,
+            raw,
+            alpha,
+        })
+    }
+}
+
+/// `cpu::forward_tile` in 8 lanes.
+#[target_feature(enable = "avx2,fma")]
+fn forward_tile(
+    splats: &HostSplats<f32>,
+    footprints: &[Footprint<f32>],
+    plan: &CompositePlan,
+    w: usize,
+) -> TileForward<f32> {
+    let channels = splats.channels;
+    let (x0, y0) = plan.tile_origin(plan.tiles[w]);
+    let (x0, y0) = (x0 as f32, y0 as f32);
+    let one = _mm256_set1_ps(1.0);
+    let min_t = _mm256_set1_ps(plan.stop_transmittance as f32);
+
+    let (mut open, mut open_count) = valid_bits(plan, plan.tiles[w]);
+    let mut t = vec![1.0f32; TILE_PIXELS];
+    let mut last = vec![0u32; TILE_PIXELS];
+    let mut planes = vec![0.0f32; (channels + 1) * TILE_PIXELS];
+    let list = plan.list(w);
+    let mut gathered = Gathered::new(footprints, list);
+    for (j, &row) in list.iter().enumerate() {
+        if open_count == 0 {
+            break;
+        }
+        let row = row as usize;
+        let Some((splat, xs, ys)) = gathered.get(j).on_tile(x0, y0) else {
+            continue;
+        };
+        let values = &splats.values[row * channels..(row + 1) * channels];
+        let lanes = SplatLanes::new(&splat);
+        let columns = column_bits(&xs);
+        // The count saved where this entry contributes, as the lanes of `last` hold it.
+        let count = _mm256_castsi256_ps(_mm256_set1_epi32(j as i32 + 1));
+        for y in ys {
+            let bits = u32::from(open[y] & columns);
+            for half in 0..TILE_SIZE / LANES {
+                let asked = (bits >> (half * LANES)) & 0xff;
+                if asked == 0 {
+                    continue;
+                }
+                let Some(at) = lanes.at(y, half, asked) else {
+                    continue;
+                };
+                let base = y * TILE_SIZE + half * LANES;
+                let t_old = load(&t, base);
+                let t_next = _mm256_mul_ps(t_old, _mm256_sub_ps(one, at.alpha));
+                let stop = _mm256_and_ps(at.live, _mm256_cmp_ps::<_CMP_LT_OQ>(t_next, min_t));
+                let stopped = bits_of(stop);
+                open[y] &= !((stopped as u16) << (half * LANES));
+                open_count -= stopped.count_ones() as usize;
+                let add = and_not(at.live, stop);
+                if bits_of(add) == 0 {
+                    continue;
+                }
+                let weight = _mm256_mul_ps(at.alpha, t_old);
+                for (k, &value) in values.iter().enumerate() {
+                    let at_k = k * TILE_PIXELS + base;
+                    let old = load(&planes, at_k);
+                    let sum = _mm256_add_ps(old, _mm256_mul_ps(_mm256_set1_ps(value), weight));
+                    store_where(&mut planes, at_k, old, sum, add);
+                }
+                store_where(&mut t, base, t_old, t_next, add);
+                let last_lanes: &mut [u32; LANES] = (&mut last[base..base + LANES])
+                    .try_into()
+                    .expect("8 counts");
+                // SAFETY: `last_lanes` is 8 readable and writable u32.
+                unsafe {
+                    let ptr = last_lanes.as_mut_ptr() as *mut f32;
+                    let old = _mm256_loadu_ps(ptr);
+                    _mm256_storeu_ps(ptr, _mm256_blendv_ps(old, count, add));
+                }
+            }
+        }
+    }
+    for p in 0..TILE_PIXELS {
+        planes[channels * TILE_PIXELS + p] = 1.0 - t[p];
+    }
+    TileForward {
+        planes,
+        final_t: t,
+        last,
+    }
+}
+
+/// A Gaussian's gradient over a tile, in 8 partial sums (one per lane).
+struct SlotLanes {
+    /// v_mx, v_my, v_a, v_b, v_c, v_o, then v_values. `[6 + C]`
+    sums: Vec<__m256>,
+    /// Whether any lane added anything since the last [`SlotLanes::take`].
+    touched: bool,
+}
+
+impl SlotLanes {
+    /// Adds `term` on the lanes of `mask` to sum `k`.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn add(&mut self, k: usize, term: __m256, mask: __m256) {
+        self.sums[k] = _mm256_add_ps(self.sums[k], _mm256_and_ps(term, mask));
+    }
+
+    /// Writes each sum's total into `slot` (lanes added in a fixed order) and clears them.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn take(&mut self, slot: &mut [f32]) {
+        for (value, sum) in slot.iter_mut().zip(&mut self.sums) {
+            let quads = _mm_add_ps(
+                _mm256_castps256_ps128(*sum),
+                _mm256_extractf128_ps::<1>(*sum),
+            );
+            let pairs = _mm_add_ps(quads, _mm_movehl_ps(quads, quads));
+            let total = _mm_add_ss(pairs, _mm_shuffle_ps::<0b01>(pairs, pairs));
+            *value = _mm_cvtss_f32(total);
+            *sum = _mm256_setzero_ps();
+        }
+        self.touched = false;
+    }
+}
+
+/// `cpu::backward_tile` in 8 lanes, from the tile's output gradients `v_planes` `[C + 1, 256]`.
+#[target_feature(enable = "avx2,fma")]
+fn backward_tile(
+    splats: &HostSplats<f32>,
+    plan: &CompositePlan,
+    state: &super::ForwardState<f32>,
+    v_planes: Vec<f32>,
+    w: usize,
+) -> Vec<f32> {
+    let channels = splats.channels;
+    let stride = 6 + channels;
+    let (x0, y0) = plan.tile_origin(plan.tiles[w]);
+    let (x0, y0) = (x0 as f32, y0 as f32);
+    let one = _mm256_set1_ps(1.0);
+    let zero = _mm256_setzero_ps();
+    let half_one = _mm256_set1_ps(0.5);
+    let max_alpha = _mm256_set1_ps(MAX_ALPHA as f32);
+
+    let last = &state.last[w * TILE_PIXELS..(w + 1) * TILE_PIXELS];
+    let final_t = &state.final_t[w * TILE_PIXELS..(w + 1) * TILE_PIXELS];
+    let list = plan.list(w);
+    let mut slots = vec![0.0f32; list.len() * stride];
+    let mut t = final_t.to_vec();
+    let mut behind = vec![0.0f32; channels * TILE_PIXELS]; // Σ over later contributors of f·α·T
+    let mut sums = SlotLanes {
+        sums: vec![zero; stride],
+        touched: false,
+    };
+    let mut gathered = Gathered::new(&state.footprints, list);
+    let (mut replay, entries) = Replay::new(last);
+    for j in (0..entries).rev() {
+        let replaying = replay.at(j);
+        let row = list[j] as usize;
+        let Some((splat, xs, ys)) = gathered.get(j).on_tile(x0, y0) else {
+            continue;
+        };
+        let values = &splats.values[row * channels..(row + 1) * channels];
+        let lanes = SplatLanes::new(&splat);
+        let columns = column_bits(&xs);
+        for y in ys {
+            let bits = u32::from(replaying[y] & columns);
+            for half in 0..TILE_SIZE / LANES {
+                let asked = (bits >> (half * LANES)) & 0xff;
+                if asked == 0 {
+                    continue;
+                }
+                let Some(at) = lanes.at(y, half, asked) else {
+                    continue;
+                };
+                sums.touched = true;
+                let base = y * TILE_SIZE + half * LANES;
+                let keep = _mm256_sub_ps(one, at.alpha);
+                let t_after = load(&t, base);
+                let t_before = _mm256_div_ps(t_after, keep);
+                let weight = _mm256_mul_ps(at.alpha, t_before);
+                // dL/dα = Σ_k v_k (f_k T_i − S_k / (1 − α)) + v_A · T_final / (1 − α)
+                let v_a = load(&v_planes, channels * TILE_PIXELS + base);
+                let mut v_alpha = _mm256_div_ps(_mm256_mul_ps(v_a, load(final_t, base)), keep);
+                for (k, &value) in values.iter().enumerate() {
+                    let at_k = k * TILE_PIXELS + base;
+                    let v_k = load(&v_planes, at_k);
+                    let value = _mm256_set1_ps(value);
+                    let old = load(&behind, at_k);
+                    let seen =
+                        _mm256_sub_ps(_mm256_mul_ps(value, t_before), _mm256_div_ps(old, keep));
+                    v_alpha = _mm256_add_ps(v_alpha, _mm256_mul_ps(v_k, seen));
+                    sums.add(6 + k, _mm256_mul_ps(v_k, weight), at.live);
+                    let sum = _mm256_add_ps(old, _mm256_mul_ps(value, weight));
+                    store_where(&mut behind, at_k, old, sum, at.live);
+                }
+                store_where(&mut t, base, t_after, t_before, at.live);
+                // No gradient to o and the geometry where α was clamped at 0.99 …
+                let unclamped = and_not(at.live, _mm256_cmp_ps::<_CMP_GT_OQ>(at.raw, max_alpha));
+                sums.add(5, _mm256_mul_ps(v_alpha, at.exp_power), unclamped);
+                // … and none to the geometry where the power was clamped at 0.
+                let inside = and_not(unclamped, _mm256_cmp_ps::<_CMP_GT_OQ>(at.power, zero));
+                let v_power = _mm256_mul_ps(v_alpha, at.raw);
+                let (dx, dy) = (at.dx, at.dy);
+                let v_mx = _mm256_add_ps(_mm256_mul_ps(lanes.a, dx), _mm256_mul_ps(lanes.b, dy));
+                let v_my = _mm256_add_ps(_mm256_mul_ps(lanes.b, dx), _mm256_mul_ps(lanes.c, dy));
+                sums.add(0, _mm256_mul_ps(v_power, v_mx), inside);
+                sums.add(1, _mm256_mul_ps(v_power, v_my), inside);
+                let v_power_half = _mm256_mul_ps(v_power, half_one);
+                sums.add(
+                    2,
+                    negate(_mm256_mul_ps(_mm256_mul_ps(v_power_half, dx), dx)),
+                    inside,
+                );
+                sums.add(
+                    3,
+                    negate(_mm256_mul_ps(_mm256_mul_ps(v_power, dx), dy)),
+                    inside,
+                );
+                sums.add(
+                    4,
+                    negate(_mm256_mul_ps(_mm256_mul_ps(v_power_half, dy), dy)),
+                    inside,
+                );
+            }
+        }
+        if sums.touched {
+            sums.take(&mut slots[j * stride..(j + 1) * stride]);
+        }
+    }
+    slots
+}
