@@ -1,6 +1,7 @@
-//! The 8-lane f32 compositing kernels (AVX2 + FMA) against the scalar kernels in f32 and in f64
-//! (the f64 scalar kernels are checked against the tensor path in `fused.rs`): images, the
-//! saved state and the gradients of all four inputs, every pixel and every row, on tiles that
+//! The 8-lane f32 compositing kernels (AVX2 + FMA) against the scalar kernels: the same bits as
+//! the scalar f32 kernels, and f32 rounding away from the f64 kernels (which `fused.rs` checks
+//! against the tensor path): images, the saved state and the gradients of all four inputs,
+//! every pixel and every row, on tiles that
 //! hit every rule at lane granularity: partial tiles at the image's right and bottom edges, an
 //! empty list, a one-Gaussian list, pixels of one half row stopping at different entries, α
 //! clamped at 0.99, powers clamped at 0, footprints with no bounded box. Then: the same bits on
@@ -123,11 +124,7 @@ fn assert_close(what: &str, got: &[f32], want: &[f64], absolute: f64, relative: 
     }
 }
 
-fn widen(values: &[f32]) -> Vec<f64> {
-    values.iter().map(|&x| x as f64).collect()
-}
-
-/// The lanes' pass against the scalar f32 pass (tight) and the f64 pass (f32 rounding).
+/// The lanes' pass against the scalar f32 pass (bit for bit) and the f64 pass (f32 rounding).
 fn lanes_match_scalar(channels: usize, stop_transmittance: f64) {
     if Kernels::detect() != Kernels::Lanes8 {
         eprintln!("no AVX2 + FMA here: the lane kernels are not run");
@@ -167,35 +164,39 @@ fn lanes_match_scalar(channels: usize, stop_transmittance: f64) {
         "tile 0 is empty"
     );
 
-    // Images: every channel and alpha of every pixel.
-    assert_close("image vs scalar", &lanes.0, &widen(&scalar.0), 2e-6, 1e-5);
-    assert_close("image vs f64", &lanes.0, &image64, 2e-5, 1e-4);
-    assert_close(
-        "final T vs scalar",
-        &lanes.1.final_t,
-        &widen(&scalar.1.final_t),
-        1e-9,
-        1e-4,
-    );
+    // The scalar f32 kernels' bits: every channel and alpha of every pixel, T, every gradient.
+    assert_bits("image", &lanes.0, &scalar.0);
+    assert_bits("final T", &lanes.1.final_t, &scalar.1.final_t);
+    let (g, s) = (&lanes.2, &scalar.2);
+    assert_bits("v_means", &g.means, &s.means);
+    assert_bits("v_conics", &g.conics, &s.conics);
+    assert_bits("v_opacities", &g.opacities, &s.opacities);
+    assert_bits("v_values", &g.values, &s.values);
 
-    // Gradients of every row, relative to the largest of their kind.
-    let check = |what: &str, got: &[f32], scalar: &[f32], f64s: &[f64]| {
+    // f64 within f32 rounding: the image per value, the gradients relative to the largest of
+    // their kind.
+    assert_close("image vs f64", &lanes.0, &image64, 2e-5, 1e-4);
+    let check = |what: &str, got: &[f32], f64s: &[f64]| {
         let scale = f64s.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         assert!(scale > 0.0, "{what}: all zero");
-        assert_close(
-            &format!("{what} vs scalar"),
-            got,
-            &widen(scalar),
-            2e-5 * scale,
-            1e-4,
-        );
         assert_close(&format!("{what} vs f64"), got, f64s, 1e-4 * scale, 1e-3);
     };
-    let (g, s) = (&lanes.2, &scalar.2);
-    check("v_means", &g.means, &s.means, &v64.means);
-    check("v_conics", &g.conics, &s.conics, &v64.conics);
-    check("v_opacities", &g.opacities, &s.opacities, &v64.opacities);
-    check("v_values", &g.values, &s.values, &v64.values);
+    check("v_means", &g.means, &v64.means);
+    check("v_conics", &g.conics, &v64.conics);
+    check("v_opacities", &g.opacities, &v64.opacities);
+    check("v_values", &g.values, &v64.values);
+}
+
+/// The same bits in every element (a lane computing anything else shows here).
+fn assert_bits(what: &str, lanes: &[f32], scalar: &[f32]) {
+    assert_eq!(lanes.len(), scalar.len(), "{what}: lengths");
+    for (i, (a, b)) in lanes.iter().zip(scalar).enumerate() {
+        assert_eq!(
+            a.to_bits(),
+            b.to_bits(),
+            "{what}[{i}]: lanes {a} against scalar {b}"
+        );
+    }
 }
 
 #[test]

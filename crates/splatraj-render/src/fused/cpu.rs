@@ -15,9 +15,9 @@
 //! space (ln T summed); here T is a running product. Both are the same rule; they can disagree
 //! only when T lands within rounding of 1e-4.
 //!
-//! f32 passes run the 8-lane kernels of [`simd`] where the processor has AVX2 and FMA (checked
-//! at run time, [`Kernels::detect`]); f64 passes, and f32 on other processors, run the scalar
-//! kernels here, which stay the definition.
+//! f32 passes run the 8-lane kernels of `simd` where the processor has AVX2 and FMA (checked
+//! at run time, [`Kernels::detect`]), with the same bits as the scalar kernels here; f64
+//! passes, and f32 on other processors, run the scalar kernels, which stay the definition.
 
 use std::any::Any;
 use std::ops::Range;
@@ -30,11 +30,12 @@ use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
 use crate::tiles::{TILE_PIXELS, TILE_SIZE, ceil_small, floor_small};
 
 #[cfg(target_arch = "x86_64")]
+mod lanes_exp;
+#[cfg(target_arch = "x86_64")]
 mod simd;
 
-/// Which implementation of the tile kernels a pass runs. Both compute the same function; they
-/// differ in f32 rounding only (the lanes' e^x is a polynomial within 2 ulp of libm's, and
-/// their gradient slots sum eight partial sums), so an image moves by a few ulp, never by a rule.
+/// Which implementation of the tile kernels a pass runs. Both compute the same numbers, bit for
+/// bit (`tests/fused_lanes.rs`); the lanes are faster.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Kernels {
     /// One pixel at a time, plain Rust: every float type and processor.

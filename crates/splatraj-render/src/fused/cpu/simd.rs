@@ -2,23 +2,24 @@
 //!
 //! Each Gaussian of a tile's list is evaluated on half a tile row (8 pixels) at a time: the
 //! lanes of the half rows its 1/255 box covers and whose pixels are open (forward) or replaying
-//! (backward), the others masked off. The rules, their order and the gradient conventions are
-//! the scalar kernels' in `cpu.rs`, comparison for comparison (an unordered compare where the
-//! scalar code's `<` or `>` is false on NaN), so every decision (skip below 1/255, the α clamp
-//! at 0.99, the stop before T < the stop transmittance, the tile's early exit) is the same.
-//! The power is computed with the same operations in the same order (no fused multiply–add),
-//! so it is bit-identical; what differs is rounding:
-//! - e^x is a polynomial ([`exp`]) within 2 ulp of libm's, not libm's own;
-//! - the backward sums a Gaussian's gradient over a tile in 8 partial sums, one per lane,
-//!   added in a fixed order at the end (the scalar kernel adds pixel after pixel).
+//! (backward), the others masked off. They compute the scalar kernels' numbers bit for bit:
+//! - every rule is the same comparison (an ordered compare where the scalar `<` or `>` is false
+//!   on NaN), so every decision is too (skip below 1/255, the α clamp at 0.99, the power clamp
+//!   at 0, the stop before T < the stop transmittance, the tile's early exit);
+//! - every value is the same IEEE operations in the same order, with no fused multiply–add
+//!   (Rust does not contract the scalar code either), e^x included ([`super::lanes_exp`]);
+//! - the backward's per-Gaussian sums are added pixel after pixel in the scalar order
+//!   ([`SlotTerms`]); the per-pixel work before them is in lanes.
 //!
-//! Both are fixed orders within one tile, so results do not depend on the thread count.
+//! Bit-identical results keep the optimiser's path, and the figures of runs, where they were:
+//! an ulp in a gradient sum moves a trajectory's TCE visibly (`docs/rasterizer.md`).
 //!
-//! Written with `std::arch` rather than a SIMD crate: the kernels need masked blends, movemask
-//! and a vector e^x, which the portable crates either lack or wrap no more simply.
+//! Written with `std::arch` rather than a SIMD crate: the kernels need masked blends, movemask,
+//! a 64-bit gather and f32↔f64 conversions, which the portable crates wrap no more simply.
 
 use std::arch::x86_64::*;
 
+use super::lanes_exp::exp;
 use super::{Footprint, Gathered, HostSplats, Replay, Splat, TileForward, column_bits, valid_bits};
 use crate::fused::plan::CompositePlan;
 use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
@@ -118,40 +119,6 @@ fn bits_of(mask: __m256) -> u32 {
 #[inline]
 fn and_not(a: __m256, b: __m256) -> __m256 {
     _mm256_andnot_ps(b, a)
-}
-
-/// e^x in 8 lanes, for x ≤ 0 (the kernels clamp the power at 0), within 2 ulp of libm's expf.
-/// The usual reduction x = n·ln 2 + r (|r| ≤ ½ ln 2, ln 2 in two parts so n·ln 2 is exact),
-/// e^r by its degree-6 Taylor–minimax polynomial, then 2^n put into the exponent bits. x is
-/// held above −87, where 2^n is still a normal number: the kernels only compare o·e^x with
-/// 1/255 there, and e^−87 ≈ 1.6e-38 is as far below it as 0. NaN stays NaN.
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-fn exp(x: __m256) -> __m256 {
-    // min/max return their second operand when either is NaN: x second keeps NaN.
-    let x = _mm256_min_ps(
-        _mm256_set1_ps(88.0),
-        _mm256_max_ps(_mm256_set1_ps(-87.0), x),
-    );
-    let n = _mm256_round_ps::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(_mm256_mul_ps(
-        x,
-        _mm256_set1_ps(std::f32::consts::LOG2_E),
-    ));
-    let r = _mm256_fnmadd_ps(n, _mm256_set1_ps(0.693_359_4), x);
-    let r = _mm256_fnmadd_ps(n, _mm256_set1_ps(-2.121_944_4e-4), r);
-    let mut p = _mm256_set1_ps(1.987_569_1e-4);
-    for c in [1.398_2e-3, 8.333_452e-3, 4.166_579_6e-2, 0.166_666_65, 0.5] {
-        p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(c));
-    }
-    let e_r = _mm256_add_ps(
-        _mm256_fmadd_ps(p, _mm256_mul_ps(r, r), r),
-        _mm256_set1_ps(1.0),
-    );
-    let two_n = _mm256_slli_epi32::<23>(_mm256_add_epi32(
-        _mm256_cvtps_epi32(n),
-        _mm256_set1_epi32(127),
-    ));
-    _mm256_mul_ps(e_r, _mm256_castsi256_ps(two_n))
 }
 
 /// The Gaussian of one list entry placed on a tile, broadcast to the lanes.
@@ -327,37 +294,50 @@ fn forward_tile(
     }
 }
 
-/// A Gaussian's gradient over a tile, in 8 partial sums (one per lane).
-struct SlotLanes {
-    /// v_mx, v_my, v_a, v_b, v_c, v_o, then v_values. `[6 + C]`
-    sums: Vec<__m256>,
-    /// Whether any lane added anything since the last [`SlotLanes::take`].
-    touched: bool,
+/// A Gaussian's gradient terms at the 8 pixels of half a tile row, added into its slot pixel
+/// after pixel in the scalar kernel's order (row-major), so the sums have its bits: summed per
+/// lane and then across, they moved by an ulp, and the optimiser's path with them (see
+/// `docs/rasterizer.md`).
+struct SlotTerms {
+    /// v_mx, v_my, v_a, v_b, v_c, v_o of each lane (0 where a rule gives none).
+    geometry: [[f32; LANES]; 6],
+    /// v_values of each lane. `[C, 8]`
+    values: Vec<f32>,
 }
 
-impl SlotLanes {
-    /// Adds `term` on the lanes of `mask` to sum `k`.
+impl SlotTerms {
+    /// Keeps `term` (0 outside `mask`) as geometry term `g`.
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    fn add(&mut self, k: usize, term: __m256, mask: __m256) {
-        self.sums[k] = _mm256_add_ps(self.sums[k], _mm256_and_ps(term, mask));
+    fn set(&mut self, g: usize, term: __m256, mask: __m256) {
+        let masked = _mm256_and_ps(term, mask);
+        // SAFETY: `geometry[g]` is 8 writable f32.
+        unsafe { _mm256_storeu_ps(self.geometry[g].as_mut_ptr(), masked) };
     }
 
-    /// Writes each sum's total into `slot` (lanes added in a fixed order) and clears them.
+    /// Keeps `term` (0 outside `mask`) as the term of channel `k`.
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    fn take(&mut self, slot: &mut [f32]) {
-        for (value, sum) in slot.iter_mut().zip(&mut self.sums) {
-            let quads = _mm_add_ps(
-                _mm256_castps256_ps128(*sum),
-                _mm256_extractf128_ps::<1>(*sum),
-            );
-            let pairs = _mm_add_ps(quads, _mm_movehl_ps(quads, quads));
-            let total = _mm_add_ss(pairs, _mm_shuffle_ps::<0b01>(pairs, pairs));
-            *value = _mm_cvtss_f32(total);
-            *sum = _mm256_setzero_ps();
+    fn set_value(&mut self, k: usize, term: __m256, mask: __m256) {
+        store(&mut self.values, k * LANES, _mm256_and_ps(term, mask));
+    }
+
+    /// Adds the terms of the lanes set in `lanes`, lane after lane, to `geometry` and to the
+    /// slot's channel sums `values` `[C]`. A lane whose rule gave no term adds +0, which
+    /// leaves any sum as it was (no sum here is −0: they start at +0).
+    #[inline(always)]
+    fn add_to(&self, mut lanes: u32, geometry: &mut [f32; 6], values: &mut [f32]) {
+        let channels = values.len();
+        while lanes != 0 {
+            let i = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
+            for (sum, terms) in geometry.iter_mut().zip(&self.geometry) {
+                *sum += terms[i];
+            }
+            for (k, sum) in values.iter_mut().enumerate().take(channels) {
+                *sum += self.values[k * LANES + i];
+            }
         }
-        self.touched = false;
     }
 }
 
@@ -385,9 +365,9 @@ fn backward_tile(
     let mut slots = vec![0.0f32; list.len() * stride];
     let mut t = final_t.to_vec();
     let mut behind = vec![0.0f32; channels * TILE_PIXELS]; // Σ over later contributors of f·α·T
-    let mut sums = SlotLanes {
-        sums: vec![zero; stride],
-        touched: false,
+    let mut terms = SlotTerms {
+        geometry: [[0.0; LANES]; 6],
+        values: vec![0.0; channels * LANES],
     };
     let mut gathered = Gathered::new(&state.footprints, list);
     let (mut replay, entries) = Replay::new(last);
@@ -400,6 +380,8 @@ fn backward_tile(
         let values = &splats.values[row * channels..(row + 1) * channels];
         let lanes = SplatLanes::new(&splat);
         let columns = column_bits(&xs);
+        let (geometry_slot, value_slot) = slots[j * stride..(j + 1) * stride].split_at_mut(6);
+        let mut geometry = [0.0f32; 6];
         for y in ys {
             let bits = u32::from(replaying[y] & columns);
             for half in 0..TILE_SIZE / LANES {
@@ -410,7 +392,6 @@ fn backward_tile(
                 let Some(at) = lanes.at(y, half, asked) else {
                     continue;
                 };
-                sums.touched = true;
                 let base = y * TILE_SIZE + half * LANES;
                 let keep = _mm256_sub_ps(one, at.alpha);
                 let t_after = load(&t, base);
@@ -427,43 +408,42 @@ fn backward_tile(
                     let seen =
                         _mm256_sub_ps(_mm256_mul_ps(value, t_before), _mm256_div_ps(old, keep));
                     v_alpha = _mm256_add_ps(v_alpha, _mm256_mul_ps(v_k, seen));
-                    sums.add(6 + k, _mm256_mul_ps(v_k, weight), at.live);
+                    terms.set_value(k, _mm256_mul_ps(v_k, weight), at.live);
                     let sum = _mm256_add_ps(old, _mm256_mul_ps(value, weight));
                     store_where(&mut behind, at_k, old, sum, at.live);
                 }
                 store_where(&mut t, base, t_after, t_before, at.live);
                 // No gradient to o and the geometry where α was clamped at 0.99 …
                 let unclamped = and_not(at.live, _mm256_cmp_ps::<_CMP_GT_OQ>(at.raw, max_alpha));
-                sums.add(5, _mm256_mul_ps(v_alpha, at.exp_power), unclamped);
+                terms.set(5, _mm256_mul_ps(v_alpha, at.exp_power), unclamped);
                 // … and none to the geometry where the power was clamped at 0.
                 let inside = and_not(unclamped, _mm256_cmp_ps::<_CMP_GT_OQ>(at.power, zero));
                 let v_power = _mm256_mul_ps(v_alpha, at.raw);
                 let (dx, dy) = (at.dx, at.dy);
                 let v_mx = _mm256_add_ps(_mm256_mul_ps(lanes.a, dx), _mm256_mul_ps(lanes.b, dy));
                 let v_my = _mm256_add_ps(_mm256_mul_ps(lanes.b, dx), _mm256_mul_ps(lanes.c, dy));
-                sums.add(0, _mm256_mul_ps(v_power, v_mx), inside);
-                sums.add(1, _mm256_mul_ps(v_power, v_my), inside);
+                terms.set(0, _mm256_mul_ps(v_power, v_mx), inside);
+                terms.set(1, _mm256_mul_ps(v_power, v_my), inside);
                 let v_power_half = _mm256_mul_ps(v_power, half_one);
-                sums.add(
+                terms.set(
                     2,
                     negate(_mm256_mul_ps(_mm256_mul_ps(v_power_half, dx), dx)),
                     inside,
                 );
-                sums.add(
+                terms.set(
                     3,
                     negate(_mm256_mul_ps(_mm256_mul_ps(v_power, dx), dy)),
                     inside,
                 );
-                sums.add(
+                terms.set(
                     4,
                     negate(_mm256_mul_ps(_mm256_mul_ps(v_power_half, dy), dy)),
                     inside,
                 );
+                terms.add_to(bits_of(at.live), &mut geometry, value_slot);
             }
         }
-        if sums.touched {
-            sums.take(&mut slots[j * stride..(j + 1) * stride]);
-        }
+        geometry_slot.copy_from_slice(&geometry);
     }
     slots
 }
