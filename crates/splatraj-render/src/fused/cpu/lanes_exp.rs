@@ -80,13 +80,30 @@ fn exp_wide(x: __m256d) -> __m256d {
     _mm256_mul_pd(y, scale)
 }
 
-/// e^x in 8 lanes, as `f32::exp` of each.
+/// e^x of 4 lanes, as `f32::exp` of each.
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-pub(super) fn exp(x: __m256) -> __m256 {
-    let low = exp_wide(_mm256_cvtps_pd(_mm256_castps256_ps128(x)));
-    let high = exp_wide(_mm256_cvtps_pd(_mm256_extractf128_ps::<1>(x)));
-    _mm256_set_m128(_mm256_cvtpd_ps(high), _mm256_cvtpd_ps(low))
+fn exp_quad(x: __m128) -> __m128 {
+    _mm256_cvtpd_ps(exp_wide(_mm256_cvtps_pd(x)))
+}
+
+/// e^x in 8 lanes, as `f32::exp` of each, in the lanes set in the low 8 bits of `lanes`; a half
+/// of 4 lanes none of which is set is left at 0 rather than evaluated (small footprints cover
+/// one half of a half row).
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+pub(super) fn exp(x: __m256, lanes: u32) -> __m256 {
+    let low = if lanes & 0x0f != 0 {
+        exp_quad(_mm256_castps256_ps128(x))
+    } else {
+        _mm_setzero_ps()
+    };
+    let high = if lanes & 0xf0 != 0 {
+        exp_quad(_mm256_extractf128_ps::<1>(x))
+    } else {
+        _mm_setzero_ps()
+    };
+    _mm256_set_m128(high, low)
 }
 
 #[cfg(test)]
@@ -98,7 +115,7 @@ mod tests {
         let mut out = [0.0f32; 8];
         // SAFETY: only called after checking for AVX2 and FMA; 8 f32 read and written.
         unsafe {
-            let v = exp(_mm256_loadu_ps(x.as_ptr()));
+            let v = exp(_mm256_loadu_ps(x.as_ptr()), 0xff);
             _mm256_storeu_ps(out.as_mut_ptr(), v);
         }
         out

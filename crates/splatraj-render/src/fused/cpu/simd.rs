@@ -140,7 +140,7 @@ struct AtLanes {
     dy: __m256,
     /// Before the clamp at 0.
     power: __m256,
-    /// e^min(power, 0).
+    /// e^min(power, 0) (0 in a half of 4 lanes none of which is live).
     exp_power: __m256,
     /// o·e^min(power, 0), before the clamp at 0.99.
     raw: __m256,
@@ -192,7 +192,7 @@ impl SplatLanes {
         }
         let zero = _mm256_setzero_ps();
         let clamped = _mm256_blendv_ps(power, zero, _mm256_cmp_ps::<_CMP_GT_OQ>(power, zero));
-        let exp_power = exp(clamped);
+        let exp_power = exp(clamped, bits_of(live));
         let raw = _mm256_mul_ps(self.opacity, exp_power);
         let max_alpha = _mm256_set1_ps(MAX_ALPHA as f32);
         let alpha = _mm256_blendv_ps(raw, max_alpha, _mm256_cmp_ps::<_CMP_GT_OQ>(raw, max_alpha));
