@@ -18,9 +18,12 @@
 //! a 64-bit gather and f32↔f64 conversions, which the portable crates wrap no more simply.
 
 use std::arch::x86_64::*;
+use std::ops::Range;
 
 use super::lanes_exp::exp;
-use super::{Footprint, Gathered, HostSplats, Replay, Splat, TileForward, column_bits, valid_bits};
+use super::{
+    Footprint, Gathered, HostSplats, Replay, RowBits, Splat, TileForward, column_bits, valid_bits,
+};
 use crate::fused::plan::CompositePlan;
 use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
 use crate::tiles::{TILE_PIXELS, TILE_SIZE};
@@ -119,6 +122,23 @@ fn bits_of(mask: __m256) -> u32 {
 #[inline]
 fn and_not(a: __m256, b: __m256) -> __m256 {
     _mm256_andnot_ps(b, a)
+}
+
+/// The half rows (y, half, lanes) of rows `ys` in which `rows` has a bit among `columns`, with
+/// those bits as lanes (bit i for pixel 8·half + i), in row-major order. `rows` is read as it
+/// is when called: the forward clears the bits of the row it is in, never of a later one.
+fn half_rows(
+    rows: RowBits,
+    columns: u16,
+    ys: Range<usize>,
+) -> impl Iterator<Item = (usize, usize, u32)> {
+    ys.flat_map(move |y| {
+        let bits = u32::from(rows[y] & columns);
+        (0..TILE_SIZE / LANES).filter_map(move |half| {
+            let lanes = (bits >> (half * LANES)) & 0xff;
+            (lanes != 0).then_some((y, half, lanes))
+        })
+    })
 }
 
 /// The Gaussian of one list entry placed on a tile, broadcast to the lanes.
@@ -243,44 +263,37 @@ fn forward_tile(
         let columns = column_bits(&xs);
         // The count saved where this entry contributes, as the lanes of `last` hold it.
         let count = _mm256_castsi256_ps(_mm256_set1_epi32(j as i32 + 1));
-        for y in ys {
-            let bits = u32::from(open[y] & columns);
-            for half in 0..TILE_SIZE / LANES {
-                let asked = (bits >> (half * LANES)) & 0xff;
-                if asked == 0 {
-                    continue;
-                }
-                let Some(at) = lanes.at(y, half, asked) else {
-                    continue;
-                };
-                let base = y * TILE_SIZE + half * LANES;
-                let t_old = load(&t, base);
-                let t_next = _mm256_mul_ps(t_old, _mm256_sub_ps(one, at.alpha));
-                let stop = _mm256_and_ps(at.live, _mm256_cmp_ps::<_CMP_LT_OQ>(t_next, min_t));
-                let stopped = bits_of(stop);
-                open[y] &= !((stopped as u16) << (half * LANES));
-                open_count -= stopped.count_ones() as usize;
-                let add = and_not(at.live, stop);
-                if bits_of(add) == 0 {
-                    continue;
-                }
-                let weight = _mm256_mul_ps(at.alpha, t_old);
-                for (k, &value) in values.iter().enumerate() {
-                    let at_k = k * TILE_PIXELS + base;
-                    let old = load(&planes, at_k);
-                    let sum = _mm256_add_ps(old, _mm256_mul_ps(_mm256_set1_ps(value), weight));
-                    store_where(&mut planes, at_k, old, sum, add);
-                }
-                store_where(&mut t, base, t_old, t_next, add);
-                let last_lanes: &mut [u32; LANES] = (&mut last[base..base + LANES])
-                    .try_into()
-                    .expect("8 counts");
-                // SAFETY: `last_lanes` is 8 readable and writable u32.
-                unsafe {
-                    let ptr = last_lanes.as_mut_ptr() as *mut f32;
-                    let old = _mm256_loadu_ps(ptr);
-                    _mm256_storeu_ps(ptr, _mm256_blendv_ps(old, count, add));
-                }
+        for (y, half, asked) in half_rows(open, columns, ys) {
+            let Some(at) = lanes.at(y, half, asked) else {
+                continue;
+            };
+            let base = y * TILE_SIZE + half * LANES;
+            let t_old = load(&t, base);
+            let t_next = _mm256_mul_ps(t_old, _mm256_sub_ps(one, at.alpha));
+            let stop = _mm256_and_ps(at.live, _mm256_cmp_ps::<_CMP_LT_OQ>(t_next, min_t));
+            let stopped = bits_of(stop);
+            open[y] &= !((stopped as u16) << (half * LANES));
+            open_count -= stopped.count_ones() as usize;
+            let add = and_not(at.live, stop);
+            if bits_of(add) == 0 {
+                continue;
+            }
+            let weight = _mm256_mul_ps(at.alpha, t_old);
+            for (k, &value) in values.iter().enumerate() {
+                let at_k = k * TILE_PIXELS + base;
+                let old = load(&planes, at_k);
+                let sum = _mm256_add_ps(old, _mm256_mul_ps(_mm256_set1_ps(value), weight));
+                store_where(&mut planes, at_k, old, sum, add);
+            }
+            store_where(&mut t, base, t_old, t_next, add);
+            let last_lanes: &mut [u32; LANES] = (&mut last[base..base + LANES])
+                .try_into()
+                .expect("8 counts");
+            // SAFETY: `last_lanes` is 8 readable and writable u32.
+            unsafe {
+                let ptr = last_lanes.as_mut_ptr() as *mut f32;
+                let old = _mm256_loadu_ps(ptr);
+                _mm256_storeu_ps(ptr, _mm256_blendv_ps(old, count, add));
             }
         }
     }
@@ -382,66 +395,58 @@ fn backward_tile(
         let columns = column_bits(&xs);
         let (geometry_slot, value_slot) = slots[j * stride..(j + 1) * stride].split_at_mut(6);
         let mut geometry = [0.0f32; 6];
-        for y in ys {
-            let bits = u32::from(replaying[y] & columns);
-            for half in 0..TILE_SIZE / LANES {
-                let asked = (bits >> (half * LANES)) & 0xff;
-                if asked == 0 {
-                    continue;
-                }
-                let Some(at) = lanes.at(y, half, asked) else {
-                    continue;
-                };
-                let base = y * TILE_SIZE + half * LANES;
-                let keep = _mm256_sub_ps(one, at.alpha);
-                let t_after = load(&t, base);
-                let t_before = _mm256_div_ps(t_after, keep);
-                let weight = _mm256_mul_ps(at.alpha, t_before);
-                // dL/dα = Σ_k v_k (f_k T_i − S_k / (1 − α)) + v_A · T_final / (1 − α)
-                let v_a = load(&v_planes, channels * TILE_PIXELS + base);
-                let mut v_alpha = _mm256_div_ps(_mm256_mul_ps(v_a, load(final_t, base)), keep);
-                for (k, &value) in values.iter().enumerate() {
-                    let at_k = k * TILE_PIXELS + base;
-                    let v_k = load(&v_planes, at_k);
-                    let value = _mm256_set1_ps(value);
-                    let old = load(&behind, at_k);
-                    let seen =
-                        _mm256_sub_ps(_mm256_mul_ps(value, t_before), _mm256_div_ps(old, keep));
-                    v_alpha = _mm256_add_ps(v_alpha, _mm256_mul_ps(v_k, seen));
-                    terms.set_value(k, _mm256_mul_ps(v_k, weight), at.live);
-                    let sum = _mm256_add_ps(old, _mm256_mul_ps(value, weight));
-                    store_where(&mut behind, at_k, old, sum, at.live);
-                }
-                store_where(&mut t, base, t_after, t_before, at.live);
-                // No gradient to o and the geometry where α was clamped at 0.99 …
-                let unclamped = and_not(at.live, _mm256_cmp_ps::<_CMP_GT_OQ>(at.raw, max_alpha));
-                terms.set(5, _mm256_mul_ps(v_alpha, at.exp_power), unclamped);
-                // … and none to the geometry where the power was clamped at 0.
-                let inside = and_not(unclamped, _mm256_cmp_ps::<_CMP_GT_OQ>(at.power, zero));
-                let v_power = _mm256_mul_ps(v_alpha, at.raw);
-                let (dx, dy) = (at.dx, at.dy);
-                let v_mx = _mm256_add_ps(_mm256_mul_ps(lanes.a, dx), _mm256_mul_ps(lanes.b, dy));
-                let v_my = _mm256_add_ps(_mm256_mul_ps(lanes.b, dx), _mm256_mul_ps(lanes.c, dy));
-                terms.set(0, _mm256_mul_ps(v_power, v_mx), inside);
-                terms.set(1, _mm256_mul_ps(v_power, v_my), inside);
-                let v_power_half = _mm256_mul_ps(v_power, half_one);
-                terms.set(
-                    2,
-                    negate(_mm256_mul_ps(_mm256_mul_ps(v_power_half, dx), dx)),
-                    inside,
-                );
-                terms.set(
-                    3,
-                    negate(_mm256_mul_ps(_mm256_mul_ps(v_power, dx), dy)),
-                    inside,
-                );
-                terms.set(
-                    4,
-                    negate(_mm256_mul_ps(_mm256_mul_ps(v_power_half, dy), dy)),
-                    inside,
-                );
-                terms.add_to(bits_of(at.live), &mut geometry, value_slot);
+        for (y, half, asked) in half_rows(replaying, columns, ys) {
+            let Some(at) = lanes.at(y, half, asked) else {
+                continue;
+            };
+            let base = y * TILE_SIZE + half * LANES;
+            let keep = _mm256_sub_ps(one, at.alpha);
+            let t_after = load(&t, base);
+            let t_before = _mm256_div_ps(t_after, keep);
+            let weight = _mm256_mul_ps(at.alpha, t_before);
+            // dL/dα = Σ_k v_k (f_k T_i − S_k / (1 − α)) + v_A · T_final / (1 − α)
+            let v_a = load(&v_planes, channels * TILE_PIXELS + base);
+            let mut v_alpha = _mm256_div_ps(_mm256_mul_ps(v_a, load(final_t, base)), keep);
+            for (k, &value) in values.iter().enumerate() {
+                let at_k = k * TILE_PIXELS + base;
+                let v_k = load(&v_planes, at_k);
+                let value = _mm256_set1_ps(value);
+                let old = load(&behind, at_k);
+                let seen = _mm256_sub_ps(_mm256_mul_ps(value, t_before), _mm256_div_ps(old, keep));
+                v_alpha = _mm256_add_ps(v_alpha, _mm256_mul_ps(v_k, seen));
+                terms.set_value(k, _mm256_mul_ps(v_k, weight), at.live);
+                let sum = _mm256_add_ps(old, _mm256_mul_ps(value, weight));
+                store_where(&mut behind, at_k, old, sum, at.live);
             }
+            store_where(&mut t, base, t_after, t_before, at.live);
+            // No gradient to o and the geometry where α was clamped at 0.99 …
+            let unclamped = and_not(at.live, _mm256_cmp_ps::<_CMP_GT_OQ>(at.raw, max_alpha));
+            terms.set(5, _mm256_mul_ps(v_alpha, at.exp_power), unclamped);
+            // … and none to the geometry where the power was clamped at 0.
+            let inside = and_not(unclamped, _mm256_cmp_ps::<_CMP_GT_OQ>(at.power, zero));
+            let v_power = _mm256_mul_ps(v_alpha, at.raw);
+            let (dx, dy) = (at.dx, at.dy);
+            let v_mx = _mm256_add_ps(_mm256_mul_ps(lanes.a, dx), _mm256_mul_ps(lanes.b, dy));
+            let v_my = _mm256_add_ps(_mm256_mul_ps(lanes.b, dx), _mm256_mul_ps(lanes.c, dy));
+            terms.set(0, _mm256_mul_ps(v_power, v_mx), inside);
+            terms.set(1, _mm256_mul_ps(v_power, v_my), inside);
+            let v_power_half = _mm256_mul_ps(v_power, half_one);
+            terms.set(
+                2,
+                negate(_mm256_mul_ps(_mm256_mul_ps(v_power_half, dx), dx)),
+                inside,
+            );
+            terms.set(
+                3,
+                negate(_mm256_mul_ps(_mm256_mul_ps(v_power, dx), dy)),
+                inside,
+            );
+            terms.set(
+                4,
+                negate(_mm256_mul_ps(_mm256_mul_ps(v_power_half, dy), dy)),
+                inside,
+            );
+            terms.add_to(bits_of(at.live), &mut geometry, value_slot);
         }
         geometry_slot.copy_from_slice(&geometry);
     }
