@@ -13,6 +13,8 @@ use splatraj_scene::Scene;
 use crate::camera::{Intrinsics, Pose};
 use glam::DVec3;
 
+use crate::focus::{FocusCache, ObjectFocus};
+
 use crate::project::{FOV_CLAMP, LOW_PASS, NORMALISED_DET_FLOOR, world_covariance};
 use crate::tiles::{TILE_SIZE, TileGrid};
 
@@ -36,6 +38,8 @@ pub struct HostGeometry {
     pub blocks: Vec<Block>,
     /// Scene index of the Gaussian at each sorted position. `[N]`
     pub scene_from_sorted: Vec<u32>,
+    /// The objects of the mask passes rendered lately (derived once per mask).
+    pub focus: FocusCache,
 }
 
 /// Neighbouring Gaussians (consecutive in Morton order of their means), bounded as a whole.
@@ -150,7 +154,18 @@ impl HostGeometry {
             opacities: scene.opacities.clone(),
             blocks,
             scene_from_sorted,
+            focus: FocusCache::default(),
         }
+    }
+
+    /// The same geometry with every block's bound made infinite, so that a pass decides each
+    /// Gaussian one by one: the full scan the block tests must agree with (for tests and
+    /// checks; the decisions, tile lists and renders are the same, only slower).
+    pub fn with_unbounded_blocks(mut self) -> Self {
+        for block in &mut self.blocks {
+            block.radius = f64::INFINITY;
+        }
+        self
     }
 
     /// Number of Gaussians.
@@ -203,7 +218,7 @@ impl Decisions {
 
 /// Projects the Gaussians each pose can see and decides their cull, radius and depth.
 ///
-/// With `focus` (a mask pass's object, one flag per Gaussian), the object's Gaussians are
+/// With `focus` (a mask pass's object), the object's Gaussians are
 /// decided first; the others are then decided only where their bounded square reaches the box
 /// of tiles the object touches in that pose and they are no deeper than the object's deepest
 /// Gaussian there, and are left out elsewhere. That changes no tile list the pass uses:
@@ -214,7 +229,7 @@ pub fn decide(
     poses: &[Pose],
     intrinsics: &Intrinsics,
     near: f64,
-    focus: Option<&[bool]>,
+    focus: Option<&ObjectFocus>,
 ) -> Decisions {
     let grid = TileGrid::new(intrinsics.width, intrinsics.height);
     // The tile grid's extent in whole tiles: a square that reaches into the last partial tile
@@ -225,21 +240,16 @@ pub fn decide(
         (grid.tiles_x * TILE_SIZE) as f64,
         (grid.tiles_y * TILE_SIZE) as f64,
     ];
-    // The object's sorted positions, listed once for all poses (an object is a small part of
-    // a scene, and its positions are close together).
-    let in_focus =
-        |k: usize| focus.is_some_and(|focus| focus[geometry.scene_from_sorted[k] as usize]);
-    let object: Option<Vec<u32>> = focus.map(|_| {
-        (0..geometry.len() as u32)
-            .into_par_iter()
-            .filter(|&k| in_focus(k as usize))
-            .collect()
-    });
+    // The object's sorted positions come listed (an object is a small part of a scene, and
+    // its positions are close together); membership is read by sorted position, so the
+    // members of a block are tested one after the other.
+    let in_focus = |k: usize| focus.is_some_and(|focus| focus.sorted.contains(k));
+    let object: Option<&[u32]> = focus.map(|focus| focus.sorted_list.as_slice());
     let kept = poses
         .iter()
         .map(|pose| {
             let camera = Camera::new(pose, intrinsics, near);
-            let Some(object) = &object else {
+            let Some(object) = object else {
                 return camera.decide_blocks(geometry, &|_| true, Reach::everywhere(whole_grid));
             };
             let mut kept: Vec<Decided> = object

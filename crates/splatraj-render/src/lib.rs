@@ -11,9 +11,11 @@
 #![warn(missing_docs)]
 
 pub mod backend;
+pub mod bitset;
 pub mod camera;
 pub mod camera_file;
 pub mod decide;
+pub mod focus;
 pub mod fused;
 pub mod host;
 pub mod images;

@@ -9,8 +9,10 @@ use std::sync::Arc;
 use burn::tensor::{DType, Device, Int, Tensor, TensorData};
 use splatraj_scene::Scene;
 
+use crate::bitset::GaussianBits;
 use crate::camera::{Intrinsics, Pose};
 use crate::decide::{HostGeometry, decide};
+use crate::focus::ObjectFocus;
 use crate::fused::{CompositePlan, composite_fused};
 use crate::project::{NEAR_PLANE, SceneTensors, project_with_near};
 use crate::rasterize::{
@@ -253,14 +255,15 @@ pub fn render(
         }
         None => 0,
     };
-    let in_object: Option<Vec<bool>> = match (
+    let started = std::time::Instant::now();
+    let focus: Option<Arc<ObjectFocus>> = match (
         request.pruning,
         request.channels.as_slice(),
         &request.gaussian_values,
     ) {
         (Pruning::None, _, _) => None,
         (Pruning::ObjectOnly, [Channel::Mask(mask)], None) => {
-            Some(mask.iter().map(|&m| m != 0.0).collect())
+            Some(scene.host.focus.focus(&scene.host, mask))
         }
         (Pruning::ObjectOnly, _, _) => return Err(RenderError::PruningNeedsOneMask),
     };
@@ -268,7 +271,6 @@ pub fn render(
     // Decisions (cull, tiles, order, pruning) on all Gaussians without gradient, then the
     // differentiable pass on only the Gaussians some tile uses.
     let grid = TileGrid::new(request.intrinsics.width, request.intrinsics.height);
-    let started = std::time::Instant::now();
     let host_poses: Vec<Pose> = poses
         .clone()
         .without_autodiff()
@@ -284,7 +286,7 @@ pub fn render(
         &host_poses,
         &request.intrinsics,
         request.near,
-        in_object.as_deref(),
+        focus.as_deref(),
     );
     let min_opacity = request.approximations.min_opacity as f32;
     if min_opacity > 0.0 {
@@ -293,28 +295,26 @@ pub fn render(
         }
     }
     let decided = started.elapsed();
-    let selection = match &in_object {
-        Some(in_object) => TileSelection::Object(in_object),
+    let selection = match &focus {
+        Some(focus) => TileSelection::Object(&focus.scene),
         None => TileSelection::All,
     };
     let mut work = bin_tiles(&decisions, &grid, selection);
     let binned = started.elapsed();
 
-    // used[u] = scene index of the u-th Gaussian some tile needs; lists are renumbered to u.
-    let mut is_used = vec![false; n];
+    // used[u] = scene index of the u-th Gaussian some tile needs (increasing); lists are
+    // renumbered to u. A bit set, not [N] arrays: O(N / 64) beside the lists' length.
+    let mut is_used = GaussianBits::new(n);
     for list in &work {
         for &g in &list.gaussians {
-            is_used[g as usize] = true;
+            is_used.insert(g as usize);
         }
     }
-    let used: Vec<usize> = (0..n).filter(|&g| is_used[g]).collect();
-    let mut compact_from_scene = vec![u32::MAX; n];
-    for (u, &g) in used.iter().enumerate() {
-        compact_from_scene[g] = u as u32;
-    }
+    let used: Vec<usize> = is_used.iter().collect();
+    let compact_from_scene = is_used.ranks();
     for list in &mut work {
         for g in &mut list.gaussians {
-            *g = compact_from_scene[*g as usize];
+            *g = compact_from_scene.rank(*g as usize);
         }
     }
     let width: usize = request.channels.iter().map(Channel::width).sum::<usize>() + tensor_width;

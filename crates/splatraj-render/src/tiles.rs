@@ -8,6 +8,7 @@
 
 use rayon::prelude::*;
 
+use crate::bitset::GaussianBits;
 use crate::decide::{Decided, Decisions};
 
 /// Tile edge in pixels (INRIA 3DGS).
@@ -74,10 +75,10 @@ impl TileGrid {
 pub enum TileSelection<'a> {
     /// Every tile, every Gaussian that touches it (any channel).
     All,
-    /// A mask pass for one object: `in_object[g]` says whether Gaussian g belongs to it. Only
-    /// tiles the object touches, and in each only the Gaussians up to the object's last one.
+    /// A mask pass for one object, its Gaussians by scene index. Only tiles the object
+    /// touches, and in each only the Gaussians up to the object's last one.
     /// Exact for the mask channel (value and gradient); other channels are not rendered right.
-    Object(&'a [bool]),
+    Object(&'a GaussianBits),
 }
 
 /// One tile of one image of the batch, with the Gaussians to composite there.
@@ -131,7 +132,7 @@ fn bin_one_pose(
         TileSelection::All => vec![true; grid.len()],
         TileSelection::Object(in_object) => {
             let mut wanted = vec![false; grid.len()];
-            for k in (0..kept.len()).filter(|&k| in_object[kept[k].gaussian as usize]) {
+            for k in (0..kept.len()).filter(|&k| in_object.contains(kept[k].gaussian as usize)) {
                 for tile in tiles_of(k) {
                     wanted[tile] = true;
                 }
@@ -164,7 +165,9 @@ fn bin_one_pose(
         .enumerate()
         .filter_map(|(tile, mut gaussians)| {
             if let TileSelection::Object(in_object) = selection {
-                let last = gaussians.iter().rposition(|&g| in_object[g as usize])?;
+                let last = gaussians
+                    .iter()
+                    .rposition(|&g| in_object.contains(g as usize))?;
                 gaussians.truncate(last + 1);
             }
             (!gaussians.is_empty()).then_some(TileWork {

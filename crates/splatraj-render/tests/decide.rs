@@ -6,6 +6,7 @@ use burn::tensor::{DType, Device, Tensor, TensorData};
 use glam::DVec3;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::decide::{HostGeometry, decide};
+use splatraj_render::focus::ObjectFocus;
 use splatraj_render::project::{NEAR_PLANE, SceneTensors, project, radii_and_visibility};
 use splatraj_render::tiles::TileGrid;
 use splatraj_scene::Scene;
@@ -161,12 +162,13 @@ fn focused_decisions_keep_every_gaussian_in_front_of_the_object_on_its_tiles() {
         Pose::look_at(DVec3::new(-2.0, -1.5, 0.3), object, DVec3::Z).unwrap(),
     ];
     let (radii, visible, depth, means) = tensor_projection(&scene, &poses, &k);
+    let geometry = HostGeometry::new(&scene);
     let decisions = decide(
-        &HostGeometry::new(&scene),
+        &geometry,
         &poses,
         &k,
         NEAR_PLANE,
-        Some(&focus),
+        Some(&ObjectFocus::from_flags(&geometry, &focus)),
     );
 
     let n = scene.len();
