@@ -1,6 +1,6 @@
 //! `splatraj bench render`: time the object-mask pass, forward and forward + backward, with
 //! each rasterizer; `bench first-try` runs the first-try configs; `bench frames` times a run's
-//! output frames.
+//! output frames; `bench scale` runs a config whole at several demo scene sizes.
 //!
 //! Each configuration (scene, resolution, pruning, rasterizer) runs in a fresh child process
 //! of this binary (hidden `--one` flag), so that the peak memory it reports (VmHWM of
@@ -40,6 +40,58 @@ pub enum BenchCommand {
     /// Time a run's output frames (render RGB + object mask, metrics, PNG, H.264) at 720p and
     /// 1080p on the demo scene and a real one, per frame and for a whole video.
     Frames(BenchFramesArgs),
+    /// Run a config (default: the demo's) whole on the demo scene at several sizes, each in a
+    /// child process, and tabulate the time per step, each stage's time and the peak memory.
+    Scale(BenchScaleArgs),
+}
+
+/// Arguments of `splatraj bench scale`.
+#[derive(Debug, Args)]
+pub struct BenchScaleArgs {
+    /// Config to run; its scene must be the demo's (`[scene] demo = …`).
+    #[arg(long, default_value = "configs/demo.toml")]
+    config: PathBuf,
+    /// Demo scene sizes, in Gaussians.
+    #[arg(long, value_delimiter = ',', default_values_t = [1_000_000usize, 3_000_000, 6_000_000, 10_000_000])]
+    sizes: Vec<usize>,
+    /// Optimisation steps per run (0: the config's own).
+    #[arg(long, default_value_t = 10)]
+    iterations: usize,
+    /// Override a config value in every run, e.g. `--set output.frames=10` (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Folder of the run folders (default: a fresh one under the system's temporary folder).
+    #[arg(long)]
+    runs_dir: Option<PathBuf>,
+    /// Print one JSON array instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// `splatraj bench scale`: the runs and their figures are the library's
+/// (`splatraj::experiment::bench_scale`); this prints them.
+fn scale(args: &BenchScaleArgs) -> Result<()> {
+    use splatraj::experiment::bench_scale::{ScaleBench, run_scale, scale_table};
+    let bench = ScaleBench {
+        config: args.config.clone(),
+        sizes: args.sizes.clone(),
+        iterations: (args.iterations > 0).then_some(args.iterations),
+        set: args.set.clone(),
+        runs_dir: args.runs_dir.clone().unwrap_or_else(|| {
+            std::env::temp_dir().join(format!("splatraj-scale-{}", std::process::id()))
+        }),
+    };
+    let exe = std::env::current_exe().context("cannot find the splatraj binary to re-run")?;
+    let rows = run_scale(&exe, &bench, &mut |size| {
+        eprintln!("running {} at {size} Gaussians …", bench.config.display())
+    })?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+    } else {
+        print!("{}", scale_table(&rows));
+        println!("run folders: {}", bench.runs_dir.display());
+    }
+    Ok(())
 }
 
 /// Arguments of `splatraj bench frames`.
@@ -230,6 +282,7 @@ pub fn run(command: BenchCommand) -> Result<()> {
     match command {
         BenchCommand::FirstTry(args) => first_try(&args),
         BenchCommand::Frames(args) => frames(&args),
+        BenchCommand::Scale(args) => scale(&args),
         BenchCommand::Render(args) => {
             let bench = || match &args.one {
                 Some(spec) => {

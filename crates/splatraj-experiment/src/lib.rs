@@ -26,6 +26,7 @@
 
 pub mod bench;
 pub mod bench_frames;
+pub mod bench_scale;
 pub mod bench_scenes;
 pub mod camera_paths;
 pub mod checkpoint;

@@ -76,6 +76,9 @@ pub struct RunReport {
     pub frames_s: f64,
     /// The whole run's wall time.
     pub total_s: f64,
+    /// Peak resident memory of the run's process so far (VmHWM), MB; None where the system
+    /// does not report it.
+    pub peak_memory_mb: Option<f64>,
     /// Backend and precision.
     pub backend: String,
 }
@@ -113,6 +116,7 @@ impl RunReport {
             metrics_s: times.metrics.as_secs_f64(),
             frames_s: times.frames.as_secs_f64(),
             total_s: times.total.as_secs_f64(),
+            peak_memory_mb: crate::bench::peak_mb(),
             backend: format!("{:?} {:?}", config.backend, config.precision),
         }
     }

@@ -80,10 +80,8 @@ fn images_and_gradient(
     let weights: Vec<f64> = (0..b * h * w * c)
         .map(|i| ((i * 7919) % 13) as f64 / 13.0)
         .collect();
-    let weights = Tensor::<4>::from_data(
-        TensorData::new(weights, [b, h, w, c]),
-        (device, DType::F64),
-    );
+    let weights =
+        Tensor::<4>::from_data(TensorData::new(weights, [b, h, w, c]), (device, DType::F64));
     let grads = (out.images.clone() * weights).sum().backward();
     (host(out.images), host(poses.grad(&grads).unwrap()))
 }
@@ -123,10 +121,16 @@ fn blocks_keep_what_the_full_scan_keeps() {
             request.rasterizer = rasterizer;
             let (image, gradient) = images_and_gradient(&with_blocks, &request, &device);
             let (image_full, gradient_full) = images_and_gradient(&full_scan, &request, &device);
-            assert!(image.iter().any(|&v| v > 0.1), "{pruning:?}: something drawn");
+            assert!(
+                image.iter().any(|&v| v > 0.1),
+                "{pruning:?}: something drawn"
+            );
             assert!(gradient.iter().any(|&g| g.abs() > 1e-9));
             assert_eq!(image, image_full, "{rasterizer:?} {pruning:?}: images");
-            assert_eq!(gradient, gradient_full, "{rasterizer:?} {pruning:?}: gradient");
+            assert_eq!(
+                gradient, gradient_full,
+                "{rasterizer:?} {pruning:?}: gradient"
+            );
         }
     }
 }
