@@ -82,7 +82,7 @@ fn scale(args: &BenchScaleArgs) -> Result<()> {
         }),
     };
     let exe = std::env::current_exe().context("cannot find the splatraj binary to re-run")?;
-    let rows = run_scale(&exe, &bench, &mut |size| {
+    let (rows, failures) = run_scale(&exe, &bench, &mut |size| {
         eprintln!("running {} at {size} Gaussians …", bench.config.display())
     })?;
     if args.json {
@@ -90,6 +90,9 @@ fn scale(args: &BenchScaleArgs) -> Result<()> {
     } else {
         print!("{}", scale_table(&rows));
         println!("run folders: {}", bench.runs_dir.display());
+    }
+    if !failures.is_empty() {
+        bail!("{} size(s) failed: {}", failures.len(), failures.join("; "));
     }
     Ok(())
 }

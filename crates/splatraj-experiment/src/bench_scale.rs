@@ -86,49 +86,58 @@ pub fn read_scale_row(dir: &Path) -> Result<ScaleRow> {
 
 /// Runs `bench.config` at each size with `exe run CONFIG --quiet` (verdict only warning, so a
 /// run that misses its goals still reports) and reads each run folder; `starting` hears each
-/// size before it runs.
+/// size before it runs. A size whose run fails is reported among the failures (second) and the
+/// next size still runs.
 pub fn run_scale(
     exe: &Path,
     bench: &ScaleBench,
     starting: &mut dyn FnMut(usize),
-) -> Result<Vec<ScaleRow>> {
+) -> Result<(Vec<ScaleRow>, Vec<String>)> {
     if bench.sizes.is_empty() {
         bail!("--sizes: nothing to run");
     }
-    let runs_dir = toml::Value::String(bench.runs_dir.display().to_string());
-    let mut rows = Vec::with_capacity(bench.sizes.len());
+    let (mut rows, mut failures) = (Vec::new(), Vec::new());
     for &size in &bench.sizes {
         starting(size);
-        let mut command = Command::new(exe);
-        command.arg("run").arg(&bench.config).arg("--quiet");
-        command.args(["--set".into(), format!("scene.demo.gaussians={size}")]);
-        command.args(["--set", "output.verdict=\"warn\""]);
-        command.args(["--set".into(), format!("output.runs_dir={runs_dir}")]);
-        if let Some(iterations) = bench.iterations {
-            command.args(["--set".into(), format!("optimiser.iterations={iterations}")]);
+        match run_size(exe, bench, size) {
+            Ok(row) => rows.push(row),
+            Err(e) => failures.push(format!("{size} Gaussians: {e:#}")),
         }
-        for s in &bench.set {
-            command.args(["--set", s]);
-        }
-        let output = command
-            .output()
-            .with_context(|| format!("cannot start a run of {}", bench.config.display()))?;
-        if !output.status.success() {
-            bail!(
-                "the run of {} at {size} Gaussians failed: {}",
-                bench.config.display(),
-                String::from_utf8_lossy(&output.stderr).trim()
-            );
-        }
-        let stdout = String::from_utf8_lossy(&output.stdout);
-        let folder = stdout
-            .lines()
-            .last()
-            .map(|l| PathBuf::from(l.trim()))
-            .ok_or_else(|| anyhow!("the run at {size} Gaussians printed no folder"))?;
-        rows.push(read_scale_row(&folder)?);
     }
-    Ok(rows)
+    Ok((rows, failures))
+}
+
+/// One run of `bench.config` at `size` Gaussians, and its figures.
+fn run_size(exe: &Path, bench: &ScaleBench, size: usize) -> Result<ScaleRow> {
+    let runs_dir = toml::Value::String(bench.runs_dir.display().to_string());
+    let mut command = Command::new(exe);
+    command.arg("run").arg(&bench.config).arg("--quiet");
+    command.args(["--set".into(), format!("scene.demo.gaussians={size}")]);
+    command.args(["--set", "output.verdict=\"warn\""]);
+    command.args(["--set".into(), format!("output.runs_dir={runs_dir}")]);
+    if let Some(iterations) = bench.iterations {
+        command.args(["--set".into(), format!("optimiser.iterations={iterations}")]);
+    }
+    for s in &bench.set {
+        command.args(["--set", s]);
+    }
+    let output = command
+        .output()
+        .with_context(|| format!("cannot start a run of {}", bench.config.display()))?;
+    if !output.status.success() {
+        bail!(
+            "the run of {} at {size} Gaussians failed: {}",
+            bench.config.display(),
+            String::from_utf8_lossy(&output.stderr).trim()
+        );
+    }
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let folder = stdout
+        .lines()
+        .last()
+        .map(|l| PathBuf::from(l.trim()))
+        .ok_or_else(|| anyhow!("the run at {size} Gaussians printed no folder"))?;
+    read_scale_row(&folder)
 }
 
 /// The rows as a table: per size the step time and its ratio to the first row's, the stages,

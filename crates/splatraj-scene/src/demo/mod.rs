@@ -58,9 +58,9 @@ pub const DEMO_UP: [f32; 3] = [0.0, 0.0, 1.0];
 pub const DEMO_VIEWPOINT: [f32; 3] = [-0.3, -1.8, 1.2];
 
 /// Gaussian counts [`demo_scene`] accepts; 50 000 to 200 000 is the intended range (fewer
-/// renders sparse, more only costs time). The top is the size of large real captures, so the
-/// demo can stand in for them in scale tests.
-pub const DEMO_GAUSSIANS_RANGE: RangeInclusive<usize> = 1_000..=6_000_000;
+/// renders sparse, more only costs time). The top is above the size of large real captures
+/// (3–6 M), so the demo can stand in for them in scale tests (`splatraj bench scale`).
+pub const DEMO_GAUSSIANS_RANGE: RangeInclusive<usize> = 1_000..=10_000_000;
 
 /// Height of the table's top surface above the floor (m).
 pub const DEMO_TABLE_TOP_Z: f32 = 0.75;
