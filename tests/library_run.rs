@@ -39,6 +39,7 @@ fn metrics_without_times(dir: &Path) -> serde_json::Value {
         "metrics_s",
         "frames_s",
         "total_s",
+        "peak_memory_mb",
     ] {
         v["run"].as_object_mut().unwrap().remove(key);
     }
