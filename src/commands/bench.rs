@@ -57,7 +57,14 @@ pub struct BenchScaleArgs {
     /// Optimisation steps per run (0: the config's own).
     #[arg(long, default_value_t = 10)]
     iterations: usize,
-    /// Override a config value in every run, e.g. `--set output.frames=10` (repeatable).
+    #[command(flatten)]
+    runs: ChildRunArgs,
+}
+
+/// What the benches that run whole configs (`splatraj run` in child processes) share.
+#[derive(Debug, Args)]
+pub struct ChildRunArgs {
+    /// Override a config value in every run, e.g. `--set output.width=320` (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
     /// Folder of the run folders (default: a fresh one under the system's temporary folder).
@@ -68,6 +75,15 @@ pub struct BenchScaleArgs {
     json: bool,
 }
 
+impl ChildRunArgs {
+    /// `--runs-dir`, or a fresh folder named `splatraj-{bench}-{pid}` in the temporary folder.
+    fn runs_dir(&self, bench: &str) -> PathBuf {
+        self.runs_dir.clone().unwrap_or_else(|| {
+            std::env::temp_dir().join(format!("splatraj-{bench}-{}", std::process::id()))
+        })
+    }
+}
+
 /// `splatraj bench scale`: the runs and their figures are the library's
 /// (`splatraj::experiment::bench_scale`); this prints them.
 fn scale(args: &BenchScaleArgs) -> Result<()> {
@@ -76,16 +92,14 @@ fn scale(args: &BenchScaleArgs) -> Result<()> {
         config: args.config.clone(),
         sizes: args.sizes.clone(),
         iterations: (args.iterations > 0).then_some(args.iterations),
-        set: args.set.clone(),
-        runs_dir: args.runs_dir.clone().unwrap_or_else(|| {
-            std::env::temp_dir().join(format!("splatraj-scale-{}", std::process::id()))
-        }),
+        set: args.runs.set.clone(),
+        runs_dir: args.runs.runs_dir("scale"),
     };
     let exe = std::env::current_exe().context("cannot find the splatraj binary to re-run")?;
     let (rows, failures) = run_scale(&exe, &bench, &mut |size| {
         eprintln!("running {} at {size} Gaussians …", bench.config.display())
     })?;
-    if args.json {
+    if args.runs.json {
         println!("{}", serde_json::to_string_pretty(&rows)?);
     } else {
         print!("{}", scale_table(&rows));
@@ -187,15 +201,8 @@ fn frames(args: &BenchFramesArgs) -> Result<()> {
 pub struct BenchFirstTryArgs {
     /// Configs to run (default: every `.toml` in `configs/first-try/`).
     configs: Vec<PathBuf>,
-    /// Override a config value in every run, e.g. `--set output.width=320` (repeatable).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    set: Vec<String>,
-    /// Folder of the run folders (default: a fresh one under the system's temporary folder).
-    #[arg(long)]
-    runs_dir: Option<PathBuf>,
-    /// Print one JSON array instead of a table.
-    #[arg(long)]
-    json: bool,
+    #[command(flatten)]
+    runs: ChildRunArgs,
 }
 
 /// `splatraj bench first-try`: the runs and their figures are the library's
@@ -210,16 +217,14 @@ fn first_try(args: &BenchFirstTryArgs) -> Result<()> {
         } else {
             args.configs.clone()
         },
-        set: args.set.clone(),
-        runs_dir: args.runs_dir.clone().unwrap_or_else(|| {
-            std::env::temp_dir().join(format!("splatraj-first-try-{}", std::process::id()))
-        }),
+        set: args.runs.set.clone(),
+        runs_dir: args.runs.runs_dir("first-try"),
     };
     let exe = std::env::current_exe().context("cannot find the splatraj binary to re-run")?;
     let runs = run_first_try(&exe, &bench, &mut |config| {
         eprintln!("running {} …", config.display())
     })?;
-    if args.json {
+    if args.runs.json {
         println!("{}", serde_json::to_string_pretty(&runs)?);
     } else {
         print!("{}", quality_table(&runs));

@@ -5,11 +5,12 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use anyhow::{Context, Result, anyhow, bail};
 use serde::Serialize;
 use serde_json::Value;
+
+use crate::quality::run_child;
 
 /// What `splatraj bench scale` runs.
 #[derive(Debug, Clone)]
@@ -84,8 +85,8 @@ pub fn read_scale_row(dir: &Path) -> Result<ScaleRow> {
     })
 }
 
-/// Runs `bench.config` at each size with `exe run CONFIG --quiet` (verdict only warning, so a
-/// run that misses its goals still reports) and reads each run folder; `starting` hears each
+/// Runs `bench.config` at each size ([`run_child`]: `exe run CONFIG --quiet`, verdict only
+/// warning) and reads each run folder; `starting` hears each
 /// size before it runs. A size whose run fails is reported among the failures (second) and the
 /// next size still runs.
 pub fn run_scale(
@@ -109,34 +110,12 @@ pub fn run_scale(
 
 /// One run of `bench.config` at `size` Gaussians, and its figures.
 fn run_size(exe: &Path, bench: &ScaleBench, size: usize) -> Result<ScaleRow> {
-    let runs_dir = toml::Value::String(bench.runs_dir.display().to_string());
-    let mut command = Command::new(exe);
-    command.arg("run").arg(&bench.config).arg("--quiet");
-    command.args(["--set".into(), format!("scene.demo.gaussians={size}")]);
-    command.args(["--set", "output.verdict=\"warn\""]);
-    command.args(["--set".into(), format!("output.runs_dir={runs_dir}")]);
+    let mut set = vec![format!("scene.demo.gaussians={size}")];
     if let Some(iterations) = bench.iterations {
-        command.args(["--set".into(), format!("optimiser.iterations={iterations}")]);
+        set.push(format!("optimiser.iterations={iterations}"));
     }
-    for s in &bench.set {
-        command.args(["--set", s]);
-    }
-    let output = command
-        .output()
-        .with_context(|| format!("cannot start a run of {}", bench.config.display()))?;
-    if !output.status.success() {
-        bail!(
-            "the run of {} at {size} Gaussians failed: {}",
-            bench.config.display(),
-            String::from_utf8_lossy(&output.stderr).trim()
-        );
-    }
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let folder = stdout
-        .lines()
-        .last()
-        .map(|l| PathBuf::from(l.trim()))
-        .ok_or_else(|| anyhow!("the run at {size} Gaussians printed no folder"))?;
+    set.extend(bench.set.iter().cloned());
+    let folder = run_child(exe, &bench.config, &bench.runs_dir, &set)?;
     read_scale_row(&folder)
 }
 

@@ -204,34 +204,41 @@ pub fn run_first_try(
     bench: &FirstTryBench,
     starting: &mut dyn FnMut(&Path),
 ) -> Result<Vec<RunQuality>> {
-    let runs_dir = toml::Value::String(bench.runs_dir.display().to_string());
     let mut runs = Vec::with_capacity(bench.configs.len());
     for config in &bench.configs {
         starting(config);
-        let mut command = Command::new(exe);
-        command.arg("run").arg(config).arg("--quiet");
-        command.args(["--set", "output.verdict=\"warn\""]);
-        command.args(["--set".to_string(), format!("output.runs_dir={runs_dir}")]);
-        for s in &bench.set {
-            command.args(["--set", s]);
-        }
-        let output = command
-            .output()
-            .with_context(|| format!("cannot start a run of {}", config.display()))?;
-        if !output.status.success() {
-            bail!(
-                "the run of {} failed: {}",
-                config.display(),
-                String::from_utf8_lossy(&output.stderr).trim()
-            );
-        }
-        let stdout = String::from_utf8_lossy(&output.stdout);
-        let folder = stdout
-            .lines()
-            .last()
-            .map(|l| PathBuf::from(l.trim()))
-            .ok_or_else(|| anyhow!("the run of {} printed no folder", config.display()))?;
+        let folder = run_child(exe, config, &bench.runs_dir, &bench.set)?;
         runs.push(read_run_quality(&folder)?);
     }
     Ok(runs)
+}
+
+/// Runs `exe run CONFIG --quiet` in a child process, its run folder in `runs_dir`, the
+/// verdict only warning (so that a run that misses its goals still reports), with the `--set`
+/// overrides `set`; returns the run folder (the last line the run prints).
+pub fn run_child(exe: &Path, config: &Path, runs_dir: &Path, set: &[String]) -> Result<PathBuf> {
+    let runs_dir = toml::Value::String(runs_dir.display().to_string());
+    let mut command = Command::new(exe);
+    command.arg("run").arg(config).arg("--quiet");
+    command.args(["--set", "output.verdict=\"warn\""]);
+    command.args(["--set".to_string(), format!("output.runs_dir={runs_dir}")]);
+    for s in set {
+        command.args(["--set", s]);
+    }
+    let output = command
+        .output()
+        .with_context(|| format!("cannot start a run of {}", config.display()))?;
+    if !output.status.success() {
+        bail!(
+            "the run of {} failed: {}",
+            config.display(),
+            String::from_utf8_lossy(&output.stderr).trim()
+        );
+    }
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    stdout
+        .lines()
+        .last()
+        .map(|l| PathBuf::from(l.trim()))
+        .ok_or_else(|| anyhow!("the run of {} printed no folder", config.display()))
 }
