@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use anyhow::Result;
 use clap::Args;
@@ -52,24 +52,40 @@ impl ReadArgs {
     }
 }
 
-/// Set by Ctrl-C: the optimisation stops at the end of the current step.
+/// Set by the first Ctrl-C or SIGTERM ([`install_stop_handler`]).
+static INTERRUPTED: OnceLock<Arc<AtomicBool>> = OnceLock::new();
+
+/// Set by Ctrl-C (or SIGTERM): the optimisation stops at the end of the current step.
 pub fn interrupt_flag() -> Arc<AtomicBool> {
-    let flag = Arc::new(AtomicBool::new(false));
-    let handler_flag = flag.clone();
-    // The first Ctrl-C asks for a clean stop; a second one quits at once, after removing the
-    // temporary files of writes in progress (files already written are whole, the others are
-    // not there; a run's checkpoint keeps its best trajectory). A second registration (tests
-    // calling twice in one process) fails; the run still works, only without the clean stop.
+    splatraj_scene::stop::honour();
+    stop_flag()
+}
+
+fn stop_flag() -> Arc<AtomicBool> {
+    INTERRUPTED
+        .get_or_init(|| Arc::new(AtomicBool::new(false)))
+        .clone()
+}
+
+/// Installs the one signal handler of the process (`main`, before any command). The first
+/// Ctrl-C or SIGTERM sets [`interrupt_flag`] and asks every loop of the library to stop at its
+/// next whole step ([`splatraj_scene::stop`]: optimisation steps, frames, study runs,
+/// benchmark children); a second one quits at once, after removing the temporary files of
+/// writes in progress (files already written are whole, the others are not there; a run's
+/// checkpoint keeps its best trajectory).
+/// Work that does not check for requests ([`splatraj_scene::stop::honour`]) ends at the first.
+pub fn install_stop_handler() {
+    let flag = stop_flag();
     let on_signal = move || {
-        if handler_flag.swap(true, Ordering::SeqCst) {
+        if flag.swap(true, Ordering::SeqCst) || !splatraj_scene::stop::honoured() {
             splatraj_scene::atomic::remove_partial_files();
             std::process::exit(EXIT_INTERRUPTED.into());
         }
+        splatraj_scene::stop::request();
     };
     if let Err(e) = ctrlc::set_handler(on_signal) {
-        tracing::warn!("Ctrl-C will not stop the run cleanly: {e}");
+        tracing::warn!("Ctrl-C will not stop the work cleanly: {e}");
     }
-    flag
 }
 
 /// Exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells expect).

@@ -95,6 +95,7 @@ fn main() -> ExitCode {
 
     let cli = Cli::parse();
     cli::install_lift_progress();
+    cli::install_stop_handler();
     // Threads: RAYON_NUM_THREADS, else one per core (rayon's rule).
     if let Err(error) = rayon::ThreadPoolBuilder::new()
         .stack_size(cli::WORKER_STACK_BYTES)
@@ -126,6 +127,10 @@ fn main() -> ExitCode {
             if let Some(ended) = error.downcast_ref::<cli::Ended>() {
                 eprintln!("{ended}");
                 ExitCode::from(ended.status())
+            } else if let Some(stopped) = error.downcast_ref::<splatraj_scene::stop::Stopped>() {
+                // Work cut short by Ctrl-C or SIGTERM: what was written is whole.
+                eprintln!("{stopped}");
+                ExitCode::from(cli::EXIT_INTERRUPTED)
             } else {
                 eprintln!("error: {}", message(&error));
                 ExitCode::FAILURE

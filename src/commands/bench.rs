@@ -294,6 +294,8 @@ pub fn run(command: BenchCommand) -> Result<()> {
         BenchCommand::Render(args) => {
             let bench = || match &args.one {
                 Some(spec) => {
+                    // A child of `bench render`: it must not outlive its parent.
+                    splatraj::experiment::children::exit_with_parent();
                     let row = run_one(&settings(&args), &BenchConfig::parse(spec)?)?;
                     println!("{}", serde_json::to_string(&row)?);
                     Ok(())
@@ -303,6 +305,7 @@ pub fn run(command: BenchCommand) -> Result<()> {
             let Some(threads) = args.threads else {
                 return bench(); // already on a worker of the global pool (`main`)
             };
+            splatraj::experiment::resources::check_threads("--threads", threads)?;
             // A pool of that size (the global one already runs this command), entered once so
             // the measured passes start their parallel loops from inside it, as `run` does.
             rayon::ThreadPoolBuilder::new()

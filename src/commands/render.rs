@@ -16,7 +16,7 @@ use serde::Serialize;
 use splatraj::experiment::io::read_camera_file;
 use splatraj::experiment::outputs::{npy_f32, write_bytes};
 use splatraj::experiment::probe::{MaskProbe, ProbeReport};
-use splatraj::experiment::resources::{MemoryLimit, MemoryPlan, render_bytes, scene_bytes};
+use splatraj::experiment::resources::{MemoryLimit, RenderWork};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera_file::resize;
 use splatraj_render::host::{OnDevice, to_host};
@@ -113,26 +113,21 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let intrinsics = resize(&camera.intrinsics, args.width, args.height)?;
     let limit = MemoryLimit::new(args.memory.max_memory)?;
     let scene = args.read.load(&args.scene)?.scene;
-    let float_bytes = dtype.size();
-    let mut plan = MemoryPlan::default();
-    plan.stage(
-        format!(
-            "a render of {} Gaussians at the camera's `width` × `height` (--width, --height) = \
-             {} × {}",
-            scene.len(),
-            intrinsics.width,
-            intrinsics.height
+    RenderWork {
+        what: format!(
+            "`--repeats` = {} renders of {} Gaussians at the camera's `width` × `height` \
+             (--width, --height)",
+            args.repeats,
+            scene.len()
         ),
-        scene_bytes(scene.len(), float_bytes)
-            + render_bytes(
-                1,
-                intrinsics.width as f64 * intrinsics.height as f64,
-                scene.len(),
-                args.grad,
-                float_bytes,
-            ),
-    );
-    plan.check(limit, "--max-memory GB")?;
+        renders: args.repeats as f64,
+        at_once: 1,
+        size: (intrinsics.width, intrinsics.height),
+        gaussians: scene.len(),
+        gradient: args.grad,
+        float_bytes: dtype.size(),
+    }
+    .check(limit, "--max-memory GB")?;
     let mask = match (&args.mask, &args.label) {
         (Some(path), _) => Some(read_mask_file(path, scene.len())?),
         (None, Some(label)) => {

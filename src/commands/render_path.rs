@@ -83,7 +83,7 @@ fn parse_overlay(s: &str) -> Result<MaskOverlay, String> {
 
 /// Whether `path` is an experiment config (a TOML table with `[scene]`) rather than a scene.
 fn is_config(path: &Path) -> bool {
-    std::fs::read_to_string(path)
+    splatraj_scene::input::read_text(path)
         .ok()
         .and_then(|text| toml::from_str::<toml::Table>(&text).ok())
         .is_some_and(|table| table.contains_key("scene"))

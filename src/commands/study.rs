@@ -216,6 +216,17 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
     let failed = failures.len();
     let study = StudyFile::new(plan, args.shard, context, rows, failures);
     write_study(&dir, &study)?;
+    if splatraj_scene::stop::requested() {
+        return Err(splatraj_scene::stop::Stopped {
+            what: format!(
+                "{} rows measured ({} runs planned), written to {}",
+                study.rows.len(),
+                study.plan.runs.len(),
+                dir.display()
+            ),
+        }
+        .into());
+    }
     if let Some(summary) = &study.summary
         && let Some(c) = summary.cheapest_within_5_percent
     {

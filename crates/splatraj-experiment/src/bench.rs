@@ -524,7 +524,14 @@ pub fn run_render_bench(
     };
     let mut rows = Vec::new();
     let mut failures = Vec::new();
+    splatraj_scene::stop::honour();
     for (i, config) in configs.iter().enumerate() {
+        if splatraj_scene::stop::requested() {
+            return Err(splatraj_scene::stop::Stopped {
+                what: format!("{i} of {} configurations measured", configs.len()),
+            }
+            .into());
+        }
         if config.is_slow() && !grid.all {
             rows.push(config.skipped_row(settings, "slow; run with --all"));
             continue;
@@ -545,9 +552,10 @@ pub fn run_render_bench(
         if let Some(scene) = &settings.scene {
             child.arg("--scene").arg(scene);
         }
-        let output = child
-            .output()
-            .map_err(|e| anyhow!("cannot start a benchmark process: {e}"))?;
+        let output = crate::children::output_until_stopped(
+            &mut child,
+            &format!("the benchmark process of {}", config.spec()),
+        )?;
         let stdout = String::from_utf8_lossy(&output.stdout);
         let parsed = stdout
             .lines()

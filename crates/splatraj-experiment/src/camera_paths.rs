@@ -17,6 +17,7 @@ use splatraj_traj::optimise::sampling::window_of;
 use splatraj_traj::trajectory::{Basis, TrajectoryRecord, uniform_times};
 
 use crate::outputs::write_bytes;
+use crate::resources::check_path_frames;
 
 /// Frames per second when neither the command line, the run's config nor the file says.
 pub const DEFAULT_FPS: f64 = 30.0;
@@ -133,7 +134,7 @@ impl RunTrajectory {
         } else {
             path.to_path_buf()
         };
-        let text = std::fs::read_to_string(&file)
+        let text = splatraj_scene::input::read_text(&file)
             .with_context(|| format!("cannot read the trajectory {}", file.display()))?;
         Self::parse(&file, &text)
     }
@@ -198,10 +199,22 @@ impl RunTrajectory {
             .or(self.run_frames.map(|r| r.0))
             .unwrap_or(DEFAULT_FPS);
         let count = match (request.seconds, self.run_frames) {
-            (Some(s), _) => ((fps * s).round() as usize).max(1),
-            (None, Some((_, frames))) => frames,
-            (None, None) => ((fps * DEFAULT_SECONDS).round() as usize).max(1),
+            (Some(s), _) => (fps * s).round().max(1.0),
+            (None, Some((_, frames))) => frames as f64,
+            (None, None) => (fps * DEFAULT_SECONDS).round().max(1.0),
         };
+        // Sized by the options, the run's config and the file's model: checked before the
+        // times and the basis matrix (frames × basis functions) are made.
+        check_path_frames(
+            &format!(
+                "the path of {} (`--fps` × `--seconds`, or the run's `output.fps`, \
+                 `output.seconds`, `output.frames`; the model's basis functions)",
+                self.file.display()
+            ),
+            count,
+            self.record.model.count(),
+        )?;
+        let count = count as usize;
         let camera = resize(&self.output_intrinsics, request.width, request.height)?;
         let (times, poses) = match self.poses_at(&uniform_times(count)) {
             Some(poses) => (uniform_times(count), poses),
@@ -234,7 +247,7 @@ impl RunTrajectory {
 
 /// The frame rate and frame count of the run whose `config.toml` is in `folder`.
 fn run_frames(folder: &Path) -> Option<(f64, usize)> {
-    let text = std::fs::read_to_string(folder.join("config.toml")).ok()?;
+    let text = splatraj_scene::input::read_text(&folder.join("config.toml")).ok()?;
     let config: toml::Value = toml::from_str(&text).ok()?;
     let output = config.get("output")?;
     let fps = output
@@ -269,7 +282,7 @@ impl PathFile {
     /// `splatraj-report` reads (told apart by their contents).
     pub fn read(path: &Path) -> Result<Self> {
         let ours = path.is_dir() || {
-            let text = std::fs::read_to_string(path).unwrap_or_default();
+            let text = splatraj_scene::input::read_text(path).unwrap_or_default();
             serde_json::from_str::<serde_json::Value>(&text)
                 .is_ok_and(|v| v.get("model").is_some() && v.get("weights").is_some())
         };

@@ -65,7 +65,7 @@ impl Checkpoint {
     /// Reads `RUN_DIR/checkpoint.json`; errors name the file.
     pub fn read(run_dir: &Path) -> Result<Checkpoint> {
         let path = run_dir.join(CHECKPOINT_FILE);
-        let text = std::fs::read_to_string(&path).with_context(|| {
+        let text = splatraj_scene::input::read_text(&path).with_context(|| {
             format!(
                 "cannot read {} (a run that stopped before its first step has none: start it \
                  again)",

@@ -8,7 +8,7 @@ use splatraj_render::camera_file::{CameraFile, CameraSpec};
 /// Reads and checks a camera JSON file (schema: [`splatraj_render::camera_file`]); errors
 /// name the file and the key.
 pub fn read_camera_file(path: &Path) -> Result<CameraSpec> {
-    let text = std::fs::read_to_string(path)
+    let text = splatraj_scene::input::read_text(path)
         .with_context(|| format!("cannot read the camera file {}", path.display()))?;
     // serde names the unknown or missing key and lists the expected ones; the path says which
     // key a wrong value or length is at.

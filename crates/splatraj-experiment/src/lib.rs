@@ -30,6 +30,7 @@ pub mod bench_scale;
 pub mod bench_scenes;
 pub mod camera_paths;
 pub mod checkpoint;
+pub mod children;
 pub mod config;
 pub mod experiment;
 pub mod extensions;

@@ -1,11 +1,15 @@
-//! The peak memory of a prepared experiment's work, stage by stage: `splatraj run`'s
-//! optimisation, model and outputs, `splatraj pose`'s restarts and chains, from the per-item
-//! costs of [`crate::resources`].
+//! The peak memory and the time of a prepared experiment's work, stage by stage: `splatraj
+//! run`'s optimisation, history, model and outputs, `splatraj pose`'s restarts and chains,
+//! from the per-item costs of [`crate::resources`].
 
 use anyhow::Result;
 
 use crate::experiment::Experiment;
-use crate::resources::{MemoryLimit, MemoryPlan, basis_bytes, render_bytes, scene_bytes};
+use crate::resources::{
+    HISTORY_BYTES_PER_WINDOW_STEP, MAX_STEPS_PER_SECOND, MemoryLimit, MemoryPlan,
+    RESTART_BYTES_PER_BASIS, TimePlan, basis_bytes, pixels, render_bytes, render_seconds,
+    scene_bytes,
+};
 
 impl Experiment {
     /// The memory limit of this experiment's work (`max_memory_gb`, else the default share).
@@ -73,12 +77,14 @@ impl Experiment {
         );
         let basis = self.model()?.basis().count();
         let output = &self.config.output;
+        let optimiser = &self.config.optimiser;
         let samples = [
             splatraj_traj::optimise::start::START_FIT_SAMPLES,
             output.trajectory_samples,
             output.ldj_samples,
             output.frame_count(windows),
             windows.saturating_mul(spw),
+            windows.saturating_mul(optimiser.path_samples),
         ]
         .into_iter()
         .max()
@@ -86,12 +92,115 @@ impl Experiment {
         plan.stage(
             format!(
                 "the trajectory model (`trajectory`): {basis} basis functions sampled at {samples} \
-                 times (`output.trajectory_samples`, `output.ldj_samples`, `output.frames`)"
+                 times (`output.trajectory_samples`, `output.ldj_samples`, `output.frames`, \
+                 `output.fps` × `output.seconds`, `optimiser.path_samples`)"
             ),
             base + basis_bytes(basis, samples),
         );
+        // Every step of every restart keeps a history row per window; a time limit caps the
+        // steps that can run.
+        let restarts = self.config.start.restarts.max(1);
+        let steps = restarts as f64 * optimiser.iterations as f64;
+        let steps = match optimiser.time_limit_s {
+            Some(limit) => steps.min(limit * MAX_STEPS_PER_SECOND),
+            None => steps,
+        };
+        plan.stage(
+            format!(
+                "the optimisation's history and starts: `start.restarts` × \
+                 `optimiser.iterations` = {restarts} × {} steps (fewer under \
+                 `optimiser.time_limit_s`) of {windows} windows, {basis} basis functions each",
+                optimiser.iterations
+            ),
+            base + steps * windows as f64 * HISTORY_BYTES_PER_WINDOW_STEP
+                + restarts as f64 * basis as f64 * RESTART_BYTES_PER_BASIS,
+        );
         self.output_stages(&mut plan, self.config.output.metric_samples);
         Ok(plan)
+    }
+
+    /// A lower bound of the time of `splatraj run`: the optimisation (bounded by
+    /// `optimiser.time_limit_s`), and what comes before and after it (the start views, the
+    /// metrics and the frames, which nothing bounds).
+    pub fn trajectory_time(&self) -> (TimePlan, TimePlan) {
+        let windows = self.windows.len() as f64;
+        let optimiser = &self.config.optimiser;
+        let restarts = self.config.start.restarts.max(1) as f64;
+        let steps = restarts * optimiser.iterations as f64;
+        let camera = &self.config.camera;
+        let mut optimisation = TimePlan::default();
+        optimisation.item(
+            format!(
+                "the optimisation: `start.restarts` × `optimiser.iterations` = {restarts} × {} \
+                 steps of {windows} windows × `optimiser.samples_per_window` = {} renders at \
+                 `camera.width` × `camera.height` = {} × {}",
+                optimiser.iterations, optimiser.samples_per_window, camera.width, camera.height
+            ),
+            steps * MIN_SECONDS_PER_STEP
+                + render_seconds(
+                    steps * windows * optimiser.samples_per_window as f64,
+                    pixels(camera.width, camera.height),
+                ),
+        );
+        let output = &self.config.output;
+        let frames = output.frame_count(self.windows.len()) as f64;
+        let mut rest = TimePlan::default();
+        let start = &self.config.start;
+        if start.kind == crate::config::StartKind::Search
+            && start.pose.is_none()
+            && start.trajectory.is_none()
+        {
+            // Each restart picks its start views among every window's candidates, avoiding
+            // the ones earlier restarts took: quadratic in the restarts (measured 1.5 µs ×
+            // restarts² per window).
+            rest.item(
+                format!(
+                    "choosing the start views (`start.kind` = \"search\") of `start.restarts` = \
+                     {restarts} restarts"
+                ),
+                restarts * restarts * windows * 1e-7,
+            );
+        }
+        // Measured 50 µs per restart (object and random starts).
+        rest.item(
+            format!("the starts of `start.restarts` = {restarts} restarts"),
+            restarts * windows * 1e-5,
+        );
+        rest.item(
+            format!(
+                "the metrics and frames: `output.metric_samples` = {} and {frames} frames \
+                 (`output.frames`, `output.fps` × `output.seconds`) at `output.width` × \
+                 `output.height` = {} × {}",
+                output.metric_samples, output.width, output.height
+            ),
+            render_seconds(
+                2.0 * output.metric_samples as f64 + frames,
+                pixels(output.width, output.height),
+            ),
+        );
+        (optimisation, rest)
+    }
+
+    /// A lower bound of the time of `splatraj pose` with `chains` SGLD chains.
+    pub fn pose_time(&self, chains: usize) -> TimePlan {
+        let restarts = self.config.start.restarts.max(1) as f64;
+        let iterations = self.config.pose.optimiser.iterations as f64;
+        let camera = &self.config.camera;
+        let mut time = TimePlan::default();
+        time.item(
+            format!(
+                "the pose optimisation: `pose.optimiser.iterations` = {iterations} steps of \
+                 `start.restarts` (--restarts) = {restarts} renders at `camera.width` × \
+                 `camera.height` = {} × {}",
+                camera.width, camera.height
+            ),
+            iterations * MIN_SECONDS_PER_STEP
+                + render_seconds(
+                    iterations * (restarts + chains as f64),
+                    pixels(camera.width, camera.height),
+                ),
+        );
+        time
     }
 
     /// Peak memory of `splatraj pose` with `chains` SGLD chains (0: none), stage by stage.

@@ -27,6 +27,7 @@ use splatraj_traj::optimise::sampling::window_of;
 use crate::camera_paths::PathFrames;
 use crate::config::MaskOverlay;
 use crate::outputs::{TINT_ALPHA, write_bytes, write_csv};
+use crate::resources::{MemoryLimit, RenderWork};
 
 /// One window's object: the Gaussians to measure (and tint) in the frames of its window.
 #[derive(Debug, Clone, Copy)]
@@ -192,6 +193,11 @@ pub fn render_path_with(
     if frames.poses.is_empty() {
         bail!("the path has no frames");
     }
+    // Only a stop requested from now on cuts the frames short (a run stopped while it
+    // optimised still renders the frames of its best trajectory).
+    let since = splatraj_scene::stop::Since::now();
+    splatraj_scene::stop::honour();
+    check_path_render(scene.len(), job, schedule)?;
     let size = (frames.cameras[0].width, frames.cameras[0].height);
     let encoder = match job.video {
         Video::Mp4 => {
@@ -244,7 +250,7 @@ pub fn render_path_with(
             let metrics = render_frames(
                 scene,
                 job,
-                1,
+                (1, since),
                 &keyframes,
                 &mut timings,
                 progress,
@@ -265,7 +271,7 @@ pub fn render_path_with(
             let rendered = render_frames(
                 scene,
                 job,
-                batch,
+                (batch, since),
                 &keyframes,
                 &mut timings,
                 progress,
@@ -322,6 +328,40 @@ pub fn render_path_with(
         video,
         timings,
     })
+}
+
+/// Refuses frames too large for the memory, or too many for the time, before any is
+/// rendered (their count and size come from options or from the path file).
+fn check_path_render(
+    gaussians: usize,
+    job: &PathRender<'_>,
+    schedule: FrameSchedule,
+) -> Result<()> {
+    let frames = job.frames;
+    let size = frames
+        .cameras
+        .iter()
+        .map(|k| (k.width, k.height))
+        .max_by(|a, b| (a.0 as f64 * a.1 as f64).total_cmp(&(b.0 as f64 * b.1 as f64)))
+        .unwrap_or((1, 1));
+    let at_once = match schedule {
+        FrameSchedule::Sequential => 1,
+        FrameSchedule::Pipelined { batch } => batch.max(1),
+    };
+    RenderWork {
+        what: format!(
+            "{} frames (`--fps` × `--seconds`, or the path file's) of {gaussians} Gaussians at \
+             the largest frame size (`--width` × `--height`, or the path file's)",
+            frames.poses.len()
+        ),
+        renders: frames.poses.len() as f64,
+        at_once,
+        size,
+        gaussians,
+        gradient: false,
+        float_bytes: 4,
+    }
+    .check(MemoryLimit::new(None)?, "")
 }
 
 /// One rendered frame on its way to the files.
@@ -386,7 +426,7 @@ impl FrameWriter {
 fn render_frames(
     scene: &DeviceScene,
     job: &PathRender<'_>,
-    batch: usize,
+    (batch, since): (usize, splatraj_scene::stop::Since),
     keyframes: &[usize],
     timings: &mut PathTimings,
     progress: &mut dyn FnMut(usize),
@@ -473,6 +513,17 @@ fn render_frames(
                 keyframe,
             })?;
             progress(index + 1);
+            // A whole frame is the boundary: what was delivered gets written whole.
+            if since.stopped() && index + 1 < frames.poses.len() {
+                return Err(splatraj_scene::stop::Stopped {
+                    what: format!(
+                        "the first {} of {} frames are written, no video",
+                        index + 1,
+                        frames.poses.len()
+                    ),
+                }
+                .into());
+            }
         }
         first = end;
     }

@@ -137,7 +137,7 @@ impl ProbeReport {
 
 /// Median of `runs` timings of `f`, in milliseconds.
 pub fn median_ms(runs: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
-    let mut times = Vec::with_capacity(runs);
+    let mut times = Vec::with_capacity(runs.min(1 << 16));
     for _ in 0..runs.max(1) {
         let start = Instant::now();
         f()?;

@@ -36,7 +36,7 @@ use crate::experiment::Experiment;
 use crate::observer::{Observer, Phase, Progress};
 use crate::outputs::{FrameSpec, create_run_dir, frame_png, write_bytes, write_csv, write_json};
 use crate::records::{PoseFile, pose_history, sgld_samples, trajectory_history};
-use crate::resources::{MemoryPlan, RAISE_LIMIT};
+use crate::resources::{MemoryPlan, RAISE_LIMIT, TimeBound};
 use crate::run_folder::{
     MetricsFile, RunReport, StageTimes, check_writable, remove_checkpoint, remove_partial_files,
 };
@@ -277,6 +277,12 @@ impl Experiment {
         self.costs()?;
         let memory = self.trajectory_memory()?;
         memory.check(self.memory_limit()?, RAISE_LIMIT)?;
+        let (optimisation, rest) = self.trajectory_time();
+        optimisation.check(TimeBound::Key {
+            key: "`optimiser.time_limit_s`",
+            seconds: self.config.optimiser.time_limit_s,
+        })?;
+        rest.check(TimeBound::Unbounded)?;
         let restarts = self.start_trajectories()?.len();
         if !resuming {
             check_writable(&self.config.output.runs_dir.join(&self.config.name))?;
@@ -359,6 +365,8 @@ impl Experiment {
         }
         let memory = self.pose_memory(sgld.unwrap_or(0));
         memory.check(self.memory_limit()?, RAISE_LIMIT)?;
+        self.pose_time(sgld.unwrap_or(0))
+            .check(TimeBound::Unbounded)?;
         self.pose_costs()?;
         self.pose_starts()?;
         Ok(RunPlan {

@@ -62,11 +62,11 @@ impl RunQuality {
 /// The figures of the run folder `dir` (its `metrics.json` and `config.toml`).
 pub fn read_run_quality(dir: &Path) -> Result<RunQuality> {
     let path = dir.join("metrics.json");
-    let text = std::fs::read_to_string(&path)
+    let text = splatraj_scene::input::read_text(&path)
         .with_context(|| format!("cannot read {}", path.display()))?;
     let metrics: Value = serde_json::from_str(&text)
         .with_context(|| format!("{} is not valid JSON", path.display()))?;
-    let config: toml::Table = std::fs::read_to_string(dir.join("config.toml"))
+    let config: toml::Table = splatraj_scene::input::read_text(&dir.join("config.toml"))
         .ok()
         .and_then(|t| toml::from_str(&t).ok())
         .unwrap_or_default();

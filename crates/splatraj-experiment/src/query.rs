@@ -26,6 +26,7 @@ use splatraj_semantic::{
 use crate::config::{Config, apply_assignment};
 use crate::experiment::load_scene;
 use crate::extensions::Extensions;
+use crate::resources::{MemoryLimit, RenderWork};
 use crate::views::{
     CameraReport, FOV_X_DEGREES, ViewOptions, diagnostic_camera, highlighted_picture,
     highlighted_png,
@@ -73,6 +74,16 @@ impl PictureOptions {
         if width == 0 || height == 0 {
             bail!("width and height must be at least 1 (got {width}×{height})");
         }
+        RenderWork {
+            what: "a picture".to_string(),
+            renders: 1.0,
+            at_once: 1,
+            size: (width, height),
+            gaussians: 0,
+            gradient: false,
+            float_bytes: 4,
+        }
+        .check(MemoryLimit::new(None)?, "")?;
         let elevation = view.elevation_degrees;
         if !(elevation.is_finite() && elevation.abs() <= 89.0) {
             bail!(

@@ -103,7 +103,7 @@ impl MemoryPlan {
     }
 
     /// Errors when a stage exceeds `limit`, naming the stage, the estimate and the limit, and
-    /// how to raise it (`raise`: the key or option that does).
+    /// how to raise it (`raise`: the key or option that does; empty when none does).
     pub fn check(&self, limit: MemoryLimit, raise: &str) -> Result<()> {
         if let Some(stage) = self.peak()
             // NaN (a size beyond any float) does not fit either.
@@ -120,9 +120,14 @@ impl MemoryPlan {
                     100.0 * DEFAULT_MEMORY_FRACTION
                 )
             };
+            let raise = if raise.is_empty() {
+                String::new()
+            } else {
+                format!(", or raise the limit with {raise}")
+            };
             bail!(
                 "{} needs about {} of memory, more than the limit of {} ({source}); make it \
-                 smaller, or raise the limit with {raise}",
+                 smaller{raise}",
                 stage.what,
                 show_bytes(stage.bytes),
                 show_bytes(limit.bytes)
@@ -178,6 +183,231 @@ pub fn show_bytes(bytes: f64) -> String {
         return "more than any machine holds".to_string();
     }
     format!("{value:.1} {}", UNITS[unit])
+}
+
+/// Bytes a frame of a camera path holds before it is rendered (time, pose, camera, and its
+/// share of the exported files' text).
+pub const PATH_BYTES_PER_FRAME: f64 = 512.0;
+/// Bytes per optimisation step and window kept in the history (the cost terms, the pose).
+pub const HISTORY_BYTES_PER_WINDOW_STEP: f64 = 256.0;
+/// Bytes per restart and basis function (the start, the best weights, Adam's two moments).
+pub const RESTART_BYTES_PER_BASIS: f64 = 4.0 * 6.0 * 8.0;
+/// Bytes of one run of a study's plan (its entry, its row, its share of the summary).
+pub const STUDY_BYTES_PER_RUN: f64 = 2048.0;
+/// Bytes of one worker thread (its stack, [`WORKER_STACK_BYTES`]).
+pub const WORKER_STACK_BYTES: f64 = 8.0 * 1024.0 * 1024.0;
+/// Steps per second no optimisation exceeds (for the steps a time limit lets run).
+pub const MAX_STEPS_PER_SECOND: f64 = 1000.0;
+
+/// Time no render of one pose takes less than, per pixel (a lower bound: 1000 Mpixel/s).
+pub const MIN_SECONDS_PER_PIXEL: f64 = 1e-9;
+/// Time no render of one pose takes less than, whatever its size (the tens of tensor
+/// operations of a pass, each at least microseconds).
+pub const MIN_SECONDS_PER_RENDER: f64 = 1e-4;
+/// Time no optimisation step takes less than (the renders, a backward pass, Adam).
+pub const MIN_SECONDS_PER_STEP: f64 = 1e-3;
+/// Time no study run takes less than (a process, a scene, a step, the metrics).
+pub const MIN_SECONDS_PER_STUDY_RUN: f64 = 0.1;
+/// Above this estimate the work is announced with a warning.
+pub const WARN_SECONDS: f64 = 3600.0;
+/// Above this estimate (a lower bound) work without a time limit is refused.
+pub const MAX_SECONDS: f64 = 24.0 * 3600.0;
+
+/// The time of a piece of work: a lower bound, item by item, from its sizes.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TimePlan {
+    /// Each item: what it is (naming the keys or options that size it) and its seconds.
+    pub items: Vec<(String, f64)>,
+}
+
+/// How the time of a piece of work is bounded.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TimeBound<'a> {
+    /// Nothing stops it but its end.
+    Unbounded,
+    /// A key stops it after its seconds (when set).
+    Key {
+        /// The key or option (e.g. `optimiser.time_limit_s`).
+        key: &'a str,
+        /// Its value, if set.
+        seconds: Option<f64>,
+    },
+}
+
+impl TimePlan {
+    /// Adds an item.
+    pub fn item(&mut self, what: impl Into<String>, seconds: f64) -> &mut Self {
+        self.items.push((what.into(), seconds));
+        self
+    }
+
+    /// The sum of the items.
+    pub fn total(&self) -> f64 {
+        self.items.iter().map(|(_, s)| s).sum()
+    }
+
+    /// The largest item's description.
+    fn largest(&self) -> &str {
+        self.items
+            .iter()
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .map_or("the work", |(w, _)| w.as_str())
+    }
+
+    /// Errors when the work would take more than [`MAX_SECONDS`] and `bound` does not stop it,
+    /// naming the largest item, the estimate and the limit; warns (on the log) above
+    /// [`WARN_SECONDS`]. Returns the warning, if any.
+    pub fn check(&self, bound: TimeBound<'_>) -> Result<Option<String>> {
+        let total = self.total();
+        let limit = match bound {
+            TimeBound::Key {
+                seconds: Some(s), ..
+            } => Some(s),
+            _ => None,
+        };
+        let estimate = format!("at least {}", show_seconds(total));
+        let fits = total.partial_cmp(&MAX_SECONDS) == Some(std::cmp::Ordering::Less);
+        if limit.is_none() && !fits {
+            let raise = match bound {
+                TimeBound::Key { key, .. } => format!(", or bound it with {key}"),
+                TimeBound::Unbounded => String::new(),
+            };
+            bail!(
+                "{} would take {estimate}, more than the {} splatraj starts without a time \
+                 limit; make it smaller{raise}",
+                self.largest(),
+                show_seconds(MAX_SECONDS)
+            );
+        }
+        if total.partial_cmp(&WARN_SECONDS) != Some(std::cmp::Ordering::Greater) {
+            return Ok(None);
+        }
+        let warning = match (bound, limit) {
+            (TimeBound::Key { key, .. }, Some(s)) if s < total => format!(
+                "{} would take {estimate}: {key} = {s} stops it before",
+                self.largest()
+            ),
+            _ => format!("{} will take {estimate}", self.largest()),
+        };
+        tracing::warn!("{warning}");
+        Ok(Some(warning))
+    }
+}
+
+/// `3.2 s`, `4.5 min`, `7.1 h`, `12 days`.
+pub fn show_seconds(seconds: f64) -> String {
+    if !seconds.is_finite() {
+        "longer than any machine runs".to_string()
+    } else if seconds < 60.0 {
+        format!("{seconds:.1} s")
+    } else if seconds < 3600.0 {
+        format!("{:.1} min", seconds / 60.0)
+    } else if seconds < 86400.0 * 2.0 {
+        format!("{:.1} h", seconds / 3600.0)
+    } else {
+        format!("{:.0} days", seconds / 86400.0)
+    }
+}
+
+/// A lower bound of the time of `renders` renders of `pixels` pixels each.
+pub fn render_seconds(renders: f64, pixels: f64) -> f64 {
+    renders * (MIN_SECONDS_PER_RENDER + pixels * MIN_SECONDS_PER_PIXEL)
+}
+
+/// `width × height` as a float (no overflow).
+pub fn pixels(width: usize, height: usize) -> f64 {
+    width as f64 * height as f64
+}
+
+/// Renders of one size, sized by options or a file, checked before any work: `what` names
+/// what sizes them (e.g. "`--repeats` = 1000000000 renders at `--width` × `--height`").
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderWork {
+    /// What the renders are, naming the keys, options or file that size them.
+    pub what: String,
+    /// How many renders in all.
+    pub renders: f64,
+    /// How many are held at once.
+    pub at_once: usize,
+    /// Width and height of each.
+    pub size: (usize, usize),
+    /// Gaussians of the scene (0 when not known yet: the scene is checked when read).
+    pub gaussians: usize,
+    /// With a pose gradient or not.
+    pub gradient: bool,
+    /// Bytes per float (4 or 8).
+    pub float_bytes: usize,
+}
+
+impl RenderWork {
+    /// The memory of the renders held at once, and the time of them all.
+    pub fn plans(&self) -> (MemoryPlan, TimePlan) {
+        let (w, h) = self.size;
+        let mut memory = MemoryPlan::default();
+        memory.stage(
+            format!("{} ({} × {} pixels)", self.what, w, h),
+            scene_bytes(self.gaussians, self.float_bytes)
+                + render_bytes(
+                    self.at_once,
+                    pixels(w, h),
+                    self.gaussians,
+                    self.gradient,
+                    self.float_bytes,
+                ),
+        );
+        let mut time = TimePlan::default();
+        time.item(
+            format!("{} ({} × {} pixels)", self.what, w, h),
+            render_seconds(self.renders, pixels(w, h)),
+        );
+        (memory, time)
+    }
+
+    /// Errors when the renders do not fit `limit` (raised by `raise`) or would take more than
+    /// [`MAX_SECONDS`]; warns when long.
+    pub fn check(&self, limit: MemoryLimit, raise: &str) -> Result<()> {
+        let (memory, time) = self.plans();
+        memory.check(limit, raise)?;
+        time.check(TimeBound::Unbounded)?;
+        Ok(())
+    }
+}
+
+/// Errors when `frames` frames sampled from a model of `basis` functions (0: the file's own
+/// frames) do not fit the default memory limit; `what` names what sizes them.
+pub fn check_path_frames(what: &str, frames: f64, basis: usize) -> Result<()> {
+    let mut plan = MemoryPlan::default();
+    plan.stage(
+        format!("{what}: {frames} frames from {basis} basis functions"),
+        BASE_BYTES + frames * (PATH_BYTES_PER_FRAME + 8.0 * basis as f64),
+    );
+    plan.check(MemoryLimit::new(None)?, "")
+}
+
+/// Errors when `threads` worker threads do not fit the default memory limit.
+pub fn check_threads(what: &str, threads: usize) -> Result<()> {
+    let mut plan = MemoryPlan::default();
+    plan.stage(
+        format!("{what} = {threads} worker threads"),
+        BASE_BYTES + threads as f64 * WORKER_STACK_BYTES,
+    );
+    plan.check(MemoryLimit::new(None)?, "")
+}
+
+/// Errors when a study of `runs` runs (`variants` × `--seeds`) does not fit the default
+/// memory limit or would take more than [`MAX_SECONDS`]; warns when long.
+pub fn check_study(variants: f64, seeds: usize, runs: f64) -> Result<()> {
+    let what = format!(
+        "a study of {runs} runs ({variants} variants of `--vary`, `study.vary` and `--grid` × \
+         `--seeds` = {seeds})"
+    );
+    let mut memory = MemoryPlan::default();
+    memory.stage(what.clone(), BASE_BYTES + runs * STUDY_BYTES_PER_RUN);
+    memory.check(MemoryLimit::new(None)?, "")?;
+    let mut time = TimePlan::default();
+    time.item(what, runs * MIN_SECONDS_PER_STUDY_RUN);
+    time.check(TimeBound::Unbounded)?;
+    Ok(())
 }
 
 /// The key and option that raise the limit, for messages.

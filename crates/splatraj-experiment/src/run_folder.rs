@@ -139,7 +139,7 @@ pub fn resumable(dir: &Path, overrides: &[String]) -> Result<(Config, Checkpoint
 
 /// Whether `metrics.json` says its run finished.
 fn finished(metrics: &Path) -> bool {
-    std::fs::read_to_string(metrics)
+    splatraj_scene::input::read_text(metrics)
         .ok()
         .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
         .is_some_and(|v| v["run"]["stop"] == "finished")

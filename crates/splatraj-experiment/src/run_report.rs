@@ -51,7 +51,7 @@ pub fn run_report(dir: &Path, scene: Option<&Scene>) -> Result<RunReport> {
     if !dir.is_dir() {
         bail!("{} is not a run folder", dir.display());
     }
-    let config = std::fs::read_to_string(dir.join("config.toml")).unwrap_or_default();
+    let config = splatraj_scene::input::read_text(&dir.join("config.toml")).unwrap_or_default();
     let metrics = read_json(&dir.join("metrics.json"))?;
     let trajectory = read_json(&dir.join("trajectory.json"))?;
     let title = toml::from_str::<toml::Value>(&config)
@@ -78,7 +78,7 @@ pub fn run_report(dir: &Path, scene: Option<&Scene>) -> Result<RunReport> {
 }
 
 fn read_json(path: &Path) -> Result<Value> {
-    match std::fs::read_to_string(path) {
+    match splatraj_scene::input::read_text(path) {
         Ok(text) => serde_json::from_str(&text)
             .with_context(|| format!("{} is not valid JSON", path.display())),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Value::Null),
@@ -197,7 +197,7 @@ fn windows_of(trajectory: &Value) -> Vec<Window> {
 }
 
 fn read_csv(path: &Path) -> Result<Option<Csv>> {
-    let text = match std::fs::read_to_string(path) {
+    let text = match splatraj_scene::input::read_text(path) {
         Ok(text) => text,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(e).with_context(|| format!("cannot read {}", path.display())),
@@ -324,7 +324,7 @@ fn keyframes(dir: &Path, along: &[FrameMetrics], windows: usize) -> Result<Vec<V
                     };
                     Ok(Keyframe {
                         t: times[i],
-                        png: std::fs::read(&path)
+                        png: splatraj_scene::input::read_bytes(&path)
                             .with_context(|| format!("cannot read {}", path.display()))?,
                         name,
                     })
@@ -341,7 +341,8 @@ fn video_of(dir: &Path) -> Result<Option<VideoSource>> {
     };
     Ok(Some(if meta.len() as usize <= INLINE_VIDEO_BYTES {
         VideoSource::Inline(
-            std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?,
+            splatraj_scene::input::read_bytes(&path)
+                .with_context(|| format!("cannot read {}", path.display()))?,
         )
     } else {
         VideoSource::Link(VIDEO_FILE.into())
@@ -412,7 +413,7 @@ fn scene_view(scene: &Scene, trajectory: &Value) -> SceneView {
 /// for where the run found it (`metrics.json`'s `run.scene`), then as the config names it from
 /// the working directory and from the run folder.
 pub fn run_scene(dir: &Path) -> Result<Scene> {
-    let text = std::fs::read_to_string(dir.join("config.toml"))
+    let text = splatraj_scene::input::read_text(&dir.join("config.toml"))
         .with_context(|| format!("cannot read {}", dir.join("config.toml").display()))?;
     let config: toml::Value = toml::from_str(&text)
         .with_context(|| format!("{}: not valid TOML", dir.join("config.toml").display()))?;

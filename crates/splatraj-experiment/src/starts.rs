@@ -32,7 +32,7 @@ impl Experiment {
         let (device, dtype) = (&self.device, self.dtype);
         if let Some(file) = &config.start.trajectory {
             let path = config.resolve(file);
-            let text = std::fs::read_to_string(&path)
+            let text = splatraj_scene::input::read_text(&path)
                 .with_context(|| format!("`start.trajectory`: cannot read {}", path.display()))?;
             let record: TrajectoryRecord = match serde_json::from_str(&text) {
                 Ok(record) => record,

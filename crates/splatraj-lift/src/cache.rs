@@ -122,7 +122,7 @@ pub fn write(path: &Path, key: &str, field: &LiftedField) -> Result<()> {
 /// Reads the field stored under `key` for a scene of `n` Gaussians; `Ok(None)` when there is
 /// no such file, an error when it exists but does not hold that field.
 pub fn read(path: &Path, key: &str, n: usize) -> Result<Option<LiftedField>> {
-    let data = match std::fs::read(path) {
+    let data = match splatraj_scene::input::read_bytes(path) {
         Ok(data) => data,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(LiftError::file(path, e)),

@@ -258,8 +258,8 @@ fn listed(names: &[String]) -> String {
 
 /// Width, height and pixels of the PNG at `path`.
 fn decode(path: &Path) -> Result<(usize, usize, Decoded)> {
-    let reader = std::fs::File::open(path)
-        .map(std::io::BufReader::new)
+    let reader = splatraj_scene::input::open(path)
+        .map(|(file, _)| std::io::BufReader::new(file))
         .map_err(|e| LiftError::file(path, e))?;
     let image = image::load(reader, image::ImageFormat::Png)
         .map_err(|e| LiftError::file(path, format!("not a readable PNG: {e}")))?;

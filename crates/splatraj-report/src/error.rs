@@ -79,7 +79,7 @@ pub(crate) fn export_error(format: &'static str, problem: impl Into<String>) -> 
 
 /// Reads a whole text file, naming it in the error.
 pub(crate) fn read_text(path: &std::path::Path) -> Result<String> {
-    std::fs::read_to_string(path).map_err(|source| InterchangeError::Read {
+    splatraj_scene::input::read_text(path).map_err(|source| InterchangeError::Read {
         path: path.to_path_buf(),
         source,
     })

@@ -319,7 +319,7 @@ pub fn open_clip_config(weights: &Path) -> Result<Option<(serde_json::Value, Pat
     if !path.is_file() {
         return Ok(None);
     }
-    let text = std::fs::read_to_string(&path).map_err(|e| SemanticError::io(&path, e))?;
+    let text = splatraj_scene::input::read_text(&path).map_err(|e| SemanticError::io(&path, e))?;
     let mut json: serde_json::Value = serde_json::from_str(&text)
         .map_err(|e| SemanticError::file(&path, format!("not valid JSON: {e}")))?;
     let model = match json.get_mut("model_cfg") {

@@ -49,7 +49,9 @@ impl Matrix {
 
     /// Reads a 2-D float32/float64 `.npy` file.
     pub fn from_npy(path: &Path) -> Result<Matrix> {
-        let file = std::fs::File::open(path).map_err(|e| SemanticError::io(path, e))?;
+        let file = splatraj_scene::input::open(path)
+            .map(|(file, _)| file)
+            .map_err(|e| SemanticError::io(path, e))?;
         let npy = npyz::NpyFile::new(BufReader::new(file))
             .map_err(|e| SemanticError::file(path, format!("not a readable .npy file: {e}")))?;
         let shape: Vec<u64> = npy.shape().to_vec();
@@ -94,7 +96,8 @@ impl Matrix {
     /// Reads tensor `name` of a `.safetensors` file; with `name` = `None`, the file's only
     /// tensor.
     pub fn from_safetensors(path: &Path, name: Option<&str>) -> Result<Matrix> {
-        let bytes = std::fs::read(path).map_err(|e| SemanticError::io(path, e))?;
+        let bytes =
+            splatraj_scene::input::read_bytes(path).map_err(|e| SemanticError::io(path, e))?;
         let tensors = SafeTensors::deserialize(&bytes).map_err(|e| {
             SemanticError::file(path, format!("not a readable safetensors file: {e}"))
         })?;
@@ -166,7 +169,8 @@ pub fn read_feature_sidecar(path: &Path) -> Result<Matrix> {
     match extension(path).as_str() {
         "npy" => Matrix::from_npy(path),
         "safetensors" => {
-            let bytes = std::fs::read(path).map_err(|e| SemanticError::io(path, e))?;
+            let bytes =
+                splatraj_scene::input::read_bytes(path).map_err(|e| SemanticError::io(path, e))?;
             let tensors = SafeTensors::deserialize(&bytes).map_err(|e| {
                 SemanticError::file(path, format!("not a readable safetensors file: {e}"))
             })?;
@@ -356,7 +360,8 @@ impl PhraseTable {
 
     /// Reads `{"phrase": [floats], ...}`.
     pub fn from_json(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| SemanticError::io(path, e))?;
+        let text =
+            splatraj_scene::input::read_text(path).map_err(|e| SemanticError::io(path, e))?;
         let json: serde_json::Value = serde_json::from_str(&text)
             .map_err(|e| SemanticError::file(path, format!("not valid JSON: {e}")))?;
         let serde_json::Value::Object(map) = json else {
@@ -425,7 +430,8 @@ impl PhraseTable {
     /// Reads tensor `embeddings` of a `.safetensors` file; phrases from `phrases_file` or
     /// from the metadata key `phrases` (a JSON array of strings).
     pub fn from_safetensors(path: &Path, phrases_file: Option<&Path>) -> Result<Self> {
-        let bytes = std::fs::read(path).map_err(|e| SemanticError::io(path, e))?;
+        let bytes =
+            splatraj_scene::input::read_bytes(path).map_err(|e| SemanticError::io(path, e))?;
         let tensors = SafeTensors::deserialize(&bytes).map_err(|e| {
             SemanticError::file(path, format!("not a readable safetensors file: {e}"))
         })?;
@@ -465,7 +471,7 @@ impl PhraseTable {
 /// Phrases, one per line; surrounding whitespace is trimmed and a final empty line ignored,
 /// but an empty line in between is an error (it would shift every later row).
 pub fn read_phrases_file(path: &Path) -> Result<Vec<String>> {
-    let text = std::fs::read_to_string(path).map_err(|e| SemanticError::io(path, e))?;
+    let text = splatraj_scene::input::read_text(path).map_err(|e| SemanticError::io(path, e))?;
     let mut lines: Vec<&str> = text.lines().collect();
     while lines.last().is_some_and(|l| l.trim().is_empty()) {
         lines.pop();

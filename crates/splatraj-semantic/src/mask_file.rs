@@ -2,7 +2,6 @@
 //! int32/64 or float32/64; shape `[N]` or `[N, 1]`), the object given directly instead of by a
 //! query (`--mask` of `splatraj render`, `mask = "…"` of a config's query).
 
-use std::fs::File;
 use std::io::BufReader;
 use std::path::Path;
 
@@ -15,7 +14,9 @@ pub fn read_mask_file(path: &Path, gaussians: usize) -> Result<Vec<f32>> {
         path: path.to_path_buf(),
         detail,
     };
-    let file = File::open(path).map_err(|e| SemanticError::io(path, e))?;
+    let file = splatraj_scene::input::open(path)
+        .map(|(file, _)| file)
+        .map_err(|e| SemanticError::io(path, e))?;
     let npy = npyz::NpyFile::new(BufReader::new(file))
         .map_err(|e| fail(format!("not a readable .npy file: {e}")))?;
     let shape = npy.shape().to_vec();

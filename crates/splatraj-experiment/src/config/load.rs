@@ -145,7 +145,7 @@ fn read_table(path: &Path, depth: usize) -> Result<toml::Table> {
             path.display()
         );
     }
-    let text = std::fs::read_to_string(path)
+    let text = splatraj_scene::input::read_text(path)
         .with_context(|| format!("cannot read config {}", path.display()))?;
     let mut table: toml::Table = toml::from_str(&text)
         .map_err(|e| anyhow::anyhow!("config {} is not valid TOML: {e}", path.display()))?;

@@ -8,6 +8,7 @@ use super::StudyRow;
 use super::files::Failure;
 use super::plan::{PlanOptions, Preset, Run, StudyPlan};
 use super::summary::StudyContext;
+use crate::children::output_until_stopped;
 use crate::config::Config;
 
 impl StudyContext {
@@ -129,11 +130,13 @@ pub fn measure_in_child(
     options: &PlanOptions,
     index: usize,
 ) -> Result<Vec<StudyRow>, String> {
-    let output = Command::new(exe)
-        .args(options.study_args(config))
-        .args(["--one", &index.to_string()])
-        .output()
-        .map_err(|e| format!("cannot start a study process: {e}"))?;
+    let output = output_until_stopped(
+        Command::new(exe)
+            .args(options.study_args(config))
+            .args(["--one", &index.to_string()]),
+        &format!("the study process of run {index}"),
+    )
+    .map_err(|e| format!("{e:#}"))?;
     rows_from_child(&output)
 }
 
@@ -147,9 +150,18 @@ pub fn measure_runs(
 ) -> (Vec<StudyRow>, Vec<Failure>) {
     let mut rows = Vec::new();
     let mut failures = Vec::new();
+    splatraj_scene::stop::honour();
     for (i, run) in runs.iter().enumerate() {
+        // A stop (Ctrl-C, SIGTERM) ends the study between runs; a run it cut short is not
+        // a failure, only not measured.
+        if splatraj_scene::stop::requested() {
+            break;
+        }
         let label = &plan.variants[run.variant].label;
         let measured = measure(run);
+        if splatraj_scene::stop::requested() {
+            break;
+        }
         progress(i, label, &measured);
         match measured {
             Ok(new) => rows.extend(new),

@@ -115,7 +115,7 @@ pub fn write_study(dir: &Path, study: &StudyFile) -> Result<()> {
 /// Reads `dir/study.json`.
 pub fn read_study(dir: &Path) -> Result<StudyFile> {
     let path = dir.join("study.json");
-    let text = std::fs::read_to_string(&path).with_context(|| {
+    let text = splatraj_scene::input::read_text(&path).with_context(|| {
         format!(
             "cannot read {} (is {} a study folder?)",
             path.display(),

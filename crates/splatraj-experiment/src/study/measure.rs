@@ -38,6 +38,10 @@ pub fn measure_run(
     extensions: &Extensions,
     memory: MemoryReading,
 ) -> Result<Vec<StudyRow>> {
+    if matches!(memory, MemoryReading::OwnProcess) {
+        // A child of `study`: it must not outlive its parent.
+        crate::children::exit_with_parent();
+    }
     let started = Instant::now();
     let config = plan.run_config(run, extensions)?;
     let experiment = Experiment::prepare_with(&config, extensions)?;

@@ -19,6 +19,7 @@ use serde::{Deserialize, Serialize};
 use super::{Design, EvaluationConfig, Quality, StudyConfig, StudyTask};
 use crate::config::{Ablation, Config};
 use crate::extensions::Extensions;
+use crate::resources::check_study;
 use crate::study::summary::short_value;
 
 /// One factor: a config key and its values as TOML text.
@@ -260,6 +261,16 @@ impl StudyPlan {
             .as_ref()
             .and_then(|k| lookup(&base_table, k))
             .map(|v| short_value(&v.to_string()));
+        // Sized before any variant is made: a grid multiplies the values' counts.
+        let variant_count = match study.design {
+            Design::OneAtATime => 1.0 + factors.iter().map(|f| f.values.len() as f64).sum::<f64>(),
+            Design::Grid => factors.iter().map(|f| f.values.len() as f64).product(),
+        };
+        let seeds = match study.task {
+            StudyTask::Trajectory => study.seeds,
+            StudyTask::Pose => 1,
+        };
+        check_study(variant_count, study.seeds, variant_count * seeds as f64)?;
         let settings = match study.design {
             Design::OneAtATime => one_at_a_time(&factors),
             Design::Grid => grid(&factors),

@@ -21,7 +21,7 @@ use crate::scene::Labels;
 
 /// Reads a label sidecar for a scene of `expected_len` Gaussians.
 pub fn read_label_sidecar(path: &Path, expected_len: usize) -> Result<Labels> {
-    let text = std::fs::read_to_string(path).map_err(|e| SceneError::io(path, e))?;
+    let text = crate::input::read_text(path).map_err(|e| SceneError::io(path, e))?;
     let json: Value = serde_json::from_str(&text)
         .map_err(|e| SceneError::sidecar(path, format!("not valid JSON: {e}")))?;
     let labels = labels_from_json(&json, path)?;

@@ -351,7 +351,7 @@ pub fn read_scene(path: &Path, options: &ReadOptions) -> Result<LoadedScene> {
     } else {
         path
     };
-    let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    let bytes = crate::input::read_bytes(path).map_err(|e| SceneError::io(path, e))?;
     let format = detect_format(&bytes, path)?;
     let mut scene = decode(&bytes, format, path)?;
     let report = validate(&mut scene, path, options.invalid)?;

@@ -12,6 +12,10 @@ use ply_rs_bw::ply::{
 
 use crate::error::{Result, SceneError};
 
+/// The longest PLY header read: about 40 000 property lines, hundreds of times a splat file's
+/// (an INRIA scene has 62 properties, one with 512-dimensional features under 600).
+pub const MAX_HEADER_BYTES: usize = 1 << 20;
+
 /// One PLY row as it is parsed: scalar values in header order (lists are skipped).
 ///
 /// f64 holds every PLY scalar type exactly (32-bit ints included), so packed integers survive.
@@ -199,11 +203,24 @@ pub fn read_ply_tables(bytes: &[u8], path: &Path) -> Result<PlyFile> {
 /// Refuses a header that declares an element, or a property of one element, twice (the PLY
 /// parser keys them by name and would read shifted columns); returns the header's line count.
 fn check_header_names(bytes: &[u8], path: &Path) -> Result<usize> {
-    let head = &bytes[..bytes.len().min(1 << 20)];
-    let end = head
+    let head = &bytes[..bytes.len().min(MAX_HEADER_BYTES)];
+    let Some(end) = head
         .windows(b"end_header".len())
         .position(|w| w == b"end_header")
-        .unwrap_or(head.len());
+    else {
+        // Checking a cut header would misreport its last, cut line.
+        return Err(SceneError::malformed(
+            path,
+            if bytes.len() > MAX_HEADER_BYTES {
+                format!(
+                    "no `end_header` in the first {MAX_HEADER_BYTES} bytes: the header is \
+                     longer than splatraj reads (too many properties or comments)"
+                )
+            } else {
+                "the PLY header has no `end_header` line".to_string()
+            },
+        ));
+    };
     let text = String::from_utf8_lossy(&head[..end]);
     let mut elements: Vec<(String, usize)> = Vec::new();
     let mut properties: Vec<(String, usize)> = Vec::new();
@@ -330,9 +347,9 @@ fn expected_tokens(tokens: &[&str], def: &ElementDef) -> Option<usize> {
     (at == tokens.len()).then_some(at)
 }
 
-fn read_element<T: BufRead>(
+fn read_element(
     parser: &Parser<Row>,
-    reader: &mut Reader<T>,
+    reader: &mut Reader<Cursor<&[u8]>>,
     header: &Header,
     def: &ElementDef,
     (path, first_line): (&Path, usize),
@@ -345,8 +362,19 @@ fn read_element<T: BufRead>(
             PropertyType::List(..) => None,
         })
         .collect();
-    // Cap the up-front allocation: a corrupt header may claim billions of rows.
-    let capacity = def.count.min(1 << 24);
+    // Cap the up-front allocation by the rows the rest of the file can hold: a corrupt header
+    // may claim billions of rows, or a hundred thousand properties. (A binary row takes its
+    // size; an ASCII value at least a digit and a separator.)
+    let left = reader
+        .get_ref()
+        .get_ref()
+        .len()
+        .saturating_sub(reader.get_ref().position() as usize);
+    let row_bytes = binary_row_size(def)
+        .filter(|_| header.encoding != Encoding::Ascii)
+        .unwrap_or(2 * def.properties.len())
+        .max(1);
+    let capacity = def.count.min(left / row_bytes);
     let mut columns: Vec<Column> = scalars
         .iter()
         .map(|(name, scalar)| Column {

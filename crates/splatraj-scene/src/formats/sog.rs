@@ -170,7 +170,7 @@ impl<'a> Source<'a> {
             }
             Source::Folder { dir, .. } => {
                 let file = dir.join(name);
-                std::fs::read(&file).map_err(|e| {
+                crate::input::read_bytes(&file).map_err(|e| {
                     if e.kind() == std::io::ErrorKind::NotFound {
                         SceneError::malformed(
                             path,

@@ -51,7 +51,9 @@ type Array = (Vec<u64>, Vec<f64>);
 /// The `.npy` members of an `.npz` file (stored or deflated), by name without `.npy`, each as
 /// its shape and values converted to f64 (float32/64 and integer arrays).
 fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>> {
-    let file = std::fs::File::open(path).map_err(|e| SemanticError::io(path, e))?;
+    let file = splatraj_scene::input::open(path)
+        .map(|(file, _)| file)
+        .map_err(|e| SemanticError::io(path, e))?;
     let mut archive = zip::ZipArchive::new(std::io::BufReader::new(file))
         .map_err(|e| SemanticError::file(path, format!("not a readable .npz (zip) file: {e}")))?;
     let mut arrays = BTreeMap::new();

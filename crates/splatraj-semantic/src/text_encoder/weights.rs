@@ -55,7 +55,8 @@ impl StateDict {
     /// Opens `path`: safetensors when the file starts like one (an 8-byte header length
     /// followed by `{`), else a PyTorch checkpoint.
     pub fn open(path: &Path) -> Result<Self> {
-        let bytes = std::fs::read(path).map_err(|e| SemanticError::io(path, e))?;
+        let bytes =
+            splatraj_scene::input::read_bytes(path).map_err(|e| SemanticError::io(path, e))?;
         if bytes.len() > 8 && bytes[8] == b'{' {
             let tensors = SafeTensors::deserialize(&bytes).map_err(|e| {
                 SemanticError::file(path, format!("not a readable safetensors file: {e}"))

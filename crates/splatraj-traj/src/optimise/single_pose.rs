@@ -210,7 +210,7 @@ pub fn optimise_poses_observed(
     let started = Instant::now();
     let mut skipped_steps = 0;
     let mut histories: Vec<Vec<HistoryRow>> =
-        vec![Vec::with_capacity(options.iterations + 1); starts.len()];
+        vec![Vec::with_capacity(options.iterations.min(1 << 12) + 1); starts.len()];
     let mut lowest = f64::INFINITY;
     let mut stop = StopReason::Finished;
     for step in 0..=options.iterations {

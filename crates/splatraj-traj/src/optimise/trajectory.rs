@@ -255,7 +255,8 @@ pub fn optimise_trajectory(
     let needs_path = problem.costs.needs_path();
     let started = Instant::now();
     let n = windows.len();
-    let mut history = Vec::with_capacity(options.iterations);
+    // Grown as steps run: a time limit may stop it long before `iterations`.
+    let mut history = Vec::with_capacity(options.iterations.min(1 << 12));
     let mut best: Option<(f64, usize, Vec<[f64; 6]>)> = None;
     let mut skipped_steps = 0;
     let mut stop = StopReason::Finished;

@@ -1,0 +1,332 @@
+//! Limits of every command: sizes from options, configs and files are refused before any
+//! work when their memory or time cannot fit (naming what sizes them), inputs that are not
+//! regular files are refused without reading, and a signal stops the frames at a whole frame.
+//!
+//! Every refusal must come within seconds (the test would otherwise hang or be killed for
+//! memory), as one `error:` paragraph.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::{TINY_CONFIG, assert_clean_failure, s, splatraj, stderr};
+use splatraj_report::camera::{CameraPath, CameraPose, Frame, Pinhole};
+use splatraj_report::{ExportOptions, Format};
+
+/// The tiny config in `dir`, its runs going to `dir/runs`.
+fn tiny_config(dir: &Path) -> PathBuf {
+    let config = dir.join("tiny.toml");
+    let text = TINY_CONFIG.replace(
+        "[output]\n",
+        &format!("[output]\nruns_dir = \"{}\"\n", dir.join("runs").display()),
+    );
+    std::fs::write(&config, text).unwrap();
+    config
+}
+
+/// A demo scene of 2 000 Gaussians in `dir`.
+fn tiny_scene(dir: &Path) -> PathBuf {
+    let scene = dir.join("tiny.ply");
+    let out = splatraj(&["scene", "demo", "--out", s(&scene), "--gaussians", "2000"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    scene
+}
+
+/// A nerfstudio camera path of `frames` frames at `width` × `height`, looking into the demo
+/// room from its middle.
+fn nerfstudio_path(dir: &Path, frames: usize, (width, height): (usize, usize)) -> PathBuf {
+    let path = CameraPath {
+        frames: (0..frames)
+            .map(|i| Frame {
+                pose: CameraPose::from_phi([0.0, 0.01 * i as f64, 0.0, 0.0, 0.0, -1.0]),
+                camera: Some(Pinhole {
+                    fx: width as f64,
+                    fy: width as f64,
+                    cx: width as f64 / 2.0,
+                    cy: height as f64 / 2.0,
+                    width,
+                    height,
+                }),
+            })
+            .collect(),
+        fps: Some(30.0),
+    };
+    let files =
+        splatraj_report::export(&path, Format::Nerfstudio, &ExportOptions::default()).unwrap();
+    let file = dir.join("camera_path.json");
+    std::fs::write(&file, &files[0].1).unwrap();
+    file
+}
+
+/// Runs splatraj with `args`, asserting it ended within `seconds`.
+fn quickly(seconds: u64, args: &[&str]) -> std::process::Output {
+    let started = Instant::now();
+    let out = splatraj(args);
+    assert!(
+        started.elapsed() < Duration::from_secs(seconds),
+        "{args:?} took {:?}",
+        started.elapsed()
+    );
+    out
+}
+
+#[test]
+fn a_huge_query_picture_is_refused_before_rendering_naming_width_and_memory() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(dir.path());
+    let out = quickly(
+        20,
+        &[
+            "query",
+            "--scene",
+            s(&scene),
+            "--query",
+            "red mug",
+            "--width",
+            "1000000",
+            "--height",
+            "1000000",
+            "--out",
+            s(&dir.path().join("q.png")),
+        ],
+    );
+    assert_clean_failure(&out, &["--width", "memory", "TB"]);
+}
+
+#[test]
+fn run_check_refuses_what_cannot_fit_naming_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = tiny_config(dir.path());
+    for (set, key) in [
+        (
+            "optimiser.iterations=1000000000000",
+            "`optimiser.iterations`",
+        ),
+        (
+            "optimiser.path_samples=1000000000",
+            "`optimiser.path_samples`",
+        ),
+        ("output.seconds=1e12", "`output.seconds`"),
+        // The view search is quadratic in the restarts: refused for its time.
+        ("start.restarts=10000000", "`start.restarts`"),
+    ] {
+        let out = quickly(20, &["run", s(&config), "--check", "--set", set]);
+        assert_clean_failure(&out, &[key]);
+    }
+    // A time limit bounds the optimisation: its history is sized by what can run in it.
+    let out = quickly(
+        60,
+        &[
+            "run",
+            s(&config),
+            "--check",
+            "--set",
+            "optimiser.iterations=1000000000000",
+            "--set",
+            "optimiser.time_limit_s=2",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
+#[test]
+fn a_run_with_a_huge_iteration_count_and_a_time_limit_stops_at_the_limit_without_abort() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = tiny_config(dir.path());
+    let out = quickly(
+        120,
+        &[
+            "run",
+            s(&config),
+            "--quiet",
+            "--set",
+            "optimiser.iterations=1000000000000",
+            "--set",
+            "optimiser.time_limit_s=1",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
+#[test]
+fn render_repeats_bench_threads_and_study_seeds_are_refused_for_their_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(dir.path());
+    let camera = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/cameras/demo_mug.json");
+    let out = quickly(
+        20,
+        &[
+            "render",
+            "--scene",
+            s(&scene),
+            "--camera",
+            s(&camera),
+            "--repeats",
+            "1000000000",
+            "--out",
+            s(&dir.path().join("r")),
+        ],
+    );
+    assert_clean_failure(&out, &["--repeats", "at least"]);
+    let out = quickly(
+        20,
+        &["bench", "render", "--threads", "100000", "--sizes", "1000"],
+    );
+    assert_clean_failure(&out, &["--threads", "memory"]);
+    let config = tiny_config(dir.path());
+    let out = quickly(
+        20,
+        &["study", s(&config), "--seeds", "1000000000", "--dry-run"],
+    );
+    assert_clean_failure(&out, &["--seeds"]);
+}
+
+#[test]
+fn render_path_refuses_frames_too_large_or_too_many_from_options_or_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(dir.path());
+    let path = nerfstudio_path(dir.path(), 3, (32, 24));
+    let out_dir = dir.path().join("frames");
+    let out = quickly(
+        20,
+        &[
+            "render-path",
+            s(&scene),
+            s(&path),
+            "--out",
+            s(&out_dir),
+            "--width",
+            "1000000000",
+        ],
+    );
+    assert_clean_failure(&out, &["--width", "memory"]);
+    // The size written in the file is checked like the option.
+    let huge = nerfstudio_path(dir.path(), 2, (2_000_000, 1_000_000));
+    let out = quickly(
+        20,
+        &["render-path", s(&scene), s(&huge), "--out", s(&out_dir)],
+    );
+    assert_clean_failure(&out, &["the path file's", "memory"]);
+    assert!(!out_dir.join("frames").exists(), "nothing rendered");
+}
+
+#[test]
+fn inputs_that_are_not_regular_files_are_refused_without_reading() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(dir.path());
+    let config = tiny_config(dir.path());
+    let zero = "/dev/zero";
+    for args in [
+        vec!["scene", "info", zero],
+        vec!["run", zero, "--check"],
+        vec![
+            "query",
+            "--scene",
+            s(&scene),
+            "--labels",
+            zero,
+            "--query",
+            "mug",
+        ],
+        vec![
+            "render",
+            "--scene",
+            s(&scene),
+            "--camera",
+            zero,
+            "--out",
+            "unused",
+        ],
+        vec!["render-path", s(&scene), zero, "--out", "unused"],
+    ] {
+        let out = quickly(20, &args);
+        assert_clean_failure(&out, &[zero, "not a regular file"]);
+    }
+    // A pipe: opening it would wait for a writer.
+    let fifo = dir.path().join("fifo.ply");
+    let made = Command::new("mkfifo").arg(&fifo).status();
+    if made.is_ok_and(|s| s.success()) {
+        let out = quickly(20, &["scene", "info", s(&fifo)]);
+        assert_clean_failure(&out, &["fifo.ply", "not a regular file"]);
+    }
+    let _ = config;
+}
+
+/// A PLY header declaring `properties` float properties of `vertex` and no rows.
+fn ply_with_properties(path: &Path, properties: usize) {
+    let mut header = String::from("ply\nformat binary_little_endian 1.0\nelement vertex 1000000\n");
+    for i in 0..properties {
+        header += &format!("property float f_rest_{i}\n");
+    }
+    header += "end_header\n";
+    std::fs::write(path, header).unwrap();
+}
+
+#[test]
+fn a_ply_header_of_a_hundred_thousand_properties_is_refused_as_too_long_not_as_a_duplicate() {
+    let dir = tempfile::tempdir().unwrap();
+    let long = dir.path().join("long.ply");
+    ply_with_properties(&long, 100_000);
+    let out = quickly(20, &["scene", "info", s(&long)]);
+    assert_clean_failure(&out, &["end_header", "longer"]);
+    assert!(!stderr(&out).contains("twice"), "{}", stderr(&out));
+    // Within the limit, the columns are sized by the data the file holds (none), not by the
+    // header's row count: the truncation is reported, without gigabytes allocated first.
+    let wide = dir.path().join("wide.ply");
+    ply_with_properties(&wide, 20_000);
+    let out = quickly(20, &["scene", "info", s(&wide)]);
+    assert_clean_failure(&out, &["wide.ply"]);
+}
+
+#[test]
+fn sigint_during_render_path_stops_at_a_whole_frame_and_says_stopped() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(dir.path());
+    let path = nerfstudio_path(dir.path(), 3000, (64, 48));
+    let out_dir = dir.path().join("out");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_splatraj"))
+        .args([
+            "render-path",
+            s(&scene),
+            s(&path),
+            "--out",
+            s(&out_dir),
+            "--quiet",
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait for the first frames, then interrupt.
+    let frames = out_dir.join("frames");
+    let started = Instant::now();
+    while std::fs::read_dir(&frames).map_or(0, |d| d.count()) < 3 {
+        assert!(started.elapsed() < Duration::from_secs(120), "no frames");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let output = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "{err}");
+    assert!(err.contains("stopped"), "{err}");
+    let names: Vec<String> = std::fs::read_dir(&frames)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(names.len() < 3000, "stopped early: {} frames", names.len());
+    assert!(!names.iter().any(|n| n.ends_with(".partial")), "{names:?}");
+    // Every frame there is whole.
+    for name in &names {
+        image::open(frames.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
+    }
+    assert!(
+        !out_dir.join("video.mp4").exists(),
+        "no video of a stopped path"
+    );
+}
