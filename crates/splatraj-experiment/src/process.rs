@@ -323,10 +323,25 @@ impl Experiment {
             frames,
             stop: run.stop,
         }));
-        let outputs = self.write_outputs(&trajectory, dir, &mut |done| {
-            // The frames are the run's result: a stop request does not cut them short.
-            observer.progress(&Progress::Frame { done, frames });
-        })?;
+        let outputs = self
+            .write_outputs(&trajectory, dir, &mut |done| {
+                observer.progress(&Progress::Frame { done, frames });
+            })
+            // A stop requested while the frames render (not one that ended the optimisation)
+            // ends them at a whole frame; the checkpoint stays for a resume.
+            .map_err(|e| match e.downcast::<splatraj_scene::stop::Stopped>() {
+                Ok(stopped) => splatraj_scene::stop::Stopped {
+                    what: format!(
+                        "{}; {} keeps its checkpoint: `splatraj run --resume {}` writes the \
+                         outputs again",
+                        stopped.what,
+                        dir.display(),
+                        dir.display()
+                    ),
+                }
+                .into(),
+                Err(e) => e,
+            })?;
         let times = StageTimes {
             metrics: outputs.metrics,
             frames: outputs.frames,

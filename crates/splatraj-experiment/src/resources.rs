@@ -449,4 +449,43 @@ mod tests {
         assert!(MemoryLimit::new(Some(-1.0)).is_err());
         assert_eq!(MemoryLimit::new(Some(2.0)).unwrap().bytes, 2e9);
     }
+
+    #[test]
+    fn time_is_refused_above_the_ceiling_unless_a_key_bounds_it() {
+        let mut plan = TimePlan::default();
+        plan.item("`--repeats` = 1000000000 renders", 2.0 * MAX_SECONDS);
+        let message = plan.check(TimeBound::Unbounded).unwrap_err().to_string();
+        assert!(message.contains("`--repeats`"), "{message}");
+        assert!(message.contains("at least 2 days"), "{message}");
+        let bound = TimeBound::Key {
+            key: "`optimiser.time_limit_s`",
+            seconds: None,
+        };
+        let message = plan.check(bound).unwrap_err().to_string();
+        assert!(message.contains("`optimiser.time_limit_s`"), "{message}");
+        // With the limit set, only a warning naming it.
+        let bound = TimeBound::Key {
+            key: "`optimiser.time_limit_s`",
+            seconds: Some(60.0),
+        };
+        let warning = plan.check(bound).unwrap().unwrap();
+        assert!(warning.contains("stops it before"), "{warning}");
+        // Short work passes silently.
+        let mut short = TimePlan::default();
+        short.item("a render", render_seconds(1.0, 320.0 * 240.0));
+        assert_eq!(short.check(TimeBound::Unbounded).unwrap(), None);
+    }
+
+    #[test]
+    fn path_frames_are_refused_by_frames_times_basis_functions() {
+        check_path_frames("a path", 300.0, 24).unwrap();
+        // A trajectory.json claiming 10⁹ basis functions, evaluated at 1000 frames.
+        let message = check_path_frames("the path of t.json", 1000.0, 1_000_000_000)
+            .unwrap_err()
+            .to_string();
+        assert!(message.contains("t.json"), "{message}");
+        assert!(message.contains("1000000000 basis functions"), "{message}");
+        // 10⁹ fps × 10³ s.
+        assert!(check_path_frames("`--fps` × `--seconds`", 1e12, 24).is_err());
+    }
 }

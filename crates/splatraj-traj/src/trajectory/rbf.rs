@@ -118,7 +118,8 @@ impl Rbf {
 
 impl Basis for Rbf {
     fn count(&self) -> usize {
-        self.windows * self.centres_per_window
+        // Saturating: a file or key may claim any size; the resource check refuses it.
+        self.windows.saturating_mul(self.centres_per_window)
     }
 
     fn validate(&self) -> Result<(), TrajectoryError> {
