@@ -165,7 +165,9 @@ impl std::str::FromStr for FrameSchedule {
 }
 
 /// Renders `job` into `dir` (`frames/`, `frame_metrics.csv` when there are objects,
-/// `video.mp4` when asked); `progress` is told after each frame.
+/// `video.mp4` when asked); `progress` is told after each frame. Frames too large or too many
+/// are refused before any is rendered; a stop requested meanwhile ([`splatraj_scene::stop`])
+/// ends the work after a whole frame with [`splatraj_scene::stop::Stopped`].
 pub fn render_path(
     scene: &DeviceScene,
     job: &PathRender<'_>,

@@ -1,6 +1,11 @@
-//! Peak memory of a run, a pose run or a render, estimated from its sizes before any work, and
-//! refused when it exceeds what the machine can hold, with the key to blame, the estimate and
-//! the limit.
+//! Peak memory and time of every command's work, estimated from its sizes before any work, and
+//! refused when they exceed what the machine can hold or a day, with the key, option or file
+//! to blame, the estimate and the limit: a run, a pose run, a render ([`RenderWork`]: also
+//! `query`'s picture and `render-path`'s frames), a camera path's frames
+//! ([`check_path_frames`]), worker threads ([`check_threads`]) and a study's runs
+//! ([`check_study`]). Time ([`TimePlan`]) is a lower bound from the fastest costs per pixel,
+//! render and step; above [`WARN_SECONDS`] it is a warning, above [`MAX_SECONDS`] a refusal
+//! unless a key bounds it ([`TimeBound`]: `optimiser.time_limit_s`).
 //!
 //! The estimate is a sum of per-item costs measured on the demo room with the fused rasterizer
 //! (release build, f32, peak resident memory by `/usr/bin/time -v`; f64 doubles each): a
