@@ -78,8 +78,7 @@ pub fn install_stop_handler() {
     let flag = stop_flag();
     let on_signal = move || {
         if flag.swap(true, Ordering::SeqCst) || !splatraj_scene::stop::honoured() {
-            splatraj_scene::atomic::remove_partial_files();
-            std::process::exit(EXIT_INTERRUPTED.into());
+            splatraj_scene::atomic::remove_partial_files_and_exit(EXIT_INTERRUPTED.into());
         }
         splatraj_scene::stop::request();
     };

@@ -85,8 +85,7 @@ pub fn exit_with_parent() {
             loop {
                 std::thread::sleep(POLL);
                 if std::os::unix::process::parent_id() != parent {
-                    splatraj_scene::atomic::remove_partial_files();
-                    std::process::exit(EXIT_ORPHANED);
+                    splatraj_scene::atomic::remove_partial_files_and_exit(EXIT_ORPHANED);
                 }
             }
         });

@@ -1,7 +1,7 @@
 //! Whole-or-nothing file writes: write to a temporary file beside the target, then rename.
 //!
 //! The temporary files being written are listed, so that a program that must quit at once (a
-//! second Ctrl-C) can remove them first: [`remove_partial_files`]. A killed process cannot;
+//! second Ctrl-C) can remove them first: [`remove_partial_files_and_exit`]. A killed process cannot;
 //! its leftovers are named `.NAME.PID.partial` ([`is_partial_file`]) for whoever cleans up.
 
 use std::io::Write;
@@ -22,21 +22,42 @@ pub fn remove_partial_files() {
     }
 }
 
+/// Removes the temporary files of every write in progress and ends the process with `code`,
+/// holding the list meanwhile: a write creates its temporary file while it holds the list, so
+/// none can appear between the removal and the exit.
+pub fn remove_partial_files_and_exit(code: i32) -> ! {
+    let mut paths = match IN_FLIGHT.lock() {
+        Ok(paths) => paths,
+        Err(poisoned) => poisoned.into_inner(),
+    };
+    for path in paths.drain(..) {
+        let _ = std::fs::remove_file(path);
+    }
+    std::process::exit(code)
+}
+
 /// Whether `name` is a temporary file of [`write_atomically`] (`.NAME.PID.partial`).
 pub fn is_partial_file(name: &str) -> bool {
     name.starts_with('.') && name.ends_with(".partial")
 }
 
-fn track(tmp: &Path, writing: bool) {
+/// Lists `tmp` and creates it, as one step under the list's lock (see
+/// [`remove_partial_files_and_exit`]).
+fn create_tracked(tmp: &Path) -> std::io::Result<std::fs::File> {
     let mut paths = match IN_FLIGHT.lock() {
         Ok(paths) => paths,
         Err(poisoned) => poisoned.into_inner(),
     };
-    if writing {
-        paths.push(tmp.to_path_buf());
-    } else {
-        paths.retain(|p| p != tmp);
-    }
+    paths.push(tmp.to_path_buf());
+    std::fs::File::create(tmp)
+}
+
+fn untrack(tmp: &Path) {
+    let mut paths = match IN_FLIGHT.lock() {
+        Ok(paths) => paths,
+        Err(poisoned) => poisoned.into_inner(),
+    };
+    paths.retain(|p| p != tmp);
 }
 
 /// Writes a file through `fill` so that `path` appears complete or not at all.
@@ -60,9 +81,8 @@ pub fn write_atomically(
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
     let tmp = dir.join(format!(".{name}.{}.partial", std::process::id()));
-    track(&tmp, true);
     let result = (|| {
-        let file = std::fs::File::create(&tmp)?;
+        let file = create_tracked(&tmp)?;
         let mut out = std::io::BufWriter::new(file);
         fill(&mut out)?;
         let file = out.into_inner().map_err(|e| e.into_error())?;
@@ -72,7 +92,7 @@ pub fn write_atomically(
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
-    track(&tmp, false);
+    untrack(&tmp);
     result
 }
 
