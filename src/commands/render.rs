@@ -112,7 +112,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let camera = read_camera_file(&args.camera)?;
     let intrinsics = resize(&camera.intrinsics, args.width, args.height)?;
     let limit = MemoryLimit::new(args.memory.max_memory)?;
-    let scene = args.read.load(&args.scene)?.scene;
+    let scene = args.read.load_to_render(&args.scene)?.scene;
     RenderWork {
         what: format!(
             "`--repeats` = {} renders of {} Gaussians at the camera's `width` × `height` \

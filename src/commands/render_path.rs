@@ -120,6 +120,9 @@ pub fn run(args: RenderPathArgs) -> Result<()> {
     } else {
         None
     };
+    if let (Some(e), PathFile::Trajectory(t)) = (&experiment, &path) {
+        t.check_windows(e.windows.len())?;
+    }
     let (scene, objects, rasterizer) = match &experiment {
         Some(e) => (
             e.plain_scene(),
@@ -127,7 +130,7 @@ pub fn run(args: RenderPathArgs) -> Result<()> {
             args.rasterizer.unwrap_or(e.config.rasterizer),
         ),
         None => {
-            let loaded = args.read.load(&args.scene)?;
+            let loaded = args.read.load_to_render(&args.scene)?;
             let device = args.backend.device()?;
             (
                 DeviceScene::new(&loaded.scene, &device, DType::F32),

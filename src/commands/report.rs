@@ -29,7 +29,7 @@ pub fn run(args: ReportArgs) -> Result<()> {
         anyhow::bail!("{} is not a run folder", args.run.display());
     }
     let scene = match &args.scene {
-        Some(path) => args.read.load(path)?.scene,
+        Some(path) => args.read.load_to_render(path)?.scene,
         None => run_scene(&args.run)?,
     };
     let path = write_run_report(&args.run, Some(&scene))?;

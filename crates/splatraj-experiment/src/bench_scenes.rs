@@ -47,6 +47,15 @@ fn measure_coverage(
     Ok(scalar(out.images.sum()) / (intrinsics.width * intrinsics.height) as f64)
 }
 
+/// Refuses a target ratio that is not a share of the frame in (0, 1] (the benches'
+/// `--target-ratio`): a NaN or 0 would place the camera nowhere.
+pub fn check_target_ratio(ratio: f64) -> anyhow::Result<()> {
+    if !(ratio > 0.0 && ratio <= 1.0) {
+        anyhow::bail!("--target-ratio {ratio} must be a share of the frame in (0, 1]");
+    }
+    Ok(())
+}
+
 /// Distance at which a silhouette of `area` m² covers `ratio` of a frame.
 fn framing_distance(area: f64, ratio: f64, k: &Intrinsics) -> f64 {
     // Pixel area = area · fx · fy / d², frame = W · H.
@@ -62,6 +71,7 @@ pub fn demo_bench_scene(
     calibration: &Intrinsics,
     device: &Device,
 ) -> Result<BenchScene> {
+    check_target_ratio(ratio)?;
     let layout = demo_layout();
     let object = layout
         .iter()
@@ -118,6 +128,7 @@ pub fn file_bench_scene(
     calibration: &Intrinsics,
     device: &Device,
 ) -> Result<BenchScene> {
+    check_target_ratio(ratio)?;
     let scene = read_scene(path, &ReadOptions::default())?.scene;
     let bounds = scene
         .robust_bounds(0.02)

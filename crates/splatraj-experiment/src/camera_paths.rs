@@ -6,11 +6,11 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result, anyhow, bail};
 use serde::Deserialize;
 use splatraj_lift::cameras::{camera_pose_of, intrinsics_of, pinhole_of};
 use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::camera_file::resize;
+use splatraj_render::camera_file::{check_pose_range, resize};
 use splatraj_report::supersplat::Focus;
 use splatraj_report::{CameraPath, ExportOptions, Format, Frame};
 use splatraj_traj::optimise::sampling::window_of;
@@ -79,7 +79,31 @@ impl FrameRequest {
                 bail!("{name} {v} must be a positive number");
             }
         }
+        if let Some(fps) = self.fps {
+            check_fps(fps).with_context(|| format!("--fps {fps}"))?;
+        }
         Ok(())
+    }
+}
+
+/// Refuses a frame rate the video cannot hold (non-positive, or above
+/// [`splatraj_report::video::MAX_FPS`]); the caller names where it came from.
+pub fn check_fps(fps: f64) -> Result<()> {
+    splatraj_report::video::check_fps(fps)?;
+    Ok(())
+}
+
+impl PathFrames {
+    /// Refuses frames that could not be rendered or written: a pose out of the renderer's
+    /// range ([`check_pose_range`]), or a frame rate the video cannot hold. `file` names
+    /// where they came from. Every reader of a camera path ends here.
+    fn checked(self, file: &Path) -> Result<Self> {
+        for (i, pose) in self.poses.iter().enumerate() {
+            check_pose_range(pose)
+                .map_err(|e| anyhow!("{}: frame {i}: pose {e}", file.display()))?;
+        }
+        check_fps(self.fps).with_context(|| format!("{}: key `fps`", file.display()))?;
+        Ok(self)
     }
 }
 
@@ -149,6 +173,12 @@ impl RunTrajectory {
         let extras: TrajectoryExtras = serde_json::from_str(text).with_context(|| {
             format!("{}: no frame camera (`output_intrinsics`)", file.display())
         })?;
+        record
+            .validate()
+            .with_context(|| format!("{}: keys `model`, `weights`", file.display()))?;
+        let k = extras.output_intrinsics;
+        Intrinsics::new(k.fx, k.fy, k.cx, k.cy, k.width, k.height)
+            .with_context(|| format!("{}: key `output_intrinsics`", file.display()))?;
         let folder = file.parent().unwrap_or(Path::new("."));
         Ok(Self {
             file: file.to_path_buf(),
@@ -231,12 +261,27 @@ impl RunTrajectory {
         if poses.is_empty() {
             bail!("{}: no poses", self.file.display());
         }
-        Ok(PathFrames {
+        PathFrames {
             cameras: vec![camera; poses.len()],
             times,
             poses,
             fps,
-        })
+        }
+        .checked(&self.file)
+    }
+
+    /// Refuses a trajectory whose windows are not the `queries` query windows of the config
+    /// it is rendered with (its frames would be judged against the wrong objects).
+    pub fn check_windows(&self, queries: usize) -> Result<()> {
+        let windows = self.windows.len();
+        if windows != queries {
+            bail!(
+                "{} has {windows} query windows but the config has {queries} queries: render it \
+                 with the config of its run",
+                self.file.display()
+            );
+        }
+        Ok(())
     }
 
     /// The object centre of each window.
@@ -343,12 +388,13 @@ fn imported_frames(file: &Path, path: &CameraPath, request: &FrameRequest) -> Re
                 .with_context(|| format!("{}: frame {i}", file.display()))
         })
         .collect::<Result<Vec<_>>>()?;
-    Ok(PathFrames {
+    PathFrames {
         times: uniform_times(path.frames.len()),
         poses: path.phis(),
         cameras,
         fps: request.fps.or(path.fps).unwrap_or(DEFAULT_FPS),
-    })
+    }
+    .checked(file)
 }
 
 /// The files of `frames` in `format`. SuperSplat's look-at targets sit at the distance of the

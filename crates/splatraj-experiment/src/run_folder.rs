@@ -64,7 +64,7 @@ pub struct RunReport {
     pub best_total: f64,
     /// Steps over all restarts.
     pub iterations_run: usize,
-    /// Steps skipped for a non-finite loss.
+    /// Steps skipped for a non-finite gradient.
     pub skipped_steps: usize,
     /// Optimisation wall time.
     pub optimisation_s: f64,
@@ -148,6 +148,19 @@ fn finished(metrics: &Path) -> bool {
 /// Fails unless files can be created in `dir` (or, when it does not exist yet, in the
 /// nearest folder above it that does).
 pub fn check_writable(dir: &Path) -> Result<()> {
+    // The nearest path that exists must be a folder: a file there (the runs folder itself, or
+    // a folder above it) could never hold the run.
+    if let Some(blocking) = dir
+        .ancestors()
+        .find(|p| !p.as_os_str().is_empty() && std::fs::symlink_metadata(p).is_ok())
+        .filter(|p| !p.is_dir())
+    {
+        bail!(
+            "`output.runs_dir`: {} cannot be made: {} is not a folder",
+            dir.display(),
+            blocking.display()
+        );
+    }
     let existing = dir
         .ancestors()
         .find(|p| p.as_os_str().is_empty() || p.is_dir())

@@ -52,7 +52,9 @@ pub fn run_report(dir: &Path, scene: Option<&Scene>) -> Result<RunReport> {
         bail!("{} is not a run folder", dir.display());
     }
     let config = splatraj_scene::input::read_text(&dir.join("config.toml")).unwrap_or_default();
-    let metrics = read_json(&dir.join("metrics.json"))?;
+    let metrics_file = dir.join("metrics.json");
+    let metrics = read_json(&metrics_file)?;
+    check_metrics(&metrics, &metrics_file, scene)?;
     let trajectory = read_json(&dir.join("trajectory.json"))?;
     let title = toml::from_str::<toml::Value>(&config)
         .ok()
@@ -75,6 +77,43 @@ pub fn run_report(dir: &Path, scene: Option<&Scene>) -> Result<RunReport> {
         video,
         config,
     })
+}
+
+/// Refuses a `metrics.json` that is not what a run writes (an object with a `windows` list
+/// of objects and a `run` object; a missing file reads as `null` and passes), and a scene
+/// whose Gaussian count is not the run's `run.gaussians` (another scene's views would be
+/// drawn under this run's path).
+fn check_metrics(metrics: &Value, file: &Path, scene: Option<&Scene>) -> Result<()> {
+    if metrics.is_null() {
+        return Ok(());
+    }
+    let windows_ok = metrics
+        .get("windows")
+        .and_then(Value::as_array)
+        .is_some_and(|w| w.iter().all(Value::is_object));
+    if !windows_ok {
+        bail!(
+            "{}: key `windows` must be a list of objects (one per query window)",
+            file.display()
+        );
+    }
+    let Some(run) = metrics.get("run").and_then(Value::as_object) else {
+        bail!("{}: key `run` must be an object", file.display());
+    };
+    if let (Some(scene), Some(gaussians)) = (scene, run.get("gaussians")) {
+        let Some(gaussians) = gaussians.as_u64() else {
+            bail!("{}: key `run.gaussians` must be a count", file.display());
+        };
+        if gaussians != scene.len() as u64 {
+            bail!(
+                "the scene has {} Gaussians but this run's had {gaussians} ({} key \
+                 `run.gaussians`): give the run's own scene (`--scene`)",
+                scene.len(),
+                file.display()
+            );
+        }
+    }
+    Ok(())
 }
 
 fn read_json(path: &Path) -> Result<Value> {

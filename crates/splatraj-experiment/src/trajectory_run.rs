@@ -367,6 +367,7 @@ impl Experiment {
     /// The trajectory of `record` (e.g. a `trajectory.json` read back) on the experiment's
     /// device; a custom model is built from the experiment's registry.
     pub fn trajectory(&self, record: &TrajectoryRecord) -> Result<Trajectory> {
+        record.validate()?;
         let model = match &record.model {
             TrajectoryModel::Custom(c) => {
                 let windows = c.windows.unwrap_or(self.windows.len());

@@ -15,11 +15,24 @@ use openh264::encoder::{
 };
 use openh264::formats::{RgbSliceU8, YUVBuffer};
 
+/// Highest frame rate accepted, frames per second: the MP4's 90 kHz clock needs distinct
+/// ticks per frame, and no player shows more.
+pub const MAX_FPS: f64 = 1000.0;
+
+/// Refuses a frame rate that is not a positive number up to [`MAX_FPS`].
+pub fn check_fps(fps: f64) -> Result<(), VideoError> {
+    if fps.is_finite() && fps > 0.0 && fps <= MAX_FPS {
+        Ok(())
+    } else {
+        Err(VideoError::Fps(fps))
+    }
+}
+
 /// Why a video could not be made.
 #[derive(Debug, thiserror::Error)]
 pub enum VideoError {
-    /// The frame rate is not a positive number.
-    #[error("video: frame rate {0} is not a positive number")]
+    /// The frame rate is not a positive number up to [`MAX_FPS`].
+    #[error("video: frame rate {0} is not a positive number up to {MAX_FPS}")]
     Fps(f64),
     /// The frame size is zero or larger than H.264 level 5.2 allows (3840×2160).
     #[error("video: frame size {width}×{height} is not between 1×1 and 3840×2160")]
@@ -73,9 +86,7 @@ pub struct VideoEncoder {
 impl VideoEncoder {
     /// An encoder for `width` × `height` frames shown at `fps` frames per second.
     pub fn new(width: usize, height: usize, fps: f64) -> Result<Self, VideoError> {
-        if !(fps.is_finite() && fps > 0.0) {
-            return Err(VideoError::Fps(fps));
-        }
+        check_fps(fps)?;
         if width == 0 || height == 0 || width.max(height) > 3840 || width.min(height) > 2160 {
             return Err(VideoError::Size { width, height });
         }

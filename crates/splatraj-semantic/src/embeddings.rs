@@ -61,6 +61,8 @@ impl Matrix {
                 format!("shape {shape:?}: expected 2 dimensions [rows, dim]"),
             ));
         };
+        crate::npy_size::check_npy_file(path, npy.header())
+            .map_err(|e| SemanticError::file(path, e))?;
         if npy.order() != npyz::Order::C {
             return Err(SemanticError::file(
                 path,

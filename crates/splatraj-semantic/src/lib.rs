@@ -40,6 +40,7 @@ pub mod explain;
 pub mod image_encoder;
 pub mod mask_file;
 pub mod names;
+mod npy_size;
 pub mod selection;
 pub mod sources;
 pub mod text_encoder;

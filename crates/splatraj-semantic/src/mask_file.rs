@@ -25,6 +25,7 @@ pub fn read_mask_file(path: &Path, gaussians: usize) -> Result<Vec<f32>> {
             "shape {shape:?} must be [N] or [N, 1], one value per Gaussian"
         )));
     }
+    crate::npy_size::check_npy_file(path, npy.header()).map_err(fail)?;
     let dtype = npy.dtype().descr();
     let values = read_values(npy)
         .map_err(|e| fail(e.to_string()))?

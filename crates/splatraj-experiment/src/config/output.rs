@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 use splatraj_config::ConfigError;
+use splatraj_report::video::MAX_FPS;
 
 /// Overlay of the target's mask on the output frames.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -114,8 +115,14 @@ impl OutputConfig {
         if self.width == 0 || self.height == 0 {
             return bad("width", "and `output.height` must be ≥ 1".into());
         }
-        if !(self.fps.is_finite() && self.fps > 0.0) {
-            return bad("fps", format!("= {} must be a positive number", self.fps));
+        if !(self.fps.is_finite() && self.fps > 0.0 && self.fps <= MAX_FPS) {
+            return bad(
+                "fps",
+                format!(
+                    "= {} must be a positive number up to {MAX_FPS} (the video's limit)",
+                    self.fps
+                ),
+            );
         }
         if let Some(s) = self.seconds
             && !(s.is_finite() && s > 0.0)

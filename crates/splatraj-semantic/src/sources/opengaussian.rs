@@ -72,6 +72,7 @@ fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>> {
             .map_err(|e| SemanticError::file(path, format!("reading {name:?}: {e}")))?;
         let bad = |detail: String| SemanticError::file(path, format!("array {name:?}: {detail}"));
         let npy = npyz::NpyFile::new(&bytes[..]).map_err(|e| bad(format!("not .npy: {e}")))?;
+        crate::npy_size::check_npy_bytes(&bytes, npy.header()).map_err(bad)?;
         let shape = npy.shape().to_vec();
         let values: std::io::Result<Vec<f64>> = match npy.try_data::<f32>() {
             Ok(d) => d.map(|v| v.map(f64::from)).collect(),

@@ -80,6 +80,20 @@ pub enum OptimiseError {
     /// A tensor could not be read back to the host.
     #[error("{0}")]
     ReadBack(String),
+    /// The sampled loss went NaN or infinite: the weights stepped to where the costs overflow
+    /// (a learning rate far too large), or the start itself is out of range.
+    #[error(
+        "the loss is {total} at step {step}: the trajectory left the range where the costs are \
+         finite; lower `optimiser.learning_rate` (now {learning_rate:e}) or check the start"
+    )]
+    LossNotFinite {
+        /// The step whose loss is not finite (0: the start).
+        step: usize,
+        /// The loss.
+        total: f64,
+        /// The learning rate in use.
+        learning_rate: f64,
+    },
 }
 
 /// Checks Adam's settings (a learning rate named by the caller, β1, β2, ε).

@@ -12,8 +12,11 @@
 //! W is held in normalised units ([`PoseUnits`]), so one learning rate moves rotations in
 //! radians and positions in `position` scene units.
 //!
-//! As in the single-pose loop, a step whose loss or gradient is not finite is skipped (W and
-//! Adam's state unchanged) and counted; the best weights seen (lowest sampled loss) are kept.
+//! A step whose loss is not finite stops the loop with [`OptimiseError::LossNotFinite`]
+//! (naming the step and the learning rate): W has left the range where the costs are finite,
+//! and every later step would be evaluated at the same W, so nothing non-finite is ever
+//! recorded. A step whose gradient alone is not finite is skipped (W and Adam's state
+//! unchanged) and counted; the best weights seen (lowest sampled loss) are kept.
 //! The sampled loss is noisy, so "best" is judged on the estimate; later steps are slightly
 //! favoured because the prior's weight decays. An observer sees every step and may stop the
 //! run (Ctrl-C, a time budget): the best trajectory so far is still returned.
@@ -216,7 +219,7 @@ pub struct TrajectoryResult {
     pub best_step: usize,
     /// One row per step run.
     pub history: Vec<TrajectoryStep>,
-    /// Steps skipped because the loss or the gradient was not finite.
+    /// Steps skipped because the gradient was not finite.
     pub skipped_steps: usize,
     /// Whether all iterations ran.
     pub stop: StopReason,
@@ -304,21 +307,27 @@ pub fn optimise_trajectory(
             .unwrap_or(f64::NAN);
         // Weights before the update: they are what `total` was measured at.
         let evaluated = module.host_weights();
+        if !total.is_finite() {
+            return Err(OptimiseError::LossNotFinite {
+                step,
+                total,
+                learning_rate: options.learning_rate,
+            });
+        }
         let backward_started = Instant::now();
         let grads = loss.backward();
         let grad = module.weights.val().grad(&grads).map(host_values);
         let backward_done = Instant::now();
-        let finite = total.is_finite()
-            && grad
-                .as_ref()
-                .is_none_or(|g| g.iter().all(|v| v.is_finite()));
+        let finite = grad
+            .as_ref()
+            .is_none_or(|g| g.iter().all(|v| v.is_finite()));
         if finite {
             let grads = GradientsParams::from_grads(grads, &module);
             module = optim.step(options.learning_rate, module, grads);
         } else {
             skipped_steps += 1;
         }
-        let improved = total.is_finite() && best.as_ref().is_none_or(|(b, _, _)| total < *b);
+        let improved = best.as_ref().is_none_or(|(b, _, _)| total < *b);
         let new_best = improved.then(|| evaluated.iter().map(|w| units.denormalise(w)).collect());
         if improved {
             best = Some((total, step, evaluated));

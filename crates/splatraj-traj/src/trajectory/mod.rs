@@ -84,6 +84,20 @@ pub enum TrajectoryError {
         /// Rows given.
         got: usize,
     },
+    /// A weight is NaN, infinite or beyond ±[`MAX_WEIGHT`] (no renderable path has such a
+    /// weight; its poses would overflow the renderer).
+    #[error(
+        "trajectory weights: row {row}, component {component} = {value:e} is not finite or \
+         beyond ±{MAX_WEIGHT:e}"
+    )]
+    WeightValue {
+        /// Row (basis function).
+        row: usize,
+        /// Pose component (0-2 rotation vector, 3-5 centre).
+        component: usize,
+        /// The value.
+        value: f64,
+    },
     /// Fitting data is inconsistent (lengths differ, nothing given, or a non-finite value).
     #[error("trajectory fit: {0}")]
     FitData(String),
@@ -306,6 +320,10 @@ impl Basis for TrajectoryModel {
     }
 }
 
+/// Largest weight a [`TrajectoryRecord`] may hold, in absolute value: the largest camera
+/// coordinate the renderer accepts (`splatraj_render::camera_file::MAX_COORDINATE`).
+pub const MAX_WEIGHT: f64 = splatraj_render::camera_file::MAX_COORDINATE;
+
 /// A model with its weights, as written to `trajectory.json` and read back.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrajectoryRecord {
@@ -313,6 +331,30 @@ pub struct TrajectoryRecord {
     pub model: TrajectoryModel,
     /// Weights W, one row of six per basis function `[K][6]`.
     pub weights: Vec<Pose>,
+}
+
+impl TrajectoryRecord {
+    /// Checks what every reader of a `trajectory.json` (or checkpoint) relies on: one row of
+    /// weights per basis function (for a built-in model; a custom model's count needs its
+    /// registry) and every weight finite within ±[`MAX_WEIGHT`].
+    pub fn validate(&self) -> Result<(), TrajectoryError> {
+        if self.model.validate().is_ok() && self.weights.len() != self.model.count() {
+            return Err(TrajectoryError::WeightRows {
+                expected: self.model.count(),
+                got: self.weights.len(),
+            });
+        }
+        for (row, w) in self.weights.iter().enumerate() {
+            if let Some(component) = w.iter().position(|v| !(v.abs() <= MAX_WEIGHT)) {
+                return Err(TrajectoryError::WeightValue {
+                    row,
+                    component,
+                    value: w[component],
+                });
+            }
+        }
+        Ok(())
+    }
 }
 
 /// A camera trajectory Φ(t) = Ψ(t)·W: the burn Module the optimiser updates.
