@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::Args;
-use splatraj::experiment::camera_paths::{FrameRequest, RunTrajectory, write_export};
+use splatraj::experiment::camera_paths::{FrameRequest, RunTrajectory, export_to};
 use splatraj_report::Format;
 
 /// Arguments of `splatraj export`.
@@ -58,7 +58,7 @@ pub fn run(args: ExportArgs) -> Result<()> {
     let out = args
         .out
         .unwrap_or_else(|| folder.join("exports").join(args.format.name()));
-    let names = write_export(&out, &frames, &trajectory.object_centres(), args.format)?;
+    let names = export_to(&out, &frames, &trajectory.object_centres(), args.format)?;
     let camera = frames.cameras[0];
     eprintln!(
         "wrote {} to {} ({} frames, {} fps, {}×{})",

@@ -96,9 +96,13 @@ pub fn run(args: PoseArgs) -> Result<()> {
     }
     let (metrics, pose) = (&outcome.metrics.metrics, &outcome.pose);
     eprintln!(
-        "best pose {:?}\nTCE {:.4}  TRE {:.4}  IoU {:.3}  visible {}  ({:.1} s, {:.0} ms/iteration for {} start(s))",
+        "best pose {:?}\nTCE {}  TRE {:.4}  IoU {:.3}  visible {}  ({:.1} s, {:.0} ms/iteration for {} start(s))",
         pose.pose,
-        metrics.tce,
+        metrics
+            .tce
+            .map_or("undefined (never in view)".to_string(), |t| format!(
+                "{t:.4}"
+            )),
         metrics.tre,
         metrics.iou,
         metrics.visible,

@@ -13,12 +13,12 @@
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use burn::tensor::DType;
 use clap::Args;
 use splatraj::experiment::camera_paths::{FrameRequest, PathFile};
 use splatraj::experiment::config::MaskOverlay;
-use splatraj::experiment::path_render::{PathRender, Video, render_path};
+use splatraj::experiment::path_render::{PathRender, Video, render_path_to};
 use splatraj::experiment::{Config, Experiment};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::render::{DeviceScene, Rasterizer};
@@ -154,11 +154,9 @@ pub fn run(args: RenderPathArgs) -> Result<()> {
         rasterizer,
         video,
     };
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create the output folder {}", args.out.display()))?;
     let bar = progress_bar(frames.poses.len() as u64, args.quiet);
     bar.set_message("frames");
-    let rendered = render_path(&scene, &job, &args.out, &mut |done| {
+    let rendered = render_path_to(&scene, &job, &args.out, &mut |done| {
         bar.set_position(done as u64)
     })?;
     bar.finish_and_clear();
@@ -167,8 +165,12 @@ pub fn run(args: RenderPathArgs) -> Result<()> {
             rendered.metrics.iter().map(f).sum::<f64>() / rendered.metrics.len() as f64
         };
         eprintln!(
-            "mean over frames: TCE {:.4}, TRE {:.4}, coverage {:.3}",
-            mean(|m| m.tce),
+            "mean over frames: TCE {} (frames in view), TRE {:.4}, coverage {:.3}",
+            rendered
+                .mean_tce_in_view()
+                .map_or("undefined (never in view)".to_string(), |t| format!(
+                    "{t:.4}"
+                )),
             mean(|m| m.tre),
             mean(|m| m.coverage)
         );

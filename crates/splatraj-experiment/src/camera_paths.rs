@@ -16,6 +16,7 @@ use splatraj_report::{CameraPath, ExportOptions, Format, Frame};
 use splatraj_traj::optimise::sampling::window_of;
 use splatraj_traj::trajectory::{Basis, TrajectoryRecord, uniform_times};
 
+use crate::output_folder::OutputFolder;
 use crate::outputs::write_bytes;
 use crate::resources::check_path_frames;
 
@@ -447,6 +448,26 @@ pub fn write_export(
         write_bytes(&dir.join(name), contents.as_bytes())?;
     }
     Ok(files.iter().map(|f| f.0).collect())
+}
+
+/// [`write_export`] into the folder `out` as a whole ([`OutputFolder`]): a re-export replaces
+/// an earlier one whole, a failure leaves `out` as it was. `out` may hold only an earlier
+/// export (any format's files).
+pub fn export_to(
+    out: &Path,
+    frames: &PathFrames,
+    object_centres: &[[f64; 3]],
+    format: Format,
+) -> Result<Vec<&'static str>> {
+    let ours: Vec<&str> = Format::ALL
+        .iter()
+        .chain(&[Format::Transforms])
+        .flat_map(|f| f.file_names().iter().copied())
+        .collect();
+    let folder = OutputFolder::begin(out, &ours)?;
+    let names = write_export(folder.path(), frames, object_centres, format)?;
+    folder.commit()?;
+    Ok(names)
 }
 
 /// Writes `frames` in every format into `exports/<format>/` under `run_dir`.

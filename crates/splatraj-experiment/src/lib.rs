@@ -39,6 +39,7 @@ pub mod io;
 pub mod lifted;
 pub mod memory_plans;
 pub mod observer;
+pub mod output_folder;
 pub mod outputs;
 pub mod path_checks;
 pub mod path_render;

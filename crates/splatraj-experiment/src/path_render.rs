@@ -26,6 +26,7 @@ use splatraj_traj::optimise::sampling::window_of;
 
 use crate::camera_paths::PathFrames;
 use crate::config::MaskOverlay;
+use crate::output_folder::OutputFolder;
 use crate::outputs::{TINT_ALPHA, write_bytes, write_csv};
 use crate::resources::{MemoryLimit, RenderWork};
 
@@ -95,6 +96,20 @@ pub struct RenderedPath {
     pub video: Option<PathBuf>,
     /// Where the time went.
     pub timings: PathTimings,
+}
+
+impl RenderedPath {
+    /// Mean TCE over the frames that show their object (some coverage); `None` when none
+    /// does: an object never in view has no centring error (an empty mask's TCE is 0).
+    pub fn mean_tce_in_view(&self) -> Option<f64> {
+        let seen: Vec<f64> = self
+            .metrics
+            .iter()
+            .filter(|m| m.coverage > 0.0)
+            .map(|m| m.tce)
+            .collect();
+        (!seen.is_empty()).then(|| seen.iter().sum::<f64>() / seen.len() as f64)
+    }
 }
 
 /// Time spent in each part of a path render, summed over its frames (the render stages'
@@ -175,6 +190,26 @@ pub fn render_path(
     progress: &mut dyn FnMut(usize),
 ) -> Result<RenderedPath> {
     render_path_with(scene, job, dir, progress, FrameSchedule::default())
+}
+
+/// What a rendered folder may hold: the names [`render_path`] writes.
+pub const PATH_RENDER_NAMES: [&str; 4] = ["frames", KEYFRAMES_DIR, FRAME_METRICS_FILE, VIDEO_FILE];
+
+/// [`render_path`] into the folder `out` as a whole ([`OutputFolder`]): written beside it and
+/// renamed into place, so a re-run replaces an earlier render whole, a failure leaves `out` as
+/// it was, and a second writer of the same folder is refused. `out` may hold only an earlier
+/// render ([`PATH_RENDER_NAMES`]).
+pub fn render_path_to(
+    scene: &DeviceScene,
+    job: &PathRender<'_>,
+    out: &Path,
+    progress: &mut dyn FnMut(usize),
+) -> Result<RenderedPath> {
+    let folder = OutputFolder::begin(out, &PATH_RENDER_NAMES)?;
+    let mut rendered = render_path(scene, job, folder.path(), progress)?;
+    let out = folder.commit()?;
+    rendered.video = rendered.video.map(|_| out.join(VIDEO_FILE));
+    Ok(rendered)
 }
 
 /// [`render_path`] with the given schedule.

@@ -25,12 +25,12 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use serde::Serialize;
 use splatraj_traj::metrics::WindowMetrics;
 use splatraj_traj::optimise::StopReason;
 
-use crate::checkpoint::Checkpoint;
+use crate::checkpoint::{CHECKPOINT_FILE, Checkpoint};
 use crate::config::MaskOverlay;
 use crate::experiment::Experiment;
 use crate::observer::{Observer, Phase, Progress};
@@ -40,28 +40,79 @@ use crate::resources::{MemoryPlan, RAISE_LIMIT, TimeBound};
 use crate::run_folder::{
     MetricsFile, RunReport, StageTimes, check_writable, remove_checkpoint, remove_partial_files,
 };
-use crate::{Evaluation, Posterior, RunOptions, RunStop};
+use crate::{Evaluation, Posterior, RunOptions, RunStop, TrajectoryRun};
 
 /// The run's config as run: every `"auto"` replaced by what was derived from the scene.
 pub const CONFIG_FILE: &str = "config.toml";
 
 /// A run's folder: where every file of one run goes.
+///
+/// A run that fails leaves no half-made folder ([`RunFolder::after_failure`]): a new run's
+/// folder (and the folders made for it) is removed whole, unless the optimisation had finished,
+/// in which case it is cut back to what a killed run leaves (`config.toml` and
+/// `checkpoint.json`), which `splatraj run --resume` continues.
 #[derive(Debug)]
 pub struct RunFolder {
     dir: PathBuf,
     checkpoint: Option<Checkpoint>,
+    /// Folders made for this run that did not exist before, innermost first (none for a
+    /// resumed run).
+    made: Vec<PathBuf>,
 }
 
 impl RunFolder {
     /// A new folder `output.runs_dir/name/<timestamp>/` holding the experiment's config as run.
     pub fn create(experiment: &Experiment) -> Result<RunFolder> {
         let config = &experiment.config;
+        let parent = config.output.runs_dir.join(&config.name);
+        let mut made: Vec<PathBuf> = parent
+            .ancestors()
+            .take_while(|p| !p.as_os_str().is_empty() && !p.exists())
+            .map(Path::to_path_buf)
+            .collect();
         let dir = create_run_dir(&config.output.runs_dir, &config.name)?;
-        write_bytes(&dir.join(CONFIG_FILE), toml::to_string(config)?.as_bytes())?;
-        Ok(RunFolder {
+        made.insert(0, dir.clone());
+        let folder = RunFolder {
             dir,
             checkpoint: None,
-        })
+            made,
+        };
+        let config_text = toml::to_string(config)?;
+        if let Err(e) = write_bytes(&folder.dir.join(CONFIG_FILE), config_text.as_bytes()) {
+            return Err(folder.after_failure(e, Stage::Preparing));
+        }
+        Ok(folder)
+    }
+
+    /// Tidies the folder after `error` at `stage` and returns the error, saying what was
+    /// kept: see the type's docs. A resumed run's folder is never removed, only cut back.
+    pub fn after_failure(&self, error: anyhow::Error, stage: Stage) -> anyhow::Error {
+        let resumable = self.checkpoint.is_some()
+            || (stage == Stage::Outputs && self.dir.join(CHECKPOINT_FILE).is_file());
+        if resumable {
+            return match keep_only_resumable(&self.dir) {
+                Ok(()) => error.context(format!(
+                    "the run folder {} keeps its config and checkpoint: `splatraj run --resume \
+                     {}` continues it",
+                    self.dir.display(),
+                    self.dir.display()
+                )),
+                Err(e) => error.context(format!("also, tidying the run folder failed: {e:#}")),
+            };
+        }
+        if let Err(e) = std::fs::remove_dir_all(&self.dir) {
+            return error.context(format!(
+                "also, the run folder {} could not be removed: {e}",
+                self.dir.display()
+            ));
+        }
+        // The folders made for the run go too, when nothing else was put in them since.
+        for made in &self.made[1..] {
+            if std::fs::remove_dir(made).is_err() {
+                break;
+            }
+        }
+        error
     }
 
     /// The folder of a stopped trajectory run, cleared of the temporaries a killed process
@@ -71,6 +122,7 @@ impl RunFolder {
         Ok(RunFolder {
             dir: dir.to_path_buf(),
             checkpoint: Some(checkpoint),
+            made: Vec::new(),
         })
     }
 
@@ -83,6 +135,34 @@ impl RunFolder {
     pub fn checkpoint(&self) -> Option<&Checkpoint> {
         self.checkpoint.as_ref()
     }
+}
+
+/// Where a run was when it failed (what [`RunFolder::after_failure`] keeps depends on it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stage {
+    /// Before or during the optimisation: nothing worth keeping was made.
+    Preparing,
+    /// Writing the outputs of a finished optimisation: its checkpoint is worth keeping.
+    Outputs,
+}
+
+/// Removes everything in the run folder `dir` but `config.toml` and `checkpoint.json`.
+fn keep_only_resumable(dir: &Path) -> Result<()> {
+    for entry in std::fs::read_dir(dir)? {
+        let entry = entry?;
+        let name = entry.file_name();
+        if name == CONFIG_FILE || name == CHECKPOINT_FILE {
+            continue;
+        }
+        let path = entry.path();
+        if entry.file_type()?.is_dir() {
+            std::fs::remove_dir_all(&path)
+        } else {
+            std::fs::remove_file(&path)
+        }
+        .with_context(|| format!("cannot remove {}", path.display()))?;
+    }
+    Ok(())
 }
 
 /// What a trajectory experiment did and found.
@@ -309,8 +389,22 @@ impl Experiment {
             checkpoint_dir: Some(dir),
             resume: folder.checkpoint(),
         };
-        let run = self.run_trajectory_with(options, observer)?;
-        let (header, rows) = trajectory_history(&run, self.windows.len());
+        let run = self
+            .run_trajectory_with(options, observer)
+            .map_err(|e| folder.after_failure(e, Stage::Preparing))?;
+        self.write_trajectory_outputs(folder, &run, observer)
+            .map_err(|e| folder.after_failure(e, Stage::Outputs))
+    }
+
+    /// The files of the optimised `run` in `folder` (see [`Experiment::run_trajectory_in`]).
+    fn write_trajectory_outputs(
+        &self,
+        folder: &RunFolder,
+        run: &TrajectoryRun,
+        observer: &mut dyn Observer,
+    ) -> Result<TrajectoryOutcome> {
+        let dir = folder.dir();
+        let (header, rows) = trajectory_history(run, self.windows.len());
         write_csv(&dir.join("history.csv"), &header, &rows)?;
         let trajectory = self.trajectory(&run.best().best)?;
         write_json(
@@ -347,7 +441,7 @@ impl Experiment {
             frames: outputs.frames,
             total: self.prepared_at.elapsed(),
         };
-        let report = RunReport::new(self, &run, times);
+        let report = RunReport::new(self, run, times);
         let evaluation = outputs.evaluation;
         let (problems, failing) = (evaluation.problems(), evaluation.failing());
         write_json(
@@ -395,6 +489,17 @@ impl Experiment {
     /// `pose.json`, `frame.png` and `metrics.json`. The observer hears every step (and may stop
     /// the optimisation, keeping each start's best), then [`Phase::Sgld`].
     pub fn run_pose_in(
+        &self,
+        folder: &RunFolder,
+        sgld: Option<usize>,
+        observer: &mut dyn Observer,
+    ) -> Result<PoseOutcome> {
+        self.write_pose_run(folder, sgld, observer)
+            .map_err(|e| folder.after_failure(e, Stage::Preparing))
+    }
+
+    /// The pose run of [`Experiment::run_pose_in`], failing as it comes.
+    fn write_pose_run(
         &self,
         folder: &RunFolder,
         sgld: Option<usize>,

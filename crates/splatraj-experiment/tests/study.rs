@@ -131,8 +131,11 @@ fn a_grid_study_has_a_row_per_run_and_a_non_dominated_frontier() {
         assert_eq!(r.windows.len(), 2);
         assert!(r.peak_mb.is_none());
         // The evaluation is the base config's, whatever the variant: 2 poses per window.
-        let expected =
-            (r.windows[0].tce + r.windows[0].tre + r.windows[1].tce + r.windows[1].tre) / 2.0;
+        let expected = (r.windows[0].tce.unwrap()
+            + r.windows[0].tre
+            + r.windows[1].tce.unwrap()
+            + r.windows[1].tre)
+            / 2.0;
         assert!((r.error - expected).abs() < 1e-12);
     }
 

@@ -68,7 +68,11 @@ pub fn measure_run(
             best_total: f64::NAN,
             stages: None,
             error: plan.quality.error(&windows),
-            tce: mean(|w| w.tce),
+            tce: windows
+                .iter()
+                .map(|w| w.tce)
+                .sum::<Option<f64>>()
+                .map(|s| s / windows.len().max(1) as f64),
             tre: mean(|w| w.tre),
             iou: mean(|w| w.iou),
             visible: mean(|w| w.visible_fraction),

@@ -82,8 +82,8 @@ pub struct StudyRow {
     pub stages: Option<StageTimes>,
     /// The judged error (see the plan's quality; lower is better).
     pub error: f64,
-    /// Mean over windows of the evaluation's TCE.
-    pub tce: f64,
+    /// Mean over windows of the evaluation's TCE (`None` when a window never shows its object).
+    pub tce: Option<f64>,
     /// Mean over windows of the evaluation's TRE.
     pub tre: f64,
     /// Mean over windows of the evaluation's IoU.
@@ -111,8 +111,8 @@ pub struct StudyRow {
 pub struct WindowScore {
     /// The query.
     pub name: String,
-    /// Mean TCE over the evaluation's poses.
-    pub tce: f64,
+    /// Mean TCE over the evaluation's poses (`None`: the object was never in view).
+    pub tce: Option<f64>,
     /// Mean TRE.
     pub tre: f64,
     /// Mean bounding-box IoU.
@@ -121,8 +121,8 @@ pub struct WindowScore {
     pub visible_fraction: f64,
     /// Mean share of the frame the object covers.
     pub coverage: f64,
-    /// Worst TCE.
-    pub tce_max: f64,
+    /// Worst TCE (`None`: the object was never in view).
+    pub tce_max: Option<f64>,
     /// Worst TRE.
     pub tre_max: f64,
     /// Smallest clearance from the geometry (when the clearance cost is on).
@@ -213,7 +213,7 @@ pub fn study_csv(rows: &[StudyRow]) -> Csv {
                 r.iterations.to_string(),
                 r.best_total.to_string(),
                 r.error.to_string(),
-                r.tce.to_string(),
+                opt(r.tce),
                 r.tre.to_string(),
                 r.iou.to_string(),
                 r.visible.to_string(),
@@ -232,7 +232,8 @@ pub fn study_csv(rows: &[StudyRow]) -> Csv {
             for w in 0..windows {
                 match r.windows.get(w) {
                     Some(m) => {
-                        row.extend([m.tce, m.tre, m.iou, m.visible_fraction].map(|v| v.to_string()))
+                        row.push(opt(m.tce));
+                        row.extend([m.tre, m.iou, m.visible_fraction].map(|v| v.to_string()))
                     }
                     None => row.extend(std::iter::repeat_n(String::new(), 4)),
                 }

@@ -8,12 +8,16 @@ use super::Quality;
 use super::plan::StudyPlan;
 use super::rows::{StageTimes, StudyRow, WindowScore};
 
+/// The TCE a study judges a window by when it never showed its object (its TCE is undefined):
+/// that of an object in a corner of the frame, √½, the worst a seen object can have.
+pub const UNSEEN_TCE: f64 = std::f64::consts::FRAC_1_SQRT_2;
+
 impl Quality {
-    /// The error of one evaluation.
+    /// The error of one evaluation (a window never showing its object counts [`UNSEEN_TCE`]).
     pub fn error(self, windows: &[WindowScore]) -> f64 {
         let one = |w: &WindowScore| match self {
-            Quality::Framing => w.tce + w.tre,
-            Quality::Tce => w.tce,
+            Quality::Framing => w.tce.unwrap_or(UNSEEN_TCE) + w.tre,
+            Quality::Tce => w.tce.unwrap_or(UNSEEN_TCE),
             Quality::Tre => w.tre,
             Quality::Iou => 1.0 - w.iou,
         };
@@ -129,7 +133,7 @@ impl Figures {
         Figures {
             rows: rows.len(),
             error: spread(&|r| Some(r.error)),
-            tce: spread(&|r| Some(r.tce)),
+            tce: spread(&|r| r.tce),
             tre: spread(&|r| Some(r.tre)),
             iou: spread(&|r| Some(r.iou)),
             visible: spread(&|r| Some(r.visible)),

@@ -45,8 +45,10 @@ pub struct WindowMetrics {
     pub name: String,
     /// Samples evaluated.
     pub samples: usize,
-    /// Mean target centring error.
-    pub tce: f64,
+    /// Mean target centring error over the samples; `None` (`null` in `metrics.json`) when no
+    /// sample shows the object: an object never seen has no centring error, and the empty
+    /// mask's TCE of 0 would read as perfect framing.
+    pub tce: Option<f64>,
     /// Mean target ratio error.
     pub tre: f64,
     /// Mean bounding-box IoU of the visible mask and the object alone.
@@ -59,8 +61,8 @@ pub struct WindowMetrics {
     pub visible_fraction: f64,
     /// Whether every sample shows the object.
     pub visible: bool,
-    /// Worst TCE over the samples.
-    pub tce_max: f64,
+    /// Worst TCE over the samples (`None` when no sample shows the object, as `tce`).
+    pub tce_max: Option<f64>,
     /// Worst TRE over the samples.
     pub tre_max: f64,
     /// How much of the object occluders hide (module docs).
@@ -238,14 +240,14 @@ pub fn window_metrics(
         window: index,
         name: object.name.to_string(),
         samples: batch,
-        tce: mean(&tces),
+        tce: (shown > 0).then(|| mean(&tces)),
         tre: mean(&tres),
         iou: mean(&ious),
         coverage: mean(&coverages),
         target_ratio: object.target_ratio,
         visible_fraction: shown as f64 / batch.max(1) as f64,
         visible: shown == batch,
-        tce_max: max(&tces),
+        tce_max: (shown > 0).then(|| max(&tces)),
         tre_max: max(&tres),
         occlusion: Occlusion::from_shares(&occluded),
         path: None,
