@@ -364,3 +364,498 @@ fn set_with_a_float_for_an_integer_names_the_option_and_key() {
 fn set_with_an_unknown_enum_value_names_the_option_and_lists_the_values() {
     set_error("trajectory.kind=\"spline\"", &["rbf", "waypoint"]);
 }
+
+// --- The table: one bad input per row, over every command. ---
+
+/// What every row of [`TABLE`] shares: a demo scene and a finished tiny run (made once).
+struct Fixture {
+    dir: tempfile::TempDir,
+}
+
+impl Fixture {
+    fn new() -> Self {
+        let fixture = Fixture {
+            dir: tempfile::tempdir().unwrap(),
+        };
+        let scene = fixture.scene();
+        let out = splatraj(&["scene", "demo", "--out", s(&scene), "--gaussians", "3000"]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let config = fixture.dir.path().join("tiny.toml");
+        std::fs::write(
+            &config,
+            fixture.config_text(&fixture.dir.path().join("runs")),
+        )
+        .unwrap();
+        let out = splatraj(&["run", s(&config), "--quiet"]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        fixture
+    }
+
+    /// The demo scene (3 000 Gaussians with labels).
+    fn scene(&self) -> PathBuf {
+        self.dir.path().join("demo.ply")
+    }
+
+    /// The tiny config with its runs going to `runs`.
+    fn config_text(&self, runs: &Path) -> String {
+        TINY_CONFIG.replace(
+            "[output]\n",
+            &format!("[output]\nruns_dir = \"{}\"\n", runs.display()),
+        )
+    }
+
+    /// The finished run's folder.
+    fn run(&self) -> PathBuf {
+        let tiny = self.dir.path().join("runs/tiny");
+        std::fs::read_dir(tiny)
+            .unwrap()
+            .next()
+            .unwrap()
+            .unwrap()
+            .path()
+    }
+
+    /// The run's `trajectory.json` as JSON.
+    fn trajectory(&self) -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(self.run().join("trajectory.json")).unwrap())
+            .unwrap()
+    }
+}
+
+/// Writes `value` as JSON to `dir/name` and returns the path as an argument.
+fn json_file(dir: &Path, name: &str, value: &serde_json::Value) -> String {
+    let path = dir.join(name);
+    std::fs::write(&path, value.to_string()).unwrap();
+    path.display().to_string()
+}
+
+/// A run's `trajectory.json` with `edit` applied, in `dir`.
+fn trajectory_with(f: &Fixture, dir: &Path, edit: impl FnOnce(&mut serde_json::Value)) -> String {
+    let mut t = f.trajectory();
+    edit(&mut t);
+    json_file(dir, "traj.json", &t)
+}
+
+/// The tiny config (runs into `dir/runs`) with `--set`-style `extra` TOML appended.
+fn config_in(f: &Fixture, dir: &Path, extra: &str) -> String {
+    let path = dir.join("run.toml");
+    std::fs::write(
+        &path,
+        format!("{}\n{extra}\n", f.config_text(&dir.join("runs"))),
+    )
+    .unwrap();
+    path.display().to_string()
+}
+
+/// A `.npy` of `values` f32 whose header claims `shape`.
+fn npy_claiming(dir: &Path, shape: &str, values: usize) -> String {
+    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend((header.len() as u16).to_le_bytes());
+    bytes.extend(header.as_bytes());
+    bytes.extend(std::iter::repeat_n(0u8, 4 * values));
+    let path = dir.join("mask.npy");
+    std::fs::write(&path, bytes).unwrap();
+    path.display().to_string()
+}
+
+/// An INRIA PLY header with no vertices.
+fn empty_scene(dir: &Path) -> String {
+    let mut text = "ply\nformat binary_little_endian 1.0\nelement vertex 0\n".to_string();
+    for n in [
+        "x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
+        "rot_0", "rot_1", "rot_2", "rot_3",
+    ] {
+        text += &format!("property float {n}\n");
+    }
+    text += "end_header\n";
+    let path = dir.join("empty.ply");
+    std::fs::write(&path, text).unwrap();
+    path.display().to_string()
+}
+
+/// One row: what it proves (its name), the command line it builds in its own folder (inputs
+/// made there first), and what the one-paragraph error must name. Every row must exit
+/// non-zero without a panic and leave its folder exactly as it was (no output, no run folder,
+/// no temporary).
+struct Row {
+    proves: &'static str,
+    args: fn(&Fixture, &Path) -> Vec<String>,
+    mentions: &'static [&'static str],
+}
+
+fn strings(args: &[&str]) -> Vec<String> {
+    args.iter().map(|a| a.to_string()).collect()
+}
+
+const TABLE: &[Row] = &[
+    Row {
+        proves: "run_whose_loss_goes_nan_stops_naming_the_learning_rate_and_leaves_no_run_folder",
+        args: |f, d| {
+            let c = config_in(f, d, "");
+            strings(&[
+                "run",
+                &c,
+                "--quiet",
+                "--set",
+                "optimiser.learning_rate=1e30",
+            ])
+        },
+        mentions: &["`optimiser.learning_rate`", "step", "NaN"],
+    },
+    Row {
+        proves: "run_check_refuses_a_runs_dir_that_is_a_file",
+        args: |f, d| {
+            std::fs::write(d.join("taken"), "a file").unwrap();
+            let c = config_in(f, d, "");
+            let set = format!("output.runs_dir=\"{}\"", d.join("taken").display());
+            strings(&["run", &c, "--check", "--set", &set])
+        },
+        mentions: &["`output.runs_dir`", "not a folder"],
+    },
+    Row {
+        proves: "run_refuses_an_fps_the_video_cannot_hold_before_making_a_folder",
+        args: |f, d| {
+            let c = config_in(f, d, "");
+            strings(&["run", &c, "--quiet", "--set", "output.fps=1e9"])
+        },
+        mentions: &["`output.fps`", "1000"],
+    },
+    Row {
+        proves: "run_check_refuses_a_start_trajectory_with_a_weight_of_1e300",
+        args: |f, d| {
+            let t = trajectory_with(f, d, |t| t["weights"][0][3] = 1e300.into());
+            let c = config_in(f, d, &format!("[start]\ntrajectory = \"{t}\""));
+            strings(&["run", &c, "--check"])
+        },
+        mentions: &["`start.trajectory`", "row 0", "1e300"],
+    },
+    Row {
+        proves: "render_path_refuses_a_trajectory_missing_a_weight_row",
+        args: |f, d| {
+            let t = trajectory_with(f, d, |t| {
+                t["weights"].as_array_mut().unwrap().pop();
+            });
+            let out = d.join("out").display().to_string();
+            strings(&["render-path", s(&f.scene()), &t, "--out", &out, "--quiet"])
+        },
+        mentions: &["traj.json", "expected 8 rows", "got 7"],
+    },
+    Row {
+        proves: "export_refuses_a_trajectory_missing_a_weight_row_as_render_path_does",
+        args: |f, d| {
+            let t = trajectory_with(f, d, |t| {
+                t["weights"].as_array_mut().unwrap().pop();
+            });
+            let out = d.join("out").display().to_string();
+            strings(&["export", &t, "--format", "nerfstudio", "--out", &out])
+        },
+        mentions: &["traj.json", "expected 8 rows", "got 7"],
+    },
+    Row {
+        proves: "render_path_refuses_a_trajectory_whose_fx_is_0",
+        args: |f, d| {
+            let t = trajectory_with(f, d, |t| t["output_intrinsics"]["fx"] = 0.into());
+            let out = d.join("out").display().to_string();
+            strings(&["render-path", s(&f.scene()), &t, "--out", &out, "--quiet"])
+        },
+        mentions: &["traj.json", "`output_intrinsics`", "fx = 0"],
+    },
+    Row {
+        proves: "render_path_refuses_weights_of_1e300_as_export_does",
+        args: |f, d| {
+            let t = trajectory_with(f, d, |t| t["weights"][2][1] = (-1e300).into());
+            let out = d.join("out").display().to_string();
+            strings(&["render-path", s(&f.scene()), &t, "--out", &out, "--quiet"])
+        },
+        mentions: &["traj.json", "row 2, component 1", "-1e300"],
+    },
+    Row {
+        proves: "render_path_refuses_a_nerfstudio_camera_beyond_1e15",
+        args: |f, d| {
+            let file = f.run().join("exports/nerfstudio/camera_path.json");
+            let mut path: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(file).unwrap()).unwrap();
+            path["camera_path"][1]["camera_to_world"][7] = 1e20.into();
+            let p = json_file(d, "camera_path.json", &path);
+            let out = d.join("out").display().to_string();
+            strings(&["render-path", s(&f.scene()), &p, "--out", &out, "--quiet"])
+        },
+        mentions: &["camera_path.json", "frame 1", "1e20"],
+    },
+    Row {
+        proves: "render_path_refuses_an_fps_the_video_cannot_hold_naming_the_flag",
+        args: |f, d| {
+            let out = d.join("out").display().to_string();
+            let run = f.run().display().to_string();
+            strings(&[
+                "render-path",
+                s(&f.scene()),
+                &run,
+                "--out",
+                &out,
+                "--fps",
+                "1e9",
+            ])
+        },
+        mentions: &["--fps", "1000"],
+    },
+    Row {
+        proves: "render_path_refuses_a_config_whose_queries_are_not_the_trajectorys_windows",
+        args: |f, d| {
+            let c = config_in(f, d, "[[queries]]\ntext = \"plant\"");
+            let out = d.join("out").display().to_string();
+            let run = f.run().display().to_string();
+            strings(&["render-path", &c, &run, "--out", &out, "--quiet"])
+        },
+        mentions: &["2 query windows", "3 queries"],
+    },
+    Row {
+        proves: "render_path_refuses_to_replace_a_folder_holding_other_files",
+        args: |f, d| {
+            std::fs::create_dir(d.join("out")).unwrap();
+            std::fs::write(d.join("out/notes.txt"), "mine").unwrap();
+            let out = d.join("out").display().to_string();
+            let run = f.run().display().to_string();
+            strings(&["render-path", s(&f.scene()), &run, "--out", &out, "--quiet"])
+        },
+        mentions: &["notes.txt", "does not write"],
+    },
+    Row {
+        proves: "render_refuses_a_scene_without_gaussians_naming_the_file",
+        args: |_, d| {
+            let scene = empty_scene(d);
+            let camera =
+                Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/cameras/demo_mug.json");
+            let out = d.join("out").display().to_string();
+            strings(&[
+                "render",
+                "--scene",
+                &scene,
+                "--camera",
+                s(&camera),
+                "--out",
+                &out,
+            ])
+        },
+        mentions: &["empty.ply", "no Gaussians"],
+    },
+    Row {
+        proves: "render_path_refuses_a_scene_without_gaussians_naming_the_file",
+        args: |f, d| {
+            let scene = empty_scene(d);
+            let out = d.join("out").display().to_string();
+            let run = f.run().display().to_string();
+            strings(&["render-path", &scene, &run, "--out", &out, "--quiet"])
+        },
+        mentions: &["empty.ply", "no Gaussians"],
+    },
+    Row {
+        proves: "render_refuses_a_mask_npy_whose_shape_claims_more_than_it_holds",
+        args: |f, d| {
+            let mask = npy_claiming(d, "(3000,)", 100);
+            let camera =
+                Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/cameras/demo_mug.json");
+            let out = d.join("out").display().to_string();
+            strings(&[
+                "render",
+                "--scene",
+                s(&f.scene()),
+                "--camera",
+                s(&camera),
+                "--mask",
+                &mask,
+                "--out",
+                &out,
+            ])
+        },
+        mentions: &["mask.npy", "shape [3000]", "needs 12000 bytes", "holds 400"],
+    },
+    Row {
+        proves: "report_refuses_a_metrics_json_of_the_wrong_shape",
+        args: |f, d| {
+            let run = d.join("run");
+            std::fs::create_dir(&run).unwrap();
+            for name in ["config.toml", "trajectory.json"] {
+                std::fs::copy(f.run().join(name), run.join(name)).unwrap();
+            }
+            std::fs::write(run.join("metrics.json"), r#"{"windows": 5}"#).unwrap();
+            strings(&["report", s(&run), "--scene", s(&f.scene())])
+        },
+        mentions: &["metrics.json", "`windows`"],
+    },
+    Row {
+        proves: "report_refuses_a_scene_other_than_the_runs",
+        args: |f, d| {
+            let run = d.join("run");
+            std::fs::create_dir(&run).unwrap();
+            for name in ["config.toml", "trajectory.json", "metrics.json"] {
+                std::fs::copy(f.run().join(name), run.join(name)).unwrap();
+            }
+            let other = d.join("other.ply");
+            let out = splatraj(&["scene", "demo", "--out", s(&other), "--gaussians", "2000"]);
+            assert!(out.status.success(), "{}", stderr(&out));
+            strings(&["report", s(&run), "--scene", s(&other)])
+        },
+        mentions: &["2000 Gaussians", "3000", "`run.gaussians`", "--scene"],
+    },
+    Row {
+        proves: "query_names_a_bad_top_fraction_by_its_flag_spelt_with_dashes",
+        args: |f, d| {
+            let out = d.join("out").display().to_string();
+            strings(&[
+                "query",
+                "--scene",
+                s(&f.scene()),
+                "--query",
+                "red mug",
+                "--top-fraction",
+                "2",
+                "--out",
+                &out,
+            ])
+        },
+        mentions: &["--top-fraction", "(0, 1]"],
+    },
+    Row {
+        proves: "bench_frames_names_a_nan_target_ratio_by_its_flag",
+        args: |_, _| {
+            strings(&[
+                "bench",
+                "frames",
+                "--target-ratio",
+                "NaN",
+                "--gaussians",
+                "3000",
+                "--frames",
+                "2",
+            ])
+        },
+        mentions: &["--target-ratio", "NaN"],
+    },
+];
+
+/// Every file and folder under `dir` (relative paths, sorted).
+fn tree(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path.clone());
+            }
+            out.push(path.strip_prefix(dir).unwrap().to_path_buf());
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn every_row_of_the_bad_input_table_fails_cleanly_naming_its_fault_and_writes_nothing() {
+    let fixture = Fixture::new();
+    let mut failures = Vec::new();
+    for row in TABLE {
+        let dir = fixture.dir.path().join(row.proves);
+        std::fs::create_dir(&dir).unwrap();
+        let args = (row.args)(&fixture, &dir);
+        let before = tree(&dir);
+        let out = splatraj(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        let checked = std::panic::catch_unwind(|| {
+            // Progress lines may come first (a run prints its plan); the error is the last
+            // line, the only one starting `error:`.
+            let err = stderr(&out);
+            assert!(!out.status.success(), "should fail: {err}");
+            assert!(!err.contains("panicked"), "{err}");
+            let last = err.trim_end().lines().last().unwrap_or_default();
+            assert!(last.starts_with("error: "), "{err}");
+            assert_eq!(err.matches("error:").count(), 1, "one error: {err}");
+            for m in row.mentions {
+                assert!(last.contains(m), "{last:?} does not mention {m:?}");
+            }
+            assert!(
+                !err.contains("--top_fraction"),
+                "flags are spelt with dashes: {err}"
+            );
+            assert_eq!(tree(&dir), before, "the folder changed: {err}");
+        });
+        if let Err(e) = checked {
+            let message = e
+                .downcast_ref::<String>()
+                .cloned()
+                .unwrap_or_else(|| "(no message)".into());
+            failures.push(format!("{}: {message}", row.proves));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+}
+
+// --- What a re-run and an object never in view give. ---
+
+#[test]
+fn render_path_into_its_own_earlier_folder_replaces_it_whole() {
+    let fixture = Fixture::new();
+    let out = fixture.dir.path().join("frames_out");
+    let run = fixture.run();
+    let render = |seconds: &str| {
+        let o = splatraj(&[
+            "render-path",
+            s(&fixture.scene()),
+            s(&run),
+            "--out",
+            s(&out),
+            "--quiet",
+            "--fps",
+            "10",
+            "--seconds",
+            seconds,
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        std::fs::read_dir(out.join("frames")).unwrap().count()
+    };
+    assert_eq!(render("0.5"), 5);
+    assert_eq!(
+        render("0.2"),
+        2,
+        "the first render's frames went with its folder"
+    );
+    let names: Vec<String> = std::fs::read_dir(fixture.dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(
+        names.is_empty(),
+        "no staging folder or lock left: {names:?}"
+    );
+}
+
+#[test]
+fn an_object_never_in_view_has_an_undefined_tce_not_zero() {
+    let case = Case::new();
+    let out = splatraj(&[
+        "pose",
+        s(&case.config()),
+        "--quiet",
+        // Far above the scene, looking up (+z): the mug is never in the frame.
+        "--set",
+        "start.pose=[0, 0, 0, 0, 0, 50]",
+        "--set",
+        "pose.optimiser.iterations=1",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("TCE undefined"), "{}", stderr(&out));
+    let folder = common::stdout(&out);
+    let metrics: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(Path::new(folder.trim()).join("metrics.json")).unwrap(),
+    )
+    .unwrap();
+    let m = &metrics["metrics"];
+    assert_eq!(m["visible_fraction"], 0.0, "{m}");
+    assert!(m["tce"].is_null() && m["tce_max"].is_null(), "{m}");
+}
