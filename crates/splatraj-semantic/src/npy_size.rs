@@ -103,7 +103,7 @@ mod tests {
         );
         let err = checked("(2,)", &[1.0, 2.0, 3.0]).unwrap_err();
         assert!(err.contains("needs 8 bytes"), "{err}");
-        let err = checked("(4294967296, 4294967296)", &[1.0]).unwrap_err();
+        let err = checked("(2147483648, 2147483648)", &[1.0]).unwrap_err();
         assert!(err.contains("more than 2^64"), "{err}");
     }
 }
