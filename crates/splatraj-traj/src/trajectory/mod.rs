@@ -345,7 +345,10 @@ impl TrajectoryRecord {
             });
         }
         for (row, w) in self.weights.iter().enumerate() {
-            if let Some(component) = w.iter().position(|v| !(v.abs() <= MAX_WEIGHT)) {
+            if let Some(component) = w
+                .iter()
+                .position(|v| !(v.is_finite() && v.abs() <= MAX_WEIGHT))
+            {
                 return Err(TrajectoryError::WeightValue {
                     row,
                     component,
