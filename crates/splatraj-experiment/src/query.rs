@@ -153,17 +153,23 @@ impl ConfigQuery {
             KeyNaming::Config => &crate::grounding::config_key,
             KeyNaming::Options(name) => name,
         };
-        let (at, selection_prefix) = match self.naming {
-            KeyNaming::Config => (
-                format!("config {}", config.path.display()),
-                "targets.selection.",
-            ),
-            KeyNaming::Options(_) => (format!("{scene_name} ({kind} source)"), "--"),
+        let at = match self.naming {
+            KeyNaming::Config => format!("config {}", config.path.display()),
+            KeyNaming::Options(_) => format!("{scene_name} ({kind} source)"),
+        };
+        // A selection key as the user set it: its config key, or its flag (`--top-fraction`;
+        // flags are spelt with dashes), or `--set` for a key without a flag.
+        let selection_key = |k: &str| match &self.naming {
+            KeyNaming::Config => format!("targets.selection.{k}"),
+            KeyNaming::Options(name) => match name(k) {
+                flag if flag.starts_with("--set") => format!("--set targets.selection.{k}"),
+                flag => flag,
+            },
         };
         config
             .targets
             .selection
-            .validate_as(selection_prefix)
+            .validate_named(&selection_key)
             .map_err(|e| anyhow!("{at}: {e}"))?;
         let source = crate::grounding::build_source(&config, scene.len(), &device, extensions, key)
             .map_err(|e| anyhow!("{at}: {e:#}"))?;

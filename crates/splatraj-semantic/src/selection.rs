@@ -195,10 +195,14 @@ impl SelectionOptions {
     /// As [`SelectionOptions::validate`], with `prefix` put before each key in errors
     /// (`"targets.selection."` for a config file).
     pub fn validate_as(&self, prefix: &str) -> Result<()> {
+        self.validate_named(&|key| format!("{prefix}{key}"))
+    }
+
+    /// As [`SelectionOptions::validate`], with each key (`top_fraction`, ...) named in errors
+    /// as `name` gives it (a command-line flag, `--top-fraction`).
+    pub fn validate_named(&self, name: &dyn Fn(&str) -> String) -> Result<()> {
         validate(self).map_err(|e| match e {
-            SemanticError::InvalidOption(e) => {
-                SemanticError::option(format!("{prefix}{}", e.key), e.reason)
-            }
+            SemanticError::InvalidOption(e) => SemanticError::option(name(&e.key), e.reason),
             other => other,
         })
     }
