@@ -10,7 +10,6 @@ use std::str::FromStr;
 
 use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
-use splatraj::experiment::outputs::write_bytes;
 use splatraj_render::backend::BackendKind;
 use splatraj_semantic::vectors::DEFAULT_NEGATIVES;
 use splatraj_semantic::{Activation, TextEncoder, TextEncoderOptions};
@@ -74,8 +73,7 @@ pub fn run(args: EncodeTextArgs) -> Result<()> {
     let encoder = TextEncoder::from_file(&args.text_encoder, options, &device)?;
     eprintln!("{}", encoder.describe());
     let table = encoder.table(&phrases)?;
-    let bytes = table.to_bytes(&args.out)?;
-    write_bytes(&args.out, &bytes)?;
+    table.write(&args.out)?;
     eprintln!(
         "wrote {} ({} phrases, {}-d)",
         args.out.display(),

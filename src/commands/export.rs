@@ -7,13 +7,13 @@
 //! frame count; a custom model, which needs its registry, falls back to the densely sampled
 //! poses the file holds). The cameras are the run's frame camera (`output_intrinsics`),
 //! rescaled by `--width`/`--height`. Each file is written whole or not at all. The work is the
-//! library's ([`splatraj::experiment::camera_paths`]), as for the exports every run writes.
+//! library's ([`splatraj::experiment::camera_paths::export_run`]), as for the exports every run writes.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use splatraj::experiment::camera_paths::{FrameRequest, RunTrajectory, export_to};
+use splatraj::experiment::camera_paths::{ExportRequest, FrameRequest, export_run};
 use splatraj_report::Format;
 
 /// Arguments of `splatraj export`.
@@ -47,28 +47,28 @@ fn parse_format(s: &str) -> Result<Format, String> {
 
 /// Runs `splatraj export`.
 pub fn run(args: ExportArgs) -> Result<()> {
-    let trajectory = RunTrajectory::read(&args.input)?;
-    let frames = trajectory.frames(&FrameRequest {
-        fps: args.fps,
-        seconds: args.seconds,
-        width: args.width,
-        height: args.height,
+    let exported = export_run(&ExportRequest {
+        input: args.input,
+        format: args.format,
+        frames: FrameRequest {
+            fps: args.fps,
+            seconds: args.seconds,
+            width: args.width,
+            height: args.height,
+        },
+        out: args.out,
     })?;
-    let folder = trajectory.file.parent().unwrap_or(Path::new("."));
-    let out = args
-        .out
-        .unwrap_or_else(|| folder.join("exports").join(args.format.name()));
-    let names = export_to(&out, &frames, &trajectory.object_centres(), args.format)?;
+    let frames = &exported.frames;
     let camera = frames.cameras[0];
     eprintln!(
         "wrote {} to {} ({} frames, {} fps, {}×{})",
-        names.join(", "),
-        out.display(),
+        exported.files.join(", "),
+        exported.dir.display(),
         frames.poses.len(),
         frames.fps,
         camera.width,
         camera.height
     );
-    println!("{}", out.display());
+    println!("{}", exported.dir.display());
     Ok(())
 }

@@ -6,23 +6,21 @@
 //! row-major). The object is a per-Gaussian mask from a `.npy` file or a label of the scene.
 //! Every input is checked before anything is rendered or written, and each output file
 //! appears whole or not at all. `--grad` computes TCE + TRE through the optimiser's loss path.
+//! The work is the library's ([`splatraj::experiment::camera_render`]).
 
 use std::path::PathBuf;
 use std::str::FromStr;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::Args;
-use serde::Serialize;
+use splatraj::experiment::camera_render::{
+    CameraRenderRequest, GradRequest, RenderObject, render_camera,
+};
 use splatraj::experiment::io::read_camera_file;
-use splatraj::experiment::outputs::{npy_f32, write_bytes};
-use splatraj::experiment::probe::{MaskProbe, ProbeReport};
-use splatraj::experiment::resources::{MemoryLimit, RenderWork};
+use splatraj::experiment::resources::MemoryLimit;
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera_file::resize;
-use splatraj_render::host::{OnDevice, to_host};
-use splatraj_render::images::{png_gray, png_rgb};
-use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
-use splatraj_semantic::{label_mask, read_mask_file};
+use splatraj_render::render::Rasterizer;
 use splatraj_traj::costs::DEFAULT_TARGET_RATIO;
 
 use crate::cli::{DtypeArg, MemoryArgs, ReadArgs};
@@ -76,22 +74,6 @@ pub struct RenderArgs {
     memory: MemoryArgs,
 }
 
-/// What `render --grad` prints.
-/// The `--grad` line: the probe's figures and what they were measured on.
-#[derive(Debug, Serialize)]
-struct GradReport {
-    #[serde(flatten)]
-    probe: ProbeReport,
-    target_ratio: f64,
-    repeats: usize,
-    gaussians: usize,
-    width: usize,
-    height: usize,
-    backend: String,
-    dtype: String,
-    rasterizer: Rasterizer,
-}
-
 /// Runs `splatraj render`.
 pub fn run(args: RenderArgs) -> Result<()> {
     // Cheap checks first, then every input, then the renders; files are written last.
@@ -108,121 +90,41 @@ pub fn run(args: RenderArgs) -> Result<()> {
         bail!("--width and --height must be at least 1");
     }
     let device = args.backend.device()?;
-    let dtype = args.dtype.precision().dtype();
     let camera = read_camera_file(&args.camera)?;
     let intrinsics = resize(&camera.intrinsics, args.width, args.height)?;
     let limit = MemoryLimit::new(args.memory.max_memory)?;
     let scene = args.read.load_to_render(&args.scene)?.scene;
-    RenderWork {
-        what: format!(
-            "`--repeats` = {} renders of {} Gaussians at the camera's `width` × `height` \
-             (--width, --height)",
-            args.repeats,
-            scene.len()
-        ),
-        renders: args.repeats as f64,
-        at_once: 1,
-        size: (intrinsics.width, intrinsics.height),
-        gaussians: scene.len(),
-        gradient: args.grad,
-        float_bytes: dtype.size(),
-    }
-    .check(limit, "--max-memory GB")?;
-    let mask = match (&args.mask, &args.label) {
-        (Some(path), _) => Some(read_mask_file(path, scene.len())?),
-        (None, Some(label)) => {
-            if scene.extras.labels.is_none() {
-                bail!(
-                    "{} has no labels, so --label {label:?} cannot pick an object (give --mask \
-                     MASK.npy, or a scene with a `label` property)",
-                    args.scene.display()
-                );
-            }
-            Some(label_mask(&scene, label).with_context(|| args.scene.display().to_string())?)
-        }
+    let object = match (args.mask, args.label) {
+        (Some(path), _) => Some(RenderObject::MaskFile(path)),
+        (None, Some(label)) => Some(RenderObject::Label(label)),
         (None, None) => None,
     };
-    if args.grad && mask.is_none() {
-        bail!("--grad needs an object: give --mask MASK.npy or --label NAME");
-    }
-
-    let pose = camera.pose;
-    let uploaded = DeviceScene::new(&scene, &device, dtype);
-    let image = |request: RenderRequest| -> Result<Vec<f64>> {
-        let request = RenderRequest {
-            rasterizer: args.rasterizer,
-            ..request
-        };
-        Ok(to_host(
-            render(&uploaded, uploaded.poses(&[pose]), &request)?.images,
-        )?)
+    let request = CameraRenderRequest {
+        pose: camera.pose,
+        intrinsics,
+        object,
+        grad: args.grad.then_some(GradRequest {
+            target_ratio: args.target_ratio,
+            repeats: args.repeats,
+        }),
+        backend: args.backend,
+        device,
+        precision: args.dtype.precision(),
+        rasterizer: args.rasterizer,
+        limit,
+        out: args.out,
     };
-    let rgb = image(RenderRequest::new(intrinsics, vec![Channel::Rgb]))?;
-    check_finite("the RGB image", &rgb)?;
-    let mut outputs = vec![("rgb.png", png_rgb(&rgb, &intrinsics)?)];
-    let mut report = None;
-    if let Some(mask) = mask {
-        let values = image(RenderRequest {
-            pruning: Pruning::ObjectOnly,
-            ..RenderRequest::new(intrinsics, vec![Channel::Mask(mask.clone())])
-        })?;
-        check_finite("the mask image", &values)?;
-        outputs.push(("mask.png", png_gray(&values, &intrinsics)?));
-        let shape = [intrinsics.height as u64, intrinsics.width as u64];
-        outputs.push(("mask.npy", npy_f32(&values, &shape)?));
-        if args.grad {
-            let probe = MaskProbe::new(
-                &scene,
-                (&device, dtype),
-                mask,
-                args.target_ratio,
-                intrinsics,
-                args.rasterizer,
-            )?;
-            let measured = probe.measure(&pose, args.repeats)?;
-            check_finite("the costs and pose gradient", &measured.values())?;
-            report = Some(GradReport {
-                probe: measured,
-                target_ratio: args.target_ratio,
-                repeats: args.repeats,
-                gaussians: scene.len(),
-                width: intrinsics.width,
-                height: intrinsics.height,
-                backend: args.backend.to_string(),
-                dtype: format!("{:?}", args.dtype).to_lowercase(),
-                rasterizer: args.rasterizer,
-            });
-        }
-    }
-
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create the output folder {}", args.out.display()))?;
-    for (name, bytes) in &outputs {
-        write_bytes(&args.out.join(name), bytes)?;
-    }
-    let names: Vec<&str> = outputs.iter().map(|(n, _)| *n).collect();
+    let rendered = render_camera(&scene, &args.scene, &request)?;
     eprintln!(
         "wrote {} to {} ({}×{}, {} Gaussians)",
-        names.join(", "),
-        args.out.display(),
+        rendered.files.join(", "),
+        request.out.display(),
         intrinsics.width,
         intrinsics.height,
         scene.len()
     );
-    if let Some(report) = report {
+    if let Some(report) = rendered.grad {
         println!("{}", serde_json::to_string(&report)?);
     }
     Ok(())
-}
-
-/// A non-finite value must never reach a file: it is an error naming what held it.
-fn check_finite(what: &str, values: &[f64]) -> Result<()> {
-    match values.iter().position(|v| !v.is_finite()) {
-        Some(i) => bail!(
-            "{what} holds a non-finite value ({} at index {i}); nothing was written. The \
-             camera or the scene's values are out of the range the renderer can handle",
-            values[i]
-        ),
-        None => Ok(()),
-    }
 }

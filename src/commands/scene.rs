@@ -1,20 +1,20 @@
 //! `splatraj scene …`: inspect, convert and generate scene files.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::Subcommand;
-use splatraj::lift::mask_files::{MaskCoding, MaskLift, lift_mask_files};
+use splatraj::experiment::scene_files::{
+    MaskSidecarRequest, convert_scene, lift_masks_to_sidecar, write_demo_scene,
+};
+use splatraj::lift::mask_files::{MaskCoding, MaskLift};
 use splatraj::lift::{LiftStage, MaskOptions};
 use splatraj_render::backend::BackendKind;
-use splatraj_scene::demo::{DemoConfig, demo_scene};
-use splatraj_scene::formats::{check_output_target, write_label_sidecar};
+use splatraj_scene::demo::DemoConfig;
 use splatraj_scene::summary::SceneInfo;
-use splatraj_scene::{
-    Bounds, InvalidPolicy, ReadOptions, SceneFormat, write_inria_ply, write_scene,
-};
+use splatraj_scene::{Bounds, InvalidPolicy, SceneFormat};
 
 use crate::cli::{ReadArgs, progress_bar};
 
@@ -111,23 +111,20 @@ pub fn run(command: SceneCommand) -> Result<()> {
             format,
             read,
         } => {
-            // Decided before reading, so a wrong name fails at once.
-            let format = SceneFormat::for_output_as(&output, format)?;
-            check_output_target(&output)?;
-            let loaded = read.load(&input)?;
-            let dropped = format.dropped_extras(&loaded.scene);
-            if !dropped.is_empty() {
+            let converted = convert_scene(&input, &output, format, &read.options())?;
+            let (scene, format) = (&converted.loaded.scene, converted.format);
+            warn_dropped(&input, converted.loaded.dropped);
+            if !converted.dropped_extras.is_empty() {
                 eprintln!(
                     "warning: {} cannot hold {}; they are not written (INRIA .ply keeps them)",
                     format.name(),
-                    dropped.join(", ")
+                    converted.dropped_extras.join(", ")
                 );
             }
-            write_scene(&loaded.scene, &output, format)?;
             eprintln!(
                 "wrote {} Gaussians (SH degree {}) to {} ({})",
-                loaded.scene.len(),
-                loaded.scene.sh_degree,
+                scene.len(),
+                scene.sh_degree,
                 output.display(),
                 format.name()
             );
@@ -137,24 +134,33 @@ pub fn run(command: SceneCommand) -> Result<()> {
             seed,
             gaussians,
         } => {
-            let scene = demo_scene(&DemoConfig { seed, gaussians })?;
-            write_inria_ply(&scene, &out)?;
+            let scene = write_demo_scene(&DemoConfig { seed, gaussians }, &out)?;
             eprintln!(
                 "wrote the demo scene ({} Gaussians, seed {seed}) to {}",
                 scene.len(),
                 out.display()
             );
         }
-        SceneCommand::LiftMasks(args) => lift_masks(&args)?,
+        SceneCommand::LiftMasks(args) => lift_masks(args)?,
     }
     Ok(())
+}
+
+/// The warning for Gaussians dropped as invalid while reading `path`.
+fn warn_dropped(path: &Path, dropped: usize) {
+    if dropped > 0 {
+        eprintln!(
+            "warning: {}: dropped {dropped} invalid Gaussians",
+            path.display()
+        );
+    }
 }
 
 /// Most neighbours `--neighbours` may ask.
 const MAX_NEIGHBOURS: usize = 64;
 
-/// `scene lift-masks`: parses, lifts with the library, writes the sidecar and prints a summary.
-fn lift_masks(args: &LiftMasksArgs) -> Result<()> {
+/// `scene lift-masks`: parses, lifts and writes with the library, prints a summary.
+fn lift_masks(args: LiftMasksArgs) -> Result<()> {
     if !(args.min_share > 0.0 && args.min_share <= 1.0) {
         bail!("--min-share {} must be in (0, 1]", args.min_share);
     }
@@ -164,32 +170,22 @@ fn lift_masks(args: &LiftMasksArgs) -> Result<()> {
             args.neighbours
         );
     }
-    // Written last, after minutes of work: refuse a target that would destroy the scene.
-    if let (Ok(out), Ok(scene)) = (args.out.canonicalize(), args.scene.canonicalize())
-        && out == scene
-    {
-        bail!("--out {} is the scene file itself", args.out.display());
-    }
     let device = args.backend.device()?;
-    let loaded = splatraj_scene::read_scene(
-        &args.scene,
-        &ReadOptions {
-            invalid: if args.drop_invalid {
-                InvalidPolicy::Drop
-            } else {
-                InvalidPolicy::Reject
-            },
-            labels: None,
+    let request = MaskSidecarRequest {
+        scene: args.scene,
+        cameras: args.cameras,
+        masks: args.masks,
+        out: args.out,
+        options: MaskOptions {
+            min_share: args.min_share,
+            neighbours: args.neighbours,
         },
-    )?;
-    if loaded.dropped > 0 {
-        eprintln!(
-            "warning: {}: dropped {} invalid Gaussians",
-            args.scene.display(),
-            loaded.dropped
-        );
-    }
-    let scene = loaded.scene;
+        invalid: if args.drop_invalid {
+            InvalidPolicy::Drop
+        } else {
+            InvalidPolicy::Reject
+        },
+    };
     let bar = progress_bar(0, false);
     bar.set_message(LiftStage::Lift.name());
     let drawn = bar.clone();
@@ -197,26 +193,13 @@ fn lift_masks(args: &LiftMasksArgs) -> Result<()> {
         drawn.set_length(total as u64);
         drawn.set_position(done as u64);
     };
-    let options = MaskOptions {
-        min_share: args.min_share,
-        neighbours: args.neighbours,
-    };
-    let lift = lift_mask_files(
-        &scene,
-        &args.cameras,
-        &args.masks,
-        &options,
-        &device,
-        &progress,
-    )?;
+    let (lift, dropped) = lift_masks_to_sidecar(&request, &device, &progress)?;
     bar.finish_and_clear();
-    let labels = lift.scene_labels(args.out.display().to_string());
-    write_label_sidecar(&args.out, &labels)
-        .with_context(|| format!("cannot write the labels to {}", args.out.display()))?;
+    warn_dropped(&request.scene, dropped);
     print!("{}", lift_summary(&lift));
     eprintln!(
         "wrote {} ({} Gaussians labelled)",
-        args.out.display(),
+        request.out.display(),
         lift.labels.ids.iter().filter(|&&id| id != 0).count()
     );
     Ok(())

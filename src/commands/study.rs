@@ -15,13 +15,13 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use splatraj::experiment::Extensions;
-use splatraj::experiment::outputs::create_run_dir;
 use splatraj::experiment::study::context::{measure_in_child, measure_runs};
 use splatraj::experiment::study::measure::MemoryReading;
 use splatraj::experiment::study::plan::{PlanOptions, Run};
 use splatraj::experiment::study::summary::StudyContext;
 use splatraj::experiment::study::{
-    Factor, Preset, Shard, StudyFile, StudyPlan, measure_run, merge_studies, write_study,
+    Factor, Preset, Shard, StudyFile, StudyPlan, measure_run, merge_studies, study_folder,
+    write_study,
 };
 
 /// Arguments of `splatraj study`.
@@ -176,14 +176,7 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
         return Ok(());
     }
     let base = splatraj::experiment::Config::load(config, &plan.base_overrides)?;
-    let dir = match &args.out {
-        Some(dir) => {
-            std::fs::create_dir_all(dir)
-                .with_context(|| format!("cannot create {}", dir.display()))?;
-            dir.clone()
-        }
-        None => create_run_dir(&base.output.runs_dir, &format!("{}-study", plan.name))?,
-    };
+    let dir = study_folder(args.out.as_deref(), &base.output.runs_dir, &plan.name)?;
     eprintln!("study folder: {}", dir.display());
     let exe = std::env::current_exe().context("cannot find the splatraj binary to re-run")?;
     let measure = |run: &Run| {

@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow, bail};
 use serde::Deserialize;
-use splatraj_lift::cameras::{camera_pose_of, intrinsics_of, pinhole_of};
-use splatraj_render::camera::{Intrinsics, Pose};
+use splatraj_lift::cameras::checked_intrinsics;
+use splatraj_render::camera::{CameraPose, Intrinsics, Pose};
 use splatraj_render::camera_file::{check_pose_range, resize};
 use splatraj_report::supersplat::Focus;
 use splatraj_report::{CameraPath, ExportOptions, Format, Frame};
@@ -48,8 +48,8 @@ impl PathFrames {
                 .iter()
                 .zip(&self.cameras)
                 .map(|(&pose, k)| Frame {
-                    pose: camera_pose_of(&Pose(pose)),
-                    camera: Some(pinhole_of(k)),
+                    pose: CameraPose::from_phi(pose),
+                    camera: Some(*k),
                 })
                 .collect(),
             fps: Some(self.fps),
@@ -384,7 +384,8 @@ fn imported_frames(file: &Path, path: &CameraPath, request: &FrameRequest) -> Re
             let p = f.camera.with_context(|| {
                 format!("{}: frame {i} has no camera intrinsics", file.display())
             })?;
-            let k = intrinsics_of(&p).with_context(|| format!("{}: frame {i}", file.display()))?;
+            let k =
+                checked_intrinsics(&p).with_context(|| format!("{}: frame {i}", file.display()))?;
             resize(&k, request.width, request.height)
                 .with_context(|| format!("{}: frame {i}", file.display()))
         })
@@ -442,11 +443,7 @@ pub fn write_export(
     format: Format,
 ) -> Result<Vec<&'static str>> {
     let files = export_files(frames, object_centres, format)?;
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
-    for (name, contents) in &files {
-        write_bytes(&dir.join(name), contents.as_bytes())?;
-    }
+    write_into_folder(dir, &files)?;
     Ok(files.iter().map(|f| f.0).collect())
 }
 
@@ -468,6 +465,48 @@ pub fn export_to(
     let names = write_export(folder.path(), frames, object_centres, format)?;
     folder.commit()?;
     Ok(names)
+}
+
+/// What `splatraj export` asks for: a run's trajectory in one format.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExportRequest {
+    /// A run folder (holding `trajectory.json`) or a `trajectory.json`.
+    pub input: PathBuf,
+    /// The camera file format.
+    pub format: Format,
+    /// Frame rate, length and size (unset: the run's own).
+    pub frames: FrameRequest,
+    /// Output folder; `None`: `exports/<format>/` beside `trajectory.json`.
+    pub out: Option<PathBuf>,
+}
+
+/// What [`export_run`] wrote.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExportOutcome {
+    /// The folder written.
+    pub dir: PathBuf,
+    /// The file names written in it.
+    pub files: Vec<&'static str>,
+    /// The frames exported.
+    pub frames: PathFrames,
+}
+
+/// Reads a run's trajectory, evaluates it at the requested frames and writes it in the
+/// requested format ([`write_export`]): the whole of `splatraj export`.
+pub fn export_run(request: &ExportRequest) -> Result<ExportOutcome> {
+    let trajectory = RunTrajectory::read(&request.input)?;
+    let frames = trajectory.frames(&request.frames)?;
+    let dir = match &request.out {
+        Some(out) => out.clone(),
+        None => trajectory
+            .file
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join("exports")
+            .join(request.format.name()),
+    };
+    let files = export_to(&dir, &frames, &trajectory.object_centres(), request.format)?;
+    Ok(ExportOutcome { dir, files, frames })
 }
 
 /// Writes `frames` in every format into `exports/<format>/` under `run_dir`.

@@ -2,13 +2,36 @@
 //! target sources, each registered by name (one pattern for the three: a config type with an
 //! `init()` that builds the part, registered under a name that configs write as `custom.<name>`).
 //!
-//! ```ignore
+//! ```no_run
+//! # use burn::tensor::Tensor;
+//! # use serde::{Deserialize, Serialize};
+//! # use splatraj_traj::costs::{Cost, CostConfig, CostError, CostInputs};
+//! use splatraj_experiment::{Config, Experiment, Extensions};
+//! # #[derive(Debug, Clone, Serialize, Deserialize)]
+//! # struct HeightConfig { weight: f64 }
+//! # impl CostConfig for HeightConfig {
+//! #     fn init(&self) -> Result<Box<dyn Cost>, CostError> { Ok(Box::new(self.clone())) }
+//! # }
+//! # impl Cost for HeightConfig {
+//! #     fn name(&self) -> &'static str { "height" }
+//! #     fn weight(&self, _step: usize) -> f64 { self.weight }
+//! #     fn validate(&self) -> Result<(), CostError> { Ok(()) }
+//! #     fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
+//! #         Ok(inputs.centres().sum_dim(1).reshape([inputs.batch()]))
+//! #     }
+//! # }
+//! # fn main() -> anyhow::Result<()> {
+//! // HeightConfig: a `CostConfig` (a whole one is in the registry's documentation,
+//! // `splatraj_traj::costs::registry`); models (`extensions.models`, `[trajectory] kind =
+//! // "custom.<name>"`) and sources (`extensions.sources`, `[targets] source = "custom.<name>"`)
+//! // are registered the same way.
 //! let mut extensions = Extensions::default();
-//! extensions.costs.register::<HeightConfig>("height");   // [costs.custom.height]
-//! extensions.models.register::<HatConfig>("hat");        // [trajectory] kind = "custom.hat"
-//! extensions.sources.register::<NearConfig>("near");     // [targets] source = "custom.near"
-//! let config = Config::load_with(path, &[], &extensions)?;
+//! extensions.costs.register::<HeightConfig>("height"); // [costs.custom.height]
+//! let config = Config::load_with("my.toml".as_ref(), &[], &extensions)?;
 //! let experiment = Experiment::prepare_with(&config, &extensions)?;
+//! # let _ = experiment;
+//! # Ok(())
+//! # }
 //! ```
 
 use splatraj_lift::LiftedConfig;

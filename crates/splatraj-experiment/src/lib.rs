@@ -14,13 +14,22 @@
 //! another crate adds (its own costs), and [`probe`], [`views`], [`io`] serve the smaller
 //! commands (`render --grad`, `bench`, `query`).
 //!
-//! ```ignore
+//! ```no_run
+//! use std::path::Path;
+//!
+//! use splatraj_experiment::{Config, Experiment, observer};
+//! # fn main() -> anyhow::Result<()> {
 //! let config = Config::load(Path::new("configs/demo.toml"), &[])?;
 //! let experiment = Experiment::prepare(&config)?;
 //! let run = experiment.run_trajectory(&mut observer::quiet())?;
 //! let trajectory = experiment.trajectory(&run.best().best)?;
 //! let metrics = experiment.evaluate(&trajectory)?;
+//! # let _ = metrics;
+//! # Ok(())
+//! # }
 //! ```
+//!
+//! [`process`] runs the same into a run folder, every file written as `splatraj run` writes it.
 
 #![warn(missing_docs)]
 
@@ -29,6 +38,7 @@ pub mod bench_frames;
 pub mod bench_scale;
 pub mod bench_scenes;
 pub mod camera_paths;
+pub mod camera_render;
 pub mod checkpoint;
 pub mod children;
 pub mod config;
@@ -53,6 +63,7 @@ pub mod resources;
 pub mod run_files;
 pub mod run_folder;
 pub mod run_report;
+pub mod scene_files;
 pub mod starts;
 pub mod study;
 pub mod trajectory_run;

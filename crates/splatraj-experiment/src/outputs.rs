@@ -73,6 +73,21 @@ pub fn write_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
         .with_context(|| format!("cannot write {}", path.display()))
 }
 
+/// Writes each `(name, bytes)` into `dir` (created if missing), each file whole or not at
+/// all; returns the paths written, in order.
+pub fn write_into_folder<B: AsRef<[u8]>>(dir: &Path, files: &[(&str, B)]) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
+    files
+        .iter()
+        .map(|(name, bytes)| {
+            let path = dir.join(name);
+            write_bytes(&path, bytes.as_ref())?;
+            Ok(path)
+        })
+        .collect()
+}
+
 /// Writes `value` as pretty JSON to `path` atomically.
 pub fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
     let text = serde_json::to_string_pretty(value)?;

@@ -257,6 +257,8 @@ pub fn render_path_with(
         }
         Video::None => None,
     };
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
     let frames_dir = dir.join("frames");
     std::fs::create_dir_all(&frames_dir)
         .with_context(|| format!("cannot create {}", frames_dir.display()))?;

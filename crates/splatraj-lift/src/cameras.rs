@@ -3,15 +3,15 @@
 //! [`read_views`] reads any camera file `splatraj_report` reads (INRIA `cameras.json`, COLMAP
 //! `images.txt` with `cameras.txt` beside it, nerfstudio `transforms.json` or
 //! `camera_path.json`, a SuperSplat track) and keeps, with each view, the image it was taken
-//! for, so that masks and photos can be matched to it by name. The conversions between the
-//! report crate's cameras and the renderer's ([`pose_of`], [`intrinsics_of`] and back) live
-//! here, the one place that sees both crates' types; the experiment's camera paths use them too.
+//! for, so that masks and photos can be matched to it by name. Both crates share the
+//! `splatraj-camera` types; a file's intrinsics are checked as the renderer needs them
+//! ([`checked_intrinsics`]).
 
 use std::path::Path;
 
-use splatraj_render::camera::{Intrinsics, Pose};
+use splatraj_render::camera::{CameraError, CameraPose, Intrinsics, Pose};
 use splatraj_report::colmap::frame_name;
-use splatraj_report::{CameraPath, CameraPose, Frame, Pinhole};
+use splatraj_report::{CameraPath, Frame};
 
 use crate::error::{LiftError, Result};
 use crate::views::View;
@@ -81,12 +81,12 @@ pub fn read_views(path: &Path) -> Result<Vec<NamedView>> {
                     ),
                 )
             })?;
-            let intrinsics = intrinsics_of(&camera)
+            let intrinsics = checked_intrinsics(&camera)
                 .map_err(|e| LiftError::file(path, format!("camera {i} ({name}): {e}")))?;
             Ok(NamedView {
                 name,
                 view: View {
-                    pose: pose_of(&frame.pose),
+                    pose: Pose::from(frame.pose),
                     intrinsics,
                 },
             })
@@ -94,31 +94,10 @@ pub fn read_views(path: &Path) -> Result<Vec<NamedView>> {
         .collect()
 }
 
-/// The renderer's pose of a camera file's pose (both Φ = [ω, c], OpenCV axes).
-pub fn pose_of(pose: &CameraPose) -> Pose {
-    Pose(pose.phi())
-}
-
-/// A camera file's pose of the renderer's pose.
-pub fn camera_pose_of(pose: &Pose) -> CameraPose {
-    CameraPose::from_phi(pose.0)
-}
-
-/// The renderer's intrinsics of a camera file's pinhole, checked as the renderer checks them.
-pub fn intrinsics_of(p: &Pinhole) -> Result<Intrinsics, splatraj_render::camera::CameraError> {
+/// The intrinsics of a camera file, checked as the renderer checks them
+/// ([`Intrinsics::new`]: a file only needs them positive and finite).
+pub fn checked_intrinsics(p: &Intrinsics) -> Result<Intrinsics, CameraError> {
     Intrinsics::new(p.fx, p.fy, p.cx, p.cy, p.width, p.height)
-}
-
-/// A camera file's pinhole of the renderer's intrinsics.
-pub fn pinhole_of(k: &Intrinsics) -> Pinhole {
-    Pinhole {
-        fx: k.fx,
-        fy: k.fy,
-        cx: k.cx,
-        cy: k.cy,
-        width: k.width,
-        height: k.height,
-    }
 }
 
 /// `views` as a camera path, to write with `splatraj_report::export` (frame `i` is named
@@ -128,8 +107,8 @@ pub fn camera_path(views: &[View]) -> CameraPath {
         frames: views
             .iter()
             .map(|v| Frame {
-                pose: camera_pose_of(&v.pose),
-                camera: Some(pinhole_of(&v.intrinsics)),
+                pose: CameraPose::from(v.pose),
+                camera: Some(v.intrinsics),
             })
             .collect(),
         fps: None,

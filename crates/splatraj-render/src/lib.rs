@@ -13,7 +13,8 @@
 pub mod backend;
 pub mod bitset;
 pub mod camera;
-pub mod camera_file;
+/// The single-camera JSON file (`splatraj render --camera`), from `splatraj-camera`.
+pub use splatraj_camera::camera_file;
 pub mod decide;
 pub mod focus;
 pub mod fused;

@@ -129,9 +129,8 @@ impl RefCamera {
     /// The camera of pose Φ with `intrinsics` and near plane `near` (the tested renderer's
     /// conventions: `R_cw = R(ω)ᵀ`, `t_cw = −R_cw·c`).
     pub fn from_pose(pose: &crate::camera::Pose, k: &crate::camera::Intrinsics, near: f64) -> Self {
-        let r_cw = pose.rotation_wc().transpose();
-        let t = -(r_cw * pose.centre());
-        let row = |i: usize| [r_cw.col(0)[i], r_cw.col(1)[i], r_cw.col(2)[i]];
+        let rows = splatraj_camera::pose::matrix_rows(&pose.world_to_camera());
+        let row = |i: usize| [rows[i][0], rows[i][1], rows[i][2]];
         RefCamera {
             fx: k.fx,
             fy: k.fy,
@@ -140,7 +139,7 @@ impl RefCamera {
             width: k.width,
             height: k.height,
             rotation_cw: [row(0), row(1), row(2)],
-            translation_cw: t.to_array(),
+            translation_cw: [rows[0][3], rows[1][3], rows[2][3]],
             near,
         }
     }

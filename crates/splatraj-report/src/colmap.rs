@@ -24,7 +24,7 @@ use std::path::Path;
 
 use glam::{DMat3, DQuat, DVec3};
 
-use crate::camera::{CameraPath, CameraPose, Frame, Pinhole};
+use crate::camera::{CameraPath, CameraPose, Frame, Intrinsics};
 use crate::check_export;
 use crate::error::{Result, invalid, read_text};
 
@@ -58,7 +58,7 @@ pub fn quaternion_wxyz(r: DMat3) -> [f64; 4] {
 /// `path` as a COLMAP text model; image `i` (from 1) is named [`frame_name`]`(i - 1)`.
 pub fn export(path: &CameraPath) -> Result<ColmapFiles> {
     let frames = check_export(path, FORMAT)?;
-    let mut cameras: Vec<Pinhole> = Vec::new();
+    let mut cameras: Vec<Intrinsics> = Vec::new();
     let mut images = String::from(
         "# Image list with two lines of data per image:\n\
          #   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n\
@@ -134,7 +134,7 @@ fn number<T: std::str::FromStr>(file: &str, element: &str, name: &str, token: &s
 }
 
 /// The cameras of `cameras.txt` text by id.
-pub fn import_cameras(text: &str, file: &str) -> Result<HashMap<u64, Pinhole>> {
+pub fn import_cameras(text: &str, file: &str) -> Result<HashMap<u64, Intrinsics>> {
     let mut cameras = HashMap::new();
     for (line, data) in data_lines(text) {
         let tokens: Vec<&str> = data.split_whitespace().collect();
@@ -185,7 +185,7 @@ pub fn import_cameras(text: &str, file: &str) -> Result<HashMap<u64, Pinhole>> {
             ));
         }
         let camera = if shared_focal {
-            Pinhole {
+            Intrinsics {
                 fx: params[0],
                 fy: params[0],
                 cx: params[1],
@@ -194,7 +194,7 @@ pub fn import_cameras(text: &str, file: &str) -> Result<HashMap<u64, Pinhole>> {
                 height,
             }
         } else {
-            Pinhole {
+            Intrinsics {
                 fx: params[0],
                 fy: params[1],
                 cx: params[2],
@@ -220,7 +220,7 @@ pub fn import_cameras(text: &str, file: &str) -> Result<HashMap<u64, Pinhole>> {
 pub fn import(
     text: &str,
     file: &str,
-    cameras: Option<&HashMap<u64, Pinhole>>,
+    cameras: Option<&HashMap<u64, Intrinsics>>,
 ) -> Result<CameraPath> {
     import_named(text, file, cameras).map(|(path, _)| path)
 }
@@ -229,7 +229,7 @@ pub fn import(
 pub fn import_named(
     text: &str,
     file: &str,
-    cameras: Option<&HashMap<u64, Pinhole>>,
+    cameras: Option<&HashMap<u64, Intrinsics>>,
 ) -> Result<(CameraPath, Vec<String>)> {
     let mut images: Vec<(String, u64, Frame)> = Vec::new();
     // COLMAP's reader: an image line, then its points line, which may be empty.

@@ -12,7 +12,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::camera::{CameraPath, CameraPose, Frame, Pinhole};
+use crate::camera::{CameraPath, CameraPose, Frame, Intrinsics};
 use crate::check_export;
 use crate::colmap::frame_name;
 use crate::error::{InterchangeError, Result, export_error, invalid, read_text};
@@ -87,7 +87,7 @@ pub fn import_named(text: &str, file: &str) -> Result<(CameraPath, Vec<Option<St
             );
             let pose = CameraPose::new(rotation, glam::DVec3::from_array(e.position))
                 .map_err(|p| invalid(file, element("rotation/position"), p))?;
-            let camera = Pinhole {
+            let camera = Intrinsics {
                 fx: e.fx,
                 fy: e.fy,
                 cx: e.width as f64 / 2.0,

@@ -28,7 +28,7 @@ pub mod video;
 
 use std::path::Path;
 
-pub use camera::{CameraPath, CameraPose, Frame, Pinhole};
+pub use camera::{CameraPath, CameraPose, Frame, Intrinsics};
 pub use error::{InterchangeError, Result};
 
 use error::{export_error, read_text};
@@ -278,7 +278,7 @@ pub fn read_named_cameras(path: &Path) -> Result<NamedCameras> {
 pub(crate) fn check_export(
     path: &CameraPath,
     format: &'static str,
-) -> Result<Vec<(CameraPose, Pinhole)>> {
+) -> Result<Vec<(CameraPose, Intrinsics)>> {
     if path.frames.is_empty() {
         return Err(export_error(format, "the path has no frames"));
     }

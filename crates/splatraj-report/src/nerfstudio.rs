@@ -25,7 +25,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::camera::{CameraPath, CameraPose, Frame, Pinhole};
+use crate::camera::{CameraPath, CameraPose, Frame, Intrinsics};
 use crate::error::{InterchangeError, Result, invalid};
 use crate::{check_export, check_fps};
 
@@ -249,10 +249,10 @@ pub fn import(text: &str, file: &str) -> Result<CameraPath> {
                     format!("{fov} is not a field of view in degrees (0 < fov < 180)"),
                 ));
             }
-            let focal = Pinhole::focal_from_vertical_fov(fov, parsed.render_height);
+            let focal = Intrinsics::focal_from_vertical_fov(fov, parsed.render_height);
             Ok(Frame {
                 pose,
-                camera: Some(Pinhole::centred(
+                camera: Some(Intrinsics::centred(
                     focal,
                     parsed.render_width,
                     parsed.render_height,

@@ -33,7 +33,7 @@ use serde_json::json;
 
 use glam::DVec3;
 
-use crate::camera::{CameraPath, CameraPose, Frame, Pinhole};
+use crate::camera::{CameraPath, CameraPose, Frame, Intrinsics};
 use crate::error::{InterchangeError, Result, export_error, invalid, read_text};
 use crate::{check_export, check_fps};
 
@@ -592,12 +592,12 @@ pub fn import(text: &str, file: &str, height: usize, aspect: f64) -> Result<Came
                     Some(i) => format!("frame {f} (keyframe {i})"),
                     None => format!("frame {f} (between keyframes)"),
                 };
-                invalid(file, at, problem)
+                invalid(file, at, problem.to_string())
             })?;
             // The file has no image size: a centred camera of the chosen size.
             let camera = (!fovs.is_empty()).then(|| {
-                Pinhole::centred(
-                    Pinhole::focal_from_vertical_fov(v[6], height),
+                Intrinsics::centred(
+                    Intrinsics::focal_from_vertical_fov(v[6], height),
                     width,
                     height,
                 )

@@ -21,7 +21,7 @@
 use serde::Deserialize;
 use serde_json::Value;
 
-use crate::camera::{CameraPath, CameraPose, Frame, Pinhole};
+use crate::camera::{CameraPath, CameraPose, Frame, Intrinsics};
 use crate::error::{InterchangeError, Result, invalid, read_text};
 
 const FORMAT: &str = "nerfstudio transforms.json";
@@ -69,7 +69,7 @@ impl CameraKeys {
     }
 
     /// The pinhole these keys give, or which key is missing or wrong (`element` prefixes it).
-    fn pinhole(&self, file: &str, element: &str) -> Result<Pinhole> {
+    fn pinhole(&self, file: &str, element: &str) -> Result<Intrinsics> {
         if let Some(model) = &self.camera_model
             && !matches!(model.as_str(), "OPENCV" | "PINHOLE" | "SIMPLE_PINHOLE")
         {
@@ -117,7 +117,7 @@ impl CameraKeys {
             .fl_y
             .or_else(|| from_angle(self.camera_angle_y, height))
             .unwrap_or(fx);
-        let camera = Pinhole {
+        let camera = Intrinsics {
             fx,
             fy,
             cx: self.cx.unwrap_or(width as f64 / 2.0),

@@ -1,7 +1,7 @@
 //! Bad camera files end in an error that names the file, the element and the problem, and
 //! never in a panic (every prefix of a good file is tried too).
 
-use splatraj_report::camera::{CameraPath, Frame, Pinhole};
+use splatraj_report::camera::{CameraPath, Frame, Intrinsics};
 use splatraj_report::supersplat::{Focus, SupersplatOptions};
 use splatraj_report::{ExportOptions, Format, colmap, inria, nerfstudio, supersplat, transforms};
 
@@ -249,7 +249,7 @@ fn detection_says_what_it_expected() {
 
 #[test]
 fn exports_refuse_what_they_cannot_write() {
-    let camera = Pinhole::centred(50.0, 64, 48);
+    let camera = Intrinsics::centred(50.0, 64, 48);
     let mut path = CameraPath::from_phis(&[[0.0; 6], [0.0, 0.0, 0.0, 1.0, 0.0, 0.0]], camera, 30.0);
     path.frames[1] = Frame {
         camera: None,
@@ -295,7 +295,7 @@ fn exports_refuse_what_they_cannot_write() {
 
 #[test]
 fn truncated_files_never_panic() {
-    let camera = Pinhole::centred(50.0, 64, 48);
+    let camera = Intrinsics::centred(50.0, 64, 48);
     let path = CameraPath::from_phis(
         &[
             [0.1, 0.2, 0.3, 1.0, 2.0, 3.0],

@@ -12,7 +12,7 @@
 use std::f64::consts::PI;
 
 use serde_json::Value;
-use splatraj_report::camera::{CameraPath, CameraPose, Pinhole};
+use splatraj_report::camera::{CameraPath, CameraPose, Intrinsics};
 use splatraj_report::supersplat::{Focus, SupersplatOptions};
 use splatraj_report::{colmap, inria, nerfstudio, supersplat};
 
@@ -23,8 +23,8 @@ fn phi_a() -> [f64; 6] {
     [-s, -s, s, 2.0, 0.0, 0.0]
 }
 
-fn camera_a() -> Pinhole {
-    Pinhole {
+fn camera_a() -> Intrinsics {
+    Intrinsics {
         fx: 200.0,
         fy: 200.0,
         cx: 150.0,

@@ -4,7 +4,7 @@
 
 use std::f64::consts::PI;
 
-use splatraj_report::camera::{CameraPath, CameraPose, Frame, Pinhole};
+use splatraj_report::camera::{CameraPath, CameraPose, Frame, Intrinsics};
 use splatraj_report::supersplat::{Focus, Keyframes, SupersplatOptions};
 use splatraj_report::{ExportOptions, Format, colmap, inria, nerfstudio, supersplat};
 
@@ -28,8 +28,8 @@ fn phis() -> Vec<[f64; 6]> {
     ]
 }
 
-fn camera() -> Pinhole {
-    Pinhole {
+fn camera() -> Intrinsics {
+    Intrinsics {
         fx: 412.5,
         fy: 398.25,
         cx: 161.0,
@@ -66,7 +66,7 @@ fn same_poses(exported: &CameraPath, imported: &CameraPath, what: &str) {
     }
 }
 
-fn same_camera(a: &Pinhole, b: &Pinhole, what: &str) {
+fn same_camera(a: &Intrinsics, b: &Intrinsics, what: &str) {
     for (name, x, y) in [
         ("fx", a.fx, b.fx),
         ("fy", a.fy, b.fy),
@@ -94,7 +94,7 @@ fn phi_round_trips_through_the_rotation_matrix() {
 #[test]
 fn nerfstudio_round_trip() {
     // The file holds a vertical fov only: fx = fy, centred.
-    let camera = Pinhole::centred(287.0, 320, 240);
+    let camera = Intrinsics::centred(287.0, 320, 240);
     let path = CameraPath::from_phis(&phis(), camera, 24.0);
     let options = nerfstudio::NerfstudioOptions {
         fps: 24.0,
@@ -141,7 +141,7 @@ fn nerfstudio_keyframes_are_frames_at_their_times() {
 fn colmap_round_trip_with_several_cameras() {
     let mut path = CameraPath::from_phis(&phis(), camera(), 30.0);
     // A second camera for some frames: cameras.txt gets two lines.
-    let other = Pinhole {
+    let other = Intrinsics {
         fx: 100.0,
         ..camera()
     };
@@ -169,7 +169,7 @@ fn colmap_round_trip_with_several_cameras() {
 #[test]
 fn inria_round_trip() {
     // The file has no principal point: centred cameras round-trip exactly.
-    let camera = Pinhole {
+    let camera = Intrinsics {
         cx: 160.0,
         cy: 120.0,
         ..camera()
@@ -194,7 +194,7 @@ fn supersplat_round_trip_of_upright_cameras() {
         ([-4.0, -2.0, 8.0], [0.0, 0.5, 0.0]),
         ([0.3, 0.0, 0.0], [0.3, 0.1, 5.0]),
     ];
-    let camera = Pinhole::centred(250.0, 320, 240);
+    let camera = Intrinsics::centred(250.0, 320, 240);
     let frames: Vec<Frame> = eyes_targets
         .iter()
         .map(|(e, t)| Frame {
@@ -223,7 +223,7 @@ fn supersplat_round_trip_of_upright_cameras() {
 #[test]
 fn every_format_round_trips_through_files_and_detection() {
     let dir = std::env::temp_dir().join(format!("splatraj-report-{}", std::process::id()));
-    let camera = Pinhole::centred(300.0, 320, 240);
+    let camera = Intrinsics::centred(300.0, 320, 240);
     let up = glam::DVec3::new(0.0, -1.0, 0.0);
     let frames = (0..5)
         .map(|i| Frame {
@@ -275,7 +275,7 @@ fn continuous_phis_follow_a_turn_through_pi() {
     let phis: Vec<[f64; 6]> = (0..25)
         .map(|i| [0.0, 0.0, i as f64 * 0.3, i as f64, 0.0, 0.0])
         .collect();
-    let camera = Pinhole::centred(100.0, 64, 48);
+    let camera = Intrinsics::centred(100.0, 64, 48);
     let path = CameraPath::from_phis(&phis, camera, 30.0);
     let wrapped = path.phis();
     assert!(wrapped.iter().all(|p| p[2].abs() <= PI + 1e-12));

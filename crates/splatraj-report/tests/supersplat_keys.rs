@@ -15,7 +15,7 @@ use std::f64::consts::TAU;
 
 use glam::DVec3;
 use serde_json::Value;
-use splatraj_report::camera::{CameraPath, CameraPose, Frame, Pinhole};
+use splatraj_report::camera::{CameraPath, CameraPose, Frame, Intrinsics};
 use splatraj_report::supersplat::{self, Focus, Keyframes, SupersplatOptions};
 
 const FPS: f64 = 30.0;
@@ -196,8 +196,8 @@ fn path_of(
             let c = centre(t);
             Frame {
                 pose: CameraPose::look_at(c, c + look(t), up).unwrap(),
-                camera: Some(Pinhole::centred(
-                    Pinhole::focal_from_vertical_fov(fov(t), 480),
+                camera: Some(Intrinsics::centred(
+                    Intrinsics::focal_from_vertical_fov(fov(t), 480),
                     640,
                     480,
                 )),

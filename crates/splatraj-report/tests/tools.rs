@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 use glam::{DMat3, DVec3};
 use serde_json::Value;
-use splatraj_report::camera::{CameraPath, CameraPose, Pinhole};
+use splatraj_report::camera::{CameraPath, CameraPose, Intrinsics};
 use splatraj_report::{ExportOptions, Format};
 
 const TOL: f64 = 1e-6;
@@ -70,7 +70,7 @@ fn tool_path() -> CameraPath {
             ]
         })
         .collect();
-    let camera = Pinhole {
+    let camera = Intrinsics {
         fx: 512.5,
         fy: 498.25,
         cx: 318.75,

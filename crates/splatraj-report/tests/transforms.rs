@@ -6,14 +6,14 @@
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
-use splatraj_report::{CameraPose, Format, Pinhole, detect, read_named_cameras, transforms};
+use splatraj_report::{CameraPose, Format, Intrinsics, detect, read_named_cameras, transforms};
 
 fn fixture() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/transforms.json")
 }
 
 /// Pixel position of world point `p` (pixel centres at +0.5, as the crate's convention).
-fn project(pose: &CameraPose, camera: &Pinhole, p: DVec3) -> (f64, f64, f64) {
+fn project(pose: &CameraPose, camera: &Intrinsics, p: DVec3) -> (f64, f64, f64) {
     let q = pose.world_to_camera_rotation() * (p - pose.centre);
     (
         camera.cx + camera.fx * q.x / q.z,
@@ -42,7 +42,7 @@ fn transforms_json_reads_poses_intrinsics_and_names() {
     let c0 = frames[0].camera.unwrap();
     assert_eq!(
         c0,
-        Pinhole {
+        Intrinsics {
             fx: 500.0,
             fy: 510.0,
             cx: 320.0,

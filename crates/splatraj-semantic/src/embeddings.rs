@@ -272,6 +272,14 @@ impl PhraseTable {
         Self::new(source, phrases, vectors)
     }
 
+    /// Writes the table to `path` in the form its extension names
+    /// ([`PhraseTable::to_bytes`]), whole or not at all.
+    pub fn write(&self, path: &Path) -> Result<()> {
+        let bytes = self.to_bytes(path)?;
+        splatraj_scene::atomic::write_atomically(path, |w| w.write_all(&bytes))
+            .map_err(|e| SemanticError::file(path, format!("cannot write: {e}")))
+    }
+
     /// The table as file bytes, in the form `path`'s extension names: `.safetensors`
     /// (tensor `embeddings` F32 `[P, D]`, phrases as a JSON array in the metadata key
     /// `phrases`: self-contained, the preferred form) or `.json` (`{"phrase": [floats]}`).

@@ -7,7 +7,7 @@
 mod args;
 
 use anyhow::{Context, Result, bail};
-use splatraj::experiment::outputs::write_bytes;
+use splatraj::experiment::outputs::write_into_folder;
 use splatraj::experiment::query::{
     ConfigQuery, KeyNaming, PictureOptions, QueryOutcome, QueryReport, SelectionFailed,
     SourceChoice, config_query_texts,
@@ -130,11 +130,9 @@ fn write_picture(
     outcome: &QueryOutcome,
     image_name: &str,
 ) -> Result<QueryReport> {
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create the output folder {}", args.out.display()))?;
-    let path = args.out.join(image_name);
-    write_bytes(&path, &outcome.png)?;
-    let report = outcome.report(&path);
+    let written = write_into_folder(&args.out, &[(image_name, &outcome.png)])?;
+    let path = &written[0];
+    let report = outcome.report(path);
     for w in &report.warnings {
         eprintln!("warning: {w}");
     }

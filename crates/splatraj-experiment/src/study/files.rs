@@ -2,7 +2,7 @@
 //! and `frontier.svg`, each written whole or not at all; reading it back, and merging the
 //! folders of a study's shards into one study.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
@@ -12,7 +12,7 @@ use super::plan::{Shard, StudyPlan};
 use super::plot::frontier_svg;
 use super::rows::{StudyRow, study_csv};
 use super::summary::{StudyContext, StudySummary};
-use crate::outputs::{write_bytes, write_csv, write_json};
+use crate::outputs::{create_run_dir, write_bytes, write_csv, write_json};
 
 /// The format tag of `study.json`.
 pub const STUDY_FORMAT: &str = "splatraj-study/1";
@@ -68,6 +68,19 @@ impl StudyFile {
             failures,
             summary,
         }
+    }
+}
+
+/// The folder a study writes into: `out` (created if missing), else a fresh
+/// `<runs_dir>/<name>-study/<timestamp>/`.
+pub fn study_folder(out: Option<&Path>, runs_dir: &Path, name: &str) -> Result<PathBuf> {
+    match out {
+        Some(dir) => {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create {}", dir.display()))?;
+            Ok(dir.to_path_buf())
+        }
+        None => create_run_dir(runs_dir, &format!("{name}-study")),
     }
 }
 

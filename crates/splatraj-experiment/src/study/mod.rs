@@ -25,7 +25,7 @@ pub mod summary;
 pub use crate::config::study::{
     Design, EvaluationConfig, FactorConfig, Quality, StudyConfig, StudyTask,
 };
-pub use files::{StudyFile, merge_studies, read_study, write_study};
+pub use files::{StudyFile, merge_studies, read_study, study_folder, write_study};
 pub use measure::measure_run;
 pub use plan::{Factor, Preset, Run, Shard, StudyPlan, Variant};
 pub use rows::StudyRow;

@@ -2,14 +2,52 @@
 //! `XConfig` → `init()` style, as for costs and trajectory models) and a [`SourceRegistry`]
 //! that maps the names configs use to those types.
 //!
-//! ```ignore
+//! ```
+//! use std::path::Path;
+//!
+//! use burn::tensor::Device;
+//! use serde::{Deserialize, Serialize};
+//! use splatraj_scene::Scene;
+//! use splatraj_semantic::{
+//!     Relevancy, Scoring, SourceConfig, SourceContext, SourceRegistry, TargetSource,
+//!     TargetsConfig,
+//! };
+//!
+//! /// `[targets.custom.near]`: the Gaussians within `radius` of `point`, whatever the query.
+//! #[derive(Debug, Clone, Serialize, Deserialize)]
+//! struct NearConfig {
+//!     point: [f32; 3],
+//!     radius: f32,
+//! }
+//!
+//! impl SourceConfig for NearConfig {
+//!     fn init(&self, _context: &SourceContext) -> splatraj_semantic::Result<Box<dyn TargetSource>> {
+//!         Ok(Box::new(self.clone()))
+//!     }
+//! }
+//!
+//! impl TargetSource for NearConfig {
+//!     fn kind(&self) -> &'static str {
+//!         "near"
+//!     }
+//!     fn relevancy(&self, scene: &Scene, query: &str) -> splatraj_semantic::Result<Relevancy> {
+//!         let near = |m: &[f32; 3]| (0..3).map(|i| (m[i] - self.point[i]).powi(2)).sum::<f32>();
+//!         Ok(Relevancy {
+//!             name: query.to_string(),
+//!             values: scene.means.iter().map(|m| f32::from(near(m) <= self.radius.powi(2))).collect(),
+//!             scoring: Scoring::Mask { cluster: false },
+//!         })
+//!     }
+//! }
+//!
 //! let mut sources = SourceRegistry::default();
 //! sources.register::<NearConfig>("near");
-//! // [targets]
-//! // source = "custom.near"
-//! // [targets.custom.near]
-//! // point = [0.0, 0.0, 1.0]
-//! let source = config.targets.build_with(base_dir, &device, &sources)?;
+//! let targets: TargetsConfig = toml::from_str(
+//!     "source = \"custom.near\"\n[custom.near]\npoint = [0.0, 0.0, 1.0]\nradius = 0.1\n",
+//! )
+//! .unwrap();
+//! let source = targets.build_with(Path::new("."), &Device::flex(), &sources).unwrap();
+//! assert_eq!(source.kind(), "near");
 //! ```
 
 use std::path::{Path, PathBuf};

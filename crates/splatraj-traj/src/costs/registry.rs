@@ -1,13 +1,50 @@
 //! Costs from outside the crate: a config type per cost ([`CostConfig`], burn's `XConfig` →
 //! `init()` style) and a [`CostRegistry`] that maps the names configs use to those types.
 //!
-//! ```ignore
+//! ```
+//! use burn::tensor::Tensor;
+//! use serde::{Deserialize, Serialize};
+//! use splatraj_traj::costs::{Cost, CostConfig, CostError, CostInputs, CostRegistry, CostsConfig};
+//!
+//! /// `[costs.custom.height]`: (c·up − preferred)², the camera's height off a preferred one.
+//! #[derive(Debug, Clone, Serialize, Deserialize)]
+//! struct HeightConfig {
+//!     weight: f64,
+//!     preferred: f64,
+//! }
+//!
+//! impl CostConfig for HeightConfig {
+//!     fn init(&self) -> Result<Box<dyn Cost>, CostError> {
+//!         Ok(Box::new(self.clone()))
+//!     }
+//! }
+//!
+//! impl Cost for HeightConfig {
+//!     fn name(&self) -> &'static str {
+//!         "height"
+//!     }
+//!     fn weight(&self, _step: usize) -> f64 {
+//!         self.weight
+//!     }
+//!     fn validate(&self) -> Result<(), CostError> {
+//!         Ok(())
+//!     }
+//!     fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
+//!         let up = inputs.row(inputs.query().unit_up()); // [1, 3]
+//!         let height = (inputs.centres() * up).sum_dim(1).reshape([inputs.batch()]); // [B]
+//!         let off = height.sub_scalar(self.preferred);
+//!         Ok(off.clone() * off)
+//!     }
+//! }
+//!
 //! let mut costs = CostRegistry::default();
 //! costs.register::<HeightConfig>("height");
-//! // [costs.custom.height]
-//! // weight = 2.0
-//! // preferred = 1.2
-//! let weighted = config.costs.build_with(&costs)?;
+//! let config: CostsConfig = toml::from_str(
+//!     "[tce]\n[custom.height]\nweight = 2.0\npreferred = 1.2\n",
+//! )
+//! .unwrap();
+//! let weighted = config.build_with(&costs).unwrap();
+//! assert!(weighted.names().contains(&"height"));
 //! ```
 
 use serde::Serialize;

@@ -2,14 +2,48 @@
 //! `XConfig` → `init()` style, as for costs) and a [`ModelRegistry`] that maps the names configs
 //! use to those types.
 //!
-//! ```ignore
+//! ```
+//! use serde::{Deserialize, Serialize};
+//! use splatraj_traj::trajectory::{Basis, ModelConfig, ModelRegistry, TrajectoryError, TrajectoryModel};
+//!
+//! /// `[trajectory.custom.hat]`: hat functions on `knots` evenly spaced knots.
+//! #[derive(Debug, Clone, Serialize, Deserialize)]
+//! struct HatConfig {
+//!     knots: usize,
+//! }
+//!
+//! #[derive(Debug)]
+//! struct Hat {
+//!     knots: usize,
+//! }
+//!
+//! impl ModelConfig for HatConfig {
+//!     fn init(&self, _windows: usize) -> Result<Box<dyn Basis>, TrajectoryError> {
+//!         Ok(Box::new(Hat { knots: self.knots }))
+//!     }
+//! }
+//!
+//! impl Basis for Hat {
+//!     fn count(&self) -> usize {
+//!         self.knots
+//!     }
+//!     fn validate(&self) -> Result<(), TrajectoryError> {
+//!         Ok(())
+//!     }
+//!     fn eval_into(&self, t: f64, row: &mut [f64]) {
+//!         let last = (self.knots - 1) as f64;
+//!         for (k, psi) in row.iter_mut().enumerate() {
+//!             *psi = (1.0 - (t * last - k as f64).abs()).max(0.0);
+//!         }
+//!     }
+//! }
+//!
 //! let mut models = ModelRegistry::default();
 //! models.register::<HatConfig>("hat");
-//! // [trajectory]
-//! // kind = "custom.hat"
-//! // [trajectory.custom.hat]
-//! // knots = 12
-//! let model = config.trajectory.build_with(windows, &models)?;
+//! let config: TrajectoryModel =
+//!     toml::from_str("kind = \"custom.hat\"\n[custom.hat]\nknots = 12\n").unwrap();
+//! let model = config.build_with(2, &models).unwrap();
+//! assert_eq!(model.basis().count(), 12);
 //! ```
 //!
 //! A registered model is a [`CustomModel`] inside [`TrajectoryModel::Custom`]: its name, its

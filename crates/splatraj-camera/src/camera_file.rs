@@ -10,7 +10,10 @@
 use glam::DMat4;
 use serde::{Deserialize, Serialize};
 
-use crate::camera::{CameraError, Intrinsics, Pose};
+use crate::error::CameraError;
+use crate::intrinsics::Intrinsics;
+use crate::pose::Pose;
+pub use crate::pose::matrix_rows;
 
 /// A checked camera: intrinsics and pose.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -67,11 +70,6 @@ impl Matrix4 {
         // glam is column-major: the rows read as columns give the transpose.
         DMat4::from_cols_array_2d(&rows).transpose()
     }
-}
-
-/// The rows of a 4×4 matrix, row-major (how files write matrices).
-pub fn matrix_rows(m: &DMat4) -> [[f64; 4]; 4] {
-    std::array::from_fn(|r| std::array::from_fn(|c| m.col(c)[r]))
 }
 
 /// What is wrong with a camera file (the message names the key).

@@ -1,0 +1,106 @@
+//! The scene files `splatraj scene` writes: a scene converted to another format, the demo
+//! scene, and label masks lifted onto a scene as a label sidecar. Each is one call that reads,
+//! checks and writes (whole or not at all); the command prints what it returns.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use burn::tensor::Device;
+use splatraj_lift::MaskOptions;
+use splatraj_lift::Progress;
+use splatraj_lift::mask_files::{MaskLift, lift_mask_files};
+use splatraj_scene::demo::{DemoConfig, demo_scene};
+use splatraj_scene::formats::{LoadedScene, check_output_target, write_label_sidecar};
+use splatraj_scene::{
+    InvalidPolicy, ReadOptions, Scene, SceneFormat, read_scene, write_inria_ply, write_scene,
+};
+
+/// What [`convert_scene`] wrote.
+#[derive(Debug, Clone)]
+pub struct Converted {
+    /// The format written.
+    pub format: SceneFormat,
+    /// The scene read (with how many invalid Gaussians were dropped).
+    pub loaded: LoadedScene,
+    /// The extras the format has no place for, not written ([`SceneFormat::dropped_extras`]).
+    pub dropped_extras: Vec<String>,
+}
+
+/// Reads `input` and writes it to `output` in `format` (else the one its name asks for): the
+/// format and the target are checked before the scene is read.
+pub fn convert_scene(
+    input: &Path,
+    output: &Path,
+    format: Option<SceneFormat>,
+    options: &ReadOptions,
+) -> Result<Converted> {
+    // Decided before reading, so a wrong name fails at once.
+    let format = SceneFormat::for_output_as(output, format)?;
+    check_output_target(output)?;
+    let loaded = read_scene(input, options)?;
+    let dropped_extras = format.dropped_extras(&loaded.scene);
+    write_scene(&loaded.scene, output, format)?;
+    Ok(Converted {
+        format,
+        loaded,
+        dropped_extras,
+    })
+}
+
+/// Builds the demo scene of `config` and writes it to `out` as INRIA PLY; returns it.
+pub fn write_demo_scene(config: &DemoConfig, out: &Path) -> Result<Scene> {
+    let scene = demo_scene(config)?;
+    write_inria_ply(&scene, out)?;
+    Ok(scene)
+}
+
+/// What `scene lift-masks` asks for.
+#[derive(Debug, Clone)]
+pub struct MaskSidecarRequest {
+    /// The scene file.
+    pub scene: PathBuf,
+    /// The capture's camera file.
+    pub cameras: PathBuf,
+    /// The folder of label masks.
+    pub masks: PathBuf,
+    /// The label sidecar to write.
+    pub out: PathBuf,
+    /// How the masks are lifted.
+    pub options: MaskOptions,
+    /// What to do with Gaussians holding invalid values.
+    pub invalid: InvalidPolicy,
+}
+
+/// Reads the scene, lifts the masks onto it on `device` and writes the labels as a sidecar
+/// (refusing an `out` that is the scene file itself, before minutes of work); returns the lift
+/// and how many invalid Gaussians were dropped.
+pub fn lift_masks_to_sidecar(
+    request: &MaskSidecarRequest,
+    device: &Device,
+    progress: &Progress,
+) -> Result<(MaskLift, usize)> {
+    if let (Ok(out), Ok(scene)) = (request.out.canonicalize(), request.scene.canonicalize())
+        && out == scene
+    {
+        bail!("--out {} is the scene file itself", request.out.display());
+    }
+    let loaded = read_scene(
+        &request.scene,
+        &ReadOptions {
+            invalid: request.invalid,
+            labels: None,
+        },
+    )?;
+    let lift = lift_mask_files(
+        &loaded.scene,
+        &request.cameras,
+        &request.masks,
+        &request.options,
+        device,
+        progress,
+    )?;
+    let labels = lift.scene_labels(request.out.display().to_string());
+    write_label_sidecar(&request.out, &labels)
+        .with_context(|| format!("cannot write the labels to {}", request.out.display()))?;
+    Ok((lift, loaded.dropped))
+}
