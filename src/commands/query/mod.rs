@@ -6,7 +6,7 @@
 
 mod args;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use splatraj::experiment::outputs::write_into_folder;
 use splatraj::experiment::query::{
     ConfigQuery, KeyNaming, PictureOptions, QueryOutcome, QueryReport, SelectionFailed,
