@@ -12,7 +12,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use common::{TINY_CONFIG, assert_clean_failure, s, splatraj, stderr};
-use splatraj_report::camera::{CameraPath, CameraPose, Frame, Pinhole};
+use splatraj_report::camera::{CameraPath, CameraPose, Frame, Intrinsics};
 use splatraj_report::{ExportOptions, Format};
 
 /// The tiny config in `dir`, its runs going to `dir/runs`.
@@ -41,7 +41,7 @@ fn nerfstudio_path(dir: &Path, frames: usize, (width, height): (usize, usize)) -
         frames: (0..frames)
             .map(|i| Frame {
                 pose: CameraPose::from_phi([0.0, 0.01 * i as f64, 0.0, 0.0, 0.0, -1.0]),
-                camera: Some(Pinhole {
+                camera: Some(Intrinsics {
                     fx: width as f64,
                     fy: width as f64,
                     cx: width as f64 / 2.0,

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, anyhow, bail};
 use serde::Deserialize;
 use splatraj_lift::cameras::checked_intrinsics;
-use splatraj_render::camera::{CameraPose, Intrinsics, Pose};
+use splatraj_render::camera::{CameraPose, Intrinsics};
 use splatraj_render::camera_file::{check_pose_range, resize};
 use splatraj_report::supersplat::Focus;
 use splatraj_report::{CameraPath, ExportOptions, Format, Frame};
@@ -17,7 +17,7 @@ use splatraj_traj::optimise::sampling::window_of;
 use splatraj_traj::trajectory::{Basis, TrajectoryRecord, uniform_times};
 
 use crate::output_folder::OutputFolder;
-use crate::outputs::write_bytes;
+use crate::outputs::write_into_folder;
 use crate::resources::check_path_frames;
 
 /// Frames per second when neither the command line, the run's config nor the file says.
