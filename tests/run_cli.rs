@@ -312,3 +312,41 @@ fn a_failed_verdict_warns_names_the_query_and_exits_3() {
     assert!(warned.status.success(), "{}", stderr(&warned));
     assert!(stderr(&warned).contains("warning: window 0 \"red mug\""));
 }
+
+#[test]
+fn a_frame_not_showing_its_object_has_an_empty_tce_cell_not_zero() {
+    // Two steps of the demo config leave the green ball out of some frames (its window's
+    // "in view" is below 100 %): those frames have no TCE, the others a number.
+    let dir = tempfile::tempdir().unwrap();
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/demo.toml");
+    let out = splatraj(&[
+        "run",
+        s(&config),
+        "--quiet",
+        "--set",
+        "optimiser.iterations=2",
+        "--set",
+        "output.frames=30",
+        "--set",
+        &runs_set(dir.path()),
+    ]);
+    // 3: a window failed its verdict, expected after two steps.
+    assert!(matches!(out.status.code(), Some(0 | 3)), "{}", stderr(&out));
+    let run = PathBuf::from(stdout(&out).lines().last().unwrap().trim());
+    let csv = std::fs::read_to_string(run.join("frame_metrics.csv")).unwrap();
+    let mut header = csv.lines().next().unwrap().split(',');
+    assert_eq!(header.nth(3), Some("tce"));
+    let (mut hidden, mut shown) = (0, 0);
+    for line in csv.lines().skip(1) {
+        let cells: Vec<&str> = line.split(',').collect();
+        let coverage: f64 = cells[5].parse().unwrap();
+        if coverage == 0.0 {
+            assert_eq!(cells[3], "", "no TCE without the object: {line}");
+            hidden += 1;
+        } else {
+            assert!(cells[3].parse::<f64>().unwrap().is_finite(), "{line}");
+            shown += 1;
+        }
+    }
+    assert!(hidden > 0 && shown > 0, "{hidden} hidden, {shown} shown");
+}

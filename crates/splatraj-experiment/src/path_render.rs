@@ -73,8 +73,9 @@ pub struct FrameMetrics {
     pub t: f64,
     /// Its window.
     pub window: usize,
-    /// Target centring error.
-    pub tce: f64,
+    /// Target centring error; `None` when the frame does not show the object (an empty mask
+    /// has no centre: undefined, not 0; an empty cell in `frame_metrics.csv`).
+    pub tce: Option<f64>,
     /// Target ratio error.
     pub tre: f64,
     /// Share of the frame the visible object covers.
@@ -102,12 +103,7 @@ impl RenderedPath {
     /// Mean TCE over the frames that show their object (some coverage); `None` when none
     /// does: an object never in view has no centring error (an empty mask's TCE is 0).
     pub fn mean_tce_in_view(&self) -> Option<f64> {
-        let seen: Vec<f64> = self
-            .metrics
-            .iter()
-            .filter(|m| m.coverage > 0.0)
-            .map(|m| m.tce)
-            .collect();
+        let seen: Vec<f64> = self.metrics.iter().filter_map(|m| m.tce).collect();
         (!seen.is_empty()).then(|| seen.iter().sum::<f64>() / seen.len() as f64)
     }
 }
@@ -339,7 +335,7 @@ pub fn render_path_with(
                     m.frame.to_string(),
                     m.t.to_string(),
                     m.window.to_string(),
-                    m.tce.to_string(),
+                    m.tce.map_or(String::new(), |tce| tce.to_string()),
                     m.tre.to_string(),
                     m.coverage.to_string(),
                 ]
@@ -510,11 +506,12 @@ fn render_frames(
             let coverage = to_host(coverage(mask))?;
             for (i, index) in (first..end).enumerate() {
                 let at = |v: &[f64]| v.get(i).copied().unwrap_or(f64::NAN);
+                let shown = at(&coverage) > 0.0;
                 metrics.push(FrameMetrics {
                     frame: index,
                     t: frames.times[index],
                     window: windows[index],
-                    tce: at(&tce),
+                    tce: shown.then(|| at(&tce)),
                     tre: at(&tre),
                     coverage: at(&coverage),
                 });

@@ -286,7 +286,11 @@ fn read_frame_metrics(path: &Path) -> Result<Vec<FrameMetrics>> {
             Ok(FrameMetrics {
                 t: get(t, "t")?,
                 window: get(window, "window")? as usize,
-                tce: get(tce, "tce")?,
+                // An empty cell: the frame does not show its object (undefined TCE).
+                tce: match row.get(tce) {
+                    Some(cell) if cell.is_empty() => None,
+                    cell => Some(number(path, i + 2, "tce", cell)?),
+                },
                 tre: get(tre, "tre")?,
                 coverage: get(coverage, "coverage")?,
             })

@@ -120,7 +120,7 @@ impl Evaluation {
             w.framing.wobble = kept
                 .chunk_by(|a, b| b.frame == a.frame + 1)
                 .filter_map(|run| {
-                    let series: Vec<f64> = run.iter().map(|f| f.tce).collect();
+                    let series: Vec<f64> = run.iter().filter_map(|f| f.tce).collect();
                     splatraj_traj::metrics::wobble(&series, fps)
                 })
                 .reduce(f64::max);

@@ -56,8 +56,9 @@ pub struct FrameMetrics {
     pub t: f64,
     /// The window t falls in.
     pub window: usize,
-    /// Target centring error of the window's object in this frame.
-    pub tce: f64,
+    /// Target centring error of the window's object in this frame; `None` when the frame does
+    /// not show it (undefined, not 0).
+    pub tce: Option<f64>,
     /// Target ratio error.
     pub tre: f64,
     /// Share of the frame the visible object covers.

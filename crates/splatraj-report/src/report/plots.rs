@@ -6,7 +6,7 @@ use plotters::prelude::*;
 use super::{CostHistory, FrameMetrics, ReportError, Window, window_colour};
 
 /// A line of the metrics plot: its name, colour and value of a frame.
-type MetricLine = (&'static str, RGBColor, fn(&FrameMetrics) -> f64);
+type MetricLine = (&'static str, RGBColor, fn(&FrameMetrics) -> Option<f64>);
 
 /// Plot size in pixels.
 const SIZE: (u32, u32) = (1100, 380);
@@ -24,7 +24,7 @@ pub fn along_t(frames: &[FrameMetrics], windows: &[Window]) -> Result<String, Re
     let fail = failed("metrics along t");
     let top = frames
         .iter()
-        .flat_map(|f| [f.tce, f.tre, f.coverage])
+        .flat_map(|f| [f.tce.unwrap_or(0.0), f.tre, f.coverage])
         .chain(windows.iter().map(|w| w.target_ratio))
         .filter(|v| v.is_finite())
         .fold(0.0f64, f64::max)
@@ -78,18 +78,30 @@ pub fn along_t(frames: &[FrameMetrics], windows: &[Window]) -> Result<String, Re
         }
         let series: [MetricLine; 3] = [
             ("TCE", RGBColor(200, 30, 30), |f| f.tce),
-            ("TRE", RGBColor(30, 90, 200), |f| f.tre),
-            ("coverage", RGBColor(20, 150, 60), |f| f.coverage),
+            ("TRE", RGBColor(30, 90, 200), |f| Some(f.tre)),
+            ("coverage", RGBColor(20, 150, 60), |f| Some(f.coverage)),
         ];
         for (name, colour, value) in series {
-            let points: Vec<(f64, f64)> = frames.iter().map(|f| (f.t, value(f))).collect();
-            chart
-                .draw_series(LineSeries::new(points.clone(), colour.stroke_width(2)))
-                .map_err(|e| fail(&e))?
-                .label(name)
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
-                });
+            // A frame without a value (TCE of a frame not showing its object) breaks the line.
+            let runs: Vec<Vec<(f64, f64)>> = frames
+                .iter()
+                .map(|f| value(f).map(|v| (f.t, v)))
+                .collect::<Vec<_>>()
+                .split(Option::is_none)
+                .filter(|run| !run.is_empty())
+                .map(|run| run.iter().flatten().copied().collect())
+                .collect();
+            for (i, run) in runs.iter().enumerate() {
+                let drawn = chart
+                    .draw_series(LineSeries::new(run.clone(), colour.stroke_width(2)))
+                    .map_err(|e| fail(&e))?;
+                if i == 0 {
+                    drawn.label(name).legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+                    });
+                }
+            }
+            let points: Vec<(f64, f64)> = runs.into_iter().flatten().collect();
             chart
                 .draw_series(
                     points
