@@ -1,6 +1,5 @@
 //! `splatraj scene …`: inspect, convert and generate scene files.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
@@ -9,12 +8,11 @@ use clap::Subcommand;
 use splatraj::experiment::scene_files::{
     MaskSidecarRequest, convert_scene, lift_masks_to_sidecar, write_demo_scene,
 };
-use splatraj::lift::mask_files::{MaskCoding, MaskLift};
 use splatraj::lift::{LiftStage, MaskOptions};
 use splatraj_render::backend::BackendKind;
 use splatraj_scene::demo::DemoConfig;
 use splatraj_scene::summary::SceneInfo;
-use splatraj_scene::{Bounds, InvalidPolicy, SceneFormat};
+use splatraj_scene::{InvalidPolicy, SceneFormat};
 
 use crate::cli::{ReadArgs, progress_bar};
 
@@ -102,7 +100,7 @@ pub fn run(command: SceneCommand) -> Result<()> {
             if json {
                 println!("{}", serde_json::to_string_pretty(&info)?);
             } else {
-                print!("{}", info_text(&info));
+                print!("{}", info.text());
             }
         }
         SceneCommand::Convert {
@@ -196,122 +194,11 @@ fn lift_masks(args: LiftMasksArgs) -> Result<()> {
     let (lift, dropped) = lift_masks_to_sidecar(&request, &device, &progress)?;
     bar.finish_and_clear();
     warn_dropped(&request.scene, dropped);
-    print!("{}", lift_summary(&lift));
+    print!("{}", lift.summary_text());
     eprintln!(
         "wrote {} ({} Gaussians labelled)",
         request.out.display(),
         lift.labels.ids.iter().filter(|&&id| id != 0).count()
     );
     Ok(())
-}
-
-/// What `scene lift-masks` prints: cameras used, the labels with their Gaussians, the unseen
-/// share.
-fn lift_summary(lift: &MaskLift) -> String {
-    let cameras = lift.masked.len() + lift.unmasked.len();
-    let mut out = format!("cameras:    {} of {cameras} with a mask", lift.masked.len());
-    if !lift.unmasked.is_empty() {
-        let shown: Vec<&str> = lift.unmasked.iter().take(5).map(String::as_str).collect();
-        out += &format!(
-            " ({} skipped: {}{})",
-            lift.unmasked.len(),
-            shown.join(", "),
-            if lift.unmasked.len() > shown.len() {
-                ", …"
-            } else {
-                ""
-            }
-        );
-    }
-    out += &format!(
-        "\nmasks:      {}\n",
-        match lift.coding {
-            MaskCoding::Grey => "grey (values are label ids)".to_string(),
-            MaskCoding::Colour => format!("colour-coded ({} colours)", lift.legend.len()),
-        }
-    );
-    let mut counts: BTreeMap<i32, usize> = BTreeMap::new();
-    for &id in &lift.labels.ids {
-        *counts.entry(id).or_insert(0) += 1;
-    }
-    let found: Vec<i32> = lift
-        .labels
-        .labels
-        .iter()
-        .copied()
-        .filter(|&l| l != 0)
-        .collect();
-    out += &format!("labels:     {} in the masks\n", found.len());
-    let names: BTreeMap<i32, String> = lift.legend.iter().map(|e| (e.id, e.name())).collect();
-    for id in &found {
-        out += &format!(
-            "  {id:>6}  {:>9} Gaussians  {}\n",
-            counts.get(id).copied().unwrap_or(0),
-            names.get(id).map_or("-", String::as_str)
-        );
-    }
-    let n = lift.labels.ids.len().max(1) as f64;
-    out += &format!(
-        "unlabelled: {} Gaussians ({:.1} %)\nunseen:     {:.1} % of the Gaussians (no masked \
-         camera shows them)\n",
-        counts.get(&0).copied().unwrap_or(0),
-        100.0 * counts.get(&0).copied().unwrap_or(0) as f64 / n,
-        100.0 * lift.unseen_share()
-    );
-    out
-}
-
-/// `scene info`'s text.
-fn info_text(info: &SceneInfo) -> String {
-    let fmt3 = |v: [f32; 3]| format!("[{:.3}, {:.3}, {:.3}]", v[0], v[1], v[2]);
-    let fmt_bounds = |b: &Option<Bounds>| match b {
-        Some(b) => format!("min {} max {}", fmt3(b.min), fmt3(b.max)),
-        None => "none (empty scene)".into(),
-    };
-    let mut out = format!(
-        "file:            {}\nformat:          {:?}\nGaussians:       {}\nSH degree:       {}\n\
-             bounds:          {}\nrobust bounds:   {} (2%-98% quantiles)\nmean opacity:    {:.3}\n",
-        info.file,
-        info.format,
-        info.gaussians,
-        info.sh_degree,
-        fmt_bounds(&info.bounds),
-        fmt_bounds(&info.robust_bounds),
-        info.opacity_mean,
-    );
-    if info.dropped_invalid > 0 {
-        out += &format!("dropped invalid: {}\n", info.dropped_invalid);
-    }
-    if let Some(up) = &info.up_guess {
-        out += &format!(
-            "up (guess):      {} (raw {}, confidence {:.2}, from {:?}); set `up` in the config to override\n",
-            fmt3(up.up),
-            fmt3(up.raw),
-            up.confidence,
-            up.method
-        );
-    }
-    match &info.labels {
-        Some(labels) => {
-            out += &format!("labels:          from {}\n", labels.source);
-            for (id, count) in &labels.counts {
-                let name = count.name.as_deref().unwrap_or("-");
-                out += &format!("  {id:>6}  {:>9} Gaussians  {name}\n", count.gaussians);
-            }
-        }
-        None => out += "labels:          none\n",
-    }
-    match &info.features {
-        Some(f) => {
-            out += &format!(
-                "features:        {} per Gaussian ({} … {})\n",
-                f.dim, f.first, f.last
-            )
-        }
-        None => out += "features:        none\n",
-    }
-    if !info.other_properties.is_empty() {
-        out += &format!("other properties: {}\n", info.other_properties.join(", "));
-    }
-    out
 }

@@ -582,3 +582,23 @@ pub fn run_render_bench(
     };
     Ok((report, failures))
 }
+
+/// Runs `bench` on a rayon pool of `threads` workers (checked first, `--threads`), entered
+/// once so the measured passes start their parallel loops from inside it, as `run` does;
+/// `None` runs it where it is (on the global pool).
+pub fn in_thread_pool<T: Send>(
+    threads: Option<usize>,
+    stack_bytes: usize,
+    bench: impl FnOnce() -> Result<T> + Send,
+) -> Result<T> {
+    let Some(threads) = threads else {
+        return bench();
+    };
+    crate::resources::check_threads("--threads", threads)?;
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .stack_size(stack_bytes)
+        .build()
+        .map_err(|e| anyhow!("cannot set up {threads} rayon threads: {e}"))?
+        .install(bench)
+}

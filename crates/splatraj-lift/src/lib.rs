@@ -23,6 +23,7 @@ pub mod cameras;
 pub mod error;
 pub mod field;
 pub mod mask_files;
+pub mod mask_summary;
 pub mod masks;
 pub mod pca;
 pub mod progress;

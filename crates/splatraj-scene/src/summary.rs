@@ -104,3 +104,61 @@ impl SceneInfo {
         }
     }
 }
+
+impl SceneInfo {
+    /// `splatraj scene info`'s text: the summary as aligned lines.
+    pub fn text(&self) -> String {
+        let info = self;
+        let fmt3 = |v: [f32; 3]| format!("[{:.3}, {:.3}, {:.3}]", v[0], v[1], v[2]);
+        let fmt_bounds = |b: &Option<Bounds>| match b {
+            Some(b) => format!("min {} max {}", fmt3(b.min), fmt3(b.max)),
+            None => "none (empty scene)".into(),
+        };
+        let mut out = format!(
+            "file:            {}\nformat:          {:?}\nGaussians:       {}\nSH degree:       {}\n\
+                 bounds:          {}\nrobust bounds:   {} (2%-98% quantiles)\nmean opacity:    {:.3}\n",
+            info.file,
+            info.format,
+            info.gaussians,
+            info.sh_degree,
+            fmt_bounds(&info.bounds),
+            fmt_bounds(&info.robust_bounds),
+            info.opacity_mean,
+        );
+        if info.dropped_invalid > 0 {
+            out += &format!("dropped invalid: {}\n", info.dropped_invalid);
+        }
+        if let Some(up) = &info.up_guess {
+            out += &format!(
+                "up (guess):      {} (raw {}, confidence {:.2}, from {:?}); set `up` in the config to override\n",
+                fmt3(up.up),
+                fmt3(up.raw),
+                up.confidence,
+                up.method
+            );
+        }
+        match &info.labels {
+            Some(labels) => {
+                out += &format!("labels:          from {}\n", labels.source);
+                for (id, count) in &labels.counts {
+                    let name = count.name.as_deref().unwrap_or("-");
+                    out += &format!("  {id:>6}  {:>9} Gaussians  {name}\n", count.gaussians);
+                }
+            }
+            None => out += "labels:          none\n",
+        }
+        match &info.features {
+            Some(f) => {
+                out += &format!(
+                    "features:        {} per Gaussian ({} … {})\n",
+                    f.dim, f.first, f.last
+                )
+            }
+            None => out += "features:        none\n",
+        }
+        if !info.other_properties.is_empty() {
+            out += &format!("other properties: {}\n", info.other_properties.join(", "));
+        }
+        out
+    }
+}
