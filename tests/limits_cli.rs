@@ -349,3 +349,22 @@ fn sigint_during_render_path_says_stopped_and_leaves_its_output_folder_as_it_was
         .collect();
     assert!(left.is_empty(), "nothing staged left: {left:?}");
 }
+
+#[test]
+fn bench_frames_refuses_a_frame_size_that_cannot_fit_before_building_a_scene() {
+    let out = quickly(
+        20,
+        &[
+            "bench",
+            "frames",
+            "--no-scene",
+            "--gaussians",
+            "2000",
+            "--sizes",
+            "200000x200000",
+            "--frames",
+            "1",
+        ],
+    );
+    assert_clean_failure(&out, &["--frames", "--sizes", "memory"]);
+}

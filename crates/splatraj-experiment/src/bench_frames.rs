@@ -27,6 +27,7 @@ use crate::bench_scenes::{BenchScene, demo_bench_scene, file_bench_scene};
 use crate::camera_paths::PathFrames;
 use crate::config::MaskOverlay;
 use crate::path_render::{FrameSchedule, PathObject, PathRender, Video, render_path_with};
+use crate::resources::{MemoryLimit, RenderWork};
 
 /// How far the camera turns around the object over the video, degrees.
 pub const ORBIT_DEGREES: f64 = 60.0;
@@ -262,6 +263,26 @@ pub fn run_frames(bench: &FramesBench, progress: &mut dyn FnMut(&str)) -> Result
     }
     if let Some(&(w, h)) = bench.sizes.iter().find(|&&(w, h)| w == 0 || h == 0) {
         bail!("{w}×{h} is not a frame size");
+    }
+    // Sizes and counts come from flags: refused before any scene is built when they cannot
+    // fit (the pipelined schedule holds two frames at once).
+    for &size in &bench.sizes {
+        RenderWork {
+            what: format!(
+                "`--frames` = {} frames × {} schedules (--schedule) of {} demo Gaussians \
+                 (--gaussians) at `--sizes`",
+                bench.frames,
+                bench.schedules.len(),
+                bench.demo_gaussians.unwrap_or(0)
+            ),
+            renders: bench.frames as f64 * bench.schedules.len() as f64,
+            at_once: 2,
+            size,
+            gaussians: bench.demo_gaussians.unwrap_or(0),
+            gradient: false,
+            float_bytes: DType::F32.size(),
+        }
+        .check(MemoryLimit::new(None)?, "")?;
     }
     let device = bench.backend.device()?;
     let load_before = load_average();
