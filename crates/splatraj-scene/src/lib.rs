@@ -4,12 +4,14 @@
 //! readers for the files users have (INRIA 3DGS PLY in binary and ASCII, PlayCanvas/SuperSplat
 //! compressed PLY, Niantic SPZ, PlayCanvas SOG, antimatter15 `.splat`, GaussianSplats3D
 //! `.ksplat`, label sidecars), writers of INRIA PLY, compressed PLY and SPZ, validation with clear
-//! errors, a guess of the scene's up axis, and the procedural demo scene. It does not render,
+//! errors, a guess of the scene's up axis, coarser copies of a scene (neighbours merged) and the
+//! procedural demo scene. It does not render,
 //! select objects or depend on burn: those live in the crates further down the pipeline.
 
 #![warn(missing_docs)]
 
 pub mod atomic;
+pub mod coarse;
 pub mod demo;
 pub mod error;
 pub mod formats;

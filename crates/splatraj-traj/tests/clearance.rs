@@ -170,13 +170,21 @@ fn the_index_finds_the_same_nearest_surface_as_a_scan_and_the_same_clear_points(
         .collect();
     let occupancy = Occupancy::new(&scene(&gaussians), SPEC);
     assert_eq!(occupancy.len(), 300);
-    for _ in 0..200 {
-        let p = DVec3::new(5.0 * r() - 0.5, 5.0 * r() - 0.5, 5.0 * r() - 0.5);
+    for k in 0..300 {
+        // Points in the open and, one in three, just beside or inside an ellipsoid (negative
+        // clearances, where the search radius shrinks below zero).
+        let p = if k % 3 == 0 {
+            let e = occupancy.ellipsoids()[k % occupancy.len()];
+            e.centre + e.radii.x * DVec3::new(r() - 0.5, r() - 0.5, r() - 0.5)
+        } else {
+            DVec3::new(5.0 * r() - 0.5, 5.0 * r() - 0.5, 5.0 * r() - 0.5)
+        };
         let scan = occupancy
             .ellipsoids()
             .iter()
             .map(|e| e.nearest(p).distance)
             .fold(f64::INFINITY, f64::min);
+        assert!(occupancy.upper_bound(p) >= scan, "{p}: bound below the scan");
         let found = occupancy.nearest(p, 0.05).unwrap().surface.distance;
         assert!((found - scan).abs() < 1e-12, "{p}: {found} vs {scan}");
         let within = occupancy.nearest_within(p, 0.1);
