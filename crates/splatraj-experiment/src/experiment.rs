@@ -66,6 +66,9 @@ pub struct Experiment {
     #[allow(clippy::type_complexity)]
     pub(crate) views_cache:
         std::sync::Mutex<Option<(String, Vec<Vec<splatraj_traj::optimise::Candidate>>)>>,
+    /// The coarse copy the optimisation renders instead of `scene`, when `optimise_gaussians`
+    /// asks for one ([`Experiment::optimisation_scene`]).
+    pub coarse: Option<crate::optimised_scene::CoarseCopy>,
     /// When [`Experiment::prepare`] started: a run's total time counts from here.
     pub prepared_at: std::time::Instant,
 }
@@ -110,6 +113,7 @@ impl Experiment {
             intrinsics,
             occupancy_cache: Default::default(),
             views_cache: Default::default(),
+            coarse: None,
             prepared_at,
         };
         experiment.ground_queries()?;
@@ -117,6 +121,7 @@ impl Experiment {
             experiment.measure_working_distances()?;
         }
         experiment.derive_from_scene()?;
+        experiment.build_coarse_copy()?;
         Ok(experiment)
     }
 
@@ -313,11 +318,6 @@ impl Experiment {
             .map_err(anyhow::Error::msg)
     }
 
-    /// The scene on the autodiff device (for optimisation).
-    pub fn autodiff_scene(&self) -> DeviceScene {
-        DeviceScene::new(&self.scene, &self.device.clone().autodiff(), self.dtype)
-    }
-
     /// The scene on the plain device (for frames and metrics).
     pub fn plain_scene(&self) -> DeviceScene {
         DeviceScene::new(&self.scene, &self.device, self.dtype)
@@ -325,27 +325,8 @@ impl Experiment {
 
     /// Window `i`'s object alone (its Gaussians only), on the plain device.
     pub fn object_alone(&self, i: usize) -> DeviceScene {
-        self.object_alone_on(i, &self.device)
-    }
-
-    /// Window `i`'s object alone on `device`.
-    fn object_alone_on(&self, i: usize, device: &Device) -> DeviceScene {
         let keep: Vec<bool> = self.windows[i].mask.iter().map(|&m| m != 0.0).collect();
-        DeviceScene::new(&self.scene.subset(&keep), device, self.dtype)
-    }
-
-    /// Every window's object alone on the autodiff device, when `costs` read it (the
-    /// visibility cost); None otherwise.
-    pub fn autodiff_alone(&self, costs: &WeightedCosts) -> Option<Vec<DeviceScene>> {
-        let needed = costs
-            .channels()
-            .contains(&splatraj_traj::costs::ImageChannel::MaskAlone);
-        let device = self.device.clone().autodiff();
-        needed.then(|| {
-            (0..self.windows.len())
-                .map(|i| self.object_alone_on(i, &device))
-                .collect()
-        })
+        DeviceScene::new(&self.scene.subset(&keep), &self.device, self.dtype)
     }
 
     /// The output camera: the optimisation camera at `[output]`'s size.

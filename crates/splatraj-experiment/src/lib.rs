@@ -49,6 +49,7 @@ pub mod io;
 pub mod lifted;
 pub mod memory_plans;
 pub mod observer;
+pub mod optimised_scene;
 pub mod output_folder;
 pub mod outputs;
 pub mod path_checks;

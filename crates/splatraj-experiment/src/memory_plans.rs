@@ -39,6 +39,23 @@ impl Experiment {
         let mut plan = MemoryPlan::default();
         let (n, fb) = (self.scene.len(), self.dtype.size());
         let base = scene_bytes(n, fb);
+        // The optimisation renders the coarse copy when there is one, held beside the scene.
+        let (optimised, selected) = match &self.coarse {
+            None => (n, self.selected.clone()),
+            Some(c) => (
+                c.scene.len(),
+                c.masks
+                    .iter()
+                    .map(|m| m.iter().filter(|&&v| v != 0.0).count())
+                    .collect(),
+            ),
+        };
+        let held = base
+            + if optimised < n {
+                scene_bytes(optimised, fb)
+            } else {
+                0.0
+            };
         let windows = self.windows.len();
         let spw = self.config.optimiser.samples_per_window;
         let camera = &self.config.camera;
@@ -46,11 +63,8 @@ impl Experiment {
         // The visibility cost also renders each part alone, from its own copy of the part's
         // Gaussians on the autodiff device.
         let alone = if self.config.costs.visibility.is_some() {
-            let largest = self.selected.iter().copied().max().unwrap_or(0);
-            self.selected
-                .iter()
-                .map(|&s| scene_bytes(s, fb))
-                .sum::<f64>()
+            let largest = selected.iter().copied().max().unwrap_or(0);
+            selected.iter().map(|&s| scene_bytes(s, fb)).sum::<f64>()
                 + render_bytes(
                     windows.saturating_mul(spw),
                     camera_pixels,
@@ -64,7 +78,8 @@ impl Experiment {
         plan.stage(
             format!(
                 "an optimisation step: {windows} windows × `optimiser.samples_per_window` = {spw} \
-                 poses at `camera.width` × `camera.height` = {} × {}{}",
+                 poses at `camera.width` × `camera.height` = {} × {} of {optimised} Gaussians \
+                 (`optimise_gaussians`){}",
                 camera.width,
                 camera.height,
                 if alone > 0.0 {
@@ -73,7 +88,13 @@ impl Experiment {
                     ""
                 }
             ),
-            base + render_bytes(windows.saturating_mul(spw), camera_pixels, n, true, fb) + alone,
+            held + render_bytes(
+                windows.saturating_mul(spw),
+                camera_pixels,
+                optimised,
+                true,
+                fb,
+            ) + alone,
         );
         let basis = self.model()?.basis().count();
         let output = &self.config.output;

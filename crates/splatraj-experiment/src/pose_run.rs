@@ -92,15 +92,17 @@ impl Experiment {
         })
     }
 
-    /// The single-window problem of `[pose]`'s query on `scene` (autodiff) with `costs`.
+    /// The single-window problem of `[pose]`'s query on `scene` (autodiff) and its `windows`
+    /// with `costs`.
     fn pose_problem<'a>(
         &'a self,
         scene: &'a splatraj_render::render::DeviceScene,
+        windows: &'a [splatraj_traj::optimise::WindowTarget],
         costs: &'a splatraj_traj::costs::WeightedCosts,
         occupancy: Option<&'a splatraj_traj::clearance::Occupancy>,
         alone: Option<&'a [splatraj_render::render::DeviceScene]>,
     ) -> Result<Problem<'a>> {
-        Ok(Problem::new(scene, &self.windows, costs, self.intrinsics)
+        Ok(Problem::new(scene, windows, costs, self.intrinsics)
             .with_rasterizer(self.config.rasterizer)
             .with_approximations(self.config.approximations)
             .with_occupancy(occupancy)
@@ -115,9 +117,16 @@ impl Experiment {
         let costs = self.pose_costs()?;
         let starts = self.pose_starts()?;
         let scene = self.autodiff_scene();
+        let windows = self.optimisation_windows();
         let occupancy = self.occupancy()?;
         let alone = self.autodiff_alone(&costs);
-        let problem = self.pose_problem(&scene, &costs, occupancy.as_ref(), alone.as_deref())?;
+        let problem = self.pose_problem(
+            &scene,
+            &windows,
+            &costs,
+            occupancy.as_ref(),
+            alone.as_deref(),
+        )?;
         let options = &self.config.pose.optimiser;
         let started = Instant::now();
         let results = optimise_poses_observed(&problem, &starts, options, &mut |step, best| {
@@ -147,9 +156,16 @@ impl Experiment {
         let index = self.config.pose.query;
         let costs = self.pose_costs()?;
         let scene = self.autodiff_scene();
+        let windows = self.optimisation_windows();
         let occupancy = self.occupancy()?;
         let alone = self.autodiff_alone(&costs);
-        let problem = self.pose_problem(&scene, &costs, occupancy.as_ref(), alone.as_deref())?;
+        let problem = self.pose_problem(
+            &scene,
+            &windows,
+            &costs,
+            occupancy.as_ref(),
+            alone.as_deref(),
+        )?;
         let units = PoseUnits::with_position(self.windows[index].context.prior_radius);
         let sampled = sample_poses_sgld(
             &problem,

@@ -344,7 +344,8 @@ impl Experiment {
     /// Every candidate view of the windows of `which`, measured (renders of each object's
     /// mask with the scene and alone, the camera's clearance).
     pub fn measured_views(&self, which: &[usize]) -> Result<Vec<WindowViews>> {
-        let scene = self.plain_scene();
+        let scene = self.plain_optimisation_scene();
+        let windows = self.optimisation_windows();
         let occupancy = self.occupancy()?;
         let margin = self.clearance_margin();
         let geometry = occupancy.as_ref().zip(margin);
@@ -352,8 +353,8 @@ impl Experiment {
         which
             .iter()
             .map(|&i| {
-                let w = &self.windows[i];
-                let alone = self.object_alone(i);
+                let w = &windows[i];
+                let alone = self.optimisation_alone(i, &self.device);
                 let object = ViewedObject {
                     scene: &scene,
                     alone: &alone,

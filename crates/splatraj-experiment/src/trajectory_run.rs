@@ -257,6 +257,7 @@ impl Experiment {
         }
         let occupancy = self.occupancy()?;
         let alone = self.autodiff_alone(&costs);
+        let windows = self.optimisation_windows();
         let started = Instant::now();
         let mut stop = RunStop::Finished;
         for (r, fresh_start) in starts.iter().enumerate().skip(first_restart) {
@@ -284,7 +285,7 @@ impl Experiment {
             } else {
                 &costs
             };
-            let problem = Problem::new(&scene, &self.windows, costs, self.intrinsics)
+            let problem = Problem::new(&scene, &windows, costs, self.intrinsics)
                 .with_rasterizer(self.config.rasterizer)
                 .with_approximations(self.config.approximations)
                 .with_occupancy(occupancy.as_ref())

@@ -15,7 +15,9 @@
 //! mean and SH coefficients are the weighted means; the covariance is the weighted mean of
 //! Σᵢ + (μᵢ − μ)(μᵢ − μ)ᵀ, whose eigen-decomposition gives the scales and rotation; the opacity
 //! spreads the members' total Σ wᵢ over the merged cross-section a, α = Σ wᵢ / a, at most what
-//! the members give stacked on one another, 1 − Π(1 − αᵢ).
+//! the members give stacked on one another, 1 − Π(1 − αᵢ). Where that bound saturates it (an
+//! opaque surface of small splats), the cross-section grows instead, up to twice its area: a
+//! single Gaussian at the bound covers only half the disc its members fill.
 //!
 //! It is an approximation: renders of the copy match the scene's where a merged Gaussian
 //! covers at most a pixel or so. What renders it is for the caller to decide.
@@ -31,6 +33,8 @@ const CELL_BITS: u32 = 18;
 pub const MAX_CLASSES: usize = 1 << (64 - 3 * CELL_BITS);
 /// Bisection steps on log2(cell size).
 const BISECTIONS: usize = 14;
+/// The most a saturated merge's cross-section grows (see [`merge_group`]).
+const MAX_AREA_GROWTH: f64 = 2.0;
 /// Reach of a Gaussian, in standard deviations, compared with the cell size.
 const REACH_SIGMAS: f32 = 3.0;
 
@@ -281,16 +285,33 @@ fn merge_group(scene: &Scene, members: impl Iterator<Item = usize> + Clone) -> M
         }
         clear *= 1.0 - f64::from(scene.opacities[i]);
     }
-    let (scale, rotation) = scales_and_rotation(spread);
-    let mut sorted = scale.to_array();
-    sorted.sort_by(f64::total_cmp);
-    let area = sorted[1] * sorted[2];
-    let spread_opacity = if area > 0.0 { total / area } else { 1.0 };
+    let (mut scale, rotation) = scales_and_rotation(spread);
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| scale[a].total_cmp(&scale[b]));
+    let area = scale[order[1]] * scale[order[2]];
+    let spread_opacity = if area > 0.0 {
+        total / area
+    } else {
+        f64::INFINITY
+    };
+    let most = (1.0 - clear).clamp(0.0, 1.0);
+    let opacity = if spread_opacity <= most {
+        spread_opacity
+    } else {
+        // Saturated: the members cover their footprint more evenly than one Gaussian at that
+        // opacity can, so the cross-section grows to carry the rest of Σ wᵢ, up to twice
+        // (the area of the disc that a uniform spread of σ fills is 2 · 2πσ², the integral
+        // of a Gaussian of opacity 1).
+        let grow = (spread_opacity / most).min(MAX_AREA_GROWTH).sqrt();
+        scale[order[1]] *= grow;
+        scale[order[2]] *= grow;
+        most
+    };
     Merged {
         mean: mean.as_vec3().to_array(),
         scale: scale.as_vec3().to_array(),
         rotation,
-        opacity: spread_opacity.min(1.0 - clear).clamp(0.0, 1.0) as f32,
+        opacity: opacity as f32,
         sh: sh.into_iter().map(|c| c as f32).collect(),
     }
 }

@@ -96,7 +96,11 @@ fn the_budget_holds_classes_stay_apart_and_the_moments_are_kept() {
     let gaussians: Vec<([f32; 3], [f32; 3], f32)> = (0..n)
         .map(|_| {
             let size = 0.002 + 0.004 * r();
-            ([r(), r(), 0.3 * r()], [size, size * 0.5, size * 0.2], 0.2 + 0.7 * r())
+            (
+                [r(), r(), 0.3 * r()],
+                [size, size * 0.5, size * 0.2],
+                0.2 + 0.7 * r(),
+            )
         })
         .collect();
     let input = scene(&gaussians);
@@ -109,7 +113,10 @@ fn the_budget_holds_classes_stay_apart_and_the_moments_are_kept() {
     for budget in [5_000, 1_000] {
         let coarse = coarsen(&input, &classes, budget).unwrap();
         let m = coarse.scene.len();
-        assert!(m <= budget && m > budget / 8, "{m} Gaussians for a budget of {budget}");
+        assert!(
+            m <= budget && m > budget / 8,
+            "{m} Gaussians for a budget of {budget}"
+        );
         let mut class_of = vec![None; m];
         for (i, &g) in coarse.coarse_from_fine.iter().enumerate() {
             let c = class_of[g as usize].get_or_insert(classes[i]);
@@ -143,7 +150,10 @@ fn the_budget_holds_classes_stay_apart_and_the_moments_are_kept() {
                 .map(|k| (coarse.scene.means[g as usize][k] - input.means[i][k]).powi(2))
                 .sum::<f32>()
                 .sqrt();
-            assert!(d <= 3f32.sqrt() * coarse.cell + 1e-6, "member {i} {d} from its merge");
+            assert!(
+                d <= 3f32.sqrt() * coarse.cell + 1e-6,
+                "member {i} {d} from its merge"
+            );
         }
     }
 }
@@ -159,4 +169,32 @@ fn bad_classes_are_refused() {
         coarsen(&input, &[5000], 1),
         Err(CoarseError::TooManyClasses(_))
     ));
+}
+
+#[test]
+fn a_saturated_merge_keeps_the_stacked_opacity_and_grows_its_cross_section() {
+    // Four coincident opaque discs (α = 0.9, flat along z): spread over one disc their
+    // weight gives α = 3.6, far above what they give stacked, 1 − 0.1⁴; the cross-section
+    // grows by the most allowed, twice the area (√2 on each of its two axes).
+    let (s, alpha) = (0.01f32, 0.9f32);
+    let disc = ([0.0, 0.0, 0.0], [s, s, 0.1 * s], alpha);
+    let far = ([10.0, 10.0, 10.0], [s, s, s], alpha);
+    let input = scene(&[disc, disc, disc, disc, far]);
+    let coarse = coarsen(&input, &[0; 5], 2).unwrap();
+    let j = coarse.coarse_from_fine[0] as usize;
+    assert!(
+        coarse.coarse_from_fine[..4]
+            .iter()
+            .all(|&g| g as usize == j)
+    );
+    let want = 1.0 - (1.0 - alpha).powi(4);
+    assert!((coarse.scene.opacities[j] - want).abs() < 1e-6);
+    let mut scales = coarse.scene.scales[j];
+    scales.sort_by(f32::total_cmp);
+    for (got, want) in scales
+        .iter()
+        .zip([0.1 * s, s * 2f32.sqrt(), s * 2f32.sqrt()])
+    {
+        assert!((got - want).abs() < 1e-6, "{scales:?}");
+    }
 }

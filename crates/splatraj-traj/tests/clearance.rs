@@ -184,7 +184,10 @@ fn the_index_finds_the_same_nearest_surface_as_a_scan_and_the_same_clear_points(
             .iter()
             .map(|e| e.nearest(p).distance)
             .fold(f64::INFINITY, f64::min);
-        assert!(occupancy.upper_bound(p) >= scan, "{p}: bound below the scan");
+        assert!(
+            occupancy.upper_bound(p) >= scan,
+            "{p}: bound below the scan"
+        );
         let found = occupancy.nearest(p, 0.05).unwrap().surface.distance;
         assert!((found - scan).abs() < 1e-12, "{p}: {found} vs {scan}");
         let within = occupancy.nearest_within(p, 0.1);

@@ -52,6 +52,9 @@
 //! [output]                 # frames (or fps × seconds; default 3 s per query at 30 fps),
 //!                          # width, height (1280 × 720), mask_overlay (none), runs_dir …
 //! [pose]                   # `splatraj pose`: query, ablation; [pose.optimiser]: its Adam
+//! # optimise_gaussians = "auto"  # (top level) the optimisation renders a coarse copy of at most
+//! #                          # this many Gaussians (neighbours merged): "auto" (1 M for larger
+//! #                          # scenes), "all" or a number; metrics and frames use the scene itself
 //! [approximations]         # optimisation renders only: stop_transmittance, min_opacity (exact by default)
 //! [study]                  # `splatraj study`: factors, design, seeds, quality, evaluation
 //! [sgld]                   # `splatraj pose --sgld`: Langevin settings
@@ -69,6 +72,7 @@
 
 pub mod camera;
 pub mod load;
+pub mod optimise_gaussians;
 pub mod output;
 pub mod overrides;
 pub mod pose;
@@ -91,6 +95,7 @@ use splatraj_traj::optimise::{SgldOptions, TrajectoryOptions};
 use splatraj_traj::trajectory::TrajectoryModel;
 
 pub use camera::{CameraConfig, DEFAULT_CAMERA_HEIGHT, DEFAULT_CAMERA_WIDTH, WorkingDistance};
+pub use optimise_gaussians::{AUTO_OPTIMISE_GAUSSIANS, OptimiseGaussians};
 pub use output::{MaskOverlay, OutputConfig, SECONDS_PER_QUERY, VerdictPolicy};
 pub use overrides::{apply_assignment, apply_override};
 pub use pose::{Ablation, PoseConfig};
@@ -161,6 +166,11 @@ pub struct Config {
     /// measured by `splatraj study` (docs/results.md).
     #[serde(default, skip_serializing_if = "Approximations::is_exact")]
     pub approximations: Approximations,
+    /// What the optimisation passes render: the scene itself (`"all"`) or a coarse copy of at
+    /// most this many Gaussians; `"auto"` (default): a copy of 1 M for larger scenes. Metrics,
+    /// verdicts and frames always render the scene itself ([`OptimiseGaussians`]).
+    #[serde(default, skip_serializing_if = "OptimiseGaussians::is_auto")]
+    pub optimise_gaussians: OptimiseGaussians,
     /// `splatraj study`: the variants to run and how to judge them
     /// ([`StudyConfig`]).
     #[serde(default, skip_serializing_if = "StudyConfig::is_default")]

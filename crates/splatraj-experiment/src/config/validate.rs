@@ -149,6 +149,7 @@ impl Config {
         self.sgld
             .validate()
             .map_err(|e| optimise_error("sgld", e))?;
+        self.optimise_gaussians.check()?;
         self.approximations
             .check()
             .map_err(|e| e.within("approximations"))?;

@@ -237,7 +237,11 @@ impl Occupancy {
     fn candidates(&self, p: DVec3, radius: f64) -> impl Iterator<Item = (usize, f64)> + '_ {
         // A tier whose largest semi-axis is below −radius has no surface that close (a point
         // is at most a semi-axis deep in an ellipsoid).
-        let tiers = self.inner.tiers.iter().filter(move |t| radius + t.reach >= 0.0);
+        let tiers = self
+            .inner
+            .tiers
+            .iter()
+            .filter(move |t| radius + t.reach >= 0.0);
         tiers.flat_map(move |tier| {
             let reach = radius + tier.reach;
             tier.tree
