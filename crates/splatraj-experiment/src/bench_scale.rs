@@ -32,6 +32,8 @@ pub struct ScaleBench {
 pub struct ScaleRow {
     /// Gaussians in the scene.
     pub gaussians: usize,
+    /// Gaussians the optimisation rendered (`optimise_gaussians`; None: not recorded).
+    pub optimised: Option<usize>,
     /// Steps run.
     pub iterations: usize,
     /// Wall time per optimisation step, ms.
@@ -73,6 +75,7 @@ pub fn read_scale_row(dir: &Path) -> Result<ScaleRow> {
     );
     Ok(ScaleRow {
         gaussians: number("gaussians")? as usize,
+        optimised: run["optimised_gaussians"].as_u64().map(|n| n as usize),
         iterations: number("iterations_run")? as usize,
         per_step_ms: number("per_iteration_ms")?,
         setup_s: total_s - optimisation_s - metrics_s - frames_s,
@@ -119,17 +122,17 @@ fn run_size(exe: &Path, bench: &ScaleBench, size: usize) -> Result<ScaleRow> {
     read_scale_row(&folder)
 }
 
-/// The rows as a table: per size the step time and its ratio to the first row's, the stages,
+/// The rows as a table: per size the Gaussians the optimisation rendered, the step time and its ratio to the first row's, the stages,
 /// the peak memory and the peak's growth per Gaussian over the first row.
 pub fn scale_table(rows: &[ScaleRow]) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "| Gaussians | steps | ms/step | × first | setup s | optimise s | metrics s | frames s | total s | peak MB | bytes/Gaussian over first |"
+        "| Gaussians | optimised | steps | ms/step | × first | setup s | optimise s | metrics s | frames s | total s | peak MB | bytes/Gaussian over first |"
     );
     let _ = writeln!(
         out,
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
     );
     let first = rows.first();
     for row in rows {
@@ -142,9 +145,10 @@ pub fn scale_table(rows: &[ScaleRow]) -> String {
             _ => "–".into(),
         };
         let peak = row.peak_mb.map_or("–".into(), |p| format!("{p:.0}"));
+        let optimised = row.optimised.map_or("–".into(), |n| n.to_string());
         let _ = writeln!(
             out,
-            "| {} | {} | {:.0} | {ratio:.2} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {peak} | {slope} |",
+            "| {} | {optimised} | {} | {:.0} | {ratio:.2} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {peak} | {slope} |",
             row.gaussians,
             row.iterations,
             row.per_step_ms,
@@ -165,6 +169,7 @@ mod tests {
     fn row(gaussians: usize, per_step_ms: f64, peak_mb: Option<f64>) -> ScaleRow {
         ScaleRow {
             gaussians,
+            optimised: Some(gaussians.min(1_000_000)),
             iterations: 10,
             per_step_ms,
             setup_s: 1.0,

@@ -52,6 +52,9 @@ pub struct RunReport {
     pub scene: String,
     /// Gaussians in the scene.
     pub gaussians: usize,
+    /// Gaussians the optimisation rendered: the coarse copy's when `optimise_gaussians` made
+    /// one, else the scene's.
+    pub optimised_gaussians: usize,
     /// Why the optimisation ended.
     pub stop: RunStop,
     /// Restarts that ran.
@@ -104,6 +107,7 @@ impl RunReport {
         RunReport {
             scene: experiment.scene_name.clone(),
             gaussians: experiment.scene.len(),
+            optimised_gaussians: experiment.optimisation_scene().len(),
             stop: run.stop,
             restarts_run: run.results.len(),
             best_restart: run.best,

@@ -259,9 +259,6 @@ impl Occupancy {
     /// an ellipsoid whose inscribed or circumscribed sphere decides it is not measured
     /// exactly (the distance to its surface lies between the distances to those spheres).
     pub fn is_clear(&self, p: DVec3, radius: f64) -> bool {
-        if self.upper_bound(p) < radius {
-            return false;
-        }
         for (index, squared) in self.candidates(p, radius) {
             let e = &self.inner.ellipsoids[index];
             let to_centre = squared.sqrt();
