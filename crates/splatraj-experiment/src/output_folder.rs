@@ -1,4 +1,4 @@
-//! Output folders written whole: `render-path --out` and `export --out` fill a fresh staging
+//! Output folders written whole: `render --out`, `render-path --out` and `export --out` fill a fresh staging
 //! folder beside the target (`.NAME.PID.partial`) and rename it into place once every file is
 //! written, so a re-run replaces the old folder whole (no old frames beside a new video) and a
 //! failed run leaves the old folder as it was.
@@ -27,7 +27,13 @@ pub struct OutputFolder {
 fn split(target: &Path) -> Result<(PathBuf, String)> {
     let name = target
         .file_name()
-        .with_context(|| format!("{} does not name a folder", target.display()))?
+        .with_context(|| {
+            format!(
+                "the output folder {} has no name of its own (`.` or `..`), so it cannot be \
+                 replaced whole: give a named folder",
+                target.display()
+            )
+        })?
         .to_string_lossy()
         .into_owned();
     let parent = match target.parent() {

@@ -108,7 +108,16 @@ fn a_grid_study_has_a_row_per_run_and_a_non_dominated_frontier() {
     assert_eq!(plan.runs.len(), 8);
     let mut rows = Vec::new();
     for run in &plan.runs {
-        rows.extend(measure_run(&plan, run, &extensions, MemoryReading::Shared).unwrap());
+        rows.extend(
+            measure_run(
+                &plan,
+                run,
+                &extensions,
+                MemoryReading::Shared,
+                splatraj_scene::stop::Since::now(),
+            )
+            .unwrap(),
+        );
     }
     for v in &plan.variants {
         let seeds: Vec<u64> = rows
@@ -224,7 +233,16 @@ fn a_clearance_config_reports_the_paths_clearance() {
     let plan = StudyPlan::new(&path, &options, &extensions).unwrap();
     let mut rows = Vec::new();
     for run in &plan.runs {
-        rows.extend(measure_run(&plan, run, &extensions, MemoryReading::Shared).unwrap());
+        rows.extend(
+            measure_run(
+                &plan,
+                run,
+                &extensions,
+                MemoryReading::Shared,
+                splatraj_scene::stop::Since::now(),
+            )
+            .unwrap(),
+        );
     }
     assert_eq!(rows.len(), 2);
     for r in &rows {
