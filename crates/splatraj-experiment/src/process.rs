@@ -358,13 +358,14 @@ impl Experiment {
         self.costs()?;
         let memory = self.trajectory_memory()?;
         memory.check(self.memory_limit()?, RAISE_LIMIT)?;
+        // Before the time plan, which would warn that the time limit stops the optimisation.
+        self.check_restarts_begin()?;
         let (optimisation, rest) = self.trajectory_time();
         optimisation.check(TimeBound::Key {
             key: "`optimiser.time_limit_s`",
             seconds: self.config.optimiser.time_limit_s,
         })?;
         rest.check(TimeBound::Unbounded)?;
-        self.check_restarts_begin()?;
         // The first start is built (a bad `start.trajectory`, shot or route fails there);
         // all of them would take time in proportion to `start.restarts`, which the time plan
         // above has weighed.

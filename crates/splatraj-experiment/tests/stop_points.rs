@@ -127,8 +127,12 @@ fn a_study_run_stops_within_itself_and_the_study_between_runs() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
     let extensions = Extensions::default();
-    let plan =
-        StudyPlan::new(&config_file(dir.path()), &PlanOptions::default(), &extensions).unwrap();
+    let plan = StudyPlan::new(
+        &config_file(dir.path()),
+        &PlanOptions::default(),
+        &extensions,
+    )
+    .unwrap();
     assert!(plan.runs.len() >= 2, "the default plan has several runs");
 
     // A request after `since`: the run stops at its first step and is not measured.
