@@ -676,6 +676,54 @@ const TABLE: &[Row] = &[
         mentions: &["mask.npy", "shape [3000]", "needs 12000 bytes", "holds 400"],
     },
     Row {
+        // query's picture is one file written atomically: never through a FIFO (or device).
+        proves: "query_refuses_to_write_its_picture_through_a_fifo_naming_it",
+        args: |f, d| {
+            let out = d.join("out");
+            std::fs::create_dir(&out).unwrap();
+            let fifo = out.join("query.png");
+            let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+            assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+            let out = out.display().to_string();
+            strings(&[
+                "query",
+                "--scene",
+                s(&f.scene()),
+                "--query",
+                "red mug",
+                "--out",
+                &out,
+            ])
+        },
+        mentions: &["query.png", "special file"],
+    },
+    Row {
+        // npyz multiplies the shape unchecked: 2^65 elements panicked in a debug build.
+        proves: "render_refuses_a_mask_npy_whose_shape_product_overflows_without_panicking",
+        args: |f, d| {
+            let mask = npy_claiming(d, "(4294967296, 4294967296, 2)", 1);
+            let camera =
+                Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/cameras/demo_mug.json");
+            let out = d.join("out").display().to_string();
+            strings(&[
+                "render",
+                "--scene",
+                s(&f.scene()),
+                "--camera",
+                s(&camera),
+                "--mask",
+                &mask,
+                "--out",
+                &out,
+            ])
+        },
+        mentions: &[
+            "mask.npy",
+            "[4294967296, 4294967296, 2]",
+            "more elements than 2^64",
+        ],
+    },
+    Row {
         proves: "report_refuses_a_metrics_json_of_the_wrong_shape",
         args: |f, d| {
             let run = d.join("run");

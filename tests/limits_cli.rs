@@ -148,6 +148,49 @@ fn run_check_refuses_what_cannot_fit_naming_the_key() {
 }
 
 #[test]
+fn run_check_of_ten_million_object_or_random_restarts_answers_in_seconds_without_building_them() {
+    // Building 10⁷ starts took minutes before the check answered; the check builds one and
+    // weighs the rest by the time model (the memory limit is raised so that the time is
+    // what is judged, whatever this machine's memory).
+    let dir = tempfile::tempdir().unwrap();
+    let config = tiny_config(dir.path());
+    for kind in ["objects", "random"] {
+        let kind = format!("start.kind=\"{kind}\"");
+        let restarts = [
+            "run",
+            s(&config),
+            "--check",
+            "--set",
+            "start.restarts=10000000",
+            "--set",
+            &kind,
+            "--set",
+            "max_memory_gb=1000",
+        ];
+        let out = quickly(20, &restarts);
+        let err = stderr(&out);
+        assert!(out.status.success(), "{err}");
+        // 10⁷ restarts × 3 steps at ≥ 1 ms a step: a warning naming the key and the hours.
+        assert!(
+            err.contains("`start.restarts`")
+                && err.contains("will take at least")
+                && err.contains(" h"),
+            "{err}"
+        );
+        // Under a time limit of 2 s at most 2000 steps run: most restarts would never begin,
+        // yet each start is built first.
+        let mut limited = restarts.to_vec();
+        limited.extend(["--set", "optimiser.time_limit_s=2"]);
+        let out = quickly(20, &limited);
+        assert_clean_failure(
+            &out,
+            &["`start.restarts`", "`optimiser.time_limit_s`", "2000"],
+        );
+    }
+    assert!(!dir.path().join("runs").exists());
+}
+
+#[test]
 fn a_run_with_a_huge_iteration_count_and_a_time_limit_stops_at_the_limit_without_abort() {
     let dir = tempfile::tempdir().unwrap();
     let config = tiny_config(dir.path());

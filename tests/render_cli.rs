@@ -198,6 +198,45 @@ fn world_to_camera_and_npy_mask_match_pose_and_label() {
 }
 
 #[test]
+fn a_render_into_an_earlier_render_replaces_it_whole_and_other_folders_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = demo(dir.path());
+    let camera = write_json(
+        &dir.path().join("cam.json"),
+        &camera_json(&intrinsics(), &mug_pose()),
+    );
+    let out_dir = dir.path().join("out");
+    let render = |out: &Path, object: &[&str]| {
+        let mut args = vec!["render", "--scene", s(&ply), "--camera", s(&camera)];
+        args.extend_from_slice(object);
+        args.extend(["--out", s(out)]);
+        splatraj(&args)
+    };
+    let first = render(&out_dir, &["--label", "red mug"]);
+    assert!(first.status.success(), "{}", stderr(&first));
+    // Without an object the new render has no mask: the old mask must not stay beside it.
+    let second = render(&out_dir, &[]);
+    assert!(second.status.success(), "{}", stderr(&second));
+    assert_eq!(files_in(&out_dir), ["rgb.png"]);
+    let mut beside = files_in(dir.path());
+    beside.sort();
+    assert_eq!(
+        beside,
+        ["cam.json", "demo.ply", "out"],
+        "no staging or lock left"
+    );
+
+    // A folder holding the user's other files is refused and left as it was; so is `.`,
+    // which cannot be replaced whole.
+    let (mine, notes) = (dir.path().join("mine"), dir.path().join("mine/notes.txt"));
+    std::fs::create_dir(&mine).unwrap();
+    std::fs::write(&notes, "mine").unwrap();
+    assert_clean_failure(&render(&mine, &[]), &["notes.txt", "does not write"]);
+    assert_eq!(files_in(&mine), ["notes.txt"]);
+    assert_clean_failure(&render(Path::new("."), &[]), &["no name of its own"]);
+}
+
+#[test]
 fn grad_prints_costs_gradient_and_timings() {
     let dir = tempfile::tempdir().unwrap();
     let ply = demo(dir.path());
@@ -221,7 +260,7 @@ fn grad_prints_costs_gradient_and_timings() {
         "--dtype",
         "f64",
         "--out",
-        s(dir.path()),
+        s(&dir.path().join("out")),
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let report: Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
@@ -255,7 +294,7 @@ fn grad_prints_costs_gradient_and_timings() {
 }
 
 #[test]
-fn grad_of_an_object_out_of_view_is_zero_and_finite() {
+fn grad_of_an_object_out_of_view_has_no_tce_and_a_zero_gradient() {
     let dir = tempfile::tempdir().unwrap();
     let ply = demo(dir.path());
     // At the mug, looking away from it (toward the standing viewpoint's opposite side).
@@ -280,12 +319,18 @@ fn grad_of_an_object_out_of_view_is_zero_and_finite() {
         "red mug",
         "--grad",
         "--out",
-        s(dir.path()),
+        s(&dir.path().join("out")),
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let report: Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(report["coverage"].as_f64(), Some(0.0), "{report}");
-    assert_eq!(report["tce"].as_f64(), Some(0.0), "{report}");
+    // An object covering none of the frame has no centre, so no framing error: TCE is
+    // undefined (null), as in frame_metrics.csv, not the 0 of a perfectly centred object.
+    assert!(report["tce"].is_null(), "{report}");
+    assert!(
+        (report["loss"].as_f64().unwrap() - report["tre"].as_f64().unwrap()).abs() < 1e-12,
+        "the loss is TRE alone: {report}"
+    );
     assert!((report["tre"].as_f64().unwrap() - 0.15).abs() < 1e-6);
     for g in report["grad_pose"].as_array().unwrap() {
         assert_eq!(g.as_f64(), Some(0.0), "{report}");
@@ -382,7 +427,7 @@ fn example_camera_frames_the_mug() {
         "80",
         "--grad",
         "--out",
-        s(dir.path()),
+        s(&dir.path().join("out")),
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let report: Value = serde_json::from_slice(&out.stdout).unwrap();

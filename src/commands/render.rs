@@ -4,8 +4,9 @@
 //! The camera file is JSON (schema: `splatraj_render::camera_file`): `{"fx", "fy", "cx", "cy",
 //! "width", "height"}` plus exactly one of `"pose"` (Φ = [ω, c]) or `"world_to_camera"` (4×4,
 //! row-major). The object is a per-Gaussian mask from a `.npy` file or a label of the scene.
-//! Every input is checked before anything is rendered or written, and each output file
-//! appears whole or not at all. `--grad` computes TCE + TRE through the optimiser's loss path.
+//! Every input is checked before anything is rendered or written, and the output folder
+//! (`--out`, `render/` by default) is written whole: a re-run replaces it, a failure leaves it
+//! as it was. `--grad` computes TCE + TRE through the optimiser's loss path.
 //! The work is the library's ([`splatraj::experiment::camera_render`]).
 
 use std::path::PathBuf;
@@ -67,8 +68,9 @@ pub struct RenderArgs {
     /// With --grad: time this many runs and report the median.
     #[arg(long, default_value_t = 1)]
     repeats: usize,
-    /// Output folder for rgb.png, mask.png and mask.npy (created if missing).
-    #[arg(long, default_value = ".")]
+    /// Output folder for rgb.png, mask.png and mask.npy, written whole: a new folder, or one
+    /// holding only an earlier render (replaced); other files in it are refused.
+    #[arg(long, default_value = "render")]
     out: PathBuf,
     #[command(flatten)]
     memory: MemoryArgs,

@@ -150,7 +150,8 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
             .runs
             .get(index)
             .with_context(|| format!("--one {index}: the plan has {} runs", plan.runs.len()))?;
-        let rows = measure_run(&plan, run, &extensions, MemoryReading::OwnProcess)?;
+        let since = splatraj_scene::stop::Since::now();
+        let rows = measure_run(&plan, run, &extensions, MemoryReading::OwnProcess, since)?;
         println!("{}", serde_json::to_string(&rows)?);
         return Ok(());
     }
@@ -179,37 +180,46 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
     let dir = study_folder(args.out.as_deref(), &base.output.runs_dir, &plan.name)?;
     eprintln!("study folder: {}", dir.display());
     let exe = std::env::current_exe().context("cannot find the splatraj binary to re-run")?;
+    // A stop ends the study between runs (`measure_runs`) and, in this process, within the
+    // run under way.
+    let since = splatraj_scene::stop::Since::now();
     let measure = |run: &Run| {
         if args.in_process {
-            measure_run(&plan, run, &extensions, MemoryReading::Shared)
+            measure_run(&plan, run, &extensions, MemoryReading::Shared, since)
                 .map_err(|e| format!("{e:#}"))
         } else {
             measure_in_child(&exe, config, &options, run.index)
         }
     };
-    let (rows, failures) = measure_runs(&plan, &runs, measure, |i, label, measured| {
-        let at = format!("[{}/{}] {label}", i + 1, runs.len());
-        match measured {
-            Ok(rows) if !args.quiet => {
-                for r in rows {
-                    eprintln!(
-                        "{at} (repeat {}): error {:.4}, optimisation {:.2} s, peak {}",
-                        r.repeat,
-                        r.error,
-                        r.optimisation_s,
-                        r.peak_mb.map_or("–".into(), |m| format!("{m:.0} MB"))
-                    );
+    let (rows, failures) = measure_runs(
+        &plan,
+        &runs,
+        measure,
+        |i, label, measured| {
+            let at = format!("[{}/{}] {label}", i + 1, runs.len());
+            match measured {
+                Ok(rows) if !args.quiet => {
+                    for r in rows {
+                        eprintln!(
+                            "{at} (repeat {}): error {:.4}, optimisation {:.2} s, peak {}",
+                            r.repeat,
+                            r.error,
+                            r.optimisation_s,
+                            r.peak_mb.map_or("–".into(), |m| format!("{m:.0} MB"))
+                        );
+                    }
                 }
+                Ok(_) => {}
+                Err(error) => eprintln!("{at}: failed: {error}"),
             }
-            Ok(_) => {}
-            Err(error) => eprintln!("{at}: failed: {error}"),
-        }
-    });
+        },
+        since,
+    );
     let context = StudyContext::new(&plan, &base, std::env::args());
     let failed = failures.len();
     let study = StudyFile::new(plan, args.shard, context, rows, failures);
     write_study(&dir, &study)?;
-    if splatraj_scene::stop::requested() {
+    if since.stopped() {
         return Err(splatraj_scene::stop::Stopped {
             what: format!(
                 "{} rows measured ({} runs planned), written to {}",

@@ -509,13 +509,23 @@ pub fn export_run(request: &ExportRequest) -> Result<ExportOutcome> {
     Ok(ExportOutcome { dir, files, frames })
 }
 
-/// Writes `frames` in every format into `exports/<format>/` under `run_dir`.
+/// Writes `frames` in every format into `exports/<format>/` under `run_dir`; a stop
+/// requested `since` ends it between two formats ([`splatraj_scene::stop::Stopped`]), each
+/// format written being whole.
 pub fn write_all_exports(
     run_dir: &Path,
     frames: &PathFrames,
     object_centres: &[[f64; 3]],
+    since: splatraj_scene::stop::Since,
 ) -> Result<()> {
-    for format in Format::ALL {
+    for (done, format) in Format::ALL.into_iter().enumerate() {
+        since.stop_point(|| {
+            format!(
+                "{done} of {} export formats are written under {}",
+                Format::ALL.len(),
+                run_dir.join("exports").display()
+            )
+        })?;
         let dir = run_dir.join("exports").join(format.name());
         write_export(&dir, frames, object_centres, format)
             .with_context(|| format!("exporting {format}"))?;

@@ -1,7 +1,9 @@
 //! One camera, one scene, into a folder (`splatraj render`): `rgb.png`, and with an object
 //! `mask.png` and `mask.npy`; with a gradient request also TCE + TRE of the mask and their pose
 //! gradient ([`MaskProbe`]). Every input is checked and every image rendered before anything is
-//! written, and each file appears whole or not at all.
+//! written, and the folder is written whole ([`OutputFolder`]): a re-run replaces an earlier
+//! render (no `mask.png` of an earlier object beside a new `rgb.png`), a failure leaves it as
+//! it was, and a second writer of the same folder is refused.
 
 use std::path::{Path, PathBuf};
 
@@ -16,6 +18,7 @@ use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderR
 use splatraj_scene::Scene;
 use splatraj_semantic::{label_mask, read_mask_file};
 
+use crate::output_folder::OutputFolder;
 use crate::outputs::{npy_f32, write_into_folder};
 use crate::probe::{MaskProbe, ProbeReport};
 use crate::resources::{MemoryLimit, RenderWork};
@@ -59,9 +62,13 @@ pub struct CameraRenderRequest {
     pub rasterizer: Rasterizer,
     /// Memory the render may use.
     pub limit: MemoryLimit,
-    /// The output folder (created if missing).
+    /// The output folder, written whole: new, or holding only an earlier render
+    /// ([`RENDER_NAMES`]).
     pub out: PathBuf,
 }
+
+/// What a render folder may hold: the names [`render_camera`] writes.
+pub const RENDER_NAMES: [&str; 3] = ["rgb.png", "mask.png", "mask.npy"];
 
 /// The gradient line `splatraj render --grad` prints: the probe's figures and what they were
 /// measured on.
@@ -139,6 +146,8 @@ pub fn render_camera(
     if request.grad.is_some() && mask.is_none() {
         bail!("--grad needs an object: give --mask MASK.npy or --label NAME");
     }
+    // Before the renders: a folder of other files, or one another process writes, is refused.
+    let folder = OutputFolder::begin(&request.out, &RENDER_NAMES)?;
 
     let pose = request.pose;
     let uploaded = DeviceScene::new(scene, &request.device, dtype);
@@ -188,7 +197,8 @@ pub fn render_camera(
             });
         }
     }
-    write_into_folder(&request.out, &outputs)?;
+    write_into_folder(folder.path(), &outputs)?;
+    folder.commit()?;
     Ok(CameraRender {
         files: outputs.iter().map(|(name, _)| *name).collect(),
         grad,

@@ -74,3 +74,15 @@ impl<F: FnMut(&Progress) -> Flow> Observer for F {
 pub fn quiet() -> impl Observer {
     |_: &Progress| Flow::Continue
 }
+
+/// An observer that stops at a stop request (Ctrl-C, SIGTERM: [`splatraj_scene::stop`]) made
+/// `since`, and says nothing.
+pub fn until_stopped(since: splatraj_scene::stop::Since) -> impl Observer {
+    move |_: &Progress| {
+        if since.stopped() {
+            Flow::Stop
+        } else {
+            Flow::Continue
+        }
+    }
+}

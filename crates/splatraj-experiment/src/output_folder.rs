@@ -1,4 +1,4 @@
-//! Output folders written whole: `render-path --out` and `export --out` fill a fresh staging
+//! Output folders written whole: `render --out`, `render-path --out` and `export --out` fill a fresh staging
 //! folder beside the target (`.NAME.PID.partial`) and rename it into place once every file is
 //! written, so a re-run replaces the old folder whole (no old frames beside a new video) and a
 //! failed run leaves the old folder as it was.
@@ -27,7 +27,13 @@ pub struct OutputFolder {
 fn split(target: &Path) -> Result<(PathBuf, String)> {
     let name = target
         .file_name()
-        .with_context(|| format!("{} does not name a folder", target.display()))?
+        .with_context(|| {
+            format!(
+                "the output folder {} has no name of its own (`.` or `..`), so it cannot be \
+                 replaced whole: give a named folder",
+                target.display()
+            )
+        })?
         .to_string_lossy()
         .into_owned();
     let parent = match target.parent() {
@@ -48,6 +54,30 @@ impl OutputFolder {
     /// folder). Takes the lock and makes the staging folder (and `target`'s parents).
     pub fn begin(target: &Path, ours: &[&str]) -> Result<Self> {
         let (parent, name) = split(target)?;
+        Self::check(target, ours)?;
+        std::fs::create_dir_all(&parent)
+            .with_context(|| format!("cannot create the folder {}", parent.display()))?;
+        let lock = parent.join(format!(".{name}.lock"));
+        take_lock(&lock, target)?;
+        let staging = parent.join(format!(".{name}.{}.partial", std::process::id()));
+        let folder = OutputFolder {
+            target: target.to_path_buf(),
+            staging,
+            lock,
+            committed: false,
+        };
+        // A leftover of this process id (an earlier, killed process) goes first.
+        let _ = std::fs::remove_dir_all(&folder.staging);
+        std::fs::create_dir(&folder.staging)
+            .with_context(|| format!("cannot create {}", folder.staging.display()))?;
+        Ok(folder)
+    }
+
+    /// Errors unless `target` may be written whole: new, or a folder holding only names of
+    /// `ours` (what [`OutputFolder::begin`] checks first; for a command that begins only after
+    /// long work).
+    pub fn check(target: &Path, ours: &[&str]) -> Result<()> {
+        split(target)?;
         if let Ok(meta) = std::fs::symlink_metadata(target) {
             if !meta.is_dir() {
                 bail!(
@@ -70,22 +100,7 @@ impl OutputFolder {
                 }
             }
         }
-        std::fs::create_dir_all(&parent)
-            .with_context(|| format!("cannot create the folder {}", parent.display()))?;
-        let lock = parent.join(format!(".{name}.lock"));
-        take_lock(&lock, target)?;
-        let staging = parent.join(format!(".{name}.{}.partial", std::process::id()));
-        let folder = OutputFolder {
-            target: target.to_path_buf(),
-            staging,
-            lock,
-            committed: false,
-        };
-        // A leftover of this process id (an earlier, killed process) goes first.
-        let _ = std::fs::remove_dir_all(&folder.staging);
-        std::fs::create_dir(&folder.staging)
-            .with_context(|| format!("cannot create {}", folder.staging.display()))?;
-        Ok(folder)
+        Ok(())
     }
 
     /// Where the files go until the commit.

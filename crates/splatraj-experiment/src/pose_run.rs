@@ -85,7 +85,7 @@ impl Experiment {
         Ok(match self.config.start.pose {
             Some(p) => vec![Pose(p)],
             None => self
-                .start_poses(&[self.config.pose.query])?
+                .start_poses(&[self.config.pose.query], self.config.start.restarts)?
                 .into_iter()
                 .map(|per_window| per_window[0])
                 .collect(),

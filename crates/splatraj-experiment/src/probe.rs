@@ -95,12 +95,13 @@ impl MaskProbe {
         let result = self.forward_backward(pose)?;
         let forward_ms = median_ms(repeats, || self.forward(pose).map(|_| ()))?;
         let forward_backward_ms = median_ms(repeats, || self.forward_backward(pose).map(|_| ()))?;
+        let coverage = result.coverage.unwrap_or(0.0);
         Ok(ProbeReport {
-            tce: result.term("tce"),
+            tce: (coverage > 0.0).then(|| result.term("tce")),
             tre: result.term("tre"),
             loss: result.total,
             grad_pose: result.grad_pose.unwrap_or_else(|| vec![0.0; 6]),
-            coverage: result.coverage.unwrap_or(0.0),
+            coverage,
             forward_ms,
             forward_backward_ms,
         })
@@ -110,11 +111,12 @@ impl MaskProbe {
 /// What [`MaskProbe::measure`] found.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct ProbeReport {
-    /// TCE.
-    pub tce: f64,
+    /// TCE; None (JSON null) when the object covers none of the frame: an object not seen
+    /// has no framing error (as in `frame_metrics.csv`), though the loss counts it as 0.
+    pub tce: Option<f64>,
     /// TRE.
     pub tre: f64,
-    /// TCE + TRE.
+    /// TCE + TRE, as the optimiser weighs them (an unseen object's TCE counting 0).
     pub loss: f64,
     /// d loss / dΦ, Φ = [ω_x, ω_y, ω_z, c_x, c_y, c_z].
     pub grad_pose: Vec<f64>,
@@ -129,7 +131,8 @@ pub struct ProbeReport {
 impl ProbeReport {
     /// Every number that reaches a file (for the non-finite check).
     pub fn values(&self) -> Vec<f64> {
-        let mut values = vec![self.tce, self.tre, self.loss, self.coverage];
+        let mut values: Vec<f64> = self.tce.into_iter().collect();
+        values.extend([self.tre, self.loss, self.coverage]);
         values.extend(&self.grad_pose);
         values
     }

@@ -36,7 +36,7 @@ use crate::experiment::Experiment;
 use crate::observer::{Observer, Phase, Progress};
 use crate::outputs::{FrameSpec, create_run_dir, frame_png, write_bytes, write_csv, write_json};
 use crate::records::{PoseFile, pose_history, sgld_samples, trajectory_history};
-use crate::resources::{MemoryPlan, RAISE_LIMIT, TimeBound};
+use crate::resources::{MAX_STEPS_PER_SECOND, MemoryPlan, RAISE_LIMIT, TimeBound};
 use crate::run_folder::{
     MetricsFile, RunReport, StageTimes, check_writable, remove_checkpoint, remove_partial_files,
 };
@@ -351,19 +351,26 @@ impl Experiment {
     }
 
     /// Every check of a trajectory run that can fail before the work: its costs, the memory
-    /// against the limit, the starts (reading `start.trajectory`), and, for a new run
+    /// and time against their limits (`start.restarts` among the sizes), the first start
+    /// (reading `start.trajectory`), and, for a new run
     /// (`resuming` false), that the runs folder can be written.
     pub fn check_trajectory_run(&self, resuming: bool) -> Result<RunPlan> {
         self.costs()?;
         let memory = self.trajectory_memory()?;
         memory.check(self.memory_limit()?, RAISE_LIMIT)?;
+        // Before the time plan, which would warn that the time limit stops the optimisation.
+        self.check_restarts_begin()?;
         let (optimisation, rest) = self.trajectory_time();
         optimisation.check(TimeBound::Key {
             key: "`optimiser.time_limit_s`",
             seconds: self.config.optimiser.time_limit_s,
         })?;
         rest.check(TimeBound::Unbounded)?;
-        let restarts = self.start_trajectories()?.len();
+        // The first start is built (a bad `start.trajectory`, shot or route fails there);
+        // all of them would take time in proportion to `start.restarts`, which the time plan
+        // above has weighed.
+        self.first_start_trajectories(1)?;
+        let restarts = self.start_count();
         if !resuming {
             check_writable(&self.config.output.runs_dir.join(&self.config.name))?;
         }
@@ -371,6 +378,26 @@ impl Experiment {
             memory,
             steps: restarts * self.config.optimiser.iterations,
         })
+    }
+
+    /// Errors when `optimiser.time_limit_s` ends the run before every restart could take its
+    /// first step: every start is built before the first step, so restarts that never begin
+    /// would cost time the limit does not bound.
+    fn check_restarts_begin(&self) -> Result<()> {
+        let Some(limit) = self.config.optimiser.time_limit_s else {
+            return Ok(());
+        };
+        let can_begin = (limit * MAX_STEPS_PER_SECOND).max(1.0);
+        let restarts = self.start_count();
+        if restarts as f64 > can_begin {
+            bail!(
+                "`start.restarts` = {restarts} restarts cannot all begin within \
+                 `optimiser.time_limit_s` = {limit} s (at most {can_begin:.0} steps run in it, \
+                 at {MAX_STEPS_PER_SECOND} a second), yet every start is built before the \
+                 first step: make `start.restarts` at most {can_begin:.0}, or raise the limit"
+            );
+        }
+        Ok(())
     }
 
     /// Runs the trajectory experiment into `folder` and writes every file: the optimisation
@@ -404,6 +431,9 @@ impl Experiment {
         observer: &mut dyn Observer,
     ) -> Result<TrajectoryOutcome> {
         let dir = folder.dir();
+        // Only a stop requested from now on cuts the outputs short: a run stopped while it
+        // optimised still writes the outputs of its best trajectory.
+        let since = splatraj_scene::stop::Since::now();
         let (header, rows) = trajectory_history(run, self.windows.len());
         write_csv(&dir.join("history.csv"), &header, &rows)?;
         let trajectory = self.trajectory(&run.best().best)?;
@@ -418,11 +448,17 @@ impl Experiment {
             stop: run.stop,
         }));
         let outputs = self
-            .write_outputs(&trajectory, dir, &mut |done| {
-                observer.progress(&Progress::Frame { done, frames });
-            })
-            // A stop requested while the frames render (not one that ended the optimisation)
-            // ends them at a whole frame; the checkpoint stays for a resume.
+            .write_outputs(
+                &trajectory,
+                dir,
+                &mut |done| {
+                    observer.progress(&Progress::Frame { done, frames });
+                },
+                since,
+            )
+            // A stop requested while the metrics, frames or exports are made (not one that
+            // ended the optimisation) ends them at a whole window, frame or format; the
+            // checkpoint stays for a resume.
             .map_err(|e| match e.downcast::<splatraj_scene::stop::Stopped>() {
                 Ok(stopped) => splatraj_scene::stop::Stopped {
                     what: format!(

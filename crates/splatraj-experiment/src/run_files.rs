@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
+use splatraj_scene::stop::Since;
 use splatraj_traj::trajectory::{Trajectory, uniform_times};
 
 use crate::camera_paths::{PathFrames, write_all_exports};
@@ -31,22 +32,28 @@ impl Experiment {
     /// verdicts ([`Experiment::evaluate`]), the frames, `frame_metrics.csv` and `video.mp4`
     /// (the verdicts judged again with the frames' wobble: [`Evaluation::with_frames`]), then
     /// the same poses in every export format. `progress` hears each frame done (of
-    /// `output.frame_count`).
+    /// `output.frame_count`). A stop requested `since` ([`splatraj_scene::stop`]) ends it at
+    /// the next whole window of metrics, frame or export format with
+    /// [`splatraj_scene::stop::Stopped`].
     pub fn write_outputs(
         &self,
         trajectory: &Trajectory,
         dir: &Path,
         progress: &mut dyn FnMut(usize),
+        since: Since,
     ) -> Result<Outputs> {
+        splatraj_scene::stop::honour();
         let started = Instant::now();
-        let mut evaluation = self.evaluate(trajectory)?;
+        let mut evaluation = self.evaluate_since(trajectory, since)?;
         let metrics = started.elapsed();
+        // The frames begin their own count of requests: one made before must stop them here.
+        since.stop_point(|| "the metrics were computed, no frame is written".to_string())?;
         let started = Instant::now();
         let frames = self.output_frames(trajectory)?;
         if let Some(rendered) = self.write_output_frames(&frames, dir, progress)? {
             evaluation.with_frames(&rendered.metrics, frames.fps);
         }
-        self.write_exports(&frames, dir)?;
+        self.write_exports(&frames, dir, since)?;
         Ok(Outputs {
             evaluation,
             metrics,
@@ -100,8 +107,8 @@ impl Experiment {
     }
 
     /// Writes `frames` in every interchange format into `exports/<format>/` under `dir`
-    /// (nothing when there are no frames).
-    pub fn write_exports(&self, frames: &PathFrames, dir: &Path) -> Result<()> {
+    /// (nothing when there are no frames); a stop requested `since` ends it between formats.
+    pub fn write_exports(&self, frames: &PathFrames, dir: &Path, since: Since) -> Result<()> {
         if frames.poses.is_empty() {
             return Ok(());
         }
@@ -110,7 +117,7 @@ impl Experiment {
             .iter()
             .map(|w| w.context.object_centre)
             .collect();
-        write_all_exports(dir, frames, &centres)
+        write_all_exports(dir, frames, &centres, since)
     }
 
     /// Writes `report.html` into the run folder `dir` from its files, with this scene under

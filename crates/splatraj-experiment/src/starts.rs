@@ -27,6 +27,24 @@ impl Experiment {
     /// holding `start.pose`, or one per restart from object-facing or random poses, all in
     /// the `[trajectory]` model with one window per query.
     pub fn start_trajectories(&self) -> Result<Vec<TrajectoryRecord>> {
+        self.first_start_trajectories(self.config.start.restarts)
+    }
+
+    /// How many starts [`Experiment::start_trajectories`] gives (without building them): one
+    /// for `start.trajectory` or `start.pose`, else `start.restarts`.
+    pub fn start_count(&self) -> usize {
+        let start = &self.config.start;
+        if start.trajectory.is_some() || start.pose.is_some() {
+            1
+        } else {
+            start.restarts
+        }
+    }
+
+    /// The first `count` of [`Experiment::start_trajectories`]: a check builds one, since
+    /// what can fail is the same for every restart and building them all takes time in
+    /// proportion to `start.restarts`.
+    pub fn first_start_trajectories(&self, count: usize) -> Result<Vec<TrajectoryRecord>> {
         let config = &self.config;
         let model = self.model()?;
         let (device, dtype) = (&self.device, self.dtype);
@@ -64,7 +82,7 @@ impl Experiment {
         let n = self.windows.len();
         let per_restart = match config.start.pose {
             Some(pose) => vec![vec![Pose(pose); n]],
-            None => self.start_poses(&(0..n).collect::<Vec<_>>())?,
+            None => self.start_poses(&(0..n).collect::<Vec<_>>(), count)?,
         };
         // A fixed `start.pose` is taken as given; object and random starts follow the shots.
         let shots = match config.start.pose {
@@ -72,10 +90,13 @@ impl Experiment {
             None => self.shot_paths()?,
         };
         let planner = self.route_planner(&per_restart, &shots)?;
+        // Many restarts take a while to build: a stop request ends it at the next start.
+        let since = splatraj_scene::stop::Since::now();
         per_restart
             .iter()
             .enumerate()
             .map(|(r, per_window)| {
+                since.stop_point(|| format!("{r} of {count} starts were built, none run"))?;
                 let starts: Vec<WindowStart> = per_window
                     .iter()
                     .zip(&shots)
@@ -221,16 +242,20 @@ impl Experiment {
             .context("`trajectory`")
     }
 
-    /// For each restart, one start pose per window of `which` (indices into the windows):
-    /// searched, object-facing or random (a random start is the same pose for every window).
-    pub fn start_poses(&self, which: &[usize]) -> Result<Vec<Vec<Pose>>> {
+    /// For the first `count` restarts (of `start.restarts`), one start pose per window of
+    /// `which` (indices into the windows): searched, object-facing or random (a random start
+    /// is the same pose for every window).
+    pub fn start_poses(&self, which: &[usize], count: usize) -> Result<Vec<Vec<Pose>>> {
         let config = &self.config;
         let (centre, half) = self.bounds;
-        let restarts = config.start.restarts;
+        let restarts = count.min(config.start.restarts);
         Ok(match config.start.kind {
+            // The search chooses every restart's views (and caches them for the run), each
+            // later restart's depending on the earlier ones'.
             StartKind::Search => self
-                .searched_views(which, restarts)?
+                .searched_views(which, config.start.restarts)?
                 .into_iter()
+                .take(restarts.max(1))
                 .map(|views| views.iter().map(|c| Pose(c.pose)).collect())
                 .collect(),
             StartKind::Objects => {

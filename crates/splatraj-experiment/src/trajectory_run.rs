@@ -387,12 +387,23 @@ impl Experiment {
     /// Per-window metrics at the output resolution (`output.metric_samples` per window) and
     /// LDJ (`output.ldj_samples`) of `trajectory`.
     pub fn evaluate(&self, trajectory: &Trajectory) -> Result<Evaluation> {
+        self.evaluate_since(trajectory, splatraj_scene::stop::Since::now())
+    }
+
+    /// [`Experiment::evaluate`] that a stop requested `since` ends before the next window's
+    /// metrics ([`splatraj_scene::stop::Stopped`]; nothing is written).
+    pub fn evaluate_since(
+        &self,
+        trajectory: &Trajectory,
+        since: splatraj_scene::stop::Since,
+    ) -> Result<Evaluation> {
         let output = self.output_intrinsics()?;
         let plain = self.plain_scene();
         let n = self.windows.len();
         let pose_at = |times: &[f64]| trajectory.poses_at(times);
         let windows = (0..n)
             .map(|i| {
+                since.stop_point(|| format!("the metrics of {i} of {n} windows were computed"))?;
                 let samples = self.config.output.metric_samples;
                 self.window_metrics(&plain, i, (i, n), samples, &output, &pose_at)
             })

@@ -108,7 +108,16 @@ fn a_grid_study_has_a_row_per_run_and_a_non_dominated_frontier() {
     assert_eq!(plan.runs.len(), 8);
     let mut rows = Vec::new();
     for run in &plan.runs {
-        rows.extend(measure_run(&plan, run, &extensions, MemoryReading::Shared).unwrap());
+        rows.extend(
+            measure_run(
+                &plan,
+                run,
+                &extensions,
+                MemoryReading::Shared,
+                splatraj_scene::stop::Since::now(),
+            )
+            .unwrap(),
+        );
     }
     for v in &plan.variants {
         let seeds: Vec<u64> = rows
@@ -201,6 +210,26 @@ fn a_grid_study_has_a_row_per_run_and_a_non_dominated_frontier() {
     assert!(svg.contains("<svg") && svg.contains("iterations=4"));
     let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
     assert!(md.contains("Cheapest setting within 5 %"), "{md}");
+
+    // The folder is written whole: a second study replaces the first (its rows, not a mix),
+    // and a folder holding the user's files is refused, untouched.
+    let fewer = StudyFile::new(
+        plan.clone(),
+        None,
+        StudyContext::default(),
+        rows[..2].to_vec(),
+        Vec::new(),
+    );
+    write_study(&out, &fewer).unwrap();
+    assert_eq!(read_study(&out).unwrap().rows.len(), 2);
+    let csv = std::fs::read_to_string(out.join("study.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 2);
+    let mine = dir.path().join("mine");
+    std::fs::create_dir(&mine).unwrap();
+    std::fs::write(mine.join("notes.txt"), "mine").unwrap();
+    let err = format!("{:#}", write_study(&mine, &study).unwrap_err());
+    assert!(err.contains("notes.txt"), "{err}");
+    assert_eq!(std::fs::read_dir(&mine).unwrap().count(), 1);
 }
 
 /// With a clearance cost in the base config, every row carries the evaluation's clearance: the
@@ -224,7 +253,16 @@ fn a_clearance_config_reports_the_paths_clearance() {
     let plan = StudyPlan::new(&path, &options, &extensions).unwrap();
     let mut rows = Vec::new();
     for run in &plan.runs {
-        rows.extend(measure_run(&plan, run, &extensions, MemoryReading::Shared).unwrap());
+        rows.extend(
+            measure_run(
+                &plan,
+                run,
+                &extensions,
+                MemoryReading::Shared,
+                splatraj_scene::stop::Since::now(),
+            )
+            .unwrap(),
+        );
     }
     assert_eq!(rows.len(), 2);
     for r in &rows {

@@ -58,6 +58,15 @@ impl Since {
     pub fn stopped(self) -> bool {
         requests() > self.0
     }
+
+    /// A boundary of work: [`Stopped`] saying what stands (`what`) when a stop was requested
+    /// since, else nothing.
+    pub fn stop_point(self, what: impl FnOnce() -> String) -> Result<(), Stopped> {
+        if self.stopped() {
+            return Err(Stopped { what: what() });
+        }
+        Ok(())
+    }
 }
 
 /// The error of work cut short by a stop request, naming what was done.

@@ -52,6 +52,8 @@ impl Matrix {
         let file = splatraj_scene::input::open(path)
             .map(|(file, _)| file)
             .map_err(|e| SemanticError::io(path, e))?;
+        crate::npy_size::check_shape_product_file(path)
+            .map_err(|e| SemanticError::file(path, e))?;
         let npy = npyz::NpyFile::new(BufReader::new(file))
             .map_err(|e| SemanticError::file(path, format!("not a readable .npy file: {e}")))?;
         let shape: Vec<u64> = npy.shape().to_vec();

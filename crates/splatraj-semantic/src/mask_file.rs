@@ -17,6 +17,7 @@ pub fn read_mask_file(path: &Path, gaussians: usize) -> Result<Vec<f32>> {
     let file = splatraj_scene::input::open(path)
         .map(|(file, _)| file)
         .map_err(|e| SemanticError::io(path, e))?;
+    crate::npy_size::check_shape_product_file(path).map_err(fail)?;
     let npy = npyz::NpyFile::new(BufReader::new(file))
         .map_err(|e| fail(format!("not a readable .npy file: {e}")))?;
     let shape = npy.shape().to_vec();

@@ -141,12 +141,14 @@ pub fn measure_in_child(
 }
 
 /// Measures `runs` of `plan` one after another with `measure`, keeping going past failures;
-/// `progress` hears each run's position, label and outcome. Returns the rows and the failures.
+/// `progress` hears each run's position, label and outcome. A stop requested `since`
+/// ([`splatraj_scene::stop`]) ends it between runs. Returns the rows and the failures.
 pub fn measure_runs(
     plan: &StudyPlan,
     runs: &[Run],
     mut measure: impl FnMut(&Run) -> Result<Vec<StudyRow>, String>,
     mut progress: impl FnMut(usize, &str, &Result<Vec<StudyRow>, String>),
+    since: splatraj_scene::stop::Since,
 ) -> (Vec<StudyRow>, Vec<Failure>) {
     let mut rows = Vec::new();
     let mut failures = Vec::new();
@@ -154,12 +156,12 @@ pub fn measure_runs(
     for (i, run) in runs.iter().enumerate() {
         // A stop (Ctrl-C, SIGTERM) ends the study between runs; a run it cut short is not
         // a failure, only not measured.
-        if splatraj_scene::stop::requested() {
+        if since.stopped() {
             break;
         }
         let label = &plan.variants[run.variant].label;
         let measured = measure(run);
-        if splatraj_scene::stop::requested() {
+        if since.stopped() {
             break;
         }
         progress(i, label, &measured);

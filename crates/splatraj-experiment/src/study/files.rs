@@ -12,6 +12,7 @@ use super::plan::{Shard, StudyPlan};
 use super::plot::frontier_svg;
 use super::rows::{StudyRow, study_csv};
 use super::summary::{StudyContext, StudySummary};
+use crate::output_folder::OutputFolder;
 use crate::outputs::{create_run_dir, write_bytes, write_csv, write_json};
 
 /// The format tag of `study.json`.
@@ -71,22 +72,34 @@ impl StudyFile {
     }
 }
 
-/// The folder a study writes into: `out` (created if missing), else a fresh
-/// `<runs_dir>/<name>-study/<timestamp>/`.
+/// The folder a study writes into: `out` (checked now: new, or holding only an earlier
+/// study), else a fresh `<runs_dir>/<name>-study/<timestamp>/`.
 pub fn study_folder(out: Option<&Path>, runs_dir: &Path, name: &str) -> Result<PathBuf> {
     match out {
+        // Checked before the runs, written whole after them ([`write_study`]).
         Some(dir) => {
-            std::fs::create_dir_all(dir)
-                .with_context(|| format!("cannot create {}", dir.display()))?;
+            OutputFolder::check(dir, &STUDY_NAMES)?;
             Ok(dir.to_path_buf())
         }
         None => create_run_dir(runs_dir, &format!("{name}-study")),
     }
 }
 
-/// Writes the study folder `dir` (created if missing).
-pub fn write_study(dir: &Path, study: &StudyFile) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+/// What a study folder holds: the names [`write_study`] writes.
+pub const STUDY_NAMES: [&str; 4] = ["study.csv", "frontier.svg", "summary.md", "study.json"];
+
+/// Writes the study folder `target` whole ([`OutputFolder`]): new, or holding only an earlier
+/// study ([`STUDY_NAMES`]), which it replaces; a second writer is refused, and a failure leaves
+/// `target` as it was.
+pub fn write_study(target: &Path, study: &StudyFile) -> Result<()> {
+    let folder = OutputFolder::begin(target, &STUDY_NAMES)?;
+    write_study_files(folder.path(), study)?;
+    folder.commit()?;
+    Ok(())
+}
+
+/// The files of [`write_study`] into the folder `dir`.
+fn write_study_files(dir: &Path, study: &StudyFile) -> Result<()> {
     let summary = study
         .summary
         .clone()

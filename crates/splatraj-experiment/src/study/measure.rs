@@ -21,6 +21,16 @@ use crate::bench::peak_mb;
 use crate::experiment::Experiment;
 use crate::extensions::Extensions;
 use crate::observer;
+use crate::trajectory_run::RunStop;
+use splatraj_scene::stop::{Since, Stopped};
+use splatraj_traj::optimise::StopReason;
+
+/// The error of a run a stop request cut short.
+fn cut_short(run: &Run) -> Stopped {
+    Stopped {
+        what: format!("run {} was cut short and is not measured", run.index),
+    }
+}
 
 /// Which peak memory a row reports.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -32,11 +42,14 @@ pub enum MemoryReading {
 }
 
 /// Runs `run` of `plan` here and evaluates it: one row (trajectory) or one per start (pose).
+/// A stop requested `since` ([`splatraj_scene::stop`]) ends it at the next step or window
+/// with [`Stopped`]: a run cut short is not measured.
 pub fn measure_run(
     plan: &StudyPlan,
     run: &Run,
     extensions: &Extensions,
     memory: MemoryReading,
+    since: Since,
 ) -> Result<Vec<StudyRow>> {
     if matches!(memory, MemoryReading::OwnProcess) {
         // A child of `study`: it must not outlive its parent.
@@ -93,13 +106,16 @@ pub fn measure_run(
     match plan.task {
         StudyTask::Trajectory => {
             stages::reset();
-            let result = experiment.run_trajectory(&mut observer::quiet())?;
+            let result = experiment.run_trajectory(&mut observer::until_stopped(since))?;
+            if result.stop == RunStop::Interrupted {
+                return Err(cut_short(run).into());
+            }
             let run_s = started.elapsed().as_secs_f64();
             let peak_mb = peak();
             // Before the evaluation renders (the renderer's clock is process-wide).
             let split = stage_times(&result);
             let trajectory = evaluation.trajectory(&result.best().best)?;
-            let judged = evaluation.evaluate(&trajectory)?;
+            let judged = evaluation.evaluate_since(&trajectory, since)?;
             let windows = judged.windows.iter().map(WindowScore::from).collect();
             Ok(vec![StudyRow {
                 optimisation_s: result.elapsed.as_secs_f64(),
@@ -114,7 +130,10 @@ pub fn measure_run(
             }])
         }
         StudyTask::Pose => {
-            let result = experiment.optimise_pose(&mut observer::quiet())?;
+            let result = experiment.optimise_pose(&mut observer::until_stopped(since))?;
+            if result.stop() == StopReason::Interrupted {
+                return Err(cut_short(run).into());
+            }
             let run_s = started.elapsed().as_secs_f64();
             let peak_mb = peak();
             let query = config.pose.query;

@@ -71,6 +71,7 @@ fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>> {
             .read_to_end(&mut bytes)
             .map_err(|e| SemanticError::file(path, format!("reading {name:?}: {e}")))?;
         let bad = |detail: String| SemanticError::file(path, format!("array {name:?}: {detail}"));
+        crate::npy_size::check_shape_product(&bytes).map_err(bad)?;
         let npy = npyz::NpyFile::new(&bytes[..]).map_err(|e| bad(format!("not .npy: {e}")))?;
         crate::npy_size::check_npy_bytes(&bytes, npy.header()).map_err(bad)?;
         let shape = npy.shape().to_vec();
