@@ -42,11 +42,16 @@ pub mod mask_file;
 pub mod names;
 mod npy_size;
 pub mod selection;
+pub mod source_config;
 pub mod sources;
+mod struct_keys;
 pub mod text_encoder;
 pub mod vectors;
 
 pub use config::{RegionSpec, SourceKind, TargetsConfig};
+pub use source_config::{
+    FeaturesConfig, LabelsConfig, LangsplatConfig, LiftedConfig, RegionConfig, TargetSourceConfig,
+};
 pub use embeddings::{Matrix, PhraseTable, read_feature_sidecar};
 pub use error::{Result, SemanticError};
 pub use explain::{Explanation, explain};
@@ -59,6 +64,6 @@ pub use selection::{
 pub use sources::{
     FeatureInput, FeaturesSource, LabelsSource, LangsplatDecoder, LangsplatSource, Region,
     RegionSource, Relevancy, Scoring, SourceConfig, SourceContext, SourceRegistry, TargetSource,
-    label_mask,
+    TextKeys, label_mask,
 };
 pub use text_encoder::{Activation, ClipTokenizer, TextEncoder, TextEncoderOptions};
