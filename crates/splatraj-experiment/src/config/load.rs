@@ -20,7 +20,21 @@ impl Config {
     /// [`Config::load`] for a config that may name the costs, trajectory models and target
     /// sources registered in `extensions`.
     pub fn load_with(path: &Path, overrides: &[String], extensions: &Extensions) -> Result<Config> {
-        let table = read_table(path, 0)?;
+        Self::load_layered(path, toml::Table::new(), overrides, extensions)
+    }
+
+    /// [`Config::load_with`] with `layer` merged over the file before the overrides, low to
+    /// high: the file (over what it `extends`), then `layer` (the keys a command's flags set,
+    /// e.g. `splatraj query --phrases`; tables merge key by key as `extends` does), then the
+    /// `--set` overrides.
+    pub fn load_layered(
+        path: &Path,
+        layer: toml::Table,
+        overrides: &[String],
+        extensions: &Extensions,
+    ) -> Result<Config> {
+        let mut table = read_table(path, 0)?;
+        merge(&mut table, layer);
         let base_dir = path
             .parent()
             .filter(|p| !p.as_os_str().is_empty())
