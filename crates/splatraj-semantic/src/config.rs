@@ -44,6 +44,12 @@
 //!   `docs/open-vocabulary.md`.
 //!
 //! `[targets.selection]` holds [`SelectionOptions`] for every source.
+//!
+//! The text keys (`phrases`, `phrase_names`, `text_encoder`, `text_activation`, `text_heads`,
+//! `negatives`, `temperature`) are one struct, [`crate::sources::TextKeys`], that every source
+//! scoring text reads; each source's keys are one variant of
+//! [`crate::source_config::TargetSourceConfig`], whose `init` builds it. [`TargetsConfig`]
+//! keeps the table as written until the source is built.
 
 use std::fmt;
 use std::path::Path;

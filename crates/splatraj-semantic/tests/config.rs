@@ -279,6 +279,18 @@ fn unknown_keys_and_bad_values_name_the_key() {
             &["phrase", "unknown field"][..],
         ),
         (
+            "[targets]\nlatent = \"l.npy\"\n",
+            &["targets.latent", "unknown field", "latents, checkpoint"][..],
+        ),
+        (
+            "[targets]\ntext_heads = -2\n",
+            &["targets.text_heads", "-2"][..],
+        ),
+        (
+            "[targets]\ncustom = { near = 3 }\n",
+            &["targets.custom.near", "expected a map"][..],
+        ),
+        (
             "[targets]\nsource = \"clip\"\n",
             &["source", "clip", "langsplat"][..],
         ),
@@ -371,6 +383,19 @@ fn build_errors_name_the_key() {
         (
             "[targets]\nsource = \"features\"\nphrases = \"table.json\"\nsynonyms = { a = [\"b\"] }\n",
             &["targets.synonyms", "labels source only"][..],
+        ),
+        (
+            "[targets]\nsource = \"features\"\nphrases = \"table.json\"\nlatents = \"l.npy\"\n",
+            &["targets.latents", "langsplat source only", "not to the features"][..],
+        ),
+        // A text key the lifted source does not take (it scores with its own field).
+        (
+            "[targets]\nsource = \"lifted\"\ntext_encoder = \"w.safetensors\"\nphrases = \"t.json\"\n",
+            &["targets.phrases", "features and langsplat source only", "lifted"][..],
+        ),
+        (
+            "[targets]\nsource = \"labels\"\n[targets.custom.near]\nradius = 1\n",
+            &["targets.custom.near", "custom.near only", "labels"][..],
         ),
         // A needed key missing.
         (
