@@ -135,7 +135,13 @@ fn config_query_selects_a_gaussian_grouping_instance() {
         dir.path(),
         &config,
         "7",
-        &["--json", stricter[0], stricter[1], "--source-key", "min_probability=0.5"],
+        &[
+            "--json",
+            stricter[0],
+            stricter[1],
+            "--source-key",
+            "min_probability=0.5",
+        ],
     ));
     assert_eq!(by_option["count"].as_u64().unwrap() as usize, sure.len());
     let set_wins = json_report(&query_config(

@@ -49,9 +49,6 @@ pub mod text_encoder;
 pub mod vectors;
 
 pub use config::{RegionSpec, SourceKind, TargetsConfig};
-pub use source_config::{
-    FeaturesConfig, LabelsConfig, LangsplatConfig, LiftedConfig, RegionConfig, TargetSourceConfig,
-};
 pub use embeddings::{Matrix, PhraseTable, read_feature_sidecar};
 pub use error::{Result, SemanticError};
 pub use explain::{Explanation, explain};
@@ -60,6 +57,9 @@ pub use mask_file::read_mask_file;
 pub use selection::{
     Cluster, ClusterOptions, ClusteringSummary, EpsRule, KeepClusters, SelectionOptions, Spread,
     Target, find_target, select,
+};
+pub use source_config::{
+    FeaturesConfig, LabelsConfig, LangsplatConfig, LiftedConfig, RegionConfig, TargetSourceConfig,
 };
 pub use sources::{
     FeatureInput, FeaturesSource, LabelsSource, LangsplatDecoder, LangsplatSource, Region,

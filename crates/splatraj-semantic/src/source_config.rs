@@ -158,7 +158,10 @@ struct CustomTables {
 /// `table` as `C`; an error names the key serde stopped at through `name`.
 fn typed<C: DeserializeOwned>(table: toml::Table, name: &dyn Fn(&str) -> String) -> Result<C> {
     serde_path_to_error::deserialize(toml::Value::Table(table)).map_err(|e| {
-        SemanticError::option(name(&e.path().to_string()), e.into_inner().message().trim_end())
+        SemanticError::option(
+            name(&e.path().to_string()),
+            e.into_inner().message().trim_end(),
+        )
     })
 }
 
@@ -272,7 +275,10 @@ impl TargetSourceConfig {
                     ),
                     None => FeatureInput::Scene,
                 };
-                Box::new(c.text.scoring(features, &resolve, device, key, "features")?)
+                Box::new(
+                    c.text
+                        .scoring(features, &resolve, device, key, "features")?,
+                )
             }
             TargetSourceConfig::Langsplat(c) => {
                 // Checked before the (slow) decoding, which would be wasted without it.
@@ -359,12 +365,7 @@ impl LiftedConfig {
                  (splatraj-experiment's does)",
             ));
         }
-        registry.build(
-            LIFTED,
-            &toml::Value::Table(table),
-            context,
-            &key("lifted"),
-        )
+        registry.build(LIFTED, &toml::Value::Table(table), context, &key("lifted"))
     }
 }
 
@@ -415,7 +416,10 @@ fn stray_custom(kind: &SourceKind, other: &str, name: &dyn Fn(&str) -> String) -
 /// The keys a `[targets]` table may hold, for the message of an unknown one.
 pub(crate) fn unknown_key_hint() -> String {
     let mut keys = vec!["source", "selection"];
-    for kind in SourceKind::ALL.iter().chain([&SourceKind::Custom(String::new())]) {
+    for kind in SourceKind::ALL
+        .iter()
+        .chain([&SourceKind::Custom(String::new())])
+    {
         for key in source_keys(kind) {
             if !keys.contains(&key) {
                 keys.push(key);

@@ -90,7 +90,10 @@ regions = { shelf = { box = [0.5, 0.0, -2.3, 0.75, 0.15, -2.0] }, ball = { spher
     let TargetSourceConfig::Region(region) = typed(&c) else {
         panic!("region config")
     };
-    assert_eq!(region.regions["ball"], RegionSpec::Sphere([0.6, 0.1, -2.1, 0.2]));
+    assert_eq!(
+        region.regions["ball"],
+        RegionSpec::Sphere([0.6, 0.1, -2.1, 0.2])
+    );
     let source = c.build(Path::new(""), &device()).unwrap();
     let scene = common::fruit_drops();
     let options = c.selection().unwrap();
@@ -202,7 +205,10 @@ top_fraction = 0.05
         panic!("langsplat config")
     };
     assert_eq!(langsplat.latents, Some(PathBuf::from("lang/latents.npy")));
-    assert_eq!(langsplat.checkpoint, Some(PathBuf::from("lang/best_ckpt.pth")));
+    assert_eq!(
+        langsplat.checkpoint,
+        Some(PathBuf::from("lang/best_ckpt.pth"))
+    );
     assert_eq!(langsplat.text.negatives, Some(vec!["object".to_string()]));
     assert_eq!(c.selection().unwrap().top_fraction, 0.05);
     // Only top_fraction was given: the rest keeps its defaults.
@@ -386,12 +392,20 @@ fn build_errors_name_the_key() {
         ),
         (
             "[targets]\nsource = \"features\"\nphrases = \"table.json\"\nlatents = \"l.npy\"\n",
-            &["targets.latents", "langsplat source only", "not to the features"][..],
+            &[
+                "targets.latents",
+                "langsplat source only",
+                "not to the features",
+            ][..],
         ),
         // A text key the lifted source does not take (it scores with its own field).
         (
             "[targets]\nsource = \"lifted\"\ntext_encoder = \"w.safetensors\"\nphrases = \"t.json\"\n",
-            &["targets.phrases", "features and langsplat source only", "lifted"][..],
+            &[
+                "targets.phrases",
+                "features and langsplat source only",
+                "lifted",
+            ][..],
         ),
         (
             "[targets]\nsource = \"labels\"\n[targets.custom.near]\nradius = 1\n",

@@ -30,8 +30,11 @@ fn build(
     for (k, v) in extra {
         table.insert(k.to_string(), v.clone());
     }
-    TargetsConfig::custom("opengaussian", table)
-    .build_with(&fixture(""), &Device::flex(), &SourceRegistry::default())
+    TargetsConfig::custom("opengaussian", table).build_with(
+        &fixture(""),
+        &Device::flex(),
+        &SourceRegistry::default(),
+    )
 }
 
 #[test]

@@ -359,7 +359,10 @@ fn free_text_query_selects_the_planted_object() {
         },
         ..TargetsConfig::new(
             SourceKind::Features,
-            keys(&[("features", "features.npy"), ("text_encoder", path(&encoder))]),
+            keys(&[
+                ("features", "features.npy"),
+                ("text_encoder", path(&encoder)),
+            ]),
         )
     };
     let device = Device::flex();
@@ -397,7 +400,10 @@ fn targets_text_heads_reaches_the_text_encoder() {
     let encoder = fixtures().join("gelu/open_clip_model.safetensors");
     let config = TargetsConfig::new(
         SourceKind::Features,
-        keys(&[("features", "features.npy"), ("text_encoder", path(&encoder))]),
+        keys(&[
+            ("features", "features.npy"),
+            ("text_encoder", path(&encoder)),
+        ]),
     );
     let device = Device::flex();
     let error = |config: TargetsConfig| match config.build(dir.path(), &device) {

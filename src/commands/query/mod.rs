@@ -14,8 +14,8 @@ use splatraj::experiment::query::{
 };
 use splatraj::experiment::{Config, Extensions};
 
-use args::{FlagPaths, IMAGE_NAME};
 pub use args::QueryArgs;
+use args::{FlagPaths, IMAGE_NAME};
 
 /// Runs `splatraj query`.
 pub fn run(args: QueryArgs) -> Result<()> {
