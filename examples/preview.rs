@@ -16,6 +16,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::Parser;
+use splatraj_render::camera::Intrinsics;
 use splatraj_render::reference::{RefCamera, RefChannels, render_reference};
 use splatraj_scene::{ReadOptions, guess_up_axis, read_scene};
 
@@ -109,17 +110,15 @@ fn main() -> Result<()> {
     });
     let eye: [f64; 3] = std::array::from_fn(|i| center[i] + dist * dir[i]);
 
-    let mut camera = RefCamera::look_at(
-        eye,
-        center,
-        up,
+    let k = Intrinsics::new(
         fx,
         fy,
         0.5 * args.width as f64,
         0.5 * args.height as f64,
         args.width,
         args.height,
-    );
+    )?;
+    let mut camera = RefCamera::look_at(eye, center, up, k);
     // Scale the near plane with the scene so tiny or huge scenes behave alike.
     camera.near = (1e-3 * radius).min(0.01);
 

@@ -128,6 +128,38 @@ fn config_query_selects_a_gaussian_grouping_instance() {
     );
     assert_eq!(strict["count"].as_u64().unwrap() as usize, sure.len());
 
+    // The options override the config's keys, and --set overrides both (low to high: the
+    // file, the options, --set): --source-key sets the key the --set above set.
+    let stricter = ["--source", "custom.gaussian_grouping"];
+    let by_option = json_report(&query_config(
+        dir.path(),
+        &config,
+        "7",
+        &[
+            "--json",
+            stricter[0],
+            stricter[1],
+            "--source-key",
+            "min_probability=0.5",
+        ],
+    ));
+    assert_eq!(by_option["count"].as_u64().unwrap() as usize, sure.len());
+    let set_wins = json_report(&query_config(
+        dir.path(),
+        &config,
+        "7",
+        &[
+            "--json",
+            stricter[0],
+            stricter[1],
+            "--source-key",
+            "min_probability=0.5",
+            "--set",
+            "targets.custom.gaussian_grouping.min_probability=0.3",
+        ],
+    ));
+    assert_eq!(set_wins["count"].as_u64().unwrap() as usize, members.len());
+
     // The text report labels the selected-only spread apart from the all-Gaussians one.
     let out = query_config(dir.path(), &config, "teapot", &[]);
     assert!(out.status.success(), "{}", stderr(&out));
@@ -464,13 +496,16 @@ fn bad_configs_and_sources_are_named() {
     ]);
     assert_clean_failure(&out, &["--source-key", "region"]);
 
-    // Scene and source options do not mix with a config (which sets them).
+    // An option overrides the config's key, so an option of another source is a key the
+    // config's source does not take: refused naming the key and both sources.
     let out = query_config(dir.path(), &config, "teapot", &["--phrases", "table.json"]);
-    assert!(!out.status.success());
-    assert!(
-        stderr(&out).contains("--config") && stderr(&out).contains("--phrases"),
-        "{}",
-        stderr(&out)
+    assert_clean_failure(
+        &out,
+        &[
+            "targets.phrases",
+            "features and langsplat",
+            "custom.gaussian_grouping source",
+        ],
     );
     assert!(!png.exists(), "a failed query wrote {}", png.display());
 }

@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use splatraj_lift::field::{FieldOptions, memory_bytes};
 use splatraj_lift::views::ViewOptions;
-use splatraj_semantic::{SourceKind, TargetsConfig};
+use splatraj_semantic::{SourceKind, TargetSourceConfig, TargetsConfig};
 
 use crate::config::Config;
 use crate::resources::{MemoryLimit, MemoryPlan, RAISE_LIMIT};
@@ -19,8 +19,13 @@ pub fn with_lifted_cache(targets: &TargetsConfig, scene_path: Option<&Path>) -> 
     if targets.source == SourceKind::Lifted
         && let Some(scene_path) = scene_path
     {
-        let table = targets.lifted.get_or_insert_with(toml::Table::new);
-        if !table.contains_key("cache_dir") {
+        let table = targets
+            .keys
+            .entry("lifted")
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        if let toml::Value::Table(table) = table
+            && !table.contains_key("cache_dir")
+        {
             let dir = splatraj_lift::default_cache_dir(scene_path);
             table.insert(
                 "cache_dir".into(),
@@ -34,14 +39,17 @@ pub fn with_lifted_cache(targets: &TargetsConfig, scene_path: Option<&Path>) -> 
 /// Refuses, before any view is rendered, a `lifted` field whose estimated peak memory is over
 /// the limit (`max_memory_gb`); other sources pass.
 pub fn check_lifted_memory(config: &Config, gaussians: usize) -> Result<()> {
-    let targets = &config.targets;
-    if targets.source != SourceKind::Lifted {
+    // A config the source cannot be built from, or without weights: building the source
+    // names the key.
+    let Ok(TargetSourceConfig::Lifted(lifted)) =
+        config.targets.source_config(&crate::grounding::config_key)
+    else {
         return Ok(());
-    }
-    let Some(weights) = &targets.text_encoder else {
-        return Ok(()); // building the source names the missing key
     };
-    let table = targets.lifted.clone().unwrap_or_default();
+    let Some(weights) = &lifted.text.text_encoder else {
+        return Ok(());
+    };
+    let table = lifted.lifted.unwrap_or_default();
     fn part<T: serde::de::DeserializeOwned + Default>(table: &toml::Table, key: &str) -> Result<T> {
         Ok(table
             .get(key)

@@ -20,7 +20,7 @@ use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render};
 use splatraj_scene::{Scene, resolve_up};
 use splatraj_semantic::{
     Cluster, ClusteringSummary, Explanation, Region, RegionSpec, SelectionOptions, SourceKind,
-    Spread, Target, TargetSource, TargetsConfig, explain, select,
+    Spread, Target, TargetSource, TargetsConfig, TextKeys, explain, select,
 };
 
 use crate::config::{Config, apply_assignment};
@@ -371,24 +371,20 @@ pub fn inferred_source(
     query: &str,
 ) -> Result<SourceKind> {
     use SourceKind::{Features, Labels, Langsplat, Lifted, Region};
-    let phrase_options = targets.phrases.is_some()
-        || targets.phrase_names.is_some()
-        || targets.text_encoder.is_some()
-        || targets.text_activation.is_some()
-        || targets.negatives.is_some()
-        || targets.temperature.is_some();
+    let has = |key: &str| targets.keys.contains_key(key);
+    let text_options = TextKeys::keys().iter().any(|k| has(k));
     Ok(match () {
-        () if !targets.regions.is_empty() => Region,
-        () if targets.latents.is_some() || targets.checkpoint.is_some() => Langsplat,
+        () if has("regions") => Region,
+        () if has("latents") || has("checkpoint") => Langsplat,
         // CLIP weights and nothing to score them against: the field is lifted from renders.
-        () if targets.text_encoder.is_some()
-            && targets.phrases.is_none()
-            && targets.features.is_none()
+        () if has("text_encoder")
+            && !has("phrases")
+            && !has("features")
             && scene.extras.features.is_none() =>
         {
             Lifted
         }
-        () if phrase_options || targets.features.is_some() => Features,
+        () if text_options || has("features") => Features,
         () if scene.extras.labels.is_some() => Labels,
         () if scene.extras.features.is_some() => bail!(
             "{scene_name} has per-Gaussian feature vectors but no labels: give a phrase table \

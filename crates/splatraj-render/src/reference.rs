@@ -63,6 +63,8 @@
 use rayon::prelude::*;
 use splatraj_scene::Scene;
 
+use crate::camera::Intrinsics;
+
 /// Side of a square screen tile in pixels (INRIA's `BLOCK_X = BLOCK_Y = 16`).
 pub const TILE_SIZE: usize = 16;
 
@@ -105,18 +107,9 @@ type Mat3 = [[f64; 3]; 3];
 /// A pinhole camera in OpenCV axes (x right, y down, z forward), all in f64.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RefCamera {
-    /// Focal length along x, in pixels.
-    pub fx: f64,
-    /// Focal length along y, in pixels.
-    pub fy: f64,
-    /// Principal point x, in pixels (pixel `i` has its centre at `i + 0.5`).
-    pub cx: f64,
-    /// Principal point y, in pixels (pixel row `j` has its centre at `j + 0.5`).
-    pub cy: f64,
-    /// Image width in pixels.
-    pub width: usize,
-    /// Image height in pixels.
-    pub height: usize,
+    /// Focal lengths, principal point (pixel `i` has its centre at `i + 0.5`) and image size,
+    /// in pixels.
+    pub k: Intrinsics,
     /// World-to-camera rotation `R_cw`; its rows are the camera's x, y, z axes in world.
     pub rotation_cw: [[f64; 3]; 3],
     /// World-to-camera translation: `p_cam = R_cw p_world + t_cw`.
@@ -128,16 +121,11 @@ pub struct RefCamera {
 impl RefCamera {
     /// The camera of pose Φ with `intrinsics` and near plane `near` (the tested renderer's
     /// conventions: `R_cw = R(ω)ᵀ`, `t_cw = −R_cw·c`).
-    pub fn from_pose(pose: &crate::camera::Pose, k: &crate::camera::Intrinsics, near: f64) -> Self {
+    pub fn from_pose(pose: &crate::camera::Pose, k: &Intrinsics, near: f64) -> Self {
         let rows = splatraj_camera::pose::matrix_rows(&pose.world_to_camera());
         let row = |i: usize| [rows[i][0], rows[i][1], rows[i][2]];
         RefCamera {
-            fx: k.fx,
-            fy: k.fy,
-            cx: k.cx,
-            cy: k.cy,
-            width: k.width,
-            height: k.height,
+            k: *k,
             rotation_cw: [row(0), row(1), row(2)],
             translation_cw: [rows[0][3], rows[1][3], rows[2][3]],
             near,
@@ -151,18 +139,7 @@ impl RefCamera {
     /// `world_up` as the view direction allows. If the view direction is parallel to
     /// `world_up` (roll undefined), the world axis least aligned with the view direction is
     /// used as up instead. `near` is [`DEFAULT_NEAR`].
-    #[allow(clippy::too_many_arguments)]
-    pub fn look_at(
-        eye: [f64; 3],
-        target: [f64; 3],
-        world_up: [f64; 3],
-        fx: f64,
-        fy: f64,
-        cx: f64,
-        cy: f64,
-        width: usize,
-        height: usize,
-    ) -> Self {
+    pub fn look_at(eye: [f64; 3], target: [f64; 3], world_up: [f64; 3], k: Intrinsics) -> Self {
         let z = normalize(sub(target, eye));
         let mut x = cross(z, normalize(world_up));
         if norm(x) < 1e-9 {
@@ -179,12 +156,7 @@ impl RefCamera {
         let rotation_cw = [x, y, z];
         let r_eye = mat_vec(&rotation_cw, eye);
         Self {
-            fx,
-            fy,
-            cx,
-            cy,
-            width,
-            height,
+            k,
             rotation_cw,
             translation_cw: [-r_eye[0], -r_eye[1], -r_eye[2]],
             near: DEFAULT_NEAR,
@@ -293,7 +265,7 @@ pub fn render_reference(scene: &Scene, camera: &RefCamera, channels: &RefChannel
             scene.len()
         );
     }
-    let (width, height) = (camera.width, camera.height);
+    let (width, height) = (camera.k.width, camera.k.height);
     let binned = Binned::new(scene, camera, channels.rgb);
 
     // Rules 9 and 11, one pixel at a time; rows in parallel.
@@ -348,11 +320,11 @@ struct PixelOut {
 /// value enters the pixel (rule 11). Gaussians skipped by rules 8–11 are absent.
 pub fn reference_weights(scene: &Scene, camera: &RefCamera) -> Vec<Vec<(usize, f64)>> {
     let binned = Binned::new(scene, camera, false);
-    (0..camera.height)
+    (0..camera.k.height)
         .into_par_iter()
         .flat_map_iter(|j| {
             let binned = &binned;
-            (0..camera.width).map(move |i| {
+            (0..camera.k.width).map(move |i| {
                 let mut weights = Vec::new();
                 walk_pixel(i, j, binned, |g, w| weights.push((g.index, w)));
                 weights
@@ -371,8 +343,8 @@ struct Binned {
 
 impl Binned {
     fn new(scene: &Scene, camera: &RefCamera, want_rgb: bool) -> Self {
-        let tiles_x = camera.width.div_ceil(TILE_SIZE);
-        let tiles_y = camera.height.div_ceil(TILE_SIZE);
+        let tiles_x = camera.k.width.div_ceil(TILE_SIZE);
+        let tiles_y = camera.k.height.div_ceil(TILE_SIZE);
 
         // Rules 2–7 and 12 (per-Gaussian values): once per Gaussian, independent of the pixel.
         let center = camera.center();
@@ -503,13 +475,13 @@ fn project(
     let sigma_cam = mat_mul(&mat_mul(w, &sigma_world), &transpose(w));
 
     // Rule 5: Jacobian at the mean with clamped x/z, y/z.
-    let lim_x = FOV_CLAMP * 0.5 * cam.width as f64 / cam.fx;
-    let lim_y = FOV_CLAMP * 0.5 * cam.height as f64 / cam.fy;
+    let lim_x = FOV_CLAMP * 0.5 * cam.k.width as f64 / cam.k.fx;
+    let lim_y = FOV_CLAMP * 0.5 * cam.k.height as f64 / cam.k.fy;
     let xz = (t[0] / z).clamp(-lim_x, lim_x);
     let yz = (t[1] / z).clamp(-lim_y, lim_y);
     let jac = [
-        [cam.fx / z, 0.0, -cam.fx * xz / z],
-        [0.0, cam.fy / z, -cam.fy * yz / z],
+        [cam.k.fx / z, 0.0, -cam.k.fx * xz / z],
+        [0.0, cam.k.fy / z, -cam.k.fy * yz / z],
     ];
 
     // Rule 6: Σ_2D = J Σ_cam Jᵀ + 0.3 I.
@@ -544,8 +516,8 @@ fn project(
     let radius = (3.0 * lambda_max.sqrt()).ceil();
 
     // Projected mean, not clamped.
-    let u = cam.fx * t[0] / z + cam.cx;
-    let v = cam.fy * t[1] / z + cam.cy;
+    let u = cam.k.fx * t[0] / z + cam.k.cx;
+    let v = cam.k.fy * t[1] / z + cam.k.cy;
 
     let rgb = if want_rgb {
         let dir = normalize(sub(mean, cam_center));

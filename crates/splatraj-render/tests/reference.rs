@@ -1,6 +1,7 @@
 //! Tests of the reference renderer against closed forms worked out by hand from
 //! docs/conventions.md's rules, never against the renderer's own intermediate values.
 
+use splatraj_render::camera::Intrinsics;
 use splatraj_render::reference::{RefCamera, RefChannels, RefImage, render_reference};
 use splatraj_scene::Scene;
 
@@ -53,12 +54,7 @@ fn scene_of(gs: &[G], degree: u8) -> Scene {
 /// Camera at the world origin looking down +z (camera frame = world frame).
 fn identity_camera(size: usize, f: f64, c: f64) -> RefCamera {
     RefCamera {
-        fx: f,
-        fy: f,
-        cx: c,
-        cy: c,
-        width: size,
-        height: size,
+        k: intrinsics(f, f, c, c, size, size),
         rotation_cw: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
         translation_cw: [0.0; 3],
         near: 0.01,
@@ -435,12 +431,7 @@ fn gaussians_behind_the_near_plane_contribute_nothing() {
         [0.0, 0.0, 10.0],
         [0.0, 0.0, 20.0],
         [0.0, -1.0, 0.0],
-        50.0,
-        50.0,
-        16.0,
-        16.0,
-        32,
-        32,
+        intrinsics(50.0, 50.0, 16.0, 16.0, 32, 32),
     );
     let img = render_reference(&scene_of(&[big(5.0)], 0), &cam, &ch);
     assert!(img.alpha.iter().all(|&a| a == 0.0));
@@ -484,7 +475,7 @@ fn sh_degree_one_follows_view_direction() {
         } else {
             [0.0, 1.0, 0.0]
         };
-        let cam = RefCamera::look_at(eye, mean, up, 100.0, 100.0, 32.5, 32.5, 64, 64);
+        let cam = RefCamera::look_at(eye, mean, up, intrinsics(100.0, 100.0, 32.5, 32.5, 64, 64));
         let img = render_reference(&scene, &cam, &all_channels(vec![]));
         let n = offset.iter().map(|c| c * c).sum::<f64>().sqrt();
         let [dx, dy, dz] = offset.map(|c| -c / n); // mean − eye, normalised
@@ -514,7 +505,12 @@ fn sh_degree_one_follows_view_direction() {
     strong.sh[3] = 2.0;
     let scene = scene_of(&[strong], 1);
     let eye = [mean[0], mean[1] - 3.0, mean[2]]; // dir = +y
-    let cam = RefCamera::look_at(eye, mean, [0.0, 0.0, 1.0], 100.0, 100.0, 32.5, 32.5, 64, 64);
+    let cam = RefCamera::look_at(
+        eye,
+        mean,
+        [0.0, 0.0, 1.0],
+        intrinsics(100.0, 100.0, 32.5, 32.5, 64, 64),
+    );
     let img = render_reference(&scene, &cam, &all_channels(vec![]));
     assert_eq!(rgb_at(&img, 32, 32)[0], 0.0);
 }
@@ -531,7 +527,12 @@ fn look_at_centres_the_target_and_keeps_up_up() {
         ([2.0, 2.0, 2.0], [0.0, 0.0, 0.0], [0.3, 0.2, 0.9]),
     ];
     for (eye, target, up) in cases {
-        let cam = RefCamera::look_at(eye, target, up, 200.0, 180.0, 160.0, 120.0, 320, 240);
+        let cam = RefCamera::look_at(
+            eye,
+            target,
+            up,
+            intrinsics(200.0, 180.0, 160.0, 120.0, 320, 240),
+        );
         let r = cam.rotation_cw;
         // Proper rotation: orthonormal rows, determinant +1.
         for a in 0..3 {
@@ -550,15 +551,15 @@ fn look_at_centres_the_target_and_keeps_up_up() {
                 (0..3).map(|k| r[a][k] * p[k]).sum::<f64>() + cam.translation_cw[a]
             });
             (
-                cam.fx * q[0] / q[2] + cam.cx,
-                cam.fy * q[1] / q[2] + cam.cy,
+                cam.k.fx * q[0] / q[2] + cam.k.cx,
+                cam.k.fy * q[1] / q[2] + cam.k.cy,
                 q[2],
             )
         };
         let (u, v, z) = project(target);
         assert!(z > 0.0, "target in front");
-        assert_close(u, cam.cx, 1e-9, "target u");
-        assert_close(v, cam.cy, 1e-9, "target v");
+        assert_close(u, cam.k.cx, 1e-9, "target u");
+        assert_close(v, cam.k.cy, 1e-9, "target v");
         // The eye maps to the camera origin and center() gives it back.
         for (row, t) in r.iter().zip(cam.translation_cw) {
             let q = (0..3).map(|k| row[k] * eye[k]).sum::<f64>() + t;
@@ -583,10 +584,10 @@ fn look_at_centres_the_target_and_keeps_up_up() {
             target[2] + 0.1 * up[2],
         ];
         let (u, v, _) = project(above);
-        assert!(v < cam.cy, "above the target is up in the image");
+        assert!(v < cam.k.cy, "above the target is up in the image");
         assert_close(
             u,
-            cam.cx,
+            cam.k.cx,
             1e-9,
             "above the target stays on the vertical centre line",
         );
@@ -616,4 +617,9 @@ fn channels_are_independent() {
     assert_eq!(only.alpha, full.alpha);
     let bytes = only.rgb8().unwrap();
     assert_eq!(bytes.len(), 48 * 48 * 3);
+}
+
+/// Intrinsics with these values, checked.
+fn intrinsics(fx: f64, fy: f64, cx: f64, cy: f64, width: usize, height: usize) -> Intrinsics {
+    Intrinsics::new(fx, fy, cx, cy, width, height).unwrap()
 }

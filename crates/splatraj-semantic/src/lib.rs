@@ -42,7 +42,9 @@ pub mod mask_file;
 pub mod names;
 mod npy_size;
 pub mod selection;
+pub mod source_config;
 pub mod sources;
+mod struct_keys;
 pub mod text_encoder;
 pub mod vectors;
 
@@ -56,9 +58,12 @@ pub use selection::{
     Cluster, ClusterOptions, ClusteringSummary, EpsRule, KeepClusters, SelectionOptions, Spread,
     Target, find_target, select,
 };
+pub use source_config::{
+    FeaturesConfig, LabelsConfig, LangsplatConfig, LiftedConfig, RegionConfig, TargetSourceConfig,
+};
 pub use sources::{
     FeatureInput, FeaturesSource, LabelsSource, LangsplatDecoder, LangsplatSource, Region,
     RegionSource, Relevancy, Scoring, SourceConfig, SourceContext, SourceRegistry, TargetSource,
-    label_mask,
+    TextKeys, label_mask,
 };
 pub use text_encoder::{Activation, ClipTokenizer, TextEncoder, TextEncoderOptions};

@@ -10,7 +10,9 @@ use serde::Deserialize;
 use splatraj_semantic::selection::{
     ClusterOptions, DEFAULT_EPS_FACTOR, DEFAULT_EPS_QUANTILE, EpsRule, KeepClusters,
 };
-use splatraj_semantic::{RegionSpec, SelectionOptions, SourceKind, TargetsConfig, find_target};
+use splatraj_semantic::{
+    RegionSpec, SelectionOptions, SourceKind, TargetSourceConfig, TargetsConfig, find_target,
+};
 
 /// A config file holding a `[targets]` table, as the `run` config embeds it.
 #[derive(Debug, Deserialize)]
@@ -22,6 +24,11 @@ fn parse(text: &str) -> Result<TargetsConfig, String> {
     toml::from_str::<File>(text)
         .map(|f| f.targets)
         .map_err(|e| e.to_string())
+}
+
+/// The typed config of `c`'s source, its keys named as a config file names them.
+fn typed(c: &TargetsConfig) -> TargetSourceConfig {
+    c.source_config(&|k| format!("targets.{k}")).unwrap()
 }
 
 fn device() -> Device {
@@ -52,7 +59,10 @@ synonyms = { "apple" = ["pomme", "red fruit"] }
 "#,
     )
     .unwrap();
-    assert_eq!(c.synonyms["apple"], vec!["pomme", "red fruit"]);
+    let TargetSourceConfig::Labels(labels) = typed(&c) else {
+        panic!("labels config")
+    };
+    assert_eq!(labels.synonyms["apple"], vec!["pomme", "red fruit"]);
     let source = c.build(Path::new("/nowhere"), &device()).unwrap();
     assert_eq!(source.kind(), "labels");
     let scene = common::fruit_drops();
@@ -77,7 +87,13 @@ regions = { shelf = { box = [0.5, 0.0, -2.3, 0.75, 0.15, -2.0] }, ball = { spher
 "#,
     )
     .unwrap();
-    assert_eq!(c.regions["ball"], RegionSpec::Sphere([0.6, 0.1, -2.1, 0.2]));
+    let TargetSourceConfig::Region(region) = typed(&c) else {
+        panic!("region config")
+    };
+    assert_eq!(
+        region.regions["ball"],
+        RegionSpec::Sphere([0.6, 0.1, -2.1, 0.2])
+    );
     let source = c.build(Path::new(""), &device()).unwrap();
     let scene = common::fruit_drops();
     let options = c.selection().unwrap();
@@ -146,8 +162,11 @@ cluster = false
 "#,
     )
     .unwrap();
-    assert_eq!(c.features.as_deref(), Some(Path::new("feat.npy")));
-    assert_eq!(c.temperature, Some(10.0));
+    let TargetSourceConfig::Features(features) = typed(&c) else {
+        panic!("features config")
+    };
+    assert_eq!(features.features.as_deref(), Some(Path::new("feat.npy")));
+    assert_eq!(features.text.temperature, Some(10.0));
     let options = c.selection().unwrap();
     assert_eq!(options.cluster, None);
     let source = c.build(dir.path(), &device()).unwrap();
@@ -182,9 +201,15 @@ top_fraction = 0.05
     )
     .unwrap();
     assert_eq!(c.source, SourceKind::Langsplat);
-    assert_eq!(c.latents, Some(PathBuf::from("lang/latents.npy")));
-    assert_eq!(c.checkpoint, Some(PathBuf::from("lang/best_ckpt.pth")));
-    assert_eq!(c.negatives, Some(vec!["object".to_string()]));
+    let TargetSourceConfig::Langsplat(langsplat) = typed(&c) else {
+        panic!("langsplat config")
+    };
+    assert_eq!(langsplat.latents, Some(PathBuf::from("lang/latents.npy")));
+    assert_eq!(
+        langsplat.checkpoint,
+        Some(PathBuf::from("lang/best_ckpt.pth"))
+    );
+    assert_eq!(langsplat.text.negatives, Some(vec!["object".to_string()]));
     assert_eq!(c.selection().unwrap().top_fraction, 0.05);
     // Only top_fraction was given: the rest keeps its defaults.
     assert_eq!(c.selection.cluster, Some(ClusterOptions::default()));
@@ -258,6 +283,18 @@ fn unknown_keys_and_bad_values_name_the_key() {
         (
             "[targets]\nphrase = \"t.json\"\n",
             &["phrase", "unknown field"][..],
+        ),
+        (
+            "[targets]\nlatent = \"l.npy\"\n",
+            &["targets.latent", "unknown field", "latents, checkpoint"][..],
+        ),
+        (
+            "[targets]\ntext_heads = -2\n",
+            &["targets.text_heads", "-2"][..],
+        ),
+        (
+            "[targets]\ncustom = { near = 3 }\n",
+            &["targets.custom.near", "expected a map"][..],
         ),
         (
             "[targets]\nsource = \"clip\"\n",
@@ -352,6 +389,27 @@ fn build_errors_name_the_key() {
         (
             "[targets]\nsource = \"features\"\nphrases = \"table.json\"\nsynonyms = { a = [\"b\"] }\n",
             &["targets.synonyms", "labels source only"][..],
+        ),
+        (
+            "[targets]\nsource = \"features\"\nphrases = \"table.json\"\nlatents = \"l.npy\"\n",
+            &[
+                "targets.latents",
+                "langsplat source only",
+                "not to the features",
+            ][..],
+        ),
+        // A text key the lifted source does not take (it scores with its own field).
+        (
+            "[targets]\nsource = \"lifted\"\ntext_encoder = \"w.safetensors\"\nphrases = \"t.json\"\n",
+            &[
+                "targets.phrases",
+                "features and langsplat source only",
+                "lifted",
+            ][..],
+        ),
+        (
+            "[targets]\nsource = \"labels\"\n[targets.custom.near]\nradius = 1\n",
+            &["targets.custom.near", "custom.near only", "labels"][..],
         ),
         // A needed key missing.
         (

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use burn::tensor::Device;
 use splatraj_scene::{Features, Scene};
 use splatraj_semantic::sources::feature3dgs::read_decoder;
-use splatraj_semantic::{Matrix, SourceKind, SourceRegistry, TargetSource, TargetsConfig};
+use splatraj_semantic::{Matrix, SourceRegistry, TargetSource, TargetsConfig};
 
 const IN: usize = 8;
 const NEGATIVES: [&str; 4] = ["object", "things", "stuff", "texture"];
@@ -94,11 +94,7 @@ fn scene() -> Scene {
 }
 
 fn config(table: toml::Table) -> TargetsConfig {
-    TargetsConfig {
-        source: SourceKind::Custom("feature3dgs".into()),
-        custom: [("feature3dgs".to_string(), toml::Value::Table(table))].into(),
-        ..Default::default()
-    }
+    TargetsConfig::custom("feature3dgs", table)
 }
 
 fn keys(dir: &Path, decoder: Option<&str>) -> toml::Table {

@@ -14,7 +14,7 @@ use splatraj_scene::{ReadOptions, Scene, read_scene};
 use splatraj_semantic::sources::gaussian_grouping::{
     classify, identity_encodings, read_classifier,
 };
-use splatraj_semantic::{SourceKind, SourceRegistry, TargetSource, TargetsConfig};
+use splatraj_semantic::{SourceRegistry, TargetSource, TargetsConfig};
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -42,11 +42,7 @@ fn expected() -> (Vec<usize>, Vec<f32>) {
 }
 
 fn build(table: toml::Table) -> splatraj_semantic::Result<Box<dyn TargetSource>> {
-    let config = TargetsConfig {
-        source: SourceKind::Custom("gaussian_grouping".into()),
-        custom: [("gaussian_grouping".to_string(), toml::Value::Table(table))].into(),
-        ..Default::default()
-    };
+    let config = TargetsConfig::custom("gaussian_grouping", table);
     config.build_with(&fixture(""), &Device::flex(), &SourceRegistry::default())
 }
 

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
 use splatraj_scene::{ReadOptions, Scene, read_scene};
-use splatraj_semantic::{SourceKind, SourceRegistry, TargetSource, TargetsConfig};
+use splatraj_semantic::{SourceRegistry, TargetSource, TargetsConfig};
 
 const PLANTED: [&str; 3] = ["red mug", "green ball", "potted plant"];
 const PER_BLOB: usize = 40;
@@ -51,11 +51,7 @@ fn table(entries: &[(&str, toml::Value)]) -> toml::Table {
 }
 
 fn build(table: toml::Table) -> splatraj_semantic::Result<Box<dyn TargetSource>> {
-    let config = TargetsConfig {
-        source: SourceKind::Custom("legaussians".into()),
-        custom: [("legaussians".to_string(), toml::Value::Table(table))].into(),
-        ..Default::default()
-    };
+    let config = TargetsConfig::custom("legaussians", table);
     config.build_with(&fixture(""), &Device::flex(), &SourceRegistry::default())
 }
 

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
 use splatraj_semantic::sources::opengaussian::ClusterLang;
-use splatraj_semantic::{SourceKind, SourceRegistry, TargetSource, TargetsConfig};
+use splatraj_semantic::{SourceRegistry, TargetSource, TargetsConfig};
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -30,12 +30,11 @@ fn build(
     for (k, v) in extra {
         table.insert(k.to_string(), v.clone());
     }
-    TargetsConfig {
-        source: SourceKind::Custom("opengaussian".into()),
-        custom: [("opengaussian".to_string(), toml::Value::Table(table))].into(),
-        ..Default::default()
-    }
-    .build_with(&fixture(""), &Device::flex(), &SourceRegistry::default())
+    TargetsConfig::custom("opengaussian", table).build_with(
+        &fixture(""),
+        &Device::flex(),
+        &SourceRegistry::default(),
+    )
 }
 
 #[test]

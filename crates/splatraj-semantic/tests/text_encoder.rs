@@ -349,17 +349,21 @@ fn free_text_query_selects_the_planted_object() {
     };
     let dir = tempfile::tempdir().unwrap();
     common::write_npy(&dir.path().join("features.npy"), &rows);
+    let encoder = fixtures().join("gelu/open_clip_model.safetensors");
     let config = TargetsConfig {
-        source: SourceKind::Features,
-        features: Some("features.npy".into()),
-        text_encoder: Some(fixtures().join("gelu/open_clip_model.safetensors")),
         selection: SelectionOptions {
             // Below one object's share (1/3): the percentile keeps only the most relevant.
             top_fraction: 0.3,
             floor: 0.5,
             cluster: None,
         },
-        ..Default::default()
+        ..TargetsConfig::new(
+            SourceKind::Features,
+            keys(&[
+                ("features", "features.npy"),
+                ("text_encoder", path(&encoder)),
+            ]),
+        )
     };
     let device = Device::flex();
     let source = config.build(dir.path(), &device).unwrap();
@@ -376,10 +380,8 @@ fn free_text_query_selects_the_planted_object() {
         );
     }
     // Without an encoder the same phrase is not known.
-    let no_encoder = TargetsConfig {
-        text_encoder: None,
-        ..config.clone()
-    };
+    let mut no_encoder = config.clone();
+    no_encoder.keys.remove("text_encoder");
     let err = no_encoder
         .build(dir.path(), &device)
         .unwrap_err()
@@ -395,21 +397,24 @@ fn targets_text_heads_reaches_the_text_encoder() {
     use splatraj_semantic::{SourceKind, TargetsConfig};
     let dir = tempfile::tempdir().unwrap();
     common::write_npy(&dir.path().join("features.npy"), &[vec![1.0f32; 16]]);
-    let config = TargetsConfig {
-        source: SourceKind::Features,
-        features: Some("features.npy".into()),
-        text_encoder: Some(fixtures().join("gelu/open_clip_model.safetensors")),
-        ..Default::default()
-    };
+    let encoder = fixtures().join("gelu/open_clip_model.safetensors");
+    let config = TargetsConfig::new(
+        SourceKind::Features,
+        keys(&[
+            ("features", "features.npy"),
+            ("text_encoder", path(&encoder)),
+        ]),
+    );
     let device = Device::flex();
     let error = |config: TargetsConfig| match config.build(dir.path(), &device) {
         Ok(_) => String::new(),
         Err(e) => e.to_string(),
     };
     assert_eq!(error(config.clone()), "", "the config's 4 heads build");
-    let with = |heads| TargetsConfig {
-        text_heads: Some(heads),
-        ..config.clone()
+    let with = |heads: i64| {
+        let mut with = config.clone();
+        with.keys.insert("text_heads".into(), heads.into());
+        with
     };
     assert_eq!(error(with(2)), "", "2 heads divide the width 32");
     let err = error(with(5));
@@ -422,20 +427,33 @@ fn targets_text_heads_reaches_the_text_encoder() {
         err.contains("targets.text_heads") && err.contains("≥ 1"),
         "{err}"
     );
-    let err = error(TargetsConfig {
-        text_encoder: None,
-        phrases: Some(fixtures().join("phrases.json")),
-        ..with(2)
-    });
+    let mut phrases_only = with(2);
+    phrases_only.keys.remove("text_encoder");
+    let table = fixtures().join("phrases.json");
+    phrases_only
+        .keys
+        .insert("phrases".into(), path(&table).into());
+    let err = error(phrases_only);
     assert!(err.contains("targets.text_heads"), "{err}");
-    let err = error(TargetsConfig {
-        source: SourceKind::Labels,
-        features: None,
-        text_encoder: None,
-        ..with(2)
-    });
+    let err = error(TargetsConfig::new(
+        SourceKind::Labels,
+        toml::Table::from_iter([("text_heads".to_string(), 2.into())]),
+    ));
     assert!(
         err.contains("targets.text_heads") && err.contains("not to the labels source"),
         "{err}"
     );
+}
+
+/// A `[targets]` table of string values.
+fn keys(pairs: &[(&str, &str)]) -> toml::Table {
+    pairs
+        .iter()
+        .map(|(k, v)| (k.to_string(), toml::Value::from(*v)))
+        .collect()
+}
+
+/// A path as a config writes it.
+fn path(p: &std::path::Path) -> &str {
+    p.to_str().unwrap()
 }

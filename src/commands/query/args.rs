@@ -13,7 +13,6 @@ use splatraj::experiment::query::{
 use splatraj::experiment::views::ViewOptions;
 use splatraj_render::backend::BackendKind;
 use splatraj_scene::InvalidPolicy;
-use splatraj_semantic::selection::{DEFAULT_FLOOR, DEFAULT_TOP_FRACTION};
 use splatraj_semantic::{Activation, SourceKind};
 
 use crate::cli::ReadArgs;
@@ -28,17 +27,14 @@ pub(super) const IMAGE_NAME: &str = "query.png";
 pub struct QueryArgs {
     /// A run config: its `[scene]` and `[targets]` (source, built-in or registered, with its
     /// keys and text encoder; `[targets.selection]`) are read and built as `splatraj run`
-    /// builds them, instead of the scene and source options.
-    // The groups are the flattened structs' options: a config sets all of them.
-    #[arg(
-        long,
-        value_name = "RUN.toml",
-        conflicts_with_all = ["scene", "ReadArgs", "SourceArgs"]
-    )]
+    /// builds them. The scene and source options given override its keys (each sets the key
+    /// it sets without a config; paths relative to the working directory), and --set
+    /// overrides both.
+    #[arg(long, value_name = "RUN.toml")]
     pub(super) config: Option<PathBuf>,
-    /// Override a config key, e.g. `targets.selection.floor=0.6` (repeatable); without
-    /// --config, a key of the config the options make (`targets.<key>`: any `[targets]` key,
-    /// also one without an option of its own).
+    /// Override a config key, e.g. `targets.selection.floor=0.6` (repeatable), after the
+    /// config file and the options; without --config, a key of the config the options make
+    /// (`targets.<key>`: any `[targets]` key, also one without an option of its own).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub(super) set: Vec<String>,
     /// Scene file (INRIA PLY, compressed PLY or SPZ).
@@ -157,12 +153,14 @@ pub(super) struct SourceArgs {
     /// e.g. best_ckpt.pth); decoded on --backend's device.
     #[arg(long, value_name = "CKPT.pth")]
     checkpoint: Option<PathBuf>,
-    /// Fraction (0, 1] of all Gaussians kept by the relevancy percentile (features).
-    #[arg(long, default_value_t = DEFAULT_TOP_FRACTION)]
-    top_fraction: f32,
-    /// Relevancy a Gaussian must exceed, in [0, 1) (features).
-    #[arg(long, default_value_t = DEFAULT_FLOOR)]
-    floor: f32,
+    /// Fraction (0, 1] of all Gaussians kept by the relevancy percentile (features)
+    /// [default: the config's, else 0.02].
+    #[arg(long)]
+    top_fraction: Option<f32>,
+    /// Relevancy a Gaussian must exceed, in [0, 1) (features) [default: the config's, else
+    /// 0.5].
+    #[arg(long)]
+    floor: Option<f32>,
     /// Keep every Gaussian above the thresholds: no density clustering (features).
     #[arg(long)]
     no_cluster: bool,
@@ -196,25 +194,11 @@ impl QueryArgs {
             .query
             .clone()
             .context("--query is needed without --config")?;
-        let path = self
-            .scene
-            .as_deref()
-            .context("--scene (or --config) is needed")?;
-        let read = self.read.options();
-        let mut scene = toml::Table::new();
-        scene.insert("path".into(), path_value(path));
-        if let Some(labels) = &read.labels {
-            scene.insert("labels".into(), path_value(labels));
+        if self.scene.is_none() {
+            bail!("--scene (or --config) is needed");
         }
-        scene.insert(
-            "drop_invalid".into(),
-            toml::Value::Boolean(read.invalid == InvalidPolicy::Drop),
-        );
-        let targets = self.source_options.targets_table(&query)?;
-        let mut table = toml::Table::new();
+        let mut table = self.option_keys(FlagPaths::AsGiven)?;
         table.insert("name".into(), toml::Value::String("query".into()));
-        table.insert("scene".into(), toml::Value::Table(scene));
-        table.insert("targets".into(), toml::Value::Table(targets));
         table.insert(
             "queries".into(),
             toml::Value::Array(vec![toml::Value::Table(toml::Table::from_iter([(
@@ -222,6 +206,34 @@ impl QueryArgs {
                 toml::Value::String(query),
             )]))]),
         );
+        Ok(table)
+    }
+
+    /// The config keys the scene and source options set, only those given: `[scene]`
+    /// (`path`, `labels`, `drop_invalid`) and `[targets]` (each option under its key), for
+    /// the config the options make or to override a run config's keys.
+    pub(super) fn option_keys(&self, paths: FlagPaths) -> Result<toml::Table> {
+        let path_value = |path: &Path| paths.value(path);
+        let read = self.read.options();
+        let mut scene = toml::Table::new();
+        if let Some(path) = &self.scene {
+            scene.insert("path".into(), path_value(path)?);
+        }
+        if let Some(labels) = &read.labels {
+            scene.insert("labels".into(), path_value(labels)?);
+        }
+        if read.invalid == InvalidPolicy::Drop {
+            scene.insert("drop_invalid".into(), toml::Value::Boolean(true));
+        }
+        let targets = self
+            .source_options
+            .targets_table(self.query.as_deref(), &path_value)?;
+        let mut table = toml::Table::new();
+        for (key, keys) in [("scene", scene), ("targets", targets)] {
+            if !keys.is_empty() {
+                table.insert(key.into(), toml::Value::Table(keys));
+            }
+        }
         Ok(table)
     }
 
@@ -236,13 +248,19 @@ impl SourceArgs {
     /// registered source (`custom.<name>`) the source's keys (`--source-key`, the phrase
     /// options, `--synonym`) go in its own `[targets.custom.<name>]` table, and for `lifted`
     /// the `--source-key` items in `[targets.lifted]`.
-    fn targets_table(&self, query: &str) -> Result<toml::Table> {
+    /// The region (`--box`/`--sphere`) is named `query`, which it then needs.
+    fn targets_table(
+        &self,
+        query: Option<&str>,
+        path_value: &dyn Fn(&Path) -> Result<toml::Value>,
+    ) -> Result<toml::Table> {
         let mut keys = toml::Table::new();
         let synonyms = parse_synonyms(&self.synonym)?;
         if !synonyms.is_empty() {
             keys.insert("synonyms".into(), toml::Value::try_from(synonyms)?);
         }
         if let Some(region) = parse_region(self.region_box.as_deref(), self.sphere.as_deref())? {
+            let query = query.context("--box/--sphere need --query: it names the region")?;
             let regions = std::collections::BTreeMap::from([(query.trim().to_string(), region)]);
             keys.insert("regions".into(), toml::Value::try_from(regions)?);
         }
@@ -255,7 +273,7 @@ impl SourceArgs {
             ("checkpoint", &self.checkpoint),
         ] {
             if let Some(path) = path {
-                keys.insert(key.into(), path_value(path));
+                keys.insert(key.into(), path_value(path)?);
             }
         }
         if let Some(activation) = self.text_activation {
@@ -294,15 +312,17 @@ impl SourceArgs {
         }
         targets.extend(keys);
         let mut selection = toml::Table::new();
-        selection.insert(
-            "top_fraction".into(),
-            toml::Value::Float(f64::from(self.top_fraction)),
-        );
-        selection.insert("floor".into(), toml::Value::Float(f64::from(self.floor)));
+        for (key, value) in [("top_fraction", self.top_fraction), ("floor", self.floor)] {
+            if let Some(value) = value {
+                selection.insert(key.into(), toml::Value::Float(f64::from(value)));
+            }
+        }
         if self.no_cluster {
             selection.insert("cluster".into(), toml::Value::Boolean(false));
         }
-        targets.insert("selection".into(), toml::Value::Table(selection));
+        if !selection.is_empty() {
+            targets.insert("selection".into(), toml::Value::Table(selection));
+        }
         Ok(targets)
     }
 }
@@ -320,7 +340,23 @@ pub(super) fn option_naming(key: &str) -> String {
     }
 }
 
-/// A path as a TOML string.
-fn path_value(path: &Path) -> toml::Value {
-    toml::Value::String(path.to_string_lossy().into_owned())
+/// How the options' paths (relative to the working directory) are written into a config.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum FlagPaths {
+    /// As given: the config the options make reads paths from the working directory.
+    AsGiven,
+    /// Made absolute: a run config reads relative paths from its own folder.
+    Absolute,
+}
+
+impl FlagPaths {
+    /// `path` as a TOML string.
+    fn value(self, path: &Path) -> Result<toml::Value> {
+        let path = match self {
+            FlagPaths::AsGiven => path.to_path_buf(),
+            FlagPaths::Absolute => std::path::absolute(path)
+                .with_context(|| format!("cannot make {} absolute", path.display()))?,
+        };
+        Ok(toml::Value::String(path.to_string_lossy().into_owned()))
+    }
 }

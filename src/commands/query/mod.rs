@@ -1,7 +1,7 @@
 //! `splatraj query`: what a semantic query selects in a scene, as text (or JSON) and as a
 //! picture (`query.png`, the selection tinted). The scene and source come from a run config
-//! (`--config RUN.toml`) or from the options, which make a config of their own (`args.rs`:
-//! each option sets a key). The work is `splatraj::experiment::query` ([`ConfigQuery`],
+//! (`--config RUN.toml`, whose keys the options given override) or from the options, which
+//! make a config of their own (`args.rs`: each option sets a key). The work is `splatraj::experiment::query` ([`ConfigQuery`],
 //! [`PictureOptions`]); this file prints.
 
 mod args;
@@ -14,8 +14,8 @@ use splatraj::experiment::query::{
 };
 use splatraj::experiment::{Config, Extensions};
 
-use args::IMAGE_NAME;
 pub use args::QueryArgs;
+use args::{FlagPaths, IMAGE_NAME};
 
 /// Runs `splatraj query`.
 pub fn run(args: QueryArgs) -> Result<()> {
@@ -28,7 +28,9 @@ pub fn run(args: QueryArgs) -> Result<()> {
         return show_one(&args, from_options(&args, picture));
     };
     let extensions = Extensions::default();
-    let config = Config::load_with(path, &args.set, &extensions)?;
+    // Low to high: the file, the options given, --set.
+    let options = args.option_keys(FlagPaths::Absolute)?;
+    let config = Config::load_layered(path, options, &args.set, &extensions)?;
     let texts = config_query_texts(&config);
     if args.query.is_none() && texts.is_empty() {
         bail!(

@@ -20,7 +20,21 @@ impl Config {
     /// [`Config::load`] for a config that may name the costs, trajectory models and target
     /// sources registered in `extensions`.
     pub fn load_with(path: &Path, overrides: &[String], extensions: &Extensions) -> Result<Config> {
-        let table = read_table(path, 0)?;
+        Self::load_layered(path, toml::Table::new(), overrides, extensions)
+    }
+
+    /// [`Config::load_with`] with `layer` merged over the file before the overrides, low to
+    /// high: the file (over what it `extends`), then `layer` (the keys a command's flags set,
+    /// e.g. `splatraj query --phrases`; tables merge key by key as `extends` does), then the
+    /// `--set` overrides.
+    pub fn load_layered(
+        path: &Path,
+        layer: toml::Table,
+        overrides: &[String],
+        extensions: &Extensions,
+    ) -> Result<Config> {
+        let mut table = read_table(path, 0)?;
+        merge(&mut table, layer);
         let base_dir = path
             .parent()
             .filter(|p| !p.as_os_str().is_empty())
@@ -55,6 +69,7 @@ impl Config {
             set_keys.push((apply_override(&mut table, o)?, o.as_str()));
         }
         let mut config: Config = deserialize_table(table).map_err(|(key, message)| {
+            let (key, message) = inner_key(key, message);
             // A key an override set, a key below it, or the table holding it (a tagged table
             // like `[trajectory]` reports its own name) is the option's fault, not the file's.
             let set_by = set_keys.iter().rev().find(|(k, _)| {
@@ -121,6 +136,20 @@ fn deserialize_table(table: toml::Table) -> Result<Config, (String, String)> {
     })
 }
 
+/// The key a table's own checks name in `message` (`[targets]` reads its table itself, and
+/// says "`targets.phrase` is an unknown field"), when it lies inside `key`; else `key` and
+/// `message` as they are.
+fn inner_key(key: String, message: String) -> (String, String) {
+    let named = message
+        .strip_prefix('`')
+        .and_then(|rest| rest.split_once("` "))
+        .filter(|(inner, _)| key.is_empty() || inner.starts_with(&format!("{key}.")));
+    match named {
+        Some((inner, reason)) => (inner.to_string(), reason.to_string()),
+        None => (key, message),
+    }
+}
+
 /// "`key`: message", or the message alone at the top level.
 fn at_key(key: &str, message: &str) -> String {
     if key.is_empty() || key == "?" {
@@ -180,5 +209,47 @@ fn merge(base: &mut toml::Table, over: toml::Table) {
                 base.insert(key, value);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A config whose `[targets]` holds `targets`, loaded with `overrides`: the error.
+    fn error(targets: &str, overrides: &[&str]) -> String {
+        let text = format!(
+            "name = \"x\"\n[scene]\ndemo = {{ gaussians = 100 }}\n[targets]\n{targets}\n\
+             [[queries]]\ntext = \"a\"\n"
+        );
+        let table: toml::Table = toml::from_str(&text).unwrap();
+        let overrides: Vec<String> = overrides.iter().map(|o| o.to_string()).collect();
+        let extensions = Extensions::default();
+        match Config::from_table(
+            table,
+            Path::new("."),
+            &overrides,
+            "config x.toml",
+            &extensions,
+        ) {
+            Ok(_) => String::new(),
+            Err(e) => format!("{e:#}"),
+        }
+    }
+
+    #[test]
+    fn a_targets_key_error_names_the_key_and_whoever_set_it() {
+        // The file's key, though a --set edits another key of [targets].
+        let err = error("phrase = \"t.json\"", &["targets.selection.floor=0.6"]);
+        assert!(
+            err.starts_with("config x.toml: `targets.phrase`: is an unknown field"),
+            "{err}"
+        );
+        // The --set that set it.
+        let err = error("", &["targets.phrase=t.json"]);
+        assert!(
+            err.starts_with("--set targets.phrase=t.json: `targets.phrase`: is an unknown"),
+            "{err}"
+        );
     }
 }
