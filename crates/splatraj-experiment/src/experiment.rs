@@ -26,6 +26,16 @@ pub struct Derived {
     pub why: String,
 }
 
+/// A coarse copy of the scene and each window's mask on it (`optimise_gaussians`; built and
+/// read in [`crate::optimised_scene`]).
+#[derive(Debug)]
+pub struct CoarseCopy {
+    /// The merged scene.
+    pub scene: Scene,
+    /// Each window's mask over the merged Gaussians.
+    pub masks: Vec<Vec<f32>>,
+}
+
 /// Everything loaded and checked for a run of one config.
 #[derive(Debug)]
 pub struct Experiment {
@@ -68,7 +78,7 @@ pub struct Experiment {
         std::sync::Mutex<Option<(String, Vec<Vec<splatraj_traj::optimise::Candidate>>)>>,
     /// The coarse copy the optimisation renders instead of `scene`, when `optimise_gaussians`
     /// asks for one ([`Experiment::optimisation_scene`]).
-    pub coarse: Option<crate::optimised_scene::CoarseCopy>,
+    pub coarse: Option<CoarseCopy>,
     /// When [`Experiment::prepare`] started: a run's total time counts from here.
     pub prepared_at: std::time::Instant,
 }
@@ -239,7 +249,7 @@ impl Experiment {
                     self.scene.len(),
                     &self.device,
                     &self.extensions,
-                    &crate::grounding::config_key,
+                    &crate::config::targets_key,
                 )
                 .map_err(|e| anyhow::anyhow!("{}: {e:#}", at()))?,
             )

@@ -28,11 +28,6 @@ pub fn build_source(
         .map_err(|e| anyhow!("{e}"))
 }
 
-/// How a config file names a `[targets]` key in errors: `targets.<key>`.
-pub fn config_key(key: &str) -> String {
-    format!("targets.{key}")
-}
-
 /// The union of `objects`, each grounded like a query's text: every Gaussian of any of them,
 /// centred on and spanning the box that holds each object's box (`shots::union_box`).
 pub fn group_target(

@@ -42,7 +42,7 @@ pub fn check_lifted_memory(config: &Config, gaussians: usize) -> Result<()> {
     // A config the source cannot be built from, or without weights: building the source
     // names the key.
     let Ok(TargetSourceConfig::Lifted(lifted)) =
-        config.targets.source_config(&crate::grounding::config_key)
+        config.targets.source_config(&crate::config::targets_key)
     else {
         return Ok(());
     };

@@ -12,16 +12,7 @@ use splatraj_scene::coarse::{MAX_CLASSES, coarsen};
 use splatraj_traj::costs::WeightedCosts;
 use splatraj_traj::optimise::WindowTarget;
 
-use crate::experiment::{Derived, Experiment};
-
-/// A coarse copy of the scene and each window's mask on it.
-#[derive(Debug)]
-pub struct CoarseCopy {
-    /// The merged scene.
-    pub scene: Scene,
-    /// Each window's mask over the merged Gaussians.
-    pub masks: Vec<Vec<f32>>,
-}
+use crate::experiment::{CoarseCopy, Derived, Experiment};
 
 impl Experiment {
     /// Builds the coarse copy when `optimise_gaussians` asks for one (after the queries are

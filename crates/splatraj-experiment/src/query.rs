@@ -150,7 +150,7 @@ impl ConfigQuery {
         }
         let kind = config.targets.source.clone();
         let key: &dyn Fn(&str) -> String = match &self.naming {
-            KeyNaming::Config => &crate::grounding::config_key,
+            KeyNaming::Config => &crate::config::targets_key,
             KeyNaming::Options(name) => name,
         };
         let at = match self.naming {

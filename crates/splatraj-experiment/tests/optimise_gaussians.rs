@@ -40,7 +40,7 @@ fn mask_image(experiment: &Experiment, scene: &Scene, mask: &[f32], pose: Pose) 
     let uploaded = DeviceScene::new(scene, &experiment.device, DType::F32);
     let request = RenderRequest::new(experiment.intrinsics, vec![Channel::Mask(mask.to_vec())]);
     let out = render(&uploaded, uploaded.poses(&[pose]), &request).unwrap();
-    let pixels: Vec<f32> = out.images.into_data().into_vec().unwrap();
+    let pixels: Vec<f32> = out.images.into_data().try_into_vec::<f32>().unwrap();
     let (w, h) = (experiment.intrinsics.width, experiment.intrinsics.height);
     let (mut sum, mut x, mut y) = (0.0, 0.0, 0.0);
     for (k, &v) in pixels.iter().enumerate() {

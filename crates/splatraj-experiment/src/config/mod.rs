@@ -184,6 +184,11 @@ pub struct Config {
     pub path: PathBuf,
 }
 
+/// How a config file names a `[targets]` key in errors: `targets.<key>`.
+pub fn targets_key(key: &str) -> String {
+    format!("targets.{key}")
+}
+
 /// RBF centres per window of a config without `[trajectory]`, chosen on the first-try
 /// captures (docs/results.md, "First try on real captures").
 pub const FIRST_TRY_CENTRES_PER_WINDOW: usize = 4;
