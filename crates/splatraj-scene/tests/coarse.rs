@@ -133,8 +133,8 @@ fn the_budget_holds_classes_stay_apart_and_the_moments_are_kept() {
                 let mut sc = s.scales[i].map(f64::from);
                 sc.sort_by(f64::total_cmp);
                 let w = f64::from(s.opacities[i]) * sc[1] * sc[2];
-                for k in 0..3 {
-                    sum[k] += w * f64::from(s.means[i][k]);
+                for (total, &m) in sum.iter_mut().zip(&s.means[i]) {
+                    *total += w * f64::from(m);
                 }
                 sum[3] += w;
             }
