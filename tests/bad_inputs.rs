@@ -213,6 +213,19 @@ fn a_start_pose_of_1e308_is_refused_naming_the_key() {
 // --- Files read strictly. ---
 
 #[test]
+fn a_ply_of_a_version_other_than_1_0_is_refused_by_scene_info() {
+    let case = Case::new();
+    let ply = case.path("v9.ply");
+    std::fs::write(
+        &ply,
+        "ply\nformat ascii 9.9\nelement vertex 1\nproperty float x\nend_header\n1\n",
+    )
+    .unwrap();
+    let out = splatraj(&["scene", "info", s(&ply)]);
+    assert_clean_failure(&out, &["v9.ply", "version 9.9", "only 1.0"]);
+}
+
+#[test]
 fn a_ply_with_a_property_declared_twice_is_refused_and_not_converted() {
     let case = Case::new();
     let ply = case.path("twice.ply");

@@ -213,3 +213,71 @@ fn exported_camera_files_start_a_run() {
         "{message}"
     );
 }
+
+#[test]
+fn a_trajectory_file_inconsistent_with_itself_is_refused_naming_the_key() {
+    // Each edit of a real run's trajectory.json that the adversarial trial found accepted
+    // (docs/adversarial-trial.md): export must refuse it, naming the key, and write nothing.
+    let dir = tempfile::tempdir().unwrap();
+    let run = tiny_run(dir.path());
+    let original: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("trajectory.json")).unwrap())
+            .unwrap();
+    type Edit = fn(&mut serde_json::Value);
+    let cases: [(&str, Edit, &[&str]); 7] = [
+        (
+            "fx 0",
+            |t| t["intrinsics"]["fx"] = 0.0.into(),
+            &["`intrinsics`"],
+        ),
+        (
+            "width 0",
+            |t| t["intrinsics"]["width"] = 0.into(),
+            &["`intrinsics`"],
+        ),
+        (
+            "output width 1e9",
+            |t| t["output_intrinsics"]["width"] = 1_000_000_000u64.into(),
+            &["`output_intrinsics`", "65536"],
+        ),
+        (
+            "no windows in the model",
+            |t| t["model"]["windows"] = 0.into(),
+            &["`model`"],
+        ),
+        (
+            "zero up",
+            |t| t["world_up"] = serde_json::json!([0, 0, 0]),
+            &["`world_up`"],
+        ),
+        (
+            "a window less",
+            |t| {
+                t["windows"].as_array_mut().unwrap().pop();
+            },
+            &["`windows`", "`model.windows`"],
+        ),
+        (
+            "a window ending before it starts",
+            |t| t["windows"][0]["end"] = (-1.0).into(),
+            &["`windows.0`"],
+        ),
+    ];
+    for (what, edit, mentions) in cases {
+        let mut edited = original.clone();
+        edit(&mut edited);
+        let file = dir.path().join("trajectory.json");
+        std::fs::write(&file, serde_json::to_string(&edited).unwrap()).unwrap();
+        let out_dir = dir.path().join("exported");
+        let out = splatraj(&[
+            "export",
+            s(&file),
+            "--format",
+            "colmap",
+            "--out",
+            s(&out_dir),
+        ]);
+        assert_clean_failure(&out, mentions);
+        assert!(!out_dir.exists(), "{what}: something was exported");
+    }
+}

@@ -145,3 +145,27 @@ fn a_scene_that_cannot_be_found_asks_for_scene() {
         &["nowhere", "not a run folder"],
     );
 }
+
+#[test]
+fn a_metrics_file_with_a_word_for_a_figure_or_a_window_too_many_is_refused() {
+    // Both were rebuilt into a report with exit 0 in the adversarial trial.
+    let dir = tempfile::tempdir().unwrap();
+    let run = tiny_run_in(dir.path());
+    let file = run.join("metrics.json");
+    let original: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    let report = std::fs::read(run.join("report.html")).unwrap();
+    let mut word = original.clone();
+    word["windows"][0]["tce"] = "x".into();
+    let mut extra = original.clone();
+    let first = extra["windows"][0].clone();
+    extra["windows"].as_array_mut().unwrap().push(first);
+    for (metrics, mentions) in [
+        (word, ["`windows.0.tce`", "must be a number"]),
+        (extra, ["`windows` lists 3 windows", "trajectory.json 2"]),
+    ] {
+        std::fs::write(&file, serde_json::to_string(&metrics).unwrap()).unwrap();
+        assert_clean_failure(&splatraj(&["report", s(&run)]), &mentions);
+        assert_eq!(std::fs::read(run.join("report.html")).unwrap(), report);
+    }
+}

@@ -104,8 +104,36 @@ impl PathFrames {
                 .map_err(|e| anyhow!("{}: frame {i}: pose {e}", file.display()))?;
         }
         check_fps(self.fps).with_context(|| format!("{}: key `fps`", file.display()))?;
+        for (i, camera) in self.cameras.iter().enumerate() {
+            check_image_side(camera)
+                .with_context(|| format!("{}: frame {i} (or --width, --height)", file.display()))?;
+        }
         Ok(self)
     }
+}
+
+/// The largest image side a camera may have (pixels): larger than any display or video
+/// format, small enough that no camera file claims an image no tool could make.
+pub const MAX_IMAGE_SIDE: usize = 65_536;
+
+/// Refuses a camera larger than [`MAX_IMAGE_SIDE`] on a side.
+fn check_image_side(k: &Intrinsics) -> Result<()> {
+    if k.width > MAX_IMAGE_SIDE || k.height > MAX_IMAGE_SIDE {
+        bail!(
+            "a {}×{} image is larger than {MAX_IMAGE_SIDE} pixels on a side",
+            k.width,
+            k.height
+        );
+    }
+    Ok(())
+}
+
+/// A camera of a `trajectory.json` (key `key`): valid intrinsics of a sane size.
+fn check_file_camera(file: &Path, key: &str, k: &Intrinsics) -> Result<()> {
+    Intrinsics::new(k.fx, k.fy, k.cx, k.cy, k.width, k.height)
+        .map_err(anyhow::Error::from)
+        .and_then(|k| check_image_side(&k))
+        .with_context(|| format!("{}: key `{key}`", file.display()))
 }
 
 /// One window of a run, as `trajectory.json` lists it.
@@ -116,6 +144,12 @@ pub struct WindowEntry {
     pub query: String,
     /// The object's centre.
     pub object_centre: [f64; 3],
+    /// Start of the window in t, when the file gives it.
+    #[serde(default)]
+    pub start: Option<f64>,
+    /// End of the window in t, when the file gives it.
+    #[serde(default)]
+    pub end: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -128,9 +162,41 @@ struct SampledPose {
 struct TrajectoryExtras {
     output_intrinsics: Intrinsics,
     #[serde(default)]
+    intrinsics: Option<Intrinsics>,
+    #[serde(default)]
+    world_up: Option<[f64; 3]>,
+    #[serde(default)]
     windows: Vec<WindowEntry>,
     #[serde(default)]
     poses: Vec<SampledPose>,
+}
+
+/// Refuses windows that cannot be a run's: a window that does not lie in [0, 1] or ends
+/// before it starts, or (for the RBF model, which knows its windows) a list of another length.
+fn check_windows(file: &Path, record: &TrajectoryRecord, windows: &[WindowEntry]) -> Result<()> {
+    for (i, w) in windows.iter().enumerate() {
+        if let (Some(start), Some(end)) = (w.start, w.end)
+            && !(0.0 <= start && start < end && end <= 1.0)
+        {
+            bail!(
+                "{}: key `windows.{i}`: start {start} and end {end} must satisfy 0 ≤ start < \
+                 end ≤ 1",
+                file.display()
+            );
+        }
+    }
+    if let splatraj_traj::trajectory::TrajectoryModel::Rbf(rbf) = &record.model
+        && !windows.is_empty()
+        && windows.len() != rbf.windows
+    {
+        bail!(
+            "{}: key `windows` lists {} windows, key `model.windows` says {}",
+            file.display(),
+            windows.len(),
+            rbf.windows
+        );
+    }
+    Ok(())
 }
 
 /// A run's `trajectory.json`, read back.
@@ -177,9 +243,19 @@ impl RunTrajectory {
         record
             .validate()
             .with_context(|| format!("{}: keys `model`, `weights`", file.display()))?;
-        let k = extras.output_intrinsics;
-        Intrinsics::new(k.fx, k.fy, k.cx, k.cy, k.width, k.height)
-            .with_context(|| format!("{}: key `output_intrinsics`", file.display()))?;
+        check_file_camera(file, "output_intrinsics", &extras.output_intrinsics)?;
+        if let Some(k) = &extras.intrinsics {
+            check_file_camera(file, "intrinsics", k)?;
+        }
+        if let Some(up) = extras.world_up
+            && !(up.iter().all(|v| v.is_finite()) && glam::DVec3::from(up).length() > 1e-9)
+        {
+            bail!(
+                "{}: key `world_up` = {up:?} is not a direction",
+                file.display()
+            );
+        }
+        check_windows(file, &record, &extras.windows)?;
         let folder = file.parent().unwrap_or(Path::new("."));
         Ok(Self {
             file: file.to_path_buf(),

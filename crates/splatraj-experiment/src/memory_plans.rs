@@ -27,7 +27,8 @@ impl Experiment {
         // Metrics render each pose twice (the object in the scene, and alone).
         plan.stage(
             format!(
-                "the metrics: {metric_poses} poses at `output.width` × `output.height` = {} × {}",
+                "the metrics: {metric_poses} poses (`output.metric_samples` per window) at \
+                 `output.width` × `output.height` = {} × {}",
                 output.width, output.height
             ),
             base + 2.0 * render_bytes(metric_poses, pixels, n, false, fb),
@@ -112,7 +113,8 @@ impl Experiment {
         .unwrap_or(1);
         plan.stage(
             format!(
-                "the trajectory model (`trajectory`): {basis} basis functions sampled at {samples} \
+                "the trajectory model (`trajectory`: `trajectory.centres_per_window`, or the \
+                 model's other size keys): {basis} basis functions sampled at {samples} \
                  times (`output.trajectory_samples`, `output.ldj_samples`, `output.frames`, \
                  `output.fps` × `output.seconds`, `optimiser.path_samples`)"
             ),

@@ -61,6 +61,17 @@ pub fn run_report(dir: &Path, scene: Option<&Scene>) -> Result<RunReport> {
         .and_then(|c| c.get("name")?.as_str().map(String::from))
         .unwrap_or_else(|| "run".into());
     let windows = windows_of(&trajectory);
+    let measured = metrics
+        .get("windows")
+        .and_then(Value::as_array)
+        .map_or(0, Vec::len);
+    if !windows.is_empty() && measured > 0 && measured != windows.len() {
+        bail!(
+            "{}: key `windows` lists {measured} windows, the run's trajectory.json {}",
+            metrics_file.display(),
+            windows.len()
+        );
+    }
     let along = read_frame_metrics(&dir.join(FRAME_METRICS_FILE))?;
     let video = video_of(dir)?;
     Ok(RunReport {
@@ -83,6 +94,18 @@ pub fn run_report(dir: &Path, scene: Option<&Scene>) -> Result<RunReport> {
 /// of objects and a `run` object; a missing file reads as `null` and passes), and a scene
 /// whose Gaussian count is not the run's `run.gaussians` (another scene's views would be
 /// drawn under this run's path).
+/// The per-window numbers of `metrics.json` the report tabulates and plots.
+const WINDOW_FIGURES: [&str; 8] = [
+    "samples",
+    "tce",
+    "tre",
+    "iou",
+    "coverage",
+    "visible_fraction",
+    "tce_max",
+    "tre_max",
+];
+
 fn check_metrics(metrics: &Value, file: &Path, scene: Option<&Scene>) -> Result<()> {
     if metrics.is_null() {
         return Ok(());
@@ -96,6 +119,24 @@ fn check_metrics(metrics: &Value, file: &Path, scene: Option<&Scene>) -> Result<
             "{}: key `windows` must be a list of objects (one per query window)",
             file.display()
         );
+    }
+    // The figures the window table reads are numbers, or null where undefined.
+    for (i, w) in metrics["windows"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .enumerate()
+    {
+        for key in WINDOW_FIGURES {
+            if let Some(v) = w.get(key)
+                && !(v.is_number() || v.is_null())
+            {
+                bail!(
+                    "{}: key `windows.{i}.{key}` = {v} must be a number (or null)",
+                    file.display()
+                );
+            }
+        }
     }
     let Some(run) = metrics.get("run").and_then(Value::as_object) else {
         bail!("{}: key `run` must be an object", file.display());

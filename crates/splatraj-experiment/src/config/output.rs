@@ -67,6 +67,10 @@ pub struct OutputConfig {
 /// see an object and the move to the next, short enough that three parts make a 9 s clip.
 pub const SECONDS_PER_QUERY: f64 = 3.0;
 
+/// The smallest output side: one H.264 macroblock. A 1 × 1 output failed in OpenH264 only
+/// after the whole optimisation (the adversarial trial); 16 × 16 encodes (checked by hand).
+pub const MIN_VIDEO_SIDE: usize = 16;
+
 impl Default for OutputConfig {
     /// 1280 × 720 at 30 fps, [`SECONDS_PER_QUERY`] per query, plain frames (the report's
     /// keyframes tint the object).
@@ -112,8 +116,21 @@ impl OutputConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         let bad =
             |key: &str, reason: String| Err(ConfigError::new(format!("output.{key}"), reason));
-        if self.width == 0 || self.height == 0 {
-            return bad("width", "and `output.height` must be ≥ 1".into());
+        if self.width < MIN_VIDEO_SIDE || self.height < MIN_VIDEO_SIDE {
+            return bad(
+                "width",
+                format!(
+                    "and `output.height` ({} × {}) must be at least {MIN_VIDEO_SIDE} (the H.264 \
+                     encoder's smallest frame)",
+                    self.width, self.height
+                ),
+            );
+        }
+        if self.frames == Some(0) {
+            return bad(
+                "frames",
+                "= 0 must be at least 1 (leave it out for `output.fps` × `output.seconds`)".into(),
+            );
         }
         if !(self.fps.is_finite() && self.fps > 0.0 && self.fps <= MAX_FPS) {
             return bad(

@@ -177,6 +177,16 @@ pub fn read_ply_tables(bytes: &[u8], path: &Path) -> Result<PlyFile> {
     let header: Header = parser
         .read_header(&mut reader)
         .map_err(|e| SceneError::malformed(path, format!("bad PLY header: {e}")))?;
+    // 1.0 is the only PLY version there is: another is a file this reader cannot vouch for.
+    if header.version.major != 1 || header.version.minor != 0 {
+        return Err(SceneError::malformed(
+            path,
+            format!(
+                "PLY header: format version {}.{} (only 1.0 exists)",
+                header.version.major, header.version.minor
+            ),
+        ));
+    }
     let mut tables = Vec::with_capacity(header.elements.len());
     let mut line = header_lines;
     for def in header.elements.values() {

@@ -115,6 +115,13 @@ impl Default for TrajectoryOptions {
 impl TrajectoryOptions {
     /// Checks every field; errors name the field.
     pub fn validate(&self) -> Result<(), OptimiseError> {
+        // Zero steps would optimise nothing and leave the run without a trajectory at its end.
+        if self.iterations == 0 {
+            return Err(OptimiseError::InvalidOptions {
+                field: "iterations",
+                reason: "= 0 must be at least 1".into(),
+            });
+        }
         if self.path_samples < 2 {
             return Err(OptimiseError::InvalidOptions {
                 field: "path_samples",

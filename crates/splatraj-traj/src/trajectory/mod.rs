@@ -338,6 +338,11 @@ impl TrajectoryRecord {
     /// weights per basis function (for a built-in model; a custom model's count needs its
     /// registry) and every weight finite within ±[`MAX_WEIGHT`].
     pub fn validate(&self) -> Result<(), TrajectoryError> {
+        // A built-in model must be a valid one (e.g. not an RBF of 0 windows); a custom one
+        // can only be checked by its registry.
+        if !matches!(self.model, TrajectoryModel::Custom(_)) {
+            self.model.validate()?;
+        }
         if self.model.validate().is_ok() && self.weights.len() != self.model.count() {
             return Err(TrajectoryError::WeightRows {
                 expected: self.model.count(),
