@@ -411,3 +411,101 @@ fn bench_frames_refuses_a_frame_size_that_cannot_fit_before_building_a_scene() {
     );
     assert_clean_failure(&out, &["--frames", "--sizes", "memory"]);
 }
+
+#[test]
+fn bench_render_refuses_a_resolution_or_repeat_count_that_cannot_fit_before_any_child() {
+    // 10⁶ × 10⁶ pixels: terabytes of render buffers.
+    let out = quickly(
+        20,
+        &[
+            "bench",
+            "render",
+            "--sizes",
+            "1000",
+            "--resolutions",
+            "1000000",
+        ],
+    );
+    assert_clean_failure(&out, &["--resolutions", "memory"]);
+    // 10⁹ repeats of even a 16² render: at least 10⁻⁴ s each, over a day.
+    let out = quickly(
+        20,
+        &[
+            "bench",
+            "render",
+            "--sizes",
+            "1000",
+            "--resolutions",
+            "16",
+            "--repeats",
+            "1000000000",
+        ],
+    );
+    assert_clean_failure(&out, &["--repeats", "would take"]);
+}
+
+#[test]
+fn pose_refuses_sgld_iterations_that_would_take_over_a_day() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = tiny_config(dir.path());
+    let out = quickly(
+        60,
+        &[
+            "pose",
+            s(&config),
+            "--quiet",
+            "--sgld",
+            "2",
+            "--set",
+            "sgld.iterations=1000000000000",
+        ],
+    );
+    assert_refused(&out, &["`sgld.iterations`", "would take"]);
+    assert!(
+        !dir.path().join("runs").exists()
+            || std::fs::read_dir(dir.path().join("runs"))
+                .unwrap()
+                .next()
+                .is_none(),
+        "no run folder is made for a refused pose run"
+    );
+}
+
+#[test]
+fn bench_flags_that_are_not_numbers_are_refused_naming_the_flag() {
+    let out = quickly(20, &["bench", "render", "--sizes", "1000", "--fov", "nan"]);
+    assert_clean_failure(&out, &["--fov", "field of view"]);
+    for (flag, value) in [("--fov", "nan"), ("--fps", "nan"), ("--seconds", "nan")] {
+        let out = quickly(
+            20,
+            &[
+                "bench",
+                "frames",
+                "--no-scene",
+                "--gaussians",
+                "2000",
+                flag,
+                value,
+            ],
+        );
+        assert_clean_failure(&out, &[flag]);
+    }
+}
+
+#[test]
+fn bench_frames_refuses_a_video_that_would_take_over_a_day() {
+    // 10¹² s at 30 fps: 3·10¹³ frames, at least 10⁻⁴ s each.
+    let out = quickly(
+        20,
+        &[
+            "bench",
+            "frames",
+            "--no-scene",
+            "--gaussians",
+            "2000",
+            "--seconds",
+            "1e12",
+        ],
+    );
+    assert_clean_failure(&out, &["--seconds", "would take"]);
+}

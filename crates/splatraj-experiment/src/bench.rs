@@ -8,7 +8,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Result, anyhow, bail};
+use anyhow::{Context, Result, anyhow, bail};
 use burn::tensor::DType;
 use serde::{Deserialize, Serialize};
 use splatraj_render::backend::BackendKind;
@@ -18,6 +18,7 @@ use splatraj_render::stages;
 
 use crate::bench_scenes::{demo_bench_scene, file_bench_scene};
 use crate::probe::{MaskProbe, median_ms};
+use crate::resources::{MemoryLimit, RenderWork};
 
 /// Which scene a configuration renders.
 #[derive(Debug, Clone, PartialEq)]
@@ -493,6 +494,42 @@ pub struct RenderBenchGrid {
     pub all: bool,
 }
 
+/// Errors, before any child starts, on a `--fov` that is no field of view, or when the
+/// configurations of one resolution of `grid` cannot fit in memory or would take too long:
+/// each times `--repeats` forwards and forward + backward passes after one warm-up of each,
+/// all from flags (a scene file's size is checked when read).
+fn check_render_bench_work(
+    settings: &BenchSettings,
+    grid: &RenderBenchGrid,
+    configs: &[BenchConfig],
+) -> Result<()> {
+    Intrinsics::from_fov_x(settings.fov, 64, 64)
+        .with_context(|| format!("--fov {}", settings.fov))?;
+    let gaussians = grid.sizes.iter().copied().max().unwrap_or(0);
+    for &resolution in &grid.resolutions {
+        let runs = configs
+            .iter()
+            .filter(|c| c.resolution == resolution && (grid.all || !c.is_slow()))
+            .count();
+        let passes = 2.0 * (1.0 + settings.repeats as f64);
+        RenderWork {
+            what: format!(
+                "`--repeats` = {} × {runs} configurations of up to {gaussians} demo Gaussians \
+                 (--sizes) at `--resolutions`",
+                settings.repeats
+            ),
+            renders: passes * runs as f64,
+            at_once: 1,
+            size: (resolution, resolution),
+            gaussians,
+            gradient: true,
+            float_bytes: settings.dtype.size(),
+        }
+        .check(MemoryLimit::new(None)?, "")?;
+    }
+    Ok(())
+}
+
 /// Runs every configuration of `grid` in its own child process of `exe` (`splatraj bench
 /// render --one SPEC`), so each peak memory is its own; `progress` hears each start and
 /// failure. Returns the report and the failures (each also a skipped row).
@@ -510,6 +547,7 @@ pub fn run_render_bench(
         sources.push(BenchSource::File);
     }
     let configs = BenchConfig::all(&sources, &grid.resolutions, &grid.rasterizers)?;
+    check_render_bench_work(settings, grid, &configs)?;
     // Fail early, before spawning children, on an uncompiled backend or missing scene.
     settings.backend.device()?;
     if let Some(path) = &settings.scene

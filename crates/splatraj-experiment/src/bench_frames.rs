@@ -24,7 +24,7 @@ use splatraj_render::stages::{self, Stage};
 
 use crate::bench::{cpu_seconds, rasterizer_name};
 use crate::bench_scenes::{BenchScene, demo_bench_scene, file_bench_scene};
-use crate::camera_paths::PathFrames;
+use crate::camera_paths::{PathFrames, check_fps};
 use crate::config::MaskOverlay;
 use crate::path_render::{FrameSchedule, PathObject, PathRender, Video, render_path_with};
 use crate::resources::{MemoryLimit, RenderWork};
@@ -264,18 +264,25 @@ pub fn run_frames(bench: &FramesBench, progress: &mut dyn FnMut(&str)) -> Result
     if let Some(&(w, h)) = bench.sizes.iter().find(|&&(w, h)| w == 0 || h == 0) {
         bail!("{w}×{h} is not a frame size");
     }
+    check_fps(bench.fps).with_context(|| format!("--fps {}", bench.fps))?;
+    if !(bench.seconds.is_finite() && bench.seconds > 0.0) {
+        bail!("--seconds {} must be a positive number", bench.seconds);
+    }
+    Intrinsics::from_fov_x(bench.fov, 64, 64).with_context(|| format!("--fov {}", bench.fov))?;
     // Sizes and counts come from flags: refused before any scene is built when they cannot
-    // fit (the pipelined schedule holds two frames at once).
+    // fit (the pipelined schedule holds two frames at once). The time is the whole video's,
+    // which the report gives (measured, or extrapolated from the frames timed).
     for &size in &bench.sizes {
         RenderWork {
             what: format!(
-                "`--frames` = {} frames × {} schedules (--schedule) of {} demo Gaussians \
-                 (--gaussians) at `--sizes`",
+                "`--seconds` × `--fps` = {} video frames (`--frames` = {} timed) × {} \
+                 schedules (--schedule) of {} demo Gaussians (--gaussians) at `--sizes`",
+                bench.video_frames(),
                 bench.frames,
                 bench.schedules.len(),
                 bench.demo_gaussians.unwrap_or(0)
             ),
-            renders: bench.frames as f64 * bench.schedules.len() as f64,
+            renders: bench.video_frames().max(bench.frames) as f64 * bench.schedules.len() as f64,
             at_once: 2,
             size,
             gaussians: bench.demo_gaussians.unwrap_or(0),

@@ -3,8 +3,9 @@
 //!
 //! The parent waits on a child in steps ([`output_until_stopped`]): a stop request (Ctrl-C,
 //! SIGTERM: [`splatraj_scene::stop`]) kills and reaps the child and ends the parent's loop with
-//! [`splatraj_scene::stop::Stopped`]. A parent killed outright (SIGKILL) cannot do that, so
-//! each child watches its parent ([`exit_with_parent`]) and exits once it is gone.
+//! [`splatraj_scene::stop::Stopped`]. A parent killed outright (SIGKILL) cannot do that: on
+//! Linux the kernel kills the child with it ([`die_with_parent`]); elsewhere each child watches
+//! its parent ([`exit_with_parent`]) and exits once it is gone.
 
 use std::io::Read;
 use std::process::{Child, Command, Output, Stdio};
@@ -24,6 +25,7 @@ pub const EXIT_ORPHANED: i32 = 129;
 /// naming `what` the child was doing.
 pub fn output_until_stopped(command: &mut Command, what: &str) -> Result<Output> {
     let since = Since::now();
+    die_with_parent(command);
     let mut child = command
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
@@ -73,6 +75,36 @@ fn end(child: &mut Child) {
     let _ = child.kill();
     let _ = child.wait();
 }
+
+/// Has the kernel kill the child `command` starts as soon as this process dies (Linux: the
+/// parent-death signal, set between fork and exec). Polling alone ([`exit_with_parent`]) leaves
+/// the child running for a while after a SIGKILLed parent; SIGKILL ends it at once, and its
+/// results had only one reader, the parent, which is gone (a temporary file it was writing is
+/// left as any killed process leaves it: [`splatraj_scene::atomic::is_partial_file`]).
+/// The signal comes when the spawning thread ends: [`output_until_stopped`] waits on it.
+#[cfg(target_os = "linux")]
+fn die_with_parent(command: &mut Command) {
+    use std::os::unix::process::CommandExt;
+    let parent = std::process::id();
+    // SAFETY: the hook runs in the forked child before exec and only calls prctl, getppid and
+    // _exit, which are async-signal-safe; it allocates nothing and takes no lock.
+    unsafe {
+        command.pre_exec(move || {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL as libc::c_ulong) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            // The parent may have died between fork and prctl: then no signal will come.
+            if libc::getppid() as u32 != parent {
+                libc::_exit(EXIT_ORPHANED);
+            }
+            Ok(())
+        });
+    }
+}
+
+/// Elsewhere the child polls for its parent instead ([`exit_with_parent`]).
+#[cfg(not(target_os = "linux"))]
+fn die_with_parent(_command: &mut Command) {}
 
 /// In a child process: exits (with [`EXIT_ORPHANED`]) once the parent is gone, checked every
 /// [`POLL`] on a thread of its own. On Unix an orphan is handed to another parent (init or a

@@ -218,11 +218,21 @@ impl Experiment {
                 camera.width, camera.height
             ),
             iterations * MIN_SECONDS_PER_STEP
-                + render_seconds(
-                    iterations * (restarts + chains as f64),
-                    pixels(camera.width, camera.height),
-                ),
+                + render_seconds(iterations * restarts, pixels(camera.width, camera.height)),
         );
+        if chains > 0 {
+            // The chains step together, one batch of renders per SGLD iteration.
+            let steps = self.config.sgld.iterations as f64;
+            time.item(
+                format!(
+                    "SGLD: `sgld.iterations` = {steps} steps of --sgld {chains} chains at \
+                     `camera.width` × `camera.height` = {} × {}",
+                    camera.width, camera.height
+                ),
+                steps * MIN_SECONDS_PER_STEP
+                    + render_seconds(steps * chains as f64, pixels(camera.width, camera.height)),
+            );
+        }
         time
     }
 
