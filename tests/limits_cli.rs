@@ -261,17 +261,31 @@ fn render_path_refuses_frames_too_large_or_too_many_from_options_or_the_file() {
             "--out",
             s(&out_dir),
             "--width",
-            "1000000000",
+            "60000",
         ],
     );
     assert_refused(&out, &["--width", "memory"]);
     // The size written in the file is checked like the option.
-    let huge = nerfstudio_path(dir.path(), 2, (2_000_000, 1_000_000));
+    let huge = nerfstudio_path(dir.path(), 2, (60_000, 50_000));
     let out = quickly(
         20,
         &["render-path", s(&scene), s(&huge), "--out", s(&out_dir)],
     );
     assert_refused(&out, &["the path file's", "memory"]);
+    // Beyond 65 536 pixels a side no camera is made at all, whatever the memory.
+    let out = quickly(
+        20,
+        &[
+            "render-path",
+            s(&scene),
+            s(&path),
+            "--out",
+            s(&out_dir),
+            "--width",
+            "1000000000",
+        ],
+    );
+    assert_refused(&out, &["--width", "65536"]);
     assert!(!out_dir.join("frames").exists(), "nothing rendered");
 }
 
