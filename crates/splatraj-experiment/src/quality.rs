@@ -225,9 +225,12 @@ pub fn run_child(exe: &Path, config: &Path, runs_dir: &Path, set: &[String]) -> 
     for s in set {
         command.args(["--set", s]);
     }
-    let output = command
-        .output()
-        .with_context(|| format!("cannot start a run of {}", config.display()))?;
+    // Through `output_until_stopped`: a stop ends the child too, and the child dies with this
+    // process (the trial found bench children left running after their parent was killed).
+    let output = crate::children::output_until_stopped(
+        &mut command,
+        &format!("the run of {}", config.display()),
+    )?;
     if !output.status.success() {
         bail!(
             "the run of {} failed: {}",
