@@ -501,6 +501,23 @@ struct Row {
     mentions: &'static [&'static str],
 }
 
+/// `render` of the fixture's scene from the demo mug camera with `mask` (a `.npy` path).
+fn render_with_mask(f: &Fixture, d: &Path, mask: &str) -> Vec<String> {
+    let camera = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/cameras/demo_mug.json");
+    let out = d.join("out").display().to_string();
+    strings(&[
+        "render",
+        "--scene",
+        s(&f.scene()),
+        "--camera",
+        s(&camera),
+        "--mask",
+        mask,
+        "--out",
+        &out,
+    ])
+}
+
 fn strings(args: &[&str]) -> Vec<String> {
     args.iter().map(|a| a.to_string()).collect()
 }
@@ -669,23 +686,7 @@ const TABLE: &[Row] = &[
     },
     Row {
         proves: "render_refuses_a_mask_npy_whose_shape_claims_more_than_it_holds",
-        args: |f, d| {
-            let mask = npy_claiming(d, "(3000,)", 100);
-            let camera =
-                Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/cameras/demo_mug.json");
-            let out = d.join("out").display().to_string();
-            strings(&[
-                "render",
-                "--scene",
-                s(&f.scene()),
-                "--camera",
-                s(&camera),
-                "--mask",
-                &mask,
-                "--out",
-                &out,
-            ])
-        },
+        args: |f, d| render_with_mask(f, d, &npy_claiming(d, "(3000,)", 100)),
         mentions: &["mask.npy", "shape [3000]", "needs 12000 bytes", "holds 400"],
     },
     Row {
@@ -713,23 +714,7 @@ const TABLE: &[Row] = &[
     Row {
         // npyz multiplies the shape unchecked: 2^65 elements panicked in a debug build.
         proves: "render_refuses_a_mask_npy_whose_shape_product_overflows_without_panicking",
-        args: |f, d| {
-            let mask = npy_claiming(d, "(4294967296, 4294967296, 2)", 1);
-            let camera =
-                Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/cameras/demo_mug.json");
-            let out = d.join("out").display().to_string();
-            strings(&[
-                "render",
-                "--scene",
-                s(&f.scene()),
-                "--camera",
-                s(&camera),
-                "--mask",
-                &mask,
-                "--out",
-                &out,
-            ])
-        },
+        args: |f, d| render_with_mask(f, d, &npy_claiming(d, "(4294967296, 4294967296, 2)", 1)),
         mentions: &[
             "mask.npy",
             "[4294967296, 4294967296, 2]",

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use splatraj_experiment::Extensions;
 use splatraj_experiment::study::measure::MemoryReading;
 use splatraj_experiment::study::plan::PlanOptions;
+use splatraj_experiment::study::rows::StudyRow;
 use splatraj_experiment::study::summary::StudyContext;
 use splatraj_experiment::study::{
     Design, Factor, StudyFile, StudyPlan, StudySummary, measure_run, read_study, write_study,
@@ -41,6 +42,24 @@ seeds = 2
 samples = 2
 ldj_samples = 11
 "#;
+
+/// Every run of `plan`, measured in this process.
+fn measure_all(plan: &StudyPlan, extensions: &Extensions) -> Vec<StudyRow> {
+    let mut rows = Vec::new();
+    for run in &plan.runs {
+        rows.extend(
+            measure_run(
+                plan,
+                run,
+                extensions,
+                MemoryReading::Shared,
+                splatraj_scene::stop::Since::now(),
+            )
+            .unwrap(),
+        );
+    }
+    rows
+}
 
 fn config(dir: &Path) -> PathBuf {
     let path = dir.join("tiny.toml");
@@ -106,19 +125,7 @@ fn a_grid_study_has_a_row_per_run_and_a_non_dominated_frontier() {
     let plan = StudyPlan::new(&config(dir.path()), &options(true), &extensions).unwrap();
     assert_eq!(plan.variants.len(), 4);
     assert_eq!(plan.runs.len(), 8);
-    let mut rows = Vec::new();
-    for run in &plan.runs {
-        rows.extend(
-            measure_run(
-                &plan,
-                run,
-                &extensions,
-                MemoryReading::Shared,
-                splatraj_scene::stop::Since::now(),
-            )
-            .unwrap(),
-        );
-    }
+    let rows = measure_all(&plan, &extensions);
     for v in &plan.variants {
         let seeds: Vec<u64> = rows
             .iter()
@@ -251,19 +258,7 @@ fn a_clearance_config_reports_the_paths_clearance() {
         ..PlanOptions::default()
     };
     let plan = StudyPlan::new(&path, &options, &extensions).unwrap();
-    let mut rows = Vec::new();
-    for run in &plan.runs {
-        rows.extend(
-            measure_run(
-                &plan,
-                run,
-                &extensions,
-                MemoryReading::Shared,
-                splatraj_scene::stop::Since::now(),
-            )
-            .unwrap(),
-        );
-    }
+    let rows = measure_all(&plan, &extensions);
     assert_eq!(rows.len(), 2);
     for r in &rows {
         let per_window: Vec<f64> = r.windows.iter().map(|w| w.min_clearance.unwrap()).collect();

@@ -260,28 +260,29 @@ fn merge_group(scene: &Scene, members: impl Iterator<Item = usize> + Clone) -> M
             sh: scene.sh[only * coeffs..(only + 1) * coeffs].to_vec(),
         };
     }
+    let members: Vec<usize> = members.collect();
+    let weights: Vec<f64> = members.iter().map(|&i| weight(scene, i)).collect();
+    let total: f64 = weights.iter().sum();
     // A group of fully transparent members still needs weights: fall back to equal ones.
-    let total: f64 = members.clone().map(|i| weight(scene, i)).sum();
-    let w = |i: usize| {
-        if total > 0.0 {
-            weight(scene, i) / total
-        } else {
-            1.0 / members.clone().count() as f64
-        }
+    let shares: Vec<f64> = if total > 0.0 {
+        weights.iter().map(|w| w / total).collect()
+    } else {
+        vec![1.0 / members.len() as f64; members.len()]
     };
     let mean: DVec3 = members
-        .clone()
-        .map(|i| w(i) * DVec3::from(scene.means[i].map(f64::from)))
+        .iter()
+        .zip(&shares)
+        .map(|(&i, &w)| w * DVec3::from(scene.means[i].map(f64::from)))
         .sum();
     let mut spread = DMat3::ZERO;
     let mut sh = vec![0.0f64; coeffs];
     let mut clear = 1.0f64;
-    for i in members.clone() {
+    for (&i, &w) in members.iter().zip(&shares) {
         let d = DVec3::from(scene.means[i].map(f64::from)) - mean;
         let outer = DMat3::from_cols(d * d.x, d * d.y, d * d.z);
-        spread += (covariance(scene, i) + outer) * w(i);
+        spread += (covariance(scene, i) + outer) * w;
         for (s, &c) in sh.iter_mut().zip(&scene.sh[i * coeffs..(i + 1) * coeffs]) {
-            *s += w(i) * f64::from(c);
+            *s += w * f64::from(c);
         }
         clear *= 1.0 - f64::from(scene.opacities[i]);
     }
