@@ -7,6 +7,7 @@ use std::io::IsTerminal;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use splatraj_scene::allocation::ReportingAllocator;
 
 /// Every burn tensor op allocates a fresh buffer. glibc's allocator hands large freed buffers
 /// back to the OS and the next op faults them in again, zeroed: on a 150k-Gaussian mask pass
@@ -14,8 +15,10 @@ use clap::{Parser, Subcommand};
 /// fwd + bwd 111 → 95 ms on one thread) for about 50 MB more resident memory. mimalloc (a
 /// maintained allocator, C built by its crate) keeps and reuses them. Only the binary sets it:
 /// programs using the library choose their own allocator.
+/// Wrapped so that a refused allocation ends with a message and status 1, not an abort
+/// ([`splatraj_scene::allocation`]).
 #[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+static ALLOCATOR: ReportingAllocator<mimalloc::MiMalloc> = ReportingAllocator(mimalloc::MiMalloc);
 
 // mimalloc's C API (in the library its crate builds; the crate declares it only behind a
 // feature that needs one more dependency).
@@ -76,8 +79,28 @@ enum Command {
     Report(commands::report::ReportArgs),
 }
 
+/// What the work planned, for the message of an allocation that fails anyway: the largest
+/// stage of the last memory plan that passed.
+fn planned_memory() -> String {
+    let mut words = String::new();
+    splatraj_experiment::resources::with_last_checked_peak(|peak| {
+        if let Some((stage, limit)) = peak {
+            words = format!(
+                "The plan for this work estimated at most {} for {}, under the limit of {} \
+                 ({}); this input needed more.",
+                splatraj_experiment::resources::show_bytes(stage.bytes),
+                stage.what,
+                splatraj_experiment::resources::show_bytes(limit.bytes),
+                limit.source_words()
+            );
+        }
+    });
+    words
+}
+
 fn main() -> ExitCode {
     keep_freed_memory();
+    splatraj_scene::allocation::end_failed_allocations_cleanly(planned_memory);
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()

@@ -147,6 +147,45 @@ fn run_check_refuses_what_cannot_fit_naming_the_key() {
     assert!(out.status.success(), "{}", stderr(&out));
 }
 
+/// A camera whose view search fits this machine's memory (3.6 GB against 75 % of 7 GB, the
+/// smallest CI machine) but not the 3 GB address space the process is given: without the
+/// address-space limit in the plan the run starts and aborts on a failed allocation.
+#[cfg(target_os = "linux")]
+#[test]
+fn run_check_refuses_work_beyond_the_address_space_limit_naming_ulimit() {
+    use std::os::unix::process::CommandExt;
+    let dir = tempfile::tempdir().unwrap();
+    let config = tiny_config(dir.path());
+    let mut command = Command::new(env!("CARGO_BIN_EXE_splatraj"));
+    command.args([
+        "run",
+        s(&config),
+        "--check",
+        "--set",
+        "camera.width=2000",
+        "--set",
+        "camera.height=1000",
+    ]);
+    // SAFETY: setrlimit is async-signal-safe and only changes the child's own limit.
+    unsafe {
+        command.pre_exec(|| {
+            let limit = libc::rlimit {
+                rlim_cur: 3_000_000_000,
+                rlim_max: 3_000_000_000,
+            };
+            if libc::setrlimit(libc::RLIMIT_AS, &limit) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    let out = command.output().unwrap();
+    assert_clean_failure(
+        &out,
+        &["`camera.width`", "address-space limit", "ulimit -v"],
+    );
+}
+
 #[test]
 fn run_check_of_ten_million_object_or_random_restarts_answers_in_seconds_without_building_them() {
     // Building 10⁷ starts took minutes before the check answered; the check builds one and

@@ -126,6 +126,9 @@ impl Experiment {
             coarse: None,
             prepared_at,
         };
+        experiment
+            .preparation_memory()
+            .check(experiment.memory_limit()?, crate::resources::RAISE_LIMIT)?;
         experiment.ground_queries()?;
         if experiment.config.camera.working_distance == crate::config::WorkingDistance::Measured {
             experiment.measure_working_distances()?;

@@ -17,6 +17,30 @@ impl Experiment {
         MemoryLimit::new(self.config.max_memory_gb)
     }
 
+    /// Peak memory of preparing this experiment after its scene is loaded: the view search and
+    /// the working distances render batches of poses at the camera's size (before the plans
+    /// of the work, which need the prepared windows).
+    pub fn preparation_memory(&self) -> MemoryPlan {
+        let mut plan = MemoryPlan::default();
+        let (n, fb) = (self.scene.len(), self.dtype.size());
+        let base = scene_bytes(n, fb);
+        let camera = &self.config.camera;
+        let camera_pixels = camera.width as f64 * camera.height as f64;
+        let batch = splatraj_traj::optimise::VIEW_SEARCH_BATCH;
+        plan.stage(format!("the scene ({n} Gaussians)"), base);
+        // Each batch is also read back as f64 on the host.
+        plan.stage(
+            format!(
+                "the view search: {batch} poses at once at `camera.width` × `camera.height` = \
+                 {} × {}",
+                camera.width, camera.height
+            ),
+            base + render_bytes(batch, camera_pixels, n, false, fb)
+                + batch as f64 * camera_pixels * 8.0,
+        );
+        plan
+    }
+
     /// The stages every piece of work shares: the scene, metrics and frames at the output size.
     fn output_stages(&self, plan: &mut MemoryPlan, metric_poses: usize) {
         let (n, fb) = (self.scene.len(), self.dtype.size());

@@ -17,8 +17,12 @@
 //! meant to be above the real peak (mask passes prune most Gaussians, so a run uses less), and
 //! only catches sizes that cannot fit: a 10⁷×10⁷ camera, 10⁸ basis functions, 10⁵ restarts.
 //! The default limit is [`DEFAULT_MEMORY_FRACTION`] of the physical memory (read with
-//! `sysinfo`, which knows every platform's way to ask). A prepared experiment's plans, stage by
+//! `sysinfo`, which knows every platform's way to ask, and a container's limit), and any limit
+//! is at most that share of the process's address-space limit (`ulimit -v`), past which an
+//! allocation fails however much the machine holds. A prepared experiment's plans, stage by
 //! stage, are [`crate::memory_plans`]; this file knows sizes, not experiments.
+
+use std::sync::Mutex;
 
 use anyhow::{Result, bail};
 
@@ -42,36 +46,96 @@ pub const BASE_BYTES: f64 = 64e6;
 pub struct MemoryLimit {
     /// Bytes.
     pub bytes: f64,
-    /// Given (by a key or an option) or the default share of physical memory.
-    pub given: bool,
+    /// Where the limit comes from (shown when work is refused).
+    pub source: LimitSource,
+}
+
+/// Where a [`MemoryLimit`] comes from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LimitSource {
+    /// A key or an option gave it.
+    Given,
+    /// [`DEFAULT_MEMORY_FRACTION`] of the physical memory, or of the control group's limit
+    /// when a container holds less.
+    Machine,
+    /// [`DEFAULT_MEMORY_FRACTION`] of the process's address-space limit (`ulimit -v`, `prlimit
+    /// --as`): above it an allocation fails whatever the machine holds, so it bounds a given
+    /// limit too.
+    AddressSpace,
 }
 
 impl MemoryLimit {
     /// `gigabytes` when given (must be finite and > 0), else [`DEFAULT_MEMORY_FRACTION`] of
-    /// the physical memory (or 16 GB when it cannot be read).
+    /// the physical memory (or 16 GB when it cannot be read); either way at most that share of
+    /// the process's address-space limit.
     pub fn new(gigabytes: Option<f64>) -> Result<MemoryLimit> {
-        match gigabytes {
-            Some(gb) if gb.is_finite() && gb > 0.0 => Ok(MemoryLimit {
+        let chosen = match gigabytes {
+            Some(gb) if gb.is_finite() && gb > 0.0 => MemoryLimit {
                 bytes: gb * 1e9,
-                given: true,
-            }),
+                source: LimitSource::Given,
+            },
             Some(gb) => bail!("the memory limit {gb} GB must be finite and > 0"),
-            None => Ok(MemoryLimit {
+            None => MemoryLimit {
                 bytes: DEFAULT_MEMORY_FRACTION * physical_memory().unwrap_or(16e9 / 0.75),
-                given: false,
-            }),
+                source: LimitSource::Machine,
+            },
+        };
+        Ok(match address_space_limit() {
+            Some(bytes) if DEFAULT_MEMORY_FRACTION * bytes < chosen.bytes => MemoryLimit {
+                bytes: DEFAULT_MEMORY_FRACTION * bytes,
+                source: LimitSource::AddressSpace,
+            },
+            _ => chosen,
+        })
+    }
+
+    /// Where the limit comes from, in words (e.g. "75 % of this machine's memory").
+    pub fn source_words(&self) -> String {
+        let share = 100.0 * DEFAULT_MEMORY_FRACTION;
+        match self.source {
+            LimitSource::Given => "the limit given".to_string(),
+            LimitSource::Machine => format!("{share:.0} % of this machine's memory"),
+            LimitSource::AddressSpace => {
+                format!("{share:.0} % of this process's address-space limit")
+            }
         }
     }
 }
 
-/// Physical memory in bytes, if the platform tells.
+/// Physical memory in bytes (the control group's limit when a container holds less), if the
+/// platform tells.
 pub fn physical_memory() -> Option<f64> {
     let mut system = sysinfo::System::new();
     system.refresh_memory();
-    match system.total_memory() {
-        0 => None,
-        bytes => Some(bytes as f64),
-    }
+    let total = match system.total_memory() {
+        0 => return None,
+        bytes => bytes,
+    };
+    // A container's limit reads as the host's memory in /proc/meminfo; past the group's
+    // limit the kernel kills the process, so it is the memory there is.
+    let contained = system
+        .cgroup_limits()
+        .map(|limits| limits.total_memory)
+        .filter(|&bytes| bytes > 0);
+    Some(contained.map_or(total, |bytes| bytes.min(total)) as f64)
+}
+
+/// The process's address-space limit in bytes (`RLIMIT_AS`), when one is set.
+#[cfg(target_os = "linux")]
+pub fn address_space_limit() -> Option<f64> {
+    let mut limit = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: getrlimit only writes the struct it is given.
+    let status = unsafe { libc::getrlimit(libc::RLIMIT_AS, &mut limit) };
+    (status == 0 && limit.rlim_cur != libc::RLIM_INFINITY).then_some(limit.rlim_cur as f64)
+}
+
+/// The process's address-space limit: none known on this platform.
+#[cfg(not(target_os = "linux"))]
+pub fn address_space_limit() -> Option<f64> {
+    None
 }
 
 /// One stage of the work and what it needs.
@@ -117,18 +181,14 @@ impl MemoryPlan {
                 Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
             )
         {
-            let source = if limit.given {
-                "the limit given".to_string()
-            } else {
-                format!(
-                    "{:.0} % of this machine's memory",
-                    100.0 * DEFAULT_MEMORY_FRACTION
-                )
-            };
-            let raise = if raise.is_empty() {
-                String::new()
-            } else {
-                format!(", or raise the limit with {raise}")
+            let source = limit.source_words();
+            let raise = match limit.source {
+                // A given limit would be capped again.
+                LimitSource::AddressSpace => {
+                    ", or raise the address-space limit (`ulimit -v`)".to_string()
+                }
+                _ if raise.is_empty() => String::new(),
+                _ => format!(", or raise the limit with {raise}"),
             };
             bail!(
                 "{} needs about {} of memory, more than the limit of {} ({source}); make it \
@@ -138,7 +198,32 @@ impl MemoryPlan {
                 show_bytes(limit.bytes)
             );
         }
+        if let Some(stage) = self.peak() {
+            remember_checked_peak(stage, limit);
+        }
         Ok(())
+    }
+}
+
+/// The largest stage of the last plan that passed its check and the limit it passed: what an
+/// allocation failing anyway was most likely part of.
+static CHECKED_PEAK: Mutex<Option<(Stage, MemoryLimit)>> = Mutex::new(None);
+
+fn remember_checked_peak(stage: &Stage, limit: MemoryLimit) {
+    let mut checked = match CHECKED_PEAK.lock() {
+        Ok(checked) => checked,
+        Err(poisoned) => poisoned.into_inner(),
+    };
+    *checked = Some((stage.clone(), limit));
+}
+
+/// Calls `show` with the largest stage of the last memory plan that passed its check and the
+/// limit it passed, without waiting for the lock (`None` when none passed or it is held):
+/// the message of an allocation failure, which may come from the thread recording one.
+pub fn with_last_checked_peak(show: impl FnOnce(Option<(&Stage, &MemoryLimit)>)) {
+    match CHECKED_PEAK.try_lock() {
+        Ok(checked) => show(checked.as_ref().map(|(stage, limit)| (stage, limit))),
+        Err(_) => show(None),
     }
 }
 

@@ -11,11 +11,16 @@ use std::sync::Mutex;
 /// Temporary files being written now.
 static IN_FLIGHT: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
-/// Removes the temporary files of every write in progress (before an immediate exit).
-pub fn remove_partial_files() {
-    let paths = match IN_FLIGHT.lock() {
+/// Removes the temporary files of every write in progress, if no thread holds their list now
+/// (before an immediate exit from a failure: the failing thread may be the one holding it, in
+/// the middle of starting a write, and must not wait for itself).
+pub fn remove_partial_files_if_free() {
+    let paths = match IN_FLIGHT.try_lock() {
         Ok(mut paths) => std::mem::take(&mut *paths),
-        Err(poisoned) => std::mem::take(&mut *poisoned.into_inner()),
+        Err(std::sync::TryLockError::Poisoned(poisoned)) => {
+            std::mem::take(&mut *poisoned.into_inner())
+        }
+        Err(std::sync::TryLockError::WouldBlock) => return,
     };
     for path in paths {
         let _ = std::fs::remove_file(path);

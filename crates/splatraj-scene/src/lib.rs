@@ -5,11 +5,14 @@
 //! compressed PLY, Niantic SPZ, PlayCanvas SOG, antimatter15 `.splat`, GaussianSplats3D
 //! `.ksplat`, label sidecars), writers of INRIA PLY, compressed PLY and SPZ, validation with clear
 //! errors, a guess of the scene's up axis, coarser copies of a scene (neighbours merged) and the
-//! procedural demo scene. It does not render,
+//! procedural demo scene; and the program-wide plumbing every crate shares: whole-or-nothing
+//! file writes, stop requests, and an allocation failure that ends with a message instead of an
+//! abort. It does not render,
 //! select objects or depend on burn: those live in the crates further down the pipeline.
 
 #![warn(missing_docs)]
 
+pub mod allocation;
 pub mod atomic;
 pub mod coarse;
 pub mod demo;

@@ -47,8 +47,8 @@ pub use trajectory::{
 };
 pub use units::PoseUnits;
 pub use views::{
-    Candidate, ViewSearch, ViewWeights, ViewedObject, WindowViews, calibrated_radius, choose_views,
-    search_views,
+    Candidate, VIEW_SEARCH_BATCH, ViewSearch, ViewWeights, ViewedObject, WindowViews,
+    calibrated_radius, choose_views, search_views,
 };
 
 /// Why an optimisation could not run.

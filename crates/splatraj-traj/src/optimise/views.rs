@@ -188,7 +188,8 @@ pub fn candidate_views(
 }
 
 /// Renders batches of at most this many poses at once (bounds the search's memory).
-const BATCH: usize = 32;
+/// Poses the view search renders at once (its peak memory is this many images).
+pub const VIEW_SEARCH_BATCH: usize = 32;
 
 /// Σ of the mask `mask` (one value per Gaussian of `scene`) at each pose, rendered pruned to
 /// the mask at `intrinsics`, in batches of [`BATCH`].
@@ -206,7 +207,7 @@ fn mask_sums(
     };
     let per_view = intrinsics.width * intrinsics.height;
     let mut sums = Vec::with_capacity(poses.len());
-    for batch in poses.chunks(BATCH) {
+    for batch in poses.chunks(VIEW_SEARCH_BATCH) {
         let images = render(scene, scene.poses(batch), &request)?.images; // [B, H, W, 1]
         let values = to_host(images).map_err(|e| OptimiseError::ReadBack(e.to_string()))?;
         sums.extend(
