@@ -99,22 +99,24 @@ impl Case {
 // --- Sizes that cannot fit are refused before any work, naming the key and the limit. ---
 
 #[test]
-fn a_camera_of_ten_million_pixels_squared_is_refused_before_binning() {
+fn a_camera_of_the_largest_side_squared_is_refused_for_its_memory_before_binning() {
     let case = Case::new();
     let camera = case.camera(|c| {
-        c["width"] = 10_000_000.into();
-        c["height"] = 10_000_000.into();
+        c["width"] = 65_536.into();
+        c["height"] = 65_536.into();
     });
     case.render_fails(
         &camera,
         &[],
-        &[
-            "`width` × `height`",
-            "10000000 × 10000000",
-            "PB",
-            "--max-memory",
-        ],
+        &["`width` × `height`", "65536 × 65536", "GB", "--max-memory"],
     );
+}
+
+#[test]
+fn a_camera_file_wider_than_any_image_is_refused_naming_the_file() {
+    let case = Case::new();
+    let camera = case.camera(|c| c["width"] = 1_000_000_000.into());
+    case.render_fails(&camera, &[], &["camera.json", "1000000000×240", "65536"]);
 }
 
 #[test]
@@ -524,18 +526,79 @@ fn strings(args: &[&str]) -> Vec<String> {
 
 const TABLE: &[Row] = &[
     Row {
-        proves: "run_whose_loss_goes_nan_stops_naming_the_learning_rate_and_leaves_no_run_folder",
+        proves: "run_check_refuses_a_learning_rate_above_one_radian_per_step",
         args: |f, d| {
             let c = config_in(f, d, "");
             strings(&[
                 "run",
                 &c,
-                "--quiet",
+                "--check",
                 "--set",
                 "optimiser.learning_rate=1e30",
             ])
         },
-        mentions: &["`optimiser.learning_rate`", "step", "NaN"],
+        mentions: &["`optimiser.learning_rate`", "(0, 1]"],
+    },
+    Row {
+        proves: "run_check_refuses_a_learning_rate_of_zero_that_never_moves",
+        args: |f, d| {
+            let c = config_in(f, d, "");
+            strings(&["run", &c, "--check", "--set", "optimiser.learning_rate=0"])
+        },
+        mentions: &["`optimiser.learning_rate`", "(0, 1]"],
+    },
+    Row {
+        proves: "run_whose_weighted_costs_overflow_names_the_weight_not_the_learning_rate",
+        args: |f, d| {
+            let c = config_in(f, d, "");
+            strings(&["run", &c, "--quiet", "--set", "costs.tce.weight=1e308"])
+        },
+        mentions: &["`costs.tce.weight`", "step 0"],
+    },
+    Row {
+        proves: "pose_refuses_zero_iterations_naming_the_key",
+        args: |f, d| {
+            let c = config_in(f, d, "");
+            strings(&[
+                "pose",
+                &c,
+                "--quiet",
+                "--set",
+                "pose.optimiser.iterations=0",
+            ])
+        },
+        mentions: &["`pose.optimiser.iterations`", "at least 1"],
+    },
+    Row {
+        proves: "pose_names_a_nan_max_memory_by_its_flag",
+        args: |f, d| {
+            let c = config_in(f, d, "");
+            strings(&["pose", &c, "--quiet", "--max-memory", "NaN"])
+        },
+        mentions: &["--max-memory", "NaN"],
+    },
+    Row {
+        proves: "render_names_a_zero_target_ratio_by_its_flag",
+        args: |f, d| {
+            let camera =
+                Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/cameras/demo_mug.json");
+            let out = d.join("out").display().to_string();
+            strings(&[
+                "render",
+                "--scene",
+                s(&f.scene()),
+                "--camera",
+                s(&camera),
+                "--label",
+                "1",
+                "--grad",
+                "--target-ratio",
+                "0",
+                "--out",
+                &out,
+            ])
+        },
+        mentions: &["--target-ratio", "(0, 1]"],
     },
     Row {
         proves: "run_check_refuses_a_runs_dir_that_is_a_file",

@@ -63,7 +63,7 @@ pub fn run(args: PoseArgs) -> Result<()> {
     if let Some(r) = args.restarts {
         overrides.push(format!("start.restarts={r}"));
     }
-    overrides.extend(args.memory.overrides());
+    overrides.extend(args.memory.overrides()?);
     let config = Config::load(&args.config, &overrides)?;
     let experiment = Experiment::prepare(&config)?;
     let plan = experiment.check_pose_run(args.sgld)?;

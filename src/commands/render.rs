@@ -79,9 +79,9 @@ pub struct RenderArgs {
 /// Runs `splatraj render`.
 pub fn run(args: RenderArgs) -> Result<()> {
     // Cheap checks first, then every input, then the renders; files are written last.
-    if !(args.target_ratio.is_finite() && (0.0..=1.0).contains(&args.target_ratio)) {
+    if !(args.target_ratio > 0.0 && args.target_ratio <= 1.0) {
         bail!(
-            "--target-ratio {} must be a share of the frame in [0, 1]",
+            "--target-ratio {} must be a share of the frame in (0, 1]",
             args.target_ratio
         );
     }

@@ -57,7 +57,7 @@ pub struct RunArgs {
 /// Runs `splatraj run`.
 pub fn run(args: RunArgs) -> Result<()> {
     let mut overrides = args.set.clone();
-    overrides.extend(args.memory.overrides());
+    overrides.extend(args.memory.overrides()?);
     let (config, checkpoint) = match (&args.resume, &args.config) {
         (Some(dir), _) => {
             let (config, checkpoint) = resumable(dir, &overrides)?;

@@ -117,7 +117,7 @@ impl PathFrames {
 pub const MAX_IMAGE_SIDE: usize = 65_536;
 
 /// Refuses a camera larger than [`MAX_IMAGE_SIDE`] on a side.
-fn check_image_side(k: &Intrinsics) -> Result<()> {
+pub(crate) fn check_image_side(k: &Intrinsics) -> Result<()> {
     if k.width > MAX_IMAGE_SIDE || k.height > MAX_IMAGE_SIDE {
         bail!(
             "a {}×{} image is larger than {MAX_IMAGE_SIDE} pixels on a side",

@@ -26,6 +26,10 @@ pub fn read_camera_file(path: &Path) -> Result<CameraSpec> {
             _ => anyhow!("camera file {}: key `{key}`: {}", path.display(), e.inner()),
         }
     })?;
-    file.camera()
-        .map_err(|e| anyhow!("camera file {}: {e}", path.display()))
+    let camera = file
+        .camera()
+        .map_err(|e| anyhow!("camera file {}: {e}", path.display()))?;
+    crate::camera_paths::check_image_side(&camera.intrinsics)
+        .map_err(|e| anyhow!("camera file {}: {e}", path.display()))?;
+    Ok(camera)
 }

@@ -80,21 +80,64 @@ pub enum OptimiseError {
     /// A tensor could not be read back to the host.
     #[error("{0}")]
     ReadBack(String),
-    /// The sampled loss went NaN or infinite: the weights stepped to where the costs overflow
-    /// (a learning rate far too large), or the start itself is out of range.
-    #[error(
-        "the loss is {total} at step {step}: the trajectory left the range where the costs are \
-         finite; lower `optimiser.learning_rate` (now {learning_rate:e}) or check the start"
-    )]
+    /// The sampled loss went NaN or infinite: a cost overflowed with its weight, a cost is
+    /// not finite at the start, or the weights stepped to where the costs overflow (a learning
+    /// rate far too large).
+    #[error("the loss is {total} at step {step}: {why}")]
     LossNotFinite {
         /// The step whose loss is not finite (0: the start).
         step: usize,
         /// The loss.
         total: f64,
-        /// The learning rate in use.
-        learning_rate: f64,
+        /// Which cost and what to change ([`loss_blame`]).
+        why: String,
     },
 }
+
+/// Why a loss is not finite, from each window's `(cost, weight, mean)` at that step. A cost
+/// whose mean is not finite is the start's fault at step 0 and the learning rate's later;
+/// when every cost is finite, their weighted sum overflowed, and the largest weighted cost's
+/// weight is to blame.
+pub fn loss_blame(
+    windows: &[Vec<(&'static str, f64, f64)>],
+    step: usize,
+    learning_rate: f64,
+) -> String {
+    let terms = || {
+        windows.iter().enumerate().flat_map(|(w, terms)| {
+            terms
+                .iter()
+                .map(move |&(name, weight, mean)| (w, name, weight, mean))
+        })
+    };
+    if let Some((w, name, _, mean)) = terms().find(|(_, _, _, mean)| !mean.is_finite()) {
+        return if step == 0 {
+            format!(
+                "cost `{name}` of window {w} is {mean} at the start; check the start \
+                 (`[start]`) and the cost's settings (`costs.{name}`)"
+            )
+        } else {
+            format!(
+                "cost `{name}` of window {w} is {mean}: the trajectory left the range where the \
+                 costs are finite; lower `optimiser.learning_rate` (now {learning_rate:e}) or \
+                 check the start"
+            )
+        };
+    }
+    match terms().max_by(|a, b| (a.2 * a.3).abs().total_cmp(&(b.2 * b.3).abs())) {
+        Some((w, name, weight, mean)) => format!(
+            "cost `{name}` of window {w} is {mean:.4}, and with its weight {weight:e} the \
+             weighted costs overflow; lower `costs.{name}.weight`"
+        ),
+        None => format!(
+            "no cost was evaluated; lower `optimiser.learning_rate` (now {learning_rate:e}) or \
+             check the start"
+        ),
+    }
+}
+
+/// The largest learning rate in normalised units (radians of rotation per step).
+pub const MAX_LEARNING_RATE: f64 = 1.0;
 
 /// Checks Adam's settings (a learning rate named by the caller, β1, β2, ε).
 pub(crate) fn check_adam(
@@ -104,8 +147,16 @@ pub(crate) fn check_adam(
     epsilon: f64,
 ) -> Result<(), OptimiseError> {
     let bad = |field, reason: String| Err(OptimiseError::InvalidOptions { field, reason });
-    if !(lr.1.is_finite() && lr.1 >= 0.0) {
-        return bad(lr.0, format!("= {} must be finite and ≥ 0", lr.1));
+    if !(lr.1 > 0.0 && lr.1 <= MAX_LEARNING_RATE) {
+        return bad(
+            lr.0,
+            format!(
+                "= {} must be in (0, {MAX_LEARNING_RATE}]: Adam moves each normalised \
+                 coefficient by about the rate per step, so 0 never moves and more than one \
+                 radian per step leaves the scene at the first step",
+                lr.1
+            ),
+        );
     }
     for (field, beta) in [("beta1", beta1), ("beta2", beta2)] {
         if !(0.0..1.0).contains(&beta) {
@@ -161,4 +212,39 @@ pub(crate) fn per_sample(terms: &CostTerms) -> Vec<(f64, TermRow)> {
             (total, row)
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::loss_blame;
+
+    #[test]
+    fn a_finite_cost_with_a_huge_weight_blames_that_weight() {
+        let windows = vec![
+            vec![("tce", 1.0, 0.3), ("prior", 1.0, 2.0)],
+            vec![("tce", 1e308, 1.5), ("prior", 1.0, 2.0)],
+        ];
+        let why = loss_blame(&windows, 0, 0.02);
+        assert!(
+            why.contains("`costs.tce.weight`") && why.contains("window 1"),
+            "{why}"
+        );
+        assert!(!why.contains("learning_rate"), "{why}");
+    }
+
+    #[test]
+    fn a_cost_not_finite_blames_the_start_at_step_0_and_the_learning_rate_later() {
+        let windows = vec![vec![("tce", 1.0, 0.3), ("clearance", 1.0, f64::NAN)]];
+        let start = loss_blame(&windows, 0, 0.02);
+        assert!(
+            start.contains("`clearance`") && start.contains("at the start"),
+            "{start}"
+        );
+        assert!(!start.contains("learning_rate"), "{start}");
+        let later = loss_blame(&windows, 7, 0.5);
+        assert!(
+            later.contains("`optimiser.learning_rate` (now 5e-1)"),
+            "{later}"
+        );
+    }
 }

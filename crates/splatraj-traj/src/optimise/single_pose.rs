@@ -76,6 +76,14 @@ impl Default for SinglePoseOptions {
 impl SinglePoseOptions {
     /// Checks every field's range; errors name the field.
     pub fn validate(&self) -> Result<(), OptimiseError> {
+        // Zero steps would only judge the starts: not an optimisation (and `pose` would
+        // report a start as an optimised pose).
+        if self.iterations == 0 {
+            return Err(OptimiseError::InvalidOptions {
+                field: "iterations",
+                reason: "= 0 must be at least 1".into(),
+            });
+        }
         for (field, lr) in [
             ("lr_rotation", self.lr_rotation),
             ("lr_position", self.lr_position),

@@ -318,7 +318,7 @@ pub fn optimise_trajectory(
             return Err(OptimiseError::LossNotFinite {
                 step,
                 total,
-                learning_rate: options.learning_rate,
+                why: super::loss_blame(&window_terms, step, options.learning_rate),
             });
         }
         let backward_started = Instant::now();
