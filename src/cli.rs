@@ -105,6 +105,23 @@ pub fn install_stop_handler() {
     }
 }
 
+/// Checks `RAYON_NUM_THREADS` before the worker threads start: a value that is not a number
+/// is refused (rayon would ignore it silently), and a count whose stacks cannot fit the memory
+/// limit too (rayon would start them until the system refuses one, and abort).
+pub fn check_worker_threads() -> anyhow::Result<()> {
+    let Some(value) = std::env::var_os("RAYON_NUM_THREADS") else {
+        return Ok(());
+    };
+    let text = value.to_string_lossy();
+    let threads: usize = text.trim().parse().map_err(|_| {
+        anyhow::anyhow!(
+            "the environment variable RAYON_NUM_THREADS = {text:?} is not a thread count (a \
+             whole number; 0 or unset: one per core)"
+        )
+    })?;
+    splatraj_experiment::resources::check_threads("RAYON_NUM_THREADS", threads)
+}
+
 /// Exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells expect).
 pub const EXIT_INTERRUPTED: u8 = 130;
 

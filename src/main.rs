@@ -120,6 +120,10 @@ fn main() -> ExitCode {
     cli::install_lift_progress();
     cli::install_stop_handler();
     // Threads: RAYON_NUM_THREADS, else one per core (rayon's rule).
+    if let Err(error) = cli::check_worker_threads() {
+        eprintln!("error: {}", message(&error));
+        return ExitCode::FAILURE;
+    }
     if let Err(error) = rayon::ThreadPoolBuilder::new()
         .stack_size(cli::WORKER_STACK_BYTES)
         .build_global()

@@ -556,6 +556,17 @@ const TABLE: &[Row] = &[
         mentions: &["`costs.tce.weight`", "step 0"],
     },
     Row {
+        proves: "a_config_nested_too_deep_is_refused_by_place_without_quoting_its_line",
+        args: |_, d| {
+            let path = d.join("deep.toml");
+            let depth = 100_000;
+            let text = format!("a = {}{}\n", "[".repeat(depth), "]".repeat(depth));
+            std::fs::write(&path, text).unwrap();
+            strings(&["run", &path.display().to_string(), "--check"])
+        },
+        mentions: &["deep.toml", "not valid TOML at line 1, column"],
+    },
+    Row {
         proves: "pose_refuses_zero_iterations_naming_the_key",
         args: |f, d| {
             let c = config_in(f, d, "");

@@ -562,3 +562,32 @@ fn bench_frames_refuses_a_video_that_would_take_over_a_day() {
     );
     assert_clean_failure(&out, &["--seconds", "would take"]);
 }
+
+#[test]
+fn a_worker_thread_count_that_cannot_fit_or_is_not_a_number_is_refused_naming_the_variable() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(dir.path());
+    for (value, mentions) in [
+        (
+            "100000",
+            &["RAYON_NUM_THREADS", "100000 worker threads", "memory"][..],
+        ),
+        (
+            "four",
+            &["RAYON_NUM_THREADS", "\"four\"", "not a thread count"][..],
+        ),
+    ] {
+        let started = Instant::now();
+        let out = Command::new(env!("CARGO_BIN_EXE_splatraj"))
+            .args(["scene", "info", s(&scene)])
+            .env("RAYON_NUM_THREADS", value)
+            .output()
+            .unwrap();
+        assert!(
+            started.elapsed() < Duration::from_secs(20),
+            "{value}: took {:?}",
+            started.elapsed()
+        );
+        assert_clean_failure(&out, mentions);
+    }
+}

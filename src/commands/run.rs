@@ -158,9 +158,11 @@ impl Observer for RunProgress {
         if let Progress::Phase(Phase::Outputs { frames, stop }) = *progress {
             self.bar.finish_and_clear();
             match stop {
-                RunStop::Interrupted => {
-                    eprintln!("stopped by Ctrl-C: writing the best trajectory so far")
-                }
+                RunStop::Interrupted => eprintln!(
+                    "stopped by Ctrl-C: writing the metrics and {frames} frames of the best \
+                     trajectory so far; Ctrl-C again quits now (the checkpoint stays for \
+                     `--resume`)"
+                ),
                 RunStop::TimeLimit => {
                     eprintln!(
                         "`optimiser.time_limit_s` reached: writing the best trajectory so far"

@@ -167,6 +167,22 @@ const MAX_EXTENDS: usize = 8;
 /// `extends = "demo.toml"` (relative to this file) loads that config first; this file's keys
 /// then replace its values, tables merging key by key (so a variant config states only what
 /// differs; see [`merge`]). The `extends` key itself is not part of the schema.
+/// The error of a config that does not parse: where (line and column) and what, without
+/// quoting the line (toml's own message does, and a line can be megabytes long).
+fn not_valid_toml(path: &Path, text: &str, error: &toml::de::Error) -> anyhow::Error {
+    let place = error.span().map_or(String::new(), |span| {
+        let before = &text.as_bytes()[..span.start.min(text.len())];
+        let line = before.iter().filter(|&&b| b == b'\n').count() + 1;
+        let column = before.iter().rev().take_while(|&&b| b != b'\n').count() + 1;
+        format!(" at line {line}, column {column}")
+    });
+    anyhow::anyhow!(
+        "config {} is not valid TOML{place}: {}",
+        path.display(),
+        error.message().trim_end()
+    )
+}
+
 fn read_table(path: &Path, depth: usize) -> Result<toml::Table> {
     if depth > MAX_EXTENDS {
         bail!(
@@ -176,8 +192,8 @@ fn read_table(path: &Path, depth: usize) -> Result<toml::Table> {
     }
     let text = splatraj_scene::input::read_text(path)
         .with_context(|| format!("cannot read config {}", path.display()))?;
-    let mut table: toml::Table = toml::from_str(&text)
-        .map_err(|e| anyhow::anyhow!("config {} is not valid TOML: {e}", path.display()))?;
+    let mut table: toml::Table =
+        toml::from_str(&text).map_err(|e| not_valid_toml(path, &text, &e))?;
     match table.remove("extends") {
         None => Ok(table),
         Some(toml::Value::String(base)) => {
