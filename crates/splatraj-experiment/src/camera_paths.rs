@@ -448,8 +448,8 @@ fn run_frames(folder: &Path) -> Option<(f64, usize)> {
 /// A camera path file: ours or another tool's.
 #[derive(Debug, Clone)]
 pub enum PathFile {
-    /// A run's `trajectory.json`.
-    Trajectory(RunTrajectory),
+    /// A run's `trajectory.json` (boxed: it is several times the size of the other).
+    Trajectory(Box<RunTrajectory>),
     /// Another tool's camera file.
     Imported {
         /// The file.
@@ -471,7 +471,7 @@ impl PathFile {
                 .is_ok_and(|v| v.get("model").is_some() && v.get("weights").is_some())
         };
         if ours {
-            return Ok(Self::Trajectory(RunTrajectory::read(path)?));
+            return Ok(Self::Trajectory(Box::new(RunTrajectory::read(path)?)));
         }
         let (format, camera_path) = splatraj_report::read_camera_path(path)?;
         Ok(Self::Imported {
