@@ -493,6 +493,38 @@ fn empty_scene(dir: &Path) -> String {
     path.display().to_string()
 }
 
+/// The run's export in `format` (`exports/<format>/<name>`) with `edit` applied, in `dir`.
+fn export_with(
+    f: &Fixture,
+    dir: &Path,
+    format: &str,
+    name: &str,
+    edit: impl FnOnce(&mut serde_json::Value),
+) -> String {
+    let file = f.run().join("exports").join(format).join(name);
+    let mut value: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(file).unwrap()).unwrap();
+    edit(&mut value);
+    json_file(dir, name, &value)
+}
+
+/// `render-path` of the fixture's scene along `path`, into `dir/out`.
+fn render_path_of(f: &Fixture, dir: &Path, path: &str) -> Vec<String> {
+    let out = dir.join("out").display().to_string();
+    strings(&["render-path", s(&f.scene()), path, "--out", &out, "--quiet"])
+}
+
+/// A copy of the run folder in `dir/run` with only `files` of it, and `report` of it.
+fn report_of_copy(f: &Fixture, dir: &Path, files: &[&str]) -> (PathBuf, Vec<String>) {
+    let run = dir.join("run");
+    std::fs::create_dir(&run).unwrap();
+    for name in files {
+        std::fs::copy(f.run().join(name), run.join(name)).unwrap();
+    }
+    let args = strings(&["report", s(&run), "--scene", s(&f.scene())]);
+    (run, args)
+}
+
 /// One row: what it proves (its name), the command line it builds in its own folder (inputs
 /// made there first), and what the one-paragraph error must name. Every row must exit
 /// non-zero without a panic and leave its folder exactly as it was (no output, no run folder,
@@ -856,6 +888,171 @@ const TABLE: &[Row] = &[
             ])
         },
         mentions: &["--target-ratio", "NaN"],
+    },
+    Row {
+        proves: "render_path_refuses_a_nerfstudio_path_of_1e15_seconds_like_seconds_flag",
+        args: |f, d| {
+            let p = export_with(f, d, "nerfstudio", "camera_path.json", |p| {
+                p["seconds"] = 1e15.into();
+            });
+            render_path_of(f, d, &p)
+        },
+        mentions: &[
+            "camera_path.json",
+            "`seconds`",
+            "1000000000000000 s",
+            "memory",
+        ],
+    },
+    Row {
+        proves: "render_path_refuses_a_nerfstudio_length_of_0_seconds",
+        args: |f, d| {
+            let p = export_with(f, d, "nerfstudio", "camera_path.json", |p| {
+                p["seconds"] = 0.into();
+            });
+            render_path_of(f, d, &p)
+        },
+        mentions: &["camera_path.json", "seconds", "finite and > 0"],
+    },
+    Row {
+        proves: "render_path_refuses_a_nerfstudio_camera_of_aspect_0_naming_it",
+        args: |f, d| {
+            let p = export_with(f, d, "nerfstudio", "camera_path.json", |p| {
+                p["camera_path"][2]["aspect"] = 0.into();
+            });
+            render_path_of(f, d, &p)
+        },
+        mentions: &[
+            "camera_path.json",
+            "camera_path[2].aspect",
+            "finite and > 0",
+        ],
+    },
+    Row {
+        proves: "render_path_refuses_a_supersplat_keyframe_at_1e12_frames",
+        args: |f, d| {
+            let p = export_with(f, d, "supersplat", "settings.json", |p| {
+                let times = p["animTracks"][0]["keyframes"]["times"]
+                    .as_array_mut()
+                    .unwrap();
+                *times.last_mut().unwrap() = 1e12.into();
+            });
+            render_path_of(f, d, &p)
+        },
+        mentions: &[
+            "settings.json",
+            "keyframes.times[",
+            "1000000000000",
+            "below",
+        ],
+    },
+    Row {
+        proves: "render_path_refuses_a_supersplat_keyframe_before_0",
+        args: |f, d| {
+            let p = export_with(f, d, "supersplat", "settings.json", |p| {
+                p["animTracks"][0]["keyframes"]["times"][0] = (-1).into();
+            });
+            render_path_of(f, d, &p)
+        },
+        mentions: &["settings.json", "keyframes.times[0]", "-1", "from 0"],
+    },
+    Row {
+        proves: "render_path_refuses_a_config_of_another_scene_than_the_trajectorys_naming_both",
+        args: |f, d| {
+            let c = config_in(f, d, "");
+            let out = d.join("out").display().to_string();
+            let traj = f.run().join("trajectory.json").display().to_string();
+            strings(&[
+                "render-path",
+                &c,
+                &traj,
+                "--out",
+                &out,
+                "--quiet",
+                "--set",
+                "scene.demo.gaussians=2000",
+            ])
+        },
+        mentions: &[
+            "trajectory.json",
+            "of 3000 Gaussians",
+            "of 2000 Gaussians",
+            "--scene-mismatch allow",
+        ],
+    },
+    Row {
+        proves: "render_path_refuses_a_scene_file_other_than_the_trajectorys_naming_both",
+        args: |f, d| {
+            let other = d.join("other.ply");
+            let out = splatraj(&["scene", "demo", "--out", s(&other), "--gaussians", "2000"]);
+            assert!(out.status.success(), "{}", stderr(&out));
+            let out = d.join("out").display().to_string();
+            let run = f.run().display().to_string();
+            strings(&["render-path", s(&other), &run, "--out", &out, "--quiet"])
+        },
+        mentions: &[
+            "trajectory.json",
+            "3000 Gaussians",
+            "other.ply",
+            "2000 Gaussians",
+        ],
+    },
+    Row {
+        proves: "report_refuses_a_run_folder_without_metrics_json",
+        args: |f, d| report_of_copy(f, d, &["config.toml", "trajectory.json"]).1,
+        mentions: &["metrics.json", "missing"],
+    },
+    Row {
+        proves: "report_refuses_a_run_folder_without_trajectory_json",
+        args: |f, d| report_of_copy(f, d, &["config.toml", "metrics.json"]).1,
+        mentions: &["trajectory.json", "missing"],
+    },
+    Row {
+        proves: "report_refuses_a_garbage_history_csv_naming_the_line",
+        args: |f, d| {
+            let (run, args) =
+                report_of_copy(f, d, &["config.toml", "trajectory.json", "metrics.json"]);
+            std::fs::write(run.join("history.csv"), "\0\u{1}\u{2}not,a,csv\n1,2\n").unwrap();
+            args
+        },
+        mentions: &["history.csv", "line 2", "2 fields", "header has 3"],
+    },
+    Row {
+        proves: "report_refuses_a_history_csv_without_its_total_column",
+        args: |f, d| {
+            let (run, args) =
+                report_of_copy(f, d, &["config.toml", "trajectory.json", "metrics.json"]);
+            std::fs::write(run.join("history.csv"), "step,q0_tce\n0,1.5\n").unwrap();
+            args
+        },
+        mentions: &["history.csv", "line 1", "no `total` column"],
+    },
+    Row {
+        proves: "lift_masks_refuses_a_mask_of_another_size_than_its_camera_naming_both_sizes",
+        args: |f, d| {
+            let masks = d.join("m");
+            std::fs::create_dir(&masks).unwrap();
+            // The run's frames are 40×30; 7×5 is no rescale of them (aspect 1.4, not 1.333).
+            image::GrayImage::from_pixel(7, 5, image::Luma([1]))
+                .save(masks.join("frame_0000.png"))
+                .unwrap();
+            let cameras = f.run().join("exports/inria/cameras.json");
+            let out = d.join("lifted.json").display().to_string();
+            let masks = masks.display().to_string();
+            strings(&[
+                "scene",
+                "lift-masks",
+                "--scene",
+                s(&f.scene()),
+                "--cameras",
+                s(&cameras),
+                "--masks",
+                &masks,
+                "--out",
+                &out,
+            ])
+        },
+        mentions: &["frame_0000.png", "size 7×5", "40×30"],
     },
 ];
 

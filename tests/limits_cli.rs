@@ -52,6 +52,7 @@ fn nerfstudio_path(dir: &Path, frames: usize, (width, height): (usize, usize)) -
             })
             .collect(),
         fps: Some(30.0),
+        seconds: None,
     };
     let files =
         splatraj_report::export(&path, Format::Nerfstudio, &ExportOptions::default()).unwrap();

@@ -262,3 +262,51 @@ fn render_path_fails_cleanly() {
         &["--fps 0"],
     );
 }
+
+#[test]
+fn a_trajectory_renders_on_another_scene_only_when_allowed_and_an_older_file_always() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, run) = run_with_frames(dir.path());
+    // trajectory.json records the scene it was made on: the tiny config's demo room of 3000.
+    let file = run.join("trajectory.json");
+    let mut trajectory: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    assert_eq!(trajectory["scene"]["gaussians"], 3000);
+    let other = dir.path().join("other.ply");
+    let out = splatraj(&["scene", "demo", "--out", s(&other), "--gaussians", "2000"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let render = |path: &Path, out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "render-path",
+            s(&other),
+            s(path),
+            "--out",
+            s(out),
+            "--fps",
+            "4",
+            "--seconds",
+            "0.5",
+            "--no-video",
+            "--quiet",
+        ];
+        args.extend(extra);
+        splatraj(&args)
+    };
+    let refused = dir.path().join("refused");
+    assert_clean_failure(
+        &render(&file, &refused, &[]),
+        &["3000 Gaussians", "2000 Gaussians"],
+    );
+    assert!(!refused.exists());
+    let allowed = dir.path().join("allowed");
+    let out = render(&file, &allowed, &["--scene-mismatch", "allow"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("rendered anyway"), "{}", stderr(&out));
+    assert!(allowed.join("frames/frame_0001.png").is_file());
+    // A file written before the scene was recorded still renders on any scene.
+    trajectory.as_object_mut().unwrap().remove("scene");
+    let older = dir.path().join("older.json");
+    std::fs::write(&older, trajectory.to_string()).unwrap();
+    let out = render(&older, &dir.path().join("old"), &[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+}

@@ -16,9 +16,10 @@ use std::str::FromStr;
 use anyhow::{Result, bail};
 use burn::tensor::DType;
 use clap::Args;
-use splatraj::experiment::camera_paths::{FrameRequest, PathFile};
+use splatraj::experiment::camera_paths::{FrameRequest, PathFile, SceneMismatch};
 use splatraj::experiment::config::MaskOverlay;
 use splatraj::experiment::path_render::{PathRender, Video, render_path_to};
+use splatraj::experiment::records::SceneRecord;
 use splatraj::experiment::{Config, Experiment};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::render::{DeviceScene, Rasterizer};
@@ -68,6 +69,10 @@ pub struct RenderPathArgs {
     /// Compositing: fused or tensor; default: the config's, else fused.
     #[arg(long, value_parser = Rasterizer::from_str)]
     rasterizer: Option<Rasterizer>,
+    /// A trajectory.json made on another scene (another Gaussian count) than SCENE's: refuse
+    /// it, or allow it (rendered with a warning).
+    #[arg(long, default_value = "refuse", value_parser = SceneMismatch::from_str)]
+    scene_mismatch: SceneMismatch,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
@@ -122,6 +127,7 @@ pub fn run(args: RenderPathArgs) -> Result<()> {
     };
     if let (Some(e), PathFile::Trajectory(t)) = (&experiment, &path) {
         t.check_windows(e.windows.len())?;
+        t.check_scene(&SceneRecord::of(e), args.scene_mismatch)?;
     }
     let (scene, objects, rasterizer) = match &experiment {
         Some(e) => (
@@ -131,6 +137,13 @@ pub fn run(args: RenderPathArgs) -> Result<()> {
         ),
         None => {
             let loaded = args.read.load_to_render(&args.scene)?;
+            if let PathFile::Trajectory(t) = &path {
+                let given = SceneRecord {
+                    name: args.scene.display().to_string(),
+                    gaussians: loaded.scene.len(),
+                };
+                t.check_scene(&given, args.scene_mismatch)?;
+            }
             let device = args.backend.device()?;
             (
                 DeviceScene::new(&loaded.scene, &device, DType::F32),

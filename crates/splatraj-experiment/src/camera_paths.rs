@@ -18,6 +18,7 @@ use splatraj_traj::trajectory::{Basis, TrajectoryRecord, uniform_times};
 
 use crate::output_folder::OutputFolder;
 use crate::outputs::write_into_folder;
+use crate::records::SceneRecord;
 use crate::resources::check_path_frames;
 
 /// Frames per second when neither the command line, the run's config nor the file says.
@@ -53,6 +54,7 @@ impl PathFrames {
                 })
                 .collect(),
             fps: Some(self.fps),
+            seconds: None,
         }
     }
 }
@@ -169,6 +171,9 @@ struct TrajectoryExtras {
     windows: Vec<WindowEntry>,
     #[serde(default)]
     poses: Vec<SampledPose>,
+    /// Absent from files written before it was recorded.
+    #[serde(default)]
+    scene: Option<SceneRecord>,
 }
 
 /// Refuses windows that cannot be a run's: a window that does not lie in [0, 1] or ends
@@ -215,6 +220,31 @@ pub struct RunTrajectory {
     pub sampled: Vec<[f64; 6]>,
     /// The run's frame rate and frame count (its `config.toml` beside the file), if known.
     pub run_frames: Option<(f64, usize)>,
+    /// The scene it was made on, where the file records it.
+    pub scene: Option<SceneRecord>,
+}
+
+/// What a render does with a trajectory made on a scene other than the one given.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum SceneMismatch {
+    /// Refuse it, naming both scenes.
+    #[default]
+    Refuse,
+    /// Render it anyway, with a warning (e.g. over a decimated copy of the scene).
+    Allow,
+}
+
+impl std::str::FromStr for SceneMismatch {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "refuse" => Ok(Self::Refuse),
+            "allow" => Ok(Self::Allow),
+            other => Err(format!(
+                "unknown scene mismatch {other:?} (refuse or allow)"
+            )),
+        }
+    }
 }
 
 impl RunTrajectory {
@@ -264,7 +294,39 @@ impl RunTrajectory {
             windows: extras.windows,
             sampled: extras.poses.into_iter().map(|p| p.pose).collect(),
             run_frames: run_frames(folder),
+            scene: extras.scene,
         })
+    }
+
+    /// Refuses (or with [`SceneMismatch::Allow`] warns about) rendering this trajectory on
+    /// `scene` when the file records another scene, told apart by the Gaussian count (a
+    /// moved or converted copy of the scene keeps it). A file without `scene` passes.
+    pub fn check_scene(&self, scene: &SceneRecord, policy: SceneMismatch) -> Result<()> {
+        let Some(made) = &self.scene else {
+            return Ok(());
+        };
+        if made.gaussians == scene.gaussians {
+            return Ok(());
+        }
+        let problem = format!(
+            "{} (key `scene`) was made on the scene {} of {} Gaussians, not on {} of {} \
+             Gaussians",
+            self.file.display(),
+            made.name,
+            made.gaussians,
+            scene.name,
+            scene.gaussians
+        );
+        match policy {
+            SceneMismatch::Refuse => bail!(
+                "{problem}: give the trajectory's own scene, or --scene-mismatch allow to \
+                 render it anyway"
+            ),
+            SceneMismatch::Allow => {
+                tracing::warn!("{problem}: rendered anyway (--scene-mismatch allow)");
+                Ok(())
+            }
+        }
     }
 
     /// Whether the model is built in (so it can be evaluated at any time).
@@ -386,8 +448,8 @@ fn run_frames(folder: &Path) -> Option<(f64, usize)> {
 /// A camera path file: ours or another tool's.
 #[derive(Debug, Clone)]
 pub enum PathFile {
-    /// A run's `trajectory.json`.
-    Trajectory(RunTrajectory),
+    /// A run's `trajectory.json` (boxed: it is several times the size of the other).
+    Trajectory(Box<RunTrajectory>),
     /// Another tool's camera file.
     Imported {
         /// The file.
@@ -409,7 +471,7 @@ impl PathFile {
                 .is_ok_and(|v| v.get("model").is_some() && v.get("weights").is_some())
         };
         if ours {
-            return Ok(Self::Trajectory(RunTrajectory::read(path)?));
+            return Ok(Self::Trajectory(Box::new(RunTrajectory::read(path)?)));
         }
         let (format, camera_path) = splatraj_report::read_camera_path(path)?;
         Ok(Self::Imported {
@@ -442,12 +504,17 @@ impl PathFile {
     pub fn frames(&self, request: &FrameRequest) -> Result<PathFrames> {
         match self {
             Self::Trajectory(t) => t.frames(request),
-            Self::Imported { file, path, .. } => imported_frames(file, path, request),
+            Self::Imported { file, format, path } => imported_frames(file, *format, path, request),
         }
     }
 }
 
-fn imported_frames(file: &Path, path: &CameraPath, request: &FrameRequest) -> Result<PathFrames> {
+fn imported_frames(
+    file: &Path,
+    format: Format,
+    path: &CameraPath,
+    request: &FrameRequest,
+) -> Result<PathFrames> {
     request.check()?;
     if path.frames.is_empty() {
         bail!("{}: no frames", file.display());
@@ -466,11 +533,25 @@ fn imported_frames(file: &Path, path: &CameraPath, request: &FrameRequest) -> Re
                 .with_context(|| format!("{}: frame {i}", file.display()))
         })
         .collect::<Result<Vec<_>>>()?;
+    let fps = request.fps.or(path.fps).unwrap_or(DEFAULT_FPS);
+    // The length the file states is sized like `--seconds`: a path of 10¹⁵ s is a broken
+    // file, whatever few frames it lists.
+    if let Some(seconds) = path.seconds {
+        let key = match format {
+            Format::Supersplat => "animTracks[0].duration",
+            _ => "seconds",
+        };
+        check_path_frames(
+            &format!("{}: key `{key}` = {seconds} s at {fps} fps", file.display()),
+            (seconds * fps).ceil(),
+            0,
+        )?;
+    }
     PathFrames {
         times: uniform_times(path.frames.len()),
         poses: path.phis(),
         cameras,
-        fps: request.fps.or(path.fps).unwrap_or(DEFAULT_FPS),
+        fps,
     }
     .checked(file)
 }

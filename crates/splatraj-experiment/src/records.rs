@@ -2,7 +2,7 @@
 //! `sgld_samples.csv` (as serialisable values and CSV rows; [`crate::outputs`] writes them).
 
 use anyhow::Result;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::camera_file::matrix_rows;
 use splatraj_traj::optimise::sampling::{window_bounds, window_of};
@@ -49,9 +49,31 @@ pub struct WindowInfo {
     pub target_ratio: f64,
 }
 
+/// The scene a trajectory was made on, as `trajectory.json` records it (key `scene`): a path
+/// means nothing in another scene's world, so a render checks it ([`crate::camera_paths`]).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SceneRecord {
+    /// Where the scene came from (its path, or `demo (…)`).
+    pub name: String,
+    /// Its Gaussian count (after any invalid ones were dropped).
+    pub gaussians: usize,
+}
+
+impl SceneRecord {
+    /// The scene of `experiment`.
+    pub fn of(experiment: &Experiment) -> Self {
+        Self {
+            name: experiment.scene_name.clone(),
+            gaussians: experiment.scene.len(),
+        }
+    }
+}
+
 /// `trajectory.json`: reads back as a `TrajectoryRecord` (`model`, `weights`).
 #[derive(Debug, Serialize)]
 pub struct TrajectoryFile {
+    /// The scene it was made on.
+    pub scene: SceneRecord,
     /// Trajectory model.
     pub model: TrajectoryModel,
     /// Weights `[K][6]`, scene units.
@@ -114,6 +136,7 @@ impl Experiment {
             .collect();
         let record = trajectory.record();
         Ok(TrajectoryFile {
+            scene: SceneRecord::of(self),
             model: record.model,
             weights: record.weights,
             convention: "pose = [ω (rotation vector of camera-to-world), camera centre]; OpenCV camera axes (x right, y down, z forward); t in [0, 1]",

@@ -5,8 +5,11 @@
 //! table: every number it holds, so new metrics show up without code here),
 //! `trajectory.json` (windows, object centres, world up and the sampled path),
 //! `history.csv` (each cost term summed over the windows), `frame_metrics.csv` (TCE, TRE,
-//! coverage along t), `frames/` (keyframes) and `video.mp4`. A missing file leaves its section
-//! empty with a note, so a stopped or older run still gets a page.
+//! coverage along t), `frames/` (keyframes) and `video.mp4`. `metrics.json` and
+//! `trajectory.json` must be there (a run writes both before its report); any other missing
+//! file leaves its section empty with a note. A file that is there must be what a run writes:
+//! a CSV whose rows do not match its header, or a `history.csv` without its `total` column, is
+//! refused naming the file and the line.
 
 use std::path::{Path, PathBuf};
 
@@ -56,6 +59,12 @@ pub fn run_report(dir: &Path, scene: Option<&Scene>) -> Result<RunReport> {
     let metrics = read_json(&metrics_file)?;
     check_metrics(&metrics, &metrics_file, scene)?;
     let trajectory = read_json(&dir.join("trajectory.json"))?;
+    if !trajectory.is_object() {
+        bail!(
+            "{}: not a run's trajectory.json (a JSON object)",
+            dir.join("trajectory.json").display()
+        );
+    }
     let title = toml::from_str::<toml::Value>(&config)
         .ok()
         .and_then(|c| c.get("name")?.as_str().map(String::from))
@@ -91,7 +100,7 @@ pub fn run_report(dir: &Path, scene: Option<&Scene>) -> Result<RunReport> {
 }
 
 /// Refuses a `metrics.json` that is not what a run writes (an object with a `windows` list
-/// of objects and a `run` object; a missing file reads as `null` and passes), and a scene
+/// of objects and a `run` object), and a scene
 /// whose Gaussian count is not the run's `run.gaussians` (another scene's views would be
 /// drawn under this run's path).
 /// The per-window numbers of `metrics.json` the report tabulates and plots.
@@ -107,9 +116,6 @@ const WINDOW_FIGURES: [&str; 8] = [
 ];
 
 fn check_metrics(metrics: &Value, file: &Path, scene: Option<&Scene>) -> Result<()> {
-    if metrics.is_null() {
-        return Ok(());
-    }
     let windows_ok = metrics
         .get("windows")
         .and_then(Value::as_array)
@@ -157,11 +163,16 @@ fn check_metrics(metrics: &Value, file: &Path, scene: Option<&Scene>) -> Result<
     Ok(())
 }
 
+/// A JSON file of the run folder that a run always writes (so a missing one is an error).
 fn read_json(path: &Path) -> Result<Value> {
     match splatraj_scene::input::read_text(path) {
         Ok(text) => serde_json::from_str(&text)
             .with_context(|| format!("{} is not valid JSON", path.display())),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Value::Null),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
+            "{} is missing: a run writes it before its report (is this a trajectory run's \
+             folder?)",
+            path.display()
+        ),
         Err(e) => Err(e).with_context(|| format!("cannot read {}", path.display())),
     }
 }
@@ -282,14 +293,29 @@ fn read_csv(path: &Path) -> Result<Option<Csv>> {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(e).with_context(|| format!("cannot read {}", path.display())),
     };
-    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
+    // Numbered from 1, as an editor shows them.
+    let mut lines = text
+        .lines()
+        .zip(1..)
+        .map(|(line, number)| (number, line))
+        .filter(|(_, l)| !l.trim().is_empty());
     let header: Vec<String> = match lines.next() {
-        Some(h) => h.split(',').map(|s| s.trim().to_string()).collect(),
+        Some((_, h)) => h.split(',').map(|s| s.trim().to_string()).collect(),
         None => return Ok(None),
     };
-    let rows = lines
-        .map(|l| l.split(',').map(|s| s.trim().to_string()).collect())
-        .collect();
+    let mut rows = Vec::new();
+    for (number, line) in lines {
+        let row: Vec<String> = line.split(',').map(|s| s.trim().to_string()).collect();
+        if row.len() != header.len() {
+            bail!(
+                "{}: line {number}: {} fields, but the header has {}",
+                path.display(),
+                row.len(),
+                header.len()
+            );
+        }
+        rows.push(row);
+    }
     Ok(Some((header, rows)))
 }
 
@@ -359,9 +385,15 @@ fn read_history(path: &Path) -> Result<Option<CostHistory>> {
             None => terms.push((term, vec![c])),
         }
     }
-    if let Some(c) = header.iter().position(|h| h == "total") {
-        terms.push(("total".into(), vec![c]));
-    }
+    // Every run's history has the total: without it, this is not a run's history.
+    let Some(total) = header.iter().position(|h| h == "total") else {
+        bail!(
+            "{}: line 1: no `total` column, so not a run's history.csv (its header is {:?})",
+            path.display(),
+            header.join(",")
+        );
+    };
+    terms.push(("total".into(), vec![total]));
     let mut series: Vec<(String, Vec<f64>)> =
         terms.iter().map(|(t, _)| (t.clone(), Vec::new())).collect();
     for (i, row) in rows.iter().enumerate() {

@@ -112,5 +112,6 @@ pub fn camera_path(views: &[View]) -> CameraPath {
             })
             .collect(),
         fps: None,
+        seconds: None,
     }
 }

@@ -11,8 +11,9 @@
 //!   numbered from 1 in ascending (R, G, B) order, so the same colours give the same ids
 //!   whatever the file order ([`MaskFiles::legend`]); a pixel with alpha 0 is 0. All masks are
 //!   grey or all colour;
-//! - a mask may be smaller or larger than its camera's image when the aspect ratio is the same
-//!   (up to rounding): the camera is rescaled to it.
+//! - a mask is its camera's size, or smaller or larger with the same aspect ratio to within
+//!   [`ASPECT_TOLERANCE`] (a rescaled image, each side rounded): the camera is rescaled to it.
+//!   Any other size is refused, naming the mask, its size and the camera's.
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
@@ -31,6 +32,11 @@ use crate::views::View;
 
 /// Extensions of lossy image formats, refused as masks.
 const LOSSY: [&str; 3] = ["jpg", "jpeg", "webp"];
+
+/// How far (relative) a mask's aspect ratio may be from its camera's: rounding each side of a
+/// rescaled image to whole pixels moves it by at most 1/side, under 1 % for masks of 100
+/// pixels a side or more; a few pixels' mask of a larger image is not told apart from a crop.
+pub const ASPECT_TOLERANCE: f64 = 0.01;
 
 /// How many names an error lists before "and N more".
 const LISTED: usize = 8;
@@ -315,15 +321,20 @@ fn fitted_view(camera: &NamedView, width: usize, height: usize, path: &Path) -> 
     if (k.width, k.height) == (width, height) {
         return Ok(camera.view);
     }
-    // A rescaled image rounds each side to whole pixels: allow a pixel on each.
-    let cross = (width * k.height).abs_diff(height * k.width);
-    if cross > k.width + k.height {
+    // Aspect ratios compared as w·H against h·W (no division by a side).
+    let cross = (width * k.height).abs_diff(height * k.width) as f64;
+    if cross > ASPECT_TOLERANCE * (height * k.width) as f64 {
         return Err(LiftError::file(
             path,
             format!(
-                "the mask is {width}×{height} but camera {:?} is {}×{}: not the same aspect \
-                 ratio, so not a rescaled image of that camera",
-                camera.name, k.width, k.height
+                "the mask's size {width}×{height} is not the size of camera {:?}, {}×{}, nor \
+                 a rescale of it (aspect ratios {:.4} and {:.4} differ by more than {} %)",
+                camera.name,
+                k.width,
+                k.height,
+                width as f64 / height as f64,
+                k.width as f64 / k.height as f64,
+                100.0 * ASPECT_TOLERANCE
             ),
         ));
     }

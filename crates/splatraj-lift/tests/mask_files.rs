@@ -273,6 +273,18 @@ fn bad_mask_files_give_errors_that_name_the_file() {
     assert!(e.contains(&d.join("b.png").display().to_string()), "{e}");
     assert!(e.contains("64×64") && e.contains("64×48"), "{e}");
 
+    // 7×5 is 5 % off 4:3, more than rounding a rescale of 64×48 gives at that size
+    // (the adversarial trial's case, lifted with exit 0 before).
+    grey(7, 5).save(d.join("b.png")).unwrap();
+    let e = error("a tiny mask of another aspect ratio");
+    assert!(e.contains(&d.join("b.png").display().to_string()), "{e}");
+    assert!(e.contains("size 7×5") && e.contains("64×48"), "{e}");
+
+    // 43×32: 64×48 scaled by 2/3 with the width rounded up from 42.7 (0.8 % off 4:3).
+    grey(43, 32).save(d.join("b.png")).unwrap();
+    let files = read_masks(&cameras, d).expect("a rounded rescale reads");
+    assert_eq!(files.masks[1].view.intrinsics.width, 43);
+
     std::fs::write(d.join("b.png"), "not a picture").unwrap();
     let e = error("a file that is not a PNG");
     assert!(e.contains(&d.join("b.png").display().to_string()), "{e}");

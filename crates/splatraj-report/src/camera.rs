@@ -25,6 +25,9 @@ pub struct CameraPath {
     pub frames: Vec<Frame>,
     /// Frames per second, where the file says.
     pub fps: Option<f64>,
+    /// Length in seconds, where the file says (readers check it is finite and > 0; its
+    /// frames at `fps` are sized by whoever renders them).
+    pub seconds: Option<f64>,
 }
 
 impl CameraPath {
@@ -39,6 +42,7 @@ impl CameraPath {
                 })
                 .collect(),
             fps: Some(fps),
+            seconds: None,
         }
     }
 

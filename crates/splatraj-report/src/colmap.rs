@@ -307,7 +307,14 @@ pub fn import_named(
     }
     images.sort_by_key(|(_, id, _)| *id);
     let (names, frames) = images.into_iter().map(|(n, _, f)| (n, f)).unzip();
-    Ok((CameraPath { frames, fps: None }, names))
+    Ok((
+        CameraPath {
+            frames,
+            fps: None,
+            seconds: None,
+        },
+        names,
+    ))
 }
 
 /// Reads `images.txt` and, when it is there, `cameras.txt` beside it.

@@ -105,7 +105,14 @@ pub fn import_named(text: &str, file: &str) -> Result<(CameraPath, Vec<Option<St
         })
         .collect::<Result<Vec<_>>>()?;
     let names = entries.into_iter().map(|e| e.img_name).collect();
-    Ok((CameraPath { frames, fps: None }, names))
+    Ok((
+        CameraPath {
+            frames,
+            fps: None,
+            seconds: None,
+        },
+        names,
+    ))
 }
 
 /// Reads a `cameras.json`.

@@ -5,10 +5,10 @@
 //! `nerfstudio/viewer/render_panel.py`):
 //!
 //! - `camera_type`: `"perspective"` (we write and read only this), `render_width`,
-//!   `render_height` (pixels), `fps`, `seconds`;
+//!   `render_height` (pixels), `fps`, `seconds` (finite and > 0 where given);
 //! - `camera_path`: one entry per rendered frame, `camera_to_world` (16 numbers, a 4×4 matrix
 //!   row-major, **OpenGL camera axes**: x right, y up, z backward), `fov` (**vertical**, in
-//!   **degrees**) and `aspect` (width / height);
+//!   **degrees**, 0 < fov < 180) and `aspect` (width / height, finite and > 0);
 //! - `keyframes` (for the viewer's "Load Path"): `matrix` (the same kind of matrix), `fov`,
 //!   `aspect`, `override_transition_enabled`, `override_transition_sec`; with
 //!   `default_fov`, `default_transition_sec`, `is_cycle`, `smoothness_value`.
@@ -229,6 +229,15 @@ pub fn import(text: &str, file: &str) -> Result<CameraPath> {
         }
         other => other,
     };
+    if let Some(s) = parsed.seconds
+        && !(s.is_finite() && s > 0.0)
+    {
+        return Err(invalid(
+            file,
+            "seconds",
+            format!("{s} is not a length in seconds (must be finite and > 0)"),
+        ));
+    }
     let frames = parsed
         .camera_path
         .iter()
@@ -249,6 +258,17 @@ pub fn import(text: &str, file: &str) -> Result<CameraPath> {
                     format!("{fov} is not a field of view in degrees (0 < fov < 180)"),
                 ));
             }
+            // ns-render sizes the image by render_width/height, but a broken aspect is a
+            // broken file all the same.
+            if let Some(aspect) = entry.aspect
+                && !(aspect.is_finite() && aspect > 0.0)
+            {
+                return Err(invalid(
+                    file,
+                    element("aspect"),
+                    format!("{aspect} is not a width / height ratio (must be finite and > 0)"),
+                ));
+            }
             let focal = Intrinsics::focal_from_vertical_fov(fov, parsed.render_height);
             Ok(Frame {
                 pose,
@@ -260,7 +280,11 @@ pub fn import(text: &str, file: &str) -> Result<CameraPath> {
             })
         })
         .collect::<Result<Vec<_>>>()?;
-    Ok(CameraPath { frames, fps })
+    Ok(CameraPath {
+        frames,
+        fps,
+        seconds: parsed.seconds,
+    })
 }
 
 /// Reads a `camera_path.json`.

@@ -6,7 +6,8 @@
 //! `background`, `postEffectSettings`, `animTracks`, `cameras`, `annotations`, `startMode`.
 //! A track has `name`, `duration` (seconds), `frameRate`, `loopMode`, `interpolation`,
 //! `smoothness` and `keyframes: { times, values: { position, target, fov } }`, where `times`
-//! are in **frames** (the player evaluates its spline at seconds × `frameRate`), `position`
+//! are in **frames** (the player evaluates its spline at seconds × `frameRate`; read back
+//! only when finite, from 0, increasing and below 10 hours at 30 fps), `position`
 //! and `target` are flat `[x, y, z, x, y, z, …]` and `fov` is the PlayCanvas camera's
 //! **vertical** field of view in **degrees**.
 //!
@@ -508,6 +509,21 @@ pub fn import(text: &str, file: &str, height: usize, aspect: f64) -> Result<Came
             format!("{} is not a positive number", track.frame_rate),
         ));
     }
+    if let Some((i, time)) = keys
+        .times
+        .iter()
+        .enumerate()
+        .find(|(_, t)| !(t.is_finite() && (0.0..MAX_FRAMES).contains(*t)))
+    {
+        return Err(invalid(
+            file,
+            element(&format!("times[{i}]")),
+            format!(
+                "{time} is not a keyframe time: times are frames from 0, below {MAX_FRAMES} \
+                 (the longest track played)"
+            ),
+        ));
+    }
     if let Some(i) = (1..n).find(|&i| {
         keys.times[i].partial_cmp(&keys.times[i - 1]) != Some(std::cmp::Ordering::Greater)
     }) {
@@ -608,6 +624,7 @@ pub fn import(text: &str, file: &str, height: usize, aspect: f64) -> Result<Came
     Ok(CameraPath {
         frames,
         fps: Some(track.frame_rate),
+        seconds: Some(duration),
     })
 }
 

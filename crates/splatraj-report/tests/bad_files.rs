@@ -77,6 +77,57 @@ fn nerfstudio_errors_name_file_element_and_problem() {
     mentions(&message(nerfstudio::import(&nan, "p.json")), &["p.json"]);
 }
 
+#[test]
+fn a_nerfstudio_length_that_is_not_a_positive_number_of_seconds_is_refused() {
+    let path = nerfstudio::import(NERF_OK, "ok.json").unwrap();
+    assert_eq!(path.seconds, Some(1.0));
+    for bad in ["0", "-1"] {
+        let text = NERF_OK.replacen("\"seconds\": 1", &format!("\"seconds\": {bad}"), 1);
+        mentions(
+            &message(nerfstudio::import(&text, "p.json")),
+            &["p.json", "seconds", bad, "finite and > 0"],
+        );
+    }
+}
+
+#[test]
+fn a_nerfstudio_camera_of_aspect_0_is_refused_naming_the_camera() {
+    let text = NERF_OK.replacen("\"aspect\": 1.333}]", "\"aspect\": 0}]", 1);
+    mentions(
+        &message(nerfstudio::import(&text, "p.json")),
+        &["p.json", "camera_path[1].aspect", "finite and > 0"],
+    );
+}
+
+/// A SuperSplat track of two keyframes at `times` (frames), 1 s long at 30 fps.
+fn supersplat_at(times: &str) -> String {
+    format!(
+        r#"{{"animTracks": [{{"frameRate": 30, "duration": 1, "keyframes": {{"times": {times},
+        "values": {{"position": [0, 0, 0, 1, 0, 0], "target": [0, 0, 1, 1, 0, 1],
+        "fov": [50, 50]}}}}}}]}}"#
+    )
+}
+
+#[test]
+fn supersplat_keyframe_times_must_be_frames_from_0_below_the_longest_track() {
+    let ok = supersplat::import(&supersplat_at("[0, 30]"), "settings.json", 48, 1.0).unwrap();
+    assert_eq!(ok.seconds, Some(1.0));
+    for (times, element, value) in [
+        ("[0, 1e12]", "keyframes.times[1]", "1000000000000"),
+        ("[-1, 30]", "keyframes.times[0]", "-1"),
+    ] {
+        mentions(
+            &message(supersplat::import(
+                &supersplat_at(times),
+                "settings.json",
+                48,
+                1.0,
+            )),
+            &["settings.json", element, value, "frames from 0"],
+        );
+    }
+}
+
 const CAMERAS_OK: &str = "1 PINHOLE 64 48 50 50 32 24\n";
 const IMAGES_OK: &str = "1 1 0 0 0 0 0 0 1 a.png\n\n2 1 0 0 0 0 0 1 1 b.png\n\n";
 
@@ -263,6 +314,7 @@ fn exports_refuse_what_they_cannot_write() {
         let empty = CameraPath {
             frames: vec![],
             fps: None,
+            seconds: None,
         };
         let err = splatraj_report::export(&empty, format, &ExportOptions::default())
             .unwrap_err()

@@ -205,6 +205,7 @@ fn supersplat_round_trip_of_upright_cameras() {
     let path = CameraPath {
         frames,
         fps: Some(30.0),
+        seconds: None,
     };
     let options = SupersplatOptions {
         fps: 30.0,
@@ -239,6 +240,7 @@ fn every_format_round_trips_through_files_and_detection() {
     let path = CameraPath {
         frames,
         fps: Some(30.0),
+        seconds: None,
     };
     for format in Format::ALL {
         let folder = dir.join(format.name());

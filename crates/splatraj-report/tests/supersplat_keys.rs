@@ -207,6 +207,7 @@ fn path_of(
     CameraPath {
         frames,
         fps: Some(FPS),
+        seconds: None,
     }
 }
 
