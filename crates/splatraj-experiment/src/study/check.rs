@@ -10,9 +10,10 @@
 //! folder (`--out`, or a new one under `output.runs_dir`) must be one that can be made. Nothing
 //! is optimised and nothing is left behind.
 //!
-//! Variants are prepared one at a time, each dropped before the next, so the check holds one
-//! scene at a time; variants that share a scene and queries are prepared again each, because
-//! their cameras, precision and rasterizer change what the preparation measures.
+//! Variants are prepared one at a time, each dropped before the next. The scene file is read
+//! once for the variants that share `[scene]` (a large scene's reading is most of a
+//! preparation); the queries are grounded again for each, because a variant's camera,
+//! precision and rasterizer change what the preparation measures.
 
 use std::path::Path;
 
@@ -22,7 +23,8 @@ use super::StudyTask;
 use super::files::STUDY_NAMES;
 use super::plan::{Run, StudyPlan};
 use crate::config::Config;
-use crate::experiment::Experiment;
+use crate::config::scene::SceneConfig;
+use crate::experiment::{Experiment, load_scene};
 use crate::extensions::Extensions;
 use crate::output_folder::OutputFolder;
 use crate::resources::{
@@ -55,6 +57,7 @@ impl StudyPlan {
             Some(dir) => OutputFolder::check(dir, &STUDY_NAMES)?,
             None => check_writable(&base.output.runs_dir.join(format!("{}-study", self.name)))?,
         }
+        let mut scenes = SceneCache::default();
         let mut peaks: Vec<Stage> = Vec::new();
         let mut checked: Vec<usize> = Vec::new();
         for run in runs {
@@ -64,7 +67,8 @@ impl StudyPlan {
             checked.push(run.variant);
             let label = &self.variants[run.variant].label;
             let config = self.run_config(run, extensions)?;
-            let experiment = Experiment::prepare_with(&config, extensions)
+            let experiment = scenes
+                .prepare(&config, extensions)
                 .with_context(|| format!("study variant `{label}`"))?;
             let plan = match self.task {
                 StudyTask::Trajectory => experiment.check_trajectory_work(),
@@ -73,7 +77,8 @@ impl StudyPlan {
             .with_context(|| format!("study variant `{label}`"))?;
             peaks.extend(plan.memory.peak().cloned());
         }
-        let evaluation = Experiment::prepare_with(&self.evaluation_config(extensions)?, extensions)
+        let evaluation = scenes
+            .prepare(&self.evaluation_config(extensions)?, extensions)
             .context("the study's evaluation")?;
         let (memory, time) = self.evaluation_plans(&evaluation, runs.len())?;
         memory.check(evaluation.memory_limit()?, RAISE_LIMIT)?;
@@ -141,5 +146,26 @@ impl StudyPlan {
             render_seconds(runs as f64 * 2.0 * renders, pixels(e.width, e.height)),
         );
         Ok((memory, time))
+    }
+}
+
+/// The last scene read, for the next config with the same `[scene]`.
+#[derive(Default)]
+struct SceneCache {
+    last: Option<(SceneConfig, (splatraj_scene::Scene, String))>,
+}
+
+impl SceneCache {
+    /// `config` prepared on its scene, read unless the last config shared its `[scene]`.
+    fn prepare(&mut self, config: &Config, extensions: &Extensions) -> Result<Experiment> {
+        let loaded = match &self.last {
+            Some((key, loaded)) if *key == config.scene => loaded.clone(),
+            _ => {
+                let loaded = load_scene(config)?;
+                self.last = Some((config.scene.clone(), loaded.clone()));
+                loaded
+            }
+        };
+        Experiment::prepare_on(config, extensions, loaded)
     }
 }
