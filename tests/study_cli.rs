@@ -1,6 +1,6 @@
 //! `splatraj study` end to end: each run in its own process (rows with their own peak memory),
 //! the four files, shards that merge into the rows of an unsharded study (times aside), and
-//! clean failures.
+//! clean failures; `--dry-run` refuses, before any run, what the runs would fail on.
 
 mod common;
 
@@ -116,4 +116,141 @@ fn bad_studies_fail_cleanly_before_running() {
     assert!(stderr(&out).contains("--shard"), "{}", stderr(&out));
     let out = splatraj(&["study", "merge", s(dir.path()), "--out", s(&out_dir)]);
     assert_clean_failure(&out, &["study.json"]);
+}
+
+/// `splatraj study CONFIG --dry-run` for the tiny config edited by `edit` (given the scratch
+/// folder), with `extra` arguments; runs go to `<scratch>/runs`.
+fn dry_run(
+    edit: impl Fn(&Path, &str) -> String,
+    extra: &[&str],
+) -> (tempfile::TempDir, std::process::Output) {
+    let dir = tempfile::tempdir().unwrap();
+    let runs = dir.path().join("runs");
+    let text = TINY_CONFIG.replace(
+        "[output]\n",
+        &format!("[output]\nruns_dir = {:?}\n", s(&runs)),
+    );
+    let config = dir.path().join("study.toml");
+    std::fs::write(&config, edit(dir.path(), &text)).unwrap();
+    let mut args = vec![
+        "study",
+        s(&config),
+        "--dry-run",
+        "--vary",
+        "optimiser.iterations=1,2",
+    ];
+    args.extend_from_slice(extra);
+    let out = splatraj(&args);
+    (dir, out)
+}
+
+/// The config as it is.
+fn unchanged(_: &Path, text: &str) -> String {
+    text.to_string()
+}
+
+#[test]
+fn dry_run_of_a_sound_study_passes_and_leaves_nothing_behind() {
+    let (dir, out) = dry_run(unchanged, &[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    // The baseline and the two iteration counts, each prepared.
+    assert!(
+        stderr(&out).contains("check passed: 3 variant(s) prepared"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(
+        !dir.path().join("runs").exists(),
+        "a dry run makes no folder"
+    );
+}
+
+#[test]
+fn dry_run_refuses_an_evaluation_width_beyond_the_memory_limit() {
+    // 10⁶ × 30 pixels (the output height) at 32 poses per window, rendered twice, is tens of
+    // gigabytes: more than the 8 GB given.
+    let (_dir, out) = dry_run(
+        unchanged,
+        &[
+            "--set",
+            "study.evaluation.width=1000000",
+            "--set",
+            "max_memory_gb=8",
+        ],
+    );
+    assert_clean_failure(
+        &out,
+        &[
+            "`study.evaluation.width`",
+            "1000000 × 30",
+            "more than the limit of 8.0 GB",
+        ],
+    );
+}
+
+#[test]
+fn dry_run_refuses_evaluation_samples_beyond_any_machine() {
+    // 10¹⁰ poses per window held at once: petabytes.
+    let (_dir, out) = dry_run(
+        unchanged,
+        &["--set", "study.evaluation.samples=10000000000"],
+    );
+    assert_clean_failure(
+        &out,
+        &[
+            "`study.evaluation.samples` = 10000000000",
+            "PB of memory",
+            "more than the limit",
+        ],
+    );
+}
+
+#[test]
+fn dry_run_refuses_an_empty_query_text() {
+    let (_dir, out) = dry_run(|_, t| t.replace("\"red mug\"", "\"\""), &[]);
+    assert_clean_failure(&out, &["queries.0.text"]);
+}
+
+#[test]
+fn dry_run_refuses_a_query_no_label_matches() {
+    let (_dir, out) = dry_run(|_, t| t.replace("\"red mug\"", "\"unicorn\""), &[]);
+    assert_clean_failure(&out, &["`queries.0.text`", "unicorn"]);
+}
+
+#[test]
+fn dry_run_refuses_a_missing_scene_file() {
+    let (_dir, out) = dry_run(
+        |d, t| {
+            t.replace(
+                "demo = { gaussians = 3000, seed = 7 }",
+                &format!("path = {:?}", s(&d.join("missing.ply"))),
+            )
+        },
+        &[],
+    );
+    assert_clean_failure(&out, &["missing.ply"]);
+}
+
+#[test]
+fn dry_run_refuses_a_runs_dir_that_is_a_file() {
+    let (dir, out) = dry_run(
+        |d, t| {
+            std::fs::write(d.join("afile"), "unrelated\n").unwrap();
+            t.replace(s(&d.join("runs")), s(&d.join("afile")))
+        },
+        &[],
+    );
+    assert_clean_failure(&out, &["output.runs_dir", "afile", "not a folder"]);
+    assert_eq!(
+        std::fs::read_to_string(dir.path().join("afile")).unwrap(),
+        "unrelated\n",
+        "the file is left as it was"
+    );
+}
+
+#[test]
+fn dry_run_checks_every_variant_not_only_the_base() {
+    // The base config grounds both queries; one variant asks for a label the scene lacks.
+    let (_dir, out) = dry_run(unchanged, &["--vary", "queries.1.text=\"unicorn\""]);
+    assert_clean_failure(&out, &["study variant `text=unicorn`", "unicorn"]);
 }

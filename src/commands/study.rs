@@ -6,8 +6,9 @@
 //!
 //! Each run goes to a child process of this binary (hidden `--one RUN`), so that the peak
 //! memory it reports (VmHWM, a process-wide high-water mark) is its own and no run's
-//! allocations slow the next; `--in-process` runs them here instead (no memory figure). The
-//! plan, the measuring and the files are `splatraj::experiment::study`; this file parses,
+//! allocations slow the next; `--in-process` runs them here instead (no memory figure). Before
+//! the first run the plan is checked whole (`--dry-run` stops after the check). The plan, the
+//! check, the measuring and the files are `splatraj::experiment::study`; this file parses,
 //! spawns, shows progress and writes.
 
 use std::path::{Path, PathBuf};
@@ -82,7 +83,9 @@ pub struct StudyRunArgs {
     /// Run every variant in this process (no per-run peak memory).
     #[arg(long)]
     in_process: bool,
-    /// Print the plan (variants and runs) and stop.
+    /// Print the plan (variants and runs), check it as the study checks it before its first
+    /// run (every variant's config, scene, queries, memory and time; the evaluation's sizes;
+    /// the study folder), and stop without running any.
     #[arg(long)]
     dry_run: bool,
     /// No progress lines.
@@ -156,6 +159,9 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
         return Ok(());
     }
     let runs = plan.runs_of(args.shard);
+    // Everything that can be known before the first run is checked now, dry run or not; a
+    // refusal is the only thing printed.
+    let check = plan.check(&runs, args.out.as_deref(), &extensions)?;
     eprintln!(
         "study of {}: {} variant(s), {} run(s){}",
         plan.name,
@@ -174,6 +180,18 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
         );
     }
     if args.dry_run {
+        eprintln!(
+            "check passed: {} variant(s) prepared{}",
+            check.variants,
+            check
+                .peak
+                .map(|p| format!(
+                    "; peak memory about {} ({})",
+                    splatraj::experiment::resources::show_bytes(p.bytes),
+                    p.what
+                ))
+                .unwrap_or_default()
+        );
         return Ok(());
     }
     let base = splatraj::experiment::Config::load(config, &plan.base_overrides)?;

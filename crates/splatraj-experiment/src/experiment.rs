@@ -93,7 +93,19 @@ impl Experiment {
     /// target sources of `extensions`.
     pub fn prepare_with(config: &Config, extensions: &Extensions) -> Result<Self> {
         let prepared_at = std::time::Instant::now();
-        let (scene, scene_name) = load_scene(config)?;
+        let mut experiment = Self::prepare_on(config, extensions, load_scene(config)?)?;
+        experiment.prepared_at = prepared_at;
+        Ok(experiment)
+    }
+
+    /// [`Experiment::prepare_with`] on the scene of `config.scene` already read, with its name
+    /// ([`load_scene`]): configs that share `[scene]` read it once.
+    pub fn prepare_on(
+        config: &Config,
+        extensions: &Extensions,
+        (scene, scene_name): (Scene, String),
+    ) -> Result<Self> {
+        let prepared_at = std::time::Instant::now();
         if scene.is_empty() {
             bail!("scene {scene_name} has no Gaussians");
         }

@@ -350,11 +350,22 @@ impl Experiment {
         lines
     }
 
-    /// Every check of a trajectory run that can fail before the work: its costs, the memory
-    /// and time against their limits (`start.restarts` among the sizes), the first start
-    /// (reading `start.trajectory`), and, for a new run
-    /// (`resuming` false), that the runs folder can be written.
+    /// Every check of a trajectory run that can fail before the work
+    /// ([`Experiment::check_trajectory_work`]) and, for a new run (`resuming` false), that the
+    /// runs folder can be written.
     pub fn check_trajectory_run(&self, resuming: bool) -> Result<RunPlan> {
+        let plan = self.check_trajectory_work()?;
+        if !resuming {
+            check_writable(&self.config.output.runs_dir.join(&self.config.name))?;
+        }
+        Ok(plan)
+    }
+
+    /// The checks of a trajectory optimisation that can fail before the work, wherever its
+    /// result goes (a run folder, a study's row): its costs, the memory and time against their
+    /// limits (`start.restarts` among the sizes) and the first start (reading
+    /// `start.trajectory`).
+    pub fn check_trajectory_work(&self) -> Result<RunPlan> {
         self.costs()?;
         let memory = self.trajectory_memory()?;
         memory.check(self.memory_limit()?, RAISE_LIMIT)?;
@@ -371,9 +382,6 @@ impl Experiment {
         // above has weighed.
         self.first_start_trajectories(1)?;
         let restarts = self.start_count();
-        if !resuming {
-            check_writable(&self.config.output.runs_dir.join(&self.config.name))?;
-        }
         Ok(RunPlan {
             memory,
             steps: restarts * self.config.optimiser.iterations,

@@ -9,11 +9,14 @@
 //! [`rows`] holds the measured rows; [`summary`] aggregates them per variant (mean ± sd over
 //! seeds), finds the Pareto frontier of quality against time and the cheapest variant within
 //! 5 % of the best quality, and writes `summary.md`; [`plot`] draws `frontier.svg`; [`files`]
-//! writes and reads the study folder and merges shards.
+//! writes and reads the study folder and merges shards. [`check`] checks a plan before its
+//! first run (`--dry-run` stops there): every variant prepared and checked as `run --check`
+//! checks a run, the fixed evaluation's sizes, and the study folder.
 //!
 //! Peak memory is a process-wide high-water mark, so the command runs each run in a child
 //! process of its own (as `bench render` does); in-process runs report none.
 
+pub mod check;
 pub mod context;
 pub mod files;
 pub mod measure;
@@ -25,6 +28,7 @@ pub mod summary;
 pub use crate::config::study::{
     Design, EvaluationConfig, FactorConfig, Quality, StudyConfig, StudyTask,
 };
+pub use check::StudyCheck;
 pub use files::{StudyFile, merge_studies, read_study, study_folder, write_study};
 pub use measure::measure_run;
 pub use plan::{Factor, Preset, Run, Shard, StudyPlan, Variant};
