@@ -599,6 +599,30 @@ const TABLE: &[Row] = &[
         mentions: &["deep.toml", "not valid TOML at line 1, column"],
     },
     Row {
+        proves: "run_check_refuses_a_field_of_view_near_180_degrees_by_its_working_distance",
+        args: |f, d| {
+            let c = config_in(f, d, "");
+            strings(&["run", &c, "--check", "--set", "camera.fov_x=179.9999"])
+        },
+        mentions: &[
+            "`queries.0`",
+            "working distance",
+            "`camera.fov_x` (now 179.9999°)",
+        ],
+    },
+    Row {
+        proves: "run_check_refuses_a_target_ratio_near_zero_by_its_working_distance",
+        args: |f, d| {
+            let c = config_in(f, d, "");
+            strings(&["run", &c, "--check", "--set", "camera.target_ratio=1e-300"])
+        },
+        mentions: &[
+            "`queries.0`",
+            "working distance",
+            "target ratio (now 1e-300)",
+        ],
+    },
+    Row {
         proves: "pose_refuses_zero_iterations_naming_the_key",
         args: |f, d| {
             let c = config_in(f, d, "");

@@ -592,3 +592,22 @@ fn a_worker_thread_count_that_cannot_fit_or_is_not_a_number_is_refused_naming_th
         assert_clean_failure(&out, mentions);
     }
 }
+
+/// The start's route checks each segment's clearance every quarter margin: a margin of 1e-12
+/// asked for 10¹² checks per segment and `run --check` never ended.
+#[test]
+fn run_check_with_a_tiny_clearance_margin_answers() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = tiny_config(dir.path());
+    let out = quickly(
+        120,
+        &[
+            "run",
+            s(&config),
+            "--check",
+            "--set",
+            "costs.clearance.margin=1e-12",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+}

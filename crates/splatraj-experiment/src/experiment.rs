@@ -83,6 +83,13 @@ pub struct Experiment {
     pub prepared_at: std::time::Instant,
 }
 
+/// The smallest working distance, as a share of the scene's diagonal: a millimetre in a
+/// kilometre-wide capture.
+pub const MIN_DISTANCE_OF_DIAGONAL: f64 = 1e-6;
+/// The largest working distance, as a multiple of the scene's diagonal: a whole capture seen
+/// small from far outside it.
+pub const MAX_DISTANCE_OF_DIAGONAL: f64 = 100.0;
+
 impl Experiment {
     /// Loads the scene, resolves world up and grounds every query, with the built-in costs.
     pub fn prepare(config: &Config) -> Result<Self> {
@@ -182,6 +189,32 @@ impl Experiment {
         Ok(())
     }
 
+    /// Refuses a working distance out of proportion to the scene (outside
+    /// [`MIN_DISTANCE_OF_DIAGONAL`, `MAX_DISTANCE_OF_DIAGONAL`] × its diagonal): it comes from a
+    /// camera or a target ratio no view can satisfy (a field of view near 180°, a ratio near
+    /// 0), and every size derived from it (margin, speed, the start's route) would follow it.
+    fn check_working_distances(&self, diagonal: f64) -> Result<()> {
+        let (low, high) = (
+            MIN_DISTANCE_OF_DIAGONAL * diagonal,
+            MAX_DISTANCE_OF_DIAGONAL * diagonal,
+        );
+        for (i, window) in self.windows.iter().enumerate() {
+            let distance = window.context.prior_radius;
+            if !(distance >= low && distance <= high) {
+                bail!(
+                    "`queries.{i}` ({:?}): its working distance {distance:.3e} is out of \
+                     proportion to the scene (diagonal {diagonal:.3}; between {low:.3e} and \
+                     {high:.3e} expected); check `camera.fov_x` (now {:?}°) and the query's \
+                     target ratio (now {:?})",
+                    window.name,
+                    self.config.camera.fov_x,
+                    window.context.target_ratio
+                );
+            }
+        }
+        Ok(())
+    }
+
     /// Replaces the config's `"auto"` settings by values derived from the scene and the
     /// queries' working distances, and records them in [`Experiment::derived`].
     fn derive_from_scene(&mut self) -> Result<()> {
@@ -193,6 +226,7 @@ impl Experiment {
         let smallest = radii.iter().copied().fold(f64::INFINITY, f64::min);
         let mean = radii.iter().sum::<f64>() / radii.len().max(1) as f64;
         let diagonal = 2.0 * glam::DVec3::from(self.bounds.1).length();
+        self.check_working_distances(diagonal)?;
         if let Some(clearance) = &mut self.config.costs.clearance
             && clearance.margin.is_auto()
         {

@@ -36,6 +36,9 @@ use crate::clearance::Occupancy;
 /// Most cells of a route grid (about 50³): bounds the grid's build time on large scenes.
 pub const MAX_ROUTE_CELLS: usize = 128_000;
 
+/// The most points a segment's clearance is checked at (a segment 25 000 margins long).
+pub const MAX_SEGMENT_CHECKS: usize = 100_000;
+
 /// Share of a window on each side of a join over which a planned start follows its route.
 pub const ROUTE_TRANSITION: f64 = 0.25;
 
@@ -133,10 +136,13 @@ impl RoutePlanner {
     }
 
     /// Whether the segment a–b keeps the margin (or, from an end already inside it, that
-    /// end's clearance), checked every margin/4.
+    /// end's clearance), checked every margin/4 (at most [`MAX_SEGMENT_CHECKS`] points).
     pub fn segment_is_clear(&self, a: DVec3, b: DVec3) -> bool {
         let needed = self.margin.min(self.clearance(a)).min(self.clearance(b)) - 1e-9;
-        let steps = ((a.distance(b) / (0.25 * self.margin)).ceil() as usize).max(1);
+        // Capped: a margin tiny against the segment (a degenerate scale) must not take
+        // forever; the cap is far above what a scene's own proportions ask for.
+        let steps =
+            ((a.distance(b) / (0.25 * self.margin)).ceil() as usize).clamp(1, MAX_SEGMENT_CHECKS);
         (0..=steps).all(|k| self.clearance(a.lerp(b, k as f64 / steps as f64)) >= needed)
     }
 
