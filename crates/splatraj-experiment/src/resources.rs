@@ -517,7 +517,7 @@ mod tests {
         );
         let limit = MemoryLimit {
             bytes: 8e9,
-            given: false,
+            source: LimitSource::Machine,
         };
         let message = plan.check(limit, "--max-memory").unwrap_err().to_string();
         assert!(message.contains("`camera.width`"), "{message}");
@@ -532,8 +532,11 @@ mod tests {
     #[test]
     fn the_default_limit_is_a_share_of_physical_memory() {
         let limit = MemoryLimit::new(None).unwrap();
-        assert!(!limit.given);
-        if let Some(total) = physical_memory() {
+        let space = address_space_limit().unwrap_or(f64::INFINITY);
+        if let Some(total) = physical_memory()
+            && total < space
+        {
+            assert_eq!(limit.source, LimitSource::Machine);
             assert!((limit.bytes - DEFAULT_MEMORY_FRACTION * total).abs() < 1.0);
         }
         assert!(MemoryLimit::new(Some(-1.0)).is_err());
