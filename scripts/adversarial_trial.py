@@ -94,11 +94,20 @@ class Result:
         self.rc, self.out, self.secs, self.timed_out, self.note = rc, out, secs, timed_out, note
 
 
-def launch(binary, argv, cwd, mem_gb, stdin=subprocess.DEVNULL):
+def launch(binary, argv, cwd, mem_gb, stdin=subprocess.DEVNULL, env=None):
     argv = [a.replace("{W}", str(cwd)) for a in argv]
     cmd = ["prlimit", f"--as={int(mem_gb * 2**30)}", "--", binary] + argv
     return subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            stdin=stdin, start_new_session=True)
+                            stdin=stdin, start_new_session=True,
+                            env=None if env is None else {**os.environ, **env})
+
+
+def with_env(ctx, env):
+    """A runner: the case's command with `env` added to the environment."""
+    def go(c, work):
+        t0 = time.time()
+        return finish(launch(ctx.binary, c.argv, work, ctx.mem_gb, env=env), c.timeout, t0)
+    return go
 
 
 def finish(p, timeout, t0):
@@ -1161,6 +1170,56 @@ def define_cases(ctx):
         for sig in (signal.SIGINT, signal.SIGTERM):
             case(f"{label} {signal.Signals(sig).name} at {delay}s", argv, expect="ok",
                  runner=signalled(ctx, sig, delay, False, resume=False), timeout=60)
+
+    # --- second round (issue 27, after the first fixes): degenerate scales, environment,
+    # parser limits, the address-space limit
+    for kv, names in [
+        ("camera.fov_x=179.9999", ["fov_x", "working distance"]),
+        ("camera.target_ratio=1e-300", ["target ratio", "working distance"]),
+        ("camera.target_ratio=1e-9", ["target ratio", "working distance"]),
+        ("queries.0.target_ratio=1e-300", ["target ratio", "working distance"]),
+        ("costs.clearance.margin=1e300", ["margin"]),
+        ("costs.motion.max_speed=1e-300", ["max_speed"]),
+        ("start.spread=1e-300", ["spread"]),
+        ("camera.width=3000", ["ulimit"]),
+        ('name="../../escaped"', ["name"]),
+        ("optimiser.beta1=1", ["beta1"]),
+        ("optimiser.learning_rate=0", ["learning_rate"]),
+    ]:
+        expect = "any" if kv.startswith(("costs.", "start.")) else "fail"
+        extra = ["--set", "camera.height=3000"] if kv == "camera.width=3000" else []
+        case(f"run --check {kv} (round 2)", ["run", small, "--check", "--set", kv] + extra,
+             names=names, expect=expect, timeout=60)
+    case("run --check costs.clearance.margin=1e-12 (round 2)",
+         ["run", small, "--check", "--set", "costs.clearance.margin=1e-12"], expect="ok",
+         timeout=60)
+
+    def deep_toml(work):
+        (work / "deep.toml").write_text("a = " + "[" * 100000 + "]" * 100000 + "\n")
+    case("run --check config nested 100000 deep", ["run", "deep.toml", "--check"],
+         names=["deep.toml", "line 1"], setup=deep_toml)
+
+    def many_queries(work):
+        text = (ctx.fx / "small.toml").read_text()
+        at = text.index("[camera]")
+        (work / "many.toml").write_text(
+            text[:at] + '\n[[queries]]\ntext = "red mug"\n' * 20000 + text[at:])
+    case("run --check 20000 queries", ["run", "many.toml", "--check"], expect="refuse_or_warn",
+         names=["windows"], setup=many_queries, timeout=120)
+
+    def long_line(work):
+        text = (ctx.fx / "small.toml").read_text()
+        (work / "long.toml").write_text("# " + "x" * 20_000_000 + "\n" + text)
+    case("run --check config with a 20 MB comment line", ["run", "long.toml", "--check"],
+         expect="any", names=["long.toml"], setup=long_line, timeout=60)
+
+    for value, names in [("100000", ["RAYON_NUM_THREADS"]), ("four", ["RAYON_NUM_THREADS"]),
+                         ("-1", ["RAYON_NUM_THREADS"])]:
+        case(f"scene info with RAYON_NUM_THREADS={value}", ["scene", "info", scene],
+             names=names, runner=with_env(ctx, {"RAYON_NUM_THREADS": value}), timeout=30)
+    case("render with RAYON_NUM_THREADS=1", ["render", "--scene", scene, "--camera", cam,
+                                            "--label", "1", "--width", "32", "--out", "r"],
+         expect="ok", runner=with_env(ctx, {"RAYON_NUM_THREADS": "1"}), timeout=60)
 
 
 def report_kept(original):

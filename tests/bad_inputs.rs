@@ -462,6 +462,14 @@ fn config_in(f: &Fixture, dir: &Path, extra: &str) -> String {
     path.display().to_string()
 }
 
+/// `COMMAND CONFIG EXTRA…` with the tiny config in `dir` (runs into `dir/runs`).
+fn config_command(f: &Fixture, dir: &Path, command: &str, extra: &[&str]) -> Vec<String> {
+    let config = config_in(f, dir, "");
+    let mut args = strings(&[command, &config]);
+    args.extend(strings(extra));
+    args
+}
+
 /// A `.npy` of `values` f32 whose header claims `shape`.
 fn npy_claiming(dir: &Path, shape: &str, values: usize) -> String {
     let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}");
@@ -560,31 +568,30 @@ const TABLE: &[Row] = &[
     Row {
         proves: "run_check_refuses_a_learning_rate_above_one_radian_per_step",
         args: |f, d| {
-            let c = config_in(f, d, "");
-            strings(&[
+            config_command(
+                f,
+                d,
                 "run",
-                &c,
-                "--check",
-                "--set",
-                "optimiser.learning_rate=1e30",
-            ])
+                &["--check", "--set", "optimiser.learning_rate=1e30"],
+            )
         },
         mentions: &["`optimiser.learning_rate`", "(0, 1]"],
     },
     Row {
         proves: "run_check_refuses_a_learning_rate_of_zero_that_never_moves",
         args: |f, d| {
-            let c = config_in(f, d, "");
-            strings(&["run", &c, "--check", "--set", "optimiser.learning_rate=0"])
+            config_command(
+                f,
+                d,
+                "run",
+                &["--check", "--set", "optimiser.learning_rate=0"],
+            )
         },
         mentions: &["`optimiser.learning_rate`", "(0, 1]"],
     },
     Row {
         proves: "run_whose_weighted_costs_overflow_names_the_weight_not_the_learning_rate",
-        args: |f, d| {
-            let c = config_in(f, d, "");
-            strings(&["run", &c, "--quiet", "--set", "costs.tce.weight=1e308"])
-        },
+        args: |f, d| config_command(f, d, "run", &["--quiet", "--set", "costs.tce.weight=1e308"]),
         mentions: &["`costs.tce.weight`", "step 0"],
     },
     Row {
@@ -600,10 +607,7 @@ const TABLE: &[Row] = &[
     },
     Row {
         proves: "run_check_refuses_a_field_of_view_near_180_degrees_by_its_working_distance",
-        args: |f, d| {
-            let c = config_in(f, d, "");
-            strings(&["run", &c, "--check", "--set", "camera.fov_x=179.9999"])
-        },
+        args: |f, d| config_command(f, d, "run", &["--check", "--set", "camera.fov_x=179.9999"]),
         mentions: &[
             "`queries.0`",
             "working distance",
@@ -613,8 +617,12 @@ const TABLE: &[Row] = &[
     Row {
         proves: "run_check_refuses_a_target_ratio_near_zero_by_its_working_distance",
         args: |f, d| {
-            let c = config_in(f, d, "");
-            strings(&["run", &c, "--check", "--set", "camera.target_ratio=1e-300"])
+            config_command(
+                f,
+                d,
+                "run",
+                &["--check", "--set", "camera.target_ratio=1e-300"],
+            )
         },
         mentions: &[
             "`queries.0`",
@@ -625,23 +633,18 @@ const TABLE: &[Row] = &[
     Row {
         proves: "pose_refuses_zero_iterations_naming_the_key",
         args: |f, d| {
-            let c = config_in(f, d, "");
-            strings(&[
+            config_command(
+                f,
+                d,
                 "pose",
-                &c,
-                "--quiet",
-                "--set",
-                "pose.optimiser.iterations=0",
-            ])
+                &["--quiet", "--set", "pose.optimiser.iterations=0"],
+            )
         },
         mentions: &["`pose.optimiser.iterations`", "at least 1"],
     },
     Row {
         proves: "pose_names_a_nan_max_memory_by_its_flag",
-        args: |f, d| {
-            let c = config_in(f, d, "");
-            strings(&["pose", &c, "--quiet", "--max-memory", "NaN"])
-        },
+        args: |f, d| config_command(f, d, "pose", &["--quiet", "--max-memory", "NaN"]),
         mentions: &["--max-memory", "NaN"],
     },
     Row {
@@ -679,10 +682,7 @@ const TABLE: &[Row] = &[
     },
     Row {
         proves: "run_refuses_an_fps_the_video_cannot_hold_before_making_a_folder",
-        args: |f, d| {
-            let c = config_in(f, d, "");
-            strings(&["run", &c, "--quiet", "--set", "output.fps=1e9"])
-        },
+        args: |f, d| config_command(f, d, "run", &["--quiet", "--set", "output.fps=1e9"]),
         mentions: &["`output.fps`", "1000"],
     },
     Row {

@@ -145,10 +145,12 @@ impl Experiment {
             coarse: None,
             prepared_at,
         };
+        // Grounding checks its own memory (a lifted field's views); what comes after renders at
+        // the camera's size.
+        experiment.ground_queries()?;
         experiment
             .preparation_memory()
             .check(experiment.memory_limit()?, crate::resources::RAISE_LIMIT)?;
-        experiment.ground_queries()?;
         if experiment.config.camera.working_distance == crate::config::WorkingDistance::Measured {
             experiment.measure_working_distances()?;
         }

@@ -31,6 +31,15 @@ pub struct CameraPath {
 }
 
 impl CameraPath {
+    /// Frames without timing (camera files that list views: COLMAP, INRIA, transforms.json).
+    pub fn untimed(frames: Vec<Frame>) -> Self {
+        Self {
+            frames,
+            fps: None,
+            seconds: None,
+        }
+    }
+
     /// A path of `poses` (Φ) all seen through `camera`, at `fps`.
     pub fn from_phis(poses: &[[f64; 6]], camera: Intrinsics, fps: f64) -> Self {
         Self {

@@ -307,14 +307,7 @@ pub fn import_named(
     }
     images.sort_by_key(|(_, id, _)| *id);
     let (names, frames) = images.into_iter().map(|(n, _, f)| (n, f)).unzip();
-    Ok((
-        CameraPath {
-            frames,
-            fps: None,
-            seconds: None,
-        },
-        names,
-    ))
+    Ok((CameraPath::untimed(frames), names))
 }
 
 /// Reads `images.txt` and, when it is there, `cameras.txt` beside it.

@@ -105,14 +105,7 @@ pub fn import_named(text: &str, file: &str) -> Result<(CameraPath, Vec<Option<St
         })
         .collect::<Result<Vec<_>>>()?;
     let names = entries.into_iter().map(|e| e.img_name).collect();
-    Ok((
-        CameraPath {
-            frames,
-            fps: None,
-            seconds: None,
-        },
-        names,
-    ))
+    Ok((CameraPath::untimed(frames), names))
 }
 
 /// Reads a `cameras.json`.

@@ -181,14 +181,7 @@ pub fn import_named(text: &str, file: &str) -> Result<(CameraPath, Vec<String>)>
         });
         names.push(entry.file_path);
     }
-    Ok((
-        CameraPath {
-            frames,
-            fps: None,
-            seconds: None,
-        },
-        names,
-    ))
+    Ok((CameraPath::untimed(frames), names))
 }
 
 /// The path of `transforms.json` text, without the image names.
