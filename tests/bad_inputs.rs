@@ -631,6 +631,18 @@ const TABLE: &[Row] = &[
         ],
     },
     Row {
+        proves: "run_check_refuses_a_clearance_margin_wider_than_the_scene",
+        args: |f, d| {
+            config_command(
+                f,
+                d,
+                "run",
+                &["--check", "--set", "costs.clearance.margin=1e300"],
+            )
+        },
+        mentions: &["`costs.clearance.margin` = 1e300", "diagonal"],
+    },
+    Row {
         proves: "pose_refuses_zero_iterations_naming_the_key",
         args: |f, d| {
             config_command(

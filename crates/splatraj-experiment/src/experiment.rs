@@ -229,6 +229,18 @@ impl Experiment {
         let mean = radii.iter().sum::<f64>() / radii.len().max(1) as f64;
         let diagonal = 2.0 * glam::DVec3::from(self.bounds.1).length();
         self.check_working_distances(diagonal)?;
+        // A margin wider than the scene puts every view inside it: the cost would push the
+        // camera out of the scene, and the verdict would fail every window.
+        if let Some(clearance) = &self.config.costs.clearance
+            && let OrAuto::Value(margin) = clearance.margin
+            && !(margin <= diagonal)
+        {
+            bail!(
+                "`costs.clearance.margin` = {margin:?} is larger than the scene's diagonal \
+                 ({diagonal:.3}): every view would be inside the margin; give it in scene units \
+                 or leave it \"auto\""
+            );
+        }
         if let Some(clearance) = &mut self.config.costs.clearance
             && clearance.margin.is_auto()
         {
