@@ -233,7 +233,7 @@ impl Experiment {
         // camera out of the scene, and the verdict would fail every window.
         if let Some(clearance) = &self.config.costs.clearance
             && let OrAuto::Value(margin) = clearance.margin
-            && !(margin <= diagonal)
+            && (margin > diagonal || margin.is_nan())
         {
             bail!(
                 "`costs.clearance.margin` = {margin:?} is larger than the scene's diagonal \
