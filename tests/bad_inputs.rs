@@ -470,6 +470,11 @@ fn config_command(f: &Fixture, dir: &Path, command: &str, extra: &[&str]) -> Vec
     args
 }
 
+/// `run CONFIG --check --set SETTING` with the tiny config in `dir`.
+fn run_check_setting(f: &Fixture, dir: &Path, setting: &str) -> Vec<String> {
+    config_command(f, dir, "run", &["--check", "--set", setting])
+}
+
 /// A `.npy` of `values` f32 whose header claims `shape`.
 fn npy_claiming(dir: &Path, shape: &str, values: usize) -> String {
     let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}");
@@ -567,26 +572,12 @@ fn strings(args: &[&str]) -> Vec<String> {
 const TABLE: &[Row] = &[
     Row {
         proves: "run_check_refuses_a_learning_rate_above_one_radian_per_step",
-        args: |f, d| {
-            config_command(
-                f,
-                d,
-                "run",
-                &["--check", "--set", "optimiser.learning_rate=1e30"],
-            )
-        },
+        args: |f, d| run_check_setting(f, d, "optimiser.learning_rate=1e30"),
         mentions: &["`optimiser.learning_rate`", "(0, 1]"],
     },
     Row {
         proves: "run_check_refuses_a_learning_rate_of_zero_that_never_moves",
-        args: |f, d| {
-            config_command(
-                f,
-                d,
-                "run",
-                &["--check", "--set", "optimiser.learning_rate=0"],
-            )
-        },
+        args: |f, d| run_check_setting(f, d, "optimiser.learning_rate=0"),
         mentions: &["`optimiser.learning_rate`", "(0, 1]"],
     },
     Row {
@@ -607,7 +598,7 @@ const TABLE: &[Row] = &[
     },
     Row {
         proves: "run_check_refuses_a_field_of_view_near_180_degrees_by_its_working_distance",
-        args: |f, d| config_command(f, d, "run", &["--check", "--set", "camera.fov_x=179.9999"]),
+        args: |f, d| run_check_setting(f, d, "camera.fov_x=179.9999"),
         mentions: &[
             "`queries.0`",
             "working distance",
@@ -616,14 +607,7 @@ const TABLE: &[Row] = &[
     },
     Row {
         proves: "run_check_refuses_a_target_ratio_near_zero_by_its_working_distance",
-        args: |f, d| {
-            config_command(
-                f,
-                d,
-                "run",
-                &["--check", "--set", "camera.target_ratio=1e-300"],
-            )
-        },
+        args: |f, d| run_check_setting(f, d, "camera.target_ratio=1e-300"),
         mentions: &[
             "`queries.0`",
             "working distance",
@@ -632,14 +616,7 @@ const TABLE: &[Row] = &[
     },
     Row {
         proves: "run_check_refuses_a_clearance_margin_wider_than_the_scene",
-        args: |f, d| {
-            config_command(
-                f,
-                d,
-                "run",
-                &["--check", "--set", "costs.clearance.margin=1e300"],
-            )
-        },
+        args: |f, d| run_check_setting(f, d, "costs.clearance.margin=1e300"),
         mentions: &["`costs.clearance.margin` = 1e300", "diagonal"],
     },
     Row {
