@@ -16,13 +16,10 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use splatraj::experiment::Extensions;
-use splatraj::experiment::study::context::{measure_in_child, measure_runs};
-use splatraj::experiment::study::measure::MemoryReading;
-use splatraj::experiment::study::plan::{PlanOptions, Run};
-use splatraj::experiment::study::summary::StudyContext;
+use splatraj::experiment::study::plan::PlanOptions;
 use splatraj::experiment::study::{
-    Factor, Preset, Shard, StudyFile, StudyPlan, measure_run, merge_studies, study_folder,
-    write_study,
+    Factor, Preset, RunPlace, Shard, StudyPlan, StudyRequest, conduct_study, measure_one,
+    merge_studies, study_dir, write_study,
 };
 
 /// Arguments of `splatraj study`.
@@ -149,12 +146,7 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
     let options = plan_options(args)?;
     let plan = StudyPlan::new(config, &options, &extensions)?;
     if let Some(index) = args.one {
-        let run = plan
-            .runs
-            .get(index)
-            .with_context(|| format!("--one {index}: the plan has {} runs", plan.runs.len()))?;
-        let since = splatraj_scene::stop::Since::now();
-        let rows = measure_run(&plan, run, &extensions, MemoryReading::OwnProcess, since)?;
+        let rows = measure_one(&plan, index, &extensions)?;
         println!("{}", serde_json::to_string(&rows)?);
         return Ok(());
     }
@@ -194,25 +186,27 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
         );
         return Ok(());
     }
-    let base = splatraj::experiment::Config::load(config, &plan.base_overrides)?;
-    let dir = study_folder(args.out.as_deref(), &base.output.runs_dir, &plan.name)?;
-    eprintln!("study folder: {}", dir.display());
     let exe = std::env::current_exe().context("cannot find the splatraj binary to re-run")?;
-    // A stop ends the study between runs (`measure_runs`) and, in this process, within the
-    // run under way.
-    let since = splatraj_scene::stop::Since::now();
-    let measure = |run: &Run| {
-        if args.in_process {
-            measure_run(&plan, run, &extensions, MemoryReading::Shared, since)
-                .map_err(|e| format!("{e:#}"))
+    let request = StudyRequest {
+        config,
+        options: &options,
+        shard: args.shard,
+        out: args.out.as_deref(),
+        place: if args.in_process {
+            RunPlace::InProcess
         } else {
-            measure_in_child(&exe, config, &options, run.index)
-        }
+            RunPlace::Child { exe: &exe }
+        },
     };
-    let (rows, failures) = measure_runs(
-        &plan,
+    let folder = study_dir(&plan, &request)?;
+    eprintln!("study folder: {}", folder.dir.display());
+    let outcome = conduct_study(
+        plan,
         &runs,
-        measure,
+        folder,
+        &request,
+        &extensions,
+        std::env::args(),
         |i, label, measured| {
             let at = format!("[{}/{}] {label}", i + 1, runs.len());
             match measured {
@@ -231,23 +225,8 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
                 Err(error) => eprintln!("{at}: failed: {error}"),
             }
         },
-        since,
-    );
-    let context = StudyContext::new(&plan, &base, std::env::args());
-    let failed = failures.len();
-    let study = StudyFile::new(plan, args.shard, context, rows, failures);
-    write_study(&dir, &study)?;
-    if since.stopped() {
-        return Err(splatraj_scene::stop::Stopped {
-            what: format!(
-                "{} rows measured ({} runs planned), written to {}",
-                study.rows.len(),
-                study.plan.runs.len(),
-                dir.display()
-            ),
-        }
-        .into());
-    }
+    )?;
+    let (dir, study) = (&outcome.dir, &outcome.study);
     if let Some(summary) = &study.summary
         && let Some(c) = summary.cheapest_within_5_percent
     {
@@ -257,6 +236,7 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
         );
     }
     println!("{}", dir.display());
+    let failed = study.failures.len();
     if failed > 0 {
         bail!(
             "{failed} run(s) failed (listed in {})",

@@ -99,10 +99,6 @@ pub fn run_report(dir: &Path, scene: Option<&Scene>) -> Result<RunReport> {
     })
 }
 
-/// Refuses a `metrics.json` that is not what a run writes (an object with a `windows` list
-/// of objects and a `run` object), and a scene
-/// whose Gaussian count is not the run's `run.gaussians` (another scene's views would be
-/// drawn under this run's path).
 /// The per-window numbers of `metrics.json` the report tabulates and plots.
 const WINDOW_FIGURES: [&str; 8] = [
     "samples",
@@ -115,6 +111,10 @@ const WINDOW_FIGURES: [&str; 8] = [
     "tre_max",
 ];
 
+/// Refuses a `metrics.json` that is not what a run writes (an object with a `windows` list
+/// of objects whose figures are numbers, and a `run` object), and a scene whose Gaussian
+/// count is not the run's `run.gaussians` (another scene's views would be drawn under this
+/// run's path).
 fn check_metrics(metrics: &Value, file: &Path, scene: Option<&Scene>) -> Result<()> {
     let windows_ok = metrics
         .get("windows")

@@ -11,12 +11,14 @@
 //! 5 % of the best quality, and writes `summary.md`; [`plot`] draws `frontier.svg`; [`files`]
 //! writes and reads the study folder and merges shards. [`check`] checks a plan before its
 //! first run (`--dry-run` stops there): every variant prepared and checked as `run --check`
-//! checks a run, the fixed evaluation's sizes, and the study folder.
+//! checks a run, the fixed evaluation's sizes, and the study folder; [`conduct`] measures the
+//! runs (each in a child process or here) and writes the study.
 //!
 //! Peak memory is a process-wide high-water mark, so the command runs each run in a child
 //! process of its own (as `bench render` does); in-process runs report none.
 
 pub mod check;
+pub mod conduct;
 pub mod context;
 pub mod files;
 pub mod measure;
@@ -29,6 +31,7 @@ pub use crate::config::study::{
     Design, EvaluationConfig, FactorConfig, Quality, StudyConfig, StudyTask,
 };
 pub use check::StudyCheck;
+pub use conduct::{RunPlace, StudyOutcome, StudyRequest, conduct_study, measure_one, study_dir};
 pub use files::{StudyFile, merge_studies, read_study, study_folder, write_study};
 pub use measure::measure_run;
 pub use plan::{Factor, Preset, Run, Shard, StudyPlan, Variant};

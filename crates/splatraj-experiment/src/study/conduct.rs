@@ -1,0 +1,127 @@
+//! A whole study: its runs measured one after another (each in a child process or here), then
+//! its folder written, also when a stop cut it short. What `splatraj study` does after the
+//! plan and its check; the command only shows the progress and the outcome.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+
+use super::context::{measure_in_child, measure_runs};
+use super::files::{StudyFile, study_folder, write_study};
+use super::measure::{MemoryReading, measure_run};
+use super::plan::{PlanOptions, Run, Shard, StudyPlan};
+use super::rows::StudyRow;
+use super::summary::StudyContext;
+use crate::config::Config;
+use crate::extensions::Extensions;
+
+/// Where each run of a study is measured.
+#[derive(Debug, Clone, Copy)]
+pub enum RunPlace<'a> {
+    /// In a child process of `exe` (`splatraj study … --one RUN`): its peak memory is its own.
+    Child {
+        /// The splatraj binary.
+        exe: &'a Path,
+    },
+    /// In this process (no peak memory figure).
+    InProcess,
+}
+
+/// What a study was asked: the plan built from `config` with `options`, the runs of `shard`,
+/// and where its folder goes (`out`, else a new one under `output.runs_dir`).
+#[derive(Debug, Clone, Copy)]
+pub struct StudyRequest<'a> {
+    /// The base config file.
+    pub config: &'a Path,
+    /// The options the plan was built with (a child builds the same plan from them).
+    pub options: &'a PlanOptions,
+    /// The slice of the runs asked for.
+    pub shard: Option<Shard>,
+    /// The study folder, when given.
+    pub out: Option<&'a Path>,
+    /// Where the runs are measured.
+    pub place: RunPlace<'a>,
+}
+
+/// What a study wrote.
+#[derive(Debug)]
+pub struct StudyOutcome {
+    /// The study folder.
+    pub dir: PathBuf,
+    /// Its contents.
+    pub study: StudyFile,
+}
+
+/// A study's folder, made, and the base config its files describe.
+#[derive(Debug)]
+pub struct StudyFolder {
+    /// The folder (a new one is named by the time it was made).
+    pub dir: PathBuf,
+    /// The base config, with the plan's overrides.
+    pub base: Config,
+}
+
+/// Makes the study folder `request` writes into.
+pub fn study_dir(plan: &StudyPlan, request: &StudyRequest<'_>) -> Result<StudyFolder> {
+    let base = Config::load(request.config, &plan.base_overrides)?;
+    let dir = study_folder(request.out, &base.output.runs_dir, &plan.name)?;
+    Ok(StudyFolder { dir, base })
+}
+
+/// Measures `runs` of `plan` into `folder` (from [`study_dir`]) and writes the study there;
+/// `progress` hears each run's position, label and outcome. `args` is the command line the
+/// study's files record. A stop ends it between runs (and, in this process, within the run
+/// under way): what was measured is written all the same, then the stop is the error
+/// ([`splatraj_scene::stop::Stopped`], naming the folder).
+pub fn conduct_study(
+    plan: StudyPlan,
+    runs: &[Run],
+    folder: StudyFolder,
+    request: &StudyRequest<'_>,
+    extensions: &Extensions,
+    args: impl IntoIterator<Item = String>,
+    progress: impl FnMut(usize, &str, &Result<Vec<StudyRow>, String>),
+) -> Result<StudyOutcome> {
+    let since = splatraj_scene::stop::Since::now();
+    let measure = |run: &Run| match request.place {
+        RunPlace::InProcess => measure_run(&plan, run, extensions, MemoryReading::Shared, since)
+            .map_err(|e| format!("{e:#}")),
+        RunPlace::Child { exe } => {
+            measure_in_child(exe, request.config, request.options, run.index)
+        }
+    };
+    let (rows, failures) = measure_runs(&plan, runs, measure, progress, since);
+    let context = StudyContext::new(&plan, &folder.base, args);
+    let study = StudyFile::new(plan, request.shard, context, rows, failures);
+    write_study(&folder.dir, &study)?;
+    if since.stopped() {
+        return Err(splatraj_scene::stop::Stopped {
+            what: format!(
+                "{} rows measured ({} runs planned), written to {}",
+                study.rows.len(),
+                study.plan.runs.len(),
+                folder.dir.display()
+            ),
+        }
+        .into());
+    }
+    Ok(StudyOutcome {
+        dir: folder.dir,
+        study,
+    })
+}
+
+/// Measures run `index` of `plan` in this process, with its own peak memory (what a child of
+/// [`RunPlace::Child`] does: `splatraj study … --one index`).
+pub fn measure_one(
+    plan: &StudyPlan,
+    index: usize,
+    extensions: &Extensions,
+) -> Result<Vec<StudyRow>> {
+    let run = plan
+        .runs
+        .get(index)
+        .with_context(|| format!("--one {index}: the plan has {} runs", plan.runs.len()))?;
+    let since = splatraj_scene::stop::Since::now();
+    measure_run(plan, run, extensions, MemoryReading::OwnProcess, since)
+}
