@@ -13,6 +13,7 @@ use burn::tensor::DType;
 use serde::{Deserialize, Serialize};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera::Intrinsics;
+use splatraj_render::counters::{self, Counts};
 use splatraj_render::render::{Pruning, Rasterizer};
 use splatraj_render::stages;
 
@@ -157,6 +158,7 @@ impl BenchConfig {
             coverage: f64::NAN,
             tce: f64::NAN,
             tre: f64::NAN,
+            grad_pose: Vec::new(),
             forward_ms: f64::NAN,
             forward_backward_ms: f64::NAN,
             setup_peak_mb: None,
@@ -164,6 +166,7 @@ impl BenchConfig {
             cpu_per_wall: None,
             rayon_threads: 0,
             stages_ms: Vec::new(),
+            counts: Counts::default(),
             skipped: Some(why.into()),
         }
     }
@@ -218,6 +221,10 @@ pub struct BenchRow {
     pub tce: f64,
     /// TRE of the warm-up pass.
     pub tre: f64,
+    /// d(TCE + TRE)/dΦ of the warm-up pass (what `scripts/gpu_check.sh` compares across
+    /// backends).
+    #[serde(default)]
+    pub grad_pose: Vec<f64>,
     /// Median ms of mask render + TCE + TRE (plain device).
     pub forward_ms: f64,
     /// Median ms of mask render + TCE + TRE + backward (autodiff device).
@@ -235,6 +242,10 @@ pub struct BenchRow {
     /// names), then `other`: the rest of the pass (the projection's autodiff backward, costs).
     #[serde(default)]
     pub stages_ms: Vec<(String, f64)>,
+    /// Per forward + backward pass: kernel launches (GPU backends), reads back to the host,
+    /// uploads and bytes each way (`splatraj_render::counters`).
+    #[serde(default)]
+    pub counts: Counts,
     /// Why the configuration was not run.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub skipped: Option<String>,
@@ -343,7 +354,10 @@ fn stage_table(rows: &[BenchRow]) -> String {
     for (name, _) in &names.stages_ms {
         out += &format!(" {name:>9}");
     }
-    out += "\n";
+    out += &format!(
+        " | {:>8} {:>5} {:>7} {:>9} {:>9}\n",
+        "launches", "reads", "uploads", "KB up", "KB down"
+    );
     for row in rows.iter().filter(|r| !r.stages_ms.is_empty()) {
         out += &format!(
             "{:<20} {:>9} {:>4} {:>7} {:>7}",
@@ -352,7 +366,15 @@ fn stage_table(rows: &[BenchRow]) -> String {
         for (_, ms) in &row.stages_ms {
             out += &format!(" {ms:>9.1}");
         }
-        out += "\n";
+        let c = &row.counts;
+        out += &format!(
+            " | {:>8} {:>5} {:>7} {:>9.1} {:>9.1}\n",
+            c.launches,
+            c.reads,
+            c.uploads,
+            c.bytes_up as f64 / 1024.0,
+            c.bytes_down as f64 / 1024.0
+        );
     }
     out
 }
@@ -421,10 +443,14 @@ pub fn run_one(args: &BenchSettings, config: &BenchConfig) -> Result<BenchRow> {
     // The stage clock is process-wide and each row runs in its own child, so only this
     // configuration's passes are on it.
     stages::reset();
+    let counted = counters::snapshot();
     let pass = Instant::now();
     let forward_backward_ms = median_ms(args.repeats, || {
         probe.forward_backward(&setup.pose).map(|_| ())
     })?;
+    let counts = counters::snapshot()
+        .since(&counted)
+        .per(args.repeats.max(1) as u64);
     let per_pass = |d: std::time::Duration| 1e3 * d.as_secs_f64() / args.repeats.max(1) as f64;
     let mut stages_ms: Vec<(String, f64)> = stages::totals()
         .iter()
@@ -448,6 +474,7 @@ pub fn run_one(args: &BenchSettings, config: &BenchConfig) -> Result<BenchRow> {
         coverage: result.coverage.unwrap_or(0.0),
         tce: result.term("tce"),
         tre: result.term("tre"),
+        grad_pose: result.grad_pose.clone().unwrap_or_default(),
         forward_ms,
         forward_backward_ms,
         setup_peak_mb,
@@ -455,6 +482,7 @@ pub fn run_one(args: &BenchSettings, config: &BenchConfig) -> Result<BenchRow> {
         cpu_per_wall,
         rayon_threads: rayon::current_num_threads(),
         stages_ms,
+        counts,
         skipped: None,
     })
 }

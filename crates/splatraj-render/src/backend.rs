@@ -91,7 +91,10 @@ impl BackendKind {
             // kept as an option for users comparing against older burn
             BackendKind::Ndarray => Ok(Device::ndarray()),
             #[cfg(feature = "wgpu")]
-            BackendKind::Wgpu => Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice)),
+            BackendKind::Wgpu => {
+                crate::counters::watch_launches();
+                Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice))
+            }
             #[allow(unreachable_patterns)] // reachable when a feature is off
             other => Err(BackendUnavailable {
                 requested: other,

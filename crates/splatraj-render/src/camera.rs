@@ -14,7 +14,7 @@ pub use splatraj_camera::{
 
 /// Below this θ², Rodrigues' coefficients come from their Taylor series (in f32, sin θ/θ
 /// computed directly loses all precision well before θ = 0).
-const SERIES_BELOW_THETA_SQ: f64 = 1e-2;
+pub(crate) const SERIES_BELOW_THETA_SQ: f64 = 1e-2;
 
 /// Differentiable Rodrigues: rotation vectors `[B, 3]` → rotation matrices `[B, 3, 3]`.
 ///

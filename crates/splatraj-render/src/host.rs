@@ -15,12 +15,19 @@ use crate::render::DeviceScene;
 #[error("reading a tensor back to the host: {0}")]
 pub struct ReadBackError(pub String);
 
-/// The values of a float tensor on the host as f64, in row-major order.
+/// The values of a float tensor on the host as f64, in row-major order (a counted read).
 pub fn to_host<const D: usize>(t: Tensor<D>) -> Result<Vec<f64>, ReadBackError> {
-    t.into_data()
-        .convert::<f64>()
+    let data = t.into_data();
+    crate::counters::read(data.as_bytes().len());
+    data.convert::<f64>()
         .try_to_vec::<f64>()
         .map_err(|e| ReadBackError(format!("{e:?}")))
+}
+
+/// A tensor from host `data` on `device` in `dtype` (a counted upload).
+pub fn upload<const D: usize>(data: TensorData, device: &Device, dtype: DType) -> Tensor<D> {
+    crate::counters::upload(data.as_bytes().len());
+    Tensor::from_data(data, (device, dtype))
 }
 
 /// The single value of a one-element tensor (or NaN if it cannot be read).
@@ -34,7 +41,7 @@ pub fn scalar<const D: usize>(t: Tensor<D>) -> f64 {
 /// Poses Φ as a `[B, 6]` tensor on `device` in `dtype`.
 pub fn poses_tensor(poses: &[Pose], device: &Device, dtype: DType) -> Tensor<2> {
     let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
-    Tensor::from_data(TensorData::new(flat, [poses.len(), 6]), (device, dtype))
+    upload(TensorData::new(flat, [poses.len(), 6]), device, dtype)
 }
 
 /// One pose Φ as a `[1, 6]` tensor.

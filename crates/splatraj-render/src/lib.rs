@@ -13,6 +13,7 @@
 pub mod backend;
 pub mod bitset;
 pub mod camera;
+pub mod counters;
 /// The single-camera JSON file (`splatraj render --camera`), from `splatraj-camera`.
 pub use splatraj_camera::camera_file;
 pub mod decide;

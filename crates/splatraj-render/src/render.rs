@@ -13,8 +13,12 @@ use crate::bitset::GaussianBits;
 use crate::camera::{Intrinsics, Pose};
 use crate::decide::{HostGeometry, decide};
 use crate::focus::ObjectFocus;
-use crate::fused::{CompositePlan, composite_fused};
-use crate::project::{NEAR_PLANE, SceneTensors, project_with_near};
+use crate::fused::projection::{
+    PackedColumn, ProjectionCamera, ProjectionPlan, SPLAT_COLUMNS, project_packed,
+};
+use crate::fused::{CompositePlan, composite_packed};
+use crate::host::{to_host, upload};
+use crate::project::{NEAR_PLANE, Projected, SceneTensors, project_with_near};
 use crate::rasterize::{
     Approximations, CompositeOptions, Composited, RenderStats, SplatInputs, composite,
 };
@@ -167,9 +171,17 @@ pub enum RenderError {
     /// Lifting takes a gradient, which needs the scene on an autodiff device.
     #[error("lifting needs the scene on an autodiff device (`device.autodiff()`)")]
     NeedsAutodiff,
-    /// A gradient could not be read back to the host.
-    #[error("reading a gradient back to the host: {0}")]
+    /// Poses or a gradient could not be read back to the host.
+    #[error("reading back to the host: {0}")]
     ReadBack(String),
+    /// The host poses given to [`render_at`] are not one per pose of the tensor.
+    #[error("{host} host poses for a batch of {tensor} poses")]
+    PoseCount {
+        /// Poses in the tensor.
+        tensor: usize,
+        /// Host poses given.
+        host: usize,
+    },
 }
 
 /// A scene uploaded to a device, ready to render many times.
@@ -186,6 +198,8 @@ pub struct DeviceScene {
 impl DeviceScene {
     /// Uploads `scene` to `device` in `dtype`.
     pub fn new(scene: &Scene, device: &Device, dtype: DType) -> Self {
+        let floats = scene.len() * (3 + 9 + 1) + scene.sh.len();
+        crate::counters::scene_upload(floats * dtype.size());
         DeviceScene {
             geometry: SceneTensors::new(scene, None, device, dtype),
             sh: ShTensors::new(scene, None, device, dtype),
@@ -207,10 +221,23 @@ impl DeviceScene {
 /// Renders the requested channels for every pose in `poses` `[B, 6]` (Φ = ω, c).
 ///
 /// Differentiable in `poses` when they live on an autodiff device. Returns images
-/// `[B, H, W, C]` (channels in request order) and alpha `[B, H, W]`.
+/// `[B, H, W, C]` (channels in request order) and alpha `[B, H, W]`. The host decisions read
+/// the poses back (on a GPU, a wait for the device); [`render_at`] takes them from the caller.
 pub fn render(
     scene: &DeviceScene,
     poses: Tensor<2>,
+    request: &RenderRequest,
+) -> Result<Composited, RenderError> {
+    render_at(scene, poses, None, request)
+}
+
+/// [`render`] with the values of `poses` already on the host (`host_poses`, the same values
+/// in the same order, e.g. read once per optimisation step for every pass of the step): the
+/// pass then reads nothing back. `None` reads them.
+pub fn render_at(
+    scene: &DeviceScene,
+    poses: Tensor<2>,
+    host_poses: Option<&[Pose]>,
     request: &RenderRequest,
 ) -> Result<Composited, RenderError> {
     let n = scene.len();
@@ -256,6 +283,7 @@ pub fn render(
         None => 0,
     };
     let started = std::time::Instant::now();
+    let counted = crate::counters::snapshot();
     let focus: Option<Arc<ObjectFocus>> = match (
         request.pruning,
         request.channels.as_slice(),
@@ -271,16 +299,20 @@ pub fn render(
     // Decisions (cull, tiles, order, pruning) on all Gaussians without gradient, then the
     // differentiable pass on only the Gaussians some tile uses.
     let grid = TileGrid::new(request.intrinsics.width, request.intrinsics.height);
-    let host_poses: Vec<Pose> = poses
-        .clone()
-        .without_autodiff()
-        .into_data()
-        .convert::<f64>()
-        .try_to_vec::<f64>()
-        .expect("poses read back as f64")
-        .chunks_exact(6)
-        .map(|p| Pose([p[0], p[1], p[2], p[3], p[4], p[5]]))
-        .collect();
+    let host_poses: Vec<Pose> = match host_poses {
+        Some(given) => given.to_vec(),
+        None => to_host(poses.clone().without_autodiff())
+            .map_err(|e| RenderError::ReadBack(e.to_string()))?
+            .chunks_exact(6)
+            .map(|p| Pose([p[0], p[1], p[2], p[3], p[4], p[5]]))
+            .collect(),
+    };
+    if host_poses.len() != batch {
+        return Err(RenderError::PoseCount {
+            tensor: batch,
+            host: host_poses.len(),
+        });
+    }
     let mut decisions = decide(
         &scene.host,
         &host_poses,
@@ -330,24 +362,52 @@ pub fn render(
         });
     }
     let u = used.len();
-    let index = Tensor::<1, Int>::from_data(
-        TensorData::new(used.iter().map(|&g| g as i64).collect::<Vec<_>>(), [u]),
-        &device,
-    );
-    let geometry = scene.geometry.select(index.clone());
-    let projected = project_with_near(&geometry, poses.clone(), &request.intrinsics, request.near);
+    let index = || {
+        let index: Vec<i64> = used.iter().map(|&g| g as i64).collect();
+        crate::counters::upload(8 * u);
+        Tensor::<1, Int>::from_data(TensorData::new(index, [u]), &device)
+    };
+    // Screen space: the fused projection's packed rows, or the tensor projection's outputs.
+    let (splats, depth) = match request.rasterizer {
+        Rasterizer::Fused => {
+            let plan = ProjectionPlan {
+                used: used.iter().map(|&g| g as u32).collect(),
+                camera: ProjectionCamera::new(&request.intrinsics, request.near),
+            };
+            let rows = project_packed(&scene.geometry, poses.clone(), plan); // [B, U, 7]
+            let depth = rows.clone().narrow(2, PackedColumn::Depth as usize, 1); // [B, U, 1]
+            (
+                Splats::Packed(rows.reshape([batch * u, SPLAT_COLUMNS])),
+                depth,
+            )
+        }
+        Rasterizer::Tensor => {
+            let geometry = scene.geometry.select(index());
+            let projected =
+                project_with_near(&geometry, poses.clone(), &request.intrinsics, request.near);
+            let depth = projected.depth.clone().unsqueeze_dim::<3>(2); // [B, U, 1]
+            let opacities = geometry
+                .opacities
+                .unsqueeze_dim::<2>(0)
+                .repeat_dim(0, batch)
+                .reshape([batch * u]);
+            (Splats::Separate(Box::new(projected), opacities), depth)
+        }
+    };
 
     let mut values = Vec::with_capacity(request.channels.len());
     for channel in &request.channels {
         values.push(match channel {
             Channel::Rgb => {
+                let index = index();
                 let sh = ShTensors {
                     degree: scene.sh.degree,
                     coeffs: scene.sh.coeffs.clone().select(0, index.clone()),
                 };
-                sh_colours(&sh, geometry.means.clone(), poses.clone().narrow(1, 3, 3))
+                let means = scene.geometry.means.clone().select(0, index);
+                sh_colours(&sh, means, poses.clone().narrow(1, 3, 3))
             }
-            Channel::Depth => projected.depth.clone().unsqueeze_dim::<3>(2),
+            Channel::Depth => depth.clone(),
             Channel::Mask(mask) => {
                 let mask: Vec<f32> = used.iter().map(|&g| mask[g]).collect();
                 per_gaussian(&mask, u, 1, batch, &device, dtype)
@@ -368,29 +428,25 @@ pub fn render(
         } else {
             tensor.clone().cast(dtype)
         };
-        let rows = tensor.select(0, index.clone()); // [U, C]
+        let rows = tensor.select(0, index()); // [U, C]
         values.push(rows.unsqueeze_dim::<3>(0).repeat_dim(0, batch)); // [B, U, C]
     }
     let values = Tensor::cat(values, 2).reshape([batch * u, width]);
-    let inputs = SplatInputs {
-        means_2d: projected.means_2d.reshape([batch * u, 2]),
-        conics: projected.conics.reshape([batch * u, 3]),
-        opacities: geometry
-            .opacities
-            .unsqueeze_dim::<2>(0)
-            .repeat_dim(0, batch)
-            .reshape([batch * u]),
-        values,
-    };
     let prepared = started.elapsed();
     let stop_transmittance = request.approximations.stop_transmittance;
-    let composited = match request.rasterizer {
-        Rasterizer::Fused => composite_fused(
-            &inputs,
+    let composited = match splats {
+        Splats::Packed(rows) => composite_packed(
+            rows,
+            values,
             CompositePlan::new(&work, u, batch, grid).with_stop_transmittance(stop_transmittance),
         ),
-        Rasterizer::Tensor => composite(
-            &inputs,
+        Splats::Separate(projected, opacities) => composite(
+            &SplatInputs {
+                means_2d: projected.means_2d.reshape([batch * u, 2]),
+                conics: projected.conics.reshape([batch * u, 3]),
+                opacities,
+                values,
+            },
             &work,
             u,
             batch,
@@ -410,8 +466,13 @@ pub fn render(
     ] {
         stages::add(stage, elapsed);
     }
-    // Stage times of the forward graph (backends may defer work, so they are indicative).
+    // Stage times of the forward graph (backends may defer work, so they are indicative), and
+    // what the forward moved and launched.
+    let counts = crate::counters::snapshot().since(&counted);
     tracing::debug!(
+        launches = counts.launches,
+        reads = counts.reads,
+        bytes_up = counts.bytes_up,
         decide_ms = decided.as_secs_f64() * 1e3,
         bin_ms = (binned - decided).as_secs_f64() * 1e3,
         project_ms = (prepared - binned).as_secs_f64() * 1e3,
@@ -424,6 +485,14 @@ pub fn render(
     Ok(composited)
 }
 
+/// A pass's Gaussians in screen space, as its rasterizer takes them.
+enum Splats {
+    /// The fused projection's rows `[B·U, 7]`.
+    Packed(Tensor<2>),
+    /// The tensor projection's outputs and the opacities `[B·U]`.
+    Separate(Box<Projected>, Tensor<1>),
+}
+
 /// A per-Gaussian constant channel repeated over the batch. `[B, N, dim]`
 fn per_gaussian(
     values: &[f32],
@@ -433,7 +502,7 @@ fn per_gaussian(
     device: &Device,
     dtype: DType,
 ) -> Tensor<3> {
-    Tensor::<2>::from_data(TensorData::new(values.to_vec(), [n, dim]), (device, dtype))
+    upload::<2>(TensorData::new(values.to_vec(), [n, dim]), device, dtype)
         .unsqueeze_dim::<3>(0)
         .repeat_dim(0, batch)
 }

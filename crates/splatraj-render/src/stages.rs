@@ -23,19 +23,24 @@ pub enum Stage {
     /// Compositing backward (the fused op's hand-written backward; the tensor path's backward
     /// is part of burn's autodiff and is not separated).
     CompositeBackward,
+    /// Projection backward (the fused projection's hand-written backward; the tensor
+    /// projection's is part of burn's autodiff and is not separated).
+    ProjectBackward,
 }
 
 impl Stage {
     /// Every stage, in pipeline order.
-    pub const ALL: [Stage; 5] = [
+    pub const ALL: [Stage; 6] = [
         Stage::Decide,
         Stage::Bin,
         Stage::Project,
         Stage::Composite,
         Stage::CompositeBackward,
+        Stage::ProjectBackward,
     ];
 
-    /// Short name for tables (`decide`, `bin`, `project`, `composite`, `composite_backward`).
+    /// Short name for tables (`decide`, `bin`, `project`, `composite`, `composite_backward`,
+    /// `project_backward`).
     pub fn name(self) -> &'static str {
         match self {
             Stage::Decide => "decide",
@@ -43,11 +48,12 @@ impl Stage {
             Stage::Project => "project",
             Stage::Composite => "composite",
             Stage::CompositeBackward => "composite_backward",
+            Stage::ProjectBackward => "project_backward",
         }
     }
 }
 
-static NANOS: [AtomicU64; 5] = [const { AtomicU64::new(0) }; 5];
+static NANOS: [AtomicU64; Stage::ALL.len()] = [const { AtomicU64::new(0) }; Stage::ALL.len()];
 
 /// Adds `elapsed` to `stage`'s total.
 pub fn add(stage: Stage, elapsed: Duration) {
@@ -55,7 +61,7 @@ pub fn add(stage: Stage, elapsed: Duration) {
 }
 
 /// Total time per stage since the last [`reset`], in [`Stage::ALL`] order.
-pub fn totals() -> [(Stage, Duration); 5] {
+pub fn totals() -> [(Stage, Duration); Stage::ALL.len()] {
     Stage::ALL.map(|s| {
         (
             s,
@@ -84,6 +90,6 @@ mod tests {
         let after = totals();
         let bin = Stage::Bin as usize;
         assert!(after[bin].1 - before[bin].1 >= Duration::from_millis(2));
-        assert_eq!(Stage::ALL.map(|s| s as usize), [0, 1, 2, 3, 4]);
+        assert_eq!(Stage::ALL.map(|s| s as usize), [0, 1, 2, 3, 4, 5]);
     }
 }

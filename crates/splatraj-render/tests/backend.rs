@@ -314,3 +314,92 @@ fn gpu_kernels_match_host_kernels() {
         "the GPU kernels are deterministic"
     );
 }
+
+/// The GPU projection kernels against the host kernels, both f32 (the host kernels are checked
+/// against the tensor projection in f64, `tests/fused_projection.rs`): 3000 Gaussians (a dozen
+/// cubes per pose, a partial last one), a subset out of order with a repeat, three poses on
+/// both of Rodrigues' branches (ω = 0 among them), rows behind the camera and beyond the
+/// Jacobian's clamp; the packed rows and the pose gradient of a weighted sum of them.
+#[cfg(feature = "wgpu")]
+#[test]
+fn gpu_projection_matches_host_projection() {
+    use splatraj_render::fused::projection::{
+        ProjectionCamera, ProjectionPlan, SPLAT_COLUMNS, project_packed,
+    };
+    use splatraj_render::project::{NEAR_PLANE, SceneTensors};
+
+    let mut rng = common::Rng(0x2545f4914f6cdd1d);
+    let mut scene = Scene::default();
+    for i in 0..3000 {
+        let spread = if i % 10 == 0 { 8.0 } else { 1.5 };
+        scene
+            .means
+            .push(std::array::from_fn(|_| rng.range(-spread, spread) as f32));
+        scene
+            .scales
+            .push(std::array::from_fn(|_| rng.range(0.01, 0.2) as f32));
+        scene
+            .rotations
+            .push(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
+        scene.opacities.push(rng.range(0.05, 1.0) as f32);
+    }
+    let mut used: Vec<u32> = (0..3000).rev().collect();
+    used.push(17);
+    let up = DVec3::new(0.0, -1.0, 0.0);
+    let poses = [
+        Pose::look_at(DVec3::new(3.0, -1.0, 4.0), DVec3::ZERO, up).unwrap(),
+        Pose([0.03, -0.04, 0.02, 0.1, 0.2, -4.0]),
+        Pose([0.0, 0.0, 0.0, -0.2, 0.1, -5.0]),
+    ];
+    let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
+    let intrinsics = Intrinsics::from_fov_x(60.0, 160, 120).unwrap();
+    let weights: Vec<f64> = (0..poses.len() * used.len() * SPLAT_COLUMNS)
+        .map(|i| ((i * 7919) % 29) as f64 / 29.0 - 0.45)
+        .collect();
+    let run = |backend: BackendKind| -> (Vec<f64>, Vec<f64>) {
+        let device = backend.device().unwrap().autodiff();
+        let geometry = SceneTensors::new(&scene, None, &device, DType::F32);
+        let pose_tensor =
+            Tensor::<2>::from_data(TensorData::new(flat.clone(), [3, 6]), (&device, DType::F32))
+                .require_grad();
+        let rows = project_packed(
+            &geometry,
+            pose_tensor.clone(),
+            ProjectionPlan {
+                used: used.clone(),
+                camera: ProjectionCamera::new(&intrinsics, NEAR_PLANE),
+            },
+        );
+        let w = Tensor::<3>::from_data(
+            TensorData::new(weights.clone(), [3, used.len(), SPLAT_COLUMNS]),
+            (&device, DType::F32),
+        );
+        let grads = (rows.clone() * w).sum().backward();
+        (host(rows), host(pose_tensor.grad(&grads).unwrap()))
+    };
+    let (rows_host, grad_host) = run(BackendKind::Flex);
+    let (rows_gpu, grad_gpu) = run(BackendKind::Wgpu);
+    for (i, (g, h)) in rows_gpu.iter().zip(&rows_host).enumerate() {
+        assert!(
+            (g - h).abs() <= 1e-4 * (1.0 + h.abs()),
+            "row value {i} (row {}, column {}): GPU {g} vs host {h}",
+            i / SPLAT_COLUMNS,
+            i % SPLAT_COLUMNS
+        );
+    }
+    let norm = grad_host.iter().map(|g| g * g).sum::<f64>().sqrt();
+    assert!(norm > 1.0, "a gradient to compare");
+    for (k, (g, h)) in grad_gpu.iter().zip(&grad_host).enumerate() {
+        assert!(
+            (g - h).abs() <= 1e-3 * norm,
+            "dΦ[{}][{}]: GPU {g} vs host {h} (norm {norm})",
+            k / 6,
+            k % 6
+        );
+    }
+    assert_eq!(
+        run(BackendKind::Wgpu),
+        (rows_gpu, grad_gpu),
+        "the GPU kernels are deterministic"
+    );
+}

@@ -86,9 +86,7 @@ fn tile_pixel<F: Float, I: Int>(
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 fn forward_kernel<F: Float, I: Int>(
-    means: &Tensor<F>,       // [R, 2]
-    conics: &Tensor<F>,      // [R, 3]
-    opacities: &Tensor<F>,   // [R]
+    splats: &Tensor<F>,      // [R, S]: u, v, conic a, b, c, opacity, …
     values: &Tensor<F>,      // [R, C]
     work: &Tensor<I>,        // [work, 3]: pose, tile corner x, tile corner y
     starts: &Tensor<I>,      // [work + 1]
@@ -100,6 +98,7 @@ fn forward_kernel<F: Float, I: Int>(
     work_count: u32,
     width: u32,
     height: u32,
+    columns: u32,
     #[comptime] channels: usize,
     #[define(F, I)] _dtypes: [ElemType; 2],
 ) {
@@ -148,12 +147,13 @@ fn forward_kernel<F: Float, I: Int>(
         let j = first + p;
         if j < end {
             let row = u32::cast_from(rows[j]) as usize;
-            sh_mx[p] = means[2 * row] - x0f;
-            sh_my[p] = means[2 * row + 1] - y0f;
-            sh_a[p] = conics[3 * row];
-            sh_b[p] = conics[3 * row + 1];
-            sh_c[p] = conics[3 * row + 2];
-            sh_o[p] = opacities[row];
+            let at = row * columns as usize;
+            sh_mx[p] = splats[at] - x0f;
+            sh_my[p] = splats[at + 1] - y0f;
+            sh_a[p] = splats[at + 2];
+            sh_b[p] = splats[at + 3];
+            sh_c[p] = splats[at + 4];
+            sh_o[p] = splats[at + 5];
             for k in 0..channels {
                 sh_values[k * 256 + p] = values[row * channels + k];
             }
@@ -204,9 +204,7 @@ fn forward_kernel<F: Float, I: Int>(
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 fn backward_kernel<F: Float, I: Int>(
-    means: &Tensor<F>,     // [R, 2]
-    conics: &Tensor<F>,    // [R, 3]
-    opacities: &Tensor<F>, // [R]
+    splats: &Tensor<F>,    // [R, S]
     values: &Tensor<F>,    // [R, C]
     work: &Tensor<I>,      // [work, 3]
     starts: &Tensor<I>,    // [work + 1]
@@ -218,6 +216,7 @@ fn backward_kernel<F: Float, I: Int>(
     work_count: u32,
     width: u32,
     height: u32,
+    columns: u32,
     #[comptime] channels: usize,
     #[define(F, I)] _dtypes: [ElemType; 2],
 ) {
@@ -273,12 +272,13 @@ fn backward_kernel<F: Float, I: Int>(
     while done < replay {
         let j = replay - 1 - done;
         let row = u32::cast_from(rows[start + j]) as usize;
-        let mx = means[2 * row] - x0f;
-        let my = means[2 * row + 1] - y0f;
-        let a = conics[3 * row];
-        let b = conics[3 * row + 1];
-        let c = conics[3 * row + 2];
-        let o = opacities[row];
+        let at = row * columns as usize;
+        let mx = splats[at] - x0f;
+        let my = splats[at + 1] - y0f;
+        let a = splats[at + 2];
+        let b = splats[at + 3];
+        let c = splats[at + 4];
+        let o = splats[at + 5];
         for k in 0..stride {
             sh_sum[k * 256 + p] = F::new(0.0);
         }
@@ -339,14 +339,13 @@ fn backward_kernel<F: Float, I: Int>(
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 fn gather_kernel<F: Float, I: Int>(
-    slots: &Tensor<F>,           // [pairs, 6 + C]
-    slot_order: &Tensor<I>,      // [pairs]: slots grouped by row, in plan order within a row
-    slot_starts: &Tensor<I>,     // [R + 1]
-    v_means: &mut Tensor<F>,     // [R, 2]
-    v_conics: &mut Tensor<F>,    // [R, 3]
-    v_opacities: &mut Tensor<F>, // [R]
-    v_values: &mut Tensor<F>,    // [R, C]
+    slots: &Tensor<F>,        // [pairs, 6 + C]
+    slot_order: &Tensor<I>,   // [pairs]: slots grouped by row, in plan order within a row
+    slot_starts: &Tensor<I>,  // [R + 1]
+    v_splats: &mut Tensor<F>, // [R, S]; columns past the sixth stay 0
+    v_values: &mut Tensor<F>, // [R, C]
     row_count: u32,
+    columns: u32,
     #[comptime] channels: usize,
     #[define(F, I)] _dtypes: [ElemType; 2],
 ) {
@@ -367,12 +366,11 @@ fn gather_kernel<F: Float, I: Int>(
             sums[k] += slots[slot * stride + k];
         }
     }
-    v_means[2 * row] = sums[0];
-    v_means[2 * row + 1] = sums[1];
-    v_conics[3 * row] = sums[2];
-    v_conics[3 * row + 1] = sums[3];
-    v_conics[3 * row + 2] = sums[4];
-    v_opacities[row] = sums[5];
+    // Slots hold [v_mx, v_my, v_a, v_b, v_c, v_o, …]: the splat row's first six columns.
+    let at = row * columns as usize;
+    for k in 0..6usize {
+        v_splats[at + k] = sums[k];
+    }
     for k in 0..channels {
         v_values[row * channels + k] = sums[6 + k];
     }
@@ -381,7 +379,8 @@ fn gather_kernel<F: Float, I: Int>(
 /// What the GPU forward pass keeps for its backward.
 #[derive(Debug, Clone)]
 pub struct DeviceSaved {
-    inputs: [CubeTensor; 4],
+    /// Splat rows and channel values.
+    inputs: [CubeTensor; 2],
     plan: Arc<CompositePlan>,
     lists: PlanTensors,
     final_t: CubeTensor,
@@ -406,9 +405,10 @@ struct PlanTensors {
 }
 
 /// An i32 device tensor (never empty: a kernel argument needs a buffer).
-fn int_tensor(values: Vec<i32>, device: &CubeDevice) -> CubeTensor {
+pub(crate) fn int_tensor(values: Vec<i32>, device: &CubeDevice) -> CubeTensor {
     let values = if values.is_empty() { vec![0] } else { values };
     let len = values.len();
+    crate::counters::upload(4 * len);
     Cube::int_from_data(TensorData::new(values, [len]), device)
 }
 
@@ -459,12 +459,12 @@ fn device_forward(
     inputs: SplatPrimitives<Cube>,
     plan: Arc<CompositePlan>,
 ) -> (CubeTensor, DeviceSaved) {
-    let inputs =
-        [inputs.means, inputs.conics, inputs.opacities, inputs.values].map(into_contiguous);
+    let inputs = [inputs.splats, inputs.values].map(into_contiguous);
     let device = inputs[0].device.clone();
     let client = inputs[0].client.clone();
     let dtype = inputs[0].dtype;
-    let channels = inputs[3].shape().dims::<2>()[1];
+    let columns = inputs[0].shape().dims::<2>()[1];
+    let channels = inputs[1].shape().dims::<2>()[1];
     let grid = plan.grid;
     let work_count = plan.tiles.len();
     let lists = upload_plan(&plan, &device);
@@ -482,8 +482,6 @@ fn device_forward(
             CubeDim::new_1d(TILE_PIXELS as u32),
             inputs[0].clone().into_tensor_arg(),
             inputs[1].clone().into_tensor_arg(),
-            inputs[2].clone().into_tensor_arg(),
-            inputs[3].clone().into_tensor_arg(),
             lists.work.clone().into_tensor_arg(),
             lists.starts.clone().into_tensor_arg(),
             lists.rows.clone().into_tensor_arg(),
@@ -494,6 +492,7 @@ fn device_forward(
             work_count as u32,
             grid.width as u32,
             grid.height as u32,
+            columns as u32,
             channels,
             [
                 dtype_to_storage_type(dtype),
@@ -523,7 +522,8 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
     let device = inputs[0].device.clone();
     let client = inputs[0].client.clone();
     let dtype = inputs[0].dtype;
-    let [rows, channels] = inputs[3].shape().dims::<2>();
+    let [rows, columns] = inputs[0].shape().dims::<2>();
+    let channels = inputs[1].shape().dims::<2>()[1];
     let grid = plan.grid;
     let work_count = plan.tiles.len();
     let pairs = plan.rows.len();
@@ -536,8 +536,6 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
             CubeDim::new_1d(TILE_PIXELS as u32),
             inputs[0].clone().into_tensor_arg(),
             inputs[1].clone().into_tensor_arg(),
-            inputs[2].clone().into_tensor_arg(),
-            inputs[3].clone().into_tensor_arg(),
             lists.work.into_tensor_arg(),
             lists.starts.into_tensor_arg(),
             lists.rows.into_tensor_arg(),
@@ -548,13 +546,12 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
             work_count as u32,
             grid.width as u32,
             grid.height as u32,
+            columns as u32,
             channels,
             [dtype_to_storage_type(dtype), int_dtype],
         );
     }
-    let v_means = zeros(vec![rows, 2], &device, dtype);
-    let v_conics = zeros(vec![rows, 3], &device, dtype);
-    let v_opacities = zeros(vec![rows], &device, dtype);
+    let v_splats = zeros(vec![rows, columns], &device, dtype);
     let v_values = zeros(vec![rows, channels], &device, dtype);
     if rows > 0 {
         let (order, starts) = slots_by_row(&plan, rows);
@@ -571,19 +568,16 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
             slots.into_tensor_arg(),
             order.into_tensor_arg(),
             starts.into_tensor_arg(),
-            v_means.clone().into_tensor_arg(),
-            v_conics.clone().into_tensor_arg(),
-            v_opacities.clone().into_tensor_arg(),
+            v_splats.clone().into_tensor_arg(),
             v_values.clone().into_tensor_arg(),
             rows as u32,
+            columns as u32,
             channels,
             [dtype_to_storage_type(dtype), int_dtype],
         );
     }
     SplatPrimitives {
-        means: v_means,
-        conics: v_conics,
-        opacities: v_opacities,
+        splats: v_splats,
         values: v_values,
     }
 }
@@ -595,7 +589,7 @@ impl CompositeKernels for Cube {
         inputs: SplatPrimitives<Self>,
         plan: Arc<CompositePlan>,
     ) -> (FloatTensor<Self>, CubeSaved) {
-        if inputs.means.dtype() == DType::F64 {
+        if inputs.splats.dtype() == DType::F64 {
             let (image, saved) = super::host_forward::<Self>(inputs, plan);
             return (image, CubeSaved::Host(saved));
         }

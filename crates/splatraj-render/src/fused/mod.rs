@@ -1,9 +1,9 @@
 //! The fused rasterizer: tile compositing as one burn operation with its own backward.
 //!
-//! Everything before compositing (projection, SH) and after it (costs) stays burn tensor ops;
-//! this node takes the screen-space Gaussians of a batch (means, conics, opacities, channel
-//! values, all differentiable) and the host-side tile lists, and returns the channel images and
-//! alpha packed in one tensor `[B, H, W, C + 1]`, which [`composite_fused`] splits with
+//! This node takes the screen-space Gaussians of a batch as packed rows (mean, conic, opacity:
+//! what [`projection`], the fused projection, returns) and their channel values, both
+//! differentiable, and the host-side tile lists, and returns the channel images and alpha
+//! packed in one tensor `[B, H, W, C + 1]`, which [`composite_packed`] splits with
 //! differentiable slicing. Its backward is registered in burn's autodiff graph through the
 //! backend extension (`#[backend_extension]`), so the pose gradient is still assembled by
 //! burn from end to end.
@@ -17,6 +17,7 @@ pub mod cpu;
 #[cfg(feature = "wgpu")]
 pub mod cube;
 pub mod plan;
+pub mod projection;
 pub mod real;
 
 use std::sync::Arc;
@@ -35,15 +36,12 @@ pub use plan::CompositePlan;
 use crate::rasterize::{Composited, RenderStats, SplatInputs};
 use cpu::{ForwardState, HostGradients, HostSplats, Real};
 
-/// The four differentiable inputs of a compositing pass, as backend primitives.
+/// The two differentiable inputs of a compositing pass, as backend primitives.
 #[derive(ExtensionType)]
 pub struct SplatPrimitives<B: Backend> {
-    /// `[R, 2]`
-    pub means: FloatTensor<B>,
-    /// `[R, 3]`
-    pub conics: FloatTensor<B>,
-    /// `[R]`
-    pub opacities: FloatTensor<B>,
+    /// Packed rows `[R, S]`, S ≥ 6: (u, v, conic a, b, c, opacity), further columns ignored
+    /// (the fused projection's rows carry the depth there; [`projection::PackedColumn`]).
+    pub splats: FloatTensor<B>,
     /// `[R, C]`
     pub values: FloatTensor<B>,
 }
@@ -74,7 +72,7 @@ pub trait CompositeKernels: Backend {
         plan: Arc<CompositePlan>,
     ) -> (FloatTensor<Self>, Self::Saved);
 
-    /// Gradients of the four inputs from the gradient of the packed image.
+    /// Gradients of the two inputs from the gradient of the packed image.
     fn composite_backward(saved: Self::Saved, v_image: FloatTensor<Self>) -> SplatPrimitives<Self>;
 }
 
@@ -92,12 +90,14 @@ pub enum HostInputs {
 pub struct HostSaved {
     plan: Arc<CompositePlan>,
     inputs: Arc<HostInputs>,
-    /// `[R]`, `[R, C]`: shapes to give the gradients.
+    /// `[R, S]`, `[R, C]`: shapes to give the gradients.
     rows: usize,
+    columns: usize,
     channels: usize,
 }
 
-fn read<B: Backend, E: burn::tensor::Element>(t: FloatTensor<B>) -> Vec<E> {
+/// A tensor's values on the host as `E` (a copy; a sync on a device).
+pub(crate) fn read<B: Backend, E: burn::tensor::Element>(t: FloatTensor<B>) -> Vec<E> {
     let data = try_read_sync(B::float_into_data(t))
         .expect("the fused rasterizer runs on backends that can be read synchronously")
         .expect("reading a tensor back to the host");
@@ -108,12 +108,19 @@ fn read<B: Backend, E: burn::tensor::Element>(t: FloatTensor<B>) -> Vec<E> {
 
 fn host_splats<B: Backend, E: Real + burn::tensor::Element>(
     inputs: SplatPrimitives<B>,
+    columns: usize,
     channels: usize,
 ) -> HostSplats<E> {
+    let rows = read::<B, E>(inputs.splats);
+    let column = |from: usize, width: usize| -> Vec<E> {
+        rows.chunks_exact(columns)
+            .flat_map(|row| row[from..from + width].iter().copied())
+            .collect()
+    };
     HostSplats {
-        means: read::<B, E>(inputs.means),
-        conics: read::<B, E>(inputs.conics),
-        opacities: read::<B, E>(inputs.opacities),
+        means: column(0, 2),
+        conics: column(2, 3),
+        opacities: column(5, 1),
         values: read::<B, E>(inputs.values),
         channels,
     }
@@ -133,20 +140,21 @@ pub fn host_forward<B: Backend>(
     inputs: SplatPrimitives<B>,
     plan: Arc<CompositePlan>,
 ) -> (FloatTensor<B>, HostSaved) {
-    let device = inputs.means.device();
-    let dtype = inputs.means.dtype();
+    let device = inputs.splats.device();
+    let dtype = inputs.splats.dtype();
     let [rows, channels] = inputs.values.shape().dims::<2>();
+    let columns = inputs.splats.shape().dims::<2>()[1];
     let grid = plan.grid;
     let shape = vec![plan.batch, grid.height, grid.width, channels + 1];
     let (image, host) = if dtype == DType::F64 {
-        let splats = host_splats::<B, f64>(inputs, channels);
+        let splats = host_splats::<B, f64>(inputs, columns, channels);
         let (image, state) = cpu::forward(&splats, &plan);
         (
             upload::<B, f64>(image, shape, dtype, &device),
             HostInputs::F64(splats, state),
         )
     } else {
-        let splats = host_splats::<B, f32>(inputs, channels);
+        let splats = host_splats::<B, f32>(inputs, columns, channels);
         let (image, state) = cpu::forward(&splats, &plan);
         (
             upload::<B, f32>(image, shape, dtype, &device),
@@ -157,6 +165,7 @@ pub fn host_forward<B: Backend>(
         plan,
         inputs: Arc::new(host),
         rows,
+        columns,
         channels,
     };
     (image, saved)
@@ -166,31 +175,35 @@ pub fn host_forward<B: Backend>(
 pub fn host_backward<B: Backend>(saved: HostSaved, v_image: FloatTensor<B>) -> SplatPrimitives<B> {
     let device = v_image.device();
     let dtype = v_image.dtype();
-    let (rows, channels) = (saved.rows, saved.channels);
-    fn to_primitives<B: Backend, E: burn::tensor::Element>(
+    let (rows, columns, channels) = (saved.rows, saved.columns, saved.channels);
+    fn to_primitives<B: Backend, E: Real + burn::tensor::Element>(
         v: HostGradients<E>,
-        rows: usize,
-        channels: usize,
+        [rows, columns, channels]: [usize; 3],
         dtype: DType,
         device: &B::Device,
     ) -> SplatPrimitives<B> {
+        let mut splats = vec![E::ZERO; rows * columns];
+        for (r, row) in splats.chunks_exact_mut(columns).enumerate() {
+            row[..2].copy_from_slice(&v.means[2 * r..2 * r + 2]);
+            row[2..5].copy_from_slice(&v.conics[3 * r..3 * r + 3]);
+            row[5] = v.opacities[r];
+        }
         SplatPrimitives {
-            means: upload::<B, E>(v.means, vec![rows, 2], dtype, device),
-            conics: upload::<B, E>(v.conics, vec![rows, 3], dtype, device),
-            opacities: upload::<B, E>(v.opacities, vec![rows], dtype, device),
+            splats: upload::<B, E>(splats, vec![rows, columns], dtype, device),
             values: upload::<B, E>(v.values, vec![rows, channels], dtype, device),
         }
     }
+    let sizes = [rows, columns, channels];
     match saved.inputs.as_ref() {
         HostInputs::F64(splats, state) => {
             let v_image = read::<B, f64>(v_image);
             let v = cpu::backward(splats, &saved.plan, state, &v_image);
-            to_primitives::<B, f64>(v, rows, channels, dtype, &device)
+            to_primitives::<B, f64>(v, sizes, dtype, &device)
         }
         HostInputs::F32(splats, state) => {
             let v_image = read::<B, f32>(v_image);
             let v = cpu::backward(splats, &saved.plan, state, &v_image);
-            to_primitives::<B, f32>(v, rows, channels, dtype, &device)
+            to_primitives::<B, f32>(v, sizes, dtype, &device)
         }
     }
 }
@@ -240,21 +253,16 @@ mod ndarray_kernels {
 #[derive(Debug)]
 struct CompositeBackward;
 
-impl<B: CompositeKernels> Backward<B, 4> for CompositeBackward {
+impl<B: CompositeKernels> Backward<B, 2> for CompositeBackward {
     type State = B::Saved;
 
-    fn backward(self, ops: Ops<Self::State, 4>, grads: &mut Gradients, _: &mut Checkpointer) {
+    fn backward(self, ops: Ops<Self::State, 2>, grads: &mut Gradients, _: &mut Checkpointer) {
         let v_image = grads.consume::<B>(&ops.node);
         let started = std::time::Instant::now();
         let v = B::composite_backward(ops.state, v_image);
         crate::stages::add(crate::stages::Stage::CompositeBackward, started.elapsed());
-        let [means, conics, opacities, values] = ops.parents;
-        for (node, grad) in [
-            (means, v.means),
-            (conics, v.conics),
-            (opacities, v.opacities),
-            (values, v.values),
-        ] {
+        let [splats, values] = ops.parents;
+        for (node, grad) in [(splats, v.splats), (values, v.values)] {
             if let Some(node) = node {
                 grads.register::<B>(node.id, grad);
             }
@@ -267,16 +275,9 @@ impl<B: CompositeKernels, C: CheckpointStrategy> FusedComposite for Autodiff<B, 
         inputs: SplatPrimitives<Self>,
         plan: Arc<CompositePlan>,
     ) -> FloatTensor<Self> {
-        let nodes = [
-            inputs.means.node(),
-            inputs.conics.node(),
-            inputs.opacities.node(),
-            inputs.values.node(),
-        ];
+        let nodes = [inputs.splats.node(), inputs.values.node()];
         let primitives = SplatPrimitives {
-            means: inputs.means.into_primitive(),
-            conics: inputs.conics.into_primitive(),
-            opacities: inputs.opacities.into_primitive(),
+            splats: inputs.splats.into_primitive(),
             values: inputs.values.into_primitive(),
         };
         match CompositeBackward
@@ -295,19 +296,31 @@ impl<B: CompositeKernels, C: CheckpointStrategy> FusedComposite for Autodiff<B, 
 
 /// Composites a batch with the fused operation; same contract as [`crate::rasterize::composite`].
 pub fn composite_fused(inputs: &SplatInputs, plan: CompositePlan) -> Composited {
-    let channels = inputs.values.dims()[1];
+    let splats = Tensor::cat(
+        vec![
+            inputs.means_2d.clone(),
+            inputs.conics.clone(),
+            inputs.opacities.clone().unsqueeze_dim::<2>(1),
+        ],
+        1,
+    ); // [R, 6]
+    composite_packed(splats, inputs.values.clone(), plan)
+}
+
+/// Composites packed rows `splats` `[R, S ≥ 6]` (u, v, conic a, b, c, opacity, then columns
+/// it ignores) with channel values `values` `[R, C]`: the fused projection's output as it is.
+pub fn composite_packed(splats: Tensor<2>, values: Tensor<2>, plan: CompositePlan) -> Composited {
+    let channels = values.dims()[1];
     let (batch, grid) = (plan.batch, plan.grid);
     let stats = RenderStats {
         tiles: plan.tiles.len(),
         pairs: plan.rows.len(),
-        gaussians_used: inputs.opacities.dims()[0] / batch.max(1),
+        gaussians_used: splats.dims()[0] / batch.max(1),
     };
     let packed = Tensor::<4>::from_dispatch(<Dispatch as FusedComposite>::fused_composite(
         SplatPrimitives {
-            means: inputs.means_2d.clone().into_dispatch(),
-            conics: inputs.conics.clone().into_dispatch(),
-            opacities: inputs.opacities.clone().into_dispatch(),
-            values: inputs.values.clone().into_dispatch(),
+            splats: splats.into_dispatch(),
+            values: values.into_dispatch(),
         },
         Arc::new(plan),
     )); // [B, H, W, C + 1]

@@ -194,7 +194,11 @@ impl Cost for ClearanceCost {
         let poses = inputs.path_or_sample_poses();
         let [batch, _] = poses.dims();
         let centres = poses.narrow(1, 3, 3); // [P, 3]
-        let host = crate::optimise::host_values(centres.clone().detach());
+        // Read once per optimisation step with everything else; read here only without it.
+        let host: Vec<f64> = match inputs.path_or_sample_host_poses() {
+            Some(poses) => poses.iter().flat_map(|p| p[3..].iter().copied()).collect(),
+            None => crate::optimise::host_values(centres.clone().detach()),
+        };
         let mut points = Vec::with_capacity(3 * batch);
         let mut normals = Vec::with_capacity(3 * batch);
         for c in host.chunks_exact(3) {

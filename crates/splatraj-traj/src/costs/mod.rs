@@ -187,8 +187,20 @@ pub struct CostInputs {
     path: Option<PathSamples>,
     occupancy: Option<Occupancy>,
     times: Option<SampleTimes>,
+    host_poses: Option<HostPoses>,
     step: usize,
     query: QueryContext,
+}
+
+/// The values of the poses a cost reads, already on the host (read once per optimisation
+/// step), so that a cost that needs them there (clearance looks the camera up in the scene's
+/// geometry) does not read them back again.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HostPoses {
+    /// The sampled poses `[B][6]`.
+    pub samples: Vec<[f64; 6]>,
+    /// The path's poses `[P][6]`, when there is a path.
+    pub path: Option<Vec<[f64; 6]>>,
 }
 
 /// When the sampled poses were taken (trajectory optimisation only): what costs that depend
@@ -281,9 +293,26 @@ impl CostInputs {
             path: None,
             occupancy: None,
             times: None,
+            host_poses: None,
             step,
             query,
         })
+    }
+
+    /// Adds the host values of the poses (they must be those of the tensors).
+    pub fn with_host_poses(mut self, poses: HostPoses) -> Self {
+        self.host_poses = Some(poses);
+        self
+    }
+
+    /// The host values of [`CostInputs::path_or_sample_poses`], when the caller gave them.
+    pub fn path_or_sample_host_poses(&self) -> Option<&[[f64; 6]]> {
+        let host = self.host_poses.as_ref()?;
+        match (&self.path, &host.path) {
+            (Some(_), Some(path)) => Some(path),
+            (Some(_), None) => None,
+            (None, _) => Some(&host.samples),
+        }
     }
 
     /// Adds the object's mask rendered alone `[B, H, W]`.
@@ -640,6 +669,23 @@ impl CostTerms {
     /// Batch mean of the weighted total, on the host.
     pub fn total_mean(&self) -> f64 {
         host_mean(self.total.clone())
+    }
+
+    /// Each term's `(name, weight)`, in the order of [`CostTerms::means_on_device`].
+    pub fn labels(&self) -> Vec<(&'static str, f64)> {
+        self.terms.iter().map(|t| (t.name, t.weight)).collect()
+    }
+
+    /// Batch means of each unweighted term `[terms]`, left on the device (detached), so that
+    /// an optimisation step reads them together with everything else it reads.
+    pub fn means_on_device(&self) -> Tensor<1> {
+        Tensor::cat(
+            self.terms
+                .iter()
+                .map(|t| t.value.clone().without_autodiff().mean())
+                .collect(),
+            0,
+        )
     }
 }
 

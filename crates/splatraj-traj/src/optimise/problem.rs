@@ -13,13 +13,16 @@ use burn::tensor::{DType, Device, Tensor};
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::rasterize::{Approximations, RenderStats};
-use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
+use splatraj_render::render::{
+    Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render_at,
+};
 
 use super::sampling::window_bounds;
-use super::{OptimiseError, WindowTarget, per_sample};
+use super::{OptimiseError, WindowTarget};
 use crate::clearance::Occupancy;
 use crate::costs::{
-    CostInputs, CostTerms, ImageChannel, PathSamples, SampleTimes, WeightedCosts, coverage,
+    CostInputs, CostTerms, HostPoses, ImageChannel, PathSamples, SampleTimes, WeightedCosts,
+    coverage,
 };
 
 /// A scene, its query windows, the costs and the camera: the arguments every optimiser shares.
@@ -228,18 +231,22 @@ impl<'a> Problem<'a> {
         step: usize,
         request: Option<&RenderRequest>,
     ) -> Result<Evaluated, OptimiseError> {
-        self.evaluate_along(index, poses, None, None, step, request)
+        self.evaluate_along(index, poses, None, None, None, step, request)
     }
 
     /// [`Problem::evaluate`] with the samples' times `[B]` (t ∈ [0, 1] of the whole
-    /// trajectory, for costs that depend on time) and the window's densely sampled path
-    /// (poses `[P, 6]` at times `time_step` apart) for the path costs.
+    /// trajectory, for costs that depend on time), the window's densely sampled path (poses
+    /// `[P, 6]` at times `time_step` apart) for the path costs, and the host values of the
+    /// samples and the path when the caller has them (then nothing is read back here: the
+    /// renders' decisions and the clearance cost take them).
+    #[allow(clippy::too_many_arguments)]
     pub fn evaluate_along(
         &self,
         index: usize,
         poses: Tensor<2>,
         times: Option<&[f64]>,
         path: Option<(Tensor<2>, f64)>,
+        host: Option<&HostPoses>,
         step: usize,
         request: Option<&RenderRequest>,
     ) -> Result<Evaluated, OptimiseError> {
@@ -265,8 +272,13 @@ impl<'a> Problem<'a> {
             if let Some(o) = occupancy {
                 inputs = inputs.with_occupancy(o.clone());
             }
+            if let Some(h) = host {
+                inputs = inputs.with_host_poses(h.clone());
+            }
             inputs
         };
+        let host_samples: Option<Vec<Pose>> =
+            host.map(|h| h.samples.iter().map(|&p| Pose(p)).collect());
         let owned;
         let request = match request {
             Some(r) => Some(r),
@@ -284,7 +296,7 @@ impl<'a> Problem<'a> {
                 stats: None,
             });
         };
-        let rendered = render(self.scene, poses.clone(), request)?;
+        let rendered = render_at(self.scene, poses.clone(), host_samples.as_deref(), request)?;
         let images = rendered.images;
         let [batch, height, width, _] = images.dims();
         let mut masks = None;
@@ -316,7 +328,12 @@ impl<'a> Problem<'a> {
         if self.costs.channels().contains(&ImageChannel::MaskAlone)
             && let Some(alone) = self.alone.and_then(|a| a.get(index))
         {
-            inputs = inputs.with_mask_alone(self.render_alone(alone, poses, request)?);
+            inputs = inputs.with_mask_alone(self.render_alone(
+                alone,
+                poses,
+                host_samples.as_deref(),
+                request,
+            )?);
         }
         let terms = self.costs.evaluate(&inputs)?;
         Ok(Evaluated {
@@ -332,12 +349,13 @@ impl<'a> Problem<'a> {
         &self,
         alone: &DeviceScene,
         poses: Tensor<2>,
+        host_poses: Option<&[Pose]>,
         request: &RenderRequest,
     ) -> Result<Tensor<3>, OptimiseError> {
         let mut request = request.clone();
         request.channels = vec![Channel::Mask(vec![1.0; alone.len()])];
         request.pruning = Pruning::ObjectOnly;
-        let images = render(alone, poses, &request)?.images;
+        let images = render_at(alone, poses, host_poses, &request)?.images;
         let [batch, height, width, _] = images.dims();
         Ok(images.reshape([batch, height, width]))
     }
@@ -358,22 +376,43 @@ impl<'a> Problem<'a> {
         if gradient {
             poses = poses.require_grad();
         }
-        let evaluated = self.evaluate(index, poses.clone(), 0, None)?;
-        let coverage = match &evaluated.masks {
-            Some(m) => Some(read(coverage(m.clone()))?[0]),
-            None => None,
+        let host = HostPoses {
+            samples: vec![pose.0],
+            path: None,
         };
-        let grad_pose = if gradient {
-            let grads = evaluated.terms.total.clone().sum().backward();
+        let evaluated =
+            self.evaluate_along(index, poses.clone(), None, None, Some(&host), 0, None)?;
+        let terms = &evaluated.terms;
+        // Everything the host wants in one read (one wait for the device on a GPU): the total,
+        // each term, the coverage and the gradient.
+        let mut parts: Vec<Tensor<1>> = vec![terms.total.clone().without_autodiff()];
+        parts.extend(
+            terms
+                .terms
+                .iter()
+                .map(|t| t.value.clone().without_autodiff()),
+        );
+        if let Some(m) = &evaluated.masks {
+            parts.push(coverage(m.clone()).without_autodiff());
+        }
+        if gradient {
+            let grads = terms.total.clone().sum().backward();
             // No gradient at all means nothing in the graph depended on the pose.
-            Some(match poses.grad(&grads) {
-                Some(g) => read(g)?,
-                None => vec![0.0; 6],
-            })
-        } else {
-            None
-        };
-        let (total, terms) = per_sample(&evaluated.terms).remove(0);
+            parts.push(match poses.grad(&grads) {
+                Some(g) => g.reshape([6]),
+                None => Tensor::<1>::zeros([6], (&poses.device().inner(), poses.dtype())),
+            });
+        }
+        let values = read(Tensor::cat(parts, 0))?;
+        let mut next = values.into_iter();
+        let total = next.next().unwrap_or(f64::NAN);
+        let terms: Vec<(&'static str, f64, f64)> = terms
+            .terms
+            .iter()
+            .map(|t| (t.name, t.weight, next.next().unwrap_or(f64::NAN)))
+            .collect();
+        let coverage = evaluated.masks.as_ref().and_then(|_| next.next());
+        let grad_pose = gradient.then(|| next.collect());
         Ok(PoseLoss {
             total,
             terms,

@@ -23,17 +23,17 @@
 
 use std::time::{Duration, Instant};
 
-use burn::optim::{AdamConfig, GradientsParams};
-use burn::tensor::{Tensor, TensorData};
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::tensor::Tensor;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use splatraj_render::render::RenderRequest;
 
 use super::units::PoseUnits;
-use super::{OptimiseError, Problem, check_adam, host_values, sampling};
-use crate::costs::QueryContext;
-use crate::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord};
+use super::{OptimiseError, Problem, check_adam, sampling};
+use crate::costs::{HostPoses, QueryContext};
+use crate::trajectory::{POSE_DIM, Trajectory, TrajectoryModel, TrajectoryRecord};
 
 /// Default points per window of the path the path costs read each step.
 pub const DEFAULT_PATH_SAMPLES: usize = 16;
@@ -265,16 +265,22 @@ pub fn optimise_trajectory(
     let needs_path = problem.costs.needs_path();
     let started = Instant::now();
     let n = windows.len();
-    // Grown as steps run: a time limit may stop it long before `iterations`.
-    let mut history = Vec::with_capacity(options.iterations.min(1 << 12));
-    let mut best: Option<(f64, usize, Vec<[f64; 6]>)> = None;
-    let mut skipped_steps = 0;
     let mut stop = StopReason::Finished;
+    // Step k's results stay on the device until step k + 1 reads its poses: one read a step.
+    let mut pending: Option<Pending> = None;
+    let mut bookkeeping = Bookkeeping {
+        options,
+        units: &units,
+        started,
+        // Grown as steps run: a time limit may stop it long before `iterations`.
+        history: Vec::with_capacity(options.iterations.min(1 << 12)),
+        best: None,
+        skipped_steps: 0,
+        observer,
+    };
 
     for step in 0..options.iterations {
         let step_started = Instant::now();
-        let mut loss: Option<Tensor<1>> = None;
-        let mut window_terms = Vec::with_capacity(n);
         // Every other step the grid holds t = 0 and t = 1 exactly (the path's ends, which a
         // shifted grid reaches only rarely); in between, a random shift covers the rest.
         let phase: f64 = if needs_path && step % 2 == 1 {
@@ -282,25 +288,59 @@ pub fn optimise_trajectory(
         } else {
             0.0
         };
+        let times: Vec<StepTimes> = (0..n)
+            .map(|i| StepTimes {
+                samples: sampling::stratified_times(
+                    i,
+                    n,
+                    options.samples_per_window,
+                    Some(&mut rng),
+                ),
+                path: needs_path.then(|| path_times(i, n, options.path_samples, phase)),
+            })
+            .collect();
+        let (mut poses, mut host) = step_poses(&module, &units, &times, pending.as_ref())?;
+        if let Some(done) = pending.take() {
+            let previous = std::mem::take(&mut host.previous);
+            match bookkeeping.finish(done, &previous)? {
+                Finished::Continue => {}
+                Finished::Stop => {
+                    stop = StopReason::Interrupted;
+                    break;
+                }
+                Finished::Skipped(restored) => {
+                    // The previous step's gradient was not finite: undo its update and take
+                    // this step's poses from the restored weights (a second read, rare).
+                    (module, optim) = *restored;
+                    (poses, host) = step_poses(&module, &units, &times, None)?;
+                }
+            }
+        }
+
+        let mut loss: Option<Tensor<1>> = None;
+        let mut labels = Vec::with_capacity(n);
+        let mut means = Vec::with_capacity(n);
         for (i, request) in requests.iter().enumerate() {
-            let times =
-                sampling::stratified_times(i, n, options.samples_per_window, Some(&mut rng));
-            let sample_times = Tensor::<1>::from_data(
-                TensorData::new(times.clone(), [options.samples_per_window]),
-                (&device, dtype),
-            );
-            let poses = units.to_scene(module.forward(sample_times)); // [S, 6]
-            let path = needs_path.then(|| {
-                let (times, time_step) = path_times(i, n, options.path_samples, phase);
-                let count = times.len();
-                let times =
-                    Tensor::<1>::from_data(TensorData::new(times, [count]), (&device, dtype));
-                (units.to_scene(module.forward(times)), time_step) // [P, 6]
+            let segment = &host.windows[i];
+            let window_poses = poses
+                .clone()
+                .narrow(0, segment.samples.0, segment.samples.1);
+            let path = segment.path.map(|(offset, count, time_step)| {
+                (poses.clone().narrow(0, offset, count), time_step)
             });
             let terms = problem
-                .evaluate_along(i, poses, Some(&times), path, step, request.as_ref())?
+                .evaluate_along(
+                    i,
+                    window_poses,
+                    Some(&times[i].samples),
+                    path,
+                    Some(&segment.poses),
+                    step,
+                    request.as_ref(),
+                )?
                 .terms;
-            window_terms.push(terms.means());
+            labels.push(terms.labels());
+            means.push(terms.means_on_device());
             let mean = terms.total.mean();
             loss = Some(match loss {
                 Some(l) => l + mean,
@@ -308,66 +348,50 @@ pub fn optimise_trajectory(
             });
         }
         let loss = loss.expect("at least one window").div_scalar(n as f64);
-        let total = host_values(loss.clone())
-            .first()
-            .copied()
-            .unwrap_or(f64::NAN);
-        // Weights before the update: they are what `total` was measured at.
-        let evaluated = module.host_weights();
-        if !total.is_finite() {
-            return Err(OptimiseError::LossNotFinite {
-                step,
-                total,
-                why: super::loss_blame(&window_terms, step, options.learning_rate),
-            });
-        }
+        // Weights before the update: they are what the loss is measured at.
+        let evaluated = module.weights.val().without_autodiff();
         let backward_started = Instant::now();
         let grads = loss.backward();
-        let grad = module.weights.val().grad(&grads).map(host_values);
+        let finite = match module.weights.val().grad(&grads) {
+            Some(g) => g.is_finite().all().float().cast(evaluated.dtype()),
+            None => Tensor::<1>::ones([1], (&evaluated.device(), evaluated.dtype())),
+        };
         let backward_done = Instant::now();
-        let finite = grad
-            .as_ref()
-            .is_none_or(|g| g.iter().all(|v| v.is_finite()));
-        if finite {
-            let grads = GradientsParams::from_grads(grads, &module);
-            module = optim.step(options.learning_rate, module, grads);
-        } else {
-            skipped_steps += 1;
-        }
-        let improved = best.as_ref().is_none_or(|(b, _, _)| total < *b);
-        let new_best = improved.then(|| evaluated.iter().map(|w| units.denormalise(w)).collect());
-        if improved {
-            best = Some((total, step, evaluated));
-        }
-        let row = TrajectoryStep {
+        // Adam steps now; the finiteness of the gradient is read with the next step's poses,
+        // and a step that should have been skipped is undone from these copies.
+        let before = Box::new((module.clone(), optim.clone()));
+        let grads = GradientsParams::from_grads(grads, &module);
+        module = optim.step(options.learning_rate, module, grads);
+        let [rows, _] = evaluated.dims();
+        means.push(loss.clone().without_autodiff());
+        means.push(finite);
+        means.push(evaluated.reshape([rows * POSE_DIM]));
+        pending = Some(Pending {
             step,
-            elapsed: started.elapsed(),
-            total,
-            windows: window_terms,
-            updated: finite,
-            best_total: best.as_ref().map_or(f64::NAN, |b| b.0),
-            new_best,
+            labels,
+            values: Tensor::cat(means, 0),
+            before,
             timing: StepTiming {
                 evaluate: backward_started - step_started,
                 backward: backward_done - backward_started,
                 update: backward_done.elapsed(),
             },
-        };
-        let out_of_time = options
-            .time_limit_s
-            .is_some_and(|limit| row.elapsed.as_secs_f64() >= limit);
-        let flow = if out_of_time {
-            Flow::Stop
-        } else {
-            observer(&row)
-        };
-        history.push(row);
-        if flow == Flow::Stop {
+        });
+    }
+    // The last step's results: one more read.
+    if let Some(done) = pending.take() {
+        let values = read_values(done.values.clone())?;
+        if let Finished::Stop = bookkeeping.finish(done, &values)? {
             stop = StopReason::Interrupted;
-            break;
         }
     }
 
+    let Bookkeeping {
+        history,
+        best,
+        skipped_steps,
+        ..
+    } = bookkeeping;
     let model: TrajectoryModel = module.model().clone();
     let (best_total, best_step, weights) =
         best.unwrap_or_else(|| (f64::NAN, 0, module.host_weights()));
@@ -383,4 +407,185 @@ pub fn optimise_trajectory(
         stop,
         elapsed: started.elapsed(),
     })
+}
+
+/// The times one window samples in a step: its S samples and, when path costs are on, its
+/// stretch of the path and the grid's step.
+struct StepTimes {
+    samples: Vec<f64>,
+    path: Option<(Vec<f64>, f64)>,
+}
+
+/// One window's rows in a step's pose tensor (offset, count) and their values on the host.
+struct WindowRows {
+    samples: (usize, usize),
+    /// (offset, count, time step)
+    path: Option<(usize, usize, f64)>,
+    poses: HostPoses,
+}
+
+/// What a step's one read brought back.
+struct StepRead {
+    windows: Vec<WindowRows>,
+    /// The previous step's values ([`Pending::values`]), empty at the first step.
+    previous: Vec<f64>,
+}
+
+/// What step k leaves on the device for the host, read with step k + 1's poses.
+struct Pending {
+    step: usize,
+    /// Per window, each term's `(name, weight)`.
+    labels: Vec<Vec<(&'static str, f64)>>,
+    /// Per window its terms' means, then the loss, the gradient's finiteness (1 or 0) and
+    /// the weights the loss was measured at `[K·6]`.
+    values: Tensor<1>,
+    /// The model and optimiser before this step's update, to undo it if its gradient was
+    /// not finite.
+    before: Box<(Trajectory, ModuleOptimizer)>,
+    timing: StepTiming,
+}
+
+/// How a step's bookkeeping ended.
+enum Finished {
+    Continue,
+    /// The observer or the time limit stopped the loop.
+    Stop,
+    /// The gradient was not finite: go on from the model and optimiser before its update.
+    Skipped(Box<(Trajectory, ModuleOptimizer)>),
+}
+
+fn read_values(t: Tensor<1>) -> Result<Vec<f64>, OptimiseError> {
+    splatraj_render::host::to_host(t).map_err(|e| OptimiseError::ReadBack(e.to_string()))
+}
+
+/// Every window's sample and path poses of a step in one forward of the model `[T, 6]`, and
+/// their host values read in one read together with the previous step's `pending` values.
+fn step_poses(
+    module: &Trajectory,
+    units: &PoseUnits,
+    times: &[StepTimes],
+    pending: Option<&Pending>,
+) -> Result<(Tensor<2>, StepRead), OptimiseError> {
+    let mut all = Vec::new();
+    let mut layout = Vec::with_capacity(times.len());
+    for t in times {
+        let samples = (all.len(), t.samples.len());
+        all.extend_from_slice(&t.samples);
+        let path = t.path.as_ref().map(|(path, time_step)| {
+            let rows = (all.len(), path.len(), *time_step);
+            all.extend_from_slice(path);
+            rows
+        });
+        layout.push((samples, path));
+    }
+    let count = all.len();
+    let poses = units.to_scene(module.forward_at(&all)); // [T, 6]
+    let flat = poses.clone().without_autodiff().reshape([count * POSE_DIM]);
+    let read = match pending {
+        Some(p) => Tensor::cat(vec![flat, p.values.clone()], 0),
+        None => flat,
+    };
+    let mut values = read_values(read)?;
+    let previous = values.split_off(count * POSE_DIM);
+    let rows = |(offset, len): (usize, usize)| -> Vec<[f64; 6]> {
+        values[offset * POSE_DIM..(offset + len) * POSE_DIM]
+            .chunks_exact(POSE_DIM)
+            .map(|p| std::array::from_fn(|k| p[k]))
+            .collect()
+    };
+    let windows = layout
+        .into_iter()
+        .map(|(samples, path)| WindowRows {
+            samples,
+            path,
+            poses: HostPoses {
+                samples: rows(samples),
+                path: path.map(|(offset, len, _)| rows((offset, len))),
+            },
+        })
+        .collect();
+    Ok((poses, StepRead { windows, previous }))
+}
+
+/// The host side of the loop: history rows, the best weights, the observer.
+struct Bookkeeping<'a> {
+    options: &'a TrajectoryOptions,
+    units: &'a PoseUnits,
+    started: Instant,
+    history: Vec<TrajectoryStep>,
+    best: Option<(f64, usize, Vec<[f64; 6]>)>,
+    skipped_steps: usize,
+    observer: &'a mut dyn FnMut(&TrajectoryStep) -> Flow,
+}
+
+impl Bookkeeping<'_> {
+    /// Records step `done` from its read `values`; fails when its loss is not finite.
+    fn finish(&mut self, done: Pending, values: &[f64]) -> Result<Finished, OptimiseError> {
+        let mut next = values.iter().copied();
+        let windows: Vec<Vec<(&'static str, f64, f64)>> = done
+            .labels
+            .iter()
+            .map(|labels| {
+                labels
+                    .iter()
+                    .map(|&(name, weight)| (name, weight, next.next().unwrap_or(f64::NAN)))
+                    .collect()
+            })
+            .collect();
+        let total = next.next().unwrap_or(f64::NAN);
+        let finite = next.next().is_some_and(|flag| flag != 0.0);
+        let rest: Vec<f64> = next.collect();
+        let evaluated: Vec<[f64; 6]> = rest
+            .chunks_exact(POSE_DIM)
+            .map(|p| std::array::from_fn(|k| p[k]))
+            .collect();
+        let step = done.step;
+        if !total.is_finite() {
+            return Err(OptimiseError::LossNotFinite {
+                step,
+                total,
+                why: super::loss_blame(&windows, step, self.options.learning_rate),
+            });
+        }
+        if !finite {
+            self.skipped_steps += 1;
+        }
+        let improved = self.best.as_ref().is_none_or(|(b, _, _)| total < *b);
+        let new_best = improved.then(|| {
+            evaluated
+                .iter()
+                .map(|w| self.units.denormalise(w))
+                .collect()
+        });
+        if improved {
+            self.best = Some((total, step, evaluated));
+        }
+        let row = TrajectoryStep {
+            step,
+            elapsed: self.started.elapsed(),
+            total,
+            windows,
+            updated: finite,
+            best_total: self.best.as_ref().map_or(f64::NAN, |b| b.0),
+            new_best,
+            timing: done.timing,
+        };
+        let out_of_time = self
+            .options
+            .time_limit_s
+            .is_some_and(|limit| row.elapsed.as_secs_f64() >= limit);
+        let flow = if out_of_time {
+            Flow::Stop
+        } else {
+            (self.observer)(&row)
+        };
+        self.history.push(row);
+        Ok(if flow == Flow::Stop {
+            Finished::Stop
+        } else if finite {
+            Finished::Continue
+        } else {
+            Finished::Skipped(done.before)
+        })
+    }
 }

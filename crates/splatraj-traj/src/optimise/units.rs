@@ -54,9 +54,10 @@ impl PoseUnits {
 
     /// Normalised `[.., 6]` values to scene units (differentiable).
     pub fn to_scene(&self, normalised: Tensor<2>) -> Tensor<2> {
-        let row = Tensor::<2>::from_data(
+        let row = splatraj_render::host::upload::<2>(
             TensorData::new(self.factors().to_vec(), [1, POSE_DIM]),
-            (&normalised.device(), normalised.dtype()),
+            &normalised.device(),
+            normalised.dtype(),
         );
         normalised * row
     }

@@ -528,6 +528,15 @@ impl Trajectory {
         basis.matmul(weights) // [B, K]·[K, 6] = [B, 6]
     }
 
+    /// Poses Φ(t) `[B, 6]` for host times `[B]`: the basis evaluated on the host in f64 and
+    /// uploaded (one upload, no read back, for every model). Differentiable in the weights.
+    pub fn forward_at(&self, times: &[f64]) -> Tensor<2> {
+        let weights = self.weights.val();
+        let (device, dtype) = (weights.device(), weights.dtype());
+        let data = TensorData::new(self.model.matrix(times), [times.len(), self.model.count()]);
+        splatraj_render::host::upload::<2>(data, &device, dtype).matmul(weights) // [B, 6]
+    }
+
     /// Poses Φ(t) at any times, on the host in f64 (reads the weights once).
     pub fn poses_at(&self, times: &[f64]) -> Vec<Pose> {
         let weights = self.host_weights();

@@ -1,0 +1,273 @@
+//! The fused projection (one burn op with a hand-written backward) against the tensor
+//! projection, its readable specification: in f64 the packed rows (u, v, conic, opacity, z) and
+//! the pose gradient of any weighted sum of them agree to 1e-10, on Gaussians in view, off
+//! screen beyond the Jacobian's clamp, behind the camera and degenerate ones, for rotations on
+//! both of Rodrigues' branches (ω = 0 included); f32 stays within f32 rounding of f64; the
+//! result does not depend on the thread count.
+
+use burn::tensor::{DType, Device, Tensor, TensorData};
+use glam::DVec3;
+use splatraj_render::camera::{Intrinsics, Pose};
+use splatraj_render::fused::projection::{
+    PackedColumn, ProjectionCamera, ProjectionPlan, SPLAT_COLUMNS, project_packed,
+};
+use splatraj_render::project::{NEAR_PLANE, SceneTensors, project_with_near};
+use splatraj_scene::Scene;
+
+/// SplitMix64 (the crate has no rand dev-dependency).
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.next()
+    }
+}
+
+/// 60 Gaussians: most near the origin, some far out (off screen, beyond the clamp, behind the
+/// cameras), and one needle (a footprint so thin its normalised determinant is floored).
+fn scene(seed: u64) -> Scene {
+    let mut rng = Rng(seed);
+    let mut scene = Scene::default();
+    for i in 0..60 {
+        let spread = if i < 45 { 1.5 } else { 9.0 };
+        scene
+            .means
+            .push(std::array::from_fn(|_| rng.uniform(-spread, spread) as f32));
+        let scales = if i == 59 {
+            [1e-7, 1e-7, 2.0]
+        } else {
+            std::array::from_fn(|_| rng.uniform(0.02, 0.3) as f32)
+        };
+        scene.scales.push(scales);
+        scene
+            .rotations
+            .push(std::array::from_fn(|_| rng.uniform(-1.0, 1.0) as f32));
+        scene.opacities.push(rng.uniform(0.05, 1.0) as f32);
+    }
+    scene
+}
+
+/// Poses on both of Rodrigues' branches: look-at rotations (θ large), a small rotation (the
+/// series), and ω = 0 exactly.
+fn poses() -> Vec<Pose> {
+    let up = DVec3::new(0.0, -1.0, 0.0);
+    vec![
+        Pose::look_at(DVec3::new(4.0, -1.0, 5.0), DVec3::ZERO, up).unwrap(),
+        Pose::look_at(DVec3::new(-5.5, -2.0, -1.0), DVec3::new(0.3, 0.2, 0.0), up).unwrap(),
+        Pose([0.04, -0.05, 0.03, 0.2, -0.1, -6.0]),
+        Pose([0.0, 0.0, 0.0, -0.3, 0.2, -5.0]),
+    ]
+}
+
+fn intrinsics() -> Intrinsics {
+    Intrinsics::from_fov_x(60.0, 160, 120).unwrap()
+}
+
+fn pose_tensor(poses: &[Pose], device: &Device, dtype: DType) -> Tensor<2> {
+    let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
+    Tensor::from_data(TensorData::new(flat, [poses.len(), 6]), (device, dtype))
+}
+
+fn values<const D: usize>(t: Tensor<D>) -> Vec<f64> {
+    t.into_data().convert::<f64>().try_to_vec::<f64>().unwrap()
+}
+
+/// The tensor projection's outputs packed like the fused op's rows. `[B, U, 7]`
+fn tensor_packed(
+    geometry: &SceneTensors,
+    poses: Tensor<2>,
+    intrinsics: &Intrinsics,
+    used: &[u32],
+) -> Tensor<3> {
+    let device = poses.device();
+    let index = Tensor::<1, burn::tensor::Int>::from_data(
+        TensorData::new(
+            used.iter().map(|&g| g as i64).collect::<Vec<_>>(),
+            [used.len()],
+        ),
+        &device,
+    );
+    let selected = geometry.select(index);
+    let [batch, _] = poses.dims();
+    let projected = project_with_near(&selected, poses, intrinsics, NEAR_PLANE);
+    let opacity = selected
+        .opacities
+        .clone()
+        .reshape([1, used.len(), 1])
+        .repeat_dim(0, batch);
+    let depth = projected.depth.unsqueeze_dim::<3>(2);
+    Tensor::cat(
+        vec![projected.means_2d, projected.conics, opacity, depth],
+        2,
+    )
+}
+
+/// Fixed pseudo-random weights `[B, U, 7]` for a scalar loss Σ w·rows.
+fn weights(batch: usize, rows: usize, device: &Device, dtype: DType) -> Tensor<3> {
+    let mut rng = Rng(99);
+    let w: Vec<f64> = (0..batch * rows * SPLAT_COLUMNS)
+        .map(|_| rng.uniform(-1.0, 1.0))
+        .collect();
+    Tensor::from_data(
+        TensorData::new(w, [batch, rows, SPLAT_COLUMNS]),
+        (device, dtype),
+    )
+}
+
+/// Which projection a test runs.
+#[derive(Clone, Copy)]
+enum Projection {
+    Fused,
+    Tensor,
+}
+
+/// Rows and pose gradient of one projection, in `dtype` on Flex.
+fn project(
+    scene: &Scene,
+    poses: &[Pose],
+    used: &[u32],
+    dtype: DType,
+    projection: Projection,
+) -> (Vec<f64>, Vec<f64>) {
+    let device = Device::flex().autodiff();
+    let geometry = SceneTensors::new(scene, None, &device, dtype);
+    let intrinsics = intrinsics();
+    let poses = pose_tensor(poses, &device, dtype).require_grad();
+    let rows = match projection {
+        Projection::Fused => project_packed(
+            &geometry,
+            poses.clone(),
+            ProjectionPlan {
+                used: used.to_vec(),
+                camera: ProjectionCamera::new(&intrinsics, NEAR_PLANE),
+            },
+        ),
+        Projection::Tensor => tensor_packed(&geometry, poses.clone(), &intrinsics, used),
+    };
+    let [batch, count, _] = rows.dims();
+    let loss = (rows.clone() * weights(batch, count, &device, dtype)).sum();
+    let grads = loss.backward();
+    let gradient = values(poses.grad(&grads).expect("the poses have a gradient"));
+    (values(rows.detach()), gradient)
+}
+
+/// [`project`] with both projections: `[fused, tensor]`.
+fn both(scene: &Scene, poses: &[Pose], used: &[u32], dtype: DType) -> [(Vec<f64>, Vec<f64>); 2] {
+    [Projection::Fused, Projection::Tensor].map(|p| project(scene, poses, used, dtype, p))
+}
+
+fn assert_close(what: &str, fused: &[f64], tensor: &[f64], tolerance: f64) {
+    assert_eq!(fused.len(), tensor.len(), "{what}: lengths");
+    let scale = tensor.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+    for (i, (f, t)) in fused.iter().zip(tensor).enumerate() {
+        assert!(
+            f.is_finite() && (f - t).abs() <= tolerance * (1.0 + t.abs()).min(scale),
+            "{what}[{i}] (row {}, column {}): fused {f} vs tensor {t}",
+            i / SPLAT_COLUMNS,
+            i % SPLAT_COLUMNS
+        );
+    }
+}
+
+#[test]
+fn rows_and_pose_gradients_match_the_tensor_projection_in_f64() {
+    let scene = scene(7);
+    let all: Vec<u32> = (0..scene.len() as u32).collect();
+    let [(rows, grad), (rows_t, grad_t)] = both(&scene, &poses(), &all, DType::F64);
+    assert_close("rows", &rows, &rows_t, 1e-10);
+    let norm = grad_t.iter().map(|g| g * g).sum::<f64>().sqrt();
+    assert!(norm > 1.0, "a loss over 60 Gaussians moves with the pose");
+    for (i, (f, t)) in grad.iter().zip(&grad_t).enumerate() {
+        assert!(
+            (f - t).abs() <= 1e-10 * norm,
+            "d loss/dΦ[{}][{}]: fused {f} vs tensor {t} (norm {norm})",
+            i / 6,
+            i % 6
+        );
+    }
+    // The cases the rows had to cover did occur: behind the near plane, beyond the clamp,
+    // a floored determinant (the needle is the last Gaussian).
+    let depth = PackedColumn::Depth as usize;
+    let behind = rows_t
+        .chunks_exact(SPLAT_COLUMNS)
+        .filter(|r| r[depth] <= NEAR_PLANE)
+        .count();
+    assert!(behind > 0, "some Gaussian lies behind a camera");
+    let (lim_x, _) = ProjectionCamera::new(&intrinsics(), NEAR_PLANE).limits();
+    let beyond = rows_t.chunks_exact(SPLAT_COLUMNS).any(|r| {
+        let fx = intrinsics().fx;
+        let x_over_z = (r[0] - intrinsics().cx) / fx;
+        r[depth] > NEAR_PLANE && x_over_z.abs() > lim_x
+    });
+    assert!(beyond, "some Gaussian lies beyond the Jacobian's clamp");
+}
+
+#[test]
+fn a_subset_in_any_order_projects_the_rows_it_names() {
+    let scene = scene(11);
+    // Out of order, with a repeat: the rows follow `used`, not the scene.
+    let used = [41u32, 3, 17, 59, 3, 0];
+    let [(rows, grad), (rows_t, grad_t)] = both(&scene, &poses()[..2], &used, DType::F64);
+    assert_close("rows", &rows, &rows_t, 1e-10);
+    assert_close("gradient", &grad, &grad_t, 1e-9);
+    let (empty, grad_empty) = project(&scene, &poses()[..2], &[], DType::F64, Projection::Fused);
+    assert!(empty.is_empty());
+    assert_eq!(
+        grad_empty,
+        vec![0.0; 12],
+        "nothing projected, nothing moves"
+    );
+}
+
+#[test]
+fn f32_stays_within_rounding_of_f64() {
+    let scene = scene(5);
+    // In view only: behind the camera or beyond the clamp, f32 and f64 garbage may differ more.
+    let used: Vec<u32> = (0..45).collect();
+    let (rows32, grad32) = project(&scene, &poses()[..1], &used, DType::F32, Projection::Fused);
+    let (rows64, grad64) = project(&scene, &poses()[..1], &used, DType::F64, Projection::Fused);
+    for (i, (a, b)) in rows32.iter().zip(&rows64).enumerate() {
+        assert!(
+            (a - b).abs() <= 2e-4 * (1.0 + b.abs()),
+            "row value {i}: f32 {a} vs f64 {b}"
+        );
+    }
+    let norm = grad64.iter().map(|g| g * g).sum::<f64>().sqrt();
+    for (a, b) in grad32.iter().zip(&grad64) {
+        assert!((a - b).abs() <= 1e-3 * norm, "gradient: f32 {a} vs f64 {b}");
+    }
+}
+
+#[test]
+fn the_same_numbers_on_one_and_three_threads() {
+    // 5000 Gaussians: several of the kernels' fixed chunks per pose.
+    let mut rng = Rng(3);
+    let mut big = Scene::default();
+    for _ in 0..5000 {
+        big.means
+            .push(std::array::from_fn(|_| rng.uniform(-2.0, 2.0) as f32));
+        big.scales
+            .push(std::array::from_fn(|_| rng.uniform(0.01, 0.1) as f32));
+        big.rotations
+            .push(std::array::from_fn(|_| rng.uniform(-1.0, 1.0) as f32));
+        big.opacities.push(rng.uniform(0.1, 1.0) as f32);
+    }
+    let used: Vec<u32> = (0..5000).collect();
+    let on = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| project(&big, &poses()[..2], &used, DType::F32, Projection::Fused))
+    };
+    let (one, three) = (on(1), on(3));
+    assert_eq!(one.0, three.0, "rows");
+    assert_eq!(one.1, three.1, "pose gradient");
+}

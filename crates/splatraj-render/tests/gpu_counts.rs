@@ -1,0 +1,103 @@
+//! What a mask pass launches, reads and uploads on the GPU backend (lavapipe in CI), counted by
+//! `splatraj_render::counters`: the kernel launches of a forward + backward pass do not grow
+//! with the number of poses, a pass whose poses the caller holds reads nothing back before its
+//! gradient, and the scene is not uploaded again.
+//!
+//! Its own test binary with one test: the counters are process-wide and the harness runs the
+//! tests of one binary side by side.
+#![cfg(feature = "wgpu")]
+
+mod common;
+
+use burn::tensor::{DType, Device, Tensor, TensorData};
+use glam::DVec3;
+use splatraj_render::backend::BackendKind;
+use splatraj_render::camera::{Intrinsics, Pose};
+use splatraj_render::counters::{self, Counts};
+use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, render_at};
+use splatraj_scene::Scene;
+
+/// 400 Gaussians in a slab in front of the cameras; the first half is the object.
+fn scene() -> (Scene, Vec<f32>) {
+    let mut rng = common::Rng(0x5eed);
+    let mut scene = Scene::default();
+    let mut mask = Vec::new();
+    for i in 0..400 {
+        scene.means.push([
+            rng.range(-1.0, 1.0) as f32,
+            rng.range(-0.8, 0.8) as f32,
+            rng.range(2.5, 3.5) as f32,
+        ]);
+        scene
+            .scales
+            .push(std::array::from_fn(|_| rng.range(0.03, 0.1) as f32));
+        scene
+            .rotations
+            .push(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
+        scene.opacities.push(rng.range(0.2, 0.9) as f32);
+        scene.sh.extend([0.1, 0.2, 0.3]);
+        mask.push(if i < 200 { 1.0 } else { 0.0 });
+    }
+    (scene, mask)
+}
+
+/// Counts of one forward + backward mask pass (pruned to the object) at `poses`, the pose
+/// values given from the host; and the counts of its forward alone.
+fn pass(scene: &DeviceScene, mask: &[f32], poses: &[Pose], device: &Device) -> (Counts, Counts) {
+    let intrinsics = Intrinsics::from_fov_x(60.0, 64, 48).unwrap();
+    let mut request = RenderRequest::new(intrinsics, vec![Channel::Mask(mask.to_vec())]);
+    request.pruning = Pruning::ObjectOnly;
+    let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
+    let before = counters::snapshot();
+    let tensor = Tensor::<2>::from_data(
+        TensorData::new(flat, [poses.len(), 6]),
+        (device, DType::F32),
+    )
+    .require_grad();
+    let out = render_at(scene, tensor.clone(), Some(poses), &request).unwrap();
+    let loss = out.images.clone().sum() + out.alpha.clone().mean();
+    let forward = counters::snapshot().since(&before);
+    let grads = loss.backward();
+    let gradient = tensor.grad(&grads).expect("the poses have a gradient");
+    let v: Vec<f64> = splatraj_render::host::to_host(gradient).unwrap();
+    assert!(v.iter().any(|g| *g != 0.0), "a gradient");
+    (counters::snapshot().since(&before), forward)
+}
+
+#[test]
+fn launches_do_not_grow_with_the_batch_and_reads_stay_at_one() {
+    let device = BackendKind::Wgpu.device().unwrap().autodiff();
+    let (scene, mask) = scene();
+    let uploaded = counters::snapshot();
+    let on_device = DeviceScene::new(&scene, &device, DType::F32);
+    assert_eq!(counters::snapshot().since(&uploaded).scene_uploads, 1);
+    let up = DVec3::new(0.0, -1.0, 0.0);
+    let poses: Vec<Pose> = (0..5)
+        .map(|i| {
+            let x = 0.1 * i as f64 - 0.2;
+            Pose::look_at(DVec3::new(x, -0.1, 0.0), DVec3::new(0.0, 0.0, 3.0), up).unwrap()
+        })
+        .collect();
+    // Once each first: kernels compile and may be tuned on their first use at a shape.
+    let one = &poses[..1];
+    pass(&on_device, &mask, one, &device);
+    pass(&on_device, &mask, &poses, &device);
+    let (single, single_forward) = pass(&on_device, &mask, one, &device);
+    let (batch, batch_forward) = pass(&on_device, &mask, &poses, &device);
+    eprintln!("one pose: {single:?}\nfive poses: {batch:?}");
+    assert!(
+        single.launches > 0,
+        "the GPU backend's launches are counted"
+    );
+    assert_eq!(
+        batch.launches, single.launches,
+        "5 poses launch what 1 does: {batch:?} against {single:?}"
+    );
+    // The forward reads nothing (its poses came from the host); the only read is the gradient.
+    assert_eq!(single_forward.reads, 0, "{single_forward:?}");
+    assert_eq!(batch_forward.reads, 0, "{batch_forward:?}");
+    assert_eq!(batch.reads, 1, "{batch:?}");
+    assert_eq!(batch.scene_uploads, 0, "the scene stays on the device");
+    // What goes up grows with the pass (lists, indices, mask values), not with the scene.
+    assert!(batch.bytes_up > single.bytes_up);
+}

@@ -1,0 +1,257 @@
+//! What an optimisation step moves between host and device, counted (`splatraj_render::counters`):
+//! each step reads back once (its poses, with the previous step's loss terms, gradient check and
+//! weights), whatever the windows and costs (renders, the object alone, the clearance cost's
+//! lookup on the host, path costs), and the scene is not uploaded again; and a step whose
+//! gradient is not finite is still undone (read one step late).
+//!
+//! Its own test binary: the counters are process-wide, so nothing else may run beside the
+//! counted work (the tests here take one lock).
+
+use std::sync::Mutex;
+
+use burn::tensor::{DType, Device, Tensor};
+use splatraj_render::camera::Intrinsics;
+use splatraj_render::counters;
+use splatraj_render::render::DeviceScene;
+use splatraj_scene::Scene;
+use splatraj_scene::demo::{DEMO_UP, DemoConfig, DemoObject, demo_layout, demo_scene};
+use splatraj_traj::clearance::{Occupancy, OccupancySpec};
+use splatraj_traj::costs::{
+    ClearanceCost, Cost, CostError, CostInputs, CostsConfig, DEFAULT_CLEARANCE_SIGMA,
+    DEFAULT_MIN_OPACITY, MotionCost, OrAuto, QueryContext, VisibilityCost, WeightedCosts,
+    default_prior_radius,
+};
+use splatraj_traj::optimise::{
+    Flow, ObjectView, Problem, TrajectoryOptions, WindowTarget, object_start_poses,
+    optimise_trajectory, window_start_trajectory,
+};
+use splatraj_traj::trajectory::{Polynomial, Rbf, Trajectory, TrajectoryModel};
+
+static COUNTED: Mutex<()> = Mutex::new(());
+
+fn scene() -> Scene {
+    demo_scene(&DemoConfig {
+        seed: 7,
+        gaussians: 20_000,
+    })
+    .unwrap()
+}
+
+fn object(name: &str) -> DemoObject {
+    demo_layout().into_iter().find(|o| o.name == name).unwrap()
+}
+
+fn intrinsics() -> Intrinsics {
+    Intrinsics::from_fov_x(60.0, 48, 36).unwrap()
+}
+
+fn windows(scene: &Scene, names: &[&str]) -> Vec<WindowTarget> {
+    let k = intrinsics();
+    let (tx, ty) = k.tan_half_fov();
+    let labels = scene.extras.labels.as_ref().unwrap();
+    names
+        .iter()
+        .map(|name| {
+            let o = object(name);
+            WindowTarget {
+                name: name.to_string(),
+                mask: labels
+                    .ids
+                    .iter()
+                    .map(|&id| f32::from(u8::from(id == o.id)))
+                    .collect(),
+                context: QueryContext {
+                    object_centre: o.center.map(f64::from),
+                    prior_radius: default_prior_radius(
+                        o.size.map(f64::from),
+                        2.0 * tx.atan(),
+                        2.0 * ty.atan(),
+                        0.15,
+                    )
+                    .unwrap(),
+                    world_up: DEMO_UP.map(f64::from),
+                    target_ratio: 0.15,
+                },
+            }
+        })
+        .collect()
+}
+
+/// Each window's object alone, for the visibility cost.
+fn alone(scene: &Scene, windows: &[WindowTarget], device: &Device) -> Vec<DeviceScene> {
+    windows
+        .iter()
+        .map(|w| {
+            let keep: Vec<bool> = w.mask.iter().map(|&m| m != 0.0).collect();
+            let mut alone = scene.clone();
+            alone.retain(&keep);
+            DeviceScene::new(&alone, device, DType::F32)
+        })
+        .collect()
+}
+
+#[test]
+fn a_step_reads_once_and_the_scene_is_uploaded_once() {
+    let _counted = COUNTED.lock().unwrap();
+    let scene = scene();
+    let windows = windows(&scene, &["blue box", "red mug"]);
+    let device = Device::flex().autodiff();
+    let on_device = DeviceScene::new(&scene, &device, DType::F32);
+    let alone = alone(&scene, &windows, &device);
+    let occupancy = Occupancy::new(
+        &scene,
+        OccupancySpec {
+            sigma: DEFAULT_CLEARANCE_SIGMA,
+            min_opacity: DEFAULT_MIN_OPACITY,
+        },
+    );
+    // Every kind of cost: image costs, the object alone, a path cost with a host lookup, motion.
+    let costs = CostsConfig {
+        clearance: Some(ClearanceCost {
+            margin: OrAuto::Value(0.1),
+            ..ClearanceCost::default()
+        }),
+        visibility: Some(VisibilityCost::default()),
+        motion: Some(MotionCost::default()),
+        ..CostsConfig::default()
+    }
+    .build()
+    .unwrap();
+    let objects: Vec<([f64; 3], f64)> = windows
+        .iter()
+        .map(|w| (w.context.object_centre, w.context.prior_radius))
+        .collect();
+    let per_window = object_start_poses(
+        &objects,
+        [0.0, 0.0, 0.5],
+        DEMO_UP.map(f64::from),
+        ObjectView::default(),
+        0,
+        1,
+    )
+    .unwrap();
+    let model = TrajectoryModel::Rbf(Rbf::new(windows.len(), 3, None));
+    let start = window_start_trajectory(model, &per_window, &device, DType::F32)
+        .unwrap()
+        .record();
+    let problem = Problem::new(&on_device, &windows, &costs, intrinsics())
+        .with_alone(Some(&alone))
+        .with_occupancy(Some(&occupancy));
+    let iterations = 5;
+    let options = TrajectoryOptions {
+        iterations,
+        samples_per_window: 3,
+        ..TrajectoryOptions::default()
+    };
+    let before = counters::snapshot();
+    let result = optimise_trajectory(&problem, &start, &options, 1, &mut |_| Flow::Continue)
+        .expect("the optimisation runs");
+    let counts = counters::snapshot().since(&before);
+    assert_eq!(result.history.len(), iterations);
+    assert!(result.history.iter().all(|row| row.total.is_finite()));
+    assert_eq!(
+        counts.reads,
+        iterations as u64 + 1,
+        "one read per step and one for the last step's results: {counts:?}"
+    );
+    // What a read holds: poses, term means, a flag and the weights; never an image (one 48×36
+    // mask is 6912 bytes).
+    let per_read = counts.bytes_down / counts.reads;
+    assert!(per_read < 4096, "{per_read} bytes per read: {counts:?}");
+    assert_eq!(
+        counts.scene_uploads, 0,
+        "the scene is uploaded once, before"
+    );
+    assert!(
+        counts.uploads > 0,
+        "poses, indices and mask values go up each pass"
+    );
+}
+
+/// A cost that is 0 and whose gradient is NaN from step 2 on (√u at u = 0, u ≡ 0).
+#[derive(Debug)]
+struct NanGradientFrom2;
+
+impl Cost for NanGradientFrom2 {
+    fn name(&self) -> &'static str {
+        "nan_gradient"
+    }
+    fn weight(&self, _step: usize) -> f64 {
+        1.0
+    }
+    fn validate(&self) -> Result<(), CostError> {
+        Ok(())
+    }
+    fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
+        let poses = inputs.poses().clone();
+        let [batch, _] = poses.dims();
+        let zero = (poses.clone() - poses).sum_dim(1).reshape([batch]); // [B], ≡ 0
+        Ok(if inputs.step() >= 2 {
+            zero.sqrt()
+        } else {
+            zero
+        })
+    }
+}
+
+#[test]
+fn a_step_with_a_non_finite_gradient_is_undone() {
+    let _counted = COUNTED.lock().unwrap();
+    let scene = scene();
+    let windows = windows(&scene, &["red mug"]);
+    let device = Device::flex().autodiff();
+    let on_device = DeviceScene::new(&scene, &device, DType::F32);
+    // A constant trajectory (one polynomial term): the loss does not depend on the sampled
+    // times, so steps taken at the same weights have the same loss, bit for bit.
+    let centre = windows[0].context.object_centre;
+    let eye = glam::DVec3::from(centre) + glam::DVec3::new(0.0, -1.2, 0.4);
+    let pose = splatraj_render::camera::Pose::look_at(
+        eye,
+        glam::DVec3::from(centre),
+        glam::DVec3::from(DEMO_UP.map(f64::from)),
+    )
+    .unwrap();
+    let model = TrajectoryModel::Polynomial(Polynomial { terms: 1 });
+    let mut start = Trajectory::zeros(model, &device, DType::F32)
+        .unwrap()
+        .record();
+    start.weights = vec![pose.0];
+    let options = TrajectoryOptions {
+        iterations: 5,
+        samples_per_window: 2,
+        ..TrajectoryOptions::default()
+    };
+    let run = |nan: bool| {
+        // No prior: its weight decays with the step, and the loss must depend on the weights
+        // alone.
+        let mut costs: WeightedCosts = CostsConfig {
+            prior: None,
+            ..CostsConfig::default()
+        }
+        .build()
+        .unwrap();
+        if nan {
+            costs = costs.with_cost(Box::new(NanGradientFrom2)).unwrap();
+        }
+        let problem = Problem::new(&on_device, &windows, &costs, intrinsics());
+        optimise_trajectory(&problem, &start, &options, 3, &mut |_| Flow::Continue).unwrap()
+    };
+    let plain = run(false);
+    let nan = run(true);
+    let totals = |r: &splatraj_traj::optimise::TrajectoryResult| -> Vec<f64> {
+        r.history.iter().map(|row| row.total).collect()
+    };
+    let (plain_totals, nan_totals) = (totals(&plain), totals(&nan));
+    assert_eq!(nan.skipped_steps, 3, "steps 2, 3 and 4 are skipped");
+    let updated: Vec<bool> = nan.history.iter().map(|row| row.updated).collect();
+    assert_eq!(updated, [true, true, false, false, false]);
+    // Steps 0–2 are evaluated at the same weights in both runs; after the skipped step 2 the
+    // weights stay those of step 2, so steps 3 and 4 repeat its loss exactly.
+    assert_eq!(nan_totals[..3], plain_totals[..3]);
+    assert_eq!(nan_totals[3], nan_totals[2]);
+    assert_eq!(nan_totals[4], nan_totals[2]);
+    assert_ne!(
+        plain_totals[3], plain_totals[2],
+        "without the skip the weights move"
+    );
+}

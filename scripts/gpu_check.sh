@@ -1,0 +1,104 @@
+#!/usr/bin/env bash
+# The GPU check anyone can run: on a machine with a GPU, without building, in under 5 minutes.
+#
+#   scripts/gpu_check.sh BINARY [DATA_DIR] [OUT_DIR]
+#
+# BINARY   a splatraj built with `cargo build --release --features wgpu` (flex is in it too)
+# DATA_DIR the folder holding biker.compressed.ply and guitar.compressed.ply (default:
+#          $SPLATRAJ_DATA, else ../shared/data beside the repository)
+# OUT_DIR  where the JSON of every measurement goes (default: a fresh temporary folder)
+#
+# Runs, on wgpu and on flex (the same machine's CPU cores):
+#   1. parity and the mask pass: `bench render` (demo 100k and 1 M, 128², pruned and full; biker
+#      128² full): image (TCE, TRE, coverage) and pose gradient, wgpu against flex, and the
+#      forward + backward time, kernel launches, reads and bytes per pass;
+#   2. output frames: `bench frames` (biker and demo 1 M at 1080p, pipelined);
+#   3. the first-try guitar run (`configs/first-try/guitar.toml`) whole: time, each window's
+#      verdict and TCE.
+# then prints one table (python3, standard library only). Exit status 1 when parity fails.
+set -euo pipefail
+
+bin="${1:?usage: scripts/gpu_check.sh BINARY [DATA_DIR] [OUT_DIR]}"
+repo="$(cd "$(dirname "$0")/.." && pwd)"
+data="${2:-${SPLATRAJ_DATA:-$repo/../shared/data}}"
+out="${3:-$(mktemp -d)}"
+mkdir -p "$out"
+bin="$(cd "$(dirname "$bin")" && pwd)/$(basename "$bin")"
+for f in biker.compressed.ply guitar.compressed.ply; do
+  [ -f "$data/$f" ] || { echo "gpu_check: $data/$f is missing (give DATA_DIR)" >&2; exit 2; }
+done
+# Mesa and the loader complain without it; kernels compile once per machine.
+export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
+export CUBECL_AUTOTUNE_LEVEL="${CUBECL_AUTOTUNE_LEVEL:-minimal}"
+cd "$repo"
+
+for backend in wgpu flex; do
+  echo "== $backend: bench render" >&2
+  "$bin" bench render --backend "$backend" --sizes 100000,1000000 --resolutions 128 \
+    --rasterizer fused --repeats 5 --scene "$data/biker.compressed.ply" --json \
+    >"$out/render_$backend.json"
+  echo "== $backend: bench frames" >&2
+  "$bin" bench frames --backend "$backend" --sizes 1080p --frames 4 --schedule pipelined \
+    --scene "$data/biker.compressed.ply" --json >"$out/frames_$backend.json"
+  echo "== $backend: first-try guitar" >&2
+  "$bin" bench first-try configs/first-try/guitar.toml --set "backend=\"$backend\"" \
+    --set "scene.path=\"$data/guitar.compressed.ply\"" --runs-dir "$out/runs_$backend" \
+    --json >"$out/first_try_$backend.json"
+done
+
+python3 - "$out" <<'PY'
+import json, math, os, platform, subprocess, sys
+out = sys.argv[1]
+load = lambda name: json.load(open(os.path.join(out, name)))
+try:
+    gpu = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"],
+                         capture_output=True, text=True).stdout.strip() or "?"
+except OSError:
+    gpu = "?"
+print(f"machine: {gpu}, {os.cpu_count()} CPU cores, {platform.platform()}")
+render = {b: load(f"render_{b}.json") for b in ("wgpu", "flex")}
+key = lambda r: (r["scene"], r["gaussians"], r["resolution"], r["pruning"])
+flex_rows = {key(r): r for r in render["flex"]["rows"] if not r.get("skipped")}
+failed = []
+print("\n| mask pass, fwd+bwd | wgpu ms | flex ms | wgpu/flex | launches | reads | KB up | TCE wgpu / flex | |dΦ| diff / |dΦ| |")
+print("|---|---:|---:|---:|---:|---:|---:|---|---:|")
+for r in render["wgpu"]["rows"]:
+    f = flex_rows.get(key(r))
+    if r.get("skipped") or f is None:
+        continue
+    g, h = r.get("grad_pose", []), f.get("grad_pose", [])
+    norm = math.sqrt(sum(x * x for x in h)) or 1.0
+    diff = math.sqrt(sum((a - b) ** 2 for a, b in zip(g, h))) / norm if g and h else float("nan")
+    tce_ok = abs(r["tce"] - f["tce"]) <= 1e-3 or (math.isnan(r["tce"]) and math.isnan(f["tce"]))
+    if not (tce_ok and diff <= 1e-3 and abs(r["coverage"] - f["coverage"]) <= 1e-3):
+        failed.append(f"{key(r)}: TCE {r['tce']} vs {f['tce']}, gradient {diff:.2e}")
+    c = r.get("counts", {})
+    print(f"| {r['scene']} {r['gaussians']} {r['resolution']}² {r['pruning']} | {r['forward_backward_ms']:.2f} | "
+          f"{f['forward_backward_ms']:.2f} | {r['forward_backward_ms'] / f['forward_backward_ms']:.2f} | "
+          f"{c.get('launches', '-')} | {c.get('reads', '-')} | {c.get('bytes_up', 0) / 1024:.1f} | "
+          f"{r['tce']:.6f} / {f['tce']:.6f} | {diff:.1e} |")
+frames = {b: load(f"frames_{b}.json") for b in ("wgpu", "flex")}
+print("\n| 1080p output frame | wgpu ms | flex ms |")
+print("|---|---:|---:|")
+for r in frames["wgpu"]["rows"]:
+    f = next((x for x in frames["flex"]["rows"] if (x["scene"], x["gaussians"], x["width"], x["schedule"]) ==
+              (r["scene"], r["gaussians"], r["width"], r["schedule"])), None)
+    if f:
+        print(f"| {r['scene']} {r['gaussians']} {r['schedule']} | {r['frame_ms']:.0f} | {f['frame_ms']:.0f} |")
+runs = {b: load(f"first_try_{b}.json") for b in ("wgpu", "flex")}
+print("\n| first-try guitar | wgpu | flex |")
+print("|---|---:|---:|")
+w, f = runs["wgpu"][0], runs["flex"][0]
+print(f"| whole run, s | {w['total_s']:.1f} | {f['total_s']:.1f} |")
+print(f"| optimisation, s | {w['optimisation_s']:.1f} | {f['optimisation_s']:.1f} |")
+for a, b in zip(w["windows"], f["windows"]):
+    ta, tb = a.get("tce_middle"), b.get("tce_middle")
+    print(f"| {a['name']}: verdict, TCE | {'pass' if a['pass'] else 'FAIL'}, {ta} | {'pass' if b['pass'] else 'FAIL'}, {tb} |")
+    if a["pass"] != b["pass"]:
+        failed.append(f"guitar {a['name']}: verdicts differ")
+print(f"\nspeed-up of the whole run: {f['total_s'] / w['total_s']:.2f}x (JSON in {out})")
+if failed:
+    print("PARITY FAILED:\n  " + "\n  ".join(failed))
+    sys.exit(1)
+print("parity: wgpu matches flex on every mask pass and every verdict")
+PY
