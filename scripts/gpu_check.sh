@@ -16,6 +16,8 @@
 #   3. the first-try guitar run (`configs/first-try/guitar.toml`) whole: time, each window's
 #      verdict and TCE.
 # then prints one table (python3, standard library only). Exit status 1 when parity fails.
+# GPU_CHECK_QUICK=1 shrinks every workload (a smoke test of the script, e.g. on lavapipe):
+# the figures then mean nothing.
 set -euo pipefail
 
 bin="${1:?usage: scripts/gpu_check.sh BINARY [DATA_DIR] [OUT_DIR]}"
@@ -32,18 +34,25 @@ export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
 export CUBECL_AUTOTUNE_LEVEL="${CUBECL_AUTOTUNE_LEVEL:-minimal}"
 cd "$repo"
 
+sizes=100000,1000000 repeats=5 frame_size=1080p demo=1000000 quick=()
+if [ "${GPU_CHECK_QUICK:-0}" = 1 ]; then
+  sizes=10000 repeats=1 frame_size=160x90 demo=10000
+  quick=(--set optimiser.iterations=3 --set output.frames=3 --set output.width=160
+    --set output.height=90 --set output.metric_samples=8)
+fi
 for backend in wgpu flex; do
   echo "== $backend: bench render" >&2
-  "$bin" bench render --backend "$backend" --sizes 100000,1000000 --resolutions 128 \
-    --rasterizer fused --repeats 5 --scene "$data/biker.compressed.ply" --json \
+  "$bin" bench render --backend "$backend" --sizes "$sizes" --resolutions 128 \
+    --rasterizer fused --repeats "$repeats" --scene "$data/biker.compressed.ply" --json \
     >"$out/render_$backend.json"
   echo "== $backend: bench frames" >&2
-  "$bin" bench frames --backend "$backend" --sizes 1080p --frames 4 --schedule pipelined \
-    --scene "$data/biker.compressed.ply" --json >"$out/frames_$backend.json"
+  "$bin" bench frames --backend "$backend" --sizes "$frame_size" --frames 4 \
+    --gaussians "$demo" --schedule pipelined --scene "$data/biker.compressed.ply" --json \
+    >"$out/frames_$backend.json"
   echo "== $backend: first-try guitar" >&2
   "$bin" bench first-try configs/first-try/guitar.toml --set "backend=\"$backend\"" \
-    --set "scene.path=\"$data/guitar.compressed.ply\"" --runs-dir "$out/runs_$backend" \
-    --json >"$out/first_try_$backend.json"
+    --set "scene.path=\"$data/guitar.compressed.ply\"" "${quick[@]}" \
+    --runs-dir "$out/runs_$backend" --json >"$out/first_try_$backend.json"
 done
 
 python3 - "$out" <<'PY'

@@ -120,6 +120,15 @@ fn a_camera_file_wider_than_any_image_is_refused_naming_the_file() {
 }
 
 #[test]
+fn a_camera_file_with_data_after_its_object_is_refused_naming_the_file() {
+    let case = Case::new();
+    let camera = case.camera(|_| {});
+    let text = std::fs::read_to_string(&camera).unwrap();
+    std::fs::write(&camera, format!("{text}\n{{\"width\": 8}}")).unwrap();
+    case.render_fails(&camera, &[], &["camera.json", "trailing characters"]);
+}
+
+#[test]
 fn a_hundred_million_basis_functions_are_refused() {
     let case = Case::new();
     let config = case.config_with("[trajectory]\nkind = \"rbf\"\ncentres_per_window = 100000000");
@@ -615,6 +624,11 @@ const TABLE: &[Row] = &[
         ],
     },
     Row {
+        proves: "run_check_refuses_a_frame_rate_the_video_cannot_hold_in_few_digits",
+        args: |f, d| run_check_setting(f, d, "output.fps=1e-300"),
+        mentions: &["`output.fps` = 1e-300", "between 0.01 and 1000"],
+    },
+    Row {
         proves: "run_check_refuses_a_clearance_margin_wider_than_the_scene",
         args: |f, d| run_check_setting(f, d, "costs.clearance.margin=1e300"),
         mentions: &["`costs.clearance.margin` = 1e300", "diagonal"],
@@ -916,6 +930,34 @@ const TABLE: &[Row] = &[
             "1000000000000000 s",
             "memory",
         ],
+    },
+    Row {
+        proves: "render_path_refuses_an_fps_flag_the_video_cannot_hold_before_rendering",
+        args: |f, d| {
+            let t = trajectory_with(f, d, |_| {});
+            let out = d.join("out").display().to_string();
+            strings(&[
+                "render-path",
+                s(&f.scene()),
+                &t,
+                "--fps",
+                "1e-7",
+                "--out",
+                &out,
+                "--quiet",
+            ])
+        },
+        mentions: &["--fps 1e-7", "between 0.01 and 1000"],
+    },
+    Row {
+        proves: "render_path_refuses_a_nerfstudio_fps_the_video_cannot_hold",
+        args: |f, d| {
+            let p = export_with(f, d, "nerfstudio", "camera_path.json", |p| {
+                p["fps"] = 1e-7.into();
+            });
+            render_path_of(f, d, &p)
+        },
+        mentions: &["camera_path.json", "`fps`", "1e-7", "between 0.01 and 1000"],
     },
     Row {
         proves: "render_path_refuses_a_nerfstudio_length_of_0_seconds",

@@ -264,7 +264,7 @@ pub fn run_frames(bench: &FramesBench, progress: &mut dyn FnMut(&str)) -> Result
     if let Some(&(w, h)) = bench.sizes.iter().find(|&&(w, h)| w == 0 || h == 0) {
         bail!("{w}×{h} is not a frame size");
     }
-    check_fps(bench.fps).with_context(|| format!("--fps {}", bench.fps))?;
+    check_fps(bench.fps).with_context(|| format!("--fps {:?}", bench.fps))?;
     if !(bench.seconds.is_finite() && bench.seconds > 0.0) {
         bail!("--seconds {} must be a positive number", bench.seconds);
     }

@@ -83,13 +83,13 @@ impl FrameRequest {
             }
         }
         if let Some(fps) = self.fps {
-            check_fps(fps).with_context(|| format!("--fps {fps}"))?;
+            check_fps(fps).with_context(|| format!("--fps {fps:?}"))?;
         }
         Ok(())
     }
 }
 
-/// Refuses a frame rate the video cannot hold (non-positive, or above
+/// Refuses a frame rate the video cannot hold (outside [`splatraj_report::video::MIN_FPS`],
 /// [`splatraj_report::video::MAX_FPS`]); the caller names where it came from.
 pub fn check_fps(fps: f64) -> Result<()> {
     splatraj_report::video::check_fps(fps)?;

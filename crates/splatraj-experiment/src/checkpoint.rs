@@ -72,15 +72,76 @@ impl Checkpoint {
                 path.display()
             )
         })?;
-        let deserializer = &mut serde_json::Deserializer::from_str(&text);
-        serde_path_to_error::deserialize(deserializer).map_err(|e| {
-            anyhow::anyhow!(
-                "{}: `{}`: {}",
-                path.display(),
-                e.path(),
-                e.inner().to_string().trim_end()
-            )
-        })
+        let checkpoint: Checkpoint = crate::io::strict_json(&text).map_err(|(key, e)| {
+            anyhow::anyhow!("{}: `{key}`: {}", path.display(), e.to_string().trim_end())
+        })?;
+        checkpoint
+            .check()
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        Ok(checkpoint)
+    }
+
+    /// Refuses bookkeeping no run writes (a resumed run would go on from it without a word):
+    /// the restart in progress, or the best's, beyond the restarts; more steps done than a
+    /// restart has; a time or a loss that is not a finite number of the right sign.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        let bad = |key: &str, why: String| Err(format!("`{key}` {why}"));
+        if self.restarts == 0 {
+            return bad("restarts", "= 0: a run has at least one restart".into());
+        }
+        if self.restart >= self.restarts {
+            return bad(
+                "restart",
+                format!(
+                    "= {} is beyond the run's restarts (`restarts` = {}, counted from 0)",
+                    self.restart, self.restarts
+                ),
+            );
+        }
+        if self.best_restart > self.restart {
+            return bad(
+                "best_restart",
+                format!(
+                    "= {} is a restart that has not run yet (`restart` = {})",
+                    self.best_restart, self.restart
+                ),
+            );
+        }
+        if self.steps_done > self.steps {
+            return bad(
+                "steps_done",
+                format!(
+                    "= {} is more than a restart's `steps` = {}",
+                    self.steps_done, self.steps
+                ),
+            );
+        }
+        if self.best_step >= self.steps.max(1) {
+            return bad(
+                "best_step",
+                format!(
+                    "= {} is beyond a restart's `steps` = {}",
+                    self.best_step, self.steps
+                ),
+            );
+        }
+        if !(self.elapsed_s.is_finite() && self.elapsed_s >= 0.0) {
+            return bad(
+                "elapsed_s",
+                format!(
+                    "= {:?} is not a time in seconds (finite, ≥ 0)",
+                    self.elapsed_s
+                ),
+            );
+        }
+        let losses = std::iter::once(("best_total", self.best_total))
+            .chain(self.restart_best.iter().map(|(_, l)| ("restart_best", *l)));
+        for (key, loss) in losses {
+            if !loss.is_finite() {
+                return bad(key, format!("holds the loss {loss:?}, which is not finite"));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -122,5 +183,54 @@ impl Checkpointer {
             self.last_write = Some(Instant::now());
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use splatraj_traj::trajectory::Rbf;
+
+    fn checkpoint() -> Checkpoint {
+        Checkpoint {
+            model: TrajectoryModel::Rbf(Rbf::default()),
+            weights: vec![[0.0; 6]; 8],
+            best_total: 0.5,
+            best_restart: 1,
+            best_step: 40,
+            restart: 2,
+            steps_done: 10,
+            restart_best: Some((vec![[0.0; 6]; 8], 0.7)),
+            restarts: 4,
+            steps: 200,
+            elapsed_s: 12.5,
+            base_dir: PathBuf::from("."),
+        }
+    }
+
+    /// What a run writes passes; each field out of what a run can write is named.
+    #[test]
+    fn bookkeeping_no_run_writes_is_refused_by_its_key() {
+        assert_eq!(checkpoint().check(), Ok(()));
+        type Edit = fn(&mut Checkpoint);
+        let cases: [(Edit, &str); 8] = [
+            (|c| c.steps_done = 1_000_000_000_000_000_000, "`steps_done`"),
+            (|c| c.restart = 4, "`restart` = 4 is beyond"),
+            (|c| c.best_restart = 3, "`best_restart` = 3"),
+            (|c| c.elapsed_s = -1.0, "`elapsed_s` = -1.0"),
+            (|c| c.elapsed_s = f64::NAN, "`elapsed_s` = NaN"),
+            (|c| c.restarts = 0, "`restarts`"),
+            (|c| c.best_step = 200, "`best_step` = 200"),
+            (
+                |c| c.restart_best = Some((vec![], f64::INFINITY)),
+                "`restart_best`",
+            ),
+        ];
+        for (edit, mentions) in cases {
+            let mut c = checkpoint();
+            edit(&mut c);
+            let e = c.check().unwrap_err();
+            assert!(e.contains(mentions), "{e}");
+        }
     }
 }

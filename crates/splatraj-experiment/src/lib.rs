@@ -44,6 +44,7 @@ pub mod children;
 pub mod config;
 pub mod experiment;
 pub mod extensions;
+pub mod frame_metrics;
 pub mod grounding;
 pub mod io;
 pub mod lifted;

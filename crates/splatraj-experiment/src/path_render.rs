@@ -26,6 +26,7 @@ use splatraj_traj::optimise::sampling::window_of;
 
 use crate::camera_paths::PathFrames;
 use crate::config::MaskOverlay;
+pub use crate::frame_metrics::FrameMetrics;
 use crate::output_folder::OutputFolder;
 use crate::outputs::{TINT_ALPHA, write_bytes, write_csv};
 use crate::resources::{MemoryLimit, RenderWork};
@@ -62,24 +63,6 @@ pub struct PathRender<'a> {
     pub rasterizer: Rasterizer,
     /// Whether to make `video.mp4`.
     pub video: Video,
-}
-
-/// One frame's metrics for the object of its window (a row of `frame_metrics.csv`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FrameMetrics {
-    /// Frame index.
-    pub frame: usize,
-    /// Time t ∈ [0, 1].
-    pub t: f64,
-    /// Its window.
-    pub window: usize,
-    /// Target centring error; `None` when the frame does not show the object (an empty mask
-    /// has no centre: undefined, not 0; an empty cell in `frame_metrics.csv`).
-    pub tce: Option<f64>,
-    /// Target ratio error.
-    pub tre: f64,
-    /// Share of the frame the visible object covers.
-    pub coverage: f64,
 }
 
 /// The file of per-frame metrics in a rendered folder.

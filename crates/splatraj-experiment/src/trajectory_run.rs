@@ -104,12 +104,12 @@ impl Evaluation {
     /// and last [`WOBBLE_EDGE`] of the window, where the camera pans from and to the
     /// neighbouring objects (a pan is a change the wobble must not count), over each unbroken
     /// run of such frames.
-    pub fn with_frames(&mut self, frames: &[crate::path_render::FrameMetrics], fps: f64) {
+    pub fn with_frames(&mut self, frames: &[crate::frame_metrics::FrameMetrics], fps: f64) {
         let n = self.windows.len().max(1);
         for (i, w) in self.windows.iter_mut().enumerate() {
             let (start, end) = splatraj_traj::optimise::sampling::window_bounds(i, n);
             let edge = WOBBLE_EDGE * (end - start);
-            let kept: Vec<&crate::path_render::FrameMetrics> = frames
+            let kept: Vec<&crate::frame_metrics::FrameMetrics> = frames
                 .iter()
                 .filter(|f| {
                     f.window == i && f.coverage > 0.0 && f.t >= start + edge && f.t <= end - edge

@@ -147,6 +147,15 @@ impl LiftedSource {
                 "at least one canonical negative phrase is needed",
             ));
         }
+        if let Some(up) = config.up {
+            let length = up.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if !(up.iter().all(|v| v.is_finite()) && length > 1e-9 && length.is_finite()) {
+                return Err(LiftError::option(
+                    "targets.lifted.up",
+                    format!("{up:?} is not a direction: three finite numbers, not all 0"),
+                ));
+            }
+        }
         if config.photos.is_some() && config.cameras.is_none() {
             return Err(LiftError::option(
                 "targets.lifted.photos",

@@ -333,3 +333,25 @@ fn the_cache_key_follows_the_towers_config_and_shared_keys_stay_in_targets() {
         .to_string();
     assert!(error.contains("targets.lifted.temperature"), "{error}");
 }
+
+/// An up that is no direction (zero, or not finite) is refused naming the key, before any
+/// weights are read.
+#[test]
+fn an_up_that_is_no_direction_is_refused_naming_the_key() {
+    for up in [
+        [0.0, 0.0, 0.0],
+        [0.0, f64::NAN, 1.0],
+        [f64::INFINITY, 0.0, 0.0],
+    ] {
+        let mut config = LiftedConfig::new("no-such-weights.safetensors".into());
+        config.up = Some(up);
+        let Err(error) = LiftedSource::new(config, Device::default()) else {
+            panic!("up = {up:?} was accepted");
+        };
+        let error = error.to_string();
+        assert!(
+            error.contains("targets.lifted.up") && error.contains("not a direction"),
+            "{error}"
+        );
+    }
+}

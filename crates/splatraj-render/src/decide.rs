@@ -15,8 +15,8 @@ use glam::DVec3;
 
 use crate::focus::{FocusCache, ObjectFocus};
 
-use crate::project::{FOV_CLAMP, LOW_PASS, NORMALISED_DET_FLOOR, world_covariance};
-use crate::tiles::{TILE_SIZE, TileGrid};
+use crate::project::{FOV_CLAMP, LOW_PASS, cull_and_radius, world_covariance};
+use crate::tile_grid::{TILE_SIZE, TileGrid};
 
 /// Pose-independent geometry on the host, for the decisions (computed once per scene).
 ///
@@ -477,24 +477,4 @@ impl Camera {
         let (ok, radius) = cull_and_radius(z, a, b, c, self.near);
         ([u, v], z, ok.then_some(radius))
     }
-}
-
-/// (visible, radius) from camera depth z and Σ_2D = [[a, b], [b, c]] (low-pass included).
-///
-/// visible = z > near ∧ det/tr² > [`NORMALISED_DET_FLOOR`] with every value finite;
-/// radius = ceil(3·sqrt(λ_max)) in pixels, 0 where not visible.
-pub fn cull_and_radius(z: f64, a: f64, b: f64, c: f64, near: f64) -> (bool, f32) {
-    let trace = a + c;
-    let det = a * c - b * b;
-    let ok = z > near
-        && trace.is_finite()
-        && b.is_finite()
-        && trace > 0.0
-        && det / (trace * trace) > NORMALISED_DET_FLOOR;
-    if !ok {
-        return (false, 0.0);
-    }
-    let mid = 0.5 * trace;
-    let lambda_max = mid + (mid * mid - det).max(0.0).sqrt();
-    (true, (3.0 * lambda_max.sqrt()).ceil() as f32)
 }

@@ -11,25 +11,25 @@ use std::collections::VecDeque;
 use std::sync::{Arc, Mutex, PoisonError};
 
 use crate::bitset::GaussianBits;
-use crate::decide::HostGeometry;
 
 /// A mask pass's object: its Gaussians by scene index and by sorted position.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ObjectFocus {
     /// Members by scene index (tile lists hold scene indices). `[N] bits`
     pub scene: GaussianBits,
-    /// Members by sorted position of [`HostGeometry`] (the decisions walk blocks in that
-    /// order). `[N] bits`
+    /// Members by sorted position of the host geometry (`decide::HostGeometry`: the
+    /// decisions walk blocks in that order). `[N] bits`
     pub sorted: GaussianBits,
     /// The members' sorted positions, increasing. `[object]`
     pub sorted_list: Vec<u32>,
 }
 
 impl ObjectFocus {
-    /// The object whose scene indices are `scene`, placed in `geometry`'s sorted order.
-    pub fn new(geometry: &HostGeometry, scene: GaussianBits) -> Self {
-        let sorted = GaussianBits::from_fn(geometry.len(), |k| {
-            scene.contains(geometry.scene_from_sorted[k] as usize)
+    /// The object whose scene indices are `scene`, placed in the sorted order whose scene
+    /// index at each position is `scene_from_sorted`.
+    pub fn new(scene_from_sorted: &[u32], scene: GaussianBits) -> Self {
+        let sorted = GaussianBits::from_fn(scene_from_sorted.len(), |k| {
+            scene.contains(scene_from_sorted[k] as usize)
         });
         let sorted_list = sorted.iter().map(|k| k as u32).collect();
         ObjectFocus {
@@ -40,9 +40,9 @@ impl ObjectFocus {
     }
 
     /// The object of one flag per Gaussian (scene order).
-    pub fn from_flags(geometry: &HostGeometry, in_object: &[bool]) -> Self {
+    pub fn from_flags(scene_from_sorted: &[u32], in_object: &[bool]) -> Self {
         Self::new(
-            geometry,
+            scene_from_sorted,
             GaussianBits::from_fn(in_object.len(), |g| in_object[g]),
         )
     }
@@ -60,14 +60,15 @@ pub struct FocusCache {
 }
 
 impl FocusCache {
-    /// The focus of `mask` (one value per Gaussian of `geometry`, non-zero inside the object).
-    pub fn focus(&self, geometry: &HostGeometry, mask: &[f32]) -> Arc<ObjectFocus> {
+    /// The focus of `mask` (one value per Gaussian, non-zero inside the object) in the sorted
+    /// order `scene_from_sorted` ([`ObjectFocus::new`]).
+    pub fn focus(&self, scene_from_sorted: &[u32], mask: &[f32]) -> Arc<ObjectFocus> {
         let scene = GaussianBits::from_fn(mask.len(), |g| mask[g] != 0.0);
         let mut recent = self.recent.lock().unwrap_or_else(PoisonError::into_inner);
         if let Some(known) = recent.iter().find(|f| f.scene == scene) {
             return Arc::clone(known);
         }
-        let built = Arc::new(ObjectFocus::new(geometry, scene));
+        let built = Arc::new(ObjectFocus::new(scene_from_sorted, scene));
         if recent.len() == CACHED_MASKS {
             recent.pop_front();
         }
@@ -97,6 +98,7 @@ impl std::fmt::Debug for FocusCache {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::decide::HostGeometry;
     use splatraj_scene::Scene;
 
     #[test]
@@ -119,8 +121,9 @@ mod tests {
             for mask in &masks {
                 let scaled: Vec<f32> = mask.iter().map(|v| v * (round + 1) as f32).collect();
                 let flags: Vec<bool> = mask.iter().map(|&v| v != 0.0).collect();
-                let fresh = ObjectFocus::from_flags(&geometry, &flags);
-                assert_eq!(*geometry.focus.focus(&geometry, &scaled), fresh);
+                let order = &geometry.scene_from_sorted;
+                let fresh = ObjectFocus::from_flags(order, &flags);
+                assert_eq!(*geometry.focus.focus(order, &scaled), fresh);
                 let listed: Vec<u32> = (0..700u32)
                     .filter(|&k| flags[geometry.scene_from_sorted[k as usize] as usize])
                     .collect();

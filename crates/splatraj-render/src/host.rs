@@ -1,5 +1,5 @@
-//! Moving values between the host and a device: one read-back helper, pose tensors, and the
-//! device and dtype a [`DeviceScene`] lives on.
+//! Moving values between the host and a device: one read-back helper, counted uploads, pose
+//! tensors, and the device and dtype a scene lives on ([`OnDevice`]).
 //!
 //! Every part of splatraj that reads a tensor back (costs for a history row, metrics, images,
 //! gradients) goes through [`to_host`], so there is one conversion rule: any float dtype is
@@ -8,7 +8,6 @@
 use burn::tensor::{DType, Device, Tensor, TensorData};
 
 use crate::camera::Pose;
-use crate::render::DeviceScene;
 
 /// A tensor could not be read back to the host.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -58,15 +57,5 @@ pub trait OnDevice {
     /// Poses Φ `[B, 6]` on the scene's device, in its dtype.
     fn poses(&self, poses: &[Pose]) -> Tensor<2> {
         poses_tensor(poses, &self.device(), self.dtype())
-    }
-}
-
-impl OnDevice for DeviceScene {
-    fn device(&self) -> Device {
-        self.geometry.means.device()
-    }
-
-    fn dtype(&self) -> DType {
-        self.geometry.means.dtype()
     }
 }

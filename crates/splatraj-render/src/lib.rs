@@ -29,4 +29,5 @@ pub mod reference;
 pub mod render;
 pub mod sh;
 pub mod stages;
+pub mod tile_grid;
 pub mod tiles;

@@ -21,7 +21,6 @@ use glam::{DMat3, DQuat, DVec3};
 use splatraj_scene::Scene;
 
 use crate::camera::{Intrinsics, rotation_matrices};
-use crate::decide::cull_and_radius;
 
 /// Default near plane (camera z, scene units): Gaussians with z ≤ this are culled.
 pub const NEAR_PLANE: f64 = 0.01;
@@ -299,6 +298,26 @@ pub fn radii_and_visibility(projected: &Projected, near: f64) -> (Vec<f32>, Vec<
             (radius, visible)
         })
         .unzip()
+}
+
+/// (visible, radius) from camera depth z and Σ_2D = [[a, b], [b, c]] (low-pass included).
+///
+/// visible = z > near ∧ det/tr² > [`NORMALISED_DET_FLOOR`] with every value finite;
+/// radius = ceil(3·sqrt(λ_max)) in pixels, 0 where not visible.
+pub fn cull_and_radius(z: f64, a: f64, b: f64, c: f64, near: f64) -> (bool, f32) {
+    let trace = a + c;
+    let det = a * c - b * b;
+    let ok = z > near
+        && trace.is_finite()
+        && b.is_finite()
+        && trace > 0.0
+        && det / (trace * trace) > NORMALISED_DET_FLOOR;
+    if !ok {
+        return (false, 0.0);
+    }
+    let mid = 0.5 * trace;
+    let lambda_max = mid + (mid * mid - det).max(0.0).sqrt();
+    (true, (3.0 * lambda_max.sqrt()).ceil() as f32)
 }
 
 /// Tensor values as f64 on the host (flattened, row-major).

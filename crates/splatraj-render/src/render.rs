@@ -17,7 +17,7 @@ use crate::fused::projection::{
     PackedColumn, ProjectionCamera, ProjectionPlan, SPLAT_COLUMNS, project_packed,
 };
 use crate::fused::{CompositePlan, composite_packed};
-use crate::host::{to_host, upload};
+use crate::host::{OnDevice, to_host, upload};
 use crate::project::{NEAR_PLANE, Projected, SceneTensors, project_with_near};
 use crate::rasterize::{
     Approximations, CompositeOptions, Composited, RenderStats, SplatInputs, composite,
@@ -218,6 +218,16 @@ impl DeviceScene {
     }
 }
 
+impl OnDevice for DeviceScene {
+    fn device(&self) -> Device {
+        self.geometry.means.device()
+    }
+
+    fn dtype(&self) -> DType {
+        self.geometry.means.dtype()
+    }
+}
+
 /// Renders the requested channels for every pose in `poses` `[B, 6]` (Φ = ω, c).
 ///
 /// Differentiable in `poses` when they live on an autodiff device. Returns images
@@ -291,7 +301,7 @@ pub fn render_at(
     ) {
         (Pruning::None, _, _) => None,
         (Pruning::ObjectOnly, [Channel::Mask(mask)], None) => {
-            Some(scene.host.focus.focus(&scene.host, mask))
+            Some(scene.host.focus.focus(&scene.host.scene_from_sorted, mask))
         }
         (Pruning::ObjectOnly, _, _) => return Err(RenderError::PruningNeedsOneMask),
     };

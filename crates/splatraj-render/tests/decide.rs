@@ -168,7 +168,10 @@ fn focused_decisions_keep_every_gaussian_in_front_of_the_object_on_its_tiles() {
         &poses,
         &k,
         NEAR_PLANE,
-        Some(&ObjectFocus::from_flags(&geometry, &focus)),
+        Some(&ObjectFocus::from_flags(
+            &geometry.scene_from_sorted,
+            &focus,
+        )),
     );
 
     let n = scene.len();

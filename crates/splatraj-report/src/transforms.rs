@@ -100,23 +100,35 @@ impl CameraKeys {
             Ok(v as usize)
         };
         let (width, height) = (size(self.w, "w")?, size(self.h, "h")?);
-        let from_angle = |angle: Option<f64>, pixels: usize| {
-            angle.map(|a| 0.5 * pixels as f64 / (0.5 * a).tan())
+        // A field of view in radians: in (0, π), else the focal length it gives is negative
+        // or infinite; named as written, not as the focal length it would have made.
+        let from_angle = |angle: Option<f64>, pixels: usize, key: &str| -> Result<Option<f64>> {
+            match angle {
+                None => Ok(None),
+                Some(a) if a.is_finite() && a > 0.0 && a < std::f64::consts::PI => {
+                    Ok(Some(0.5 * pixels as f64 / (0.5 * a).tan()))
+                }
+                Some(a) => Err(invalid(
+                    file,
+                    format!("{element}{key}"),
+                    format!("{a:?} is not a field of view in radians (between 0 and π)"),
+                )),
+            }
         };
-        let fx = self
-            .fl_x
-            .or_else(|| from_angle(self.camera_angle_x, width))
-            .ok_or_else(|| {
+        let fx = match self.fl_x {
+            Some(fx) => fx,
+            None => from_angle(self.camera_angle_x, width, "camera_angle_x")?.ok_or_else(|| {
                 invalid(
                     file,
                     format!("{element}fl_x"),
                     "missing (or camera_angle_x)",
                 )
-            })?;
-        let fy = self
-            .fl_y
-            .or_else(|| from_angle(self.camera_angle_y, height))
-            .unwrap_or(fx);
+            })?,
+        };
+        let fy = match self.fl_y {
+            Some(fy) => fy,
+            None => from_angle(self.camera_angle_y, height, "camera_angle_y")?.unwrap_or(fx),
+        };
         let camera = Intrinsics {
             fx,
             fy,

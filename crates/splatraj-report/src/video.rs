@@ -19,9 +19,14 @@ use openh264::formats::{RgbSliceU8, YUVBuffer};
 /// ticks per frame, and no player shows more.
 pub const MAX_FPS: f64 = 1000.0;
 
-/// Refuses a frame rate that is not a positive number up to [`MAX_FPS`].
+/// Lowest frame rate accepted, frames per second (a frame every 100 s): the MP4 counts a
+/// frame's duration in 32 bits of its 90 kHz clock (13 hours at most), and anything slower
+/// than this is a slide show, not a video.
+pub const MIN_FPS: f64 = 0.01;
+
+/// Refuses a frame rate outside [[`MIN_FPS`], [`MAX_FPS`]].
 pub fn check_fps(fps: f64) -> Result<(), VideoError> {
-    if fps.is_finite() && fps > 0.0 && fps <= MAX_FPS {
+    if fps.is_finite() && (MIN_FPS..=MAX_FPS).contains(&fps) {
         Ok(())
     } else {
         Err(VideoError::Fps(fps))
@@ -31,8 +36,8 @@ pub fn check_fps(fps: f64) -> Result<(), VideoError> {
 /// Why a video could not be made.
 #[derive(Debug, thiserror::Error)]
 pub enum VideoError {
-    /// The frame rate is not a positive number up to [`MAX_FPS`].
-    #[error("video: frame rate {0} is not a positive number up to {MAX_FPS}")]
+    /// The frame rate is outside [[`MIN_FPS`], [`MAX_FPS`]].
+    #[error("video: frame rate {0:?} is not between {MIN_FPS} and {MAX_FPS} frames per second")]
     Fps(f64),
     /// The frame size is zero or larger than H.264 level 5.2 allows (3840×2160).
     #[error("video: frame size {width}×{height} is not between 1×1 and 3840×2160")]

@@ -89,6 +89,21 @@ fn transforms_json_errors_name_the_file_and_the_element() {
         .to_string();
     assert!(e.starts_with("t.json: frames[0].w: missing"), "{e}");
 
+    // A field of view of 4 rad would make a negative focal length: named as written.
+    let mut wide = json.clone();
+    let keys = wide.as_object_mut().unwrap();
+    for key in ["fl_x", "fl_y"] {
+        keys.remove(key);
+    }
+    keys.insert("camera_angle_x".into(), 4.0.into());
+    let e = transforms::import(&wide.to_string(), "t.json")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("t.json: frames[0].camera_angle_x: 4.0 is not a field of view in radians"),
+        "{e}"
+    );
+
     json["camera_model"] = "OPENCV_FISHEYE".into();
     let e = transforms::import(&json.to_string(), "t.json")
         .unwrap_err()

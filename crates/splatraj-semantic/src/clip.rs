@@ -16,7 +16,7 @@ use burn::tensor::activation::{gelu, sigmoid, softmax};
 use burn::tensor::{DType, Device, Tensor, TensorData};
 
 use crate::error::{Result, SemanticError};
-use crate::text_encoder::StateDict;
+use crate::weights::StateDict;
 
 /// The MLP's activation: open_clip's laion towers use GELU (erf form), OpenAI's QuickGELU.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]

@@ -43,10 +43,12 @@ pub mod names;
 mod npy_size;
 pub mod selection;
 pub mod source_config;
+mod source_kind;
 pub mod sources;
 mod struct_keys;
 pub mod text_encoder;
 pub mod vectors;
+mod weights;
 
 pub use config::{RegionSpec, SourceKind, TargetsConfig};
 pub use embeddings::{Matrix, PhraseTable, read_feature_sidecar};

@@ -13,9 +13,9 @@ use burn::tensor::Device;
 use serde::Deserialize;
 use serde::de::DeserializeOwned;
 
-use crate::config::{LIFTED, RegionSpec, SourceKind};
 use crate::embeddings::read_feature_sidecar;
 use crate::error::{Result, SemanticError};
+use crate::source_kind::{LIFTED, RegionSpec, SourceKind};
 use crate::sources::{
     FeatureInput, LabelsSource, LangsplatDecoder, LangsplatSource, Region, RegionSource,
     SourceContext, SourceRegistry, TargetSource, TextKeys,

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 use splatraj_config::ConfigError;
-use splatraj_report::video::MAX_FPS;
+use splatraj_report::video::{MAX_FPS, MIN_FPS, check_fps};
 
 /// Overlay of the target's mask on the output frames.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -132,11 +132,12 @@ impl OutputConfig {
                 "= 0 must be at least 1 (leave it out for `output.fps` × `output.seconds`)".into(),
             );
         }
-        if !(self.fps.is_finite() && self.fps > 0.0 && self.fps <= MAX_FPS) {
+        // The video's own check, so that `run --check` refuses what the video would.
+        if check_fps(self.fps).is_err() {
             return bad(
                 "fps",
                 format!(
-                    "= {} must be a positive number up to {MAX_FPS} (the video's limit)",
+                    "= {:?} must be between {MIN_FPS} and {MAX_FPS} (the video's limits)",
                     self.fps
                 ),
             );

@@ -8,6 +8,7 @@ use super::StudyRow;
 use super::files::Failure;
 use super::plan::{PlanOptions, Preset, Run, StudyPlan};
 use super::summary::StudyContext;
+use super::text::command_line;
 use crate::children::output_until_stopped;
 use crate::config::Config;
 
@@ -27,25 +28,6 @@ impl StudyContext {
             command: Some(command_line(args)),
         }
     }
-}
-
-/// The command line as typed (arguments with spaces or shell characters quoted), the program
-/// named `splatraj`.
-pub fn command_line(args: impl IntoIterator<Item = String>) -> String {
-    args.into_iter()
-        .enumerate()
-        .map(|(i, a)| {
-            let a = if i == 0 { "splatraj".to_string() } else { a };
-            if a.chars()
-                .all(|c| c.is_ascii_alphanumeric() || "-_./=,:".contains(c))
-            {
-                a
-            } else {
-                format!("'{}'", a.replace('\'', "'\\''"))
-            }
-        })
-        .collect::<Vec<_>>()
-        .join(" ")
 }
 
 /// The machine in words: CPU model and cores.
@@ -175,18 +157,4 @@ pub fn measure_runs(
         }
     }
     (rows, failures)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn command_lines_quote_what_a_shell_would_split() {
-        let args = ["/usr/bin/x", "study", "a b.toml", "--vary", "k=it's"].map(String::from);
-        assert_eq!(
-            command_line(args),
-            "splatraj study 'a b.toml' --vary 'k=it'\\''s'"
-        );
-    }
 }

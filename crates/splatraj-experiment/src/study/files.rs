@@ -7,11 +7,11 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 
-use super::context::command_line;
 use super::plan::{Shard, StudyPlan};
 use super::plot::frontier_svg;
 use super::rows::{StudyRow, study_csv};
 use super::summary::{StudyContext, StudySummary};
+use super::text::command_line;
 use crate::output_folder::OutputFolder;
 use crate::outputs::{create_run_dir, write_bytes, write_csv, write_json};
 

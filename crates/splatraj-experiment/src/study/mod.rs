@@ -26,6 +26,7 @@ pub mod plan;
 pub mod plot;
 pub mod rows;
 pub mod summary;
+pub mod text;
 
 pub use crate::config::study::{
     Design, EvaluationConfig, FactorConfig, Quality, StudyConfig, StudyTask,

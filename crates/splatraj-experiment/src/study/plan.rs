@@ -16,11 +16,11 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 
+use super::text::short_value;
 use super::{Design, EvaluationConfig, Quality, StudyConfig, StudyTask};
 use crate::config::{Ablation, Config};
 use crate::extensions::Extensions;
 use crate::resources::check_study;
-use crate::study::summary::short_value;
 
 /// One factor: a config key and its values as TOML text.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]

@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 use super::Quality;
 use super::plan::StudyPlan;
 use super::rows::{StageTimes, StudyRow, WindowScore};
+use super::text::short_value;
 
 /// The TCE a study judges a window by when it never showed its object (its TCE is undefined):
 /// that of an object in a corner of the frame, √½, the worst a seen object can have.
@@ -457,23 +458,6 @@ pub struct StudyContext {
     pub command: Option<String>,
 }
 
-/// A factor value for a table: a table's `kind`, else the value without quotes.
-pub fn short_value(raw: &str) -> String {
-    let table = raw
-        .trim_start()
-        .starts_with('{')
-        .then(|| toml::from_str::<toml::Table>(&format!("v = {raw}")).ok())
-        .flatten()
-        .and_then(|mut t| t.remove("v"));
-    match table {
-        Some(toml::Value::Table(t)) => match t.get("kind") {
-            Some(toml::Value::String(kind)) => kind.clone(),
-            _ => raw.chars().filter(|c| !c.is_whitespace()).collect(),
-        },
-        _ => raw.trim().trim_matches('"').to_string(),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -501,12 +485,5 @@ mod tests {
             pareto_front(&points),
             [true, true, false, true, true, false]
         );
-    }
-
-    #[test]
-    fn short_values_name_a_tables_kind() {
-        assert_eq!(short_value("{ kind = \"waypoint\" }"), "waypoint");
-        assert_eq!(short_value("\"prior-tce\""), "prior-tce");
-        assert_eq!(short_value("{width=64, height=48}"), "{width=64,height=48}");
     }
 }

@@ -27,7 +27,7 @@ use rayon::prelude::*;
 use super::plan::CompositePlan;
 pub use super::real::Real;
 use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
-use crate::tiles::{TILE_PIXELS, TILE_SIZE, ceil_small, floor_small};
+use crate::tile_grid::{TILE_PIXELS, TILE_SIZE, ceil_small, floor_small};
 
 #[cfg(target_arch = "x86_64")]
 mod lanes_exp;

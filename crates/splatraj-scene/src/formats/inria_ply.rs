@@ -12,6 +12,8 @@ use crate::scene::{Extras, Features, Labels, NamedProperty, Scene, sh_degree_for
 pub const LABEL_PROPERTIES: [&str; 3] = ["label", "obj_id", "instance"];
 /// Property name prefixes read as feature vectors (`semantic_0`, `f_lang_0`, …).
 pub const FEATURE_PREFIXES: [&str; 2] = ["semantic_", "f_lang_"];
+/// Header comment prefix that carries a label's name (`comment label_name 3 apple`).
+pub const LABEL_NAME_COMMENT: &str = "label_name";
 /// Properties with a fixed meaning in the INRIA layout.
 const CORE: [&str; 14] = [
     "x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
@@ -124,9 +126,7 @@ fn label_names_from_comments(comments: &[String]) -> BTreeMap<i32, String> {
     comments
         .iter()
         .filter_map(|c| {
-            let rest = c
-                .strip_prefix(super::ply_writer::LABEL_NAME_COMMENT)?
-                .trim_start();
+            let rest = c.strip_prefix(LABEL_NAME_COMMENT)?.trim_start();
             let (id, name) = rest.split_once(' ')?;
             Some((id.parse().ok()?, name.trim().to_string()))
         })

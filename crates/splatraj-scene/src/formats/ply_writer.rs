@@ -9,13 +9,10 @@
 use std::io::Write;
 use std::path::Path;
 
-use super::inria_ply::{FEATURE_PREFIXES, LABEL_PROPERTIES};
+use super::inria_ply::{FEATURE_PREFIXES, LABEL_NAME_COMMENT, LABEL_PROPERTIES};
 use crate::atomic::write_atomically;
 use crate::error::{Result, SceneError};
 use crate::scene::{Scene, logit};
-
-/// Header comment prefix that carries a label's name.
-pub const LABEL_NAME_COMMENT: &str = "label_name";
 
 /// Writes `scene` as an INRIA binary PLY (whole or not at all).
 pub fn write_inria_ply(scene: &Scene, path: &Path) -> Result<()> {

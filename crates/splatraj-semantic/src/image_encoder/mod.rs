@@ -66,7 +66,7 @@ use crate::clip::{
 };
 use crate::embeddings::Matrix;
 use crate::error::{Result, SemanticError};
-use crate::text_encoder::StateDict;
+use crate::weights::StateDict;
 
 pub use crate::clip::Activation;
 pub use resample::{MEAN, STD};

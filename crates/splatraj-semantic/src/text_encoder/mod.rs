@@ -22,7 +22,6 @@
 
 mod model;
 mod tokenizer;
-mod weights;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -37,8 +36,8 @@ use crate::embeddings::{Matrix, PhraseTable};
 use crate::error::{Result, SemanticError};
 
 pub use crate::clip::{Activation, HEAD_WIDTH, OPEN_CLIP_CONFIG};
+pub use crate::weights::StateDict;
 pub use tokenizer::{CONTEXT_LENGTH, ClipTokenizer, END_OF_TEXT, START_OF_TEXT, VOCAB_SIZE, clean};
-pub use weights::StateDict;
 
 use model::Tower;
 

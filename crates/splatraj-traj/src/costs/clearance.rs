@@ -197,7 +197,7 @@ impl Cost for ClearanceCost {
         // Read once per optimisation step with everything else; read here only without it.
         let host: Vec<f64> = match inputs.path_or_sample_host_poses() {
             Some(poses) => poses.iter().flat_map(|p| p[3..].iter().copied()).collect(),
-            None => crate::optimise::host_values(centres.clone().detach()),
+            None => splatraj_render::host::to_host(centres.clone().detach()).unwrap_or_default(),
         };
         let mut points = Vec::with_capacity(3 * batch);
         let mut normals = Vec::with_capacity(3 * batch);

@@ -5,7 +5,7 @@
 //! reader cannot read: `docs/open-vocabulary.md` gives the one-line conversion.
 //!
 //! Only names, shapes and dtypes are read up front; values are read (and converted to f32
-//! from float16, bfloat16, float32 or float64) for the tensors the text tower uses.
+//! from float16, bfloat16, float32 or float64) for the tensors a tower uses.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
