@@ -177,6 +177,7 @@ fn lift_masks(args: LiftMasksArgs) -> Result<()> {
         options: MaskOptions {
             min_share: args.min_share,
             neighbours: args.neighbours,
+            ..MaskOptions::default()
         },
         invalid: if args.drop_invalid {
             InvalidPolicy::Drop

@@ -167,6 +167,7 @@ impl BenchConfig {
             rayon_threads: 0,
             stages_ms: Vec::new(),
             counts: Counts::default(),
+            launch_names: Vec::new(),
             skipped: Some(why.into()),
         }
     }
@@ -246,6 +247,9 @@ pub struct BenchRow {
     /// uploads and bytes each way (`splatraj_render::counters`).
     #[serde(default)]
     pub counts: Counts,
+    /// The kernels launched in those passes by name, most first, per pass (GPU backends).
+    #[serde(default)]
+    pub launch_names: Vec<(String, u64)>,
     /// Why the configuration was not run.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub skipped: Option<String>,
@@ -376,6 +380,24 @@ fn stage_table(rows: &[BenchRow]) -> String {
             c.bytes_down as f64 / 1024.0
         );
     }
+    // Where a GPU pass's launches go: the kernels launched most, per pass.
+    for row in rows.iter().filter(|r| !r.launch_names.is_empty()) {
+        let most: Vec<String> = row
+            .launch_names
+            .iter()
+            .take(8)
+            .map(|(name, n)| format!("{n}× {name}"))
+            .collect();
+        out += &format!(
+            "launches, {} {} {}² {} {}: {}\n",
+            row.scene,
+            row.gaussians,
+            row.resolution,
+            row.pruning,
+            row.rasterizer,
+            most.join(", ")
+        );
+    }
     out
 }
 
@@ -443,6 +465,7 @@ pub fn run_one(args: &BenchSettings, config: &BenchConfig) -> Result<BenchRow> {
     // The stage clock is process-wide and each row runs in its own child, so only this
     // configuration's passes are on it.
     stages::reset();
+    counters::tally_launch_names(true);
     let counted = counters::snapshot();
     let pass = Instant::now();
     let forward_backward_ms = median_ms(args.repeats, || {
@@ -451,6 +474,11 @@ pub fn run_one(args: &BenchSettings, config: &BenchConfig) -> Result<BenchRow> {
     let counts = counters::snapshot()
         .since(&counted)
         .per(args.repeats.max(1) as u64);
+    let launch_names = counters::launch_names()
+        .into_iter()
+        .map(|(name, n)| (name, n / args.repeats.max(1) as u64))
+        .collect();
+    counters::tally_launch_names(false);
     let per_pass = |d: std::time::Duration| 1e3 * d.as_secs_f64() / args.repeats.max(1) as f64;
     let mut stages_ms: Vec<(String, f64)> = stages::totals()
         .iter()
@@ -483,6 +511,7 @@ pub fn run_one(args: &BenchSettings, config: &BenchConfig) -> Result<BenchRow> {
         rayon_threads: rayon::current_num_threads(),
         stages_ms,
         counts,
+        launch_names,
         skipped: None,
     })
 }

@@ -72,7 +72,7 @@ impl Checkpoint {
                 path.display()
             )
         })?;
-        let checkpoint: Checkpoint = crate::io::strict_json(&text).map_err(|(key, e)| {
+        let checkpoint: Checkpoint = crate::json::strict_json(&text).map_err(|(key, e)| {
             anyhow::anyhow!("{}: `{key}`: {}", path.display(), e.to_string().trim_end())
         })?;
         checkpoint

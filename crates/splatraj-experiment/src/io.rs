@@ -1,22 +1,11 @@
-//! Reading the small input files of the commands: camera files (JSON), and JSON read strictly.
+//! Reading the small input files of the commands: camera files (JSON).
 
 use std::path::Path;
 
 use anyhow::{Context, Result, anyhow};
-use serde::de::DeserializeOwned;
 use splatraj_render::camera_file::{CameraFile, CameraSpec};
 
-/// `text` as exactly one JSON value of type `T`: anything but white space after the value is
-/// refused (serde_json's reader stops after one value, so a file with a second object or stray
-/// text after it would otherwise be read as if it ended there). On an error, the key path where
-/// it happened (`.` for the whole document, or after the value) and serde's message.
-pub fn strict_json<T: DeserializeOwned>(text: &str) -> Result<T, (String, serde_json::Error)> {
-    let mut deserializer = serde_json::Deserializer::from_str(text);
-    let value = serde_path_to_error::deserialize(&mut deserializer)
-        .map_err(|e| (e.path().to_string(), e.into_inner()))?;
-    deserializer.end().map_err(|e| (".".to_string(), e))?;
-    Ok(value)
-}
+use crate::json::strict_json;
 
 /// Reads and checks a camera JSON file (schema: [`splatraj_render::camera_file`]); errors
 /// name the file and the key.

@@ -47,6 +47,7 @@ pub mod extensions;
 pub mod frame_metrics;
 pub mod grounding;
 pub mod io;
+pub mod json;
 pub mod lifted;
 pub mod memory_plans;
 pub mod observer;

@@ -91,11 +91,18 @@ pub fn lift_masks_to_sidecar(
             labels: None,
         },
     )?;
+    // The labels come from the masks' content: bound what their votes take by the memory
+    // limit before lifting.
+    let limit = crate::resources::MemoryLimit::new(None)?;
+    let options = MaskOptions {
+        max_bytes: Some(limit.bytes as u64),
+        ..request.options
+    };
     let lift = lift_mask_files(
         &loaded.scene,
         &request.cameras,
         &request.masks,
-        &request.options,
+        &options,
         device,
         progress,
     )?;

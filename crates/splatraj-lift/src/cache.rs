@@ -6,7 +6,10 @@
 //! bytes, so a renamed file still hits and an edited one misses), the view and field options,
 //! the given cameras, and the weights file's path, length and modification time (hashing a
 //! 600 MB checkpoint on every query would cost more than it saves). Files are written
-//! atomically; a cache that cannot be read is ignored with a warning and rebuilt.
+//! atomically, with a hash of their tensors' bytes in the metadata (`content`): a cache is
+//! trusted only when its tensors still hash to it and hold what a field can (finite values,
+//! weights ≥ 0, no zero basis vector); one that cannot be read, or fails these, is ignored with
+//! a warning and rebuilt.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -85,6 +88,15 @@ pub fn cache_path(dir: &Path, key: &str) -> PathBuf {
     dir.join(format!("lifted-{key}.safetensors"))
 }
 
+/// The hash of a cache's tensors, in the order mean, basis, codes, weights.
+fn content_hash(tensors: &[&[u8]]) -> String {
+    let mut hash = Fnv::default();
+    for bytes in tensors {
+        hash.bytes(&(bytes.len() as u64).to_le_bytes()).bytes(bytes);
+    }
+    hash.hex()
+}
+
 /// Writes `field` under `key` (atomically).
 pub fn write(path: &Path, key: &str, field: &LiftedField) -> Result<()> {
     let sub = &field.subspace;
@@ -109,6 +121,10 @@ pub fn write(path: &Path, key: &str, field: &LiftedField) -> Result<()> {
     let metadata = HashMap::from([
         ("key".to_string(), key.to_string()),
         ("explained".to_string(), sub.explained.to_string()),
+        (
+            "content".to_string(),
+            content_hash(&[&mean, &basis, &codes, &weights]),
+        ),
     ]);
     let data =
         safetensors::serialize(tensors, Some(metadata)).map_err(|e| LiftError::file(path, e))?;
@@ -140,6 +156,23 @@ pub fn read(path: &Path, key: &str, n: usize) -> Result<Option<LiftedField>> {
         .and_then(|s| s.parse().ok())
         .ok_or_else(|| bad("no explained variance".into()))?;
     let tensors = safetensors::SafeTensors::deserialize(&data).map_err(|e| bad(e.to_string()))?;
+    let written = metadata
+        .get("content")
+        .ok_or_else(|| bad("no content hash (written by another version)".into()))?;
+    let raw = |name: &str| {
+        tensors
+            .tensor(name)
+            .map(|t| t.data().to_vec())
+            .unwrap_or_default()
+    };
+    let content: Vec<Vec<u8>> = ["mean", "basis", "codes", "weights"].map(raw).to_vec();
+    let refs: Vec<&[u8]> = content.iter().map(Vec::as_slice).collect();
+    if content_hash(&refs) != *written {
+        return Err(bad(
+            "its tensors do not hash to the content hash written with them (edited or damaged)"
+                .into(),
+        ));
+    }
     let get = |name: &str| -> Result<(Vec<usize>, Vec<f32>)> {
         let t = tensors
             .tensor(name)
@@ -175,6 +208,27 @@ pub fn read(path: &Path, key: &str, n: usize) -> Result<Option<LiftedField>> {
              {weights_shape:?} do not fit a scene of {n} Gaussians"
         )));
     }
+    // What a field built here holds: blending weights are sums of α·T ≥ 0, basis vectors are
+    // unit principal directions, and nothing is near f32's range.
+    if let Some(w) = weights.iter().find(|w| **w < 0.0) {
+        return Err(bad(format!("a weight is negative ({w})")));
+    }
+    if basis
+        .chunks_exact(dim)
+        .any(|row| row.iter().map(|v| v * v).sum::<f32>() < 1e-6)
+    {
+        return Err(bad("a basis vector is zero".into()));
+    }
+    let huge = 1e15f32;
+    if mean
+        .iter()
+        .chain(&basis)
+        .chain(&codes)
+        .chain(&weights)
+        .any(|v| v.abs() > huge)
+    {
+        return Err(bad(format!("a value is beyond {huge:e}")));
+    }
     Ok(Some(LiftedField {
         subspace: Subspace {
             dim,
@@ -185,4 +239,64 @@ pub fn read(path: &Path, key: &str, n: usize) -> Result<Option<LiftedField>> {
         codes,
         weights,
     }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A field of 3 Gaussians, 2 components of 4 dimensions.
+    fn field() -> LiftedField {
+        LiftedField {
+            subspace: Subspace {
+                dim: 4,
+                mean: vec![0.1, 0.2, 0.3, 0.4],
+                basis: vec![1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0],
+                explained: 0.9,
+            },
+            codes: vec![0.5, -0.5, 0.25, 0.0, 1.0, 2.0],
+            weights: vec![1.0, 0.5, 2.0],
+        }
+    }
+
+    fn error(path: &Path) -> String {
+        match read(path, "k", 3) {
+            Err(e) => e.to_string(),
+            Ok(_) => panic!("a lying cache was trusted"),
+        }
+    }
+
+    #[test]
+    fn a_cache_is_trusted_only_intact_and_plausible() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("lifted-k.safetensors");
+        write(&path, "k", &field()).unwrap();
+        let back = read(&path, "k", 3).unwrap().expect("the cache is there");
+        assert_eq!(back.weights, field().weights);
+
+        // A weight edited in place (its bytes changed, the hash not): found by the hash.
+        let mut bytes = std::fs::read(&path).unwrap();
+        let at = bytes
+            .windows(4)
+            .rposition(|w| w == 2.0f32.to_le_bytes())
+            .unwrap();
+        bytes[at..at + 4].copy_from_slice(&(-2.0f32).to_le_bytes());
+        std::fs::write(&path, &bytes).unwrap();
+        assert!(error(&path).contains("do not hash"), "{}", error(&path));
+
+        // Written with a matching hash but holding what no field holds.
+        type Edit = fn(&mut LiftedField);
+        let cases: [(Edit, &str); 3] = [
+            (|f| f.weights[1] = -0.5, "negative"),
+            (|f| f.subspace.basis[4..].fill(0.0), "basis vector is zero"),
+            (|f| f.codes[2] = 1e38, "beyond"),
+        ];
+        for (edit, mentions) in cases {
+            let mut lying = field();
+            edit(&mut lying);
+            write(&path, "k", &lying).unwrap();
+            let e = error(&path);
+            assert!(e.contains(mentions), "{e}");
+        }
+    }
 }

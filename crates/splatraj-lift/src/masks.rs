@@ -51,13 +51,25 @@ pub struct MaskOptions {
     pub min_share: f32,
     /// Nearest Gaussians asked by one left without an object (0: no consensus pass).
     pub neighbours: usize,
+    /// Bytes the votes may take (12 per Gaussian and label); more labels than fit are
+    /// refused before any work. `None`: no bound but [`MAX_LABELS`].
+    pub max_bytes: Option<u64>,
 }
+
+/// The most labels masks may hold (a 16-bit grey mask's range): segmenters give tens to
+/// hundreds of objects a view; far more means the images are not label masks (a photo, or a
+/// depth map saved in colour, where every pixel is its own colour).
+pub const MAX_LABELS: usize = 65_535;
+
+/// Bytes per Gaussian and label while lifting: the votes (f64) and the shares (f32).
+pub const BYTES_PER_GAUSSIAN_AND_LABEL: u64 = 12;
 
 impl Default for MaskOptions {
     fn default() -> Self {
         MaskOptions {
             min_share: 0.15,
             neighbours: 8,
+            max_bytes: None,
         }
     }
 }
@@ -75,6 +87,32 @@ pub struct LiftedLabels {
     pub labels: Vec<i32>,
     /// Each label's share of each Gaussian's weight. `[N, labels]`
     pub shares: Vec<f32>,
+}
+
+/// Refuses `labels` label channels (0 included) on `gaussians` Gaussians when there are more
+/// than [`MAX_LABELS`] or their votes would take more than `max_bytes`.
+pub fn check_label_count(labels: usize, gaussians: usize, max_bytes: Option<u64>) -> Result<()> {
+    if labels > MAX_LABELS + 1 {
+        return Err(LiftError::Scene(format!(
+            "the masks hold {} labels (distinct ids or colours), more than the {MAX_LABELS} \
+             label masks can: are they label images (not photos or depth maps)?",
+            labels - 1
+        )));
+    }
+    let bytes = labels as u64 * gaussians as u64 * BYTES_PER_GAUSSIAN_AND_LABEL;
+    if let Some(limit) = max_bytes
+        && bytes > limit
+    {
+        return Err(LiftError::Scene(format!(
+            "the masks hold {} labels: lifting them onto {gaussians} Gaussians needs {:.1} GB \
+             ({BYTES_PER_GAUSSIAN_AND_LABEL} bytes per Gaussian and label), above the memory \
+             limit of {:.1} GB; merge labels, or give fewer masks",
+            labels - 1,
+            bytes as f64 / 1e9,
+            limit as f64 / 1e9
+        )));
+    }
+    Ok(())
 }
 
 /// Lifts `masks` onto `scene` (see the module docs).
@@ -116,6 +154,7 @@ pub fn lift_masks(
         .into_iter()
         .collect();
     let n = device_scene.len();
+    check_label_count(ids.len(), n, options.max_bytes)?;
     let mut votes = vec![0f64; n * ids.len()]; // [N, labels]
     let mut weights = vec![0f64; n];
     for (group_index, group) in ids.chunks(CHANNELS_PER_PASS).enumerate() {
@@ -211,4 +250,28 @@ fn neighbour_consensus(means: &[[f32; 3]], ids: &[i32], k: usize) -> Result<Vec<
                 .map_or(0, |(id, _)| id)
         })
         .collect())
+}
+
+#[cfg(test)]
+mod label_bounds {
+    use super::*;
+
+    #[test]
+    fn labels_beyond_a_label_mask_or_the_memory_limit_are_refused_before_work() {
+        // Every pixel of two 400×300 masks its own colour: 240 000 labels.
+        let e = check_label_count(240_001, 1000, None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("240000 labels") && e.contains("65535"), "{e}");
+        // 24 576 labels (two 128×96 masks) on 50 000 Gaussians: 14.7 GB of votes.
+        let e = check_label_count(24_577, 50_000, Some(8_000_000_000))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("24576 labels") && e.contains("14.7 GB") && e.contains("8.0 GB"),
+            "{e}"
+        );
+        // A real segmentation: 40 objects.
+        assert!(check_label_count(41, 2_000_000, Some(8_000_000_000)).is_ok());
+    }
 }

@@ -114,6 +114,51 @@ pub fn watch_launches() {
     gpu::watch();
 }
 
+/// Also tallies the launches by kernel name from now on (a lock per launch: for `bench` and
+/// diagnosis, not for runs), or stops and forgets the tally.
+pub fn tally_launch_names(on: bool) {
+    let mut names = NAMES
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    *names = on.then(std::collections::HashMap::new);
+}
+
+/// The launches by kernel name since [`tally_launch_names`] was turned on, most first.
+pub fn launch_names() -> Vec<(String, u64)> {
+    let names = NAMES
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    // Kernels that differ only in their generic arguments count as one.
+    let mut merged = std::collections::BTreeMap::<String, u64>::new();
+    for (name, &count) in names.iter().flatten() {
+        *merged.entry(short_kernel_name(name)).or_default() += count;
+    }
+    let mut out: Vec<(String, u64)> = merged.into_iter().collect();
+    out.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
+    out
+}
+
+/// A kernel's name without its module path and generic arguments.
+fn short_kernel_name(name: &str) -> String {
+    let base = name.split('<').next().unwrap_or(name);
+    base.rsplit("::").next().unwrap_or(base).to_string()
+}
+
+static NAMES: std::sync::Mutex<Option<std::collections::HashMap<&'static str, u64>>> =
+    std::sync::Mutex::new(None);
+
+/// Records one launch of `kernel`.
+#[cfg_attr(not(feature = "wgpu"), allow(dead_code))]
+fn launched(kernel: &'static str) {
+    LAUNCHES.fetch_add(1, Ordering::Relaxed);
+    let mut names = NAMES
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if let Some(names) = names.as_mut() {
+        *names.entry(kernel).or_default() += 1;
+    }
+}
+
 #[cfg(feature = "wgpu")]
 mod gpu {
     use std::sync::{Arc, OnceLock};
@@ -123,8 +168,8 @@ mod gpu {
     struct CountLaunches;
 
     impl LaunchObserver for CountLaunches {
-        fn launched(&self, _kernel: &'static str) {
-            super::LAUNCHES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        fn launched(&self, kernel: &'static str) {
+            super::launched(kernel);
         }
     }
 

@@ -353,10 +353,16 @@ fn gpu_projection_matches_host_projection() {
     ];
     let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
     let intrinsics = Intrinsics::from_fov_x(60.0, 160, 120).unwrap();
-    let weights: Vec<f64> = (0..poses.len() * used.len() * SPLAT_COLUMNS)
+    // Rows a pass can composite: in front of the camera and near the image. The others
+    // (behind the near plane, thousands of pixels off screen) hold finite values whose f32
+    // rounding differs between any two implementations, and no pass sends them a gradient.
+    let seen = |row: &[f64]| -> bool {
+        row[6] > 0.1 && (row[0] - 80.0).abs() < 320.0 && (row[1] - 60.0).abs() < 240.0
+    };
+    let mut weights: Vec<f64> = (0..poses.len() * used.len() * SPLAT_COLUMNS)
         .map(|i| ((i * 7919) % 29) as f64 / 29.0 - 0.45)
         .collect();
-    let run = |backend: BackendKind| -> (Vec<f64>, Vec<f64>) {
+    let run = |backend: BackendKind, weights: &[f64]| -> (Vec<f64>, Vec<f64>) {
         let device = backend.device().unwrap().autodiff();
         let geometry = SceneTensors::new(&scene, None, &device, DType::F32);
         let pose_tensor =
@@ -371,17 +377,28 @@ fn gpu_projection_matches_host_projection() {
             },
         );
         let w = Tensor::<3>::from_data(
-            TensorData::new(weights.clone(), [3, used.len(), SPLAT_COLUMNS]),
+            TensorData::new(weights.to_vec(), [3, used.len(), SPLAT_COLUMNS]),
             (&device, DType::F32),
         );
         let grads = (rows.clone() * w).sum().backward();
         (host(rows), host(pose_tensor.grad(&grads).unwrap()))
     };
-    let (rows_host, grad_host) = run(BackendKind::Flex);
-    let (rows_gpu, grad_gpu) = run(BackendKind::Wgpu);
+    let (rows_host, _) = run(BackendKind::Flex, &weights);
+    let in_view: Vec<bool> = rows_host.chunks_exact(SPLAT_COLUMNS).map(seen).collect();
+    assert!(
+        in_view.iter().filter(|&&s| s).count() > used.len(),
+        "most rows are in view"
+    );
+    for (w, &keep) in weights.chunks_exact_mut(SPLAT_COLUMNS).zip(&in_view) {
+        if !keep {
+            w.fill(0.0);
+        }
+    }
+    let (_, grad_host) = run(BackendKind::Flex, &weights);
+    let (rows_gpu, grad_gpu) = run(BackendKind::Wgpu, &weights);
     for (i, (g, h)) in rows_gpu.iter().zip(&rows_host).enumerate() {
         assert!(
-            (g - h).abs() <= 1e-4 * (1.0 + h.abs()),
+            !in_view[i / SPLAT_COLUMNS] || (g - h).abs() <= 1e-4 * (1.0 + h.abs()),
             "row value {i} (row {}, column {}): GPU {g} vs host {h}",
             i / SPLAT_COLUMNS,
             i % SPLAT_COLUMNS
@@ -398,7 +415,7 @@ fn gpu_projection_matches_host_projection() {
         );
     }
     assert_eq!(
-        run(BackendKind::Wgpu),
+        run(BackendKind::Wgpu, &weights),
         (rows_gpu, grad_gpu),
         "the GPU kernels are deterministic"
     );

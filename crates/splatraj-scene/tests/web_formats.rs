@@ -131,6 +131,27 @@ fn sog_bad_input_is_named() {
     let e = error_of(&dir);
     assert!(e.contains("meta.json"), "{e}");
 
+    // An image far larger than the Gaussians need (a 12 KB file can claim 16383² texels):
+    // refused from its header, before 1 GB is allocated for it. A lossless WebP header alone:
+    // RIFF, VP8L, the signature byte, then 14 + 14 bits of width − 1 and height − 1.
+    let (_keep, dir) = sog_folder_copy();
+    let side: u32 = 16383;
+    let bits = (side - 1) | ((side - 1) << 14);
+    let mut vp8l = vec![0x2f];
+    vp8l.extend(bits.to_le_bytes());
+    vp8l.extend([0u8; 64]);
+    let mut webp = b"RIFF".to_vec();
+    webp.extend((4 + 8 + vp8l.len() as u32).to_le_bytes());
+    webp.extend(b"WEBPVP8L");
+    webp.extend((vp8l.len() as u32).to_le_bytes());
+    webp.extend(vp8l);
+    std::fs::write(dir.join("means_l.webp"), webp).unwrap();
+    let e = error_of(&dir);
+    assert!(
+        e.contains("means_l.webp") && e.contains("16383×16383") && e.contains("far more"),
+        "{e}"
+    );
+
     // An image that is not WebP.
     let (_keep, dir) = sog_folder_copy();
     std::fs::write(dir.join("sh0.webp"), b"not a webp at all").unwrap();

@@ -184,10 +184,11 @@ impl<'a> Source<'a> {
         }
     }
 
-    /// Decodes the image `name` to RGBA and checks it has a texel for each of `count` Gaussians.
+    /// Decodes the image `name` to RGBA and checks it has a texel for each of `count` Gaussians
+    /// (and, before decoding, not far more: see [`MAX_SPARE_TEXELS`]).
     fn texture(&mut self, name: &str, count: usize, path: &Path) -> Result<Texture> {
         let bytes = self.load(name, path)?;
-        let texture = decode_webp(&bytes, name, path)?;
+        let texture = decode_webp(&bytes, name, 2 * count + MAX_SPARE_TEXELS, count, path)?;
         if texture.texels() < count {
             return Err(SceneError::malformed(
                 path,
@@ -202,6 +203,11 @@ impl<'a> Source<'a> {
         Ok(texture)
     }
 }
+
+/// Texels an image may hold beyond two per Gaussian: the largest shN codebook (65 536 entries
+/// of 15 coefficients, 983 040 texels) with room to spare. A writer lays a per-Gaussian image
+/// out as a near-square of `count` texels, so anything much larger is not this scene's.
+const MAX_SPARE_TEXELS: usize = 4 << 20;
 
 /// A decoded image, always RGBA.
 struct Texture {
@@ -227,13 +233,32 @@ impl Texture {
 /// `image-webp` is the pure-Rust decoder maintained by image-rs (the `image` crate's own WebP
 /// backend): lossless (VP8L) and lossy, no C library to build, and already in Cargo.lock. SOG
 /// images are lossless, so the bytes come back exactly as the writer quantised them.
-fn decode_webp(bytes: &[u8], name: &str, path: &Path) -> Result<Texture> {
+///
+/// An image of more than `max_texels` texels is refused from its header, before anything is
+/// allocated for it (`count`: the Gaussians meta.json declares, for the message).
+fn decode_webp(
+    bytes: &[u8],
+    name: &str,
+    max_texels: usize,
+    count: usize,
+    path: &Path,
+) -> Result<Texture> {
     let bad = |e: &dyn std::fmt::Display| {
         SceneError::malformed(path, format!("image '{name}' is not a readable WebP: {e}"))
     };
     let mut decoder = image_webp::WebPDecoder::new(Cursor::new(bytes)).map_err(|e| bad(&e))?;
     let (width, height) = decoder.dimensions();
     let (width, height) = (width as usize, height as usize);
+    if width * height > max_texels {
+        return Err(SceneError::malformed(
+            path,
+            format!(
+                "image '{name}' is {width}×{height} = {} texels, far more than meta.json's \
+                 {count} Gaussians need (at most {max_texels}): it is not this scene's image",
+                width * height
+            ),
+        ));
+    }
     let size = decoder
         .output_buffer_size()
         .ok_or_else(|| bad(&"the image is too large"))?;
