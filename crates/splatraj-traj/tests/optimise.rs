@@ -2,6 +2,8 @@
 //! optimisation on the demo scene (checked by independent metrics), and finiteness from many
 //! random and degenerate starts.
 
+mod common;
+
 use burn::tensor::{DType, Device};
 use glam::{DMat3, DVec3};
 use rand::SeedableRng;
@@ -9,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::render::DeviceScene;
 use splatraj_scene::Scene;
-use splatraj_scene::demo::{DEMO_UP, DemoConfig, DemoObject, demo_layout, demo_scene};
+use splatraj_scene::demo::{DEMO_UP, DemoObject};
 use splatraj_traj::costs::{
     CostsConfig, QueryContext, UprightCost, UprightMode, WeightedCosts, default_prior_radius,
 };
@@ -35,24 +37,15 @@ fn one_window(mask: &[f32], context: &QueryContext) -> [WindowTarget; 1] {
 }
 
 fn scene() -> Scene {
-    demo_scene(&DemoConfig {
-        seed: 7,
-        gaussians: 30_000,
-    })
-    .unwrap()
+    common::demo_room(30_000)
 }
 
 fn object(name: &str) -> DemoObject {
-    demo_layout().into_iter().find(|o| o.name == name).unwrap()
+    common::demo_object(name)
 }
 
 fn mask_of(scene: &Scene, object: &DemoObject) -> Vec<f32> {
-    let labels = scene.extras.labels.as_ref().unwrap();
-    labels
-        .ids
-        .iter()
-        .map(|&id| f32::from(u8::from(id == object.id)))
-        .collect()
+    common::demo_mask(scene, object)
 }
 
 fn intrinsics() -> Intrinsics {

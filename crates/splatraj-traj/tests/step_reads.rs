@@ -7,6 +7,8 @@
 //! Its own test binary: the counters are process-wide, so nothing else may run beside the
 //! counted work (the tests here take one lock).
 
+mod common;
+
 use std::sync::Mutex;
 
 use burn::tensor::{DType, Device, Tensor};
@@ -14,7 +16,7 @@ use splatraj_render::camera::Intrinsics;
 use splatraj_render::counters;
 use splatraj_render::render::DeviceScene;
 use splatraj_scene::Scene;
-use splatraj_scene::demo::{DEMO_UP, DemoConfig, DemoObject, demo_layout, demo_scene};
+use splatraj_scene::demo::DEMO_UP;
 use splatraj_traj::clearance::{Occupancy, OccupancySpec};
 use splatraj_traj::costs::{
     ClearanceCost, Cost, CostError, CostInputs, CostsConfig, DEFAULT_CLEARANCE_SIGMA,
@@ -30,15 +32,7 @@ use splatraj_traj::trajectory::{Polynomial, Rbf, Trajectory, TrajectoryModel};
 static COUNTED: Mutex<()> = Mutex::new(());
 
 fn scene() -> Scene {
-    demo_scene(&DemoConfig {
-        seed: 7,
-        gaussians: 20_000,
-    })
-    .unwrap()
-}
-
-fn object(name: &str) -> DemoObject {
-    demo_layout().into_iter().find(|o| o.name == name).unwrap()
+    common::demo_room(20_000)
 }
 
 fn intrinsics() -> Intrinsics {
@@ -48,18 +42,13 @@ fn intrinsics() -> Intrinsics {
 fn windows(scene: &Scene, names: &[&str]) -> Vec<WindowTarget> {
     let k = intrinsics();
     let (tx, ty) = k.tan_half_fov();
-    let labels = scene.extras.labels.as_ref().unwrap();
     names
         .iter()
         .map(|name| {
-            let o = object(name);
+            let o = common::demo_object(name);
             WindowTarget {
                 name: name.to_string(),
-                mask: labels
-                    .ids
-                    .iter()
-                    .map(|&id| f32::from(u8::from(id == o.id)))
-                    .collect(),
+                mask: common::demo_mask(scene, &o),
                 context: QueryContext {
                     object_centre: o.center.map(f64::from),
                     prior_radius: default_prior_radius(

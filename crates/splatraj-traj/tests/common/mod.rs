@@ -16,3 +16,27 @@ pub fn scene_of(means: Vec<[f32; 3]>, scales: Vec<[f32; 3]>) -> Scene {
         extras: Default::default(),
     }
 }
+
+/// The demo room of `gaussians` Gaussians (seed 7).
+pub fn demo_room(gaussians: usize) -> Scene {
+    splatraj_scene::demo::demo_scene(&splatraj_scene::demo::DemoConfig { seed: 7, gaussians })
+        .unwrap()
+}
+
+/// The demo object called `name`.
+pub fn demo_object(name: &str) -> splatraj_scene::demo::DemoObject {
+    splatraj_scene::demo::demo_layout()
+        .into_iter()
+        .find(|o| o.name == name)
+        .unwrap()
+}
+
+/// 1 for the Gaussians of `object` in the demo `scene`, 0 elsewhere.
+pub fn demo_mask(scene: &Scene, object: &splatraj_scene::demo::DemoObject) -> Vec<f32> {
+    let labels = scene.extras.labels.as_ref().unwrap();
+    labels
+        .ids
+        .iter()
+        .map(|&id| f32::from(u8::from(id == object.id)))
+        .collect()
+}
