@@ -20,6 +20,17 @@
 //! The sampled loss is noisy, so "best" is judged on the estimate; later steps are slightly
 //! favoured because the prior's weight decays. An observer sees every step and may stop the
 //! run (Ctrl-C, a time budget): the best trajectory so far is still returned.
+//!
+//! **One read a step.** On a GPU every read back is a wait for the device, so a step reads
+//! once: every window's sample and path poses come from one forward of the model (the basis
+//! evaluated on the host, [`Trajectory::forward_at`]) and are read together with the previous
+//! step's results (each window's term means, the loss, whether the gradient was finite, the
+//! weights it was measured at), which stay on the device until then. The renders' host
+//! decisions and the clearance cost take the poses from that read. Adam steps W at once; a
+//! step whose gradient turns out not to be finite is undone when the next step reads that
+//! (the model and optimiser before it are kept), and the poses are evaluated again. So a
+//! step's row reaches the observer during the next step, and the last step's after one more
+//! read (`tests/step_reads.rs` counts them).
 
 use std::time::{Duration, Instant};
 
@@ -207,11 +218,11 @@ pub struct TrajectoryStep {
 /// Wall time of one step's phases (what `splatraj study` reports per stage).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct StepTiming {
-    /// Poses, renders and costs of every window, up to the loss on the host.
+    /// Poses (with the step's one read), renders and costs of every window, up to the loss.
     pub evaluate: Duration,
-    /// The backward pass and the gradient read back.
+    /// The backward pass (on a GPU the time to queue it: it is read with the next step).
     pub backward: Duration,
-    /// Adam's update and the step's bookkeeping.
+    /// Adam's update.
     pub update: Duration,
 }
 
