@@ -174,12 +174,14 @@ impl QueryContext {
 
 /// Everything a cost may read, for one batch of B samples of one query window.
 ///
-/// Built by [`CostInputs::new`], which checks shapes and computes the rotations R_wc once for
+/// Built by [`CostInputs::new`], which checks shapes; the rotations R_wc are computed once for
 /// all costs. Tensors are cheap handles; costs clone what they consume.
 #[derive(Debug, Clone)]
 pub struct CostInputs {
     poses: Tensor<2>,
-    rotations: Tensor<3>,
+    /// R_wc, made on first use: image-only costs never need them, and on a GPU Rodrigues is
+    /// two dozen launches forward.
+    rotations: std::sync::OnceLock<Tensor<3>>,
     masks: Option<Tensor<3>>,
     mask_alone: Option<Tensor<3>>,
     depth: Option<Tensor<3>>,
@@ -282,10 +284,9 @@ impl CostInputs {
                 )));
             }
         }
-        let rotations = splatraj_render::camera::rotation_matrices(poses.clone().narrow(1, 0, 3));
         Ok(Self {
             poses,
-            rotations,
+            rotations: std::sync::OnceLock::new(),
             masks,
             mask_alone: None,
             depth: None,
@@ -417,14 +418,16 @@ impl CostInputs {
 
     /// Camera-to-world rotations R_wc `[B, 3, 3]` (differentiable Rodrigues of Φ's ω).
     pub fn rotations(&self) -> &Tensor<3> {
-        &self.rotations
+        self.rotations.get_or_init(|| {
+            splatraj_render::camera::rotation_matrices(self.poses.clone().narrow(1, 0, 3))
+        })
     }
 
     /// Column `axis` of R_wc, `[B, 3]`: the camera's x (right, 0), y (down, 1) or z (forward,
     /// 2) axis in world coordinates.
     pub fn camera_axis(&self, axis: usize) -> Tensor<2> {
         let batch = self.batch();
-        self.rotations
+        self.rotations()
             .clone()
             .narrow(2, axis, 1)
             .reshape([batch, 3])
