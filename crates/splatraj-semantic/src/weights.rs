@@ -8,6 +8,11 @@
 //! from float16, bfloat16, float32 or float64) for the tensors a tower uses.
 
 use std::collections::BTreeMap;
+
+/// The largest weight magnitude accepted: float16's range, in which CLIP checkpoints are
+/// trained and shipped. A value beyond it overflows the towers' activations in f32 and would
+/// surface later as a non-finite pixel of a rendered view, far from its cause.
+const MAX_WEIGHT: f32 = 65_504.0;
 use std::path::{Path, PathBuf};
 
 use burn::store::pytorch_reader::{self, PytorchReader};
@@ -186,6 +191,16 @@ impl StateDict {
                 &self.path,
                 format!(
                     "tensor {name:?} holds a non-finite value ({}) at {i}",
+                    values[i]
+                ),
+            ));
+        }
+        if let Some(i) = values.iter().position(|v| v.abs() > MAX_WEIGHT) {
+            return Err(SemanticError::file(
+                &self.path,
+                format!(
+                    "tensor {name:?} holds {:e} at {i}, beyond ±{MAX_WEIGHT}: not a trained \
+                     weight (the activations would overflow)",
                     values[i]
                 ),
             ));

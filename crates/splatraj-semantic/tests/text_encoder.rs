@@ -188,14 +188,25 @@ fn full_vit_b_towers_are_recognised() {
 
 /// Writes `tensors` (name → shape, zeros) as safetensors in `dir`.
 fn write_safetensors(dir: &Path, tensors: &BTreeMap<String, Vec<usize>>) -> PathBuf {
+    write_safetensors_with(dir, tensors, None)
+}
+
+/// [`write_safetensors`] with the first value of tensor `first.0` set to `first.1`.
+fn write_safetensors_with(
+    dir: &Path,
+    tensors: &BTreeMap<String, Vec<usize>>,
+    first: Option<(&str, f32)>,
+) -> PathBuf {
     let data: Vec<(String, Vec<u8>, Vec<usize>)> = tensors
         .iter()
         .map(|(k, s)| {
-            (
-                k.clone(),
-                vec![0u8; 4 * s.iter().product::<usize>()],
-                s.clone(),
-            )
+            let mut bytes = vec![0u8; 4 * s.iter().product::<usize>()];
+            if let Some((name, value)) = first
+                && name == k
+            {
+                bytes[..4].copy_from_slice(&value.to_le_bytes());
+            }
+            (k.clone(), bytes, s.clone())
         })
         .collect();
     let views: Vec<(String, TensorView)> = data
@@ -285,6 +296,19 @@ fn bad_weights_name_the_file_and_the_tensor() {
         assert!(err.contains(message), "{err}");
         assert!(err.contains("tower.safetensors"), "{err}");
     }
+    // A weight of 3e38 is finite but no trained weight: named with its tensor, not later as a
+    // non-finite pixel of a rendered view.
+    let path = write_safetensors_with(dir.path(), &good, Some(("text.ln_final.weight", 3e38)));
+    let err = TextEncoder::from_file(&path, options, &device)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("tower.safetensors")
+            && err.contains("\"text.ln_final.weight\"")
+            && err.contains("3e38"),
+        "{err}"
+    );
+
     // Not a checkpoint at all, and a missing file.
     let junk = dir.path().join("junk.bin");
     std::fs::write(&junk, b"not a checkpoint").unwrap();
