@@ -121,6 +121,7 @@ pub fn tally_launch_names(on: bool) {
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner);
     *names = on.then(std::collections::HashMap::new);
+    TALLYING.store(on, Ordering::Relaxed);
 }
 
 /// The launches by kernel name since [`tally_launch_names`] was turned on, most first.
@@ -144,6 +145,10 @@ fn short_kernel_name(name: &str) -> String {
     base.rsplit("::").next().unwrap_or(base).to_string()
 }
 
+/// Whether [`NAMES`] is on: checked before taking its lock, so that an ordinary run's launches
+/// cost one relaxed atomic increment and load, no lock.
+static TALLYING: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
 static NAMES: std::sync::Mutex<Option<std::collections::HashMap<&'static str, u64>>> =
     std::sync::Mutex::new(None);
 
@@ -151,6 +156,9 @@ static NAMES: std::sync::Mutex<Option<std::collections::HashMap<&'static str, u6
 #[cfg_attr(not(feature = "wgpu"), allow(dead_code))]
 fn launched(kernel: &'static str) {
     LAUNCHES.fetch_add(1, Ordering::Relaxed);
+    if !TALLYING.load(Ordering::Relaxed) {
+        return;
+    }
     let mut names = NAMES
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner);

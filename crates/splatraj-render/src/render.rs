@@ -372,10 +372,18 @@ pub fn render_at(
         });
     }
     let u = used.len();
+    // The scene indices used, uploaded once and only when a select needs them (the fused
+    // projection takes them as a plan; SH colours, per-Gaussian tensors and the tensor path
+    // select with them).
+    let uploaded_index = std::cell::OnceCell::new();
     let index = || {
-        let index: Vec<i64> = used.iter().map(|&g| g as i64).collect();
-        crate::counters::upload(8 * u);
-        Tensor::<1, Int>::from_data(TensorData::new(index, [u]), &device)
+        uploaded_index
+            .get_or_init(|| {
+                let index: Vec<i64> = used.iter().map(|&g| g as i64).collect();
+                crate::counters::upload(8 * u);
+                Tensor::<1, Int>::from_data(TensorData::new(index, [u]), &device)
+            })
+            .clone()
     };
     // Screen space: the fused projection's packed rows, or the tensor projection's outputs.
     let (splats, depth) = match request.rasterizer {

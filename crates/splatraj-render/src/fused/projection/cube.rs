@@ -525,7 +525,7 @@ pub enum CubeSaved {
     /// f32 passes: everything on the device.
     Device(Box<DeviceSaved>),
     /// f64 passes: the host kernels' state.
-    Host(HostSaved<Cube>),
+    Host(Box<HostSaved<Cube>>),
 }
 
 /// The launch grid: (cubes per pose, poses), and the chunks of 256 Gaussians each pose has.
@@ -664,7 +664,7 @@ impl ProjectionKernels for Cube {
     ) -> (FloatTensor<Self>, CubeSaved) {
         if components.dtype() == DType::F64 {
             let (rows, saved) = host_forward::<Self>(poses, components, opacities, plan);
-            return (rows, CubeSaved::Host(saved));
+            return (rows, CubeSaved::Host(Box::new(saved)));
         }
         let (rows, saved) = device_forward(poses, components, opacities, plan);
         (rows, CubeSaved::Device(Box::new(saved)))
@@ -672,7 +672,7 @@ impl ProjectionKernels for Cube {
 
     fn projection_backward(saved: CubeSaved, v_rows: FloatTensor<Self>) -> FloatTensor<Self> {
         match saved {
-            CubeSaved::Host(saved) => host_backward::<Self>(saved, v_rows),
+            CubeSaved::Host(saved) => host_backward::<Self>(*saved, v_rows),
             CubeSaved::Device(saved) => device_backward(*saved, v_rows),
         }
     }
