@@ -25,6 +25,7 @@ pub mod report;
 pub mod supersplat;
 pub mod transforms;
 pub mod video;
+pub mod views_page;
 
 use std::path::Path;
 

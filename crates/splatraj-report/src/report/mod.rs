@@ -127,7 +127,8 @@ pub struct RunReport {
 /// Videos up to this size are inlined; larger ones are linked.
 pub const INLINE_VIDEO_BYTES: usize = 8 << 20;
 
-const STYLE: &str = "body{font-family:system-ui,sans-serif;margin:24px auto;max-width:1180px;color:#222;padding:0 12px}
+/// The style of the pages this crate writes (the run report, the views page).
+pub(crate) const STYLE: &str = "body{font-family:system-ui,sans-serif;margin:24px auto;max-width:1180px;color:#222;padding:0 12px}
 h1{margin-bottom:0}.sub{color:#666;margin-top:4px;font-family:monospace}
 nav a{margin-right:14px}section{margin-top:28px}
 table{border-collapse:collapse;font-size:14px}th,td{border:1px solid #ccc;padding:3px 8px;text-align:right}
