@@ -2,7 +2,7 @@
 //! against central finite differences in f64.
 
 use burn::tensor::{DType, Device, Tensor, TensorData};
-use splatraj_traj::costs::{NORM_EPSILON, centroid_offset, coverage, tce, tre};
+use splatraj_traj::costs::{MaskMoments, NORM_EPSILON, centroid_offset, coverage, tce, tre};
 
 /// A mask `[B, H, W]` from host values in `dtype` on `device`.
 fn mask(values: Vec<f64>, shape: [usize; 3], device: &Device, dtype: DType) -> Tensor<3> {
@@ -192,4 +192,46 @@ fn gradients_match_finite_differences_in_f64() {
         assert!(grad.iter().any(|g| g.abs() > 1e-3), "{weight:?}: trivial");
         assert!(worst.is_finite());
     }
+}
+
+/// The moments of a random non-square mask batch (two matrix products) equal a brute-force f64
+/// double loop over the pixels, in both precisions; an all-ones 1280×720 frame keeps its mass
+/// (921 600 pixels) in f32.
+#[test]
+fn mask_moments_match_brute_force_sums() {
+    let device = Device::flex();
+    let (b, h, w) = (2, 91, 160);
+    let mut rng = Rng(0xa11ce);
+    let values: Vec<f64> = (0..b * h * w).map(|_| rng.next()).collect();
+    for (dtype, tolerance) in [(DType::F64, 1e-12), (DType::F32, 1e-5)] {
+        let moments = MaskMoments::of(mask(values.clone(), [b, h, w], &device, dtype));
+        let (mass, first) = (host(moments.mass()), host(moments.first()));
+        for s in 0..b {
+            let (mut m, mut mx, mut my) = (0.0, 0.0, 0.0);
+            for j in 0..h {
+                for i in 0..w {
+                    let v = values[(s * h + j) * w + i];
+                    m += v;
+                    mx += v * ((i as f64 + 0.5) / w as f64 - 0.5);
+                    my += v * ((j as f64 + 0.5) / h as f64 - 0.5);
+                }
+            }
+            let close = |got: f64, want: f64| (got - want).abs() <= tolerance * m;
+            assert!(close(mass[s], m), "{dtype:?} mass {} vs {m}", mass[s]);
+            assert!(
+                close(first[2 * s], mx),
+                "{dtype:?} Σm·x {} vs {mx}",
+                first[2 * s]
+            );
+            assert!(
+                close(first[2 * s + 1], my),
+                "{dtype:?} Σm·y {} vs {my}",
+                first[2 * s + 1]
+            );
+        }
+    }
+    let ones = Tensor::<3>::ones([1, 720, 1280], (&device, DType::F32));
+    let moments = MaskMoments::of(ones);
+    assert_eq!(host(moments.mass()), vec![921_600.0]);
+    assert_eq!(host(moments.coverage()), vec![1.0]);
 }

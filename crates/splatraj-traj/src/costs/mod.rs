@@ -35,7 +35,8 @@
 //! same kind of struct, with a typed field each in [`CostsConfig`] (so a typo in their keys is
 //! caught when the file is parsed).
 //!
-//! The image costs are also plain tensor functions ([`tce()`], [`tre()`]): they run on the mask's
+//! The image costs are also plain tensor functions ([`tce()`], [`tre()`]; of the mask's
+//! [`MaskMoments`], which the inputs make once for all costs): they run on the mask's
 //! device and dtype and differentiate through burn's autodiff. None of the costs is ever NaN,
 //! and for an empty mask (object out of view) TCE has a zero gradient and TRE a constant one,
 //! so that nothing but the prior moves a camera that sees nothing (see each function's docs).
@@ -43,6 +44,7 @@
 pub mod auto;
 pub mod clearance;
 pub mod iou;
+pub mod moments;
 pub mod motion;
 pub mod prior;
 pub mod registry;
@@ -64,14 +66,17 @@ pub use clearance::{
     ClearanceCost, DEFAULT_CLEARANCE_SIGMA, DEFAULT_MIN_OPACITY, auto_margin, clearance,
 };
 pub use iou::{IOU_THRESHOLD, PixelBox, bbox_iou, bbox_iou_batch, mask_box};
+pub use moments::MaskMoments;
 pub use motion::{MotionCost, auto_max_speed};
 pub use prior::{PRIOR_EPSILON_FRACTION, PriorCost, default_prior_radius, prior};
 pub use registry::{CostConfig, CostRegistry};
 pub use shot::ShotCost;
-pub use tce::{MASS_FLOOR, NORM_EPSILON, TceCost, centroid_offset, tce};
-pub use tre::{DEFAULT_TARGET_RATIO, TreCost, coverage, tre};
+pub use tce::{
+    MASS_FLOOR, NORM_EPSILON, TceCost, centroid_offset, centroid_offset_of, tce, tce_of,
+};
+pub use tre::{DEFAULT_TARGET_RATIO, TreCost, coverage, tre, tre_of};
 pub use upright::{UprightCost, UprightMode, upright};
-pub use visibility::{VisibilityCost, hidden_share};
+pub use visibility::{VisibilityCost, hidden_share, hidden_share_of};
 
 /// Prefix of every config key named in errors: the costs live in the config's `[costs]` table.
 pub const CONFIG_TABLE: &str = "costs";
@@ -183,6 +188,9 @@ pub struct CostInputs {
     /// two dozen launches forward.
     rotations: std::sync::OnceLock<Tensor<3>>,
     masks: Option<Tensor<3>>,
+    /// The masks' moments, made on first use and shared by every cost that reads them (TCE,
+    /// TRE and visibility would each reduce the mask again: launches on a GPU).
+    moments: std::sync::OnceLock<MaskMoments>,
     mask_alone: Option<Tensor<3>>,
     depth: Option<Tensor<3>>,
     rgb: Option<Tensor<4>>,
@@ -288,6 +296,7 @@ impl CostInputs {
             poses,
             rotations: std::sync::OnceLock::new(),
             masks,
+            moments: std::sync::OnceLock::new(),
             mask_alone: None,
             depth: None,
             rgb: None,
@@ -441,6 +450,13 @@ impl CostInputs {
     /// The masks, or [`CostError::MissingMask`] naming `cost`.
     pub fn require_masks(&self, cost: &'static str) -> Result<Tensor<3>, CostError> {
         self.masks.clone().ok_or(CostError::MissingMask { cost })
+    }
+
+    /// The moments of the rendered masks (made once, on first use), or
+    /// [`CostError::MissingMask`] naming `cost`.
+    pub fn require_mask_moments(&self, cost: &'static str) -> Result<&MaskMoments, CostError> {
+        let masks = self.masks.as_ref().ok_or(CostError::MissingMask { cost })?;
+        Ok(self.moments.get_or_init(|| MaskMoments::of(masks.clone())))
     }
 
     /// Optimisation step k (0 first).

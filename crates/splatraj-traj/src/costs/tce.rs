@@ -15,10 +15,10 @@
 //!   two, so ε² and its root are exact in f32 and f64), within ε of ‖d‖ elsewhere, and its
 //!   derivative d/√(d² + ε²) is finite everywhere.
 
-use burn::tensor::{Tensor, TensorData};
+use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostError, CostInputs, ImageChannel, check_weight};
+use super::{Cost, CostError, CostInputs, ImageChannel, MaskMoments, check_weight};
 
 /// Total mask mass (in pixels) below which the centroid is pulled toward the image centre.
 pub const MASS_FLOOR: f64 = 1e-3;
@@ -30,27 +30,24 @@ pub const NORM_EPSILON: f64 = 1.0 / 1_048_576.0;
 /// (c_x/W − ½, c_y/H − ½) per sample, with the mass floor of the module docs (0 for an empty
 /// mask). `mask` is `[B, H, W]`.
 pub fn centroid_offset(mask: Tensor<3>) -> Tensor<2> {
-    let [batch, height, width] = mask.dims();
-    let device = mask.device();
-    let dtype = mask.dtype();
-    // Pixel centres relative to the image centre, in image fractions: (i + ½)/W − ½.
-    let offsets =
-        |n: usize| -> Vec<f64> { (0..n).map(|i| (i as f64 + 0.5) / n as f64 - 0.5).collect() };
-    let xs = Tensor::<1>::from_data(TensorData::new(offsets(width), [width]), (&device, dtype))
-        .reshape([1, 1, width]);
-    let ys = Tensor::<1>::from_data(TensorData::new(offsets(height), [height]), (&device, dtype))
-        .reshape([1, height, 1]);
-    let per_sample = |t: Tensor<3>| t.sum_dim(2).sum_dim(1).reshape([batch, 1]);
-    let mass = per_sample(mask.clone()).clamp_min(MASS_FLOOR);
-    let dx = per_sample(mask.clone() * xs) / mass.clone();
-    let dy = per_sample(mask * ys) / mass;
-    Tensor::cat(vec![dx, dy], 1)
+    centroid_offset_of(&MaskMoments::of(mask))
+}
+
+/// [`centroid_offset`] of a mask's moments (what a cost reads: [`CostInputs::mask_moments`]).
+pub fn centroid_offset_of(moments: &MaskMoments) -> Tensor<2> {
+    // [B, 2] / [B, 1]: the mass broadcasts over both coordinates.
+    moments.first() / moments.mass().clamp_min(MASS_FLOOR)
 }
 
 /// Target centring error per sample, `[B]`, of mask images `[B, H, W]` (see module docs).
 pub fn tce(mask: Tensor<3>) -> Tensor<1> {
-    let [batch, _, _] = mask.dims();
-    let offset = centroid_offset(mask);
+    tce_of(&MaskMoments::of(mask))
+}
+
+/// [`tce`] of a mask's moments.
+pub fn tce_of(moments: &MaskMoments) -> Tensor<1> {
+    let offset = centroid_offset_of(moments);
+    let [batch, _] = offset.dims();
     offset
         .square()
         .sum_dim(1)
@@ -89,6 +86,6 @@ impl Cost for TceCost {
         check_weight(self.name(), "weight", self.weight)
     }
     fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
-        Ok(tce(inputs.require_masks(self.name())?))
+        Ok(tce_of(inputs.require_mask_moments(self.name())?))
     }
 }

@@ -10,23 +10,24 @@
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostError, CostInputs, ImageChannel, check_weight};
+use super::{Cost, CostError, CostInputs, ImageChannel, MaskMoments, check_weight};
 
 /// Target ratio of the frame the object should cover when none is configured.
 pub const DEFAULT_TARGET_RATIO: f64 = 0.15;
 
 /// Share of the frame the mask covers, Σ I_b / (W·H), per sample: `[B]` of `[B, H, W]`.
 pub fn coverage(mask: Tensor<3>) -> Tensor<1> {
-    let [batch, height, width] = mask.dims();
-    mask.sum_dim(2)
-        .sum_dim(1)
-        .reshape([batch])
-        .div_scalar((width * height) as f64)
+    MaskMoments::of(mask).coverage()
 }
 
 /// Target ratio error per sample, `[B]`, of mask images `[B, H, W]` for target ratio `target`.
 pub fn tre(mask: Tensor<3>, target: f64) -> Tensor<1> {
-    coverage(mask).sub_scalar(target).abs()
+    tre_of(&MaskMoments::of(mask), target)
+}
+
+/// [`tre`] of a mask's moments (what a cost reads: [`CostInputs::mask_moments`]).
+pub fn tre_of(moments: &MaskMoments, target: f64) -> Tensor<1> {
+    moments.coverage().sub_scalar(target).abs()
 }
 
 /// TRE as a [`Cost`]: config table `[costs.tre]`, key `weight` (default 1). The target ratio
@@ -59,8 +60,8 @@ impl Cost for TreCost {
         check_weight(self.name(), "weight", self.weight)
     }
     fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
-        Ok(tre(
-            inputs.require_masks(self.name())?,
+        Ok(tre_of(
+            inputs.require_mask_moments(self.name())?,
             inputs.query().target_ratio,
         ))
     }

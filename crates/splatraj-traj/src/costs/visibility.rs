@@ -28,7 +28,7 @@
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostError, CostInputs, ImageChannel, check_weight, invalid};
+use super::{Cost, CostError, CostInputs, ImageChannel, MaskMoments, check_weight, invalid};
 
 /// Mask mass (pixels' worth) of the object alone below which it counts as out of frame.
 pub const MIN_ALONE_PIXELS: f64 = 1.0;
@@ -38,16 +38,21 @@ pub const DEFAULT_TOLERANCE: f64 = 0.25;
 
 /// The hidden share per sample `[B]` of masks seen with the scene and alone `[B, H, W]`.
 pub fn hidden_share(seen: Tensor<3>, alone: Tensor<3>) -> Tensor<1> {
-    let [batch, _, _] = seen.dims();
-    let sum = |t: Tensor<3>| t.sum_dim(2).sum_dim(1).reshape([batch]);
-    let whole = sum(alone);
+    hidden_share_of(&MaskMoments::of(seen), alone)
+}
+
+/// [`hidden_share`] with the seen mask's moments (shared with TCE and TRE in a cost pass).
+pub fn hidden_share_of(seen: &MaskMoments, alone: Tensor<3>) -> Tensor<1> {
+    let [batch, _, _] = alone.dims();
+    let mass = |m: &MaskMoments| m.mass().reshape([batch]);
+    let whole = mass(&MaskMoments::of(alone));
     // 1 where the object alone is in frame, else 0 (off the graph: a switch, not a slope).
     let in_frame = whole
         .clone()
         .detach()
         .greater_equal_elem(MIN_ALONE_PIXELS)
         .float();
-    let ratio = sum(seen) / whole.clamp_min(MIN_ALONE_PIXELS);
+    let ratio = mass(seen) / whole.clamp_min(MIN_ALONE_PIXELS);
     ratio.neg().add_scalar(1.0).clamp_min(0.0) * in_frame
 }
 
@@ -95,9 +100,9 @@ impl Cost for VisibilityCost {
         Ok(())
     }
     fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
-        let seen = inputs.require_masks(self.name())?;
+        let seen = inputs.require_mask_moments(self.name())?;
         let alone = inputs.require_mask_alone(self.name())?;
-        Ok(hidden_share(seen, alone)
+        Ok(hidden_share_of(seen, alone)
             .sub_scalar(self.tolerance)
             .clamp_min(0.0)
             .div_scalar(1.0 - self.tolerance))

@@ -32,7 +32,7 @@ use splatraj_render::render::{
     Channel, DeviceScene, Pruning, Rasterizer, RenderError, RenderRequest, render,
 };
 
-use crate::costs::{IOU_THRESHOLD, bbox_iou_batch, coverage, mask_box, tce, tre};
+use crate::costs::{IOU_THRESHOLD, MaskMoments, bbox_iou_batch, mask_box, tce_of, tre_of};
 use crate::optimise::sampling::stratified_times;
 use crate::trajectory::Pose;
 
@@ -196,9 +196,10 @@ pub fn window_metrics(
     let visible = mask_of(scene, object.mask.to_vec())?;
     let alone = mask_of(object.alone, vec![1.0; object.alone.len()])?;
     let host = |t: Tensor<1>| -> Vec<f64> { to_host(t).unwrap_or_default() };
-    let tces = host(tce(visible.clone()));
-    let tres = host(tre(visible.clone(), object.target_ratio));
-    let coverages = host(coverage(visible.clone()));
+    let moments = MaskMoments::of(visible.clone());
+    let tces = host(tce_of(&moments));
+    let tres = host(tre_of(&moments, object.target_ratio));
+    let coverages = host(moments.coverage());
     let ious = bbox_iou_batch(visible.clone(), alone.clone());
     let [batch, height, width] = visible.dims();
     let pixels = host(visible.reshape([batch * height * width]));
