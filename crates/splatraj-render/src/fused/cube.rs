@@ -7,9 +7,9 @@
 //!   unit composites its pixel and keeps its final T and the count of list entries up to its
 //!   last contributor. A tile stops once none of its pixels is open.
 //! - Backward: every unit replays its pixel back to front from the saved state; per list entry
-//!   the tile's 256 contributions are summed by a fixed tree reduction in shared memory into
-//!   that entry's gradient slot, and a second kernel sums each Gaussian's slots in plan order
-//!   (the host built the map from Gaussian to its slots). No atomics, so the result is the same
+//!   the tile's 256 contributions are summed in a fixed order in shared memory (two levels,
+//!   two barriers per entry) into that entry's gradient slot, and a second kernel sums each
+//!   Gaussian's slots in plan order (the host built the map from Gaussian to its slots). No atomics, so the result is the same
 //!   on every run.
 //!
 //! The tile lists are built on the host (binning is cheapest there: it is a per-pose sort the
@@ -38,6 +38,12 @@ use crate::tiles::TILE_PIXELS;
 const fn slot_width(channels: usize) -> usize {
     6 + channels
 }
+
+/// Pixels summed by one unit in the first level of the backward's per-entry sum.
+const GROUP_PIXELS: usize = 8;
+
+/// Groups of [`GROUP_PIXELS`] in a tile: the second level's terms.
+const GROUPS: usize = TILE_PIXELS / GROUP_PIXELS;
 
 /// Work tile index of this cube (the launch grid is 2D when there are more than 65 535 tiles).
 #[cube]
@@ -268,6 +274,7 @@ fn backward_kernel<F: Float, I: Int>(
     let start = u32::cast_from(starts[w]) as usize;
 
     let mut sh_sum = Shared::<[F]>::new_slice(comptime!(256usize * (channels + 6)));
+    let mut sh_group = Shared::<[F]>::new_slice(comptime!(GROUPS * (channels + 6)));
     let mut done = 0usize;
     while done < replay {
         let j = replay - 1 - done;
@@ -316,22 +323,30 @@ fn backward_kernel<F: Float, I: Int>(
             }
         }
         sync_cube();
-        // A fixed tree over the tile's pixels: the same sum on every run.
-        let mut half = 128usize;
-        while half > 0 {
-            if p < half {
-                for k in 0..stride {
-                    let other = sh_sum[k * 256 + p + half];
-                    sh_sum[k * 256 + p] += other;
-                }
+        // A fixed two-level sum over the tile's pixels (the same sum on every run), two
+        // barriers per entry: 32 groups of 8 pixels per component, then the 32 groups. A
+        // binary tree took ten; on a GPU the barriers, not the adds, bound this loop.
+        let mut u = p;
+        while u < comptime!(GROUPS * (channels + 6)) {
+            // u = k·32 + g: component k, pixels 8g … 8g + 7.
+            let base = (u / GROUPS) * 256 + (u % GROUPS) * GROUP_PIXELS;
+            let mut sum = sh_sum[base];
+            for q in 1..GROUP_PIXELS {
+                sum += sh_sum[base + q];
             }
-            sync_cube();
-            half /= 2;
-        }
-        if p < stride {
-            slots[(start + j) * stride + p] = sh_sum[p * 256];
+            sh_group[u] = sum;
+            u += 256;
         }
         sync_cube();
+        // Safe without a third barrier: the next entry writes `sh_sum` (read above, before
+        // the barrier) and `sh_group` only after its own first barrier.
+        if p < stride {
+            let mut sum = sh_group[p * GROUPS];
+            for g in 1..GROUPS {
+                sum += sh_group[p * GROUPS + g];
+            }
+            slots[(start + j) * stride + p] = sum;
+        }
         done += 1;
     }
 }
