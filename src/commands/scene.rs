@@ -5,16 +5,18 @@ use std::str::FromStr;
 
 use anyhow::{Result, bail};
 use clap::Subcommand;
+use splatraj::experiment::query::parse_direction;
 use splatraj::experiment::scene_files::{
     MaskSidecarRequest, convert_scene, lift_masks_to_sidecar, write_demo_scene,
 };
+use splatraj::experiment::views_page::{ViewsPageOptions, ViewsPageRequest, write_views_page};
 use splatraj::lift::{LiftStage, MaskOptions};
 use splatraj_render::backend::BackendKind;
 use splatraj_scene::demo::DemoConfig;
 use splatraj_scene::summary::SceneInfo;
 use splatraj_scene::{InvalidPolicy, SceneFormat};
 
-use crate::cli::{ReadArgs, progress_bar};
+use crate::cli::{MemoryArgs, ReadArgs, progress_bar};
 
 /// The `scene` subcommands.
 #[derive(Debug, Subcommand)]
@@ -58,6 +60,40 @@ pub enum SceneCommand {
     /// Lift 2D label masks (a segmenter's PNGs, one per camera) onto the Gaussians and write
     /// them as a label sidecar that `--labels` reads (docs/open-vocabulary.md).
     LiftMasks(LiftMasksArgs),
+    /// Write one self-contained HTML page of renders around (and inside) the scene, each with
+    /// its camera and depth, where a click picks a part: its 3D point, a ball to size, the
+    /// Gaussians inside and the `[targets]` lines to paste into a config.
+    Views(ViewsArgs),
+}
+
+/// Arguments of `scene views`.
+#[derive(Debug, clap::Args)]
+pub struct ViewsArgs {
+    /// Scene file (INRIA PLY, compressed PLY, SPZ, SOG …).
+    scene: PathBuf,
+    /// The page to write (HTML; written whole or not at all).
+    #[arg(long, default_value = "views.html")]
+    out: PathBuf,
+    /// Views to render (the planner may keep fewer when fewer show something).
+    #[arg(long, default_value_t = ViewsPageOptions::default().views)]
+    views: usize,
+    /// Side of each square view, pixels.
+    #[arg(long, default_value_t = ViewsPageOptions::default().size)]
+    size: usize,
+    /// World up of the scene, `X,Y,Z` (e.g. `0,-1,0` for y-down captures); by default guessed.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    up: Option<String>,
+    /// Most Gaussian centres the page carries to count what a ball holds; beyond, an even
+    /// sample, and the counts are estimates scaled from it (the page says so).
+    #[arg(long, default_value_t = ViewsPageOptions::default().max_centres)]
+    max_centres: usize,
+    /// Tensor backend: flex (CPU), ndarray or wgpu, among those compiled in.
+    #[arg(long, default_value = "flex", value_parser = BackendKind::from_str)]
+    backend: BackendKind,
+    #[command(flatten)]
+    read: ReadArgs,
+    #[command(flatten)]
+    memory: MemoryArgs,
 }
 
 /// Arguments of `scene lift-masks`.
@@ -140,6 +176,7 @@ pub fn run(command: SceneCommand) -> Result<()> {
             );
         }
         SceneCommand::LiftMasks(args) => lift_masks(args)?,
+        SceneCommand::Views(args) => views(args)?,
     }
     Ok(())
 }
@@ -200,6 +237,64 @@ fn lift_masks(args: LiftMasksArgs) -> Result<()> {
         "wrote {} ({} Gaussians labelled)",
         request.out.display(),
         lift.labels.ids.iter().filter(|&&id| id != 0).count()
+    );
+    Ok(())
+}
+
+/// `scene views`: parses, writes the page with the library, prints a summary.
+fn views(args: ViewsArgs) -> Result<()> {
+    let request = ViewsPageRequest {
+        options: ViewsPageOptions {
+            views: args.views,
+            size: args.size,
+            up: args
+                .up
+                .as_deref()
+                .map(|up| parse_direction(up, "--up"))
+                .transpose()?,
+            max_centres: args.max_centres,
+            ..ViewsPageOptions::default()
+        },
+        read: args.read.options(),
+        scene: args.scene,
+        out: args.out,
+        max_memory_gb: args.memory.max_memory,
+    };
+    let device = args.backend.device()?;
+    let bar = progress_bar(0, false);
+    let drawn = bar.clone();
+    let progress = move |stage: LiftStage, done: usize, total: usize| {
+        drawn.set_message(stage.name());
+        drawn.set_length(total as u64);
+        drawn.set_position(done as u64);
+    };
+    let written = write_views_page(&request, &device, &progress)?;
+    bar.finish_and_clear();
+    warn_dropped(&request.scene, written.dropped);
+    let [x, y, z] = written.up.up;
+    eprintln!(
+        "up [{x:.3}, {y:.3}, {z:.3}] ({}); {} views around the scene, {} from inside; they show \
+         {:.0} % of the Gaussians",
+        written.up.source.name(),
+        written.around,
+        written.inside,
+        100.0 * written.seen_share
+    );
+    let counts = if written.centres < written.gaussians {
+        format!(
+            "{} of {} centres carried: counts in the page are estimates",
+            written.centres, written.gaussians
+        )
+    } else {
+        format!(
+            "all {} centres carried: counts are exact",
+            written.gaussians
+        )
+    };
+    eprintln!(
+        "wrote {} ({:.1} MB; {counts})",
+        request.out.display(),
+        written.bytes as f64 / 1e6
     );
     Ok(())
 }

@@ -11,8 +11,8 @@
 //! [`Experiment::sample_posterior`] (SGLD) do the work, telling an [`Observer`] of each step
 //! (which may stop them, keeping the best so far). [`records`] and [`outputs`] turn results
 //! into the run folder's files, each written whole or not at all. [`Extensions`] carries what
-//! another crate adds (its own costs), and [`probe`], [`views`], [`io`] serve the smaller
-//! commands (`render --grad`, `bench`, `query`).
+//! another crate adds (its own costs), and [`probe`], [`views`], [`io`], [`views_page`] serve
+//! the smaller commands (`render --grad`, `bench`, `query`, `scene views`).
 //!
 //! ```no_run
 //! use std::path::Path;
@@ -71,6 +71,7 @@ pub mod starts;
 pub mod study;
 pub mod trajectory_run;
 pub mod views;
+pub mod views_page;
 
 pub use config::Config;
 pub use experiment::Experiment;

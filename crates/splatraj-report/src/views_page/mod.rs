@@ -216,7 +216,10 @@ fn view_data(i: usize, view: &PickView) -> Result<ViewData<'_>, ViewsPageError> 
         )));
     }
     if !view.pose.0.iter().all(|v| v.is_finite()) {
-        return Err(ViewsPageError(format!("view {}: pose is not finite", i + 1)));
+        return Err(ViewsPageError(format!(
+            "view {}: pose is not finite",
+            i + 1
+        )));
     }
     let r = view.pose.rotation_wc();
     Ok(ViewData {
@@ -294,6 +297,9 @@ mod tests {
         let mut page = page();
         page.views[0].depth.pop();
         let error = page.to_html().unwrap_err().to_string();
-        assert!(error.contains("11 depth values for a 4×3 picture"), "{error}");
+        assert!(
+            error.contains("11 depth values for a 4×3 picture"),
+            "{error}"
+        );
     }
 }
