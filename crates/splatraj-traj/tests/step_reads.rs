@@ -244,3 +244,70 @@ fn a_step_with_a_non_finite_gradient_is_undone() {
         "without the skip the weights move"
     );
 }
+
+/// The single-pose loop (`pose`, Table I) reads twice a step (the poses, then the totals, terms
+/// and gradient together) and once for its last evaluation's poses and terms; SGLD, whose
+/// chains live on the host, reads once a step. Neither reads an image.
+#[test]
+fn pose_loops_read_twice_and_once_a_step() {
+    use splatraj_render::camera::Pose;
+    use splatraj_traj::optimise::{
+        SgldOptions, SinglePoseOptions, optimise_poses, sample_poses_sgld,
+    };
+
+    let _counted = COUNTED.lock().unwrap();
+    let scene = scene();
+    let windows = windows(&scene, &["blue box"]);
+    let device = Device::flex().autodiff();
+    let on_device = DeviceScene::new(&scene, &device, DType::F32);
+    let costs = CostsConfig::default().build().unwrap();
+    let problem = Problem::new(&on_device, &windows, &costs, intrinsics());
+    let objects = [(
+        windows[0].context.object_centre,
+        windows[0].context.prior_radius,
+    )];
+    // Two starts: the object's view from two restarts.
+    let starts: Vec<Pose> = (0..2)
+        .map(|restart| {
+            object_start_poses(
+                &objects,
+                [0.0, 0.0, 0.5],
+                DEMO_UP.map(f64::from),
+                ObjectView::default(),
+                restart,
+                1,
+            )
+            .unwrap()
+            .remove(0)
+        })
+        .collect();
+    assert_eq!(starts.len(), 2);
+
+    let options = SinglePoseOptions {
+        iterations: 4,
+        ..SinglePoseOptions::default()
+    };
+    let before = counters::snapshot();
+    let results = optimise_poses(&problem, &starts, &options).expect("the poses optimise");
+    let counts = counters::snapshot().since(&before);
+    assert!(
+        results
+            .iter()
+            .all(|r| r.history.len() == 5 && r.total.is_finite())
+    );
+    assert_eq!(counts.reads, 2 * 4 + 2, "{counts:?}");
+    assert!(counts.bytes_down / counts.reads < 1024, "{counts:?}");
+
+    let options = SgldOptions {
+        iterations: 6,
+        burn_in: 2,
+        thin: 2,
+        ..SgldOptions::default()
+    };
+    let before = counters::snapshot();
+    let units = SinglePoseOptions::default().units();
+    let result = sample_poses_sgld(&problem, &starts, units, &options, 7).expect("the chains run");
+    let counts = counters::snapshot().since(&before);
+    assert_eq!(result.samples.len(), 2 * 2);
+    assert_eq!(counts.reads, 6, "{counts:?}");
+}

@@ -191,27 +191,38 @@ pub(crate) fn host_values<const D: usize>(t: Tensor<D>) -> Vec<f64> {
 /// One sample's terms as `(name, weight, unweighted value)`.
 pub(crate) type TermRow = Vec<(&'static str, f64, f64)>;
 
-/// Each sample's weighted total and terms, on the host.
-pub(crate) fn per_sample(terms: &CostTerms) -> Vec<(f64, TermRow)> {
-    let totals = host_values(terms.total.clone());
-    let values: Vec<Vec<f64>> = terms
-        .terms
-        .iter()
-        .map(|t| host_values(t.value.clone()))
-        .collect();
-    totals
-        .iter()
-        .enumerate()
-        .map(|(b, &total)| {
+/// Each sample's weighted total and terms on the host, and the values of `extra` (e.g. the
+/// step's gradient) when given: all of it in **one read** (one wait for the device on a GPU).
+pub(crate) fn per_sample(
+    terms: &CostTerms,
+    extra: Option<Tensor<1>>,
+) -> (Vec<(f64, TermRow)>, Option<Vec<f64>>) {
+    let batch = terms.total.dims()[0];
+    let mut parts = vec![terms.total.clone().without_autodiff()];
+    parts.extend(
+        terms
+            .terms
+            .iter()
+            .map(|t| t.value.clone().without_autodiff()),
+    );
+    let has_extra = extra.is_some();
+    parts.extend(extra.map(Tensor::without_autodiff));
+    let values = host_values(Tensor::cat(parts, 0));
+    let at = |i: usize| values.get(i).copied().unwrap_or(f64::NAN);
+    let rows = (0..batch)
+        .map(|b| {
             let row = terms
                 .terms
                 .iter()
-                .zip(&values)
-                .map(|(t, v)| (t.name, t.weight, v.get(b).copied().unwrap_or(f64::NAN)))
+                .enumerate()
+                .map(|(k, t)| (t.name, t.weight, at((k + 1) * batch + b)))
                 .collect();
-            (total, row)
+            (at(b), row)
         })
-        .collect()
+        .collect();
+    let used = (terms.terms.len() + 1) * batch;
+    let extra = has_extra.then(|| values.get(used..).unwrap_or_default().to_vec());
+    (rows, extra)
 }
 
 #[cfg(test)]

@@ -25,7 +25,8 @@ use serde::{Deserialize, Serialize};
 use splatraj_render::camera::Pose;
 
 use super::units::PoseUnits;
-use super::{OptimiseError, Problem, check_starts, host_values, per_sample};
+use super::{OptimiseError, Problem, check_starts, per_sample};
+use crate::costs::HostPoses;
 
 /// Settings of [`sample_poses_sgld`] (the config's `[sgld]` table).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -139,13 +140,20 @@ pub fn sample_poses_sgld(
             Tensor::<2>::from_data(TensorData::new(flat, [chains, 6]), (&device, dtype))
                 .require_grad();
         let poses = units.to_scene(normalised.clone());
-        let terms = problem.evaluate(0, poses, step, request.as_ref())?.terms;
-        let totals: Vec<f64> = per_sample(&terms).into_iter().map(|(t, _)| t).collect();
-        let grads = terms.total.sum().backward();
-        let grad = normalised
-            .grad(&grads)
-            .map(host_values)
-            .unwrap_or_else(|| vec![0.0; chains * 6]);
+        // The chains live on the host, so the render takes their poses from there and the
+        // step reads once: totals and gradient together.
+        let host = HostPoses {
+            samples: theta.iter().map(|t| units.denormalise(t)).collect(),
+            path: None,
+        };
+        let terms = problem
+            .evaluate_along(0, poses, None, None, Some(&host), step, request.as_ref())?
+            .terms;
+        let grads = terms.total.clone().sum().backward();
+        let grad = normalised.grad(&grads).map(|g| g.reshape([chains * 6]));
+        let (rows, grad) = per_sample(&terms, grad);
+        let totals: Vec<f64> = rows.into_iter().map(|(t, _)| t).collect();
+        let grad = grad.unwrap_or_else(|| vec![0.0; chains * 6]);
         if step >= options.burn_in && (step - options.burn_in).is_multiple_of(options.thin) {
             for (chain, (t, &total)) in theta.iter().zip(&totals).enumerate() {
                 samples.push(SgldSample {

@@ -38,6 +38,7 @@ use splatraj_render::camera::Pose;
 use super::trajectory::{Flow, StopReason};
 use super::units::PoseUnits;
 use super::{OptimiseError, Problem, check_adam, check_starts, host_values, per_sample};
+use crate::costs::HostPoses;
 
 /// Settings of [`optimise_single_pose`]; the defaults suit scenes in metres.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -199,10 +200,11 @@ pub fn optimise_poses_observed(
         let flat: Vec<f64> = rows.iter().flat_map(|p| units.normalise(p)).collect();
         Tensor::<2>::from_data(TensorData::new(flat, [rows.len(), 6]), (&device, dtype))
     };
+    // Scene poses (already denormalised on the device) as host rows.
     let from_tensor = |t: Tensor<2>| -> Vec<[f64; 6]> {
         host_values(t)
             .chunks_exact(6)
-            .map(|r| units.denormalise(&r.try_into().expect("rows of six")))
+            .map(|r| r.try_into().expect("rows of six"))
             .collect()
     };
     let start_rows: Vec<[f64; 6]> = starts.iter().map(|p| p.0).collect();
@@ -224,14 +226,30 @@ pub fn optimise_poses_observed(
     for step in 0..=options.iterations {
         let last = step == options.iterations;
         let normalised = module.poses.val();
-        let evaluated = from_tensor(normalised.clone());
         let poses = units.to_scene(normalised.clone());
-        let terms = problem.evaluate(0, poses, step, request.as_ref())?.terms;
-        let samples = per_sample(&terms);
+        // Two reads a step: the poses (the render's decisions and the history need them on
+        // the host), then the totals, terms and gradient together.
+        let evaluated = from_tensor(poses.clone().without_autodiff());
+        let host = HostPoses {
+            samples: evaluated.clone(),
+            path: None,
+        };
+        let terms = problem
+            .evaluate_along(0, poses, None, None, Some(&host), step, request.as_ref())?
+            .terms;
         let mut updated = false;
-        if !last {
-            let grads = terms.total.sum().backward();
-            let grad = normalised.grad(&grads).map(host_values);
+        let (samples, grad, grads) = if last {
+            let (samples, _) = per_sample(&terms, None);
+            (samples, None, None)
+        } else {
+            let grads = terms.total.clone().sum().backward();
+            let grad = normalised
+                .grad(&grads)
+                .map(|g| g.reshape([starts.len() * 6]));
+            let (samples, grad) = per_sample(&terms, grad);
+            (samples, grad, Some(grads))
+        };
+        if let Some(grads) = grads {
             let finite = samples.iter().all(|(t, _)| t.is_finite())
                 && grad
                     .as_ref()
