@@ -108,6 +108,7 @@ impl TargetSource for NearConfig {
                 .map(|m| f32::from(distance(m, point) <= self.radius))
                 .collect(),
             scoring: Scoring::Mask { cluster: false },
+            notes: Vec::new(),
         })
     }
 }

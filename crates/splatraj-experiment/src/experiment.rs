@@ -55,6 +55,8 @@ pub struct Experiment {
     pub windows: Vec<WindowTarget>,
     /// The selected Gaussians of each query (counts for the report).
     pub selected: Vec<usize>,
+    /// What grounding said about each query (a selection file's matched share), for the plan.
+    pub notes: Vec<Vec<String>>,
     /// Each query's object box as (centre, half extent): its robust extent around its centre.
     pub boxes: Vec<([f64; 3], [f64; 3])>,
     /// The settings that were `"auto"` in the config and were derived from the scene, in the
@@ -135,6 +137,7 @@ impl Experiment {
             bounds: (centre, half),
             windows: Vec::new(),
             selected: Vec::new(),
+            notes: Vec::new(),
             boxes: Vec::new(),
             derived: Vec::new(),
             device,
@@ -339,6 +342,7 @@ impl Experiment {
                         name: query.text.clone(),
                         values,
                         scoring: Scoring::Mask { cluster: false },
+                        notes: Vec::new(),
                     };
                     select(&self.scene, &query.text, &relevancy, &selection)
                         .with_context(|| format!("`queries.{i}.mask` ({})", path.display()))?
@@ -367,6 +371,7 @@ impl Experiment {
                 })
                 .with_context(|| format!("`queries.{i}`: prior radius"))?;
             self.selected.push(target.count);
+            self.notes.push(target.notes.clone());
             let half = target.extent.map(|e| 0.5 * f64::from(e));
             self.boxes.push((target.centre.map(f64::from), half));
             self.windows.push(WindowTarget {

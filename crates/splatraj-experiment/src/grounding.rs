@@ -53,6 +53,7 @@ pub fn group_target(
             *u = u.max(*m);
         }
         union.warnings.extend(part.warnings.iter().cloned());
+        union.notes.extend(part.notes.iter().cloned());
     }
     union.count = union.mask.iter().filter(|&&m| m > 0.5).count();
     union.centre = centre.map(|v| v as f32);

@@ -346,6 +346,9 @@ impl Experiment {
             w.context.prior_radius,
             w.context.target_ratio
         ));
+            for note in experiment.notes.get(i).into_iter().flatten() {
+                lines.push(format!("query {i}: {note}"));
+            }
         }
         lines
     }

@@ -19,8 +19,8 @@ use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render};
 use splatraj_scene::{Scene, resolve_up};
 use splatraj_semantic::{
-    Cluster, ClusteringSummary, Explanation, Region, RegionSpec, SelectionOptions, SourceKind,
-    Spread, Target, TargetSource, TargetsConfig, TextKeys, explain, select,
+    Cluster, ClusteringSummary, Explanation, RegionSpec, SelectionOptions, SourceKind, Spread,
+    Target, TargetSource, TargetsConfig, TextKeys, explain, select,
 };
 
 use crate::config::{Config, apply_assignment};
@@ -357,6 +357,9 @@ pub struct QueryReport {
     pub image: String,
     /// Doubts about the selection, each naming the query.
     pub warnings: Vec<String>,
+    /// What the source said about how it matched (a selection file's matched share).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
 }
 
 /// The source `targets`' inputs point to (the scene's own data deciding the rest), for a query
@@ -491,6 +494,7 @@ impl QueryOutcome {
             highlighted_share: self.highlighted_share,
             image: image.display().to_string(),
             warnings: t.warnings.clone(),
+            notes: t.notes.clone(),
         }
     }
 }
@@ -531,7 +535,8 @@ pub fn option_of_key(key: &str) -> String {
     let head = key.split('.').next().unwrap_or(key);
     match head {
         "synonyms" => "--synonym".to_string(),
-        "regions" => "--box/--sphere".to_string(),
+        "regions" if key.ends_with(".selection") => "--selection".to_string(),
+        "regions" => "--box/--sphere/--selection".to_string(),
         "negatives" => "--negative".to_string(),
         // A registered source's table: `custom.<name>` is the --source value.
         "custom" => format!("--source {key}"),
@@ -572,9 +577,9 @@ pub fn parse_region(region_box: Option<&str>, sphere: Option<&str>) -> Result<Op
         ),
         (None, None) => return Ok(None),
     };
-    Region::from(spec)
-        .validate(key)
-        .map_err(|e| anyhow!("{e}"))?;
+    if let Some(region) = spec.shape() {
+        region.validate(key).map_err(|e| anyhow!("{e}"))?;
+    }
     Ok(Some(spec))
 }
 
@@ -651,6 +656,9 @@ impl QueryReport {
             r.gaussians,
             100.0 * r.fraction
         ));
+        for note in &r.notes {
+            s.push_str(&format!("{note}\n"));
+        }
         let threshold = r
             .percentile_threshold
             .map_or(String::new(), |t| format!(" (percentile threshold {t:.4})"));

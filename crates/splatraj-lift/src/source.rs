@@ -392,6 +392,7 @@ impl TargetSource for LiftedSource {
             name: query.trim().to_string(),
             values,
             scoring: Scoring::Graded,
+            notes: Vec::new(),
         })
     }
 }

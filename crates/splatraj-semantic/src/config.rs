@@ -16,7 +16,10 @@
 //! Keys by source (a key of another source is an error, not silently ignored):
 //! - `labels`: `label_names = { "3" = "apple" }` (id → name, adding to the scene's names),
 //!   `synonyms = { "red mug" = ["cup", "mug"] }`;
-//! - `region`: `regions = { shelf = { box = [x0, y0, z0, x1, y1, z1] }, ball = { sphere = [cx, cy, cz, r] } }`;
+//! - `region`: `regions = { shelf = { box = [x0, y0, z0, x1, y1, z1] }, ball = { sphere = [cx, cy, cz, r] } }`,
+//!   or `head = { selection = "head.ply" }`: the splats a user selected in an editor (SuperSplat)
+//!   and exported, in any scene format, matched to the scene's Gaussians by position, scale and
+//!   colour (refused when it is not part of the scene; `sources::editor_selection`);
 //! - `features`: `features` (`.npy`/`.safetensors` `[N, D]`; default: the scene's own feature
 //!   properties), `phrases` (phrase table: `.json`, `.npy` with `phrase_names`, `.safetensors`),
 //!   `phrase_names`, `negatives`, `temperature`, `text_encoder` (CLIP weights: any phrase can

@@ -3,7 +3,8 @@
 //! SplaTraj grounds each query in the scene as a 0/1 value per Gaussian (paper, "Semantic Map
 //! Extraction"). This crate does that grounding. A [`TargetSource`] turns a query into one
 //! value per Gaussian: [`LabelsSource`] matches label names (case-insensitive, synonyms, ids),
-//! [`RegionSource`] takes a box or a sphere in world coordinates, [`FeaturesSource`] scores
+//! [`RegionSource`] takes a box or a sphere in world coordinates or a file of splats selected in
+//! an editor ([`match_selection`]), [`FeaturesSource`] scores
 //! per-Gaussian language embeddings against a phrase's text embedding with the LERF relevancy
 //! (softmax against canonical negatives, minimum over negatives), and [`LangsplatSource`]
 //! decodes LangSplat's per-Gaussian 3-d latents to 512-d with the scene's autoencoder decoder
@@ -65,7 +66,7 @@ pub use source_config::{
 };
 pub use sources::{
     FeatureInput, FeaturesSource, LabelsSource, LangsplatDecoder, LangsplatSource, Region,
-    RegionSource, Relevancy, Scoring, SourceConfig, SourceContext, SourceRegistry, TargetSource,
-    TextKeys, label_mask,
+    RegionSource, Relevancy, Scoring, SelectionFile, SelectionMatch, SourceConfig, SourceContext,
+    SourceRegistry, TargetSource, TextKeys, label_mask, match_selection,
 };
 pub use text_encoder::{Activation, ClipTokenizer, TextEncoder, TextEncoderOptions};

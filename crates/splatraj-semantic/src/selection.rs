@@ -336,6 +336,9 @@ pub struct Target {
     pub relevancy_spread: Spread,
     /// Doubts about the selection, each naming the query (for the caller to show).
     pub warnings: Vec<String>,
+    /// What the source said about how it matched (a selection file's matched share), for the
+    /// caller to show.
+    pub notes: Vec<String>,
 }
 
 impl Target {
@@ -576,6 +579,7 @@ pub fn select(
             max: rel[rel.len() - 1],
         },
         warnings,
+        notes: relevancy.notes.clone(),
     })
 }
 

@@ -17,7 +17,7 @@ use crate::embeddings::read_feature_sidecar;
 use crate::error::{Result, SemanticError};
 use crate::source_kind::{LIFTED, RegionSpec, SourceKind};
 use crate::sources::{
-    FeatureInput, LabelsSource, LangsplatDecoder, LangsplatSource, Region, RegionSource,
+    FeatureInput, LabelsSource, LangsplatDecoder, LangsplatSource, RegionSource, SelectionFile,
     SourceContext, SourceRegistry, TargetSource, TextKeys,
 };
 use crate::struct_keys::struct_keys;
@@ -56,7 +56,8 @@ pub struct LabelsConfig {
     pub synonyms: BTreeMap<String, Vec<String>>,
 }
 
-/// `region`: `regions = { shelf = { box = [x0, y0, z0, x1, y1, z1] } }`; a query names one.
+/// `region`: `regions = { shelf = { box = [x0, y0, z0, x1, y1, z1] }, head = { selection =
+/// "head.ply" } }`; a query names one.
 #[derive(Debug, Clone, PartialEq, Default, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RegionConfig {
@@ -261,12 +262,26 @@ impl TargetSourceConfig {
                     ));
                 }
                 let mut regions = BTreeMap::new();
+                let mut selections = BTreeMap::new();
                 for (name, spec) in &c.regions {
-                    let region = Region::from(*spec);
-                    region.validate(&key(&format!("regions.{name}")))?;
-                    regions.insert(name.clone(), region);
+                    let at = key(&format!("regions.{name}"));
+                    match (spec, spec.shape()) {
+                        (RegionSpec::Selection(path), _) => {
+                            let file = SelectionFile::read(&resolve(path))
+                                .map_err(|e| e.in_key(key(&format!("regions.{name}.selection"))))?;
+                            selections.insert(name.clone(), file);
+                        }
+                        (_, Some(region)) => {
+                            region.validate(&at)?;
+                            regions.insert(name.clone(), region);
+                        }
+                        (_, None) => unreachable!("a box or a sphere has a shape"),
+                    }
                 }
-                Box::new(RegionSource { regions })
+                Box::new(RegionSource {
+                    regions,
+                    selections,
+                })
             }
             TargetSourceConfig::Features(c) => {
                 let features = match &c.features {

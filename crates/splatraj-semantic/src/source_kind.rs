@@ -3,6 +3,7 @@
 //! source it names ([`SourceKind`]) and how a region is written ([`RegionSpec`]).
 
 use std::fmt;
+use std::path::PathBuf;
 use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
@@ -102,28 +103,34 @@ impl From<SourceKind> for String {
     }
 }
 
-/// A region as written in a config: `{ box = [x0, y0, z0, x1, y1, z1] }` (two opposite corners)
-/// or `{ sphere = [cx, cy, cz, r] }`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+/// A region as written in a config: `{ box = [x0, y0, z0, x1, y1, z1] }` (two opposite corners),
+/// `{ sphere = [cx, cy, cz, r] }`, or `{ selection = "head.ply" }` (the splats a user selected in
+/// an editor and exported, matched to the scene's Gaussians: [`crate::sources::editor_selection`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum RegionSpec {
     /// Axis-aligned box: smallest corner then largest corner.
     Box([f32; 6]),
     /// Ball: centre then radius.
     Sphere([f32; 4]),
+    /// A file of selected splats (any scene format; relative to the config's folder).
+    Selection(PathBuf),
 }
 
-impl From<RegionSpec> for Region {
-    fn from(spec: RegionSpec) -> Region {
-        match spec {
-            RegionSpec::Box(v) => Region::Box {
+impl RegionSpec {
+    /// The box or ball as a [`Region`]; `None` for a selection file, which is matched to the
+    /// scene instead.
+    pub fn shape(&self) -> Option<Region> {
+        match *self {
+            RegionSpec::Box(v) => Some(Region::Box {
                 min: [v[0], v[1], v[2]],
                 max: [v[3], v[4], v[5]],
-            },
-            RegionSpec::Sphere(v) => Region::Sphere {
+            }),
+            RegionSpec::Sphere(v) => Some(Region::Sphere {
                 centre: [v[0], v[1], v[2]],
                 radius: v[3],
-            },
+            }),
+            RegionSpec::Selection(_) => None,
         }
     }
 }

@@ -137,6 +137,7 @@ fn equal_relevancies_empty_scenes_and_bad_options_are_errors() {
         name: "x".into(),
         values: vec![0.9, 0.1, 0.6],
         scoring: Scoring::Graded,
+        notes: Vec::new(),
     };
     let err = select(
         &scene,
@@ -177,6 +178,7 @@ fn a_soft_mask_without_members_says_why() {
         name: "half.npy".into(),
         values: vec![0.5; 4],
         scoring: Scoring::Mask { cluster: false },
+        notes: Vec::new(),
     };
     let err = select(&scene, "half.npy", &rel, &opts()).unwrap_err();
     assert!(

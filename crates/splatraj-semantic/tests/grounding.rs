@@ -246,6 +246,7 @@ fn run(case: &Case, eps: EpsRule) -> Target {
         name: case.name.to_string(),
         values: case.relevancy.clone(),
         scoring: Scoring::Graded,
+        notes: Vec::new(),
     };
     let t = select(&case.scene, case.name, &relevancy, &options(case, eps)).unwrap();
     assert_eq!(t.candidates, case.candidates, "{}", case.name);
@@ -350,6 +351,7 @@ fn the_issue_16_scene_gets_the_objects_extent_and_the_old_rule_a_warning() {
         name: case.name.to_string(),
         values: case.relevancy.clone(),
         scoring: Scoring::Graded,
+        notes: Vec::new(),
     };
     let now = select(&case.scene, "mug", &relevancy, &SelectionOptions::default()).unwrap();
     assert_eq!(now.candidates, 400);

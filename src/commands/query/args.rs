@@ -46,8 +46,8 @@ pub struct QueryArgs {
     /// (region), a phrase (features, langsplat and the registered language fields). With
     /// --config and no --query: every query of the config (group shots' objects included),
     /// pictured as query-N.png (query-N-M.png for a group's objects), N the `[[queries]]`
-    /// entry from 1.
-    #[arg(long, required_unless_present = "config")]
+    /// entry from 1. With --selection, by default the selection file's name.
+    #[arg(long, required_unless_present_any = ["config", "selection"])]
     pub(super) query: Option<String>,
     // Boxed: the source options would make this the largest command by far.
     #[command(flatten)]
@@ -119,6 +119,11 @@ pub(super) struct SourceArgs {
     // Coordinates may start with '-': take the next word as the value, not as a flag.
     #[arg(long, value_name = "CX,CY,CZ,R", allow_hyphen_values = true)]
     sphere: Option<String>,
+    /// region: the splats selected in an editor (SuperSplat: select, then export the
+    /// selection), in any scene format, matched to the scene's Gaussians; refused when it is
+    /// not part of this scene. Names the region after --query, else after the file.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["region_box", "sphere"])]
+    selection: Option<PathBuf>,
     /// features: per-Gaussian feature vectors, `[N, D]` (.npy or .safetensors); by default
     /// the scene's own feature properties.
     #[arg(long, value_name = "SIDECAR")]
@@ -191,8 +196,7 @@ impl QueryArgs {
     /// directory): `[scene]`, one `[[queries]]`, and `[targets]` with each option as its key.
     pub(super) fn config_table(&self) -> Result<toml::Table> {
         let query = self
-            .query
-            .clone()
+            .query_text()
             .context("--query is needed without --config")?;
         if self.scene.is_none() {
             bail!("--scene (or --config) is needed");
@@ -227,7 +231,7 @@ impl QueryArgs {
         }
         let targets = self
             .source_options
-            .targets_table(self.query.as_deref(), &path_value)?;
+            .targets_table(self.query_text().as_deref(), &path_value)?;
         let mut table = toml::Table::new();
         for (key, keys) in [("scene", scene), ("targets", targets)] {
             if !keys.is_empty() {
@@ -235,6 +239,16 @@ impl QueryArgs {
             }
         }
         Ok(table)
+    }
+
+    /// The query: `--query`, else the name of the `--selection` file (`head` for
+    /// `head.compressed.ply`), which names its region.
+    pub(super) fn query_text(&self) -> Option<String> {
+        self.query.clone().or_else(|| {
+            let path = self.source_options.selection.as_deref()?;
+            let name = path.file_name()?.to_string_lossy();
+            Some(name.split('.').next().unwrap_or(&name).to_string())
+        })
     }
 
     /// Whether `--source` chose the source (else the inputs point to it).
@@ -263,6 +277,13 @@ impl SourceArgs {
             let query = query.context("--box/--sphere need --query: it names the region")?;
             let regions = std::collections::BTreeMap::from([(query.trim().to_string(), region)]);
             keys.insert("regions".into(), toml::Value::try_from(regions)?);
+        }
+        if let Some(path) = &self.selection {
+            let query = query.context("--selection needs --query: it names the region")?;
+            let selection = toml::Table::from_iter([("selection".to_string(), path_value(path)?)]);
+            let regions =
+                toml::Table::from_iter([(query.trim().to_string(), toml::Value::Table(selection))]);
+            keys.insert("regions".into(), toml::Value::Table(regions));
         }
         for (key, path) in [
             ("features", &self.features),

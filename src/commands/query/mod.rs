@@ -32,7 +32,8 @@ pub fn run(args: QueryArgs) -> Result<()> {
     let options = args.option_keys(FlagPaths::Absolute)?;
     let config = Config::load_layered(path, options, &args.set, &extensions)?;
     let texts = config_query_texts(&config);
-    if args.query.is_none() && texts.is_empty() {
+    let query = args.query_text();
+    if query.is_none() && texts.is_empty() {
         bail!(
             "config {}: no query to check (every [[queries]] uses a mask file); give --query",
             path.display()
@@ -45,7 +46,7 @@ pub fn run(args: QueryArgs) -> Result<()> {
         naming: KeyNaming::Config,
     }
     .prepare(&config, &extensions)?;
-    if let Some(query) = &args.query {
+    if let Some(query) = &query {
         return show_one(&args, prepared.find(query));
     }
     // Every query of the config, each with its own picture; one failing does not stop the

@@ -124,6 +124,7 @@ impl TargetSource for Feature3dgsSource {
                 .scoring
                 .score_rows(query, &m.source, "Gaussian", m.dim, &m.values)?,
             scoring: Scoring::Graded,
+            notes: Vec::new(),
         })
     }
 }

@@ -170,6 +170,7 @@ impl TargetSource for FeaturesSource {
             name: query.trim().to_string(),
             values: self.score_rows(query, &source, "Gaussian", dim, values)?,
             scoring: Scoring::Graded,
+            notes: Vec::new(),
         })
     }
 }

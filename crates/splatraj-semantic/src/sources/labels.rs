@@ -161,6 +161,7 @@ impl LabelsSource {
             scoring: Scoring::Mask {
                 cluster: self.cluster,
             },
+            notes: Vec::new(),
         })
     }
 }

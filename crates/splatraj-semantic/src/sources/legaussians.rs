@@ -266,6 +266,7 @@ impl TargetSource for LeGaussiansSource {
             name: query.trim().to_string(),
             values,
             scoring: Scoring::Graded,
+            notes: Vec::new(),
         })
     }
 }

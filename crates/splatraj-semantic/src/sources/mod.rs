@@ -6,6 +6,7 @@
 //! [`crate::selection`] and reads the [`Scoring`] a source declares.
 
 pub mod conv1x1;
+pub mod editor_selection;
 pub mod feature3dgs;
 pub mod features;
 pub mod gaussian_grouping;
@@ -23,6 +24,7 @@ use splatraj_scene::Scene;
 
 use crate::error::Result;
 
+pub use editor_selection::{SelectionFile, SelectionMatch, match_selection};
 pub use feature3dgs::{Feature3dgsConfig, Feature3dgsSource};
 pub use features::{FeatureInput, FeaturesSource};
 pub use gaussian_grouping::{GaussianGroupingConfig, GaussianGroupingSource};
@@ -57,6 +59,10 @@ pub struct Relevancy {
     pub values: Vec<f32>,
     /// How the values are to be read.
     pub scoring: Scoring,
+    /// What the source says about how it matched, for the caller to show (a selection
+    /// file's matched share); not doubts, which the selection's warnings carry.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
 }
 
 /// A way to turn a text query into per-Gaussian relevancy or selection. `Debug` so that a

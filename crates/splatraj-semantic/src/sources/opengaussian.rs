@@ -226,6 +226,7 @@ impl TargetSource for OpenGaussianSource {
             name: query.trim().to_string(),
             values: c.leaf_ind.iter().map(|&k| leaf_relevancy[k]).collect(),
             scoring: Scoring::Graded,
+            notes: Vec::new(),
         })
     }
 }

@@ -1,4 +1,5 @@
-//! `region` source: Gaussians whose centre lies in a box or a sphere in world coordinates.
+//! `region` source: Gaussians whose centre lies in a box or a sphere in world coordinates, or
+//! that a user selected in an editor and exported as a file ([`super::editor_selection`]).
 
 use std::collections::BTreeMap;
 
@@ -7,6 +8,7 @@ use splatraj_scene::Scene;
 
 use crate::error::{Result, SemanticError};
 use crate::names;
+use crate::sources::editor_selection::{SelectionFile, match_selection};
 use crate::sources::{Relevancy, Scoring, TargetSource};
 
 /// A region of world space. Boundaries are inclusive.
@@ -71,11 +73,14 @@ impl Region {
     }
 }
 
-/// Named regions; a query names one of them (case-insensitive).
+/// Named regions and selection files; a query names one of them (case-insensitive).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct RegionSource {
     /// Region by name.
     pub regions: BTreeMap<String, Region>,
+    /// Selection file by name, read (matched to the scene when a query names it).
+    #[serde(skip)]
+    pub selections: BTreeMap<String, SelectionFile>,
 }
 
 impl RegionSource {
@@ -83,6 +88,7 @@ impl RegionSource {
     pub fn single(name: impl Into<String>, region: Region) -> Self {
         RegionSource {
             regions: BTreeMap::from([(name.into(), region)]),
+            selections: BTreeMap::new(),
         }
     }
 }
@@ -94,6 +100,23 @@ impl TargetSource for RegionSource {
 
     fn relevancy(&self, scene: &Scene, query: &str) -> Result<Relevancy> {
         let q = names::normalise(query);
+        if let Some((name, selection)) = self
+            .selections
+            .iter()
+            .find(|(n, _)| names::normalise(n) == q)
+        {
+            let matched = match_selection(scene, selection)?;
+            let mut values = vec![0.0; scene.len()];
+            for &i in &matched.indices {
+                values[i] = 1.0;
+            }
+            return Ok(Relevancy {
+                name: name.clone(),
+                values,
+                scoring: Scoring::Mask { cluster: false },
+                notes: vec![matched.describe(&selection.path)],
+            });
+        }
         let Some((name, region)) = self.regions.iter().find(|(n, _)| names::normalise(n) == q)
         else {
             return Err(SemanticError::NoMatch {
@@ -101,7 +124,10 @@ impl TargetSource for RegionSource {
                 query: query.to_string(),
                 closest: names::closest(
                     query,
-                    self.regions.keys().map(String::as_str),
+                    self.regions
+                        .keys()
+                        .chain(self.selections.keys())
+                        .map(String::as_str),
                     names::SUGGESTIONS,
                 ),
             });
@@ -116,6 +142,7 @@ impl TargetSource for RegionSource {
             name: name.clone(),
             values,
             scoring: Scoring::Mask { cluster: false },
+            notes: Vec::new(),
         })
     }
 }

@@ -36,6 +36,7 @@
 //!             name: query.to_string(),
 //!             values: scene.means.iter().map(|m| f32::from(near(m) <= self.radius.powi(2))).collect(),
 //!             scoring: Scoring::Mask { cluster: false },
+//!             notes: Vec::new(),
 //!         })
 //!     }
 //! }
