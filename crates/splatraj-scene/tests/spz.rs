@@ -819,6 +819,42 @@ fn impossible_headers_are_errors() {
     let content = legacy_content(3, 50_000_000, 0, 0, &arrays(&sample_points(0), 3, 12));
     let detail = expect_error(&gzip(&content));
     assert!(detail.contains("claims 50000000 Gaussians"), "{detail}");
+
+    // A valid zstd file of 200 000 copies of one Gaussian: every stream decodes to the size its
+    // table of contents says, but the arrays are thousands of times the file, which no capture
+    // compresses to; refused before decoding, naming the count and the file's size.
+    let count = 200_000usize;
+    let one = arrays(&sample_points(0)[..1], 4, 12);
+    let repeated: Vec<Vec<u8>> = one.iter().map(|a| a.repeat(count)).collect();
+    let file = v4_file(count as u32, 0, 0, &[], &repeated);
+    let decoded: usize = repeated.iter().map(Vec::len).sum();
+    assert!(decoded > 1032 * file.len(), "{decoded} vs {}", file.len());
+    let detail = expect_error(&file);
+    assert!(
+        detail.contains("claims 200000 Gaussians")
+            && detail.contains(&format!("{}-byte", file.len())),
+        "{detail}"
+    );
+    // The same Gaussians with their positions spread out (as a capture's are) decode.
+    let spread: Vec<Packed> = (0..2_000)
+        .map(|i| {
+            let mut p = sample_points(0)[i % 4].clone();
+            p.position = [
+                i as f32 * 0.013,
+                (i % 37) as f32 * 0.07,
+                (i % 11) as f32 * 0.3,
+            ];
+            p
+        })
+        .collect();
+    let file = v4_file(spread.len() as u32, 0, 0, &[], &arrays(&spread, 4, 12));
+    let path = Path::new("spread.spz");
+    assert_eq!(
+        decode_spz(&file, path)
+            .expect("a plausible file decodes")
+            .len(),
+        2_000
+    );
 }
 
 /// Deterministic byte mutations of small valid files of each kind: every result must be an

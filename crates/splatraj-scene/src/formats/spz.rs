@@ -83,6 +83,13 @@ const MAX_DEFLATE_RATIO: usize = 1032;
 /// A zstd block yields at most 128 KiB and costs at least 4 bytes (an RLE block), so no zstd
 /// stream expands more than 32768-fold.
 const MAX_ZSTD_RATIO: u64 = 32_768;
+/// Largest ratio of a version 4 file's decoded arrays to its size that a capture can have.
+/// zstd alone would allow [`MAX_ZSTD_RATIO`], but a capture's positions and rotations are
+/// nearly random bits that compress a few-fold at most (the fruit and biker captures: 1.3–2×
+/// over all arrays), so an array set more than deflate's bound larger than the whole file
+/// repeats one value millions of times: a crafted or corrupt count, refused before decoding
+/// (a 37 KB file claiming 60 M Gaussians took 4.5 GB under the zstd bound alone).
+const MAX_PLAUSIBLE_V4_RATIO: usize = MAX_DEFLATE_RATIO;
 /// Room for extension records after the arrays of a gzip file; anything beyond is ignored.
 const MAX_LEGACY_EXTENSION_BYTES: usize = 1 << 20;
 const FLAG_ANTIALIASED: u8 = 0x1;
@@ -385,6 +392,26 @@ fn decode_v4(bytes: &[u8], path: &Path) -> Result<Scene> {
             format!(
                 "truncated: the SPZ table of contents needs bytes {toc_offset}..{toc_end}, the \
                  file has {}",
+                bytes.len()
+            ),
+        ));
+    }
+    // A file too short for its streams is reported as truncated by the loop below; one that
+    // holds them all is judged on what they claim to decode to.
+    let declared = (0..declared_streams)
+        .map(|i| read_u64(bytes, toc_offset + i * TOC_ENTRY_LEN).unwrap_or(0))
+        .fold(0u64, u64::saturating_add);
+    let decoded_bytes = sizes.iter().fold(0usize, |a, &b| a.saturating_add(b));
+    if (toc_end as u64).saturating_add(declared) <= bytes.len() as u64
+        && decoded_bytes > bytes.len().saturating_mul(MAX_PLAUSIBLE_V4_RATIO)
+    {
+        return Err(malformed(
+            path,
+            format!(
+                "the SPZ header claims {} Gaussians ({decoded_bytes} bytes of arrays) in a \
+                 {}-byte file, more than {MAX_PLAUSIBLE_V4_RATIO}-fold: a capture's positions \
+                 and rotations compress a few-fold at most, so the count is corrupt",
+                header.count,
                 bytes.len()
             ),
         ));
