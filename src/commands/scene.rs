@@ -14,7 +14,7 @@ use splatraj::lift::{LiftStage, MaskOptions};
 use splatraj_render::backend::BackendKind;
 use splatraj_scene::demo::DemoConfig;
 use splatraj_scene::summary::SceneInfo;
-use splatraj_scene::{InvalidPolicy, SceneFormat};
+use splatraj_scene::{InvalidPolicy, SceneFormat, UpSource};
 
 use crate::cli::{MemoryArgs, ReadArgs, progress_bar};
 
@@ -272,10 +272,13 @@ fn views(args: ViewsArgs) -> Result<()> {
     bar.finish_and_clear();
     warn_dropped(&request.scene, written.dropped);
     let [x, y, z] = written.up.up;
+    let from = match written.up.source {
+        UpSource::Config => "given".to_string(),
+        other => format!("{}; --up X,Y,Z to override", other.name()),
+    };
     eprintln!(
-        "up [{x:.3}, {y:.3}, {z:.3}] ({}); {} views around the scene, {} from inside; they show \
-         {:.0} % of the Gaussians",
-        written.up.source.name(),
+        "up [{x:.3}, {y:.3}, {z:.3}] ({from}); {} views around the scene, {} from inside; they \
+         show {:.0} % of the Gaussians",
         written.around,
         written.inside,
         100.0 * written.seen_share

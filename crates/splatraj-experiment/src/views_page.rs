@@ -13,7 +13,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow, bail};
 use burn::tensor::{DType, Device};
-use splatraj_lift::{LiftStage, Placement, Progress, View, ViewOptions, plan_views};
+use glam::DVec3;
+use splatraj_lift::{LiftStage, Placement, Progress, View, ViewOptions, ViewPlan, plan_views};
 use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::images::{png_rgb8, rgb8};
 use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render};
@@ -159,12 +160,7 @@ pub fn write_views_page(
         request.options.size,
         progress,
     )?;
-    let views: Vec<(View, String)> = plan
-        .views
-        .iter()
-        .zip(&plan.placements)
-        .map(|(view, placement)| (*view, caption(*placement, view)))
-        .collect();
+    let views = overviews_first(scene, &plan);
     let title = request
         .scene
         .file_name()
@@ -278,6 +274,31 @@ fn render_view(uploaded: &DeviceScene, view: &View, caption: String) -> Result<P
         png,
         depth,
     })
+}
+
+/// The planned views with captions: those around the content farthest first (an overview
+/// before the close-ups), then those from inside. The planner orders them by what each newly
+/// shows, which for picking puts a close-up first.
+fn overviews_first(scene: &Scene, plan: &ViewPlan) -> Vec<(View, String)> {
+    let middle = scene
+        .robust_bounds(0.02)
+        .map_or(DVec3::ZERO, |b| DVec3::from(b.center().map(f64::from)));
+    let mut views: Vec<(View, Placement)> = plan
+        .views
+        .iter()
+        .copied()
+        .zip(plan.placements.iter().copied())
+        .collect();
+    views.sort_by(|(a, pa), (b, pb)| {
+        let far = |v: &View| v.pose.centre().distance(middle);
+        (*pa == Placement::Inside)
+            .cmp(&(*pb == Placement::Inside))
+            .then(far(b).total_cmp(&far(a)))
+    });
+    views
+        .into_iter()
+        .map(|(view, placement)| (view, caption(placement, &view)))
+        .collect()
 }
 
 /// Where a view stands, in words.

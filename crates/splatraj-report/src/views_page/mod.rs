@@ -32,7 +32,7 @@ const PAGE_STYLE: &str = "body{max-width:1500px}
 .panel{position:sticky;top:8px;width:380px;flex:none;border:1px solid #ccc;padding:10px 12px;background:#fafafa;font-size:14px}
 .panel input[type=text],.panel input[type=number]{width:120px}.panel button{margin:2px 4px 2px 0}
 .panel textarea{width:100%;height:170px;font-family:monospace;font-size:12px}
-.view{position:relative;display:inline-block;line-height:0}.view img{display:block;width:100%;border:1px solid #ccc}
+.view{position:relative;display:block;line-height:0}.view img{display:block;width:100%;border:1px solid #ccc}
 .view canvas{position:absolute;left:0;top:0;width:100%;height:100%;cursor:crosshair;touch-action:none}
 figure.pick{width:520px;max-width:100%}code.line{display:block;background:#f0f0f0;padding:4px;word-break:break-all}
 #parts li{margin:2px 0}.warn{color:#b00020}";
@@ -160,6 +160,7 @@ impl ViewsPage {
                 h = view.intrinsics.height,
             ));
         }
+        page.push_str("</div>");
         page.push_str(PANEL);
         page.push_str("</div>\n");
         page.push_str(&format!(

@@ -147,8 +147,9 @@
     const p = state.point;
     const r2 = state.radius * state.radius;
     let drawn = 0;
-    ctx.fillStyle = "rgba(255, 40, 200, 0.85)";
-    const dot = Math.max(1.5, v.width / 400);
+    // Small and half transparent, so that the part itself still shows through.
+    ctx.fillStyle = "rgba(255, 40, 200, 0.45)";
+    const dot = Math.max(1, v.width / 512);
     for (let k = 0; k < centres.length && drawn < MAX_DOTS; k += 3) {
       const q = [centres[k], centres[k + 1], centres[k + 2]];
       const dx = q[0] - p[0];
