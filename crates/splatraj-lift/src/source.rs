@@ -166,6 +166,8 @@ impl LiftedSource {
         if let (Some(dir), Some(cameras)) = (&config.photos, &cameras) {
             photos_of(dir, cameras)?;
         }
+        // Keyed by the table's own name for the file, so the caller can name it as the user
+        // set it (`text_encoder` in `[targets]`).
         let text = TextEncoder::from_file(
             &config.weights,
             TextEncoderOptions {
@@ -173,7 +175,8 @@ impl LiftedSource {
                 heads: None,
             },
             &device,
-        )?;
+        )
+        .map_err(|e| LiftError::Semantic(e.in_key("weights")))?;
         Ok(LiftedSource {
             config,
             text,

@@ -175,6 +175,20 @@ fn targets_source_lifted_builds_through_a_registry_and_names_bad_keys() {
         "{error}"
     );
 
+    // A weights file that cannot be read is named by the key the user set, not by the lifted
+    // table it went into.
+    let missing = parse("source = \"lifted\"\ntext_encoder = \"no-such-weights.safetensors\"\n");
+    let error = missing
+        .build_with(&base, &device, &registry)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        error.starts_with("targets.text_encoder")
+            && error.contains("no-such-weights.safetensors")
+            && !error.contains("targets.lifted"),
+        "{error}"
+    );
+
     let without = parse("source = \"lifted\"\n");
     let error = without
         .build_with(&base, &device, &registry)

@@ -380,7 +380,26 @@ impl LiftedConfig {
                  (splatraj-experiment's does)",
             ));
         }
-        registry.build(LIFTED, &toml::Value::Table(table), context, &key("lifted"))
+        // The source names its own keys (`weights`) inside `lifted`; one the user set through a
+        // shared key is named as they wrote it (`text_encoder`, `--text-encoder`), not as the
+        // lifted table (`--source-key`) they never touched.
+        registry
+            .build(LIFTED, &toml::Value::Table(table), context, &key("lifted"))
+            .map_err(|e| match e {
+                SemanticError::Config { key: outer, error } => match *error {
+                    SemanticError::Config { key: inner, error } => {
+                        let shared = LIFTED_TEXT_KEYS
+                            .iter()
+                            .find(|(shared, own)| *own == inner && set.contains_key(*shared));
+                        match shared {
+                            Some((shared, _)) => error.in_key(key(shared)),
+                            None => error.in_key(key(&format!("lifted.{inner}"))),
+                        }
+                    }
+                    error => error.in_key(outer),
+                },
+                other => other,
+            })
     }
 }
 
