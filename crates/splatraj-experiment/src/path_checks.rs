@@ -66,12 +66,18 @@ impl Experiment {
         let occupancy = self.occupancy()?;
         let margin = self.clearance_margin();
         let clearance = occupancy.as_ref().zip(margin);
+        let centres: Vec<[f64; 3]> = self
+            .windows
+            .iter()
+            .map(|w| w.context.object_centre)
+            .collect();
         let paths = path_metrics(
             &|t: &[f64]| trajectory.poses_at(t),
             windows.len(),
             self.config.output.ldj_samples,
             clearance,
             self.path_seconds(),
+            &centres,
         );
         let n = windows.len();
         let shots = self.shot_paths()?;

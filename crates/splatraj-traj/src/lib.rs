@@ -17,5 +17,6 @@ pub mod clearance;
 pub mod costs;
 pub mod metrics;
 pub mod optimise;
+pub mod pacing;
 pub mod shots;
 pub mod trajectory;

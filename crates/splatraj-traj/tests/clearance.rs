@@ -1,6 +1,6 @@
 //! Clearance and motion limits: exact distances to ellipsoids against closed forms and brute
-//! force, the occupancy index against a scan of every ellipsoid, both path costs against
-//! closed forms and f64 finite differences, a camera inside geometry pushed out, and a speed
+//! force, the occupancy index against a scan of every ellipsoid, both path costs (the motion
+//! cost's orbit limit on a circle too) against closed forms and f64 finite differences, a camera inside geometry pushed out, and a speed
 //! limit that holds on the densely sampled path.
 
 use burn::tensor::{DType, Device, Tensor, TensorData};
@@ -361,9 +361,89 @@ fn motion_cost_matches_closed_forms_and_finite_differences() {
         max_speed: Some(1.0.into()),
         max_acceleration: Some(5.0),
         max_angular_speed: Some(10.0),
+        max_orbit_speed: Some(5.0),
         even_speed: 0.5,
     };
     check_finite_differences(&all, &uneven, &build);
+}
+
+#[test]
+fn orbit_limit_matches_the_circle_closed_form_and_finite_differences() {
+    // A camera circling o = (1, −2, 0.5) at radius ρ and rate Ω in a tilted plane, sampled
+    // every Δt: each step's chord between unit directions is 2 sin(ΩΔt/2), so the charge is
+    // (2 sin(ΩΔt/2)/Δt)²/ψ² − 1 at every step.
+    let (seconds, time_step) = (10.0, 0.01);
+    let dt = seconds * time_step;
+    let (rho, omega) = (1.7, 0.9); // units, rad/s
+    let o = DVec3::new(1.0, -2.0, 0.5);
+    let (a, b) = (
+        DVec3::new(1.0, 0.0, 0.3).normalize(),
+        DVec3::new(0.0, 1.0, 0.0),
+    );
+    let circle: Vec<[f64; 6]> = (0..9)
+        .map(|k| {
+            let phase = omega * k as f64 * dt;
+            let c = o + rho * (a * phase.cos() + b * phase.sin());
+            [0.1, -0.2, 0.3, c.x, c.y, c.z]
+        })
+        .collect();
+    let build = |t: Tensor<2>| {
+        CostInputs::new(t.clone(), None, 0, context(o.to_array()))
+            .unwrap()
+            .with_path(PathSamples {
+                poses: t,
+                time_step,
+                seconds: Some(seconds),
+            })
+    };
+    let evaluate = |cost: &MotionCost, poses: &[[f64; 6]]| -> f64 {
+        host(
+            cost.evaluate(&build(poses_tensor(poses, &Device::flex())))
+                .unwrap(),
+        )[0]
+    };
+    let limit = 0.4f64; // rad/s
+    let orbit = MotionCost {
+        max_orbit_speed: Some(limit.to_degrees()),
+        ..MotionCost::default()
+    };
+    let rate = 2.0 * (0.5 * omega * dt).sin() / dt;
+    let want = (rate / limit).powi(2) - 1.0;
+    let got = evaluate(&orbit, &circle);
+    assert!((got - want).abs() < 1e-9 * want, "{got} vs {want}");
+    // Within the limit: nothing to pay.
+    let slow = MotionCost {
+        max_orbit_speed: Some(1.0f64.to_degrees()),
+        ..MotionCost::default()
+    };
+    assert!(evaluate(&slow, &circle).abs() < 1e-12);
+    // Straight at the object and through it (the floored distance at o): no orbit before o,
+    // a half turn of the direction as the camera passes o, and a finite value.
+    let through: Vec<[f64; 6]> = (-3..=3)
+        .map(|k| {
+            let c = o + a * (0.5 * k as f64);
+            [0.0, 0.0, 0.0, c.x, c.y, c.z]
+        })
+        .collect();
+    let radial = evaluate(&orbit, &through);
+    assert!(radial.is_finite());
+    // The steps into and out of o move the direction by a chord of 1 (from ±a to the floored
+    // zero vector's direction, which is 0): two of six steps, each charged (1/Δt)²/ψ² − 1.
+    let want = 2.0 / 6.0 * ((1.0 / dt / limit).powi(2) - 1.0);
+    assert!((radial - want).abs() < 1e-6 * want, "{radial} vs {want}");
+
+    // Gradients on an uneven circle (turning too, so both rotation and orbit terms act).
+    let mut rng = 0x0_B17_u64;
+    let uneven: Vec<[f64; 6]> = circle
+        .iter()
+        .map(|p| std::array::from_fn(|i| p[i] + 0.05 * (xorshift(&mut rng) - 0.5)))
+        .collect();
+    let both = MotionCost {
+        max_angular_speed: Some(10.0),
+        max_orbit_speed: Some(limit.to_degrees()),
+        ..MotionCost::default()
+    };
+    check_finite_differences(&both, &uneven, &build);
 }
 
 fn pose_only_problem_costs(config: CostsConfig) -> splatraj_traj::costs::WeightedCosts {
@@ -491,6 +571,7 @@ fn two_object_run(
         2001,
         None,
         Some(seconds),
+        &[],
     )
 }
 

@@ -359,3 +359,47 @@ fn the_verdict_fails_a_camera_inside_the_object_and_one_behind_a_wall() {
         inside.problems
     );
 }
+
+#[test]
+fn the_framed_share_counts_the_middle_samples_that_show_the_object_centred() {
+    let (host, object) = enclosed_object();
+    let device = Device::flex();
+    let on_device = DeviceScene::new(&host, &device, DType::F32);
+    let keep: Vec<bool> = (0..host.len()).map(|i| i < object).collect();
+    let alone = DeviceScene::new(&host.subset(&keep), &device, DType::F32);
+    let mask: Vec<f32> = keep.iter().map(|&k| if k { 1.0 } else { 0.0 }).collect();
+    let window = WindowObject {
+        name: "ball",
+        mask: &mask,
+        alone: &alone,
+        target_ratio: 0.06,
+        rasterizer: Rasterizer::default(),
+        bounds: Some(([0.0; 3], [0.1; 3])),
+    };
+    // Through the open side; looking at the ball until `away_from`, then along +x (the ball
+    // out of frame: 90° off a 60° lens's axis).
+    let eye = DVec3::new(0.0, 0.9, 0.0);
+    let share = |away_from: f64| {
+        let pose_at = |times: &[f64]| -> Vec<[f64; 6]> {
+            times
+                .iter()
+                .map(|&t| {
+                    let look = if t < away_from {
+                        DVec3::ZERO
+                    } else {
+                        eye + DVec3::X
+                    };
+                    Pose::look_at(eye, look, DVec3::Z).unwrap().0
+                })
+                .collect()
+        };
+        let m = window_metrics(&on_device, &window, 0, 1, 10, &camera(), &pose_at).unwrap();
+        m.framing.framed_share.unwrap()
+    };
+    // Of 10 samples at (k + ½)/10, the middle 60 % holds k = 2…7 (0.25 … 0.75).
+    assert_eq!(share(2.0), 1.0);
+    assert_eq!(share(0.5), 0.5); // 0.25, 0.35, 0.45 framed
+    assert_eq!(share(0.3), 1.0 / 6.0); // 0.25 only
+    // Looking away at the window's ends only: the middle is whole.
+    assert_eq!(share(0.8), 1.0);
+}

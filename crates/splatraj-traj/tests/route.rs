@@ -199,6 +199,7 @@ fn walled_run(planned: bool) -> f64 {
         401,
         Some((&occupancy, MARGIN)),
         None,
+        &[],
     );
     for (w, m) in metrics.iter().enumerate() {
         println!("planned {planned}, window {w}: {:?}", m.clearance);

@@ -57,7 +57,8 @@ pub struct OutputConfig {
     pub verdict: VerdictPolicy,
     /// Poses written to `trajectory.json` (evenly spaced over [0, 1]).
     pub trajectory_samples: usize,
-    /// Samples per window for the metrics.
+    /// Samples per window for the metrics (default 30: 18 in the middle 60 % the verdict's
+    /// `framed_share` judges, one every 0.1 s of a 3 s window).
     pub metric_samples: usize,
     /// Samples of the whole trajectory for LDJ.
     pub ldj_samples: usize,
@@ -85,7 +86,7 @@ impl Default for OutputConfig {
             mask_overlay: MaskOverlay::None,
             verdict: VerdictPolicy::Fail,
             trajectory_samples: 201,
-            metric_samples: 16,
+            metric_samples: 30,
             ldj_samples: splatraj_traj::metrics::DEFAULT_LDJ_SAMPLES,
         }
     }

@@ -1,5 +1,5 @@
-//! Motion limits: keeps the camera's speed, acceleration and turning rate within bounds, and
-//! optionally its speed even, along the densely sampled path.
+//! Motion limits: keeps the camera's speed, acceleration, turning rate and orbit rate within
+//! bounds, and optionally its speed even, along the densely sampled path.
 //!
 //! The path is played over `seconds` (the config's `[output] seconds`): normalised time t
 //! becomes t·T seconds. On the path's evenly spaced poses (time step h, so Δt = h·T seconds)
@@ -7,9 +7,15 @@
 //! ```text
 //! v_k = (c_{k+1} − c_k)/Δt,   a_k = (c_{k+1} − 2c_k + c_{k−1})/Δt²,
 //! θ_k² ≈ ‖R_{k+1} − R_k‖²_F / 2                 (= 4 sin²(θ/2) ≈ θ² for the small turn θ)
+//! u_k = (c_k − o)/‖c_k − o‖,   φ_k² ≈ ‖u_{k+1} − u_k‖²   (= 4 sin²(φ/2), φ the orbit angle)
 //! L_motion = mean_k max(0, ‖v_k‖²/v_max² − 1) + mean_k max(0, ‖a_k‖²/a_max² − 1)
-//!          + mean_k max(0, θ_k²/(ω_max Δt)² − 1) + w_even · mean_k (‖v_k‖²/mean‖v‖² − 1)²
+//!          + mean_k max(0, θ_k²/(ω_max Δt)² − 1) + mean_k max(0, φ_k²/(ψ_max Δt)² − 1)
+//!          + w_even · mean_k (‖v_k‖²/mean‖v‖² − 1)²
 //! ```
+//!
+//! with o the window's object centre ([`super::QueryContext::object_centre`]): the orbit rate
+//! is how fast the camera circles its subject (docs/conventions.md, "Pacing"). ‖c_k − o‖ is
+//! floored at 10⁻⁶ of the prior radius so a camera at o has a finite value and gradient.
 //!
 //! Each limit term is 0 within its bound and grows linearly with the relative excess of the
 //! squared rate (no square root, so no NaN gradient at rest); a limit left out of the config
@@ -28,7 +34,7 @@ use super::{Cost, CostDomain, CostError, CostInputs, OrAuto, check_weight, inval
 
 /// The motion-limit cost: table `[costs.motion]`, keys `weight` (default 1), `max_speed`
 /// (scene units per second), `max_acceleration` (scene units per second²),
-/// `max_angular_speed` (degrees per second), each optional, and `even_speed` (weight of the
+/// `max_angular_speed` and `max_orbit_speed` (degrees per second), each optional, and `even_speed` (weight of the
 /// even-speed term, default 0). Needs `[output] seconds` when a limit is given.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -45,6 +51,9 @@ pub struct MotionCost {
     /// Largest turning rate of the view, degrees per second (> 0).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub max_angular_speed: Option<f64>,
+    /// Largest orbit rate about the window's object centre, degrees per second (> 0).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_orbit_speed: Option<f64>,
     /// Weight of the even-speed term (≥ 0; 0 leaves the speed free).
     pub even_speed: f64,
 }
@@ -57,17 +66,21 @@ impl Default for MotionCost {
             max_speed: None,
             max_acceleration: None,
             max_angular_speed: None,
+            max_orbit_speed: None,
             even_speed: 0.0,
         }
     }
 }
 
-/// Turning rate a viewer follows comfortably, degrees per second: the default limit of a
-/// config without `[costs]` (a pan of 90° takes two seconds; cinematographers' rule of thumb
-/// for a pan that does not strobe at 30 fps is 3–7 seconds for a whole frame width, 10–20°/s
-/// for a 60° lens, so this is brisk but not a whip pan; what a 3 s window leaves for the turn
-/// between two sides of an object needs about this much).
-pub const FIRST_TRY_MAX_ANGULAR_SPEED: f64 = 60.0;
+/// Turning-rate limit of a config without `[costs]`, degrees per second: 5°/s under the rate
+/// a viewer follows ([`crate::pacing::MAX_TURN_RATE`], the verdict's limit), since this
+/// linear penalty lets the image costs push a rate a little past it and sees the path on the
+/// optimiser's grid, coarser than the verdict's.
+pub const FIRST_TRY_MAX_ANGULAR_SPEED: f64 = 40.0;
+
+/// Orbit-rate limit of a config without `[costs]`, degrees per second: 5°/s under
+/// [`crate::pacing::MAX_ORBIT_RATE`], for the same reason.
+pub const FIRST_TRY_MAX_ORBIT_SPEED: f64 = 40.0;
 
 /// How many working distances (prior radii) per second the automatic speed limit allows.
 pub const AUTO_SPEED_RADII_PER_SECOND: f64 = 1.5;
@@ -94,7 +107,7 @@ pub fn auto_max_speed(mean_radius: f64, largest_travel: f64, window_seconds: f64
 
 impl MotionCost {
     /// The motion limits of a config without `[costs]`: speed `"auto"`, turning at most
-    /// [`FIRST_TRY_MAX_ANGULAR_SPEED`], weight 1: a preference the image costs can overrule
+    /// [`FIRST_TRY_MAX_ANGULAR_SPEED`], orbiting at most [`FIRST_TRY_MAX_ORBIT_SPEED`], weight 1: a preference the image costs can overrule
     /// (at 10 the limits won against framing on the first-try tray: the camera backed away
     /// from its objects to turn less).
     pub fn first_try() -> Self {
@@ -103,6 +116,7 @@ impl MotionCost {
             max_speed: Some(OrAuto::Auto),
             max_acceleration: None,
             max_angular_speed: Some(FIRST_TRY_MAX_ANGULAR_SPEED),
+            max_orbit_speed: Some(FIRST_TRY_MAX_ORBIT_SPEED),
             even_speed: 0.0,
         }
     }
@@ -112,7 +126,13 @@ impl MotionCost {
         self.max_speed.is_some()
             || self.max_acceleration.is_some()
             || self.max_angular_speed.is_some()
+            || self.max_orbit_speed.is_some()
     }
+}
+
+/// The camera centres `[P, 3]` of poses `[P, 6]`.
+fn centres_of(poses: &Tensor<2>) -> Tensor<2> {
+    poses.clone().narrow(1, 3, 3)
 }
 
 /// max(0, x/limit² − 1), averaged: the charge of squared rates `x` `[N]` over `limit`.
@@ -141,6 +161,7 @@ impl Cost for MotionCost {
             ("max_speed", self.max_speed.and_then(OrAuto::value)),
             ("max_acceleration", self.max_acceleration),
             ("max_angular_speed", self.max_angular_speed),
+            ("max_orbit_speed", self.max_orbit_speed),
         ] {
             if let Some(v) = value
                 && !(v.is_finite() && v > 0.0)
@@ -180,7 +201,7 @@ impl Cost for MotionCost {
             }
         };
         let dt = path.time_step * seconds;
-        let centres = poses.clone().narrow(1, 3, 3); // [P, 3]
+        let centres = centres_of(&poses); // [P, 3]
         let steps = centres.clone().narrow(0, 1, count - 1) - centres.narrow(0, 0, count - 1);
         let squared_speed = steps
             .clone()
@@ -214,7 +235,8 @@ impl Cost for MotionCost {
             total = total + over_limit(squared, limit);
         }
         if let Some(limit) = self.max_angular_speed {
-            let rotations = splatraj_render::camera::rotation_matrices(poses.narrow(1, 0, 3));
+            let rotations =
+                splatraj_render::camera::rotation_matrices(poses.clone().narrow(1, 0, 3));
             let turns =
                 rotations.clone().narrow(0, 1, count - 1) - rotations.narrow(0, 0, count - 1);
             let squared_angle = turns
@@ -223,6 +245,26 @@ impl Cost for MotionCost {
                 .sum_dim(1)
                 .reshape([count - 1])
                 .div_scalar(2.0 * dt * dt); // θ²/Δt² [P − 1]
+            total = total + over_limit(squared_angle, limit.to_radians());
+        }
+        if let Some(limit) = self.max_orbit_speed {
+            let floor = 1e-6 * inputs.query().prior_radius;
+            let offsets = centres_of(&poses) - inputs.row(inputs.query().object_centre);
+            // Floored before the square root (no NaN gradient at the object's centre).
+            let lengths = offsets
+                .clone()
+                .square()
+                .sum_dim(1)
+                .clamp_min(floor * floor)
+                .sqrt(); // [P, 1]
+            let directions = offsets / lengths.expand([count, 3]);
+            let chords =
+                directions.clone().narrow(0, 1, count - 1) - directions.narrow(0, 0, count - 1);
+            let squared_angle = chords
+                .square()
+                .sum_dim(1)
+                .reshape([count - 1])
+                .div_scalar(dt * dt); // φ²/Δt² [P − 1]
             total = total + over_limit(squared_angle, limit.to_radians());
         }
         if self.even_speed > 0.0 {

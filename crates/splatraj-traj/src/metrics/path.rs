@@ -1,5 +1,6 @@
 //! How a trajectory moves through the scene, per query window: clearance from the geometry
-//! and peak speed, acceleration and turning rate (docs/conventions.md "Clearance and motion").
+//! and peak speed, acceleration, turning and orbit rate (docs/conventions.md "Clearance and
+//! motion").
 //!
 //! The trajectory is sampled on one even grid over [0, 1], made fine enough that consecutive
 //! camera centres are at most a quarter of the clearance margin apart (so no surface can pass
@@ -14,6 +15,11 @@
 //!   seconds (per unit of normalised time when none is given): speed ‖Δc‖/Δt between
 //!   consecutive samples, acceleration ‖c_{k+1} − 2c_k + c_{k−1}‖/Δt² at inner samples,
 //!   angular speed the exact angle of R_kᵀR_{k+1} over Δt, in degrees per second.
+//! - Orbit rate, when the window's object centre o is given: the exact angle between the
+//!   directions from o to consecutive camera centres, (c_k − o)/‖c_k − o‖, over Δt, in degrees
+//!   per second: how fast the camera circles its subject, which a viewer reads as the subject
+//!   turning. Computed here from the poses on the host, independently of the motion cost's
+//!   tensor form (a chord, not an angle), so the verdict does not grade the cost by itself.
 
 use glam::DVec3;
 use serde::Serialize;
@@ -55,6 +61,10 @@ pub struct MotionMetrics {
     pub peak_acceleration: f64,
     /// Largest turning rate, degrees per second.
     pub peak_angular_speed: f64,
+    /// Largest orbit rate about the window's object centre, degrees per second (None: no
+    /// centre given).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub peak_orbit_speed: Option<f64>,
     /// Standard deviation of the speed over its mean (0: even speed).
     pub speed_spread: f64,
 }
@@ -73,13 +83,15 @@ pub struct PathMetrics {
 
 /// Per-window path metrics of the trajectory whose poses `pose_at` gives, sampled at least
 /// `samples` times over [0, 1] (refined for the clearance, see the module docs);
-/// `clearance` is the occupancy and margin, `seconds` the duration.
+/// `clearance` is the occupancy and margin, `seconds` the duration, `orbit_centres[i]` window
+/// i's object centre for its orbit rate (a window beyond the list has none).
 pub fn path_metrics(
     pose_at: &dyn Fn(&[f64]) -> Vec<Pose>,
     windows: usize,
     samples: usize,
     clearance: Option<(&Occupancy, f64)>,
     seconds: Option<f64>,
+    orbit_centres: &[[f64; 3]],
 ) -> Vec<PathMetrics> {
     let mut times = uniform_times(samples.max(3));
     let mut poses = pose_at(&times);
@@ -134,6 +146,15 @@ pub fn path_metrics(
             let peak_angular_speed = (first..last)
                 .map(|k| turn_angle(&poses[k], &poses[k + 1]).to_degrees() / dt)
                 .fold(0.0, f64::max);
+            let peak_orbit_speed = orbit_centres.get(i).map(|&o| {
+                let o = DVec3::from(o);
+                (first..last)
+                    .map(|k| {
+                        let angle = angle_between(centre(&poses[k]) - o, centre(&poses[k + 1]) - o);
+                        angle.to_degrees() / dt
+                    })
+                    .fold(0.0, f64::max)
+            });
             let mean = speeds.iter().sum::<f64>() / speeds.len().max(1) as f64;
             let variance =
                 speeds.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / speeds.len().max(1) as f64;
@@ -142,6 +163,7 @@ pub fn path_metrics(
                 peak_speed: speeds.iter().copied().fold(0.0, f64::max),
                 peak_acceleration,
                 peak_angular_speed,
+                peak_orbit_speed,
                 speed_spread: if mean > 0.0 {
                     variance.sqrt() / mean
                 } else {
@@ -171,6 +193,13 @@ pub fn path_metrics(
 
 fn centre(pose: &Pose) -> DVec3 {
     DVec3::new(pose[3], pose[4], pose[5])
+}
+
+/// The angle (radians) between `a` and `b`, 0 when either is zero: atan2 of the cross and dot
+/// products, accurate for the small angles between consecutive grid samples (acos of a dot
+/// product near 1 loses half the digits).
+fn angle_between(a: DVec3, b: DVec3) -> f64 {
+    a.cross(b).length().atan2(a.dot(b))
 }
 
 /// The angle (radians) of the rotation from `a`'s camera orientation to `b`'s.

@@ -11,21 +11,28 @@
 //! |---|---|---|---|
 //! | `in_view` | share of samples showing the object | ≥ [`MIN_IN_VIEW`] | the pans at the window's ends may pass through views of neither object; most of the window must show it |
 //! | `framed` | mean TCE over the middle half's samples in view | ≤ [`MAX_TCE`] | the object's centre within 15 % of the frame's size from the middle, outside the pans |
+//! | `framed_share` | share of the middle 60 %'s samples in view with TCE ≤ [`MAX_TCE`] ([`super::Framing::framed_share`]) | ≥ [`MIN_FRAMED_SHARE`] | a mean can hide a window centred half of the time; a viewer sees the part held, with the pans at most in its outer fifths |
 //! | `size` | middle half's mean coverage / target ratio | within [`SIZE_RANGE`] | a factor 3 either way is a different shot (a speck, or a close-up of a part) |
 //! | `visible` | 1 − mean occluded share | ≥ [`MIN_VISIBLE_SHARE`] | most of the object must be seen, not what stands in front of it |
 //! | `hidden` | share of samples more than half hidden | ≤ [`MAX_HIDDEN`] | a fifth of the window behind something is a visible failure |
 //! | `clearance` | smallest clearance of the camera from the solid geometry | ≥ 0 | below 0 the camera is inside geometry and films its inside |
 //! | `inside_object` | share of samples whose camera is inside the object's box | ≤ [`MAX_INSIDE_OBJECT`] | a camera inside the object cannot show it |
+//! | `turning` | peak turning rate of the view on the dense path grid, °/s, when the path has a duration | ≤ [`MAX_TURN_RATE`] | faster reads as a whip pan and judders ([`crate::pacing`]) |
+//! | `orbiting` | peak orbit rate about the window's object centre on the same grid, °/s | ≤ [`MAX_ORBIT_RATE`] | the subject seems to spin ([`crate::pacing`]) |
 //! | `steady` | the frames' framing wobble ([`super::wobble()`]), once frames exist | ≤ [`MAX_WOBBLE`] | a swing of a tenth of the frame several times a second is seen as shaking |
 
 use serde::Serialize;
 
 use super::WindowMetrics;
+pub use crate::pacing::{MAX_ORBIT_RATE, MAX_TURN_RATE};
 
 /// Least share of a window's samples that must show the object.
 pub const MIN_IN_VIEW: f64 = 0.8;
-/// Largest mean centring error (TCE) of the middle half's samples in view.
-pub const MAX_TCE: f64 = 0.15;
+/// Largest mean centring error (TCE) of the middle half's samples in view; also the largest
+/// TCE of a sample counted as framed by `framed_share`.
+pub const MAX_TCE: f64 = super::window::FRAMED_TCE;
+/// Least share of the middle 60 %'s samples that show the object framed.
+pub const MIN_FRAMED_SHARE: f64 = 0.8;
 /// Range of the middle half's coverage over the target ratio.
 pub const SIZE_RANGE: (f64, f64) = (1.0 / 3.0, 3.0);
 /// Least mean share of the object not hidden by other geometry.
@@ -48,6 +55,8 @@ pub enum CheckKind {
     InView,
     /// Its centre is near the frame's middle.
     Framed,
+    /// It stays framed through the window's middle.
+    FramedShare,
     /// It covers about the share of the frame asked for.
     Size,
     /// Little of it is hidden by other geometry.
@@ -58,6 +67,10 @@ pub enum CheckKind {
     Clearance,
     /// The camera stays out of the object.
     InsideObject,
+    /// The view turns no faster than a viewer follows.
+    Turning,
+    /// The camera circles the object no faster than a viewer follows.
+    Orbiting,
     /// The framing does not swing faster than a viewer follows.
     Steady,
 }
@@ -68,11 +81,14 @@ impl CheckKind {
         match self {
             CheckKind::InView => "in_view",
             CheckKind::Framed => "framed",
+            CheckKind::FramedShare => "framed_share",
             CheckKind::Size => "size",
             CheckKind::Visible => "visible",
             CheckKind::Hidden => "hidden",
             CheckKind::Clearance => "clearance",
             CheckKind::InsideObject => "inside_object",
+            CheckKind::Turning => "turning",
+            CheckKind::Orbiting => "orbiting",
             CheckKind::Steady => "steady",
         }
     }
@@ -166,6 +182,25 @@ pub fn verdict(m: &WindowMetrics) -> Verdict {
             None => None,
         },
     );
+    if let Some(share) = m.framing.framed_share {
+        add(
+            CheckKind::FramedShare,
+            Some(share),
+            vec![MIN_FRAMED_SHARE],
+            share >= MIN_FRAMED_SHARE,
+            // An object never in frame is the `in_view` check's to report.
+            (m.visible_fraction > 0.0).then(|| {
+                format!(
+                    "the object is framed (in view, centre within {MAX_TCE} of the frame from \
+                     its middle) in {:.0} % of the window's middle 60 % (at least {:.0} % \
+                     expected); likely fix: a pan that takes too long or an object that \
+                     drifts off: raise `optimiser.iterations`, or cut between distant parts",
+                    100.0 * share,
+                    100.0 * MIN_FRAMED_SHARE
+                )
+            }),
+        );
+    }
     let size = m.framing.coverage_middle.map(|c| c / m.target_ratio);
     add(
         CheckKind::Size,
@@ -239,6 +274,43 @@ pub fn verdict(m: &WindowMetrics) -> Verdict {
             100.0 * m.framing.inside_object
         )),
     );
+    // Rates per second need the path's duration (per unit of normalised time they mean
+    // nothing to a viewer).
+    if let Some(motion) = m
+        .path
+        .as_ref()
+        .map(|p| &p.motion)
+        .filter(|m| m.seconds.is_some())
+    {
+        let turning = motion.peak_angular_speed;
+        add(
+            CheckKind::Turning,
+            Some(turning),
+            vec![MAX_TURN_RATE],
+            turning <= MAX_TURN_RATE,
+            Some(format!(
+                "the view turns at up to {turning:.0}°/s (at most {MAX_TURN_RATE}°/s expected: \
+                 faster reads as a whip pan); likely fix: give the path more time \
+                 (`output.seconds`), keep `costs.motion.max_angular_speed` at its default, or \
+                 cut between parts seen from opposite sides"
+            )),
+        );
+        if let Some(orbit) = motion.peak_orbit_speed {
+            add(
+                CheckKind::Orbiting,
+                Some(orbit),
+                vec![MAX_ORBIT_RATE],
+                orbit <= MAX_ORBIT_RATE,
+                Some(format!(
+                    "the camera circles the object at up to {orbit:.0}°/s (at most \
+                     {MAX_ORBIT_RATE}°/s expected: faster, the object seems to spin); likely \
+                     fix: give the path more time (`output.seconds`), a slower `shot` sweep, \
+                     keep `costs.motion.max_orbit_speed` at its default, or cut between parts \
+                     seen from opposite sides"
+                )),
+            );
+        }
+    }
     if let Some(w) = m.framing.wobble {
         add(
             CheckKind::Steady,

@@ -23,6 +23,14 @@
 //! error, rather than the 0 an empty mask's TCE would give), the same TCE over the whole
 //! window's samples that show it, and the share of samples whose camera centre lies inside the
 //! object's box (a camera inside the object sees its inside, or nothing).
+//!
+//! **Framed share.** A mean can hide a window that is centred half of the time and far off
+//! the rest. `framing.framed_share` counts, over the samples of the window's middle
+//! [`MIDDLE_SHARE`] (stratum middles within 20 %–80 % of the window, where no pan should be),
+//! the share that both show the object and have a TCE of at most [`FRAMED_TCE`]. The grid
+//! must be dense there for the share to mean anything: at the default 30 samples per window
+//! (`output.metric_samples`) 18 fall in the middle 60 %, one every 0.1 s of a 3 s window (every
+//! third frame at 30 fps), so the share moves in steps of 1/18.
 
 use burn::tensor::Tensor;
 use serde::Serialize;
@@ -35,6 +43,13 @@ use splatraj_render::render::{
 use crate::costs::{IOU_THRESHOLD, MaskMoments, bbox_iou_batch, mask_box, tce_of, tre_of};
 use crate::optimise::sampling::stratified_times;
 use crate::trajectory::Pose;
+
+/// Share of the window, about its middle, where the object must stay framed (module docs).
+pub const MIDDLE_SHARE: f64 = 0.6;
+
+/// Largest TCE of a sample counted as framed: the object's centre within 15 % of the frame's
+/// size from the middle (the verdict holds the middle half's mean to the same bound).
+pub const FRAMED_TCE: f64 = 0.15;
 
 /// Metrics of one query window, averaged over its samples.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -92,6 +107,9 @@ pub struct Framing {
     pub coverage_middle: Option<f64>,
     /// Mean TCE over all of the window's samples that show the object.
     pub tce_in_view: Option<f64>,
+    /// Share of the middle [`MIDDLE_SHARE`]'s samples that show the object with a TCE of at
+    /// most [`FRAMED_TCE`] (None: no sample lies there).
+    pub framed_share: Option<f64>,
     /// Share of the samples whose camera centre lies inside the object's box.
     pub inside_object: f64,
     /// The wobble of the frames' TCE in the window ([`super::wobble()`]), once frames were
@@ -219,7 +237,17 @@ pub fn window_metrics(
             .collect();
         (!picked.is_empty()).then(|| picked.iter().sum::<f64>() / picked.len() as f64)
     };
+    let in_middle_share = |k: usize| {
+        let s = (k as f64 + 0.5) / batch.max(1) as f64;
+        (s - 0.5).abs() <= 0.5 * MIDDLE_SHARE + 1e-12
+    };
+    let judged: Vec<usize> = (0..batch).filter(|&k| in_middle_share(k)).collect();
+    let framed = judged
+        .iter()
+        .filter(|&&k| shows[k] && tces[k] <= FRAMED_TCE)
+        .count();
     let framing = Framing {
+        framed_share: (!judged.is_empty()).then(|| framed as f64 / judged.len() as f64),
         tce_middle: mean_where(&tces, &middle),
         coverage_middle: mean_where(&coverages, &middle),
         tce_in_view: mean_where(&tces, &|_| true),

@@ -1,0 +1,184 @@
+//! Pacing: the path metrics' turning and orbit rates against closed forms (a camera circling
+//! its subject, one panning on the spot, one walking straight at it), and the verdict's
+//! `framed_share`, `turning` and `orbiting` checks on both sides of their limits.
+
+use glam::DVec3;
+use splatraj_render::camera::Pose;
+use splatraj_traj::metrics::verdict::{MAX_ORBIT_RATE, MAX_TURN_RATE, MIN_FRAMED_SHARE};
+use splatraj_traj::metrics::{
+    CheckKind, Framing, MotionMetrics, Occlusion, PathMetrics, WindowMetrics, path_metrics, verdict,
+};
+
+const UP: DVec3 = DVec3::Z;
+
+/// Per-window path metrics of `pose_at` over one window of `seconds` on 2001 samples, with
+/// the orbit measured about `o`.
+fn rates(pose_at: &dyn Fn(f64) -> Pose, seconds: f64, o: DVec3) -> MotionMetrics {
+    let poses = |t: &[f64]| t.iter().map(|&t| pose_at(t).0).collect();
+    let mut all = path_metrics(&poses, 1, 2001, None, Some(seconds), &[o.to_array()]);
+    all.remove(0).motion
+}
+
+fn close(got: f64, want: f64) {
+    assert!(
+        (got - want).abs() <= 1e-6 * want.abs().max(1.0),
+        "{got} vs {want}"
+    );
+}
+
+#[test]
+fn turning_and_orbit_rates_match_closed_forms() {
+    let seconds = 4.0;
+    let o = DVec3::new(0.5, -1.0, 0.2);
+    // Circling o at radius 2 and 30°/s over the window, looking at it, level with it: the
+    // direction to the camera and the view both turn about up at 30°/s.
+    let omega = 30f64.to_radians() * seconds; // per unit of normalised time
+    let circling = |t: f64| {
+        let phase = omega * t;
+        let eye = o + 2.0 * DVec3::new(phase.cos(), phase.sin(), 0.0);
+        Pose::look_at(eye, o, UP).unwrap()
+    };
+    let m = rates(&circling, seconds, o);
+    close(m.peak_orbit_speed.unwrap(), 30.0);
+    close(m.peak_angular_speed, 30.0);
+
+    // Standing 3 units from o and panning at 20°/s: the view turns, the camera does not move
+    // about o.
+    let eye = o + DVec3::new(3.0, 0.0, 0.0);
+    let panning = |t: f64| {
+        let heading = (20f64 * seconds * t).to_radians();
+        Pose::look_at(eye, eye + DVec3::new(heading.cos(), heading.sin(), 0.0), UP).unwrap()
+    };
+    let m = rates(&panning, seconds, o);
+    close(m.peak_orbit_speed.unwrap(), 0.0);
+    close(m.peak_angular_speed, 20.0);
+
+    // Passing o at distance d and speed v along a straight line: the orbit rate peaks at v/d
+    // radians per second as the camera passes closest (the view held fixed: no turning).
+    let (d, v) = (1.5, 0.8);
+    let passing = |t: f64| {
+        let eye = o + DVec3::new(d, v * seconds * (t - 0.5), 0.0);
+        Pose::look_at(eye, eye - DVec3::X, UP).unwrap()
+    };
+    let m = rates(&passing, seconds, o);
+    let peak = (v / d).to_degrees();
+    assert!(
+        (m.peak_orbit_speed.unwrap() - peak).abs() < 1e-3 * peak,
+        "{:?} vs {peak}",
+        m.peak_orbit_speed
+    );
+    close(m.peak_angular_speed, 0.0);
+
+    // No centre given: no orbit rate.
+    let poses = |t: &[f64]| t.iter().map(|&t| passing(t).0).collect();
+    assert!(
+        path_metrics(&poses, 1, 101, None, Some(seconds), &[])[0]
+            .motion
+            .peak_orbit_speed
+            .is_none()
+    );
+}
+
+/// A window that passes every check but the ones the test sets: in view throughout, centred,
+/// at the size asked for, unhidden, with the given framed share and rates.
+fn window(framed_share: f64, turning: f64, orbit: f64) -> WindowMetrics {
+    WindowMetrics {
+        window: 1,
+        name: "jaw".into(),
+        samples: 30,
+        tce: Some(0.05),
+        tre: 0.01,
+        iou: 1.0,
+        coverage: 0.15,
+        target_ratio: 0.15,
+        visible_fraction: 1.0,
+        visible: true,
+        tce_max: Some(0.1),
+        tre_max: 0.02,
+        occlusion: Occlusion::from_shares(&[Some(0.0); 30]),
+        path: Some(PathMetrics {
+            samples: 100,
+            clearance: None,
+            motion: MotionMetrics {
+                seconds: Some(9.0),
+                peak_speed: 0.1,
+                peak_acceleration: 0.1,
+                peak_angular_speed: turning,
+                peak_orbit_speed: Some(orbit),
+                speed_spread: 0.0,
+            },
+        }),
+        shot: None,
+        framing: Framing {
+            tce_middle: Some(0.05),
+            coverage_middle: Some(0.15),
+            tce_in_view: Some(0.05),
+            framed_share: Some(framed_share),
+            inside_object: 0.0,
+            wobble: None,
+        },
+        verdict: None,
+    }
+}
+
+#[test]
+fn the_verdict_holds_framed_share_and_pacing_to_their_limits() {
+    let good = verdict(&window(0.85, 44.0, 44.0));
+    assert!(good.pass, "{good:#?}");
+    let names: Vec<&str> = good.checks.iter().map(|c| c.check.name()).collect();
+    for name in ["framed_share", "turning", "orbiting"] {
+        assert!(names.contains(&name), "{names:?}");
+    }
+    let limit = |kind: CheckKind| {
+        good.checks
+            .iter()
+            .find(|c| c.check == kind)
+            .map(|c| c.limit.clone())
+    };
+    assert_eq!(limit(CheckKind::FramedShare), Some(vec![0.8]));
+    assert_eq!(limit(CheckKind::Turning), Some(vec![45.0]));
+    assert_eq!(limit(CheckKind::Orbiting), Some(vec![45.0]));
+    assert_eq!(
+        (MIN_FRAMED_SHARE, MAX_TURN_RATE, MAX_ORBIT_RATE),
+        (0.8, 45.0, 45.0)
+    );
+
+    // Each on the wrong side of its limit fails alone, with a sentence naming the window, the
+    // figure and a fix.
+    for (metrics, kind, says) in [
+        (
+            window(0.75, 44.0, 44.0),
+            CheckKind::FramedShare,
+            "75 % of the window's middle 60 %",
+        ),
+        (
+            window(0.85, 61.0, 44.0),
+            CheckKind::Turning,
+            "turns at up to 61°/s",
+        ),
+        (
+            window(0.85, 44.0, 83.0),
+            CheckKind::Orbiting,
+            "circles the object at up to 83°/s",
+        ),
+    ] {
+        let v = verdict(&metrics);
+        assert_eq!(v.failed(), vec![kind.name()], "{v:#?}");
+        assert_eq!(v.problems.len(), 1);
+        let problem = &v.problems[0];
+        assert!(
+            problem.starts_with("window 1 \"jaw\"") && problem.contains(says),
+            "{problem}"
+        );
+        assert!(problem.contains("likely fix"), "{problem}");
+    }
+
+    // Rates per unit of normalised time mean nothing to a viewer: not judged.
+    let mut unknown = window(0.85, 500.0, 500.0);
+    if let Some(p) = unknown.path.as_mut() {
+        p.motion.seconds = None;
+    }
+    let v = verdict(&unknown);
+    assert!(v.pass, "{v:#?}");
+    assert!(v.checks.iter().all(|c| c.check != CheckKind::Turning));
+}
