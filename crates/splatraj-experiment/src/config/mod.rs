@@ -40,8 +40,9 @@
 //! [costs]                  # tce, tre, upright, prior, clearance (margin, sigma, min_opacity),
 //!                          # motion (max_speed, max_acceleration, max_angular_speed,
 //!                          # max_orbit_speed, even_speed), visibility (tolerance)
-//!                          # tables; without `[costs]` the first-try set (all of them, margin and speed "auto": derived
-//!                          # from the scene; `--set costs.<cost>.<key>=…` edits that set);
+//!                          # tables; without `[costs]` the first-try set (all of them,
+//!                          # margin and speed "auto": derived from the scene;
+//!                          # `--set costs.<cost>.<key>=…` edits that set);
 //!                          # with it, exactly the costs it lists;
 //!                          # [costs.custom.<name>]: a cost registered in `Extensions`
 //! [optimiser]              # iterations, samples_per_window, learning_rate, position_unit,
