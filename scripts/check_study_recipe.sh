@@ -5,10 +5,13 @@
 # verbatim from the docs into a scratch folder and submit.sh is run there. By default `sbatch` is
 # a stand-in that does what real Slurm does with these files at submission and launch: it fails a
 # job whose --output folder does not exist (Slurm opens the log before the task starts and makes
-# no folders, so every array task ended in JobLaunchFailure), and it records each submission.
+# no folders, so every array task ended in JobLaunchFailure), and it records each submission;
+# `sinfo` is a stand-in for one small node (2 CPUs, 2000 MB) and `splatraj` one on PATH.
 # The check then asserts that every job's log folder existed when it was submitted, that the
 # merge depends on the array (afterok) with --kill-on-invalid-dep=yes (else it pends forever
-# after a failed shard), and that each shard's --shard is K/N with N the --array's size.
+# after a failed shard), that each shard's --shard is K/N with N the --array's size, that the
+# shards' CPUs and memory fit the node (else Slurm leaves them PENDING without a word), that the
+# merge asks for one CPU and little memory, and that the jobs run splatraj by absolute path.
 #
 # With REAL_SLURM=1 the real sbatch is used (a cluster or single-node slurmctld must answer, and
 # `splatraj` and configs/demo.toml must exist in the scratch folder's parent): the script then
@@ -55,10 +58,13 @@ mkdir -p "$work/bin"
 cat > "$work/bin/sbatch" <<'EOF'
 #!/bin/bash
 set -euo pipefail
-output="slurm-%j.out"; array=""; dep=""; kill=no; script=""
+output="slurm-%j.out"; array=""; dep=""; kill=no; script=""; cpus=""; mem=""; export_=""
 for a in "$@"; do
     case "$a" in
         --output=*) output=${a#--output=} ;;
+        --cpus-per-task=*) cpus=${a#--cpus-per-task=} ;;
+        --mem=*) mem=${a#--mem=} ;;
+        --export=*) export_=${a#--export=} ;;
         --array=*) array=${a#--array=} ;;
         --dependency=*) dep=${a#--dependency=} ;;
         --kill-on-invalid-dep=*) kill=${a#--kill-on-invalid-dep=} ;;
@@ -72,6 +78,8 @@ if [[ -n "$script" ]]; then
         case "$key" in
             --output) [[ "$output" == "slurm-%j.out" ]] && output=$value ;;
             --array) [[ -z "$array" ]] && array=$value ;;
+            --cpus-per-task) [[ -z "$cpus" ]] && cpus=$value ;;
+            --mem) [[ -z "$mem" ]] && mem=$value ;;
         esac
     done < <(sed -n 's/^#SBATCH \(--[a-z-]*\)=\(.*\)$/\1 \2/p' "$script")
 fi
@@ -80,10 +88,18 @@ if [[ ! -d "$(dirname "$output")" ]]; then
     echo "stand-in sbatch: job $id: log folder $(dirname "$output") missing: JobLaunchFailure" >&2
     exit 1
 fi
-echo "$id|$array|$dep|$kill|$script" >> "$JOBS"
+echo "$id|$array|$dep|$kill|$script|$cpus|$mem|$export_" >> "$JOBS"
 echo "$id"
 EOF
 chmod +x "$work/bin/sbatch"
+# Stand-in sinfo: one node of 2 CPUs and 2000 MB (the single-node cluster of issue 39).
+cat > "$work/bin/sinfo" <<'EOF'
+#!/bin/bash
+echo "2 2000"
+EOF
+# Stand-in splatraj: submit.sh only looks it up.
+printf '#!/bin/bash\nexit 0\n' > "$work/bin/splatraj"
+chmod +x "$work/bin/sinfo" "$work/bin/splatraj"
 
 export JOBS="$work/jobs.log"
 : > "$JOBS"
@@ -91,11 +107,19 @@ export JOBS="$work/jobs.log"
 
 fail() { echo "check_study_recipe: $*" >&2; exit 1; }
 [[ $(wc -l < "$JOBS") == 2 ]] || fail "expected 2 submissions (array, merge), got $(wc -l < "$JOBS")"
-IFS='|' read -r array_id range _ _ script < <(sed -n 1p "$JOBS")
-IFS='|' read -r _ _ dep kill _ < <(sed -n 2p "$JOBS")
+IFS='|' read -r array_id range _ _ script shard_cpus shard_mem shard_export < <(sed -n 1p "$JOBS")
+IFS='|' read -r _ _ dep kill _ merge_cpus merge_mem _ < <(sed -n 2p "$JOBS")
 [[ "$script" == study.sbatch ]] || fail "the first job is not study.sbatch"
 [[ "$dep" == "afterok:$array_id" ]] || fail "the merge depends on '$dep', not afterok:$array_id"
 [[ "$kill" == yes ]] || fail "the merge has no --kill-on-invalid-dep=yes"
+megabytes() { case "$1" in *G) echo $(( ${1%G} * 1024 ));; *M) echo "${1%M}";; *) echo "$1";; esac; }
+[[ -n "$shard_cpus" && "$shard_cpus" -le 2 ]] || fail "a shard asks for '$shard_cpus' CPUs on a 2-CPU node"
+[[ -n "$shard_mem" && $(megabytes "$shard_mem") -le 2000 ]] \
+    || fail "a shard asks for '$shard_mem' of memory on a 2000 MB node"
+[[ "$merge_cpus" == 1 && -n "$merge_mem" && $(megabytes "$merge_mem") -le 2048 ]] \
+    || fail "the merge asks for '$merge_cpus' CPUs and '$merge_mem' (one CPU and little memory expected)"
+[[ "$shard_export" == *"SPLATRAJ=$work/bin/splatraj"* ]] \
+    || fail "the shards are not told splatraj's absolute path (--export: '$shard_export')"
 # --array=1-N and --shard K/N agree (N written out, so a resubmitted shard keeps it).
 n=${range#1-}
 grep -q -- "--shard \"\${SLURM_ARRAY_TASK_ID}/$n\"" "$work/study.sbatch" \
