@@ -29,6 +29,7 @@
 use glam::{Mat3, Quat, Vec3};
 use serde::Serialize;
 
+use crate::cameras_up::CamerasUp;
 use crate::scene::Scene;
 
 /// The guessed up direction and how much to trust it.
@@ -263,6 +264,8 @@ pub enum UpSource {
     Config,
     /// The built-in demo room's known up ([`crate::demo::DEMO_UP`]).
     Demo,
+    /// The capture's cameras ([`crate::cameras_up`]).
+    Cameras,
     /// Guessed from the scene ([`guess_up_axis`]).
     Guess,
     /// Nothing to go on: +z.
@@ -270,11 +273,12 @@ pub enum UpSource {
 }
 
 impl UpSource {
-    /// The name used in logs: `config`, `demo`, `guess` or `default`.
+    /// The name used in logs: `config`, `demo`, `cameras`, `guess` or `default`.
     pub fn name(self) -> &'static str {
         match self {
             UpSource::Config => "config",
             UpSource::Demo => "demo",
+            UpSource::Cameras => "cameras",
             UpSource::Guess => "guess",
             UpSource::Default => "default",
         }
@@ -282,7 +286,7 @@ impl UpSource {
 }
 
 /// World up (unit length, f64) and where it came from.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ResolvedUp {
     /// Unit world up.
     pub up: [f64; 3],
@@ -290,6 +294,8 @@ pub struct ResolvedUp {
     pub source: UpSource,
     /// The guess, when up was guessed (its confidence and method).
     pub guess: Option<UpGuess>,
+    /// The cameras, when up came from them (their count, file and spread).
+    pub cameras: Option<CamerasUp>,
 }
 
 /// Below this confidence a guessed up is worth a warning: the normals or the extent hardly
@@ -325,6 +331,9 @@ impl ResolvedUp {
                     g.confidence
                 )
             }
+            (UpSource::Cameras, _) if let Some(c) = &self.cameras => {
+                format!("{up} ({}; `scene.up` overrides)", c.describe())
+            }
             (source, _) => format!("{up} ({})", source.name()),
         }
     }
@@ -350,5 +359,21 @@ pub fn resolve_up(given: Option<[f64; 3]>, is_demo: bool, scene: &Scene) -> Reso
     } else {
         [0.0, 0.0, 1.0]
     };
-    ResolvedUp { up, source, guess }
+    ResolvedUp {
+        up,
+        source,
+        guess,
+        cameras: None,
+    }
+}
+
+impl From<CamerasUp> for ResolvedUp {
+    fn from(cameras: CamerasUp) -> Self {
+        ResolvedUp {
+            up: cameras.up,
+            source: UpSource::Cameras,
+            guess: None,
+            cameras: Some(cameras),
+        }
+    }
 }
