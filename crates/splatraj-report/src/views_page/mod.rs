@@ -192,8 +192,8 @@ impl ViewsPage {
             )
         } else {
             format!(
-                "{} of the scene's {} Gaussians are in the page (every {:.1}th), so counts are \
-                 estimates scaled from them",
+                "{} of the scene's {} Gaussians are in the page (an even sample, 1 in {:.1}), so \
+                 counts are estimates scaled from them",
                 self.centres.len(),
                 self.gaussians,
                 self.gaussians as f64 / self.centres.len().max(1) as f64
