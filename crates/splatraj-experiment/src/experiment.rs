@@ -7,7 +7,7 @@ use burn::tensor::{DType, Device};
 use splatraj_render::camera::Intrinsics;
 use splatraj_render::render::DeviceScene;
 use splatraj_scene::demo::{DemoConfig, demo_scene};
-use splatraj_scene::{InvalidPolicy, ReadOptions, ResolvedUp, Scene, read_scene, resolve_up};
+use splatraj_scene::{InvalidPolicy, ReadOptions, ResolvedUp, Scene, read_scene};
 use splatraj_semantic::{Relevancy, Scoring, Target, read_mask_file, select};
 use splatraj_traj::costs::{OrAuto, QueryContext, WeightedCosts, default_prior_radius};
 use splatraj_traj::optimise::WindowTarget;
@@ -118,7 +118,8 @@ impl Experiment {
         if scene.is_empty() {
             bail!("scene {scene_name} has no Gaussians");
         }
-        let up = resolve_up(config.scene.up, config.scene.demo.is_some(), &scene);
+        let up = crate::scene_up::scene_up(config, &scene)
+            .with_context(|| format!("config {}", config.path.display()))?;
         let bounds = scene
             .robust_bounds(0.02)
             .or_else(|| scene.bounds())

@@ -67,6 +67,7 @@ pub mod run_files;
 pub mod run_folder;
 pub mod run_report;
 pub mod scene_files;
+pub mod scene_up;
 pub mod starts;
 pub mod study;
 pub mod trajectory_run;

@@ -17,7 +17,7 @@ use splatraj_render::backend::{BackendKind, Precision};
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render};
-use splatraj_scene::{Scene, resolve_up};
+use splatraj_scene::{Scene, UpSource};
 use splatraj_semantic::{
     Cluster, ClusteringSummary, Explanation, RegionSpec, SelectionOptions, SourceKind, Spread,
     Target, TargetSource, TargetsConfig, TextKeys, explain, select,
@@ -173,12 +173,15 @@ impl ConfigQuery {
             .map_err(|e| anyhow!("{at}: {e}"))?;
         let source = crate::grounding::build_source(&config, scene.len(), &device, extensions, key)
             .map_err(|e| anyhow!("{at}: {e:#}"))?;
-        // The config's up (or the demo room's) as runs take it; else the picture guesses it
-        // by the same rule and says so.
+        // The config's up (or the demo room's, or the capture's cameras') as runs take it;
+        // else the picture guesses it by the same rule and says so.
         let mut picture = self.picture.clone();
-        let demo = config.scene.demo.is_some();
-        if picture.view.up.is_none() && (config.scene.up.is_some() || demo) {
-            picture.view.up = Some(resolve_up(config.scene.up, demo, &scene).up);
+        if picture.view.up.is_none() {
+            let resolved =
+                crate::scene_up::scene_up(&config, &scene).map_err(|e| anyhow!("{at}: {e:#}"))?;
+            if resolved.source != UpSource::Guess {
+                picture.view.up = Some(resolved.up);
+            }
         }
         Ok(PreparedQueries {
             scene,

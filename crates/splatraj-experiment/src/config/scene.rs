@@ -19,9 +19,15 @@ pub struct SceneConfig {
     pub labels: Option<PathBuf>,
     /// Drop invalid Gaussians (with a warning) instead of stopping.
     pub drop_invalid: bool,
-    /// World up; by default guessed from the scene (the demo's is +z).
+    /// World up; by default from the capture's cameras (`cameras`, or a camera file beside
+    /// the scene), else guessed from the scene (the demo's is +z).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub up: Option<[f64; 3]>,
+    /// The capture's cameras (INRIA `cameras.json`, nerfstudio `transforms.json`, COLMAP
+    /// `images.txt`), for world up; by default one found beside the scene under its usual
+    /// name (the experiment's `scene_up`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cameras: Option<PathBuf>,
 }
 
 /// `[scene.demo]`: the demo room's generator settings.
