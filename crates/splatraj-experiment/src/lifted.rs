@@ -65,7 +65,7 @@ pub fn check_lifted_memory(config: &Config, gaussians: usize) -> Result<()> {
     let view_count = match table.get("cameras").and_then(toml::Value::as_str) {
         Some(cameras) => splatraj_lift::cameras::read_views(&config.resolve(Path::new(cameras)))
             .map(|v| v.len())
-            .with_context(|| format!("`targets.lifted.cameras` {cameras}"))?,
+            .context("`targets.lifted.cameras`")?,
         None => views.count,
     };
     let path = config.resolve(weights);

@@ -7,22 +7,24 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum InterchangeError {
     /// The file could not be read from disk.
-    #[error("cannot read {path}: {source}")]
+    // The causes below are part of the message, not a `source`: an error chain printed whole
+    // (anyhow's `{:#}`) would otherwise say them twice.
+    #[error("cannot read {path}: {error}")]
     Read {
         /// The file.
         path: PathBuf,
         /// Why.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The file is not JSON of the expected shape (serde says where and what).
-    #[error("{file}: not a {format} file: {source}")]
+    #[error("{file}: not a {format} file: {error}")]
     Json {
         /// The file's name as given.
         file: String,
         /// The format it was read as.
         format: &'static str,
         /// serde's message, with line and column.
-        source: serde_json::Error,
+        error: serde_json::Error,
     },
     /// One element of the file holds a bad value.
     #[error("{file}: {element}: {problem}")]
@@ -79,8 +81,8 @@ pub(crate) fn export_error(format: &'static str, problem: impl Into<String>) -> 
 
 /// Reads a whole text file, naming it in the error.
 pub(crate) fn read_text(path: &std::path::Path) -> Result<String> {
-    splatraj_scene::input::read_text(path).map_err(|source| InterchangeError::Read {
+    splatraj_scene::input::read_text(path).map_err(|error| InterchangeError::Read {
         path: path.to_path_buf(),
-        source,
+        error,
     })
 }

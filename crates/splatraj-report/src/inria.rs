@@ -66,10 +66,10 @@ pub fn import(text: &str, file: &str) -> Result<CameraPath> {
 /// [`import`] with each camera's `img_name` (where the file has one).
 pub fn import_named(text: &str, file: &str) -> Result<(CameraPath, Vec<Option<String>>)> {
     let entries: Vec<Entry> =
-        serde_json::from_str(text).map_err(|source| InterchangeError::Json {
+        serde_json::from_str(text).map_err(|error| InterchangeError::Json {
             file: file.to_string(),
             format: FORMAT,
-            source,
+            error,
         })?;
     if entries.is_empty() {
         return Err(invalid(file, "[]", "the file lists no cameras"));

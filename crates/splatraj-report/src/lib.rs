@@ -192,10 +192,10 @@ pub fn detect(path: &Path) -> Result<Format> {
     }
     let text = read_text(path)?;
     let value: serde_json::Value =
-        serde_json::from_str(&text).map_err(|source| InterchangeError::Json {
+        serde_json::from_str(&text).map_err(|error| InterchangeError::Json {
             file: file.clone(),
             format: "camera (JSON)",
-            source,
+            error,
         })?;
     if value.get("camera_path").is_some() {
         Ok(Format::Nerfstudio)

@@ -191,10 +191,10 @@ fn keyframe_indices(n: usize, fps: f64, per_second: f64) -> Vec<usize> {
 /// The path of `camera_path.json` text (`file` names it in errors).
 pub fn import(text: &str, file: &str) -> Result<CameraPath> {
     let parsed: CameraPathFile =
-        serde_json::from_str(text).map_err(|source| InterchangeError::Json {
+        serde_json::from_str(text).map_err(|error| InterchangeError::Json {
             file: file.to_string(),
             format: FORMAT,
-            source,
+            error,
         })?;
     if parsed.camera_type != "perspective" {
         return Err(invalid(

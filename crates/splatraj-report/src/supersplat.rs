@@ -464,10 +464,10 @@ struct Values {
 /// `height` × `aspect`, since the file has no image size.
 pub fn import(text: &str, file: &str, height: usize, aspect: f64) -> Result<CameraPath> {
     let settings: Settings =
-        serde_json::from_str(text).map_err(|source| InterchangeError::Json {
+        serde_json::from_str(text).map_err(|error| InterchangeError::Json {
             file: file.to_string(),
             format: FORMAT,
-            source,
+            error,
         })?;
     let track = settings
         .anim_tracks

@@ -163,10 +163,10 @@ struct FrameEntry {
 /// frame's `file_path`.
 pub fn import_named(text: &str, file: &str) -> Result<(CameraPath, Vec<String>)> {
     let parsed: TransformsFile =
-        serde_json::from_str(text).map_err(|source| InterchangeError::Json {
+        serde_json::from_str(text).map_err(|error| InterchangeError::Json {
             file: file.to_string(),
             format: FORMAT,
-            source,
+            error,
         })?;
     if parsed.frames.is_empty() {
         return Err(invalid(file, "frames", "holds no frames"));

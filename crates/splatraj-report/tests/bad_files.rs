@@ -381,3 +381,37 @@ fn truncated_files_never_panic() {
         }
     }
 }
+
+/// A cause is said once: the errors carry serde's or the system's message in their text, not
+/// as an error source, so a whole chain (`{:#}`, as the command line prints it) does not repeat
+/// it (seen with a `targets.lifted.cameras` file that was not JSON).
+#[test]
+fn causes_are_said_once_in_a_printed_chain() {
+    let dir = std::env::temp_dir().join(format!("splatraj-bad-files-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let broken = dir.join("cameras.json");
+    std::fs::write(&broken, "{\"frames\": [1, 2,").unwrap();
+    for (file, cause) in [
+        (broken.clone(), "EOF while parsing"),
+        (dir.join("missing.json"), "No such file"),
+    ] {
+        let Err(error) = splatraj_report::read_named_cameras(&file) else {
+            panic!("{} is refused", file.display());
+        };
+        let chain = format!("{:#}", anyhow_like(&error));
+        assert_eq!(chain.matches(cause).count(), 1, "{chain}");
+        assert!(chain.contains(&file.display().to_string()), "{chain}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The error and each of its sources joined by ": ", as anyhow's `{:#}` prints a chain.
+fn anyhow_like(error: &dyn std::error::Error) -> String {
+    let mut text = error.to_string();
+    let mut source = error.source();
+    while let Some(s) = source {
+        text.push_str(&format!(": {s}"));
+        source = s.source();
+    }
+    text
+}
