@@ -490,6 +490,22 @@ def hostile_scenes(fx):
                                                      + b"\0\x0c\0\0" + b"\0" * 4000)))
     s.append(("bomb.spz", gzip.compress(b"NGSP" + struct.pack("<I", 2) + struct.pack("<I", 1000)
                                         + b"\0\x0c\0\0" + b"\0" * (300 * 2**20), 9)))
+    # SPZ v4 whose zstd streams are run-length blocks: a 37 KB file whose valid streams decode
+    # to 60 M Gaussians (issue 39); refused for its ratio before anything is decoded.
+    def zstd_rle(n):
+        frame = bytearray(struct.pack("<I", 0xFD2FB528) + bytes([0x00, 0x38]))  # 128 KiB window
+        while n > 0:
+            size = min(n, 1 << 17)
+            n -= size
+            frame += struct.pack("<I", (n == 0) | (1 << 1) | (size << 3))[:3] + b"\0"
+        return bytes(frame)
+    count = 60_000_000
+    streams = [zstd_rle(per * count) for per in (9, 1, 3, 3, 4)]
+    v4 = bytearray(b"NGSP" + struct.pack("<II", 4, count) + bytes([0, 12, 0, len(streams)])
+                   + struct.pack("<I", 32) + b"\0" * 12)
+    for stream, per in zip(streams, (9, 1, 3, 3, 4)):
+        v4 += struct.pack("<QQ", len(stream), per * count)
+    s.append(("v4-zstd-rle-60M.spz", bytes(v4) + b"".join(streams)))
     # SOG (zip of meta.json and WebP images)
     sog = DATA / "narcissus.sog"
     if sog.exists():
