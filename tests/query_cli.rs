@@ -709,3 +709,135 @@ fn langsplat_route_decodes_latents_and_selects_the_phrases_label() {
     );
     assert!(!none.exists());
 }
+
+#[test]
+fn selection_query_matches_the_editors_file_and_refuses_one_moved() {
+    let (ply, _) = fruit();
+    let scene = fruit_scene();
+    let dir = tempfile::tempdir().unwrap();
+    // The Gaussians of a box of the scene, exported as an editor would: their own PLY.
+    let (min, max) = ([0.5f32, 0.0, -2.3], [0.75f32, 0.15, -2.0]);
+    let keep: Vec<bool> = scene
+        .means
+        .iter()
+        .map(|m| (0..3).all(|k| min[k] <= m[k] && m[k] <= max[k]))
+        .collect();
+    let cut = scene.subset(&keep);
+    let head = dir.path().join("head.ply");
+    splatraj_scene::write_inria_ply(&cut, &head).unwrap();
+    let out = splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--selection",
+        s(&head),
+        "--json",
+        "--out",
+        s(dir.path()),
+    ]);
+    let report = json_report(&out);
+    assert_eq!(report["source"], "region");
+    // Without --query the part is named after the file.
+    assert_eq!(report["name"], "head");
+    assert_eq!(report["count"].as_u64().unwrap() as usize, cut.len());
+    let note = report["notes"][0].as_str().unwrap();
+    let all = format!("matched {0} of {0} splats (100.0 %)", cut.len());
+    assert!(note.contains(&all), "{note}");
+
+    // The same splats moved by a few centimetres: refused, naming the file and the share.
+    let mut moved = cut.clone();
+    for m in &mut moved.means {
+        m[0] += 0.02;
+    }
+    let moved_path = dir.path().join("moved.ply");
+    splatraj_scene::write_inria_ply(&moved, &moved_path).unwrap();
+    let out = splatraj(&[
+        "query",
+        "--scene",
+        s(&ply),
+        "--selection",
+        s(&moved_path),
+        "--query",
+        "head",
+        "--out",
+        s(dir.path()),
+    ]);
+    assert_clean_failure(&out, &["moved.ply", "not part of this scene", "0.0 %"]);
+}
+
+/// An INRIA `cameras.json` of `count` level cameras around `target` at `radius` under world
+/// `up` = [0, -1, 0] (a y-down capture), looking at it: `rotation` is R_wc (OpenCV axes) as
+/// rows.
+fn y_down_cameras_json(target: [f32; 3], radius: f64, count: usize) -> String {
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let cameras: Vec<Value> = (0..count)
+        .map(|i| {
+            let a = std::f64::consts::TAU * i as f64 / count as f64;
+            let t = target.map(f64::from);
+            // On a circle in the x-z plane, 0.3 radius above the target (up is −y).
+            let c = [
+                t[0] + radius * a.cos(),
+                t[1] - 0.3 * radius,
+                t[2] + radius * a.sin(),
+            ];
+            let d = [t[0] - c[0], t[1] - c[1], t[2] - c[2]];
+            let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let forward = d.map(|v| v / n);
+            // Down is +y without its component along the view.
+            let along = forward[1];
+            let down = [
+                -along * forward[0],
+                1.0 - along * forward[1],
+                -along * forward[2],
+            ];
+            let m = (down[0] * down[0] + down[1] * down[1] + down[2] * down[2]).sqrt();
+            let down = down.map(|v| v / m);
+            let right = cross(down, forward);
+            let rows: Vec<[f64; 3]> = (0..3).map(|k| [right[k], down[k], forward[k]]).collect();
+            json!({"id": i, "img_name": format!("{i:04}"), "width": 640, "height": 480,
+                "position": c, "rotation": rows, "fx": 500.0, "fy": 500.0})
+        })
+        .collect();
+    Value::Array(cameras).to_string()
+}
+
+#[test]
+fn the_picture_stands_upright_on_the_capture_cameras_beside_the_scene() {
+    let (ply, _) = fruit();
+    let scene = fruit_scene();
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("fruit.ply");
+    std::fs::copy(&ply, &copy).unwrap();
+    let b = scene.robust_bounds(0.02).unwrap();
+    let size = b.size();
+    let diagonal = f64::from((size[0] * size[0] + size[1] * size[1] + size[2] * size[2]).sqrt());
+    std::fs::write(
+        dir.path().join("cameras.json"),
+        y_down_cameras_json(b.center(), diagonal, 16),
+    )
+    .unwrap();
+    let out = splatraj(&[
+        "query",
+        "--scene",
+        s(&copy),
+        "--box=0.5,0.0,-2.3,0.75,0.15,-2.0",
+        "--query",
+        "part",
+        "--json",
+        "--out",
+        s(dir.path()),
+    ]);
+    let report = json_report(&out);
+    assert_eq!(report["camera"]["up_from"], "cameras");
+    let up: Vec<f64> = serde_json::from_value(report["camera"]["up"].clone()).unwrap();
+    assert!(
+        (up[1] + 1.0).abs() < 1e-9 && up[0].abs() < 1e-9 && up[2].abs() < 1e-9,
+        "{up:?}"
+    );
+}

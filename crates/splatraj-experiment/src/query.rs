@@ -176,11 +176,13 @@ impl ConfigQuery {
         // The config's up (or the demo room's, or the capture's cameras') as runs take it;
         // else the picture guesses it by the same rule and says so.
         let mut picture = self.picture.clone();
+        let mut up_from = None;
         if picture.view.up.is_none() {
             let resolved =
                 crate::scene_up::scene_up(&config, &scene).map_err(|e| anyhow!("{at}: {e:#}"))?;
             if resolved.source != UpSource::Guess {
                 picture.view.up = Some(resolved.up);
+                up_from = Some(resolved.source.name());
             }
         }
         Ok(PreparedQueries {
@@ -190,6 +192,7 @@ impl ConfigQuery {
             kind,
             selection: config.targets.selection,
             picture,
+            up_from,
             device,
         })
     }
@@ -203,6 +206,9 @@ pub struct PreparedQueries {
     kind: SourceKind,
     selection: SelectionOptions,
     picture: PictureOptions,
+    /// Where the picture's up came from when the config decided it (the picture's camera
+    /// only sees a given up).
+    up_from: Option<&'static str>,
     device: Device,
 }
 
@@ -215,13 +221,17 @@ impl PreparedQueries {
             source: self.source.as_ref(),
             kind: self.kind.clone(),
         };
-        find_and_draw(
+        let mut outcome = find_and_draw(
             &grounding,
             query,
             &self.selection,
             &self.picture,
             &self.device,
-        )
+        )?;
+        if let Some(from) = self.up_from {
+            outcome.camera.up_from = from;
+        }
+        Ok(outcome)
     }
 }
 
