@@ -14,7 +14,11 @@
 #      forward + backward time, kernel launches, reads and bytes per pass;
 #   2. output frames: `bench frames` (biker and demo 1 M at 1080p, pipelined);
 #   3. the first-try guitar run (`configs/first-try/guitar.toml`) whole: time, each window's
-#      verdict and TCE.
+#      verdict and TCE;
+#   4. where a wgpu pass spends its time: the mask passes of 1. again with CubeCL's profiling
+#      on (`CUBECL_DEBUG_OPTION=profile-medium` waits for each kernel), so that each stage's
+#      column holds its kernels' time instead of "other" holding all of it (a GPU runs
+#      asynchronously: without it only the final read waits).
 # then prints one table (python3, standard library only). Exit status 1 when parity fails.
 # GPU_CHECK_QUICK=1 shrinks every workload (a smoke test of the script, e.g. on lavapipe):
 # the figures then mean nothing.
@@ -54,6 +58,10 @@ for backend in wgpu flex; do
     --set "scene.path=\"$data/guitar.compressed.ply\"" "${quick[@]}" \
     --runs-dir "$out/runs_$backend" --json >"$out/first_try_$backend.json"
 done
+echo "== wgpu: bench render, each kernel waited for" >&2
+CUBECL_DEBUG_OPTION=profile-medium "$bin" bench render --backend wgpu --sizes "$sizes" \
+  --resolutions 128 --rasterizer fused --repeats 1 --scene "$data/biker.compressed.ply" --json \
+  >"$out/render_wgpu_profiled.json"
 
 python3 - "$out" <<'PY'
 import json, math, os, platform, subprocess, sys
@@ -86,6 +94,15 @@ for r in render["wgpu"]["rows"]:
           f"{f['forward_backward_ms']:.2f} | {r['forward_backward_ms'] / f['forward_backward_ms']:.2f} | "
           f"{c.get('launches', '-')} | {c.get('reads', '-')} | {c.get('bytes_up', 0) / 1024:.1f} | "
           f"{r['tce']:.6f} / {f['tce']:.6f} | {diff:.1e} |")
+profiled = load("render_wgpu_profiled.json")
+names = [n for n, _ in profiled["rows"][0]["stages_ms"]] if profiled["rows"] else []
+print("\n| wgpu stages, ms, each kernel waited for | " + " | ".join(names) + " |")
+print("|---|" + "---:|" * len(names))
+for r in profiled["rows"]:
+    if not r.get("skipped"):
+        stages = dict(r["stages_ms"])
+        print(f"| {r['scene']} {r['gaussians']} {r['resolution']}² {r['pruning']} | "
+              + " | ".join(f"{stages.get(n, 0):.2f}" for n in names) + " |")
 frames = {b: load(f"frames_{b}.json") for b in ("wgpu", "flex")}
 print("\n| 1080p output frame | wgpu ms | flex ms |")
 print("|---|---:|---:|")
