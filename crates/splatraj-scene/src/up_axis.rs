@@ -5,9 +5,10 @@
 //! We take the opacity- and area-weighted scatter matrix of these normals and pick its
 //! principal direction. When no direction holds at least [`STRONG_NORMALS`] of that weight
 //! (no dominant ground) and the scene's robust bounding box is [`TALL`] times longer along one
-//! side than along that direction, the scene is an object captured all around (a statue, a
-//! rider, a guitar) and that longest side is up: standing things are taller than wide. Few flat
-//! splats: the direction of least spread of the centres.
+//! side than along its next longest, the scene is an object captured all around (a statue, a
+//! rider, a guitar) and that longest side is up: standing things are taller than wide. (The
+//! side along the weak normals' direction is no yardstick: a statue's plinth pulls them
+//! sideways.) Few flat splats: the direction of least spread of the centres.
 //!
 //! **Sign**, from where the scene sits relative to the world origin, which trainers put at
 //! one of three places. Where the origin lies near the scene's end along the axis (between
@@ -22,8 +23,10 @@
 //!
 //! Judged on real captures whose up we know (see the scene crate's README): biker and guitar
 //! (PlayCanvas, y-down, standing on y = 0: −y), donut (Blender synthetic, z-up, lying on
-//! z = 0: +z), fruit_drops (a tabletop 2 units below its cameras at the origin: +z), and the
-//! demo room (+z). The result is snapped to the nearest coordinate axis when within 25° of
+//! z = 0: +z), fruit_drops (a tabletop 2 units below its cameras at the origin: +z), narcissus
+//! (a statue on a plinth, PlayCanvas y-down: −y; normals 0.38 toward −x, its height 1.96 × its
+//! width) and the demo room (+z). The capture's cameras, where they exist, say better
+//! ([`crate::cameras_up`]). The result is snapped to the nearest coordinate axis when within 25° of
 //! one. It is a guess: configs can always state `up`.
 
 use glam::{Mat3, Quat, Vec3};
@@ -63,9 +66,9 @@ const FLATNESS: f32 = 0.3;
 const MIN_FLAT: usize = 100;
 /// Share of the normals' weight one direction needs to be taken as up (else: longest side).
 pub const STRONG_NORMALS: f32 = 0.5;
-/// Without a dominant normal, a scene this many times longer along one side than along the
-/// normals' axis is a standing object, and that side is up.
-pub const TALL: f32 = 2.0;
+/// Without a dominant normal, a scene this many times longer along one side than along its
+/// next longest is a standing object, and that side is up.
+pub const TALL: f32 = 1.5;
 /// The origin is a ground point when within this many half-extents of the scene's centre
 /// (and not within [`ORIGIN_AT_CENTRE`]).
 pub const ORIGIN_ON_SCENE: f32 = 1.5;
@@ -108,9 +111,12 @@ pub fn guess_up_axis(scene: &Scene) -> Option<UpGuess> {
         let k = (0..3)
             .max_by(|&a, &b| size[a].total_cmp(&size[b]))
             .unwrap_or(2);
-        // The box's side along the normals' axis.
-        let along = size.dot(axis.abs());
-        if value >= STRONG_NORMALS || size[k] < TALL * along {
+        // The box's next longest side. Not its side along the normals' axis: normals that
+        // prefer no direction point anywhere (a plinth's four sides pull them sideways, and
+        // the statue on it is twice as tall as the plinth is wide).
+        let mut sides = size.to_array();
+        sides.sort_by(f32::total_cmp);
+        if value >= STRONG_NORMALS || size[k] < TALL * sides[1] {
             (axis, value, UpMethod::Normals)
         } else {
             // Confidence: how much longer the longest side is than the others.
