@@ -17,12 +17,15 @@ use splatraj_scene::{ResolvedUp, Scene, cameras_up, resolve_up};
 use crate::config::Config;
 
 /// Camera files looked for in the scene file's folder, in this order: INRIA 3DGS and gsplat
-/// (`cameras.json`), nerfstudio and Instant-NGP (`transforms.json`), COLMAP's text model.
-pub const CAMERA_FILE_NAMES: [&str; 4] = [
+/// (`cameras.json`), nerfstudio and Instant-NGP (`transforms.json`), COLMAP's text model, then
+/// its binary one (what `colmap mapper` writes by default).
+pub const CAMERA_FILE_NAMES: [&str; 6] = [
     "cameras.json",
     "transforms.json",
     "sparse/0/images.txt",
     "images.txt",
+    "sparse/0/images.bin",
+    "images.bin",
 ];
 
 /// Cameras whose median distance from the scene's centre exceeds this many diagonals of its
@@ -39,26 +42,17 @@ pub fn scene_up(config: &Config, scene: &Scene) -> Result<ResolvedUp> {
         let path = config.resolve(cameras);
         return up_from_file(&path, scene).map_err(|e| anyhow!("`scene.cameras`: {e}"));
     }
-    if let Some(scene_file) = config.scene_file() {
-        if let Some(path) = camera_files_beside(&scene_file)
-            .into_iter()
-            .find(|p| p.is_file())
-        {
-            match up_from_file(&path, scene) {
-                Ok(up) => return Ok(up),
-                Err(e) => tracing::warn!(
-                    "found {} beside the scene but took up from the geometry instead: {e} (set \
-                     `scene.up`, or `scene.cameras` to the right file)",
-                    path.display()
-                ),
-            }
-        } else if let Some(binary) = colmap_binary_beside(&scene_file) {
-            tracing::warn!(
-                "found COLMAP's binary model {} beside the scene, which splatraj does not read: \
-                 up comes from the geometry (convert it with `colmap model_converter \
-                 --output_type TXT` for images.txt, or set `scene.up`)",
-                binary.display()
-            );
+    let found = config
+        .scene_file()
+        .and_then(|file| camera_files_beside(&file).into_iter().find(|p| p.is_file()));
+    if let Some(path) = found {
+        match up_from_file(&path, scene) {
+            Ok(up) => return Ok(up),
+            Err(e) => tracing::warn!(
+                "found {} beside the scene but took up from the geometry instead: {e} (set \
+                 `scene.up`, or `scene.cameras` to the right file)",
+                path.display()
+            ),
         }
     }
     Ok(resolve_up(None, false, scene))
@@ -83,15 +77,6 @@ pub fn camera_files_beside(scene_file: &Path) -> Vec<PathBuf> {
         files.push(model.join("cameras.json"));
     }
     files
-}
-
-/// COLMAP's binary `images.bin` beside `scene_file` (its folder or `sparse/0`), if any.
-fn colmap_binary_beside(scene_file: &Path) -> Option<PathBuf> {
-    let dir = scene_file.parent()?;
-    ["sparse/0/images.bin", "images.bin"]
-        .iter()
-        .map(|n| dir.join(n))
-        .find(|p| p.is_file())
 }
 
 /// Up from the cameras of `path`, checked for agreement and for standing near `scene`.

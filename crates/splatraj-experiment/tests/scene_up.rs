@@ -99,6 +99,27 @@ fn images_txt(cameras: &[(DMat3, DVec3)]) -> String {
     text
 }
 
+/// COLMAP `images.bin`: per image u32 id, f64 qw qx qy qz (R_cw = R_wcᵀ), f64 t = −R_cw·c,
+/// u32 camera id, the name and a zero byte, and a u64 count of 2D points (here one point).
+fn images_bin(cameras: &[(DMat3, DVec3)]) -> Vec<u8> {
+    let mut bytes = (cameras.len() as u64).to_le_bytes().to_vec();
+    for (i, (r, c)) in cameras.iter().enumerate() {
+        let r_cw = r.transpose();
+        let q = DQuat::from_mat3(&r_cw);
+        let t = -(r_cw * *c);
+        bytes.extend((i as u32 + 1).to_le_bytes());
+        for v in [q.w, q.x, q.y, q.z, t.x, t.y, t.z] {
+            bytes.extend(v.to_le_bytes());
+        }
+        bytes.extend(1u32.to_le_bytes());
+        bytes.extend(format!("{i:04}.png\0").bytes());
+        bytes.extend(1u64.to_le_bytes());
+        bytes.extend([1.5f64.to_le_bytes(), 2.5f64.to_le_bytes()].concat());
+        bytes.extend((-1i64).to_le_bytes());
+    }
+    bytes
+}
+
 /// INRIA `cameras.json`: `position` the centre, `rotation` R_wc (OpenCV axes) as rows.
 fn cameras_json(cameras: &[(DMat3, DVec3)]) -> String {
     let list: Vec<serde_json::Value> = cameras
@@ -133,11 +154,12 @@ fn assert_known_up(up: [f64; 3], what: &str) {
 
 #[test]
 fn each_camera_file_beside_the_scene_gives_the_known_up() {
-    type Writer = fn(&[(DMat3, DVec3)]) -> String;
-    let files: [(&str, Writer); 3] = [
-        ("transforms.json", transforms_json),
-        ("sparse/0/images.txt", images_txt),
-        ("cameras.json", cameras_json),
+    type Writer = fn(&[(DMat3, DVec3)]) -> Vec<u8>;
+    let files: [(&str, Writer); 4] = [
+        ("transforms.json", |c| transforms_json(c).into_bytes()),
+        ("sparse/0/images.txt", |c| images_txt(c).into_bytes()),
+        ("sparse/0/images.bin", images_bin),
+        ("cameras.json", |c| cameras_json(c).into_bytes()),
     ];
     for (name, write) in files {
         let dir = tempfile::tempdir().unwrap();

@@ -315,20 +315,34 @@ pub fn read(images: &Path) -> Result<CameraPath> {
     read_named(images).map(|(path, _)| path)
 }
 
-/// [`read`] with each image's `NAME`.
+/// [`read`] with each image's `NAME`. A binary `images.bin` is read with `cameras.bin` (or
+/// `cameras.txt`) beside it ([`crate::colmap_binary`]).
 pub fn read_named(images: &Path) -> Result<(CameraPath, Vec<String>)> {
-    let cameras_path = images.with_file_name("cameras.txt");
-    let cameras = if cameras_path.is_file() {
-        Some(import_cameras(
-            &read_text(&cameras_path)?,
-            &cameras_path.display().to_string(),
-        )?)
+    let binary = images
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("bin"));
+    let mut cameras = None;
+    for (name, is_binary) in [("cameras.bin", true), ("cameras.txt", false)] {
+        let path = images.with_file_name(name);
+        if (binary || !is_binary) && path.is_file() {
+            let file = path.display().to_string();
+            let text = if is_binary {
+                crate::colmap_binary::cameras_text(
+                    &crate::colmap_binary::read_bytes(&path)?,
+                    &file,
+                )?
+            } else {
+                read_text(&path)?
+            };
+            cameras = Some(import_cameras(&text, &file)?);
+            break;
+        }
+    }
+    let file = images.display().to_string();
+    let text = if binary {
+        crate::colmap_binary::images_text(&crate::colmap_binary::read_bytes(images)?, &file)?
     } else {
-        None
+        read_text(images)?
     };
-    import_named(
-        &read_text(images)?,
-        &images.display().to_string(),
-        cameras.as_ref(),
-    )
+    import_named(&text, &file, cameras.as_ref())
 }

@@ -18,6 +18,7 @@
 
 pub mod camera;
 pub mod colmap;
+pub mod colmap_binary;
 pub mod error;
 pub mod inria;
 pub mod nerfstudio;
@@ -39,7 +40,7 @@ use error::{export_error, read_text};
 pub enum Format {
     /// nerfstudio `camera_path.json`.
     Nerfstudio,
-    /// COLMAP text model.
+    /// COLMAP model: text (read and written) or binary `images.bin` (read).
     Colmap,
     /// INRIA 3DGS `cameras.json`.
     Inria,
@@ -171,8 +172,8 @@ pub fn export(
     })
 }
 
-/// Which format a camera file is in: `images.txt` (or `*.txt` that is not `cameras.txt`) is
-/// COLMAP; a JSON object with `camera_path` is nerfstudio, one with `animTracks` SuperSplat,
+/// Which format a camera file is in: `images.txt` or `images.bin` (or `*.txt`, `*.bin` that
+/// is not `cameras.*`) is COLMAP's text or binary model; a JSON object with `camera_path` is nerfstudio, one with `animTracks` SuperSplat,
 /// one with `frames` whose first entry has `transform_matrix` nerfstudio's `transforms.json`; a
 /// JSON array of objects with `rotation` is INRIA.
 pub fn detect(path: &Path) -> Result<Format> {
@@ -181,13 +182,15 @@ pub fn detect(path: &Path) -> Result<Format> {
         .file_name()
         .map(|n| n.to_string_lossy().to_lowercase())
         .unwrap_or_default();
-    if name == "cameras.txt" {
+    if name == "cameras.txt" || name == "cameras.bin" {
         return Err(InterchangeError::UnknownFormat {
             file,
-            problem: "give COLMAP's images.txt (cameras.txt beside it is read with it)".into(),
+            problem: "give COLMAP's images.txt or images.bin (the cameras file beside it is \
+                      read with it)"
+                .into(),
         });
     }
-    if name.ends_with(".txt") {
+    if name.ends_with(".txt") || name.ends_with(".bin") {
         return Ok(Format::Colmap);
     }
     let text = read_text(path)?;
