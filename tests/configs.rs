@@ -72,8 +72,8 @@ fn first_try_configs_are_minimal_and_get_the_documented_defaults() {
         assert!(costs.clearance.as_ref().unwrap().margin.is_auto());
         assert!(costs.motion.as_ref().unwrap().max_speed.unwrap().is_auto());
         // Under the verdict's pacing limits of 45°/s (docs/conventions.md, "Pacing").
-        assert_eq!(costs.motion.as_ref().unwrap().max_angular_speed, Some(40.0));
-        assert_eq!(costs.motion.as_ref().unwrap().max_orbit_speed, Some(40.0));
+        assert_eq!(costs.motion.as_ref().unwrap().max_angular_speed, Some(36.0));
+        assert_eq!(costs.motion.as_ref().unwrap().max_orbit_speed, Some(36.0));
         assert!(costs.visibility.is_some());
         match &config.trajectory {
             splatraj::traj::trajectory::TrajectoryModel::Rbf(rbf) => {

@@ -1,7 +1,8 @@
 //! The first-try quality benchmark's figures, read from a finished run folder
 //! (`splatraj bench first-try`, docs/first-try.md): per window whether its verdict passes,
-//! its framing in the middle half, the visible and hidden shares, the smallest clearance, the
-//! largest turn between two frames and the framing's wobble; per run its wall time. The runs
+//! its framing in the middle half, its framed share of the middle 60 %, the visible and hidden
+//! shares, the smallest clearance, the largest turn of the view and orbit about the part
+//! between two frames and the framing's wobble; per run its wall time. The runs
 //! themselves are `splatraj run` in child processes ([`run_first_try`]), as a user runs them.
 
 use std::path::{Path, PathBuf};
@@ -24,6 +25,8 @@ pub struct WindowQuality {
     pub in_view: f64,
     /// Mean TCE of the middle half's samples in view (None: never in view).
     pub tce_middle: Option<f64>,
+    /// Share of the middle 60 %'s samples framed (None: an older run folder).
+    pub framed_share: Option<f64>,
     /// 1 − mean occluded share.
     pub visible: f64,
     /// Share of samples more than half hidden.
@@ -33,6 +36,9 @@ pub struct WindowQuality {
     /// Largest turn of the view between two consecutive frames, degrees (None: the run
     /// folder gives no duration).
     pub turn_per_frame: Option<f64>,
+    /// Largest orbit about the part's centre between two consecutive frames, degrees (None:
+    /// no duration, or an older run folder).
+    pub orbit_per_frame: Option<f64>,
     /// The framing's wobble over the frames (None: no frames).
     pub wobble: Option<f64>,
 }
@@ -91,6 +97,9 @@ pub fn read_run_quality(dir: &Path) -> Result<RunQuality> {
             // Per second when the path has a duration (every run has one now; older run
             // folders may not).
             let turn_per_frame = number(&motion["seconds"]).map(|_| per_second / fps);
+            let orbit_per_frame = number(&motion["seconds"])
+                .and(number(&motion["peak_orbit_speed"]))
+                .map(|o| o / fps);
             WindowQuality {
                 name: w["name"].as_str().unwrap_or_default().to_string(),
                 pass: w["verdict"]["pass"].as_bool().unwrap_or(false),
@@ -101,10 +110,12 @@ pub fn read_run_quality(dir: &Path) -> Result<RunQuality> {
                     .collect(),
                 in_view: number(&w["visible_fraction"]).unwrap_or(f64::NAN),
                 tce_middle: number(&w["framing"]["tce_middle"]),
+                framed_share: number(&w["framing"]["framed_share"]),
                 visible: 1.0 - number(&w["occlusion"]["mean_occluded"]).unwrap_or(f64::NAN),
                 hidden: number(&w["occlusion"]["hidden_fraction"]).unwrap_or(f64::NAN),
                 min_clearance: number(&w["path"]["clearance"]["min_clearance"]),
                 turn_per_frame,
+                orbit_per_frame,
                 wobble: number(&w["framing"]["wobble"]),
             }
         })
@@ -125,10 +136,12 @@ pub fn read_run_quality(dir: &Path) -> Result<RunQuality> {
 /// The runs as a Markdown table, one row per window, and a last line counting the passes.
 pub fn quality_table(runs: &[RunQuality]) -> String {
     let show = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.3}"));
+    let degrees = |v: Option<f64>| v.map_or("–".to_string(), |d| format!("{d:.2}°"));
     let mut out = String::from(
-        "| scene | Gaussians | window | verdict | in view | TCE (middle) | visible | hidden \
-         | min clearance | turn/frame | wobble | time (optimisation) |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| scene | Gaussians | window | verdict | in view | TCE (middle) | framed (middle 60 %) \
+         | visible | hidden | min clearance | turn/frame | orbit/frame | wobble | time \
+         (optimisation) |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for run in runs {
         for (i, w) in run.windows.iter().enumerate() {
@@ -143,17 +156,19 @@ pub fn quality_table(runs: &[RunQuality]) -> String {
                 String::new()
             };
             out.push_str(&format!(
-                "| {} | {} | {} | {verdict} | {:.0} % | {} | {:.0} % | {:.0} % | {} | {} | {} | {time} |\n",
+                "| {} | {} | {} | {verdict} | {:.0} % | {} | {} | {:.0} % | {:.0} % | {} | {} | {} | {} | {time} |\n",
                 if i == 0 { run.name.as_str() } else { "" },
                 if i == 0 { run.gaussians.to_string() } else { String::new() },
                 w.name,
                 100.0 * w.in_view,
                 show(w.tce_middle),
+                w.framed_share
+                    .map_or("–".to_string(), |f| format!("{:.0} %", 100.0 * f)),
                 100.0 * w.visible,
                 100.0 * w.hidden,
                 show(w.min_clearance),
-                w.turn_per_frame
-                    .map_or("–".to_string(), |d| format!("{d:.2}°")),
+                degrees(w.turn_per_frame),
+                degrees(w.orbit_per_frame),
                 show(w.wobble),
             ));
         }

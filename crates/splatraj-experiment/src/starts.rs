@@ -12,9 +12,9 @@ use splatraj_traj::costs::{ShotCost, WeightedCosts};
 use splatraj_traj::optimise::start::START_FIT_SAMPLES;
 use splatraj_traj::optimise::start::window_joins;
 use splatraj_traj::optimise::{
-    Candidate, RouteKind, RoutePlanner, ViewSearch, ViewWeights, ViewedObject, WindowStart,
-    WindowViews, choose_views, object_side, object_start_poses, plan_transitions,
-    random_start_poses, routed_start_trajectory, search_views,
+    Candidate, PanLimits, RouteKind, RoutePlanner, ViewSearch, ViewWeights, ViewedObject,
+    WindowStart, WindowViews, choose_views, object_side, object_start_poses, pan_shares,
+    plan_transitions, random_start_poses, routed_start_trajectory, search_views,
 };
 use splatraj_traj::shots::{ShotFrame, ShotPath};
 use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord, uniform_times};
@@ -105,11 +105,12 @@ impl Experiment {
                         None => WindowStart::Hold(*pose),
                     })
                     .collect();
+                let shares = self.pan_shares(&starts);
                 let transitions = match &planner {
                     Some(planner) => {
                         let has_shot: Vec<bool> = shots.iter().map(Option::is_some).collect();
                         let (routes, walled_in) =
-                            plan_transitions(planner, &window_joins(&starts), &has_shot);
+                            plan_transitions(planner, &window_joins(&starts), &has_shot, &shares);
                         for i in walled_in {
                             tracing::warn!(
                                 "start {r}: no route keeps `costs.clearance.margin` from \
@@ -121,12 +122,36 @@ impl Experiment {
                     }
                     None => Vec::new(),
                 };
-                Ok(
-                    routed_start_trajectory(model.clone(), &starts, &transitions, device, dtype)?
-                        .record(),
-                )
+                Ok(routed_start_trajectory(
+                    model.clone(),
+                    &starts,
+                    &transitions,
+                    &shares,
+                    device,
+                    dtype,
+                )?
+                .record())
             })
             .collect()
+    }
+
+    /// How long the start pans at each join of `starts`: long enough for the motion cost's
+    /// turning and orbit limits ([`pan_shares`]); a quarter window each side without limits.
+    fn pan_shares(&self, starts: &[WindowStart]) -> Vec<f64> {
+        let (Some(motion), Some(seconds)) = (&self.config.costs.motion, self.path_seconds()) else {
+            return Vec::new();
+        };
+        let centres: Vec<[f64; 3]> = self
+            .windows
+            .iter()
+            .map(|w| w.context.object_centre)
+            .collect();
+        let limits = PanLimits {
+            turn: motion.max_angular_speed,
+            orbit: motion.max_orbit_speed,
+            window_seconds: seconds / self.windows.len().max(1) as f64,
+        };
+        pan_shares(starts, &centres, limits)
     }
 
     /// The grid `[start] route` plans on (None when the starts go straight): over the

@@ -182,3 +182,56 @@ fn the_verdict_holds_framed_share_and_pacing_to_their_limits() {
     assert!(v.pass, "{v:#?}");
     assert!(v.checks.iter().all(|c| c.check != CheckKind::Turning));
 }
+
+#[test]
+fn pans_get_the_time_their_turn_and_orbit_need_within_bounds() {
+    use splatraj_traj::optimise::pans::MAX_PAN_SHARE;
+    use splatraj_traj::optimise::route::ROUTE_TRANSITION;
+    use splatraj_traj::optimise::{PanLimits, WindowStart, pan_shares};
+    let limits = PanLimits {
+        turn: Some(40.0),
+        orbit: Some(40.0),
+        window_seconds: 3.0,
+    };
+    // Standing still and turning by θ about up: the smoothstep over 2·s·3 s peaks at
+    // 1.5·θ/(6 s), which is 40°/s at s = 1.5·θ/40/6.
+    let eye = DVec3::new(1.0, 2.0, 0.5);
+    let heading = |degrees: f64| {
+        let a = degrees.to_radians();
+        WindowStart::Hold(Pose::look_at(eye, eye + DVec3::new(a.cos(), a.sin(), 0.0), UP).unwrap())
+    };
+    let share = |starts: &[WindowStart], centres: &[[f64; 3]]| pan_shares(starts, centres, limits);
+    let far = [[50.0, 0.0, 0.0], [50.0, 0.0, 0.0]]; // no orbit to speak of
+    let turned = share(&[heading(10.0), heading(58.0)], &far);
+    close(turned[0], 1.5 * 48.0 / 40.0 / 6.0); // 0.3
+    assert_eq!(
+        share(&[heading(0.0), heading(20.0)], &far),
+        vec![ROUTE_TRANSITION]
+    );
+    assert_eq!(
+        share(&[heading(0.0), heading(120.0)], &far),
+        vec![MAX_PAN_SHARE]
+    );
+    // Orbiting o by 44° at a fixed distance, the view's turn kept small: the orbit sets it.
+    let o = DVec3::new(0.0, 0.0, 0.0);
+    let around = |degrees: f64| {
+        let a = degrees.to_radians();
+        let c = o + 2.0 * DVec3::new(a.cos(), a.sin(), 0.0);
+        WindowStart::Hold(Pose::look_at(c, c - DVec3::X, UP).unwrap())
+    };
+    let orbited = share(
+        &[around(0.0), around(44.0)],
+        &[o.to_array(), [50.0, 0.0, 0.0]],
+    );
+    close(orbited[0], 1.5 * 44.0 / 40.0 / 6.0); // 0.275
+    // Without limits every pan keeps a quarter window.
+    let free = PanLimits {
+        turn: None,
+        orbit: None,
+        window_seconds: 3.0,
+    };
+    assert_eq!(
+        pan_shares(&[heading(0.0), heading(120.0)], &far, free),
+        vec![ROUTE_TRANSITION]
+    );
+}

@@ -173,6 +173,7 @@ fn walled_run(planned: bool) -> f64 {
             &planner(&occupancy),
             &window_joins(&starts),
             &[false, false],
+            &[],
         );
         assert!(walled_in.is_empty() && routes.len() == 1);
         routes
@@ -180,7 +181,7 @@ fn walled_run(planned: bool) -> f64 {
         Vec::new()
     };
     let model = TrajectoryModel::Rbf(Rbf::new(2, 8, None));
-    let start = routed_start_trajectory(model, &starts, &transitions, &device, DType::F32)
+    let start = routed_start_trajectory(model, &starts, &transitions, &[], &device, DType::F32)
         .unwrap()
         .record();
     let options = TrajectoryOptions {

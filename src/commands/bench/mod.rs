@@ -31,7 +31,8 @@ pub enum BenchCommand {
     Render(BenchRenderArgs),
     /// Run minimal first-try configs (default: `configs/first-try/*.toml`) as a new user
     /// would, each with `splatraj run` in a child process, and tabulate each window's verdict,
-    /// framing, visible and hidden shares, clearance, turn per frame, wobble and the time.
+    /// framing, framed share, visible and hidden shares, clearance, turn and orbit per frame,
+    /// wobble and the time.
     FirstTry(BenchFirstTryArgs),
     /// Time a run's output frames (render RGB + object mask, metrics, PNG, H.264) at 720p and
     /// 1080p on the demo scene and a real one, per frame and for a whole video.

@@ -72,22 +72,25 @@ impl Default for MotionCost {
     }
 }
 
-/// Turning-rate limit of a config without `[costs]`, degrees per second: 5°/s under the rate
-/// a viewer follows ([`crate::pacing::MAX_TURN_RATE`], the verdict's limit), since this
-/// linear penalty lets the image costs push a rate a little past it and sees the path on the
-/// optimiser's grid, coarser than the verdict's.
-pub const FIRST_TRY_MAX_ANGULAR_SPEED: f64 = 40.0;
+/// Turning-rate limit of a config without `[costs]`, degrees per second: 80 % of the rate a
+/// viewer follows ([`crate::pacing::MAX_TURN_RATE`], the verdict's limit), since this linear
+/// penalty lets the image costs push a rate past it and sees the path on the optimiser's
+/// grid, coarser than the verdict's (measured on three first-try captures: at 40°/s the
+/// peaks reached 46°/s; at 36°/s, with the pans of `optimise::pans`, 37°/s).
+pub const FIRST_TRY_MAX_ANGULAR_SPEED: f64 = 36.0;
 
-/// Orbit-rate limit of a config without `[costs]`, degrees per second: 5°/s under
-/// [`crate::pacing::MAX_ORBIT_RATE`], for the same reason.
-pub const FIRST_TRY_MAX_ORBIT_SPEED: f64 = 40.0;
+/// Orbit-rate limit of a config without `[costs]`, degrees per second: 80 % of
+/// [`crate::pacing::MAX_ORBIT_RATE`], for the same reason (at 40°/s the peaks reached
+/// 49°/s; at 36°/s, 37°/s).
+pub const FIRST_TRY_MAX_ORBIT_SPEED: f64 = 36.0;
 
 /// How many working distances (prior radii) per second the automatic speed limit allows.
 pub const AUTO_SPEED_RADII_PER_SECOND: f64 = 1.5;
 
 /// Share of a window's duration the automatic speed limit allows for the move from one
-/// object to the next: the start pans over the last and first quarter of the windows at a
-/// join (`optimise::route::ROUTE_TRANSITION`), half a window in all.
+/// object to the next: the start pans over at least the last and first quarter of the windows
+/// at a join (`optimise::route::ROUTE_TRANSITION`; more where the pacing limits ask for it,
+/// `optimise::pans`), half a window in all: the speed that shortest pan needs bounds them all.
 pub const AUTO_SPEED_JOIN_SHARE: f64 = 0.5;
 
 /// Peak over mean speed of the start's eased pans (the smoothstep 3x² − 2x³).

@@ -12,6 +12,7 @@
 //! - [`sampling`] and [`units`]: the stratified times and the normalised parameter units the
 //!   loops share.
 
+pub mod pans;
 pub mod problem;
 pub mod route;
 pub mod sampling;
@@ -29,6 +30,7 @@ use splatraj_render::render::RenderError;
 use crate::costs::{CostError, CostTerms};
 use crate::trajectory::TrajectoryError;
 
+pub use pans::{PanLimits, pan_shares};
 pub use problem::{Evaluated, PoseLoss, Problem};
 pub use route::{Route, RouteKind, RoutePlanner, Transition, plan_transitions};
 pub use sgld::{SgldOptions, SgldResult, SgldSample, sample_poses_sgld};

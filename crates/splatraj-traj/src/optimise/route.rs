@@ -21,9 +21,9 @@
 //! already inside the margin may keep that end's clearance instead) is kept next.
 //!
 //! **Start.** [`routed_start`] moves the start's camera centres along the route over the
-//! transition around each join of windows: the last [`ROUTE_TRANSITION`] of the earlier
-//! window and the first of the later one (none inside a window with a shot, whose path is the
-//! shot's), by arc length along the smoothstep 3x² − 2x³ of time (at rest at both ends of the
+//! transition around each join of windows: the last share of the earlier window and the first
+//! of the later one (at least [`ROUTE_TRANSITION`], more where the pacing limits ask for it:
+//! [`crate::optimise::pans`]; none inside a window with a shot, whose path is the shot's), by arc length along the smoothstep 3x² − 2x³ of time (at rest at both ends of the
 //! transition). Orientations stay those of the start. Joins whose straight segment already
 //! keeps the margin are left alone.
 
@@ -39,7 +39,9 @@ pub const MAX_ROUTE_CELLS: usize = 128_000;
 /// The most points a segment's clearance is checked at (a segment 25 000 margins long).
 pub const MAX_SEGMENT_CHECKS: usize = 100_000;
 
-/// Share of a window on each side of a join over which a planned start follows its route.
+/// Least share of a window on each side of a join over which a start pans (and a planned
+/// start follows its route); a pan that needs longer for the pacing limits gets more
+/// ([`crate::optimise::pans`]).
 pub const ROUTE_TRANSITION: f64 = 0.25;
 
 /// How starts travel between consecutive windows (`[start] route`).
@@ -262,23 +264,26 @@ impl Transition {
 /// The transitions of a start over `windows` windows: for each join whose straight segment
 /// (from `ends[i].0`, the end centre of window i, to `ends[i].1`, the start centre of window
 /// i + 1) does not keep the margin, the planned route over the times described in the module
-/// docs; `shot[i]` says window i follows a shot (no transition inside it). The second list
-/// holds the joins that found no route.
+/// docs, over `shares[i]` of each window (a join beyond the list: [`ROUTE_TRANSITION`]);
+/// `shot[i]` says window i follows a shot (no transition inside it). The second list holds
+/// the joins that found no route.
 pub fn plan_transitions(
     planner: &RoutePlanner,
     ends: &[(DVec3, DVec3)],
     shot: &[bool],
+    shares: &[f64],
 ) -> (Vec<Transition>, Vec<usize>) {
     let n = shot.len().max(1) as f64;
     let mut transitions = Vec::new();
     let mut unreachable = Vec::new();
     for (i, &(a, b)) in ends.iter().enumerate() {
         let join = (i + 1) as f64 / n;
-        let before = if shot[i] { 0.0 } else { ROUTE_TRANSITION / n };
+        let share = shares.get(i).copied().unwrap_or(ROUTE_TRANSITION);
+        let before = if shot[i] { 0.0 } else { share / n };
         let after = if shot.get(i + 1).copied().unwrap_or(true) {
             0.0
         } else {
-            ROUTE_TRANSITION / n
+            share / n
         };
         if before + after <= 0.0 {
             continue;

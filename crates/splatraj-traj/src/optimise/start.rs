@@ -259,7 +259,7 @@ pub fn start_trajectory(
     device: &Device,
     dtype: DType,
 ) -> Result<Trajectory, OptimiseError> {
-    routed_start_trajectory(model, per_window, &[], device, dtype)
+    routed_start_trajectory(model, per_window, &[], &[], device, dtype)
 }
 
 /// Each window's end and the next window's start camera centre, per join (what
@@ -272,11 +272,13 @@ pub fn window_joins(per_window: &[WindowStart]) -> Vec<(DVec3, DVec3)> {
 }
 
 /// [`start_trajectory`] whose camera centres follow `transitions` (planned routes around the
-/// geometry, [`crate::optimise::route`]) over their times.
+/// geometry, [`crate::optimise::route`]) over their times, with the pan at join k over
+/// `shares[k]` of each window ([`crate::optimise::pans::pan_shares`]; a join beyond the list
+/// pans over [`ROUTE_TRANSITION`]).
 ///
 /// **Joins.** Around each join of two windows the start does not jump from one window's pose
-/// to the next: over the last [`ROUTE_TRANSITION`] of the earlier window and the first of the
-/// later one (not inside a window with a shot, whose path is the shot's), the orientation
+/// to the next: over the last share of the earlier window and the first of the later one
+/// (not inside a window with a shot, whose path is the shot's), the orientation
 /// turns from the one to the other (slerp) and the centre moves along the join's route, or
 /// straight, both by the smoothstep 3x² − 2x³ of time, at rest at both ends: a pan from one
 /// framed object to the next. A step is what no smooth model can hold: fitted by 3 RBF
@@ -288,12 +290,13 @@ pub fn routed_start_trajectory(
     model: TrajectoryModel,
     per_window: &[WindowStart],
     transitions: &[Transition],
+    shares: &[f64],
     device: &Device,
     dtype: DType,
 ) -> Result<Trajectory, OptimiseError> {
     let n = per_window.len();
     let times = uniform_times(START_FIT_SAMPLES);
-    let joins = join_spans(per_window);
+    let joins = join_spans(per_window, shares);
     let mut poses: Vec<[f64; 6]> = Vec::with_capacity(times.len());
     for &t in &times {
         let i = window_of(t, n);
@@ -325,20 +328,18 @@ pub fn routed_start_trajectory(
 }
 
 /// (join k, from, to): the time span over which the start turns from window k's end pose to
-/// window k + 1's start pose (see [`routed_start_trajectory`]); none beside a shot's window.
-fn join_spans(per_window: &[WindowStart]) -> Vec<(usize, f64, f64)> {
+/// window k + 1's start pose, `shares[k]` of each window (see [`routed_start_trajectory`]);
+/// none beside a shot's window.
+fn join_spans(per_window: &[WindowStart], shares: &[f64]) -> Vec<(usize, f64, f64)> {
     let n = per_window.len().max(1) as f64;
     let held = |w: &WindowStart| matches!(w, WindowStart::Hold(_));
     (0..per_window.len().saturating_sub(1))
         .filter_map(|k| {
             let join = (k + 1) as f64 / n;
-            let before = if held(&per_window[k]) {
-                ROUTE_TRANSITION / n
-            } else {
-                0.0
-            };
+            let share = shares.get(k).copied().unwrap_or(ROUTE_TRANSITION);
+            let before = if held(&per_window[k]) { share / n } else { 0.0 };
             let after = if held(&per_window[k + 1]) {
-                ROUTE_TRANSITION / n
+                share / n
             } else {
                 0.0
             };
