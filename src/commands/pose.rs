@@ -76,11 +76,13 @@ pub fn run(args: PoseArgs) -> Result<()> {
         experiment.pose_starts()?.len(),
         experiment.pose_costs()?.names()
     );
+    // Ctrl-C is honoured before the run folder exists (as `run` does): a signal in between
+    // would end the process at once and leave an empty folder.
+    let interrupted = interrupt_flag();
     let folder = RunFolder::create(&experiment)?;
     eprintln!("run folder: {}", folder.dir().display());
 
     let bar = progress_bar(plan.steps as u64, args.quiet);
-    let interrupted = interrupt_flag();
     let mut observer = |p: &Progress| {
         if let Progress::Phase(Phase::Sgld { chains }) = *p {
             bar.finish_and_clear();

@@ -90,13 +90,16 @@ pub fn run(args: RunArgs) -> Result<()> {
         }
         return Ok(());
     }
+    // Ctrl-C is honoured (a request the loops act on at their next whole step) before the run
+    // folder exists: a signal between the two would otherwise end the process at once and
+    // leave a folder without a checkpoint, which `--resume` cannot continue.
+    let mut progress = RunProgress::new(plan.steps as u64, args.quiet);
     let folder = match (&args.resume, checkpoint) {
         (Some(dir), Some(checkpoint)) => RunFolder::resume(dir, checkpoint)?,
         _ => RunFolder::create(&experiment)?,
     };
     eprintln!("run folder: {}", folder.dir().display());
 
-    let mut progress = RunProgress::new(plan.steps as u64, args.quiet);
     let outcome = experiment.run_trajectory_in(&folder, &mut progress)?;
     progress.finish();
     for line in outcome.summary_lines() {
