@@ -4,27 +4,11 @@
 
 mod common;
 
-use std::path::PathBuf;
-
 use common::{assert_clean_failure, fixture, s, splatraj, stderr, stdout};
 
-/// A real scene from the shared data folder, as the scene crate's tests find it: `SPLATRAJ_DATA`
-/// or `shared/data` beside the repository; skipped with a notice when absent, a failure when
-/// `SPLATRAJ_REQUIRE_DATA=1`.
-fn shared_data(name: &str) -> Option<PathBuf> {
-    let dir = std::env::var_os("SPLATRAJ_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
-    let path = dir.join(name);
-    if path.exists() {
-        return Some(path);
-    }
-    if std::env::var("SPLATRAJ_REQUIRE_DATA").is_ok_and(|v| v == "1") {
-        panic!("{} is missing and SPLATRAJ_REQUIRE_DATA=1", path.display());
-    }
-    eprintln!("skipped: {} not found (set SPLATRAJ_DATA)", path.display());
-    None
-}
+#[path = "../crates/splatraj-scene/tests/common/shared_data.rs"]
+mod shared_data;
+use shared_data::shared_data;
 
 #[test]
 fn biker_compressed_ply_to_spz_and_back_through_info() {

@@ -12,22 +12,9 @@ use splatraj_semantic::{
     SelectionFile, SelectionOptions, TargetsConfig, find_target, match_selection,
 };
 
-/// A real scene from the shared data folder (`SPLATRAJ_DATA`, or `shared/data` beside the
-/// repository), or `None` with a notice; `SPLATRAJ_REQUIRE_DATA=1` makes absence a failure.
-fn shared_data(name: &str) -> Option<PathBuf> {
-    let dir = std::env::var_os("SPLATRAJ_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"));
-    let path = dir.join(name);
-    if path.exists() {
-        return Some(path);
-    }
-    if std::env::var("SPLATRAJ_REQUIRE_DATA").is_ok_and(|v| v == "1") {
-        panic!("{} is missing and SPLATRAJ_REQUIRE_DATA=1", path.display());
-    }
-    eprintln!("skipped: {} not found (set SPLATRAJ_DATA)", path.display());
-    None
-}
+#[path = "../../splatraj-scene/tests/common/shared_data.rs"]
+mod shared_data;
+use shared_data::shared_data;
 
 fn read(path: &Path) -> Scene {
     read_scene(path, &ReadOptions::default()).unwrap().scene

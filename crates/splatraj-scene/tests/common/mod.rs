@@ -1,6 +1,11 @@
 //! Helpers shared by the scene crate's integration tests.
 #![allow(dead_code)] // each test binary uses a different subset
 
+#[path = "shared_data.rs"]
+mod shared;
+#[allow(unused_imports)] // as dead_code above: not every test binary reads shared data
+pub use shared::shared_data;
+
 use std::path::PathBuf;
 
 use serde_json::Value;
@@ -11,26 +16,6 @@ pub fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data")
         .join(name)
-}
-
-/// A larger real scene from the shared data folder, or `None` (with a notice) when it is not
-/// there. `SPLATRAJ_DATA` overrides the folder; `SPLATRAJ_REQUIRE_DATA=1` makes absence a failure.
-pub fn shared_data(name: &str) -> Option<PathBuf> {
-    let dir = std::env::var_os("SPLATRAJ_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"));
-    let path = dir.join(name);
-    if path.exists() {
-        return Some(path);
-    }
-    if std::env::var("SPLATRAJ_REQUIRE_DATA").is_ok_and(|v| v == "1") {
-        panic!("{} is missing and SPLATRAJ_REQUIRE_DATA=1", path.display());
-    }
-    eprintln!(
-        "skipped: {} not found (set SPLATRAJ_DATA to the shared data folder)",
-        path.display()
-    );
-    None
 }
 
 /// Offset of the first payload byte of a PLY file (just after `end_header\n`).
