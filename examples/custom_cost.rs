@@ -15,7 +15,7 @@
 use anyhow::Result;
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
-use splatraj::experiment::{Config, Experiment, Extensions, observer};
+use splatraj::experiment::{Config, Experiment, Extensions, optimise::observer};
 use splatraj::traj::costs::{Cost, CostConfig, CostError, CostInputs, check_weight};
 use splatraj::traj::trajectory::uniform_times;
 

@@ -4,7 +4,7 @@
 //! `cargo run --release --example library_run -- CONFIG [--set KEY=VALUE]...`
 
 use anyhow::{Context, Result, bail};
-use splatraj::experiment::observer::{Flow, Progress};
+use splatraj::experiment::optimise::observer::{Flow, Progress};
 use splatraj::experiment::process::RunFolder;
 use splatraj::experiment::{Config, Experiment};
 

@@ -9,7 +9,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use splatraj::experiment::observer::{Flow, Observer, Progress};
+use splatraj::experiment::optimise::observer::{Flow, Observer, Progress};
 use splatraj_scene::formats::LoadedScene;
 use splatraj_scene::{InvalidPolicy, ReadOptions, read_scene};
 

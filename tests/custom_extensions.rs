@@ -10,7 +10,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 use splatraj::config::ConfigError;
-use splatraj::experiment::{Config, Experiment, Extensions, observer};
+use splatraj::experiment::{Config, Experiment, Extensions, optimise::observer};
 use splatraj::scene::Scene;
 use splatraj::semantic::{
     Relevancy, Scoring, SemanticError, SourceConfig, SourceContext, TargetSource,

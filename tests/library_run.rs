@@ -8,7 +8,7 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use common::{TINY_CONFIG, s, splatraj, stderr, stdout};
-use splatraj::experiment::observer;
+use splatraj::experiment::optimise::observer;
 use splatraj::experiment::process::RunFolder;
 use splatraj::experiment::{Config, Experiment};
 

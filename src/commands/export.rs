@@ -7,13 +7,13 @@
 //! frame count; a custom model, which needs its registry, falls back to the densely sampled
 //! poses the file holds). The cameras are the run's frame camera (`output_intrinsics`),
 //! rescaled by `--width`/`--height`. Each file is written whole or not at all. The work is the
-//! library's ([`splatraj::experiment::camera_paths::export_run`]), as for the exports every run writes.
+//! library's ([`splatraj::experiment::outputs::camera_paths::export_run`]), as for the exports every run writes.
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use splatraj::experiment::camera_paths::{ExportRequest, FrameRequest, export_run};
+use splatraj::experiment::outputs::camera_paths::{ExportRequest, FrameRequest, export_run};
 use splatraj_report::Format;
 
 /// Arguments of `splatraj export`.

@@ -16,7 +16,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use splatraj::experiment::Experiment;
 use splatraj::experiment::config::{Ablation, Config};
-use splatraj::experiment::observer::{Flow, Observer, Phase, Progress};
+use splatraj::experiment::optimise::observer::{Flow, Observer, Phase, Progress};
 use splatraj::experiment::process::RunFolder;
 
 use crate::cli::{Ended, MemoryArgs, bar_observer, interrupt_flag, progress_bar};

@@ -7,17 +7,17 @@
 //! Every input is checked before anything is rendered or written, and the output folder
 //! (`--out`, `render/` by default) is written whole: a re-run replaces it, a failure leaves it
 //! as it was. `--grad` computes TCE + TRE through the optimiser's loss path.
-//! The work is the library's ([`splatraj::experiment::camera_render`]).
+//! The work is the library's ([`splatraj::experiment::outputs::camera_render`]).
 
 use std::path::PathBuf;
 use std::str::FromStr;
 
 use anyhow::{Result, bail};
 use clap::Args;
-use splatraj::experiment::camera_render::{
+use splatraj::experiment::io::read_camera_file;
+use splatraj::experiment::outputs::camera_render::{
     CameraRenderRequest, GradRequest, RenderObject, render_camera,
 };
-use splatraj::experiment::io::read_camera_file;
 use splatraj::experiment::resources::MemoryLimit;
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera_file::resize;

@@ -7,7 +7,7 @@
 //! whose frames are rendered as they are. SCENE is a scene file, or an experiment config
 //! whose scene and queries are used: then each frame's metrics for its window's object go to
 //! `frame_metrics.csv`, and `--mask-overlay tint` tints it. The work is the library's
-//! ([`splatraj::experiment::path_render`], as `splatraj run` renders its frames); this file
+//! ([`splatraj::experiment::outputs::path_render`], as `splatraj run` renders its frames); this file
 //! parses, reads and shows progress.
 
 use std::path::{Path, PathBuf};
@@ -16,10 +16,10 @@ use std::str::FromStr;
 use anyhow::{Result, bail};
 use burn::tensor::DType;
 use clap::Args;
-use splatraj::experiment::camera_paths::{FrameRequest, PathFile, SceneMismatch};
 use splatraj::experiment::config::MaskOverlay;
-use splatraj::experiment::path_render::{PathRender, Video, render_path_to};
-use splatraj::experiment::records::SceneRecord;
+use splatraj::experiment::outputs::camera_paths::{FrameRequest, PathFile, SceneMismatch};
+use splatraj::experiment::outputs::path_render::{PathRender, Video, render_path_to};
+use splatraj::experiment::outputs::records::SceneRecord;
 use splatraj::experiment::{Config, Experiment};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::render::{DeviceScene, Rasterizer};
@@ -174,7 +174,7 @@ pub fn run(args: RenderPathArgs) -> Result<()> {
     })?;
     bar.finish_and_clear();
     if !rendered.metrics.is_empty() {
-        let mean = |f: fn(&splatraj::experiment::path_render::FrameMetrics) -> f64| {
+        let mean = |f: fn(&splatraj::experiment::outputs::path_render::FrameMetrics) -> f64| {
             rendered.metrics.iter().map(f).sum::<f64>() / rendered.metrics.len() as f64
         };
         eprintln!(

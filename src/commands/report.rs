@@ -1,13 +1,13 @@
 //! `splatraj report RUN_DIR [--scene FILE]`: rebuilds a run folder's `report.html` from its
 //! files, with the scene's points under the path views (the scene its `config.toml` names,
 //! found as `run_scene` says, or `--scene`). The work is the library's
-//! ([`splatraj::experiment::run_report`], as at the end of `splatraj run`).
+//! ([`splatraj::experiment::outputs::run_report`], as at the end of `splatraj run`).
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use splatraj::experiment::run_report::{run_scene, write_run_report};
+use splatraj::experiment::outputs::run_report::{run_scene, write_run_report};
 
 use crate::cli::ReadArgs;
 

@@ -23,9 +23,9 @@ use anyhow::{Result, bail};
 use clap::Args;
 use indicatif::ProgressBar;
 use splatraj::experiment::config::{Config, VerdictPolicy};
-use splatraj::experiment::observer::{Flow, Observer, Phase, Progress};
+use splatraj::experiment::optimise::observer::{Flow, Observer, Phase, Progress};
+use splatraj::experiment::outputs::run_folder::resumable;
 use splatraj::experiment::process::RunFolder;
-use splatraj::experiment::run_folder::resumable;
 use splatraj::experiment::{Experiment, RunStop};
 
 use crate::cli::{Ended, MemoryArgs, bar_observer, interrupt_flag, progress_bar};

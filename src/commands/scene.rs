@@ -5,11 +5,13 @@ use std::str::FromStr;
 
 use anyhow::{Result, bail};
 use clap::Subcommand;
-use splatraj::experiment::query::parse_direction;
-use splatraj::experiment::scene_files::{
+use splatraj::experiment::picking::query::parse_direction;
+use splatraj::experiment::picking::views_page::{
+    ViewsPageOptions, ViewsPageRequest, write_views_page,
+};
+use splatraj::experiment::prepare::scene_files::{
     MaskSidecarRequest, convert_scene, lift_masks_to_sidecar, write_demo_scene,
 };
-use splatraj::experiment::views_page::{ViewsPageOptions, ViewsPageRequest, write_views_page};
 use splatraj::lift::{LiftStage, MaskOptions};
 use splatraj_render::backend::BackendKind;
 use splatraj_scene::demo::DemoConfig;

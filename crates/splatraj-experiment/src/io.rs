@@ -26,7 +26,7 @@ pub fn read_camera_file(path: &Path) -> Result<CameraSpec> {
     let camera = file
         .camera()
         .map_err(|e| anyhow!("camera file {}: {e}", path.display()))?;
-    crate::camera_paths::check_image_side(&camera.intrinsics)
+    crate::outputs::camera_paths::check_image_side(&camera.intrinsics)
         .map_err(|e| anyhow!("camera file {}: {e}", path.display()))?;
     Ok(camera)
 }

@@ -17,7 +17,7 @@
 //! ```no_run
 //! use std::path::Path;
 //!
-//! use splatraj_experiment::{Config, Experiment, observer};
+//! use splatraj_experiment::{Config, Experiment, optimise::observer};
 //! # fn main() -> anyhow::Result<()> {
 //! let config = Config::load(Path::new("configs/demo.toml"), &[])?;
 //! let experiment = Experiment::prepare(&config)?;
@@ -34,49 +34,24 @@
 #![warn(missing_docs)]
 
 pub mod bench;
-pub mod bench_frames;
-pub mod bench_scale;
-pub mod bench_scenes;
-pub mod camera_paths;
-pub mod camera_render;
-pub mod checkpoint;
 pub mod children;
 pub mod config;
-pub mod experiment;
 pub mod extensions;
 pub mod frame_metrics;
-pub mod grounding;
 pub mod io;
 pub mod json;
-pub mod lifted;
-pub mod memory_plans;
-pub mod observer;
-pub mod optimised_scene;
-pub mod output_folder;
+pub mod optimise;
 pub mod outputs;
-pub mod path_checks;
-pub mod path_render;
-pub mod pose_run;
-pub mod probe;
+pub mod picking;
+pub mod prepare;
 pub mod process;
-pub mod quality;
-pub mod query;
-pub mod records;
 pub mod resources;
-pub mod run_files;
-pub mod run_folder;
-pub mod run_report;
-pub mod scene_files;
-pub mod scene_up;
-pub mod starts;
 pub mod study;
-pub mod trajectory_run;
-pub mod views;
-pub mod views_page;
+pub mod write;
 
 pub use config::Config;
-pub use experiment::Experiment;
 pub use extensions::Extensions;
-pub use observer::{Flow, Observer, Progress};
-pub use pose_run::{PoseRun, Posterior};
-pub use trajectory_run::{Evaluation, RunOptions, RunStop, TrajectoryRun};
+pub use optimise::observer::{Flow, Observer, Progress};
+pub use optimise::pose_run::{PoseRun, Posterior};
+pub use optimise::trajectory_run::{Evaluation, RunOptions, RunStop, TrajectoryRun};
+pub use prepare::experiment::Experiment;

@@ -11,7 +11,7 @@
 //! (steps, restarts, the switch to the outputs, frames, SGLD) reaches the [`Observer`].
 //!
 //! ```no_run
-//! use splatraj_experiment::{Config, Experiment, observer, process::RunFolder};
+//! use splatraj_experiment::{Config, Experiment, optimise::observer, process::RunFolder};
 //! # fn main() -> anyhow::Result<()> {
 //! let config = Config::load(std::path::Path::new("configs/demo.toml"), &[])?;
 //! let experiment = Experiment::prepare(&config)?;
@@ -30,16 +30,17 @@ use serde::Serialize;
 use splatraj_traj::metrics::WindowMetrics;
 use splatraj_traj::optimise::StopReason;
 
-use crate::checkpoint::{CHECKPOINT_FILE, Checkpoint};
 use crate::config::MaskOverlay;
-use crate::experiment::Experiment;
-use crate::observer::{Observer, Phase, Progress};
-use crate::outputs::{FrameSpec, create_run_dir, frame_png, write_bytes, write_csv, write_json};
-use crate::records::{PoseFile, pose_history, sgld_samples, trajectory_history};
-use crate::resources::{MAX_STEPS_PER_SECOND, MemoryPlan, RAISE_LIMIT, TimeBound};
-use crate::run_folder::{
+use crate::optimise::checkpoint::{CHECKPOINT_FILE, Checkpoint};
+use crate::optimise::observer::{Observer, Phase, Progress};
+use crate::outputs::records::{PoseFile, pose_history, sgld_samples, trajectory_history};
+use crate::outputs::run_folder::{
     MetricsFile, RunReport, StageTimes, check_writable, remove_checkpoint, remove_partial_files,
 };
+use crate::outputs::{FrameSpec, create_run_dir, frame_png};
+use crate::prepare::experiment::Experiment;
+use crate::resources::{MAX_STEPS_PER_SECOND, MemoryPlan, RAISE_LIMIT, TimeBound};
+use crate::write::{write_bytes, write_csv, write_json};
 use crate::{Evaluation, Posterior, RunOptions, RunStop, TrajectoryRun};
 
 /// The run's config as run: every `"auto"` replaced by what was derived from the scene.
@@ -116,7 +117,7 @@ impl RunFolder {
     }
 
     /// The folder of a stopped trajectory run, cleared of the temporaries a killed process
-    /// left, to continue from `checkpoint` ([`crate::run_folder::resumable`] reads both).
+    /// left, to continue from `checkpoint` ([`crate::outputs::run_folder::resumable`] reads both).
     pub fn resume(dir: &Path, checkpoint: Checkpoint) -> Result<RunFolder> {
         remove_partial_files(dir)?;
         Ok(RunFolder {

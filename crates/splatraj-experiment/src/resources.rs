@@ -20,7 +20,7 @@
 //! `sysinfo`, which knows every platform's way to ask, and a container's limit), and any limit
 //! is at most that share of the process's address-space limit (`ulimit -v`), past which an
 //! allocation fails however much the machine holds. A prepared experiment's plans, stage by
-//! stage, are [`crate::memory_plans`]; this file knows sizes, not experiments.
+//! stage, are [`crate::prepare::memory_plans`]; this file knows sizes, not experiments.
 
 use std::sync::Mutex;
 
@@ -502,6 +502,14 @@ pub fn check_study(variants: f64, seeds: usize, runs: f64) -> Result<()> {
 
 /// The key and option that raise the limit, for messages.
 pub const RAISE_LIMIT: &str = "`max_memory_gb` (or --max-memory GB)";
+
+/// Process peak resident set (VmHWM), MB; None where /proc is missing.
+pub fn peak_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}
 
 #[cfg(test)]
 mod tests {

@@ -7,9 +7,9 @@ use std::path::Path;
 
 use burn::tensor::{DType, Device};
 use glam::DVec3;
-use splatraj_experiment::camera_paths::PathFrames;
 use splatraj_experiment::config::MaskOverlay;
-use splatraj_experiment::path_render::{
+use splatraj_experiment::outputs::camera_paths::PathFrames;
+use splatraj_experiment::outputs::path_render::{
     FrameSchedule, PathObject, PathRender, Video, render_path_with,
 };
 use splatraj_render::camera::{Intrinsics, Pose};

@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use glam::{DMat3, DQuat, DVec3};
-use splatraj_experiment::scene_up::scene_up;
+use splatraj_experiment::prepare::scene_up::scene_up;
 use splatraj_experiment::{Config, Extensions};
 use splatraj_scene::demo::{DemoConfig, demo_scene};
 use splatraj_scene::{Scene, UpSource, write_inria_ply};

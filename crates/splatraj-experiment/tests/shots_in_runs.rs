@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use glam::DVec3;
-use splatraj_experiment::{Config, Experiment, Extensions, observer};
+use splatraj_experiment::{Config, Experiment, Extensions, optimise::observer};
 use splatraj_traj::clearance::Occupancy;
 use splatraj_traj::costs::ClearanceCost;
 

@@ -10,7 +10,7 @@
 use std::path::Path;
 use std::sync::Mutex;
 
-use splatraj_experiment::observer::{Flow, Phase, Progress};
+use splatraj_experiment::optimise::observer::{Flow, Phase, Progress};
 use splatraj_experiment::process::RunFolder;
 use splatraj_experiment::study::context::measure_runs;
 use splatraj_experiment::study::measure::MemoryReading;

@@ -6,7 +6,7 @@ use std::f64::consts::PI;
 use base64::Engine;
 use base64::engine::general_purpose::STANDARD as BASE64;
 use burn::tensor::{DType, Device};
-use splatraj_experiment::views_page::{
+use splatraj_experiment::picking::views_page::{
     PageText, ViewsPageOptions, ViewsPageRequest, views_page, write_views_page,
 };
 use splatraj_lift::{LiftStage, View};

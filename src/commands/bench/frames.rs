@@ -5,7 +5,7 @@ use std::str::FromStr;
 
 use anyhow::Result;
 use clap::Args;
-use splatraj::experiment::path_render::FrameSchedule;
+use splatraj::experiment::outputs::path_render::FrameSchedule;
 use splatraj_render::backend::BackendKind;
 use splatraj_render::render::Rasterizer;
 
@@ -54,17 +54,17 @@ pub struct BenchFramesArgs {
 }
 
 fn parse_size(text: &str) -> Result<(usize, usize), String> {
-    splatraj::experiment::bench_frames::parse_size(text).map_err(|e| e.to_string())
+    splatraj::experiment::bench::frames::parse_size(text).map_err(|e| e.to_string())
 }
 
-/// `splatraj bench frames`: the timing is the library's (`splatraj::experiment::bench_frames`);
+/// `splatraj bench frames`: the timing is the library's (`splatraj::experiment::bench::frames`);
 /// this picks the real scene and prints.
 pub(super) fn run(args: &BenchFramesArgs) -> Result<()> {
-    use splatraj::experiment::bench_frames::{FramesBench, run_frames};
+    use splatraj::experiment::bench::frames::{FramesBench, run_frames};
     let scene = match (&args.scene, args.no_scene) {
         (Some(path), _) => Some(path.clone()),
         (None, true) => None,
-        (None, false) => splatraj::experiment::bench_frames::default_scene(),
+        (None, false) => splatraj::experiment::bench::frames::default_scene(),
     };
     let bench = FramesBench {
         backend: args.backend,

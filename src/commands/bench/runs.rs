@@ -46,9 +46,9 @@ impl ChildRunArgs {
 }
 
 /// `splatraj bench scale`: the runs and their figures are the library's
-/// (`splatraj::experiment::bench_scale`); this prints them.
+/// (`splatraj::experiment::bench::scale`); this prints them.
 pub(super) fn scale(args: &BenchScaleArgs) -> Result<()> {
-    use splatraj::experiment::bench_scale::{ScaleBench, run_scale, scale_table};
+    use splatraj::experiment::bench::scale::{ScaleBench, run_scale, scale_table};
     let bench = ScaleBench {
         config: args.config.clone(),
         sizes: args.sizes.clone(),
@@ -82,9 +82,9 @@ pub struct BenchFirstTryArgs {
 }
 
 /// `splatraj bench first-try`: the runs and their figures are the library's
-/// (`splatraj::experiment::quality`); this prints them.
+/// (`splatraj::experiment::bench::quality`); this prints them.
 pub(super) fn first_try(args: &BenchFirstTryArgs) -> Result<()> {
-    use splatraj::experiment::quality::{
+    use splatraj::experiment::bench::quality::{
         FIRST_TRY_CONFIGS, FirstTryBench, configs_in, quality_table, run_first_try,
     };
     let bench = FirstTryBench {

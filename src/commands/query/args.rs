@@ -6,11 +6,11 @@ use std::str::FromStr;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use splatraj::experiment::query::{
+use splatraj::experiment::picking::query::{
     PictureOptions, RejectedView, option_of_key, parse_direction, parse_region, parse_source_keys,
     parse_synonyms,
 };
-use splatraj::experiment::views::ViewOptions;
+use splatraj::experiment::prepare::views::ViewOptions;
 use splatraj_render::backend::BackendKind;
 use splatraj_scene::InvalidPolicy;
 use splatraj_semantic::{Activation, SourceKind};

@@ -1,17 +1,17 @@
 //! `splatraj query`: what a semantic query selects in a scene, as text (or JSON) and as a
 //! picture (`query.png`, the selection tinted). The scene and source come from a run config
 //! (`--config RUN.toml`, whose keys the options given override) or from the options, which
-//! make a config of their own (`args.rs`: each option sets a key). The work is `splatraj::experiment::query` ([`ConfigQuery`],
+//! make a config of their own (`args.rs`: each option sets a key). The work is `splatraj::experiment::picking::query` ([`ConfigQuery`],
 //! [`PictureOptions`]); this file prints.
 
 mod args;
 
 use anyhow::{Result, bail};
-use splatraj::experiment::outputs::write_into_folder;
-use splatraj::experiment::query::{
+use splatraj::experiment::picking::query::{
     ConfigQuery, KeyNaming, PictureOptions, QueryOutcome, QueryReport, SelectionFailed,
     SourceChoice, config_query_texts,
 };
+use splatraj::experiment::write::write_into_folder;
 use splatraj::experiment::{Config, Extensions};
 
 pub use args::QueryArgs;

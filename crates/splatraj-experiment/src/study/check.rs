@@ -24,14 +24,14 @@ use super::files::STUDY_NAMES;
 use super::plan::{Run, StudyPlan};
 use crate::config::Config;
 use crate::config::scene::SceneConfig;
-use crate::experiment::{Experiment, load_scene};
 use crate::extensions::Extensions;
-use crate::output_folder::OutputFolder;
+use crate::outputs::output_folder::OutputFolder;
+use crate::outputs::run_folder::check_writable;
+use crate::prepare::experiment::{Experiment, load_scene};
 use crate::resources::{
     MemoryPlan, RAISE_LIMIT, Stage, TimeBound, TimePlan, basis_bytes, pixels, render_bytes,
     render_seconds, scene_bytes,
 };
-use crate::run_folder::check_writable;
 
 /// What a study's check found.
 #[derive(Debug, Clone, PartialEq)]

@@ -12,8 +12,9 @@ use super::plot::frontier_svg;
 use super::rows::{StudyRow, study_csv};
 use super::summary::{StudyContext, StudySummary};
 use super::text::command_line;
-use crate::output_folder::OutputFolder;
-use crate::outputs::{create_run_dir, write_bytes, write_csv, write_json};
+use crate::outputs::create_run_dir;
+use crate::outputs::output_folder::OutputFolder;
+use crate::write::{write_bytes, write_csv, write_json};
 
 /// The format tag of `study.json`.
 pub const STUDY_FORMAT: &str = "splatraj-study/1";

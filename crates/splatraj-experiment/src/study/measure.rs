@@ -17,11 +17,11 @@ use splatraj_render::stages::{self, Stage};
 use super::StudyTask;
 use super::plan::{Run, StudyPlan};
 use super::rows::{StageTimes, StudyRow, WindowScore};
-use crate::bench::peak_mb;
-use crate::experiment::Experiment;
 use crate::extensions::Extensions;
-use crate::observer;
-use crate::trajectory_run::RunStop;
+use crate::optimise::observer;
+use crate::optimise::trajectory_run::RunStop;
+use crate::prepare::experiment::Experiment;
+use crate::resources::peak_mb;
 use splatraj_scene::stop::{Since, Stopped};
 use splatraj_traj::optimise::StopReason;
 

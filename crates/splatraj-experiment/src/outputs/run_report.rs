@@ -25,10 +25,10 @@ use splatraj_scene::{InvalidPolicy, ReadOptions, Scene, read_scene};
 use splatraj_traj::trajectory::uniform_times;
 
 use crate::outputs::Csv;
-use crate::outputs::write_bytes;
-use crate::path_render::{
+use crate::outputs::path_render::{
     FRAME_METRICS_FILE, KEYFRAMES_DIR, VIDEO_FILE, frame_name, keyframe_indices,
 };
+use crate::write::write_bytes;
 
 /// The report's file name in a run folder.
 pub const REPORT_FILE: &str = "report.html";
@@ -411,7 +411,7 @@ fn read_history(path: &Path) -> Result<Option<CostHistory>> {
     }))
 }
 
-/// Up to [`crate::path_render::KEYFRAMES_PER_WINDOW`] frames of each window, evenly spread over its frames
+/// Up to [`crate::outputs::path_render::KEYFRAMES_PER_WINDOW`] frames of each window, evenly spread over its frames
 /// ([`keyframe_indices`]): the tinted copies in `keyframes/` when the run wrote them, else the
 /// frames themselves.
 fn keyframes(dir: &Path, along: &[FrameMetrics], windows: usize) -> Result<Vec<Vec<Keyframe>>> {

@@ -3,17 +3,31 @@
 //! `runs/<name>/<timestamp>/` is created fresh (never reused: a second run in the same second
 //! gets a `-2` suffix). Files go through `write_atomically` (temporary name, then rename), so
 //! an interrupted run leaves complete files or none.
+//!
+//! **This folder** is the outputs stage: what a finished optimisation becomes on disk. The run
+//! folder ([`run_folder`], [`output_folder`]), its records ([`records`], [`run_files`]), the
+//! frames and video of a camera path ([`path_render`], [`path_checks`], [`camera_render`]),
+//! other tools' camera files ([`camera_paths`]) and `report.html`'s data
+//! ([`run_report`]).
+
+pub mod camera_paths;
+pub mod camera_render;
+pub mod output_folder;
+pub mod path_checks;
+pub mod path_render;
+pub mod records;
+pub mod run_files;
+pub mod run_folder;
+pub mod run_report;
 
 use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
 
 use anyhow::{Context, Result};
-use serde::Serialize;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::images::{highlight, png_rgb};
 use splatraj_render::render::{Channel, DeviceScene, Rasterizer, RenderRequest, render};
-use splatraj_scene::atomic::write_atomically;
 
 /// A CSV table: header and rows ([`write_csv`]).
 pub type Csv = (Vec<String>, Vec<Vec<String>>);
@@ -65,44 +79,6 @@ pub fn utc_timestamp(time: SystemTime) -> String {
         (rem % 3600) / 60,
         rem % 60
     )
-}
-
-/// Writes bytes to `path` atomically.
-pub fn write_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomically(path, |w| w.write_all(bytes))
-        .with_context(|| format!("cannot write {}", path.display()))
-}
-
-/// Writes each `(name, bytes)` into `dir` (created if missing), each file whole or not at
-/// all; returns the paths written, in order.
-pub fn write_into_folder<B: AsRef<[u8]>>(dir: &Path, files: &[(&str, B)]) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
-    files
-        .iter()
-        .map(|(name, bytes)| {
-            let path = dir.join(name);
-            write_bytes(&path, bytes.as_ref())?;
-            Ok(path)
-        })
-        .collect()
-}
-
-/// Writes `value` as pretty JSON to `path` atomically.
-pub fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
-    let text = serde_json::to_string_pretty(value)?;
-    write_bytes(path, format!("{text}\n").as_bytes())
-}
-
-/// Writes a CSV (header, then rows of numbers or words) to `path` atomically.
-pub fn write_csv(path: &Path, header: &[String], rows: &[Vec<String>]) -> Result<()> {
-    let mut text = header.join(",");
-    text.push('\n');
-    for row in rows {
-        text.push_str(&row.join(","));
-        text.push('\n');
-    }
-    write_bytes(path, text.as_bytes())
 }
 
 /// One frame to render: its pose and the object mask to tint (if any).

@@ -16,10 +16,10 @@ use splatraj_report::{CameraPath, ExportOptions, Format, Frame};
 use splatraj_traj::optimise::sampling::window_of;
 use splatraj_traj::trajectory::{Basis, TrajectoryRecord, uniform_times};
 
-use crate::output_folder::OutputFolder;
-use crate::outputs::write_into_folder;
-use crate::records::SceneRecord;
+use crate::outputs::output_folder::OutputFolder;
+use crate::outputs::records::SceneRecord;
 use crate::resources::check_path_frames;
+use crate::write::write_into_folder;
 
 /// Frames per second when neither the command line, the run's config nor the file says.
 pub const DEFAULT_FPS: f64 = 30.0;

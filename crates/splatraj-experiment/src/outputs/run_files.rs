@@ -10,11 +10,11 @@ use anyhow::Result;
 use splatraj_scene::stop::Since;
 use splatraj_traj::trajectory::{Trajectory, uniform_times};
 
-use crate::camera_paths::{PathFrames, write_all_exports};
-use crate::experiment::Experiment;
-use crate::path_render::{PathObject, PathRender, RenderedPath, Video, render_path};
-use crate::run_report::write_run_report;
-use crate::trajectory_run::Evaluation;
+use crate::optimise::trajectory_run::Evaluation;
+use crate::outputs::camera_paths::{PathFrames, write_all_exports};
+use crate::outputs::path_render::{PathObject, PathRender, RenderedPath, Video, render_path};
+use crate::outputs::run_report::write_run_report;
+use crate::prepare::experiment::Experiment;
 
 /// What [`Experiment::write_outputs`] measured, and how long its parts took.
 #[derive(Debug, Clone)]

@@ -10,10 +10,10 @@ use splatraj_traj::optimise::{SinglePoseResult, StopReason};
 use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, uniform_times};
 
 use crate::config::Ablation;
-use crate::experiment::Experiment;
+use crate::optimise::pose_run::{PoseRun, Posterior};
+use crate::optimise::trajectory_run::TrajectoryRun;
 use crate::outputs::Csv;
-use crate::pose_run::{PoseRun, Posterior};
-use crate::trajectory_run::TrajectoryRun;
+use crate::prepare::experiment::Experiment;
 
 /// One pose of the densely sampled trajectory in `trajectory.json`.
 #[derive(Debug, Serialize)]
@@ -50,7 +50,7 @@ pub struct WindowInfo {
 }
 
 /// The scene a trajectory was made on, as `trajectory.json` records it (key `scene`): a path
-/// means nothing in another scene's world, so a render checks it ([`crate::camera_paths`]).
+/// means nothing in another scene's world, so a render checks it ([`crate::outputs::camera_paths`]).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SceneRecord {
     /// Where the scene came from (its path, or `demo (…)`).

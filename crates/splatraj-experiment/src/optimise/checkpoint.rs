@@ -16,7 +16,7 @@ use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 use splatraj_traj::trajectory::{Pose, TrajectoryModel, TrajectoryRecord};
 
-use crate::outputs::write_json;
+use crate::write::write_json;
 
 /// File name of the checkpoint in a run folder.
 pub const CHECKPOINT_FILE: &str = "checkpoint.json";

@@ -15,8 +15,8 @@ use serde::Serialize;
 use splatraj_scene::atomic::is_partial_file;
 use splatraj_traj::metrics::{Smoothness, WindowMetrics};
 
-use crate::checkpoint::{CHECKPOINT_FILE, Checkpoint};
 use crate::config::Config;
+use crate::optimise::checkpoint::{CHECKPOINT_FILE, Checkpoint};
 use crate::{Evaluation, Experiment, RunStop, TrajectoryRun};
 
 /// `metrics.json`.
@@ -120,7 +120,7 @@ impl RunReport {
             metrics_s: times.metrics.as_secs_f64(),
             frames_s: times.frames.as_secs_f64(),
             total_s: times.total.as_secs_f64(),
-            peak_memory_mb: crate::bench::peak_mb(),
+            peak_memory_mb: crate::resources::peak_mb(),
             backend: format!("{:?} {:?}", config.backend, config.precision),
         }
     }

@@ -1,9 +1,17 @@
 //! `splatraj bench render` as a library: the configurations (scene, resolution, pruning,
 //! rasterizer), one configuration timed in this process ([`run_one`]: the mask pass through the
-//! optimiser's loss path, [`crate::probe`], on the scenes of [`crate::bench_scenes`]), the
+//! optimiser's loss path, [`crate::optimise::probe`], on the scenes of [`crate::bench::scenes`]), the
 //! rows and the report with its table, including the fused rasterizer's speed-up over the
 //! tensor one. The command runs each configuration in a child process of its own so that the
 //! peak memory a row reports (VmHWM, a process-wide high-water mark) is that configuration's.
+//!
+//! **This folder** is the benchmarks: the mask pass (here), output frames ([`frames`]), scale
+//! ([`scale`], on the demo scenes of [`scenes`]) and the first-try quality figures ([`quality`]).
+
+pub mod frames;
+pub mod quality;
+pub mod scale;
+pub mod scenes;
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -17,8 +25,9 @@ use splatraj_render::counters::{self, Counts};
 use splatraj_render::render::{Pruning, Rasterizer};
 use splatraj_render::stages;
 
-use crate::bench_scenes::{demo_bench_scene, file_bench_scene};
-use crate::probe::{MaskProbe, median_ms};
+use crate::bench::scenes::{demo_bench_scene, file_bench_scene};
+use crate::optimise::probe::{MaskProbe, median_ms};
+use crate::resources::peak_mb;
 use crate::resources::{MemoryLimit, RenderWork};
 
 /// Which scene a configuration renders.
@@ -514,14 +523,6 @@ pub fn run_one(args: &BenchSettings, config: &BenchConfig) -> Result<BenchRow> {
         launch_names,
         skipped: None,
     })
-}
-
-/// Process peak resident set (VmHWM), MB; None where /proc is missing.
-pub fn peak_mb() -> Option<f64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb / 1024.0)
 }
 
 /// User + system CPU time of this process, seconds (from /proc/self/stat, 100 ticks/s).

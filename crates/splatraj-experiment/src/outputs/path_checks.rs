@@ -7,7 +7,7 @@ use splatraj_traj::clearance::Occupancy;
 use splatraj_traj::metrics::{WindowMetrics, path_metrics, shot_metrics};
 use splatraj_traj::trajectory::Trajectory;
 
-use crate::experiment::Experiment;
+use crate::prepare::experiment::Experiment;
 
 impl Experiment {
     /// The clearance cost's margin (resolved from the scene when it was `"auto"`), when the

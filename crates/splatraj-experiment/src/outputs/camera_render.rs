@@ -18,10 +18,11 @@ use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderR
 use splatraj_scene::Scene;
 use splatraj_semantic::{label_mask, read_mask_file};
 
-use crate::output_folder::OutputFolder;
-use crate::outputs::{npy_f32, write_into_folder};
-use crate::probe::{MaskProbe, ProbeReport};
+use crate::optimise::probe::{MaskProbe, ProbeReport};
+use crate::outputs::npy_f32;
+use crate::outputs::output_folder::OutputFolder;
 use crate::resources::{MemoryLimit, RenderWork};
+use crate::write::write_into_folder;
 
 /// The object whose mask is rendered.
 #[derive(Debug, Clone, PartialEq)]

@@ -12,8 +12,8 @@ use splatraj_traj::optimise::{
     sample_poses_sgld,
 };
 
-use crate::experiment::Experiment;
-use crate::observer::{Observer, Progress};
+use crate::optimise::observer::{Observer, Progress};
+use crate::prepare::experiment::Experiment;
 
 /// What [`Experiment::optimise_pose`] did.
 #[derive(Debug, Clone)]

@@ -1,5 +1,5 @@
 //! Grounding texts in a scene, as `splatraj run` ([`crate::Experiment::prepare`]) and
-//! `splatraj query` ([`crate::query::ConfigQuery`]) both do it: a config's `[targets]` built
+//! `splatraj query` ([`crate::picking::query::ConfigQuery`]) both do it: a config's `[targets]` built
 //! into a source (the lifted field's memory checked first and its cache placed beside the
 //! scene file), then a text, or a group shot's texts, made a target.
 
@@ -22,8 +22,8 @@ pub fn build_source(
     extensions: &Extensions,
     key: &dyn Fn(&str) -> String,
 ) -> Result<Box<dyn TargetSource>> {
-    crate::lifted::check_lifted_memory(config, gaussians)?;
-    crate::lifted::with_lifted_cache(&config.targets, config.scene_file().as_deref())
+    crate::prepare::lifted::check_lifted_memory(config, gaussians)?;
+    crate::prepare::lifted::with_lifted_cache(&config.targets, config.scene_file().as_deref())
         .build_named(&config.base_dir, device, &extensions.sources, key)
         .map_err(|e| anyhow!("{e}"))
 }

@@ -10,7 +10,7 @@ use anyhow::{Context, Result, anyhow, bail};
 use serde::Serialize;
 use serde_json::Value;
 
-use crate::quality::run_child;
+use crate::bench::quality::run_child;
 
 /// What `splatraj bench scale` runs.
 #[derive(Debug, Clone)]

@@ -24,12 +24,13 @@ use splatraj_report::video::VideoEncoder;
 use splatraj_traj::costs::{coverage, tce, tre};
 use splatraj_traj::optimise::sampling::window_of;
 
-use crate::camera_paths::PathFrames;
 use crate::config::MaskOverlay;
 pub use crate::frame_metrics::FrameMetrics;
-use crate::output_folder::OutputFolder;
-use crate::outputs::{TINT_ALPHA, write_bytes, write_csv};
+use crate::outputs::TINT_ALPHA;
+use crate::outputs::camera_paths::PathFrames;
+use crate::outputs::output_folder::OutputFolder;
 use crate::resources::{MemoryLimit, RenderWork};
+use crate::write::{write_bytes, write_csv};
 
 /// One window's object: the Gaussians to measure (and tint) in the frames of its window.
 #[derive(Debug, Clone, Copy)]

@@ -27,7 +27,7 @@ pub struct Derived {
 }
 
 /// A coarse copy of the scene and each window's mask on it (`optimise_gaussians`; built and
-/// read in [`crate::optimised_scene`]).
+/// read in [`crate::prepare::optimised_scene`]).
 #[derive(Debug)]
 pub struct CoarseCopy {
     /// The merged scene.
@@ -118,7 +118,7 @@ impl Experiment {
         if scene.is_empty() {
             bail!("scene {scene_name} has no Gaussians");
         }
-        let up = crate::scene_up::scene_up(config, &scene)
+        let up = crate::prepare::scene_up::scene_up(config, &scene)
             .with_context(|| format!("config {}", config.path.display()))?;
         let bounds = scene
             .robust_bounds(0.02)
@@ -311,7 +311,7 @@ impl Experiment {
             .map_err(|e| anyhow::anyhow!("{}: {e}", at()))?;
         let source = if config.queries.iter().any(|q| q.mask.is_none()) {
             Some(
-                crate::grounding::build_source(
+                crate::prepare::grounding::build_source(
                     config,
                     self.scene.len(),
                     &self.device,
@@ -333,8 +333,13 @@ impl Experiment {
                     bail!("`queries.{i}`: a group shot frames its `shot.objects`; leave out `mask`")
                 }
                 (None, Some(source)) if !group.is_empty() => {
-                    crate::grounding::group_target(source.as_ref(), &self.scene, group, &selection)
-                        .with_context(|| format!("`queries.{i}.shot.objects`"))?
+                    crate::prepare::grounding::group_target(
+                        source.as_ref(),
+                        &self.scene,
+                        group,
+                        &selection,
+                    )
+                    .with_context(|| format!("`queries.{i}.shot.objects`"))?
                 }
                 (Some(mask), _) => {
                     let path = config.resolve(mask);

@@ -2,7 +2,7 @@
 //! selection, a diagnostic picture of it, and the report (text or JSON).
 //!
 //! The scene and source always come from a config ([`ConfigQuery`]): a run config's `[scene]`
-//! and `[targets]`, built exactly as `splatraj run` builds them ([`crate::grounding`]), or the
+//! and `[targets]`, built exactly as `splatraj run` builds them ([`crate::prepare::grounding`]), or the
 //! config the command-line options make (each option sets a `[targets]` key; without
 //! `--source` the source is the one the inputs point to, [`inferred_source`], and errors name
 //! the options, [`option_of_key`]). Both end in [`find_and_draw`].
@@ -24,13 +24,13 @@ use splatraj_semantic::{
 };
 
 use crate::config::{Config, apply_assignment};
-use crate::experiment::load_scene;
 use crate::extensions::Extensions;
-use crate::resources::{MemoryLimit, RenderWork};
-use crate::views::{
+use crate::prepare::experiment::load_scene;
+use crate::prepare::views::{
     CameraReport, FOV_X_DEGREES, ViewOptions, diagnostic_camera, highlighted_picture,
     highlighted_png,
 };
+use crate::resources::{MemoryLimit, RenderWork};
 use splatraj_traj::shots::ShotSpec;
 
 /// Colour of the rejected candidates in `query.png` (cyan, against the selection's magenta).
@@ -171,15 +171,16 @@ impl ConfigQuery {
             .selection
             .validate_named(&selection_key)
             .map_err(|e| anyhow!("{at}: {e}"))?;
-        let source = crate::grounding::build_source(&config, scene.len(), &device, extensions, key)
-            .map_err(|e| anyhow!("{at}: {e:#}"))?;
+        let source =
+            crate::prepare::grounding::build_source(&config, scene.len(), &device, extensions, key)
+                .map_err(|e| anyhow!("{at}: {e:#}"))?;
         // The config's up (or the demo room's, or the capture's cameras') as runs take it;
         // else the picture guesses it by the same rule and says so.
         let mut picture = self.picture.clone();
         let mut up_from = None;
         if picture.view.up.is_none() {
-            let resolved =
-                crate::scene_up::scene_up(&config, &scene).map_err(|e| anyhow!("{at}: {e:#}"))?;
+            let resolved = crate::prepare::scene_up::scene_up(&config, &scene)
+                .map_err(|e| anyhow!("{at}: {e:#}"))?;
             if resolved.source != UpSource::Guess {
                 picture.view.up = Some(resolved.up);
                 up_from = Some(resolved.source.name());

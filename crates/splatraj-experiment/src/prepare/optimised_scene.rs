@@ -12,7 +12,7 @@ use splatraj_scene::coarse::{MAX_CLASSES, coarsen};
 use splatraj_traj::costs::WeightedCosts;
 use splatraj_traj::optimise::WindowTarget;
 
-use crate::experiment::{CoarseCopy, Derived, Experiment};
+use crate::prepare::experiment::{CoarseCopy, Derived, Experiment};
 
 impl Experiment {
     /// Builds the coarse copy when `optimise_gaussians` asks for one (after the queries are

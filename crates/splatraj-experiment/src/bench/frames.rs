@@ -1,7 +1,7 @@
 //! `splatraj bench frames` as a library: how long a run's output frames take (render, metrics,
 //! read-back, PNG, H.264, writing), per frame and for a whole video, at the sizes users share.
 //!
-//! Each scene is framed as `bench render` frames it ([`crate::bench_scenes`]: the demo scene
+//! Each scene is framed as `bench render` frames it ([`crate::bench::scenes`]: the demo scene
 //! looking at one object, a real scene with a sphere at its centre as the object), and the
 //! camera orbits the object by [`ORBIT_DEGREES`] over the video, so that each frame is a
 //! different view as in a run. The frames go through [`render_path_with`], the code
@@ -22,11 +22,11 @@ use splatraj_render::orbit::Orbit;
 use splatraj_render::render::{DeviceScene, Rasterizer};
 use splatraj_render::stages::{self, Stage};
 
+use crate::bench::scenes::{BenchScene, demo_bench_scene, file_bench_scene};
 use crate::bench::{cpu_seconds, rasterizer_name};
-use crate::bench_scenes::{BenchScene, demo_bench_scene, file_bench_scene};
-use crate::camera_paths::{PathFrames, check_fps};
 use crate::config::MaskOverlay;
-use crate::path_render::{FrameSchedule, PathObject, PathRender, Video, render_path_with};
+use crate::outputs::camera_paths::{PathFrames, check_fps};
+use crate::outputs::path_render::{FrameSchedule, PathObject, PathRender, Video, render_path_with};
 use crate::resources::{MemoryLimit, RenderWork};
 
 /// How far the camera turns around the object over the video, degrees.

@@ -18,9 +18,9 @@ use splatraj_traj::optimise::{
 };
 use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord};
 
-use crate::checkpoint::{Checkpoint, Checkpointer};
-use crate::experiment::Experiment;
-use crate::observer::{Observer, Progress};
+use crate::optimise::checkpoint::{Checkpoint, Checkpointer};
+use crate::optimise::observer::{Observer, Progress};
+use crate::prepare::experiment::Experiment;
 
 /// Why a trajectory run ended (`metrics.json`'s `stop`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]

@@ -20,7 +20,7 @@ use splatraj_traj::shots::{ShotFrame, ShotPath};
 use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord, uniform_times};
 
 use crate::config::StartKind;
-use crate::experiment::Experiment;
+use crate::prepare::experiment::Experiment;
 
 impl Experiment {
     /// The starting trajectories of `[start]`: one re-fitted from `start.trajectory`, one

@@ -4,7 +4,7 @@
 
 use anyhow::Result;
 
-use crate::experiment::Experiment;
+use crate::prepare::experiment::Experiment;
 use crate::resources::{
     HISTORY_BYTES_PER_WINDOW_STEP, MAX_STEPS_PER_SECOND, MIN_SECONDS_PER_STEP, MemoryLimit,
     MemoryPlan, RESTART_BYTES_PER_BASIS, TimePlan, basis_bytes, pixels, render_bytes,
