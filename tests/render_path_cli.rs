@@ -249,6 +249,20 @@ fn render_path_fails_cleanly() {
     );
     // Nothing was written for the refused render.
     assert!(!out_dir.exists());
+    // Overrides belong to a config, not a scene file.
+    assert_clean_failure(
+        &splatraj(&[
+            "render-path",
+            s(&scene),
+            s(&run),
+            "--out",
+            s(&out_dir),
+            "--set",
+            "output.fps=10",
+        ]),
+        &["demo.ply", "--set", "experiment config"],
+    );
+    assert!(!out_dir.exists());
     assert_clean_failure(
         &splatraj(&[
             "render-path",

@@ -7,22 +7,21 @@
 //! whose frames are rendered as they are. SCENE is a scene file, or an experiment config
 //! whose scene and queries are used: then each frame's metrics for its window's object go to
 //! `frame_metrics.csv`, and `--mask-overlay tint` tints it. The work is the library's
-//! ([`splatraj::experiment::outputs::path_render`], as `splatraj run` renders its frames); this file
-//! parses, reads and shows progress.
+//! ([`splatraj::experiment::outputs::path_job`]: one call that reads, checks and renders, as
+//! `splatraj run` renders its frames); this file parses, calls it and shows progress.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::str::FromStr;
 
-use anyhow::{Result, bail};
-use burn::tensor::DType;
+use anyhow::Result;
 use clap::Args;
 use splatraj::experiment::config::MaskOverlay;
-use splatraj::experiment::outputs::camera_paths::{FrameRequest, PathFile, SceneMismatch};
-use splatraj::experiment::outputs::path_render::{PathRender, Video, render_path_to};
-use splatraj::experiment::outputs::records::SceneRecord;
-use splatraj::experiment::{Config, Experiment};
+use splatraj::experiment::frame_metrics::FrameMetrics;
+use splatraj::experiment::outputs::camera_paths::{FrameRequest, SceneMismatch};
+use splatraj::experiment::outputs::path_job::{PathJob, PathPlan, PathScene, render_path_job};
+use splatraj::experiment::outputs::path_render::Video;
 use splatraj_render::backend::BackendKind;
-use splatraj_render::render::{DeviceScene, Rasterizer};
+use splatraj_render::render::Rasterizer;
 
 use crate::cli::{ReadArgs, progress_bar};
 
@@ -86,95 +85,48 @@ fn parse_overlay(s: &str) -> Result<MaskOverlay, String> {
     }
 }
 
-/// Whether `path` is an experiment config (a TOML table with `[scene]`) rather than a scene.
-fn is_config(path: &Path) -> bool {
-    splatraj_scene::input::read_text(path)
-        .ok()
-        .and_then(|text| toml::from_str::<toml::Table>(&text).ok())
-        .is_some_and(|table| table.contains_key("scene"))
-}
-
 /// Runs `splatraj render-path`.
 pub fn run(args: RenderPathArgs) -> Result<()> {
-    // Every input is read and checked before anything is rendered or written.
-    let config = is_config(&args.scene);
-    if !config && !args.set.is_empty() {
-        bail!("--set needs an experiment config as SCENE, not a scene file");
-    }
-    if !config && args.mask_overlay == MaskOverlay::Tint {
-        bail!(
-            "--mask-overlay tint needs the objects to tint: give an experiment config (TOML) \
-             with its queries as SCENE instead of {}",
-            args.scene.display()
-        );
-    }
-    let path = PathFile::read(&args.path)?;
-    let frames = path.frames(&FrameRequest {
-        fps: args.fps,
-        seconds: args.seconds,
-        width: args.width,
-        height: args.height,
-    })?;
-    let video = if args.no_video {
-        Video::None
-    } else {
-        Video::Mp4
-    };
-    let experiment = if config {
-        Some(Experiment::prepare(&Config::load(&args.scene, &args.set)?)?)
-    } else {
-        None
-    };
-    if let (Some(e), PathFile::Trajectory(t)) = (&experiment, &path) {
-        t.check_windows(e.windows.len())?;
-        t.check_scene(&SceneRecord::of(e), args.scene_mismatch)?;
-    }
-    let (scene, objects, rasterizer) = match &experiment {
-        Some(e) => (
-            e.plain_scene(),
-            e.path_objects(),
-            args.rasterizer.unwrap_or(e.config.rasterizer),
-        ),
-        None => {
-            let loaded = args.read.load_to_render(&args.scene)?;
-            if let PathFile::Trajectory(t) = &path {
-                let given = SceneRecord {
-                    name: args.scene.display().to_string(),
-                    gaussians: loaded.scene.len(),
-                };
-                t.check_scene(&given, args.scene_mismatch)?;
-            }
-            let device = args.backend.device()?;
-            (
-                DeviceScene::new(&loaded.scene, &device, DType::F32),
-                Vec::new(),
-                args.rasterizer.unwrap_or_default(),
-            )
-        }
-    };
-    eprintln!(
-        "path: {} → {} frames at {} fps, {}×{}",
-        path.describe(),
-        frames.poses.len(),
-        frames.fps,
-        frames.cameras[0].width,
-        frames.cameras[0].height
-    );
-    let job = PathRender {
-        frames: &frames,
-        objects,
+    let job = PathJob {
+        scene: PathScene::of(&args.scene, &args.set, args.read.options(), args.backend)?,
+        path: &args.path,
+        frames: FrameRequest {
+            fps: args.fps,
+            seconds: args.seconds,
+            width: args.width,
+            height: args.height,
+        },
         overlay: args.mask_overlay,
-        rasterizer,
-        video,
+        rasterizer: args.rasterizer,
+        scene_mismatch: args.scene_mismatch,
+        video: if args.no_video {
+            Video::None
+        } else {
+            Video::Mp4
+        },
     };
-    let bar = progress_bar(frames.poses.len() as u64, args.quiet);
-    bar.set_message("frames");
-    let rendered = render_path_to(&scene, &job, &args.out, &mut |done| {
+    let bar = progress_bar(0, args.quiet);
+    let mut announce = |plan: &PathPlan| {
+        if plan.dropped > 0 {
+            eprintln!(
+                "warning: {}: dropped {} invalid Gaussians",
+                args.scene.display(),
+                plan.dropped
+            );
+        }
+        eprintln!(
+            "path: {} → {} frames at {} fps, {}×{}",
+            plan.description, plan.frames, plan.fps, plan.width, plan.height
+        );
+        bar.set_length(plan.frames as u64);
+        bar.set_message("frames");
+    };
+    let rendered = render_path_job(&job, &args.out, &mut announce, &mut |done| {
         bar.set_position(done as u64)
     })?;
     bar.finish_and_clear();
     if !rendered.metrics.is_empty() {
-        let mean = |f: fn(&splatraj::experiment::outputs::path_render::FrameMetrics) -> f64| {
+        let mean = |f: fn(&FrameMetrics) -> f64| {
             rendered.metrics.iter().map(f).sum::<f64>() / rendered.metrics.len() as f64
         };
         eprintln!(

@@ -6,7 +6,8 @@
 //!
 //! **This folder** is the outputs stage: what a finished optimisation becomes on disk. The run
 //! folder ([`run_folder`], [`output_folder`]), its records ([`records`], [`run_files`]), the
-//! frames and video of a camera path ([`path_render`], [`path_checks`], [`camera_render`]),
+//! frames and video of a camera path ([`path_render`], [`path_checks`], [`camera_render`];
+//! `render-path` whole: [`path_job`]),
 //! other tools' camera files ([`camera_paths`]) and `report.html`'s data
 //! ([`run_report`]).
 
@@ -14,6 +15,7 @@ pub mod camera_paths;
 pub mod camera_render;
 pub mod output_folder;
 pub mod path_checks;
+pub mod path_job;
 pub mod path_render;
 pub mod records;
 pub mod run_files;
