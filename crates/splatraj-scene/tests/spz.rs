@@ -12,19 +12,14 @@ use splatraj_scene::{ReadOptions, Scene, SceneError, SceneFormat, read_scene};
 const C0: f32 = 0.282_094_8;
 const BIKER_COUNT: usize = 152_746;
 
-fn data_dir() -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data"))
-}
+#[path = "common/shared_data.rs"]
+mod shared_data;
 
 /// Reads a shared data file; a missing file fails the test (nothing is skipped silently).
 fn data_file(name: &str) -> (PathBuf, Vec<u8>) {
-    let path = data_dir().join(name);
-    let bytes = std::fs::read(&path).unwrap_or_else(|e| {
-        panic!(
-            "{}: {e} (the shared data set is required for this test)",
-            path.display()
-        )
-    });
+    let path = shared_data::shared_data(name)
+        .unwrap_or_else(|| panic!("{name}: the shared data set is required for this test"));
+    let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     (path, bytes)
 }
 
