@@ -586,6 +586,74 @@ def zip_bomb(path):
         z.writestr("meta.json", b" " * (400 * 2**20))
 
 
+def webp_constant(w, h, argb=(255, 128, 128, 128)):
+    """A lossless WebP (VP8L) of w × h texels of one colour, written by hand: every prefix code
+    is a simple code of one symbol, which takes no bits, so any size is a few dozen bytes."""
+    bits = []
+
+    def put(v, n):
+        bits.extend((v >> i) & 1 for i in range(n))
+    put(w - 1, 14), put(h - 1, 14), put(1, 1), put(0, 3)  # size, alpha used, version 0
+    put(0, 1), put(0, 1), put(0, 1)  # no transform, no colour cache, no meta prefix codes
+    a, r, g, b = argb
+    for symbol in (g, r, b, a, 0):  # green, red, blue, alpha, distance
+        put(1, 1), put(0, 1), put(1, 1), put(symbol, 8)  # simple code, 1 symbol, 8 bits
+    data = b"\x2f" + bytes(sum(bit << i for i, bit in enumerate(bits[k:k + 8]))
+                           for k in range(0, len(bits), 8))
+    chunk = b"VP8L" + struct.pack("<I", len(data)) + data + b"\0" * (len(data) % 2)
+    return b"RIFF" + struct.pack("<I", 4 + len(chunk)) + b"WEBP" + chunk
+
+
+def sog_of(count, sizes):
+    """A SOG v2 bundle of `count` Gaussians whose images are constant WebPs of `sizes`
+    (image name -> (w, h)); no meta.json codebook is taken from a real file."""
+    book = [round(-6 + 6 * i / 255, 4) for i in range(256)]
+    meta = {"version": 2, "count": count,
+            "means": {"mins": [-1, -1, -1], "maxs": [1, 1, 1],
+                      "files": ["means_l.webp", "means_u.webp"]},
+            "scales": {"codebook": book, "files": ["scales.webp"]},
+            "quats": {"files": ["quats.webp"]},
+            "sh0": {"codebook": [round(-2 + 4 * i / 255, 4) for i in range(256)],
+                    "files": ["sh0.webp"]}}
+
+    def build(path):
+        with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
+            z.writestr("meta.json", json.dumps(meta))
+            for name, (w, h) in sizes.items():
+                z.writestr(name, webp_constant(w, h))
+    return build
+
+
+def transforms_from_inria(run, angle):
+    """The fixture run's INRIA cameras as a nerfstudio transforms.json with `camera_angle_x`
+    (radians) instead of focal lengths (OpenCV camera axes turned to OpenGL's)."""
+    frames = []
+    cams = json.loads((Path(run) / "exports/inria/cameras.json").read_text())
+    for c in cams:
+        rot, pos = c["rotation"], c["position"]
+        m = [[rot[i][0], -rot[i][1], -rot[i][2], pos[i]] for i in range(3)] + [[0, 0, 0, 1]]
+        frames.append({"file_path": f"images/{c['img_name']}.png", "transform_matrix": m})
+    return json.dumps({"camera_angle_x": angle, "w": cams[0]["width"], "h": cams[0]["height"],
+                       "frames": frames})
+
+
+def names_all(*words, unless=()):
+    """A check: a refusal must name every one of `words` and none of `unless` (a flag or file
+    the user did not give)."""
+    def check(work, r):
+        if r.rc in (0, 3, None):
+            return None
+        low = r.out.lower()
+        missing = [w for w in words if w.lower() not in low]
+        if missing:
+            return ("UNCLEAR", f"message does not name {missing}")
+        wrong = [w for w in unless if w.lower() in low]
+        if wrong:
+            return ("UNCLEAR", f"message names {wrong}, which the command did not give")
+        return None
+    return check
+
+
 # ---------------------------------------------------------------------------------------------
 # Case definitions
 
@@ -1237,6 +1305,93 @@ def define_cases(ctx):
                                             "--label", "1", "--width", "32", "--out", "r"],
          expect="ok", runner=with_env(ctx, {"RAYON_NUM_THREADS": "1"}), timeout=60)
 
+    # --- third round (issue 39): sizes read from content, values that pass `--check` and fail
+    # later, messages that name the wrong thing, lenient JSON
+    # lift-masks: masks whose every pixel is its own colour (a label each), at rescales of the
+    # 32 × 24 cameras
+    def rainbow_masks(w, h, n=2):
+        def setup(work):
+            (work / "m").mkdir()
+            for i in range(n):
+                write_png(work / "m" / f"frame_{i:04d}.png", w, h, first_colour=1 + i * w * h)
+        return setup
+    for w, h in [(400, 300), (128, 96)]:
+        case(f"lift-masks 2 masks {w}x{h}, every pixel its own colour", L + ["--masks", "m"],
+             names=["labels"], setup=rainbow_masks(w, h), outs=["l.json"], timeout=30)
+
+    # SOG: means images of 16383² texels for 100 Gaussians (refused from the WebP header),
+    # beside a control whose images fit the count
+    fits = {n: (10, 10) for n in ("means_l.webp", "means_u.webp", "quats.webp", "scales.webp",
+                                  "sh0.webp")}
+    for label, sizes, expect in [
+        ("images fit (control)", fits, "ok"),
+        ("means 16383x16383", {**fits, "means_l.webp": (16383, 16383),
+                               "means_u.webp": (16383, 16383)}, "fail"),
+        ("quats 16383x16383", {**fits, "quats.webp": (16383, 16383)}, "fail"),
+    ]:
+        case(f"scene info SOG count 100, {label}", ["scene", "info", "s.sog"], expect=expect,
+             names=["s.sog"], setup=lambda w, sizes=sizes: sog_of(100, sizes)(w / "s.sog"),
+             check=None if expect == "ok" else names_all("s.sog", label.split()[0]),
+             timeout=20)
+
+    # a run checkpoint that cannot be right (resumed without a word before)
+    def checkpoint_with(**changes):
+        def setup(work):
+            shutil.copytree(ctx.fx / "interrupted", work / "run")
+            ck = work / "run" / "checkpoint.json"
+            ck.write_text(json.dumps({**json.loads(ck.read_text()), **changes}, indent=1))
+        return setup
+    for field, value in [("steps_done", 10**18), ("restart", 7), ("best_restart", 7),
+                         ("elapsed_s", -5.0), ("elapsed_s", float("nan"))]:
+        case(f"run --resume checkpoint {field}={value}", ["run", "--resume", "run", "--quiet"],
+             names=[field], setup=checkpoint_with(**{field: value}),
+             check=names_all("checkpoint.json", field), timeout=60)
+
+    # targets.lifted.up (the lifted source; the text encoder only has to exist, the up is
+    # checked before it is read: the control proves the case gets that far)
+    lifted = ["run", small, "--check", "--set", 'targets.source="lifted"',
+              "--set", 'targets.text_encoder="{W}/enc.safetensors"']
+    for v, key in [("[0,0,0]", "targets.lifted.up"), ("[nan,0,1]", "targets.lifted.up"),
+                   ("[0,0,1e-300]", "targets.lifted.up"), ("[0,0,1]", "text_encoder")]:
+        case(f"run --check lifted targets.lifted.up={v}", lifted + ["--set",
+                                                                   f"targets.lifted.up={v}"],
+             names=[key], check=names_all(key),
+             setup=lambda w: (w / "enc.safetensors").write_text("not weights\n"))
+
+    # a nerfstudio transforms.json of camera_angle_x 4 rad (> π) wherever cameras are read
+    def transforms(angle):
+        def setup(work):
+            (work / "t").mkdir()
+            (work / "t" / "transforms.json").write_text(transforms_from_inria(run, angle))
+            (work / "c.toml").write_text(Path(small).read_text().replace(
+                "demo = { gaussians = 5000, seed = 7 }", f'path = "{scene}"'))
+        return setup
+    tj = "t/transforms.json"
+    for label, argv in [
+        ("render-path", ["render-path", scene, tj, "--out", "rp", "--quiet", "--no-video"]),
+        ("lift-masks --cameras", ["scene", "lift-masks", "--scene", scene, "--cameras", tj,
+                                  "--masks", "m", "--out", "l.json"]),
+        ("scene.cameras", ["run", "c.toml", "--check", "--set",
+                           'scene.cameras="{W}/t/transforms.json"']),
+        ("targets.lifted.cameras", lifted + ["--set",
+                                             'targets.lifted.cameras="{W}/t/transforms.json"']),
+    ]:
+        case(f"{label} transforms.json camera_angle_x=4.0", argv, names=["camera_angle_x"],
+             setup=transforms(4.0), check=names_all("transforms.json", "camera_angle_x"),
+             outs=["rp", "l.json"], timeout=30)
+    case("render-path transforms.json camera_angle_x=1.0 (control)",
+         ["render-path", scene, tj, "--out", "rp", "--quiet", "--no-video"], expect="ok",
+         setup=transforms(1.0), timeout=30)
+
+    # query --text-encoder of a missing file: the message names the flag given, not another
+    for extra in [[], ["--source", "lifted"], ["--phrases", "p.json"],
+                  ["--source", "custom.feature3dgs"]]:
+        case(f"query --text-encoder missing {' '.join(extra)}".rstrip(),
+             ["query", "--scene", scene, "--query", "mug", "--out", "q", "--text-encoder",
+              "nope.safetensors"] + extra, names=["--text-encoder"],
+             check=names_all("--text-encoder", "nope.safetensors", unless=["--source-key"]),
+             outs=["q"])
+
 
 def report_kept(original):
     def check(work, r):
@@ -1266,13 +1421,22 @@ def nonfinite_check(work, r):
     return None
 
 
-def write_png(path, w, h, lie=False):
+def write_png(path, w, h, lie=False, first_colour=None):
+    """A grey PNG of label 1; with `first_colour`, an RGB PNG whose every pixel is its own
+    colour (first_colour, first_colour + 1, ... as 24-bit RGB)."""
     import zlib
 
     def chunk(t, d):
         return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d))
-    ihdr = struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0)
-    raw = b"" if lie else b"".join(b"\0" + b"\1" * w for _ in range(h))
+    rgb = first_colour is not None
+    ihdr = struct.pack(">IIBBBBB", w, h, 8, 2 if rgb else 0, 0, 0, 0)
+    if lie:
+        raw = b""
+    elif rgb:
+        raw = b"".join(b"\0" + b"".join((first_colour + y * w + x).to_bytes(3, "big")
+                                        for x in range(w)) for y in range(h))
+    else:
+        raw = b"".join(b"\0" + b"\1" * w for _ in range(h))
     data = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(raw)) \
         + chunk(b"IEND", b"")
     Path(path).write_bytes(data)
@@ -1293,6 +1457,9 @@ def camera_variants():
     c = dict(base)
     del c["pose"]
     out.append(("no pose", json.dumps(c)))
+    # strict JSON (issue 39): nothing after the object
+    out.append(("trailing object", json.dumps(base) + ' {"fx": 1}'))
+    out.append(("trailing text", json.dumps(base) + "\nnot json"))
     return out
 
 
