@@ -12,6 +12,16 @@ pub use splatraj_camera::{
     CameraError, CameraPose, Intrinsics, Pose, matrix_to_rotation_vector, rotation_vector_to_matrix,
 };
 
+/// `intrinsics` zoomed by s > 0: focal lengths fx·s, fy·s about the same principal point and
+/// image size (the field of view's tan shrinks as 1/s).
+pub fn zoomed_intrinsics(intrinsics: &Intrinsics, zoom: f64) -> Intrinsics {
+    Intrinsics {
+        fx: intrinsics.fx * zoom,
+        fy: intrinsics.fy * zoom,
+        ..*intrinsics
+    }
+}
+
 /// Below this θ², Rodrigues' coefficients come from their Taylor series (in f32, sin θ/θ
 /// computed directly loses all precision well before θ = 0).
 pub(crate) const SERIES_BELOW_THETA_SQ: f64 = 1e-2;

@@ -10,7 +10,7 @@
 use rayon::prelude::*;
 use splatraj_scene::Scene;
 
-use crate::camera::{Intrinsics, Pose};
+use crate::camera::{Intrinsics, Pose, zoomed_intrinsics};
 use glam::DVec3;
 
 use crate::focus::{FocusCache, ObjectFocus};
@@ -231,6 +231,22 @@ pub fn decide(
     near: f64,
     focus: Option<&ObjectFocus>,
 ) -> Decisions {
+    decide_zoomed(geometry, poses, None, intrinsics, near, focus)
+}
+
+/// [`decide`] with pose b seen through `intrinsics` zoomed by `zoom[b]` (fx·s, fy·s; `None`:
+/// s = 1), as the zoomed projection draws it. Panics if `zoom` is not one value per pose.
+pub fn decide_zoomed(
+    geometry: &HostGeometry,
+    poses: &[Pose],
+    zoom: Option<&[f64]>,
+    intrinsics: &Intrinsics,
+    near: f64,
+    focus: Option<&ObjectFocus>,
+) -> Decisions {
+    if let Some(zoom) = zoom {
+        assert_eq!(zoom.len(), poses.len(), "one zoom per pose");
+    }
     let grid = TileGrid::new(intrinsics.width, intrinsics.height);
     // The tile grid's extent in whole tiles: a square that reaches into the last partial tile
     // is listed there, as the binning rule says.
@@ -247,8 +263,13 @@ pub fn decide(
     let object: Option<&[u32]> = focus.map(|focus| focus.sorted_list.as_slice());
     let kept = poses
         .iter()
-        .map(|pose| {
-            let camera = Camera::new(pose, intrinsics, near);
+        .enumerate()
+        .map(|(b, pose)| {
+            let intrinsics = match zoom {
+                Some(zoom) => zoomed_intrinsics(intrinsics, zoom[b]),
+                None => *intrinsics,
+            };
+            let camera = Camera::new(pose, &intrinsics, near);
             let Some(object) = object else {
                 return camera.decide_blocks(geometry, &|_| true, Reach::everywhere(whole_grid));
             };

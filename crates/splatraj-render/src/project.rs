@@ -184,7 +184,31 @@ pub fn project_with_near(
     intrinsics: &Intrinsics,
     near: f64,
 ) -> Projected {
+    project_zoomed(scene, poses, None, intrinsics, near)
+}
+
+/// [`project_with_near`] through `intrinsics` zoomed per pose by `zoom` `[B]` (s > 0; `None`:
+/// s = 1); differentiable in Φ and s.
+///
+/// The zoom enters exactly where fx and fy do: fx·s and fy·s in the projected mean and the
+/// Jacobian, and the Jacobian's clamp bound ±1.3·tan(half fov) on x/z, y/z, which shrinks to
+/// ±1.3·tan/s (written as clamp(s·x/z, ±1.3·tan)/s, so the gradient also flows through the
+/// bound where a Gaussian is clamped). Equal to rendering with fx·s, fy·s in the intrinsics.
+pub fn project_zoomed(
+    scene: &SceneTensors,
+    poses: Tensor<2>,
+    zoom: Option<Tensor<1>>,
+    intrinsics: &Intrinsics,
+    near: f64,
+) -> Projected {
     let [batch, _] = poses.dims();
+    let zoom = zoom.map(|s| s.reshape([batch, 1, 1])); // [B, 1, 1]
+    // t·fx (or fy) with the focal length zoomed per pose: a broadcast product with s, or the
+    // unzoomed scalar product (the same ops as before zoom existed).
+    let focal = |t: Tensor<3>, f: f64| match &zoom {
+        Some(s) => t * s.clone().mul_scalar(f),
+        None => t.mul_scalar(f),
+    };
     let n = scene.len();
     let Intrinsics { fx, fy, cx, cy, .. } = *intrinsics;
     let (tan_x, tan_y) = intrinsics.tan_half_fov();
@@ -215,17 +239,23 @@ pub fn project_with_near(
     let x_over_z = x * inv_z.clone(); // [B, 1, N]
     let y_over_z = y * inv_z.clone(); // [B, 1, N]
 
-    let u = x_over_z.clone().mul_scalar(fx).add_scalar(cx); // [B, 1, N]
-    let v = y_over_z.clone().mul_scalar(fy).add_scalar(cy); // [B, 1, N]
+    let u = focal(x_over_z.clone(), fx).add_scalar(cx); // [B, 1, N]
+    let v = focal(y_over_z.clone(), fy).add_scalar(cy); // [B, 1, N]
     let means_2d = interleave(vec![u, v]); // [B, N, 2]
 
     // Jacobian entries with clamped x/z, y/z: J00 = fx/z, J02 = −fx·x̂/z, J11 = fy/z, J12 = −fy·ŷ/z.
-    let tx = x_over_z.clamp(-lim_x, lim_x); // [B, 1, N]
-    let ty = y_over_z.clamp(-lim_y, lim_y); // [B, 1, N]
-    let j00 = inv_z.clone().mul_scalar(fx); // [B, 1, N]
-    let j11 = inv_z.clone().mul_scalar(fy); // [B, 1, N]
-    let j02 = (tx * inv_z.clone()).mul_scalar(-fx); // [B, 1, N]
-    let j12 = (ty * inv_z).mul_scalar(-fy); // [B, 1, N]
+    // Zoomed: clamp(x/z, ±lim/s) = clamp(s·x/z, ±lim)/s, with burn's scalar clamp.
+    let (tx, ty) = match &zoom {
+        Some(s) => (
+            (x_over_z * s.clone()).clamp(-lim_x, lim_x) / s.clone(),
+            (y_over_z * s.clone()).clamp(-lim_y, lim_y) / s.clone(),
+        ),
+        None => (x_over_z.clamp(-lim_x, lim_x), y_over_z.clamp(-lim_y, lim_y)),
+    }; // [B, 1, N] each
+    let j00 = focal(inv_z.clone(), fx); // [B, 1, N]
+    let j11 = focal(inv_z.clone(), fy); // [B, 1, N]
+    let j02 = focal(tx * inv_z.clone(), -fx); // [B, 1, N]
+    let j12 = focal(ty * inv_z, -fy); // [B, 1, N]
 
     // T = J W with W = R_wcᵀ: row k of W is camera axis k in world (column k of R_wc), so T's
     // rows are t1 = J00·r0 + J02·r2 and t2 = J11·r1 + J12·r2, component by component.

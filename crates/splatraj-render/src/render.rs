@@ -11,14 +11,14 @@ use splatraj_scene::Scene;
 
 use crate::bitset::GaussianBits;
 use crate::camera::{Intrinsics, Pose};
-use crate::decide::{HostGeometry, decide};
+use crate::decide::{HostGeometry, decide_zoomed};
 use crate::focus::ObjectFocus;
 use crate::fused::projection::{
-    PackedColumn, ProjectionCamera, ProjectionPlan, SPLAT_COLUMNS, project_packed,
+    PackedColumn, ProjectionCamera, ProjectionPlan, SPLAT_COLUMNS, project_packed_zoomed,
 };
 use crate::fused::{CompositePlan, composite_packed};
 use crate::host::{OnDevice, to_host, upload};
-use crate::project::{NEAR_PLANE, Projected, SceneTensors, project_with_near};
+use crate::project::{NEAR_PLANE, Projected, SceneTensors, project_zoomed};
 use crate::rasterize::{
     Approximations, CompositeOptions, Composited, RenderStats, SplatInputs, composite,
 };
@@ -111,6 +111,34 @@ pub struct RenderRequest {
     /// `channels`; unlike [`Channel::Features`] the render is differentiable in it (the route
     /// of [`crate::lift`]).
     pub gaussian_values: Option<Tensor<2>>,
+    /// A zoom per pose (focal lengths fx·s, fy·s about the fixed principal point); the render
+    /// is differentiable in it. `None`: s = 1 for every pose.
+    pub zoom: Option<Zoom>,
+}
+
+/// A zoom s_b > 0 per pose: the tensor `[B]` the render is differentiable in, and optionally
+/// its values on the host (as [`render_at`]'s host poses: the pass then reads nothing back).
+#[derive(Debug, Clone)]
+pub struct Zoom {
+    /// s per pose, on the poses' device. `[B]`
+    pub values: Tensor<1>,
+    /// The same values on the host; `None` reads them back for the host decisions.
+    pub host: Option<Vec<f64>>,
+}
+
+impl Zoom {
+    /// A zoom whose values the render reads back when it needs them on the host.
+    pub fn new(values: Tensor<1>) -> Self {
+        Zoom { values, host: None }
+    }
+
+    /// A zoom whose values are already on the host (`host`: the values of `values`, in order).
+    pub fn at(values: Tensor<1>, host: Vec<f64>) -> Self {
+        Zoom {
+            values,
+            host: Some(host),
+        }
+    }
 }
 
 impl RenderRequest {
@@ -125,6 +153,7 @@ impl RenderRequest {
             rasterizer: Rasterizer::default(),
             approximations: Approximations::default(),
             gaussian_values: None,
+            zoom: None,
         }
     }
 }
@@ -181,6 +210,22 @@ pub enum RenderError {
         tensor: usize,
         /// Host poses given.
         host: usize,
+    },
+    /// The zoom (tensor or host values) is not one value per pose.
+    #[error("{got} zoom values for a batch of {batch} poses")]
+    ZoomCount {
+        /// Poses in the batch.
+        batch: usize,
+        /// Zoom values given.
+        got: usize,
+    },
+    /// A zoom value is not a finite positive number.
+    #[error("zoom {index} is {value}: a zoom must be finite and > 0")]
+    BadZoom {
+        /// Pose whose zoom it is.
+        index: usize,
+        /// The value.
+        value: f64,
     },
 }
 
@@ -243,7 +288,8 @@ pub fn render(
 
 /// [`render`] with the values of `poses` already on the host (`host_poses`, the same values
 /// in the same order, e.g. read once per optimisation step for every pass of the step): the
-/// pass then reads nothing back. `None` reads them.
+/// pass then reads nothing back. `None` reads them. A zoom's host values come the same way
+/// ([`Zoom::at`]).
 pub fn render_at(
     scene: &DeviceScene,
     poses: Tensor<2>,
@@ -323,9 +369,48 @@ pub fn render_at(
             host: host_poses.len(),
         });
     }
-    let mut decisions = decide(
+    let host_zoom: Option<Vec<f64>> = match &request.zoom {
+        None => None,
+        Some(zoom) => {
+            let [got] = zoom.values.dims();
+            if got != batch {
+                return Err(RenderError::ZoomCount { batch, got });
+            }
+            let host = match &zoom.host {
+                Some(given) => given.clone(),
+                None => to_host(zoom.values.clone().without_autodiff())
+                    .map_err(|e| RenderError::ReadBack(e.to_string()))?,
+            };
+            if host.len() != batch {
+                return Err(RenderError::ZoomCount {
+                    batch,
+                    got: host.len(),
+                });
+            }
+            if let Some((index, &value)) = host
+                .iter()
+                .enumerate()
+                .find(|(_, s)| !(s.is_finite() && **s > 0.0))
+            {
+                return Err(RenderError::BadZoom { index, value });
+            }
+            Some(host)
+        }
+    };
+    // The zoom in the poses' float type (the kernels and the tensor ops mix the two).
+    let zoom: Option<Tensor<1>> = request.zoom.as_ref().map(|zoom| {
+        let values = zoom.values.clone();
+        if values.dtype() == poses.dtype() {
+            values
+        } else {
+            values.cast(poses.dtype())
+        }
+    });
+    // Each pose's decisions (cull, radii, tiles) through its own zoomed intrinsics.
+    let mut decisions = decide_zoomed(
         &scene.host,
         &host_poses,
+        host_zoom.as_deref(),
         &request.intrinsics,
         request.near,
         focus.as_deref(),
@@ -362,7 +447,10 @@ pub fn render_at(
     let width: usize = request.channels.iter().map(Channel::width).sum::<usize>() + tensor_width;
     if used.is_empty() {
         // Nothing to draw: zeros that still hang off the pose graph, so a gradient exists (0).
-        let zero = poses.sum().mul_scalar(0.0);
+        let mut zero = poses.sum().mul_scalar(0.0);
+        if let Some(zoom) = &zoom {
+            zero = zero + zoom.clone().sum().mul_scalar(0.0);
+        }
         let images = Tensor::<4>::zeros([batch, grid.height, grid.width, width], (&device, dtype));
         let alpha = Tensor::<3>::zeros([batch, grid.height, grid.width], (&device, dtype));
         return Ok(Composited {
@@ -392,7 +480,7 @@ pub fn render_at(
                 used: used.iter().map(|&g| g as u32).collect(),
                 camera: ProjectionCamera::new(&request.intrinsics, request.near),
             };
-            let rows = project_packed(&scene.geometry, poses.clone(), plan); // [B, U, 7]
+            let rows = project_packed_zoomed(&scene.geometry, poses.clone(), zoom, plan); // [B, U, 7]
             let depth = rows.clone().narrow(2, PackedColumn::Depth as usize, 1); // [B, U, 1]
             (
                 Splats::Packed(rows.reshape([batch * u, SPLAT_COLUMNS])),
@@ -401,8 +489,13 @@ pub fn render_at(
         }
         Rasterizer::Tensor => {
             let geometry = scene.geometry.select(index());
-            let projected =
-                project_with_near(&geometry, poses.clone(), &request.intrinsics, request.near);
+            let projected = project_zoomed(
+                &geometry,
+                poses.clone(),
+                zoom,
+                &request.intrinsics,
+                request.near,
+            );
             let depth = projected.depth.clone().unsqueeze_dim::<3>(2); // [B, U, 1]
             let opacities = geometry
                 .opacities

@@ -436,3 +436,130 @@ fn gpu_projection_matches_host_projection() {
         "the GPU kernels are deterministic"
     );
 }
+
+#[cfg(feature = "wgpu")]
+#[test]
+fn gpu_zoomed_projection_matches_host_projection() {
+    // The zoom's kernels (fx·s, fy·s, the clamp of s·x/z, d L/ds summed per cube then per
+    // pose) on the GPU against the host kernels, f32, zooms in and out.
+    use splatraj_render::fused::projection::{
+        ProjectionCamera, ProjectionPlan, SPLAT_COLUMNS, project_packed_zoomed,
+    };
+    use splatraj_render::project::{NEAR_PLANE, SceneTensors};
+
+    let mut rng = common::Rng(0x9e3779b97f4a7c15);
+    let mut scene = Scene::default();
+    for i in 0..3000 {
+        let spread = if i % 10 == 0 { 8.0 } else { 1.5 };
+        scene
+            .means
+            .push(std::array::from_fn(|_| rng.range(-spread, spread) as f32));
+        scene
+            .scales
+            .push(std::array::from_fn(|_| rng.range(0.01, 0.2) as f32));
+        scene
+            .rotations
+            .push(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
+        scene.opacities.push(rng.range(0.05, 1.0) as f32);
+    }
+    let used: Vec<u32> = (0..3000).collect();
+    let up = DVec3::new(0.0, -1.0, 0.0);
+    let poses = [
+        Pose::look_at(DVec3::new(3.0, -1.0, 4.0), DVec3::ZERO, up).unwrap(),
+        Pose([0.03, -0.04, 0.02, 0.1, 0.2, -4.0]),
+        Pose([0.0, 0.0, 0.0, -0.2, 0.1, -5.0]),
+    ];
+    let zoom = [1.8f64, 0.6, 2.5];
+    let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
+    let intrinsics = Intrinsics::from_fov_x(60.0, 160, 120).unwrap();
+    // Rows a pass can composite (in front, near the image); see the unzoomed test above.
+    let seen = |row: &[f64]| -> bool {
+        row[6] > 0.1 && (row[0] - 80.0).abs() < 320.0 && (row[1] - 60.0).abs() < 240.0
+    };
+    let mut weights: Vec<f64> = (0..poses.len() * used.len() * SPLAT_COLUMNS)
+        .map(|i| ((i * 7919) % 29) as f64 / 29.0 - 0.45)
+        .collect();
+    let run = |backend: BackendKind, weights: &[f64]| -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        let device = backend.device().unwrap().autodiff();
+        let geometry = SceneTensors::new(&scene, None, &device, DType::F32);
+        let pose_tensor =
+            Tensor::<2>::from_data(TensorData::new(flat.clone(), [3, 6]), (&device, DType::F32))
+                .require_grad();
+        let zoom_tensor =
+            Tensor::<1>::from_data(TensorData::new(zoom.to_vec(), [3]), (&device, DType::F32))
+                .require_grad();
+        let rows = project_packed_zoomed(
+            &geometry,
+            pose_tensor.clone(),
+            Some(zoom_tensor.clone()),
+            ProjectionPlan {
+                used: used.clone(),
+                camera: ProjectionCamera::new(&intrinsics, NEAR_PLANE),
+            },
+        );
+        let w = Tensor::<3>::from_data(
+            TensorData::new(weights.to_vec(), [3, used.len(), SPLAT_COLUMNS]),
+            (&device, DType::F32),
+        );
+        let grads = (rows.clone() * w).sum().backward();
+        (
+            host(rows),
+            host(pose_tensor.grad(&grads).unwrap()),
+            host(zoom_tensor.grad(&grads).unwrap()),
+        )
+    };
+    let (rows_host, _, _) = run(BackendKind::Flex, &weights);
+    let in_view: Vec<bool> = rows_host.chunks_exact(SPLAT_COLUMNS).map(seen).collect();
+    assert!(
+        in_view.iter().filter(|&&s| s).count() > used.len(),
+        "most rows are in view"
+    );
+    for (w, &keep) in weights.chunks_exact_mut(SPLAT_COLUMNS).zip(&in_view) {
+        if !keep {
+            w.fill(0.0);
+        }
+    }
+    let (_, grad_host, zoom_host) = run(BackendKind::Flex, &weights);
+    let (rows_gpu, grad_gpu, zoom_gpu) = run(BackendKind::Wgpu, &weights);
+    for (i, (g, h)) in rows_gpu.iter().zip(&rows_host).enumerate() {
+        assert!(
+            !in_view[i / SPLAT_COLUMNS] || (g - h).abs() <= 1e-4 * (1.0 + h.abs()),
+            "row value {i} (row {}, column {}): GPU {g} vs host {h}",
+            i / SPLAT_COLUMNS,
+            i % SPLAT_COLUMNS
+        );
+    }
+    let norm = grad_host.iter().map(|g| g * g).sum::<f64>().sqrt();
+    assert!(norm > 1.0, "a gradient to compare");
+    for (k, (g, h)) in grad_gpu.iter().zip(&grad_host).enumerate() {
+        assert!(
+            (g - h).abs() <= 1e-3 * norm,
+            "dΦ[{}][{}]: GPU {g} vs host {h} (norm {norm})",
+            k / 6,
+            k % 6
+        );
+    }
+    let zoom_norm = zoom_host.iter().map(|g| g * g).sum::<f64>().sqrt();
+    let worst = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+    };
+    println!(
+        "GPU vs host: dΦ {:.1e} of its norm {norm:.1}, ds {:.1e} of its norm {zoom_norm:.1} (GPU {zoom_gpu:?}, host {zoom_host:?})",
+        worst(&grad_gpu, &grad_host) / norm,
+        worst(&zoom_gpu, &zoom_host) / zoom_norm
+    );
+    assert!(zoom_norm > 1.0, "a zoom gradient to compare");
+    for (b, (g, h)) in zoom_gpu.iter().zip(&zoom_host).enumerate() {
+        assert!(
+            (g - h).abs() <= 1e-3 * zoom_norm,
+            "d/ds[{b}]: GPU {g} vs host {h} (norm {zoom_norm})"
+        );
+    }
+    assert_eq!(
+        run(BackendKind::Wgpu, &weights),
+        (rows_gpu, grad_gpu, zoom_gpu),
+        "the GPU kernels are deterministic"
+    );
+}

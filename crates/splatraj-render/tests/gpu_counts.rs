@@ -1,7 +1,8 @@
 //! What a mask pass launches, reads and uploads on the GPU backend (lavapipe in CI), counted by
 //! `splatraj_render::counters`: the kernel launches of a forward + backward pass do not grow
 //! with the number of poses, a pass whose poses the caller holds reads nothing back before its
-//! gradient, and the scene is not uploaded again.
+//! gradient, and the scene is not uploaded again; the same with a zoom per pose whose values
+//! the caller holds.
 //!
 //! Its own test binary with one test: the counters are process-wide and the harness runs the
 //! tests of one binary side by side.
@@ -14,7 +15,7 @@ use glam::DVec3;
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::counters::{self, Counts};
-use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, render_at};
+use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, Zoom, render_at};
 use splatraj_scene::Scene;
 
 /// 400 Gaussians in a slab in front of the cameras; the first half is the object.
@@ -42,8 +43,15 @@ fn scene() -> (Scene, Vec<f32>) {
 }
 
 /// Counts of one forward + backward mask pass (pruned to the object) at `poses`, the pose
-/// values given from the host; and the counts of its forward alone.
-fn pass(scene: &DeviceScene, mask: &[f32], poses: &[Pose], device: &Device) -> (Counts, Counts) {
+/// values given from the host (and with `zoomed`, a zoom per pose, also given from the host);
+/// and the counts of its forward alone.
+fn pass(
+    scene: &DeviceScene,
+    mask: &[f32],
+    poses: &[Pose],
+    device: &Device,
+    zoomed: bool,
+) -> (Counts, Counts) {
     let intrinsics = Intrinsics::from_fov_x(60.0, 64, 48).unwrap();
     let mut request = RenderRequest::new(intrinsics, vec![Channel::Mask(mask.to_vec())]);
     request.pruning = Pruning::ObjectOnly;
@@ -54,6 +62,15 @@ fn pass(scene: &DeviceScene, mask: &[f32], poses: &[Pose], device: &Device) -> (
         (device, DType::F32),
     )
     .require_grad();
+    let zoom: Vec<f64> = (0..poses.len()).map(|b| 1.2 + 0.1 * b as f64).collect();
+    let zoom_tensor = Tensor::<1>::from_data(
+        TensorData::new(zoom.clone(), [poses.len()]),
+        (device, DType::F32),
+    )
+    .require_grad();
+    if zoomed {
+        request.zoom = Some(Zoom::at(zoom_tensor.clone(), zoom));
+    }
     let out = render_at(scene, tensor.clone(), Some(poses), &request).unwrap();
     let loss = out.images.clone().sum() + out.alpha.clone().mean();
     let forward = counters::snapshot().since(&before);
@@ -61,7 +78,15 @@ fn pass(scene: &DeviceScene, mask: &[f32], poses: &[Pose], device: &Device) -> (
     let gradient = tensor.grad(&grads).expect("the poses have a gradient");
     let v: Vec<f64> = splatraj_render::host::to_host(gradient).unwrap();
     assert!(v.iter().any(|g| *g != 0.0), "a gradient");
-    (counters::snapshot().since(&before), forward)
+    let counts = counters::snapshot().since(&before);
+    if zoomed {
+        let v_zoom = splatraj_render::host::to_host(zoom_tensor.grad(&grads).unwrap()).unwrap();
+        assert!(
+            v_zoom.iter().all(|g| *g != 0.0),
+            "a zoom gradient: {v_zoom:?}"
+        );
+    }
+    (counts, forward)
 }
 
 #[test]
@@ -80,10 +105,12 @@ fn launches_do_not_grow_with_the_batch_and_reads_stay_at_one() {
         .collect();
     // Once each first: kernels compile and may be tuned on their first use at a shape.
     let one = &poses[..1];
-    pass(&on_device, &mask, one, &device);
-    pass(&on_device, &mask, &poses, &device);
-    let (single, single_forward) = pass(&on_device, &mask, one, &device);
-    let (batch, batch_forward) = pass(&on_device, &mask, &poses, &device);
+    for zoomed in [false, true] {
+        pass(&on_device, &mask, one, &device, zoomed);
+        pass(&on_device, &mask, &poses, &device, zoomed);
+    }
+    let (single, single_forward) = pass(&on_device, &mask, one, &device, false);
+    let (batch, batch_forward) = pass(&on_device, &mask, &poses, &device, false);
     eprintln!("one pose: {single:?}\nfive poses: {batch:?}");
     assert!(
         single.launches > 0,
@@ -100,4 +127,17 @@ fn launches_do_not_grow_with_the_batch_and_reads_stay_at_one() {
     assert_eq!(batch.scene_uploads, 0, "the scene stays on the device");
     // What goes up grows with the pass (lists, indices, mask values), not with the scene.
     assert!(batch.bytes_up > single.bytes_up);
+
+    // A zoom whose values come from the host: still nothing read before the gradient, and
+    // launches that do not grow with the batch.
+    let (zoomed_single, zoomed_single_forward) = pass(&on_device, &mask, one, &device, true);
+    let (zoomed_batch, zoomed_batch_forward) = pass(&on_device, &mask, &poses, &device, true);
+    eprintln!("zoomed, one pose: {zoomed_single:?}\nzoomed, five poses: {zoomed_batch:?}");
+    assert_eq!(zoomed_single_forward.reads, 0, "{zoomed_single_forward:?}");
+    assert_eq!(zoomed_batch_forward.reads, 0, "{zoomed_batch_forward:?}");
+    assert_eq!(zoomed_batch.reads, 1, "{zoomed_batch:?}");
+    assert_eq!(
+        zoomed_batch.launches, zoomed_single.launches,
+        "5 zoomed poses launch what 1 does"
+    );
 }

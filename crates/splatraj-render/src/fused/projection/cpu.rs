@@ -111,24 +111,35 @@ impl<E: Real> Frame<E> {
     }
 }
 
-/// The camera constants in the pass's float type.
+/// One pose's camera constants in the pass's float type: the intrinsics zoomed by s.
 #[derive(Debug, Clone, Copy)]
 struct Lens<E> {
+    /// The zoom s (focal lengths scale by it about the fixed principal point).
+    zoom: E,
+    /// Unzoomed focal lengths: d fx·s/ds = fx.
+    fx0: E,
+    fy0: E,
+    /// Zoomed focal lengths fx·s, fy·s (the product in f64, as an `Intrinsics` with fx·s gives).
     fx: E,
     fy: E,
     cx: E,
     cy: E,
+    /// The unzoomed clamp ±1.3·tan(half fov) of s·x/z, s·y/z: the zoomed bound on x/z is
+    /// this over s (tan of half the field of view shrinks as 1/s).
     lim_x: E,
     lim_y: E,
     near: E,
 }
 
 impl<E: Real> Lens<E> {
-    fn new(camera: &ProjectionCamera) -> Self {
+    fn new(camera: &ProjectionCamera, zoom: f64) -> Self {
         let (lim_x, lim_y) = camera.limits();
         Lens {
-            fx: E::of(camera.fx),
-            fy: E::of(camera.fy),
+            zoom: E::of(zoom),
+            fx0: E::of(camera.fx),
+            fy0: E::of(camera.fy),
+            fx: E::of(camera.fx * zoom),
+            fy: E::of(camera.fy * zoom),
             cx: E::of(camera.cx),
             cy: E::of(camera.cy),
             lim_x: E::of(lim_x),
@@ -241,8 +252,10 @@ fn project_row<E: Real>(
     let y_over_z = y * inv_z;
     let u = x_over_z * lens.fx + lens.cx;
     let v = y_over_z * lens.fy + lens.cy;
-    let tx = max(min(x_over_z, lens.lim_x), -lens.lim_x);
-    let ty = max(min(y_over_z, lens.lim_y), -lens.lim_y);
+    // clamp(x/z, ±lim/s) written as clamp(s·x/z, ±lim)/s: the same value and gradient (also
+    // through the bound), and the same bits as the unzoomed rule at s = 1.
+    let tx = max(min(x_over_z * lens.zoom, lens.lim_x), -lens.lim_x) / lens.zoom;
+    let ty = max(min(y_over_z * lens.zoom, lens.lim_y), -lens.lim_y) / lens.zoom;
     let j00 = inv_z * lens.fx;
     let j11 = inv_z * lens.fy;
     let j02 = tx * inv_z * -lens.fx;
@@ -294,13 +307,13 @@ fn project_row<E: Real>(
 }
 
 /// Gradient of one row's output `v` (the packed columns; opacity's is ignored: it is a scene
-/// constant) with respect to the pose's axes `[k][e]` and centre.
+/// constant) with respect to the pose's axes `[k][e]`, centre and zoom.
 fn backward_row<E: Real>(
     row: &Row<E>,
     v: &[E],
     frame: &Frame<E>,
     lens: &Lens<E>,
-) -> ([[E; 3]; 3], [E; 3]) {
+) -> ([[E; 3]; 3], [E; 3], E) {
     let [r0, r1, r2] = frame.axes;
     let zero = E::ZERO;
     let [vu, vv, va_out, vb_out, vc_out] = std::array::from_fn(|k| v[k]);
@@ -343,19 +356,33 @@ fn backward_row<E: Real>(
         v_axes[2][e] = row.j02 * v_t1[e] + row.j12 * v_t2[e];
     }
 
-    // j00 = fx/z, j11 = fy/z, j02 = −fx·tx/z, j12 = −fy·ty/z; tx, ty clamped x/z, y/z
+    // j00 = fx/z, j11 = fy/z, j02 = −fx·tx/z, j12 = −fy·ty/z (fx, fy zoomed); tx, ty the
+    // clamped x/z, y/z: tx = clamp(s·x/z, ±lim)/s
     let mut v_inv_z =
         lens.fx * v_j00 + lens.fy * v_j11 - lens.fx * row.tx * v_j02 - lens.fy * row.ty * v_j12;
     let v_tx = -(lens.fx * row.inv_z * v_j02);
     let v_ty = -(lens.fy * row.inv_z * v_j12);
+    // d L/d(fx·s), d L/d(fy·s): through u, v and the Jacobian.
+    let v_fx = vu * row.x_over_z + v_j00 * row.inv_z - v_j02 * row.tx * row.inv_z;
+    let v_fy = vv * row.y_over_z + v_j11 * row.inv_z - v_j12 * row.ty * row.inv_z;
+    let mut v_zoom = v_fx * lens.fx0 + v_fy * lens.fy0;
     let inside = |t: E, lim: E| !(t > lim || t < -lim);
+    let s = lens.zoom;
+    // tx = k/s with k = clamp(s·x/z): d tx/d k = 1/s, d tx/ds (at fixed k) = −tx/s.
+    let v_kx = v_tx / s;
+    let v_ky = v_ty / s;
+    v_zoom += -(v_tx * row.tx / s) - v_ty * row.ty / s;
     let mut v_x_over_z = lens.fx * vu;
-    if inside(row.x_over_z, lens.lim_x) {
-        v_x_over_z += v_tx;
+    let x_zoomed = row.x_over_z * s;
+    if inside(x_zoomed, lens.lim_x) {
+        v_x_over_z += v_kx * s;
+        v_zoom += v_kx * row.x_over_z;
     }
     let mut v_y_over_z = lens.fy * vv;
-    if inside(row.y_over_z, lens.lim_y) {
-        v_y_over_z += v_ty;
+    let y_zoomed = row.y_over_z * s;
+    if inside(y_zoomed, lens.lim_y) {
+        v_y_over_z += v_ky * s;
+        v_zoom += v_ky * row.y_over_z;
     }
     let v_x = v_x_over_z * row.inv_z;
     let v_y = v_y_over_z * row.inv_z;
@@ -372,7 +399,7 @@ fn backward_row<E: Real>(
         }
     }
     let v_centre = std::array::from_fn(|e| -(v_x * r0[e] + v_y * r1[e] + v_z * r2[e]));
-    (v_axes, v_centre)
+    (v_axes, v_centre, v_zoom)
 }
 
 fn frames<E: Real>(poses: &[f64]) -> (Vec<Rotation>, Vec<Frame<E>>) {
@@ -388,16 +415,22 @@ fn frames<E: Real>(poses: &[f64]) -> (Vec<Rotation>, Vec<Frame<E>>) {
     (rotations, frames)
 }
 
+/// The pose's lenses: `camera` zoomed by `zoom` `[B]`.
+fn lenses<E: Real>(camera: &ProjectionCamera, zoom: &[f64]) -> Vec<Lens<E>> {
+    zoom.iter().map(|&s| Lens::new(camera, s)).collect()
+}
+
 /// The packed rows `[B, U, 7]` of the Gaussians `used` (scene indices) seen from `poses`
-/// (`[B, 6]`, Φ = ω, c).
+/// (`[B, 6]`, Φ = ω, c) through `camera` zoomed by `zoom` (`[B]`, s > 0).
 pub fn forward<E: Real>(
     poses: &[f64],
+    zoom: &[f64],
     scene: SceneRows<'_, E>,
     used: &[u32],
     camera: &ProjectionCamera,
 ) -> Vec<E> {
     let (_, frames) = frames::<E>(poses);
-    let lens = Lens::new(camera);
+    let lenses = lenses::<E>(camera, zoom);
     let rows = frames.len() * used.len();
     let mut out = vec![E::ZERO; rows * SPLAT_COLUMNS];
     out.par_chunks_mut(ROWS_PER_CHUNK * SPLAT_COLUMNS)
@@ -406,31 +439,32 @@ pub fn forward<E: Real>(
             for (i, packed) in out.chunks_exact_mut(SPLAT_COLUMNS).enumerate() {
                 let r = chunk * ROWS_PER_CHUNK + i;
                 let (b, g) = (r / used.len(), used[r % used.len()] as usize);
-                packed.copy_from_slice(&scene.project(g, &frames[b], &lens).out);
+                packed.copy_from_slice(&scene.project(g, &frames[b], &lenses[b]).out);
             }
         });
     out
 }
 
-/// d L/dΦ `[B, 6]` from the gradient of the packed rows `v_out` `[B, U, 7]`.
+/// d L/dΦ `[B, 6]` and d L/ds `[B]` from the gradient of the packed rows `v_out` `[B, U, 7]`.
 pub fn backward<E: Real>(
     poses: &[f64],
+    zoom: &[f64],
     scene: SceneRows<'_, E>,
     used: &[u32],
     camera: &ProjectionCamera,
     v_out: &[E],
-) -> Vec<f64> {
+) -> (Vec<f64>, Vec<f64>) {
     let (rotations, frames) = frames::<E>(poses);
-    let lens = Lens::new(camera);
+    let lenses = lenses::<E>(camera, zoom);
     let batch = frames.len();
     let per_pose = used.len();
     let chunks_per_pose = per_pose.div_ceil(ROWS_PER_CHUNK);
-    // Per (pose, chunk): Σ d L/d axes (9) and d L/d centre (3), in f64.
-    let partial: Vec<[f64; 12]> = (0..batch * chunks_per_pose)
+    // Per (pose, chunk): Σ d L/d axes (9), d L/d centre (3) and d L/ds (1), in f64.
+    let partial: Vec<[f64; 13]> = (0..batch * chunks_per_pose)
         .into_par_iter()
         .map(|job| {
             let (b, chunk) = (job / chunks_per_pose, job % chunks_per_pose);
-            let mut sums = [0.0f64; 12];
+            let mut sums = [0.0f64; 13];
             let first = chunk * ROWS_PER_CHUNK;
             let last = (first + ROWS_PER_CHUNK).min(per_pose);
             for (u, &g) in used.iter().enumerate().take(last).skip(first) {
@@ -441,21 +475,23 @@ pub fn backward<E: Real>(
                 if v.iter().all(|g| g.to_f64() == 0.0) {
                     continue;
                 }
-                let row = scene.project(g as usize, &frames[b], &lens);
-                let (v_axes, v_centre) = backward_row(&row, v, &frames[b], &lens);
+                let row = scene.project(g as usize, &frames[b], &lenses[b]);
+                let (v_axes, v_centre, v_zoom) = backward_row(&row, v, &frames[b], &lenses[b]);
                 for k in 0..3 {
                     for e in 0..3 {
                         sums[3 * k + e] += v_axes[k][e].to_f64();
                     }
                     sums[9 + k] += v_centre[k].to_f64();
                 }
+                sums[12] += v_zoom.to_f64();
             }
             sums
         })
         .collect();
     let mut v_poses = vec![0.0; batch * 6];
+    let mut v_zoom = vec![0.0; batch];
     for (b, rotation) in rotations.iter().enumerate() {
-        let mut total = [0.0f64; 12];
+        let mut total = [0.0f64; 13];
         for sums in &partial[b * chunks_per_pose..(b + 1) * chunks_per_pose] {
             for (t, s) in total.iter_mut().zip(sums) {
                 *t += s;
@@ -467,8 +503,9 @@ pub fn backward<E: Real>(
         let v_omega = rotation.omega_gradient(&v_matrix);
         v_poses[b * 6..b * 6 + 3].copy_from_slice(&v_omega);
         v_poses[b * 6 + 3..b * 6 + 6].copy_from_slice(&total[9..12]);
+        v_zoom[b] = total[12];
     }
-    v_poses
+    (v_poses, v_zoom)
 }
 
 #[cfg(test)]

@@ -4,8 +4,8 @@
 //! - Forward: one unit per row (pose, Gaussian); each unit builds its pose's rotation from ω
 //!   (Rodrigues, the same two branches) and writes the packed row. The launch grid is
 //!   (chunks of 256 Gaussians, poses), so every cube serves one pose.
-//! - Backward: each unit computes its rows' gradient with respect to the camera's axes and
-//!   centre (12 values) and the cube sums them by a fixed tree in shared memory into one
+//! - Backward: each unit computes its rows' gradient with respect to the camera's axes,
+//!   centre and zoom (13 values) and the cube sums them by a fixed tree in shared memory into one
 //!   partial per cube; a second kernel, one cube per pose, sums the partials in order and takes
 //!   them through Rodrigues' derivative. No atomics: the same numbers on every run.
 //!
@@ -35,14 +35,19 @@ use crate::project::{LOW_PASS, NORMALISED_DET_FLOOR};
 
 /// Units per cube, and Gaussians per chunk of the launch grid.
 const UNITS: usize = 256;
-/// Values a row's gradient has before Rodrigues: the three axes (9) and the centre (3).
-const PARTIAL: usize = 12;
+/// Values a row's gradient has before Rodrigues: the three axes (9), the centre (3) and the
+/// zoom (1).
+const PARTIAL: usize = 13;
 /// The launch grid's largest extent per axis.
 const MAX_PER_AXIS: usize = 65_535;
 
-/// The camera as the kernels read it, in the pass's float type.
+/// One pose's camera as the kernels read it, in the pass's float type (as in [`super::cpu`]:
+/// fx, fy zoomed by s; lim_x, lim_y the unzoomed clamp of s·x/z, s·y/z).
 #[derive(CubeType)]
 struct Lens<F: Float> {
+    zoom: F,
+    fx0: F,
+    fy0: F,
     fx: F,
     fy: F,
     cx: F,
@@ -52,12 +57,16 @@ struct Lens<F: Float> {
     near: F,
 }
 
-/// The camera's constants from the launch's `[fx, fy, cx, cy, lim_x, lim_y, near]`.
+/// Pose `pose`'s lens from the launch's `[fx, fy, cx, cy, lim_x, lim_y, near]` and zoom `[B]`.
 #[cube]
-fn lens<F: Float>(camera: &Tensor<F>) -> Lens<F> {
+fn lens<F: Float>(camera: &Tensor<F>, zoom: &Tensor<F>, pose: usize) -> Lens<F> {
+    let s = zoom[pose];
     Lens::<F> {
-        fx: camera[0],
-        fy: camera[1],
+        zoom: s,
+        fx0: camera[0],
+        fy0: camera[1],
+        fx: camera[0] * s,
+        fy: camera[1] * s,
         cx: camera[2],
         cy: camera[3],
         lim_x: camera[4],
@@ -193,8 +202,9 @@ fn project_row<F: Float>(
     let fy = lens.fy;
     let lim_x = lens.lim_x;
     let lim_y = lens.lim_y;
-    let tx = max(min(x_over_z, lim_x), F::new(0.0) - lim_x);
-    let ty = max(min(y_over_z, lim_y), F::new(0.0) - lim_y);
+    // clamp(x/z, ±lim/s) as clamp(s·x/z, ±lim)/s, as the host kernel.
+    let tx = max(min(x_over_z * lens.zoom, lim_x), F::new(0.0) - lim_x) / lens.zoom;
+    let ty = max(min(y_over_z * lens.zoom, lim_y), F::new(0.0) - lim_y) / lens.zoom;
     let j00 = inv_z * fx;
     let j11 = inv_z * fy;
     let j02 = tx * inv_z * (F::new(0.0) - fx);
@@ -271,6 +281,7 @@ fn project_row<F: Float>(
 #[allow(clippy::too_many_arguments)]
 fn forward_kernel<F: Float, I: Int>(
     poses: &Tensor<F>,      // [B, 6]
+    zoom: &Tensor<F>,       // [B]
     components: &Tensor<F>, // [9, N]
     opacities: &Tensor<F>,  // [N]
     used: &Tensor<I>,       // [U]
@@ -282,7 +293,7 @@ fn forward_kernel<F: Float, I: Int>(
     #[define(F, I)] _dtypes: [ElemType; 2],
 ) {
     let pose = CUBE_POS_Y as usize;
-    let lens = lens::<F>(camera);
+    let lens = lens::<F>(camera, zoom, pose);
     let rot = rodrigues::<F>(poses[pose * 6], poses[pose * 6 + 1], poses[pose * 6 + 2]);
     let mut chunk = CUBE_POS_X;
     while chunk < chunks {
@@ -303,14 +314,14 @@ fn forward_kernel<F: Float, I: Int>(
     }
 }
 
-/// Sums `values[k·256 + p]` over the cube's 256 units into `values[k·256]`, for k < 12, by a
+/// Sums `values[k·256 + p]` over the cube's 256 units into `values[k·256]`, for k < 13, by a
 /// fixed tree (the same sum on every run).
 #[cube]
 fn tree_sum<F: Float>(values: &mut Shared<[F]>, p: usize) {
     let mut half = 128usize;
     while half > 0 {
         if p < half {
-            for k in 0..12usize {
+            for k in 0..13usize {
                 let other = values[k * 256 + p + half];
                 values[k * 256 + p] += other;
             }
@@ -324,10 +335,11 @@ fn tree_sum<F: Float>(values: &mut Shared<[F]>, p: usize) {
 #[allow(clippy::too_many_arguments)]
 fn backward_kernel<F: Float, I: Int>(
     poses: &Tensor<F>,       // [B, 6]
+    zoom: &Tensor<F>,        // [B]
     components: &Tensor<F>,  // [9, N]
     used: &Tensor<I>,        // [U]
     v_rows: &Tensor<F>,      // [B, U, 7]
-    partial: &mut Tensor<F>, // [B, cubes per pose, 12]
+    partial: &mut Tensor<F>, // [B, cubes per pose, 13]
     camera: &Tensor<F>,      // [7]
     n: u32,
     count: u32,
@@ -337,7 +349,8 @@ fn backward_kernel<F: Float, I: Int>(
     let pose = CUBE_POS_Y as usize;
     let p = UNIT_POS as usize;
     let rot = rodrigues::<F>(poses[pose * 6], poses[pose * 6 + 1], poses[pose * 6 + 2]);
-    let lens = lens::<F>(camera);
+    let lens = lens::<F>(camera, zoom, pose);
+    let s = lens.zoom;
     let fx = lens.fx;
     let fy = lens.fy;
     let lim_x = lens.lim_x;
@@ -346,9 +359,10 @@ fn backward_kernel<F: Float, I: Int>(
     let near = lens.near;
     let two = F::new(2.0);
     let zero = F::new(0.0);
-    // d L/d axes (r0, r1, r2: columns of R) and d L/d centre, summed over this unit's rows.
-    let mut acc = Array::<F>::new(12usize);
-    for k in 0..12usize {
+    // d L/d axes (r0, r1, r2: columns of R), d L/d centre and d L/ds, summed over this unit's
+    // rows.
+    let mut acc = Array::<F>::new(13usize);
+    for k in 0..13usize {
         acc[k] = zero;
     }
     let mut chunk = CUBE_POS_X;
@@ -402,14 +416,26 @@ fn backward_kernel<F: Float, I: Int>(
             let mut v_inv_z = fx * v_j00 + fy * v_j11 - fx * row.tx * v_j02 - fy * row.ty * v_j12;
             let v_tx = zero - fx * row.inv_z * v_j02;
             let v_ty = zero - fy * row.inv_z * v_j12;
+            // d L/d(fx·s), d L/d(fy·s), then tx = clamp(s·x/z)/s (the host kernel's steps).
+            let v_fx = vu * row.x_over_z + v_j00 * row.inv_z - v_j02 * row.tx * row.inv_z;
+            let v_fy = vv * row.y_over_z + v_j11 * row.inv_z - v_j12 * row.ty * row.inv_z;
+            let mut v_zoom = v_fx * lens.fx0 + v_fy * lens.fy0;
+            let v_kx = v_tx / s;
+            let v_ky = v_ty / s;
+            v_zoom += zero - v_tx * row.tx / s - v_ty * row.ty / s;
             let mut v_x_over_z = fx * vu;
-            if row.x_over_z <= lim_x && row.x_over_z >= zero - lim_x {
-                v_x_over_z += v_tx;
+            let x_zoomed = row.x_over_z * s;
+            if x_zoomed <= lim_x && x_zoomed >= zero - lim_x {
+                v_x_over_z += v_kx * s;
+                v_zoom += v_kx * row.x_over_z;
             }
             let mut v_y_over_z = fy * vv;
-            if row.y_over_z <= lim_y && row.y_over_z >= zero - lim_y {
-                v_y_over_z += v_ty;
+            let y_zoomed = row.y_over_z * s;
+            if y_zoomed <= lim_y && y_zoomed >= zero - lim_y {
+                v_y_over_z += v_ky * s;
+                v_zoom += v_ky * row.y_over_z;
             }
+            acc[12] += v_zoom;
             let v_x = v_x_over_z * row.inv_z;
             let v_y = v_y_over_z * row.inv_z;
             v_inv_z += v_x_over_z * row.x + v_y_over_z * row.y;
@@ -435,33 +461,34 @@ fn backward_kernel<F: Float, I: Int>(
         }
         chunk += CUBE_COUNT_X;
     }
-    let mut shared = Shared::<[F]>::new_slice(3072usize);
-    for k in 0..12usize {
+    let mut shared = Shared::<[F]>::new_slice(3328usize);
+    for k in 0..13usize {
         shared[k * 256 + p] = acc[k];
     }
     sync_cube();
     tree_sum::<F>(&mut shared, p);
-    if p < 12 {
-        partial[(pose * CUBE_COUNT_X as usize + CUBE_POS_X as usize) * 12 + p] = shared[p * 256];
+    if p < 13 {
+        partial[(pose * CUBE_COUNT_X as usize + CUBE_POS_X as usize) * 13 + p] = shared[p * 256];
     }
 }
 
 #[cube(launch)]
 fn reduce_kernel<F: Float>(
     poses: &Tensor<F>,       // [B, 6]
-    partial: &Tensor<F>,     // [B, cubes, 12]
+    partial: &Tensor<F>,     // [B, cubes, 13]
     v_poses: &mut Tensor<F>, // [B, 6]
+    v_zoom: &mut Tensor<F>,  // [B]
     cubes: u32,
     #[define(F)] _dtype: ElemType,
 ) {
     let pose = CUBE_POS_X as usize;
     let p = UNIT_POS as usize;
-    let mut shared = Shared::<[F]>::new_slice(3072usize);
-    for k in 0..12usize {
+    let mut shared = Shared::<[F]>::new_slice(3328usize);
+    for k in 0..13usize {
         let mut sum = F::new(0.0);
         let mut i = p;
         while i < cubes as usize {
-            sum += partial[(pose * cubes as usize + i) * 12 + k];
+            sum += partial[(pose * cubes as usize + i) * 13 + k];
             i += 256;
         }
         shared[k * 256 + p] = sum;
@@ -506,6 +533,7 @@ fn reduce_kernel<F: Float>(
         v_poses[pose * 6 + 3] = shared[2304];
         v_poses[pose * 6 + 4] = shared[2560];
         v_poses[pose * 6 + 5] = shared[2816];
+        v_zoom[pose] = shared[3072];
     }
 }
 
@@ -513,6 +541,7 @@ fn reduce_kernel<F: Float>(
 #[derive(Debug, Clone)]
 pub struct DeviceSaved {
     poses: CubeTensor,
+    zoom: CubeTensor,
     components: CubeTensor,
     used: CubeTensor,
     camera: CubeTensor,
@@ -554,11 +583,13 @@ fn camera_tensor(plan: &ProjectionPlan, device: &CubeDevice, dtype: DType) -> Cu
 
 fn device_forward(
     poses: CubeTensor,
+    zoom: CubeTensor,
     components: CubeTensor,
     opacities: CubeTensor,
     plan: Arc<ProjectionPlan>,
 ) -> (CubeTensor, DeviceSaved) {
-    let [poses, components, opacities] = [poses, components, opacities].map(into_contiguous);
+    let [poses, zoom, components, opacities] =
+        [poses, zoom, components, opacities].map(into_contiguous);
     let device = poses.device.clone();
     let client = poses.client.clone();
     let dtype = poses.dtype;
@@ -575,6 +606,7 @@ fn device_forward(
             cubes,
             CubeDim::new_1d(UNITS as u32),
             poses.clone().into_tensor_arg(),
+            zoom.clone().into_tensor_arg(),
             components.clone().into_tensor_arg(),
             opacities.into_tensor_arg(),
             used.clone().into_tensor_arg(),
@@ -591,6 +623,7 @@ fn device_forward(
     }
     let saved = DeviceSaved {
         poses,
+        zoom,
         components,
         used,
         camera,
@@ -599,10 +632,11 @@ fn device_forward(
     (rows, saved)
 }
 
-fn device_backward(saved: DeviceSaved, v_rows: CubeTensor) -> CubeTensor {
+fn device_backward(saved: DeviceSaved, v_rows: CubeTensor) -> (CubeTensor, CubeTensor) {
     let v_rows = into_contiguous(v_rows);
     let DeviceSaved {
         poses,
+        zoom,
         components,
         used,
         camera,
@@ -617,8 +651,9 @@ fn device_backward(saved: DeviceSaved, v_rows: CubeTensor) -> CubeTensor {
     let (cubes, chunks, per_pose) = grid(batch, count);
     let partial = empty(vec![batch, per_pose, PARTIAL], &device, dtype);
     let v_poses = empty(vec![batch, 6], &device, dtype);
+    let v_zoom = empty(vec![batch], &device, dtype);
     if batch == 0 {
-        return v_poses;
+        return (v_poses, v_zoom);
     }
     let int_dtype = dtype_to_storage_type(used.dtype);
     // With nothing projected every cube still writes its (zero) partial.
@@ -627,6 +662,7 @@ fn device_backward(saved: DeviceSaved, v_rows: CubeTensor) -> CubeTensor {
         cubes,
         CubeDim::new_1d(UNITS as u32),
         poses.clone().into_tensor_arg(),
+        zoom.into_tensor_arg(),
         components.into_tensor_arg(),
         used.into_tensor_arg(),
         v_rows.into_tensor_arg(),
@@ -644,10 +680,11 @@ fn device_backward(saved: DeviceSaved, v_rows: CubeTensor) -> CubeTensor {
         poses.into_tensor_arg(),
         partial.into_tensor_arg(),
         v_poses.clone().into_tensor_arg(),
+        v_zoom.clone().into_tensor_arg(),
         per_pose as u32,
         dtype_to_storage_type(dtype),
     );
-    v_poses
+    (v_poses, v_zoom)
 }
 
 /// f64 passes read the scene's rows back (a copy) and run the host kernels.
@@ -658,19 +695,23 @@ impl ProjectionKernels for Cube {
 
     fn projection_forward(
         poses: FloatTensor<Self>,
+        zoom: FloatTensor<Self>,
         components: FloatTensor<Self>,
         opacities: FloatTensor<Self>,
         plan: Arc<ProjectionPlan>,
     ) -> (FloatTensor<Self>, CubeSaved) {
         if components.dtype() == DType::F64 {
-            let (rows, saved) = host_forward::<Self>(poses, components, opacities, plan);
+            let (rows, saved) = host_forward::<Self>(poses, zoom, components, opacities, plan);
             return (rows, CubeSaved::Host(Box::new(saved)));
         }
-        let (rows, saved) = device_forward(poses, components, opacities, plan);
+        let (rows, saved) = device_forward(poses, zoom, components, opacities, plan);
         (rows, CubeSaved::Device(Box::new(saved)))
     }
 
-    fn projection_backward(saved: CubeSaved, v_rows: FloatTensor<Self>) -> FloatTensor<Self> {
+    fn projection_backward(
+        saved: CubeSaved,
+        v_rows: FloatTensor<Self>,
+    ) -> (FloatTensor<Self>, FloatTensor<Self>) {
         match saved {
             CubeSaved::Host(saved) => host_backward::<Self>(*saved, v_rows),
             CubeSaved::Device(saved) => device_backward(*saved, v_rows),
@@ -681,10 +722,11 @@ impl ProjectionKernels for Cube {
 impl FusedProjection for Cube {
     fn fused_project(
         poses: FloatTensor<Self>,
+        zoom: FloatTensor<Self>,
         components: FloatTensor<Self>,
         opacities: FloatTensor<Self>,
         plan: Arc<ProjectionPlan>,
     ) -> FloatTensor<Self> {
-        Self::projection_forward(poses, components, opacities, plan).0
+        Self::projection_forward(poses, zoom, components, opacities, plan).0
     }
 }

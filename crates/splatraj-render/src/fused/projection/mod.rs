@@ -3,14 +3,15 @@
 //!
 //! The tensor projection (`crate::project`) is about sixty burn ops forward and twice as many
 //! in its autodiff backward, each a kernel launch and a graph node on a GPU, each a full pass
-//! over `[B, U]` values on the CPU. This node takes the poses Φ `[B, 6]` (the only
-//! differentiable input), the scene's component rows `[9, N]` and opacities `[N]` (constants,
-//! uploaded once per scene) and the scene indices of the Gaussians the pass uses, and returns
-//! what compositing needs, packed per row b·U + u as `[B, U, 7]`: (u, v, conic a, b, c,
-//! opacity, camera z); see [`PackedColumn`]. Its backward returns d L/dΦ `[B, 6]` directly:
-//! per row the gradient through the camera's axes and centre, summed per pose, then through
-//! Rodrigues' derivative. The rules, order of operations and clamp conventions are the tensor
-//! projection's (f64: same values and gradients to rounding, `tests/fused_projection.rs`).
+//! over `[B, U]` values on the CPU. This node takes the poses Φ `[B, 6]` and the zoom s `[B]`
+//! (the differentiable inputs; pose b is seen with fx·s_b, fy·s_b), the scene's component
+//! rows `[9, N]` and opacities `[N]` (constants, uploaded once per scene) and the scene
+//! indices of the Gaussians the pass uses, and returns what compositing needs, packed per row
+//! b·U + u as `[B, U, 7]`: (u, v, conic a, b, c, opacity, camera z); see [`PackedColumn`]. Its
+//! backward returns d L/dΦ `[B, 6]` and d L/ds `[B]` directly: per row the gradient through
+//! the camera's axes, centre and zoom, summed per pose, then through Rodrigues' derivative.
+//! The rules, order of operations and clamp conventions are the tensor projection's (f64:
+//! same values and gradients to rounding, `tests/fused_projection.rs`, `tests/zoom.rs`).
 //!
 //! Backends: on Flex the kernels ([`cpu`]) read the scene's rows in place (no copy) and run
 //! in parallel over chunks of rows; ndarray copies them first. On `Cube` (wgpu) the same
@@ -115,10 +116,12 @@ pub struct ProjectionPlan {
     Autodiff
 )]
 pub trait FusedProjection: Backend {
-    /// The packed rows `[B, U, 7]` of `plan.used` seen from `poses` `[B, 6]`, reading the
-    /// scene's `components` `[9, N]` and `opacities` `[N]`.
+    /// The packed rows `[B, U, 7]` of `plan.used` seen from `poses` `[B, 6]` through the plan's
+    /// camera zoomed by `zoom` `[B]`, reading the scene's `components` `[9, N]` and
+    /// `opacities` `[N]`.
     fn fused_project(
         poses: FloatTensor<Self>,
+        zoom: FloatTensor<Self>,
         components: FloatTensor<Self>,
         opacities: FloatTensor<Self>,
         plan: Arc<ProjectionPlan>,
@@ -133,13 +136,17 @@ pub trait ProjectionKernels: Backend {
     /// The packed rows `[B, U, 7]` and the state the backward needs.
     fn projection_forward(
         poses: FloatTensor<Self>,
+        zoom: FloatTensor<Self>,
         components: FloatTensor<Self>,
         opacities: FloatTensor<Self>,
         plan: Arc<ProjectionPlan>,
     ) -> (FloatTensor<Self>, Self::Saved);
 
-    /// d L/dΦ `[B, 6]` from the gradient of the packed rows.
-    fn projection_backward(saved: Self::Saved, v_rows: FloatTensor<Self>) -> FloatTensor<Self>;
+    /// d L/dΦ `[B, 6]` and d L/ds `[B]` from the gradient of the packed rows.
+    fn projection_backward(
+        saved: Self::Saved,
+        v_rows: FloatTensor<Self>,
+    ) -> (FloatTensor<Self>, FloatTensor<Self>);
 }
 
 /// The float types the host kernels run in, as burn elements and plain bytes.
@@ -172,11 +179,12 @@ impl HostView for burn::backend::Flex {
 #[allow(deprecated)] // burn deprecates ndarray; it stays our second CPU backend for the tests
 impl HostView for burn::backend::NdArray {}
 
-/// What the host kernels keep for the backward: the poses as read, the scene's handles (no
-/// copy) and the plan.
+/// What the host kernels keep for the backward: the poses and zooms as read, the scene's
+/// handles (no copy) and the plan.
 #[derive(Debug, Clone)]
 pub struct HostSaved<B: Backend> {
     poses: Arc<Vec<f64>>,
+    zoom: Arc<Vec<f64>>,
     components: FloatTensor<B>,
     opacities: FloatTensor<B>,
     plan: Arc<ProjectionPlan>,
@@ -185,6 +193,7 @@ pub struct HostSaved<B: Backend> {
 /// [`ProjectionKernels::projection_forward`] through the host kernels.
 pub fn host_forward<B: HostView>(
     poses: FloatTensor<B>,
+    zoom: FloatTensor<B>,
     components: FloatTensor<B>,
     opacities: FloatTensor<B>,
     plan: Arc<ProjectionPlan>,
@@ -193,9 +202,11 @@ pub fn host_forward<B: HostView>(
     let dtype = components.dtype();
     let [batch, _] = poses.shape().dims::<2>();
     let host_poses = super::read::<B, f64>(poses);
+    let host_zoom = super::read::<B, f64>(zoom);
     let shape = vec![batch, plan.used.len(), SPLAT_COLUMNS];
     fn run<B: HostView, E: HostFloat>(
         poses: &[f64],
+        zoom: &[f64],
         components: &FloatTensor<B>,
         opacities: &FloatTensor<B>,
         plan: &ProjectionPlan,
@@ -206,19 +217,20 @@ pub fn host_forward<B: HostView>(
                     components,
                     opacities,
                 };
-                cpu::forward(poses, scene, &plan.used, &plan.camera)
+                cpu::forward(poses, zoom, scene, &plan.used, &plan.camera)
             })
         })
     }
     let rows = if dtype == DType::F64 {
-        let rows = run::<B, f64>(&host_poses, &components, &opacities, &plan);
+        let rows = run::<B, f64>(&host_poses, &host_zoom, &components, &opacities, &plan);
         B::float_from_data(TensorData::new(rows, shape), &device)
     } else {
-        let rows = run::<B, f32>(&host_poses, &components, &opacities, &plan);
+        let rows = run::<B, f32>(&host_poses, &host_zoom, &components, &opacities, &plan);
         B::float_from_data(TensorData::new(rows, shape).convert_dtype(dtype), &device)
     };
     let saved = HostSaved {
         poses: Arc::new(host_poses),
+        zoom: Arc::new(host_zoom),
         components,
         opacities,
         plan,
@@ -227,10 +239,16 @@ pub fn host_forward<B: HostView>(
 }
 
 /// [`ProjectionKernels::projection_backward`] through the host kernels.
-pub fn host_backward<B: HostView>(saved: HostSaved<B>, v_rows: FloatTensor<B>) -> FloatTensor<B> {
+pub fn host_backward<B: HostView>(
+    saved: HostSaved<B>,
+    v_rows: FloatTensor<B>,
+) -> (FloatTensor<B>, FloatTensor<B>) {
     let device = v_rows.device();
     let dtype = v_rows.dtype();
-    fn run<B: HostView, E: HostFloat>(saved: &HostSaved<B>, v_rows: FloatTensor<B>) -> Vec<f64> {
+    fn run<B: HostView, E: HostFloat>(
+        saved: &HostSaved<B>,
+        v_rows: FloatTensor<B>,
+    ) -> (Vec<f64>, Vec<f64>) {
         let v_rows = super::read::<B, E>(v_rows);
         B::with_host::<E, _>(&saved.components, |components| {
             B::with_host::<E, _>(&saved.opacities, |opacities| {
@@ -240,6 +258,7 @@ pub fn host_backward<B: HostView>(saved: HostSaved<B>, v_rows: FloatTensor<B>) -
                 };
                 cpu::backward(
                     &saved.poses,
+                    &saved.zoom,
                     scene,
                     &saved.plan.used,
                     &saved.plan.camera,
@@ -248,15 +267,21 @@ pub fn host_backward<B: HostView>(saved: HostSaved<B>, v_rows: FloatTensor<B>) -
             })
         })
     }
-    let v_poses = if dtype == DType::F64 {
+    let (v_poses, v_zoom) = if dtype == DType::F64 {
         run::<B, f64>(&saved, v_rows)
     } else {
         run::<B, f32>(&saved, v_rows)
     };
     let batch = saved.poses.len() / 6;
-    B::float_from_data(
-        TensorData::new(v_poses, [batch, 6]).convert_dtype(dtype),
-        &device,
+    (
+        B::float_from_data(
+            TensorData::new(v_poses, [batch, 6]).convert_dtype(dtype),
+            &device,
+        ),
+        B::float_from_data(
+            TensorData::new(v_zoom, [batch]).convert_dtype(dtype),
+            &device,
+        ),
     )
 }
 
@@ -268,17 +293,18 @@ macro_rules! host_projection {
 
             fn projection_forward(
                 poses: FloatTensor<Self>,
+                zoom: FloatTensor<Self>,
                 components: FloatTensor<Self>,
                 opacities: FloatTensor<Self>,
                 plan: Arc<ProjectionPlan>,
             ) -> (FloatTensor<Self>, Self::Saved) {
-                host_forward::<Self>(poses, components, opacities, plan)
+                host_forward::<Self>(poses, zoom, components, opacities, plan)
             }
 
             fn projection_backward(
                 saved: Self::Saved,
                 v_rows: FloatTensor<Self>,
-            ) -> FloatTensor<Self> {
+            ) -> (FloatTensor<Self>, FloatTensor<Self>) {
                 host_backward::<Self>(saved, v_rows)
             }
         }
@@ -286,11 +312,12 @@ macro_rules! host_projection {
         impl FusedProjection for $backend {
             fn fused_project(
                 poses: FloatTensor<Self>,
+                zoom: FloatTensor<Self>,
                 components: FloatTensor<Self>,
                 opacities: FloatTensor<Self>,
                 plan: Arc<ProjectionPlan>,
             ) -> FloatTensor<Self> {
-                Self::projection_forward(poses, components, opacities, plan).0
+                Self::projection_forward(poses, zoom, components, opacities, plan).0
             }
         }
     };
@@ -309,17 +336,21 @@ mod ndarray_kernels {
 #[derive(Debug)]
 struct ProjectionBackward;
 
-impl<B: ProjectionKernels> Backward<B, 1> for ProjectionBackward {
+impl<B: ProjectionKernels> Backward<B, 2> for ProjectionBackward {
     type State = B::Saved;
 
-    fn backward(self, ops: Ops<Self::State, 1>, grads: &mut Gradients, _: &mut Checkpointer) {
+    fn backward(self, ops: Ops<Self::State, 2>, grads: &mut Gradients, _: &mut Checkpointer) {
         let v_rows = grads.consume::<B>(&ops.node);
         let started = std::time::Instant::now();
-        let v_poses = B::projection_backward(ops.state, v_rows);
+        let (v_poses, v_zoom) = B::projection_backward(ops.state, v_rows);
         crate::stages::add(crate::stages::Stage::ProjectBackward, started.elapsed());
-        let [poses] = ops.parents;
+        let [poses, zoom] = ops.parents;
         if let Some(node) = poses {
             grads.register::<B>(node.id, v_poses);
+        }
+        // An untracked zoom (a render without one gets ones) has no parent: nothing to register.
+        if let Some(node) = zoom {
+            grads.register::<B>(node.id, v_zoom);
         }
     }
 }
@@ -327,26 +358,28 @@ impl<B: ProjectionKernels> Backward<B, 1> for ProjectionBackward {
 impl<B: ProjectionKernels, C: CheckpointStrategy> FusedProjection for Autodiff<B, C> {
     fn fused_project(
         poses: FloatTensor<Self>,
+        zoom: FloatTensor<Self>,
         components: FloatTensor<Self>,
         opacities: FloatTensor<Self>,
         plan: Arc<ProjectionPlan>,
     ) -> FloatTensor<Self> {
-        let node = poses.node();
+        let nodes = [poses.node(), zoom.node()];
         let poses = poses.into_primitive();
+        let zoom = zoom.into_primitive();
         // The scene is a constant of the pass: no gradient flows to it.
         let components = components.into_primitive();
         let opacities = opacities.into_primitive();
         match ProjectionBackward
-            .prepare::<C>([node])
+            .prepare::<C>(nodes)
             .compute_bound()
             .stateful()
         {
             OpsKind::Tracked(prep) => {
-                let (rows, saved) = B::projection_forward(poses, components, opacities, plan);
+                let (rows, saved) = B::projection_forward(poses, zoom, components, opacities, plan);
                 prep.finish(saved, rows)
             }
             OpsKind::UnTracked(prep) => {
-                prep.finish(B::projection_forward(poses, components, opacities, plan).0)
+                prep.finish(B::projection_forward(poses, zoom, components, opacities, plan).0)
             }
         }
     }
@@ -355,8 +388,34 @@ impl<B: ProjectionKernels, C: CheckpointStrategy> FusedProjection for Autodiff<B
 /// The packed rows `[B, U, 7]` of the Gaussians `plan.used` (indices into `scene`) seen from
 /// `poses` `[B, 6]`; differentiable in the poses. Columns: [`PackedColumn`].
 pub fn project_packed(scene: &SceneTensors, poses: Tensor<2>, plan: ProjectionPlan) -> Tensor<3> {
+    project_packed_zoomed(scene, poses, None, plan)
+}
+
+/// [`project_packed`] through the plan's camera zoomed per pose by `zoom` `[B]` (s > 0: fx·s,
+/// fy·s about the fixed principal point; `None`: s = 1); differentiable in the poses and the
+/// zoom.
+pub fn project_packed_zoomed(
+    scene: &SceneTensors,
+    poses: Tensor<2>,
+    zoom: Option<Tensor<1>>,
+    plan: ProjectionPlan,
+) -> Tensor<3> {
+    let [batch, _] = poses.dims();
+    // Without a zoom the kernels read ones: B values up, no launch, and no autodiff parent.
+    let zoom = match zoom {
+        Some(zoom) if zoom.dtype() == scene.components.dtype() => zoom,
+        Some(zoom) => zoom.cast(scene.components.dtype()),
+        None => {
+            crate::counters::upload(batch * scene.components.dtype().size());
+            Tensor::<1>::from_data(
+                TensorData::new(vec![1.0f64; batch], [batch]),
+                (&poses.device(), scene.components.dtype()),
+            )
+        }
+    };
     Tensor::<3>::from_dispatch(<Dispatch as FusedProjection>::fused_project(
         poses.into_dispatch(),
+        zoom.into_dispatch(),
         scene.components.clone().into_dispatch(),
         scene.opacities.clone().into_dispatch(),
         Arc::new(plan),
