@@ -18,7 +18,7 @@
 //! spatially compact, so this labels the faint and the hidden Gaussians inside an object
 //! without reaching past its surface (there the neighbours are mostly unlabelled).
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 
 use rayon::prelude::*;
 use splatraj_scene::Scene;
@@ -115,6 +115,35 @@ pub fn check_label_count(labels: usize, gaussians: usize, max_bytes: Option<u64>
     Ok(())
 }
 
+/// Labels smaller than this many pixels (over all masks) are specks, not objects.
+pub const MIN_LABEL_PIXELS: usize = 4;
+
+/// How many speck labels ([`MIN_LABEL_PIXELS`]) masks may hold before they are judged not to be
+/// label masks: a segmenter's stray specks are a few, a photo's or depth map's colours are
+/// thousands, each on a pixel or two.
+pub const MAX_SPECK_LABELS: usize = 256;
+
+/// Refuses masks whose labels (0 excluded) are mostly specks: more than
+/// [`MAX_SPECK_LABELS`] labels cover fewer than [`MIN_LABEL_PIXELS`] pixels each, and they are
+/// the majority. Lifting each label is a render pass per mask, so such images would take
+/// minutes and gigabytes to give nothing (two 128×96 images of distinct colours: 24 576 labels,
+/// 28 s, 2.3 GB before this check).
+pub fn check_label_areas(areas: &BTreeMap<i32, usize>) -> Result<()> {
+    let labels = areas.iter().filter(|&(&id, _)| id != 0).count();
+    let specks = areas
+        .iter()
+        .filter(|&(&id, &area)| id != 0 && area < MIN_LABEL_PIXELS)
+        .count();
+    if specks > MAX_SPECK_LABELS && 2 * specks > labels {
+        return Err(LiftError::Scene(format!(
+            "the masks hold {labels} labels, {specks} of them on fewer than {MIN_LABEL_PIXELS} \
+             pixels each: label masks give each object a region, so these look like photos or \
+             depth maps (every pixel its own colour), not label images"
+        )));
+    }
+    Ok(())
+}
+
 /// Lifts `masks` onto `scene` (see the module docs).
 pub fn lift_masks(
     scene: &Scene,
@@ -147,14 +176,14 @@ pub fn lift_masks(
             ));
         }
     }
-    let ids: Vec<i32> = masks
-        .iter()
-        .flat_map(|m| m.labels.iter().copied())
-        .collect::<BTreeSet<_>>()
-        .into_iter()
-        .collect();
+    let mut areas: BTreeMap<i32, usize> = BTreeMap::new();
+    for &id in masks.iter().flat_map(|m| m.labels.iter()) {
+        *areas.entry(id).or_default() += 1;
+    }
+    let ids: Vec<i32> = areas.keys().copied().collect();
     let n = device_scene.len();
     check_label_count(ids.len(), n, options.max_bytes)?;
+    check_label_areas(&areas)?;
     let mut votes = vec![0f64; n * ids.len()]; // [N, labels]
     let mut weights = vec![0f64; n];
     for (group_index, group) in ids.chunks(CHANNELS_PER_PASS).enumerate() {
@@ -255,6 +284,22 @@ fn neighbour_consensus(means: &[[f32; 3]], ids: &[i32], k: usize) -> Result<Vec<
 #[cfg(test)]
 mod label_bounds {
     use super::*;
+
+    #[test]
+    fn masks_of_specks_are_refused_and_a_few_specks_pass() {
+        // Every pixel of two 128×96 images its own colour: 24 576 labels of one pixel.
+        let photo: BTreeMap<i32, usize> = (1..=24_576).map(|id| (id, 1)).collect();
+        let e = check_label_areas(&photo).unwrap_err().to_string();
+        assert!(e.contains("24576 labels") && e.contains("photos"), "{e}");
+        // Forty objects of hundreds of pixels and 100 stray specks: a segmenter's output.
+        let mut masks: BTreeMap<i32, usize> = (1..=40).map(|id| (id, 500)).collect();
+        masks.extend((41..=140).map(|id| (id, 1)));
+        masks.insert(0, 10_000);
+        assert!(check_label_areas(&masks).is_ok());
+        // At the bound: 256 specks alone pass (more than 256 are needed, and a majority).
+        let edge: BTreeMap<i32, usize> = (1..=256).map(|id| (id, 1)).collect();
+        assert!(check_label_areas(&edge).is_ok());
+    }
 
     #[test]
     fn labels_beyond_a_label_mask_or_the_memory_limit_are_refused_before_work() {
