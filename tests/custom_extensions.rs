@@ -174,7 +174,7 @@ fn a_registered_model_and_source_run_through_a_config() {
     assert!(off.sqrt() < RADIUS as f64, "object centre {centre:?}");
 
     // The model is the registered one, five knots.
-    let model = experiment.model().unwrap();
+    let model = &experiment.model;
     assert!(matches!(model, TrajectoryModel::Custom(_)));
     assert_eq!(model.count(), 5);
 

@@ -200,7 +200,7 @@ impl Experiment {
     ) -> Result<TrajectoryRun> {
         let starts = self.start_trajectories()?;
         let costs = self.with_shot_cost(self.costs()?)?;
-        let model = self.model()?;
+        let model = self.model.clone();
         let scene = self.autodiff_scene();
         let steps = self.config.optimiser.iterations;
         // The time limit is the run's, not each restart's: this loop enforces it.

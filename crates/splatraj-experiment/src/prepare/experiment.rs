@@ -11,6 +11,7 @@ use splatraj_scene::{InvalidPolicy, ReadOptions, ResolvedUp, Scene, read_scene};
 use splatraj_semantic::{Relevancy, Scoring, Target, read_mask_file, select};
 use splatraj_traj::costs::{OrAuto, QueryContext, WeightedCosts, default_prior_radius};
 use splatraj_traj::optimise::WindowTarget;
+use splatraj_traj::trajectory::TrajectoryModel;
 
 use crate::config::Config;
 use crate::extensions::Extensions;
@@ -53,6 +54,10 @@ pub struct Experiment {
     pub bounds: ([f64; 3], [f64; 3]),
     /// One target per query, in order: its window's object mask and cost context.
     pub windows: Vec<WindowTarget>,
+    /// The `[trajectory]` model for the windows, built once (a custom model from
+    /// [`Extensions::models`](crate::Extensions::models)): the starts, the memory plan and the
+    /// run all use this one.
+    pub model: TrajectoryModel,
     /// The selected Gaussians of each query (counts for the report).
     pub selected: Vec<usize>,
     /// What grounding said about each query (a selection file's matched share), for the plan.
@@ -129,6 +134,11 @@ impl Experiment {
         let half: [f64; 3] = std::array::from_fn(|i| 0.5 * (bounds.max[i] - bounds.min[i]) as f64);
         let device = config.backend.device()?;
         let intrinsics = config.camera.intrinsics()?;
+        // One window per query (grounding keeps their order and count).
+        let model = config
+            .trajectory
+            .build_with(config.queries.len(), &extensions.models)
+            .context("`trajectory`")?;
         let mut experiment = Experiment {
             config: config.clone(),
             extensions: extensions.clone(),
@@ -137,6 +147,7 @@ impl Experiment {
             up,
             bounds: (centre, half),
             windows: Vec::new(),
+            model,
             selected: Vec::new(),
             notes: Vec::new(),
             boxes: Vec::new(),

@@ -121,7 +121,7 @@ impl Experiment {
                 fb,
             ) + alone,
         );
-        let basis = self.model()?.basis().count();
+        let basis = self.model.basis().count();
         let output = &self.config.output;
         let optimiser = &self.config.optimiser;
         let samples = [

@@ -46,7 +46,7 @@ impl Experiment {
     /// proportion to `start.restarts`.
     pub fn first_start_trajectories(&self, count: usize) -> Result<Vec<TrajectoryRecord>> {
         let config = &self.config;
-        let model = self.model()?;
+        let model = self.model.clone();
         let (device, dtype) = (&self.device, self.dtype);
         if let Some(file) = &config.start.trajectory {
             let path = config.resolve(file);
@@ -256,15 +256,6 @@ impl Experiment {
         let fitted = Trajectory::fit(model, &times, &poses, &self.device, self.dtype)
             .with_context(context)?;
         Ok(fitted.record())
-    }
-
-    /// The `[trajectory]` model for the experiment's windows (a custom model built from
-    /// [`Extensions::models`](crate::Extensions::models)).
-    pub fn model(&self) -> Result<TrajectoryModel> {
-        self.config
-            .trajectory
-            .build_with(self.windows.len(), &self.extensions.models)
-            .context("`trajectory`")
     }
 
     /// For the first `count` restarts (of `start.restarts`), one start pose per window of

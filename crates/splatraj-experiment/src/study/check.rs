@@ -130,7 +130,7 @@ impl StudyPlan {
             held + 2.0 * render_bytes(at_once, pixels(e.width, e.height), n, false, fb),
         );
         if self.task == StudyTask::Trajectory {
-            let basis = evaluation.model()?.basis().count();
+            let basis = evaluation.model.basis().count();
             memory.stage(
                 format!(
                     "the study's evaluation of a run: LDJ of {basis} basis functions sampled at \
