@@ -229,12 +229,24 @@ impl TargetSourceConfig {
         let context = SourceContext { base_dir, device };
         let resolve = |p: &Path| context.resolve(p);
         Ok(match self {
-            TargetSourceConfig::Custom { name, table } => registry.build(
-                name,
-                &toml::Value::Table(table.clone()),
-                &context,
-                &key(&format!("custom.{name}")),
-            )?,
+            // A key inside the source's table is named whole (`custom.<name>.<key>`), so that a
+            // command line names the option that set it (`--text-encoder`), a config its key.
+            TargetSourceConfig::Custom { name, table } => registry
+                .build(
+                    name,
+                    &toml::Value::Table(table.clone()),
+                    &context,
+                    &key(&format!("custom.{name}")),
+                )
+                .map_err(|e| match e {
+                    SemanticError::Config { key: outer, error } => match *error {
+                        SemanticError::Config { key: inner, error } => {
+                            error.in_key(key(&format!("custom.{name}.{inner}")))
+                        }
+                        error => error.in_key(outer),
+                    },
+                    other => other,
+                })?,
             TargetSourceConfig::Lifted(c) => c.init(&context, registry, key)?,
             TargetSourceConfig::Labels(c) => {
                 let mut names = BTreeMap::new();

@@ -146,7 +146,7 @@ fn bad_files_and_keys_are_named() {
         assert!(
             e.contains(file)
                 && e.contains(words)
-                && e.contains(&format!("custom.legaussians: {key}")),
+                && e.contains(&format!("targets.custom.legaussians.{key}:")),
             "{file}: {e}"
         );
         println!("{e}");

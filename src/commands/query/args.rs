@@ -356,6 +356,9 @@ pub(super) fn option_naming(key: &str) -> String {
     let command = QueryArgs::augment_args(clap::Command::new("query"));
     if command.get_arguments().any(|a| a.get_long() == long) {
         option
+    } else if let Some(["custom", _, inner]) = key.splitn(3, '.').collect::<Vec<_>>().get(..) {
+        // A registered source's own key, set with --source-key.
+        format!("--source-key {inner}")
     } else {
         format!("--set targets.{key}")
     }

@@ -552,8 +552,12 @@ pub fn option_of_key(key: &str) -> String {
         "regions" if key.ends_with(".selection") => "--selection".to_string(),
         "regions" => "--box/--sphere/--selection".to_string(),
         "negatives" => "--negative".to_string(),
-        // A registered source's table: `custom.<name>` is the --source value.
-        "custom" => format!("--source {key}"),
+        // A registered source's table: `custom.<name>` is the --source value; a key inside it
+        // was set by its own option (`--text-encoder`) where the command has one.
+        "custom" => match key.splitn(3, '.').nth(2) {
+            Some(inner) => format!("--{}", inner.replace('_', "-")),
+            None => format!("--source {key}"),
+        },
         // The lifted source's own table comes from --source-key items.
         "lifted" => match key.split_once('.') {
             Some((_, rest)) => format!("--source-key {rest}"),
