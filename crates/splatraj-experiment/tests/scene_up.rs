@@ -245,3 +245,24 @@ fn named_cameras_that_disagree_or_stand_elsewhere_are_refused_found_ones_fall_ba
         "{error}"
     );
 }
+
+/// The demo room has no capture: `scene.cameras` beside `scene.demo` is refused naming the key,
+/// not read never and passed by `run --check` (the trial's third round found it silent).
+#[test]
+fn cameras_for_the_demo_room_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "name = \"up\"\n[scene]\ndemo = { gaussians = 2000, seed = 1 }\ncameras = \
+                \"transforms.json\"\n[targets]\nsource = \"region\"\nregions = { all = { sphere \
+                = [0, 0, 0, 100] } }\n[[queries]]\ntext = \"all\"\n";
+    let config = Config::from_toml(text, dir.path(), &Extensions::default()).unwrap();
+    let scene = demo_scene(&DemoConfig {
+        gaussians: 2000,
+        seed: 1,
+    })
+    .unwrap();
+    let error = scene_up(&config, &scene).unwrap_err().to_string();
+    assert!(
+        error.contains("`scene.cameras`") && error.contains("demo"),
+        "{error}"
+    );
+}

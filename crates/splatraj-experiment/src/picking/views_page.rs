@@ -146,7 +146,11 @@ pub fn write_views_page(
     }
     memory_plan(scene.len(), &request.options)
         .check(MemoryLimit::new(request.max_memory_gb)?, "--max-memory GB")?;
-    let up = resolve_up(request.options.up, false, scene);
+    // As runs take it: `--up`, else the capture's cameras beside the scene, else the guess.
+    let up = match request.options.up {
+        Some(_) => resolve_up(request.options.up, false, scene),
+        None => crate::prepare::scene_up::up_beside(&request.scene, scene),
+    };
     let uploaded = DeviceScene::new(scene, &device.clone().autodiff(), DType::F32);
     let plan = plan_views(
         scene,

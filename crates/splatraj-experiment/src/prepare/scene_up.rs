@@ -35,6 +35,13 @@ pub const NEAR_SCENE_DIAGONALS: f64 = 10.0;
 /// World up for `config`'s `scene`: see the module docs.
 pub fn scene_up(config: &Config, scene: &Scene) -> Result<ResolvedUp> {
     let is_demo = config.scene.demo.is_some();
+    if is_demo && config.scene.cameras.is_some() {
+        // Never read otherwise: a file set and silently ignored is worse than a refusal.
+        anyhow::bail!(
+            "`scene.cameras` needs a scene file (`scene.path`): the demo room has no capture, and \
+             its up is known"
+        );
+    }
     if config.scene.up.is_some() || is_demo {
         return Ok(resolve_up(config.scene.up, is_demo, scene));
     }
@@ -42,12 +49,22 @@ pub fn scene_up(config: &Config, scene: &Scene) -> Result<ResolvedUp> {
         let path = config.resolve(cameras);
         return up_from_file(&path, scene).map_err(|e| anyhow!("`scene.cameras`: {e}"));
     }
-    let found = config
-        .scene_file()
-        .and_then(|file| camera_files_beside(&file).into_iter().find(|p| p.is_file()));
-    if let Some(path) = found {
+    Ok(match config.scene_file() {
+        Some(file) => up_beside(&file, scene),
+        None => resolve_up(None, false, scene),
+    })
+}
+
+/// World up for the scene read from `scene_file` without a config: the cameras found beside
+/// it ([`camera_files_beside`]) when they agree, else the geometry's guess (with a warning
+/// naming the file that was found and why it was not used).
+pub fn up_beside(scene_file: &Path, scene: &Scene) -> ResolvedUp {
+    if let Some(path) = camera_files_beside(scene_file)
+        .into_iter()
+        .find(|p| p.is_file())
+    {
         match up_from_file(&path, scene) {
-            Ok(up) => return Ok(up),
+            Ok(up) => return up,
             Err(e) => tracing::warn!(
                 "found {} beside the scene but took up from the geometry instead: {e} (set \
                  `scene.up`, or `scene.cameras` to the right file)",
@@ -55,7 +72,7 @@ pub fn scene_up(config: &Config, scene: &Scene) -> Result<ResolvedUp> {
             ),
         }
     }
-    Ok(resolve_up(None, false, scene))
+    resolve_up(None, false, scene)
 }
 
 /// Where a capture's cameras usually lie beside `scene_file`: [`CAMERA_FILE_NAMES`] in its
