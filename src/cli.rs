@@ -51,20 +51,19 @@ impl ReadArgs {
         Ok(loaded)
     }
 
-    /// Reads `path` as [`ReadArgs::load`] does, for a command that renders it: a scene without
-    /// Gaussians (none in the file, or all dropped as invalid) is refused, naming the file.
+    /// Reads `path` for a command that renders it (a scene without Gaussians is refused,
+    /// naming the file), warning about dropped Gaussians.
     pub fn load_to_render(&self, path: &Path) -> Result<LoadedScene> {
-        let loaded = self.load(path)?;
-        if loaded.scene.is_empty() {
-            let why = if loaded.dropped > 0 {
-                format!(
-                    "all {} of its Gaussians are invalid (dropped by --drop-invalid)",
-                    loaded.dropped
-                )
-            } else {
-                "it holds no Gaussians".to_string()
-            };
-            anyhow::bail!("{}: nothing to render: {why}", path.display());
+        let loaded = splatraj::experiment::prepare::scene_files::read_scene_to_render(
+            path,
+            &self.options(),
+        )?;
+        if loaded.dropped > 0 {
+            eprintln!(
+                "warning: {}: dropped {} invalid Gaussians",
+                path.display(),
+                loaded.dropped
+            );
         }
         Ok(loaded)
     }

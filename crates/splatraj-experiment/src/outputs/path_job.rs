@@ -10,13 +10,14 @@ use anyhow::{Result, bail};
 use burn::tensor::DType;
 use splatraj_render::backend::BackendKind;
 use splatraj_render::render::{DeviceScene, Rasterizer};
-use splatraj_scene::formats::{ReadOptions, read_scene};
+use splatraj_scene::formats::ReadOptions;
 
 use crate::config::{Config, MaskOverlay};
 use crate::outputs::camera_paths::{FrameRequest, PathFile, SceneMismatch};
 use crate::outputs::path_render::{PathRender, RenderedPath, Video, render_path_to};
 use crate::outputs::records::SceneRecord;
 use crate::prepare::experiment::Experiment;
+use crate::prepare::scene_files::read_scene_to_render;
 
 /// Where `render-path`'s scene comes from.
 #[derive(Debug, Clone)]
@@ -147,18 +148,7 @@ pub fn render_path_job(
             read,
             backend,
         } => {
-            let loaded = read_scene(file, read)?;
-            if loaded.scene.is_empty() {
-                let why = if loaded.dropped > 0 {
-                    format!(
-                        "all {} of its Gaussians are invalid (dropped by --drop-invalid)",
-                        loaded.dropped
-                    )
-                } else {
-                    "it holds no Gaussians".to_string()
-                };
-                bail!("{}: nothing to render: {why}", file.display());
-            }
+            let loaded = read_scene_to_render(file, read)?;
             if let PathFile::Trajectory(t) = &path {
                 let given = SceneRecord {
                     name: file.display().to_string(),

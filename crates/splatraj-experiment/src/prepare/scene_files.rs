@@ -15,6 +15,24 @@ use splatraj_scene::{
     InvalidPolicy, ReadOptions, Scene, SceneFormat, read_scene, write_inria_ply, write_scene,
 };
 
+/// Reads `path` for a command that renders it: a scene without Gaussians (none in the file,
+/// or all dropped as invalid) is refused, naming the file.
+pub fn read_scene_to_render(path: &Path, options: &ReadOptions) -> Result<LoadedScene> {
+    let loaded = read_scene(path, options)?;
+    if loaded.scene.is_empty() {
+        let why = if loaded.dropped > 0 {
+            format!(
+                "all {} of its Gaussians are invalid (dropped by --drop-invalid)",
+                loaded.dropped
+            )
+        } else {
+            "it holds no Gaussians".to_string()
+        };
+        bail!("{}: nothing to render: {why}", path.display());
+    }
+    Ok(loaded)
+}
+
 /// What [`convert_scene`] wrote.
 #[derive(Debug, Clone)]
 pub struct Converted {
