@@ -312,8 +312,10 @@ impl Experiment {
         lines.push(experiment.up.describe());
         if experiment.up.doubtful() {
             lines.push(
-                "warning: the up guess is unsure; if the frames come out tilted, set `scene.up` \
-                 (y-down captures: [0, -1, 0]; z-up: [0, 0, 1])"
+                "warning: the up guess is unsure; `splatraj scene views SCENE --out views.html` \
+                 shows the scene as a run would film it (`--up x,y,z` to try another), and \
+                 `scene.up` sets it (y-down captures: [0, -1, 0]; z-up: [0, 0, 1]), or \
+                 `scene.cameras` takes it from the capture's cameras"
                     .to_string(),
             );
         }
