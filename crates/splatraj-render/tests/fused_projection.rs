@@ -5,66 +5,16 @@
 //! both of Rodrigues' branches (ω = 0 included); f32 stays within f32 rounding of f64; the
 //! result does not depend on the thread count.
 
+mod common;
+
 use burn::tensor::{DType, Device, Tensor, TensorData};
-use glam::DVec3;
+use common::{Rng, projection_poses, projection_scene};
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::fused::projection::{
     PackedColumn, ProjectionCamera, ProjectionPlan, SPLAT_COLUMNS, project_packed,
 };
 use splatraj_render::project::{NEAR_PLANE, SceneTensors, project_with_near};
 use splatraj_scene::Scene;
-
-/// SplitMix64 (the crate has no rand dev-dependency).
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
-}
-
-/// 60 Gaussians: most near the origin, some far out (off screen, beyond the clamp, behind the
-/// cameras), and one needle (a footprint so thin its normalised determinant is floored).
-fn scene(seed: u64) -> Scene {
-    let mut rng = Rng(seed);
-    let mut scene = Scene::default();
-    for i in 0..60 {
-        let spread = if i < 45 { 1.5 } else { 9.0 };
-        scene
-            .means
-            .push(std::array::from_fn(|_| rng.uniform(-spread, spread) as f32));
-        let scales = if i == 59 {
-            [1e-7, 1e-7, 2.0]
-        } else {
-            std::array::from_fn(|_| rng.uniform(0.02, 0.3) as f32)
-        };
-        scene.scales.push(scales);
-        scene
-            .rotations
-            .push(std::array::from_fn(|_| rng.uniform(-1.0, 1.0) as f32));
-        scene.opacities.push(rng.uniform(0.05, 1.0) as f32);
-    }
-    scene
-}
-
-/// Poses on both of Rodrigues' branches: look-at rotations (θ large), a small rotation (the
-/// series), and ω = 0 exactly.
-fn poses() -> Vec<Pose> {
-    let up = DVec3::new(0.0, -1.0, 0.0);
-    vec![
-        Pose::look_at(DVec3::new(4.0, -1.0, 5.0), DVec3::ZERO, up).unwrap(),
-        Pose::look_at(DVec3::new(-5.5, -2.0, -1.0), DVec3::new(0.3, 0.2, 0.0), up).unwrap(),
-        Pose([0.04, -0.05, 0.03, 0.2, -0.1, -6.0]),
-        Pose([0.0, 0.0, 0.0, -0.3, 0.2, -5.0]),
-    ]
-}
 
 fn intrinsics() -> Intrinsics {
     Intrinsics::from_fov_x(60.0, 160, 120).unwrap()
@@ -113,7 +63,7 @@ fn tensor_packed(
 fn weights(batch: usize, rows: usize, device: &Device, dtype: DType) -> Tensor<3> {
     let mut rng = Rng(99);
     let w: Vec<f64> = (0..batch * rows * SPLAT_COLUMNS)
-        .map(|_| rng.uniform(-1.0, 1.0))
+        .map(|_| rng.range(-1.0, 1.0))
         .collect();
     Tensor::from_data(
         TensorData::new(w, [batch, rows, SPLAT_COLUMNS]),
@@ -178,9 +128,9 @@ fn assert_close(what: &str, fused: &[f64], tensor: &[f64], tolerance: f64) {
 
 #[test]
 fn rows_and_pose_gradients_match_the_tensor_projection_in_f64() {
-    let scene = scene(7);
+    let scene = projection_scene(7);
     let all: Vec<u32> = (0..scene.len() as u32).collect();
-    let [(rows, grad), (rows_t, grad_t)] = both(&scene, &poses(), &all, DType::F64);
+    let [(rows, grad), (rows_t, grad_t)] = both(&scene, &projection_poses(), &all, DType::F64);
     assert_close("rows", &rows, &rows_t, 1e-10);
     let norm = grad_t.iter().map(|g| g * g).sum::<f64>().sqrt();
     assert!(norm > 1.0, "a loss over 60 Gaussians moves with the pose");
@@ -211,13 +161,20 @@ fn rows_and_pose_gradients_match_the_tensor_projection_in_f64() {
 
 #[test]
 fn a_subset_in_any_order_projects_the_rows_it_names() {
-    let scene = scene(11);
+    let scene = projection_scene(11);
     // Out of order, with a repeat: the rows follow `used`, not the scene.
     let used = [41u32, 3, 17, 59, 3, 0];
-    let [(rows, grad), (rows_t, grad_t)] = both(&scene, &poses()[..2], &used, DType::F64);
+    let [(rows, grad), (rows_t, grad_t)] =
+        both(&scene, &projection_poses()[..2], &used, DType::F64);
     assert_close("rows", &rows, &rows_t, 1e-10);
     assert_close("gradient", &grad, &grad_t, 1e-9);
-    let (empty, grad_empty) = project(&scene, &poses()[..2], &[], DType::F64, Projection::Fused);
+    let (empty, grad_empty) = project(
+        &scene,
+        &projection_poses()[..2],
+        &[],
+        DType::F64,
+        Projection::Fused,
+    );
     assert!(empty.is_empty());
     assert_eq!(
         grad_empty,
@@ -228,11 +185,23 @@ fn a_subset_in_any_order_projects_the_rows_it_names() {
 
 #[test]
 fn f32_stays_within_rounding_of_f64() {
-    let scene = scene(5);
+    let scene = projection_scene(5);
     // In view only: behind the camera or beyond the clamp, f32 and f64 garbage may differ more.
     let used: Vec<u32> = (0..45).collect();
-    let (rows32, grad32) = project(&scene, &poses()[..1], &used, DType::F32, Projection::Fused);
-    let (rows64, grad64) = project(&scene, &poses()[..1], &used, DType::F64, Projection::Fused);
+    let (rows32, grad32) = project(
+        &scene,
+        &projection_poses()[..1],
+        &used,
+        DType::F32,
+        Projection::Fused,
+    );
+    let (rows64, grad64) = project(
+        &scene,
+        &projection_poses()[..1],
+        &used,
+        DType::F64,
+        Projection::Fused,
+    );
     for (i, (a, b)) in rows32.iter().zip(&rows64).enumerate() {
         assert!(
             (a - b).abs() <= 2e-4 * (1.0 + b.abs()),
@@ -252,12 +221,12 @@ fn the_same_numbers_on_one_and_three_threads() {
     let mut big = Scene::default();
     for _ in 0..5000 {
         big.means
-            .push(std::array::from_fn(|_| rng.uniform(-2.0, 2.0) as f32));
+            .push(std::array::from_fn(|_| rng.range(-2.0, 2.0) as f32));
         big.scales
-            .push(std::array::from_fn(|_| rng.uniform(0.01, 0.1) as f32));
+            .push(std::array::from_fn(|_| rng.range(0.01, 0.1) as f32));
         big.rotations
-            .push(std::array::from_fn(|_| rng.uniform(-1.0, 1.0) as f32));
-        big.opacities.push(rng.uniform(0.1, 1.0) as f32);
+            .push(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
+        big.opacities.push(rng.range(0.1, 1.0) as f32);
     }
     let used: Vec<u32> = (0..5000).collect();
     let on = |threads: usize| {
@@ -265,7 +234,15 @@ fn the_same_numbers_on_one_and_three_threads() {
             .num_threads(threads)
             .build()
             .unwrap()
-            .install(|| project(&big, &poses()[..2], &used, DType::F32, Projection::Fused))
+            .install(|| {
+                project(
+                    &big,
+                    &projection_poses()[..2],
+                    &used,
+                    DType::F32,
+                    Projection::Fused,
+                )
+            })
     };
     let (one, three) = (on(1), on(3));
     assert_eq!(one.0, three.0, "rows");

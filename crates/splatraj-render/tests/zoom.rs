@@ -7,7 +7,7 @@
 mod common;
 
 use burn::tensor::{DType, Device, Int, Tensor, TensorData};
-use common::{Rng, host, pose_tensor, ref_camera};
+use common::{Rng, host, pose_tensor, projection_poses, projection_scene, ref_camera};
 use glam::DVec3;
 use splatraj_render::camera::{Intrinsics, Pose, zoomed_intrinsics};
 use splatraj_render::fused::projection::{
@@ -19,41 +19,6 @@ use splatraj_render::render::{
     Channel, DeviceScene, Rasterizer, RenderError, RenderRequest, Zoom, render, render_at,
 };
 use splatraj_scene::Scene;
-
-/// 60 Gaussians around the origin, 15 of them far out (off screen, beyond the Jacobian's
-/// clamp, behind the cameras), and a needle whose normalised determinant is floored.
-fn projection_scene(seed: u64) -> Scene {
-    let mut rng = Rng(seed);
-    let mut scene = Scene::default();
-    for i in 0..60 {
-        let spread = if i < 45 { 1.5 } else { 9.0 };
-        scene
-            .means
-            .push(std::array::from_fn(|_| rng.range(-spread, spread) as f32));
-        let scales = if i == 59 {
-            [1e-7, 1e-7, 2.0]
-        } else {
-            std::array::from_fn(|_| rng.range(0.02, 0.3) as f32)
-        };
-        scene.scales.push(scales);
-        scene
-            .rotations
-            .push(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
-        scene.opacities.push(rng.range(0.05, 1.0) as f32);
-    }
-    scene
-}
-
-/// Poses on both of Rodrigues' branches (ω = 0 included).
-fn projection_poses() -> Vec<Pose> {
-    let up = DVec3::new(0.0, -1.0, 0.0);
-    vec![
-        Pose::look_at(DVec3::new(4.0, -1.0, 5.0), DVec3::ZERO, up).unwrap(),
-        Pose::look_at(DVec3::new(-5.5, -2.0, -1.0), DVec3::new(0.3, 0.2, 0.0), up).unwrap(),
-        Pose([0.04, -0.05, 0.03, 0.2, -0.1, -6.0]),
-        Pose([0.0, 0.0, 0.0, -0.3, 0.2, -5.0]),
-    ]
-}
 
 /// One zoom per projection pose: in, out, far in, and 1.
 const ZOOMS: [f64; 4] = [1.7, 0.55, 2.4, 1.0];

@@ -2,8 +2,10 @@
 #![allow(dead_code)] // each test binary uses a different subset
 
 use burn::tensor::{DType, Device, Tensor, TensorData};
+use glam::DVec3;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::reference::RefCamera;
+use splatraj_scene::Scene;
 
 /// The reference renderer's camera for a pose and intrinsics (near plane 0.01).
 pub fn ref_camera(pose: &Pose, k: &Intrinsics) -> RefCamera {
@@ -37,4 +39,39 @@ impl Rng {
     pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
         lo + (hi - lo) * self.next()
     }
+}
+
+/// 60 Gaussians around the origin, 15 of them far out (off screen, beyond the Jacobian's
+/// clamp, behind the cameras), and a needle whose normalised determinant is floored.
+pub fn projection_scene(seed: u64) -> Scene {
+    let mut rng = Rng(seed);
+    let mut scene = Scene::default();
+    for i in 0..60 {
+        let spread = if i < 45 { 1.5 } else { 9.0 };
+        scene
+            .means
+            .push(std::array::from_fn(|_| rng.range(-spread, spread) as f32));
+        let scales = if i == 59 {
+            [1e-7, 1e-7, 2.0]
+        } else {
+            std::array::from_fn(|_| rng.range(0.02, 0.3) as f32)
+        };
+        scene.scales.push(scales);
+        scene
+            .rotations
+            .push(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
+        scene.opacities.push(rng.range(0.05, 1.0) as f32);
+    }
+    scene
+}
+
+/// Poses on both of Rodrigues' branches (ω = 0 included).
+pub fn projection_poses() -> Vec<Pose> {
+    let up = DVec3::new(0.0, -1.0, 0.0);
+    vec![
+        Pose::look_at(DVec3::new(4.0, -1.0, 5.0), DVec3::ZERO, up).unwrap(),
+        Pose::look_at(DVec3::new(-5.5, -2.0, -1.0), DVec3::new(0.3, 0.2, 0.0), up).unwrap(),
+        Pose([0.04, -0.05, 0.03, 0.2, -0.1, -6.0]),
+        Pose([0.0, 0.0, 0.0, -0.3, 0.2, -5.0]),
+    ]
 }
