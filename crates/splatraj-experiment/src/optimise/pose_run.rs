@@ -92,49 +92,43 @@ impl Experiment {
         })
     }
 
-    /// The single-window problem of `[pose]`'s query on `scene` (autodiff) and its `windows`
-    /// with `costs`.
-    fn pose_problem<'a>(
-        &'a self,
-        scene: &'a splatraj_render::render::DeviceScene,
-        windows: &'a [splatraj_traj::optimise::WindowTarget],
-        costs: &'a splatraj_traj::costs::WeightedCosts,
-        occupancy: Option<&'a splatraj_traj::clearance::Occupancy>,
-        alone: Option<&'a [splatraj_render::render::DeviceScene]>,
-    ) -> Result<Problem<'a>> {
-        Ok(Problem::new(scene, windows, costs, self.intrinsics)
+    /// Calls `work` with the single-window problem of `[pose]`'s query (its costs, on the
+    /// autodiff scene with the geometry and objects alone those costs read) and the costs.
+    /// The problem borrows what is built here, so it is lent, not returned.
+    fn with_pose_problem<T>(
+        &self,
+        work: impl FnOnce(&Problem<'_>, &splatraj_traj::costs::WeightedCosts) -> Result<T>,
+    ) -> Result<T> {
+        let costs = self.pose_costs()?;
+        let scene = self.autodiff_scene();
+        let windows = self.optimisation_windows();
+        let occupancy = self.occupancy()?;
+        let alone = self.autodiff_alone(&costs);
+        let problem = Problem::new(&scene, &windows, &costs, self.intrinsics)
             .with_rasterizer(self.config.rasterizer)
             .with_approximations(self.config.approximations)
-            .with_occupancy(occupancy)
-            .with_alone(alone)
-            .window(self.config.pose.query)?)
+            .with_occupancy(occupancy.as_ref())
+            .with_alone(alone.as_deref())
+            .window(self.config.pose.query)?;
+        work(&problem, &costs)
     }
 
     /// Optimises `[pose]`'s query from every start at once (`[pose.optimiser]`); `observer`
     /// may stop it, each start keeping its best.
     pub fn optimise_pose(&self, observer: &mut dyn Observer) -> Result<PoseRun> {
         let window = self.config.pose.query;
-        let costs = self.pose_costs()?;
         let starts = self.pose_starts()?;
-        let scene = self.autodiff_scene();
-        let windows = self.optimisation_windows();
-        let occupancy = self.occupancy()?;
-        let alone = self.autodiff_alone(&costs);
-        let problem = self.pose_problem(
-            &scene,
-            &windows,
-            &costs,
-            occupancy.as_ref(),
-            alone.as_deref(),
-        )?;
         let options = &self.config.pose.optimiser;
         let started = Instant::now();
-        let results = optimise_poses_observed(&problem, &starts, options, &mut |step, best| {
-            observer.progress(&Progress::Pose {
-                step,
-                steps: options.iterations,
-                best,
-            })
+        let (results, cost_names) = self.with_pose_problem(|problem, costs| {
+            let results = optimise_poses_observed(problem, &starts, options, &mut |step, best| {
+                observer.progress(&Progress::Pose {
+                    step,
+                    steps: options.iterations,
+                    best,
+                })
+            })?;
+            Ok((results, costs.names()))
         })?;
         let best = (0..results.len())
             .filter(|&i| results[i].total.is_finite())
@@ -145,7 +139,7 @@ impl Experiment {
             starts,
             results,
             best,
-            cost_names: costs.names(),
+            cost_names,
             elapsed: started.elapsed(),
         })
     }
@@ -154,26 +148,16 @@ impl Experiment {
     pub fn sample_posterior(&self, pose: Pose, chains: usize) -> Result<Posterior> {
         anyhow::ensure!(chains > 0, "SGLD needs at least one chain");
         let index = self.config.pose.query;
-        let costs = self.pose_costs()?;
-        let scene = self.autodiff_scene();
-        let windows = self.optimisation_windows();
-        let occupancy = self.occupancy()?;
-        let alone = self.autodiff_alone(&costs);
-        let problem = self.pose_problem(
-            &scene,
-            &windows,
-            &costs,
-            occupancy.as_ref(),
-            alone.as_deref(),
-        )?;
         let units = PoseUnits::with_position(self.windows[index].context.prior_radius);
-        let sampled = sample_poses_sgld(
-            &problem,
-            &vec![pose; chains],
-            units,
-            &self.config.sgld,
-            self.config.seed,
-        )?;
+        let sampled = self.with_pose_problem(|problem, _| {
+            Ok(sample_poses_sgld(
+                problem,
+                &vec![pose; chains],
+                units,
+                &self.config.sgld,
+                self.config.seed,
+            )?)
+        })?;
         let samples = sampled.samples;
         let count = samples.len().max(1) as f64;
         let mean: [f64; 6] =
