@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use anyhow::{Result, bail};
+use anyhow::Result;
 use clap::Subcommand;
 use splatraj::experiment::picking::query::parse_direction;
 use splatraj::experiment::picking::views_page::{
@@ -16,7 +16,7 @@ use splatraj::lift::{LiftStage, MaskOptions};
 use splatraj_render::backend::BackendKind;
 use splatraj_scene::demo::DemoConfig;
 use splatraj_scene::summary::SceneInfo;
-use splatraj_scene::{InvalidPolicy, SceneFormat, UpSource};
+use splatraj_scene::{InvalidPolicy, SceneFormat};
 
 use crate::cli::{MemoryArgs, ReadArgs, progress_bar};
 
@@ -193,20 +193,8 @@ fn warn_dropped(path: &Path, dropped: usize) {
     }
 }
 
-/// Most neighbours `--neighbours` may ask.
-const MAX_NEIGHBOURS: usize = 64;
-
 /// `scene lift-masks`: parses, lifts and writes with the library, prints a summary.
 fn lift_masks(args: LiftMasksArgs) -> Result<()> {
-    if !(args.min_share > 0.0 && args.min_share <= 1.0) {
-        bail!("--min-share {} must be in (0, 1]", args.min_share);
-    }
-    if args.neighbours > MAX_NEIGHBOURS {
-        bail!(
-            "--neighbours {} must be at most {MAX_NEIGHBOURS}",
-            args.neighbours
-        );
-    }
     let device = args.backend.device()?;
     let request = MaskSidecarRequest {
         scene: args.scene,
@@ -273,33 +261,8 @@ fn views(args: ViewsArgs) -> Result<()> {
     let written = write_views_page(&request, &device, &progress)?;
     bar.finish_and_clear();
     warn_dropped(&request.scene, written.dropped);
-    let [x, y, z] = written.up.up;
-    let from = match written.up.source {
-        UpSource::Config => "given".to_string(),
-        other => format!("{}; --up X,Y,Z to override", other.name()),
-    };
-    eprintln!(
-        "up [{x:.3}, {y:.3}, {z:.3}] ({from}); {} views around the scene, {} from inside; they \
-         show {:.0} % of the Gaussians",
-        written.around,
-        written.inside,
-        100.0 * written.seen_share
-    );
-    let counts = if written.centres < written.gaussians {
-        format!(
-            "{} of {} centres carried: counts in the page are estimates",
-            written.centres, written.gaussians
-        )
-    } else {
-        format!(
-            "all {} centres carried: counts are exact",
-            written.gaussians
-        )
-    };
-    eprintln!(
-        "wrote {} ({:.1} MB; {counts})",
-        request.out.display(),
-        written.bytes as f64 / 1e6
-    );
+    for line in written.summary(&request.out) {
+        eprintln!("{line}");
+    }
     Ok(())
 }

@@ -22,7 +22,7 @@ use splatraj_report::views_page::{PickView, ViewsPage};
 use splatraj_scene::atomic::write_atomically;
 use splatraj_scene::formats::check_output_target;
 use splatraj_scene::up_axis::{ResolvedUp, resolve_up};
-use splatraj_scene::{ReadOptions, Scene, read_scene};
+use splatraj_scene::{ReadOptions, Scene, UpSource, read_scene};
 
 use crate::resources::{MemoryLimit, MemoryPlan, render_bytes, scene_bytes};
 
@@ -128,6 +128,40 @@ pub struct WrittenViewsPage {
     pub up: ResolvedUp,
     /// Size of the page, bytes.
     pub bytes: usize,
+}
+
+impl WrittenViewsPage {
+    /// What `scene views` says after writing the page at `out`: the up it stood the views on,
+    /// how many views and what they show, the file and whether its counts are exact.
+    pub fn summary(&self, out: &Path) -> Vec<String> {
+        let [x, y, z] = self.up.up;
+        let from = match self.up.source {
+            UpSource::Config => "given".to_string(),
+            other => format!("{}; --up X,Y,Z to override", other.name()),
+        };
+        let counts = if self.centres < self.gaussians {
+            format!(
+                "{} of {} centres carried: counts in the page are estimates",
+                self.centres, self.gaussians
+            )
+        } else {
+            format!("all {} centres carried: counts are exact", self.gaussians)
+        };
+        vec![
+            format!(
+                "up [{x:.3}, {y:.3}, {z:.3}] ({from}); {} views around the scene, {} from \
+                 inside; they show {:.0} % of the Gaussians",
+                self.around,
+                self.inside,
+                100.0 * self.seen_share
+            ),
+            format!(
+                "wrote {} ({:.1} MB; {counts})",
+                out.display(),
+                self.bytes as f64 / 1e6
+            ),
+        ]
+    }
 }
 
 /// Checks the request, reads the scene, plans and renders the views and writes the page to

@@ -33,6 +33,9 @@ pub fn read_scene_to_render(path: &Path, options: &ReadOptions) -> Result<Loaded
     Ok(loaded)
 }
 
+/// Most neighbours the consensus pass of [`lift_masks_to_sidecar`] may ask.
+pub const MAX_NEIGHBOURS: usize = 64;
+
 /// What [`convert_scene`] wrote.
 #[derive(Debug, Clone)]
 pub struct Converted {
@@ -97,6 +100,16 @@ pub fn lift_masks_to_sidecar(
     device: &Device,
     progress: &Progress,
 ) -> Result<(MaskLift, usize)> {
+    let options = &request.options;
+    if !(options.min_share > 0.0 && options.min_share <= 1.0) {
+        bail!("--min-share {} must be in (0, 1]", options.min_share);
+    }
+    if options.neighbours > MAX_NEIGHBOURS {
+        bail!(
+            "--neighbours {} must be at most {MAX_NEIGHBOURS}",
+            options.neighbours
+        );
+    }
     if let (Ok(out), Ok(scene)) = (request.out.canonicalize(), request.scene.canonicalize())
         && out == scene
     {
