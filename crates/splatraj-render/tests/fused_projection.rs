@@ -8,7 +8,7 @@
 mod common;
 
 use burn::tensor::{DType, Device, Tensor, TensorData};
-use common::{Rng, projection_poses, projection_scene};
+use common::{Rng, host, pose_tensor, projection_poses, projection_scene, row_weights};
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::fused::projection::{
     PackedColumn, ProjectionCamera, ProjectionPlan, SPLAT_COLUMNS, project_packed,
@@ -18,15 +18,6 @@ use splatraj_scene::Scene;
 
 fn intrinsics() -> Intrinsics {
     Intrinsics::from_fov_x(60.0, 160, 120).unwrap()
-}
-
-fn pose_tensor(poses: &[Pose], device: &Device, dtype: DType) -> Tensor<2> {
-    let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
-    Tensor::from_data(TensorData::new(flat, [poses.len(), 6]), (device, dtype))
-}
-
-fn values<const D: usize>(t: Tensor<D>) -> Vec<f64> {
-    t.into_data().convert::<f64>().try_to_vec::<f64>().unwrap()
 }
 
 /// The tensor projection's outputs packed like the fused op's rows. `[B, U, 7]`
@@ -56,18 +47,6 @@ fn tensor_packed(
     Tensor::cat(
         vec![projected.means_2d, projected.conics, opacity, depth],
         2,
-    )
-}
-
-/// Fixed pseudo-random weights `[B, U, 7]` for a scalar loss Σ w·rows.
-fn weights(batch: usize, rows: usize, device: &Device, dtype: DType) -> Tensor<3> {
-    let mut rng = Rng(99);
-    let w: Vec<f64> = (0..batch * rows * SPLAT_COLUMNS)
-        .map(|_| rng.range(-1.0, 1.0))
-        .collect();
-    Tensor::from_data(
-        TensorData::new(w, [batch, rows, SPLAT_COLUMNS]),
-        (device, dtype),
     )
 }
 
@@ -102,10 +81,10 @@ fn project(
         Projection::Tensor => tensor_packed(&geometry, poses.clone(), &intrinsics, used),
     };
     let [batch, count, _] = rows.dims();
-    let loss = (rows.clone() * weights(batch, count, &device, dtype)).sum();
+    let loss = (rows.clone() * row_weights(batch, count, &device, dtype)).sum();
     let grads = loss.backward();
-    let gradient = values(poses.grad(&grads).expect("the poses have a gradient"));
-    (values(rows.detach()), gradient)
+    let gradient = host(poses.grad(&grads).expect("the poses have a gradient"));
+    (host(rows.detach()), gradient)
 }
 
 /// [`project`] with both projections: `[fused, tensor]`.

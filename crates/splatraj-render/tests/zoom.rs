@@ -7,7 +7,7 @@
 mod common;
 
 use burn::tensor::{DType, Device, Int, Tensor, TensorData};
-use common::{Rng, host, pose_tensor, projection_poses, projection_scene, ref_camera};
+use common::{Rng, host, pose_tensor, projection_poses, projection_scene, ref_camera, row_weights};
 use glam::DVec3;
 use splatraj_render::camera::{Intrinsics, Pose, zoomed_intrinsics};
 use splatraj_render::fused::projection::{
@@ -79,18 +79,6 @@ fn packed(
     }
 }
 
-/// Fixed weights `[B, U, 7]` for a scalar loss Σ w·rows.
-fn row_weights(batch: usize, rows: usize, device: &Device) -> Tensor<3> {
-    let mut rng = Rng(99);
-    let w: Vec<f64> = (0..batch * rows * SPLAT_COLUMNS)
-        .map(|_| rng.range(-1.0, 1.0))
-        .collect();
-    Tensor::from_data(
-        TensorData::new(w, [batch, rows, SPLAT_COLUMNS]),
-        (device, DType::F64),
-    )
-}
-
 /// (rows, d loss/dΦ, d loss/ds) of Σ w·rows in f64 on Flex.
 fn rows_and_gradients(projection: Projection, zoom: &[f64]) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let device = Device::flex().autodiff();
@@ -105,7 +93,7 @@ fn rows_and_gradients(projection: Projection, zoom: &[f64]) -> (Vec<f64>, Vec<f6
         &projection_intrinsics(),
     );
     let [batch, count, _] = rows.dims();
-    let grads = (rows.clone() * row_weights(batch, count, &device))
+    let grads = (rows.clone() * row_weights(batch, count, &device, DType::F64))
         .sum()
         .backward();
     (
@@ -213,7 +201,7 @@ fn zoom_gradient_of_the_projection_matches_finite_differences() {
             &projection_intrinsics(),
         );
         let [batch, count, _] = rows.dims();
-        (rows * row_weights(batch, count, &device))
+        (rows * row_weights(batch, count, &device, DType::F64))
             .sum()
             .into_scalar::<f64>()
     };

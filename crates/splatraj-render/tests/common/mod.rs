@@ -75,3 +75,22 @@ pub fn projection_poses() -> Vec<Pose> {
         Pose([0.0, 0.0, 0.0, -0.3, 0.2, -5.0]),
     ]
 }
+
+/// Fixed pseudo-random weights `[B, U, 7]` for a scalar loss Σ w·rows of packed projection rows.
+pub fn row_weights(batch: usize, rows: usize, device: &Device, dtype: DType) -> Tensor<3> {
+    let mut rng = Rng(99);
+    let w: Vec<f64> = (0..batch * rows * splatraj_render::fused::projection::SPLAT_COLUMNS)
+        .map(|_| rng.range(-1.0, 1.0))
+        .collect();
+    Tensor::from_data(
+        TensorData::new(
+            w,
+            [
+                batch,
+                rows,
+                splatraj_render::fused::projection::SPLAT_COLUMNS,
+            ],
+        ),
+        (device, dtype),
+    )
+}
