@@ -33,5 +33,8 @@ pub use formats::{
     write_spz,
 };
 pub use scene::{Bounds, Extras, Features, Labels, NamedProperty, SH_C0, Scene};
-pub use up_axis::{ResolvedUp, UpGuess, UpSource, guess_up_axis, resolve_up};
+pub use up_axis::{
+    ResolvedUp, UpCandidate, UpCandidates, UpGuess, UpSource, guess_up_axis, resolve_up,
+    up_candidates,
+};
 pub use validate::InvalidPolicy;

@@ -60,6 +60,26 @@ pub enum UpMethod {
     Extent,
 }
 
+impl UpMethod {
+    /// What the method reads, in words: `the normals of flat splats (a floor, a table, a base)`.
+    pub fn evidence(self) -> &'static str {
+        match self {
+            UpMethod::Normals => "the normals of flat splats (a floor, a table, a base)",
+            UpMethod::Extent => "the longest side of an object captured all around",
+            UpMethod::Spread => "the direction the centres spread least along",
+        }
+    }
+
+    /// What a candidate's score means under this method ([`UpCandidates`]).
+    pub fn score_meaning(self) -> &'static str {
+        match self {
+            UpMethod::Normals => "the share of the flat splats' normals along it",
+            UpMethod::Extent => "its share of the box's sides",
+            UpMethod::Spread => "1 minus the share of the centres' spread along it",
+        }
+    }
+}
+
 /// A splat counts as flat when its shortest axis is this much shorter than its middle one.
 const FLATNESS: f32 = 0.3;
 /// Minimum number of flat splats for the normal-based estimate.
@@ -79,8 +99,53 @@ pub const ORIGIN_AT_CENTRE: f32 = 0.5;
 /// The origin is where the cameras were when this many half-extents or more away.
 pub const ORIGIN_AT_CAMERAS: f32 = 3.0;
 
+/// One direction up may be, as [`up_candidates`] ranks it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct UpCandidate {
+    /// Unit up vector, snapped to ±x/±y/±z when within 25° of one.
+    pub up: [f32; 3],
+    /// The unsnapped direction.
+    pub raw: [f32; 3],
+    /// How strongly the guess's method prefers this direction (see [`UpCandidates`]); for
+    /// the first candidate, the guess's confidence.
+    pub score: f32,
+}
+
+/// The guess and the two next candidates: three mutually orthogonal directions (unsnapped),
+/// ranked by the score of the method that made the guess. `Normals`: the share of the flat
+/// splats' normal weight along each (the three sum to 1). `Extent`: each coordinate axis's
+/// share of the robust box's sides (they sum to 1). `Spread`: 1 − the share of the centres'
+/// spread along each. A scene whose up the guess gets wrong usually has it among the other
+/// two: a statue's long side against a plinth's normals, a tabletop's two flat directions.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct UpCandidates {
+    /// How the directions and their scores were found.
+    pub method: UpMethod,
+    /// The guess first, then the others by falling score.
+    pub ranked: [UpCandidate; 3],
+}
+
+impl UpCandidates {
+    /// The first candidate as the guess [`guess_up_axis`] returns.
+    pub fn guess(&self) -> UpGuess {
+        let best = self.ranked[0];
+        UpGuess {
+            up: best.up,
+            raw: best.raw,
+            confidence: best.score,
+            method: self.method,
+        }
+    }
+}
+
 /// Guesses the up direction; `None` for an empty scene.
 pub fn guess_up_axis(scene: &Scene) -> Option<UpGuess> {
+    up_candidates(scene).map(|c| c.guess())
+}
+
+/// The guess of [`guess_up_axis`] and the two next candidates ([`UpCandidates`]); `None` for
+/// an empty scene. Each is signed and snapped as the guess is.
+pub fn up_candidates(scene: &Scene) -> Option<UpCandidates> {
     let bounds = scene.robust_bounds(0.02)?;
     let mut scatter = Mat3::ZERO;
     let mut flat = 0usize;
@@ -105,8 +170,10 @@ pub fn guess_up_axis(scene: &Scene) -> Option<UpGuess> {
         flat += 1;
     }
 
-    let (axis, confidence, method) = if flat >= MIN_FLAT && total > 0.0 {
-        let (axis, value) = principal_direction(scatter / total, Largest);
+    // Three orthogonal directions with their scores, best first.
+    let (ranked, method): ([(Vec3, f32); 3], UpMethod) = if flat >= MIN_FLAT && total > 0.0 {
+        let normals = scatter / total;
+        let (axis, value) = principal_direction(normals, Largest);
         let size = Vec3::from(bounds.max) - Vec3::from(bounds.min);
         let k = (0..3)
             .max_by(|&a, &b| size[a].total_cmp(&size[b]))
@@ -117,11 +184,32 @@ pub fn guess_up_axis(scene: &Scene) -> Option<UpGuess> {
         let mut sides = size.to_array();
         sides.sort_by(f32::total_cmp);
         if value >= STRONG_NORMALS || size[k] < TALL * sides[1] {
-            (axis, value, UpMethod::Normals)
+            let [second, third] = rest_of_spectrum(normals, axis, Largest);
+            let score = |v: Vec3| v.dot(normals * v);
+            (
+                [
+                    (axis, value),
+                    (second, score(second)),
+                    (third, score(third)),
+                ],
+                UpMethod::Normals,
+            )
         } else {
-            // Confidence: how much longer the longest side is than the others.
-            let share = size[k] / (size.x + size.y + size.z).max(f32::MIN_POSITIVE);
-            (Vec3::AXES[k], share.clamp(1.0 / 3.0, 1.0), UpMethod::Extent)
+            // Score: each side's share of the box, how much longer the longest is than the
+            // others.
+            let sum = (size.x + size.y + size.z).max(f32::MIN_POSITIVE);
+            let mut axes = [0usize, 1, 2];
+            axes.sort_by(|&a, &b| size[b].total_cmp(&size[a]));
+            axes.sort_by_key(|&a| a != k);
+            let share = |a: usize| size[a] / sum;
+            (
+                [
+                    (Vec3::AXES[k], share(k).clamp(1.0 / 3.0, 1.0)),
+                    (Vec3::AXES[axes[1]], share(axes[1])),
+                    (Vec3::AXES[axes[2]], share(axes[2])),
+                ],
+                UpMethod::Extent,
+            )
         }
     } else {
         let centre = Vec3::from(bounds.center());
@@ -132,23 +220,52 @@ pub fn guess_up_axis(scene: &Scene) -> Option<UpGuess> {
         }
         let trace = spread.x_axis.x + spread.y_axis.y + spread.z_axis.z;
         let (axis, value) = principal_direction(spread, Smallest);
-        let confidence = if trace > 0.0 {
-            1.0 - value / trace
-        } else {
-            1.0 / 3.0
+        let score = |value: f32| {
+            if trace > 0.0 {
+                1.0 - value / trace
+            } else {
+                1.0 / 3.0
+            }
         };
-        (axis, confidence.clamp(1.0 / 3.0, 1.0), UpMethod::Spread)
+        let [second, third] = rest_of_spectrum(spread, axis, Smallest);
+        (
+            [
+                (axis, score(value).clamp(1.0 / 3.0, 1.0)),
+                (second, score(second.dot(spread * second))),
+                (third, score(third.dot(spread * third))),
+            ],
+            UpMethod::Spread,
+        )
     };
 
-    let raw = orient_by_origin(axis, &bounds)
-        .unwrap_or_else(|| orient_away_from_ground(scene, axis, &bounds));
-    let snapped = snap_to_axis(raw, 25f32.to_radians());
-    Some(UpGuess {
-        up: snapped.to_array(),
-        raw: raw.to_array(),
-        confidence,
-        method,
-    })
+    let ranked = ranked.map(|(axis, score)| {
+        let raw = orient_by_origin(axis, &bounds)
+            .unwrap_or_else(|| orient_away_from_ground(scene, axis, &bounds));
+        UpCandidate {
+            up: snap_to_axis(raw, 25f32.to_radians()).to_array(),
+            raw: raw.to_array(),
+            score,
+        }
+    });
+    Some(UpCandidates { method, ranked })
+}
+
+/// The two eigenvectors of the symmetric `m` orthogonal to its eigenvector `first`, from the
+/// same end of the spectrum as `first` inwards: the 2×2 problem in the plane orthogonal to
+/// `first`, solved in closed form.
+fn rest_of_spectrum(m: Mat3, first: Vec3, which: Extreme) -> [Vec3; 2] {
+    let first = first.normalize_or(Vec3::Z);
+    let a = first.any_orthonormal_vector();
+    let b = first.cross(a);
+    let (aa, bb, ab) = (a.dot(m * a), b.dot(m * b), a.dot(m * b));
+    // The larger eigenvalue's direction lies at θ from a.
+    let theta = 0.5 * (2.0 * ab).atan2(aa - bb);
+    let larger = theta.cos() * a + theta.sin() * b;
+    let smaller = first.cross(larger);
+    match which {
+        Largest => [larger, smaller],
+        Smallest => [smaller, larger],
+    }
 }
 
 /// Which end of the spectrum [`principal_direction`] returns.
@@ -321,11 +438,7 @@ impl ResolvedUp {
         let up = format!("up [{x:.3}, {y:.3}, {z:.3}]");
         match (self.source, self.guess) {
             (UpSource::Guess, Some(g)) => {
-                let how = match g.method {
-                    UpMethod::Normals => "the normals of flat splats (a floor, a table, a base)",
-                    UpMethod::Extent => "the longest side of an object captured all around",
-                    UpMethod::Spread => "the direction the centres spread least along",
-                };
+                let how = g.method.evidence();
                 let doubt = if self.doubtful() {
                     ", low: check the frames"
                 } else {

@@ -5,7 +5,7 @@ mod common;
 use common::fixture;
 use splatraj_scene::demo::{DEMO_UP, DemoConfig, demo_scene};
 use splatraj_scene::up_axis::UpMethod;
-use splatraj_scene::{ReadOptions, Scene, guess_up_axis, read_scene};
+use splatraj_scene::{ReadOptions, Scene, UpCandidates, guess_up_axis, read_scene, up_candidates};
 
 /// Adds one opaque splat (grey) to `scene`.
 fn push_splat(scene: &mut Scene, mean: [f32; 3], scale: [f32; 3], rotation: [f32; 4]) {
@@ -119,6 +119,83 @@ fn tabletop_up_is_along_its_thinnest_extent() {
 #[test]
 fn empty_scene_has_no_guess() {
     assert!(guess_up_axis(&Scene::default()).is_none());
+    assert!(up_candidates(&Scene::default()).is_none());
+}
+
+/// The candidates are the guess first, then by falling score, three mutually orthogonal
+/// directions (so three distinct pictures), each of unit length.
+fn assert_ranked_and_distinct(candidates: &UpCandidates, what: &str) {
+    let [a, b, c] = candidates.ranked;
+    assert!(
+        a.score >= b.score && b.score >= c.score,
+        "{what}: scores do not fall: {candidates:?}"
+    );
+    for (i, x) in candidates.ranked.iter().enumerate() {
+        let raw = glam::Vec3::from(x.raw);
+        assert!((raw.length() - 1.0).abs() < 1e-4, "{what}: {x:?}");
+        for y in &candidates.ranked[i + 1..] {
+            let cos = raw.dot(glam::Vec3::from(y.raw)).abs();
+            assert!(cos < 1e-3, "{what}: {x:?} and {y:?} are not orthogonal");
+            assert_ne!(x.up, y.up, "{what}");
+        }
+    }
+}
+
+#[test]
+fn a_floor_ranks_its_normal_first_then_the_walls_normal() {
+    let scene = y_down_room();
+    let candidates = up_candidates(&scene).unwrap();
+    assert_eq!(candidates.method, UpMethod::Normals);
+    assert_eq!(candidates.guess(), guess_up_axis(&scene).unwrap());
+    assert_eq!(candidates.ranked[0].up, [0.0, -1.0, 0.0], "{candidates:?}");
+    // The wall (normals along z) holds the rest of the normals' weight; x holds none.
+    assert_eq!(candidates.ranked[1].up[2].abs(), 1.0, "{candidates:?}");
+    assert_eq!(candidates.ranked[2].up[0].abs(), 1.0, "{candidates:?}");
+    assert!(candidates.ranked[2].score < 1e-3, "{candidates:?}");
+    // Under the normals the three scores share the whole weight.
+    let sum: f32 = candidates.ranked.iter().map(|c| c.score).sum();
+    assert!((sum - 1.0).abs() < 1e-3, "{candidates:?}");
+    assert_ranked_and_distinct(&candidates, "y-down room");
+}
+
+#[test]
+fn a_tilted_floor_gives_tilted_orthogonal_candidates() {
+    // The room turned by 40° about x: no candidate lies along an axis, none snaps.
+    let mut scene = y_down_room();
+    let turn = glam::Quat::from_rotation_x(40f32.to_radians());
+    for (m, r) in scene.means.iter_mut().zip(&mut scene.rotations) {
+        *m = (turn * glam::Vec3::from(*m)).to_array();
+        let q = turn * glam::Quat::from_xyzw(r[1], r[2], r[3], r[0]);
+        *r = [q.w, q.x, q.y, q.z];
+    }
+    let candidates = up_candidates(&scene).unwrap();
+    let floor = turn * glam::Vec3::NEG_Y;
+    let best = glam::Vec3::from(candidates.ranked[0].raw);
+    assert!(best.dot(floor) > 0.999, "{candidates:?}");
+    assert_ranked_and_distinct(&candidates, "tilted room");
+}
+
+#[test]
+fn a_flat_cloud_of_round_splats_ranks_by_spread() {
+    // Round splats (no normals): spread 2 along x, 1 along y, 0.1 along z.
+    let mut scene = Scene::default();
+    for i in 0..20 {
+        for j in 0..10 {
+            for k in 0..2 {
+                let mean = [i as f32 * 0.1, j as f32 * 0.1, k as f32 * 0.1];
+                push_splat(&mut scene, mean, [0.01; 3], [1.0, 0.0, 0.0, 0.0]);
+            }
+        }
+    }
+    let candidates = up_candidates(&scene).unwrap();
+    assert_eq!(candidates.method, UpMethod::Spread);
+    let axes: Vec<usize> = candidates
+        .ranked
+        .iter()
+        .map(|c| c.up.iter().position(|v| v.abs() == 1.0).unwrap())
+        .collect();
+    assert_eq!(axes, vec![2, 1, 0], "{candidates:?}");
+    assert_ranked_and_distinct(&candidates, "flat cloud");
 }
 
 /// Real captures whose up is known from how they were made (shared data folder): biker and
@@ -143,5 +220,6 @@ fn real_captures_get_their_known_up() {
         let scene = read_scene(&path, &ReadOptions::default()).unwrap().scene;
         let guess = guess_up_axis(&scene).unwrap();
         assert_eq!(guess.up, up, "{name}: {guess:?}");
+        assert_ranked_and_distinct(&up_candidates(&scene).unwrap(), name);
     }
 }
