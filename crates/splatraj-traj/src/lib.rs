@@ -20,3 +20,4 @@ pub mod optimise;
 pub mod pacing;
 pub mod shots;
 pub mod trajectory;
+pub mod transitions;

@@ -124,7 +124,38 @@ pub fn pose_ldj(poses: &[Pose], duration: f64) -> Smoothness {
 
 /// LDJ of a trajectory over its normalised time [0, 1], from `samples` evenly spaced poses.
 ///
-/// The duration is 1; any other would give the same values (LDJ is dimensionless).
+/// The duration is 1; any other would give the same values (LDJ is dimensionless). A
+/// trajectory cut into shots has no jerk at a cut (the switch is no motion): each shot's LDJ
+/// is taken over its own span, from its share of the samples, and the shots' values are
+/// averaged weighted by their durations.
 pub fn trajectory_ldj(trajectory: &Trajectory, samples: usize) -> Smoothness {
-    pose_ldj(&trajectory.poses_at(&uniform_times(samples)), 1.0)
+    let shots = trajectory.model().shots(1);
+    if shots.is_empty() {
+        return pose_ldj(&trajectory.poses_at(&uniform_times(samples)), 1.0);
+    }
+    let spans: Vec<(f64, f64)> = (0..shots.len()).map(|j| shots.span(j)).collect();
+    let per_shot: Vec<(f64, Smoothness)> = spans
+        .iter()
+        .map(|&(a, b)| {
+            let count = ((samples as f64 * (b - a)).round() as usize).max(MIN_LDJ_SAMPLES);
+            // Inside the shot: its end is the next shot's first time.
+            let times: Vec<f64> = uniform_times(count)
+                .iter()
+                .map(|u| a + u * (b - a) * (1.0 - 1e-9))
+                .collect();
+            (b - a, pose_ldj(&trajectory.poses_at(&times), b - a))
+        })
+        .collect();
+    let mean = |value: fn(&Smoothness) -> Option<f64>| {
+        let kept: Vec<(f64, f64)> = per_shot
+            .iter()
+            .filter_map(|(w, s)| value(s).map(|v| (*w, v)))
+            .collect();
+        let total: f64 = kept.iter().map(|k| k.0).sum();
+        (total > 0.0).then(|| kept.iter().map(|(w, v)| w * v).sum::<f64>() / total)
+    };
+    Smoothness {
+        positional: mean(|s| s.positional),
+        angular: mean(|s| s.angular),
+    }
 }

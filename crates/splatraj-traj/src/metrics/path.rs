@@ -20,6 +20,11 @@
 //!   per second: how fast the camera circles its subject, which a viewer reads as the subject
 //!   turning. Computed here from the poses on the host, independently of the motion cost's
 //!   tensor form (a chord, not an angle), so the verdict does not grade the cost by itself.
+//!
+//! A trajectory cut into shots ([`crate::trajectory::cuts`]) jumps at each cut: a difference
+//! between samples of two shots is no motion and is left out of every rate, and a window's
+//! clearance takes only the samples of its own shot (the sample on a window's end that is a
+//! cut is the next shot's camera).
 
 use glam::DVec3;
 use serde::Serialize;
@@ -27,7 +32,7 @@ use splatraj_render::camera::rotation_vector_to_matrix;
 
 use crate::clearance::Occupancy;
 use crate::optimise::sampling::window_bounds;
-use crate::trajectory::{Pose, uniform_times};
+use crate::trajectory::{Pose, ShotSpans, uniform_times};
 
 /// Clearances are searched this many margins away; beyond it they read as the cap.
 pub const CLEARANCE_CAP_MARGINS: f64 = 4.0;
@@ -93,23 +98,39 @@ pub fn path_metrics(
     seconds: Option<f64>,
     orbit_centres: &[[f64; 3]],
 ) -> Vec<PathMetrics> {
+    let shots = ShotSpans::single(windows);
+    shot_path_metrics(pose_at, &shots, samples, clearance, seconds, orbit_centres)
+}
+
+/// [`path_metrics`] of a trajectory cut into `shots` (one shot: the same): no rate is taken
+/// across a cut (module docs).
+pub fn shot_path_metrics(
+    pose_at: &dyn Fn(&[f64]) -> Vec<Pose>,
+    shots: &ShotSpans,
+    samples: usize,
+    clearance: Option<(&Occupancy, f64)>,
+    seconds: Option<f64>,
+    orbit_centres: &[[f64; 3]],
+) -> Vec<PathMetrics> {
+    let windows = shots.windows;
     let mut times = uniform_times(samples.max(3));
     let mut poses = pose_at(&times);
-    let gap = |poses: &[Pose]| {
-        poses
-            .windows(2)
-            .map(|w| centre(&w[0]).distance(centre(&w[1])))
+    // The largest step between consecutive samples of one shot (a cut is no step).
+    let gap = |poses: &[Pose], times: &[f64]| {
+        (0..poses.len().saturating_sub(1))
+            .filter(|&k| shots.same_shot(times[k], times[k + 1]))
+            .map(|k| centre(&poses[k]).distance(centre(&poses[k + 1])))
             .fold(0.0, f64::max)
     };
     if let Some((_, margin)) = clearance {
-        let factor = (gap(&poses) / (0.25 * margin)).ceil().max(1.0) as usize;
+        let factor = (gap(&poses, &times) / (0.25 * margin)).ceil().max(1.0) as usize;
         let refined = ((times.len() - 1) * factor + 1).min(MAX_PATH_SAMPLES);
         if refined > times.len() {
             times = uniform_times(refined);
             poses = pose_at(&times);
         }
     }
-    let largest_gap = gap(&poses);
+    let largest_gap = gap(&poses, &times);
     let clearances = clearance.map(|(occupancy, margin)| {
         let cap = CLEARANCE_CAP_MARGINS * margin;
         let centres: Vec<DVec3> = poses.iter().map(centre).collect();
@@ -129,26 +150,31 @@ pub fn path_metrics(
     (0..n)
         .map(|i| {
             let (start, end) = window_bounds(i, n);
+            let shot = shots.shot_of_window(i);
             let inside: Vec<usize> = (0..times.len())
                 .filter(|&k| times[k] >= start - 1e-12 && times[k] <= end + 1e-12)
+                .filter(|&k| shots.shot_of(times[k]) == shot)
                 .collect();
             let (first, last) = (inside[0], *inside.last().expect("a window holds samples"));
-            let speeds: Vec<f64> = (first..last)
+            // Steps k → k + 1 within the window's shot (none across a cut).
+            let steps = || (first..last).filter(|&k| shots.same_shot(times[k], times[k + 1]));
+            let speeds: Vec<f64> = steps()
                 .map(|k| centre(&poses[k]).distance(centre(&poses[k + 1])) / dt)
                 .collect();
             let peak_acceleration = (first.max(1)..last.min(times.len() - 2) + 1)
+                .filter(|&k| shots.same_shot(times[k - 1], times[k + 1]))
                 .map(|k| {
                     let second =
                         centre(&poses[k + 1]) - 2.0 * centre(&poses[k]) + centre(&poses[k - 1]);
                     second.length() / (dt * dt)
                 })
                 .fold(0.0, f64::max);
-            let peak_angular_speed = (first..last)
+            let peak_angular_speed = steps()
                 .map(|k| turn_angle(&poses[k], &poses[k + 1]).to_degrees() / dt)
                 .fold(0.0, f64::max);
             let peak_orbit_speed = orbit_centres.get(i).map(|&o| {
                 let o = DVec3::from(o);
-                (first..last)
+                steps()
                     .map(|k| {
                         let angle = angle_between(centre(&poses[k]) - o, centre(&poses[k + 1]) - o);
                         angle.to_degrees() / dt

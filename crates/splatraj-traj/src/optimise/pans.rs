@@ -67,7 +67,7 @@ pub fn pan_shares(per_window: &[WindowStart], centres: &[[f64; 3]], limits: PanL
 }
 
 /// The angle (radians) of the rotation between two poses' orientations.
-fn rotation_angle(a: &Pose, b: &Pose) -> f64 {
+pub(crate) fn rotation_angle(a: &Pose, b: &Pose) -> f64 {
     let relative = a.rotation_wc().transpose() * b.rotation_wc();
     let trace = relative.x_axis.x + relative.y_axis.y + relative.z_axis.z;
     ((trace - 1.0) * 0.5).clamp(-1.0, 1.0).acos()

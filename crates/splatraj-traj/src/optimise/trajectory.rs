@@ -66,6 +66,24 @@ pub fn path_times(index: usize, windows: usize, per_window: usize, phase: f64) -
     (times, step)
 }
 
+/// [`path_times`] kept to the times of window `index`'s shot when the trajectory is cut
+/// into `shots` ([`crate::trajectory::cuts`]): the path costs then never see the jump at a
+/// cut, which is no motion.
+pub fn shot_path_times(
+    index: usize,
+    shots: &crate::trajectory::ShotSpans,
+    per_window: usize,
+    phase: f64,
+) -> (Vec<f64>, f64) {
+    let (times, step) = path_times(index, shots.windows, per_window, phase);
+    let shot = shots.shot_of_window(index);
+    let times = times
+        .into_iter()
+        .filter(|&t| shots.shot_of(t) == shot)
+        .collect();
+    (times, step)
+}
+
 /// One query window's object: its per-Gaussian mask and cost context.
 #[derive(Debug, Clone)]
 pub struct WindowTarget {
@@ -274,6 +292,7 @@ pub fn optimise_trajectory(
         .init();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let needs_path = problem.costs.needs_path();
+    let shots = start.model.shots(windows.len());
     let started = Instant::now();
     let n = windows.len();
     let mut stop = StopReason::Finished;
@@ -307,7 +326,7 @@ pub fn optimise_trajectory(
                     options.samples_per_window,
                     Some(&mut rng),
                 ),
-                path: needs_path.then(|| path_times(i, n, options.path_samples, phase)),
+                path: needs_path.then(|| shot_path_times(i, &shots, options.path_samples, phase)),
             })
             .collect();
         let (mut poses, mut host) = step_poses(&module, &units, &times, pending.as_ref())?;

@@ -40,6 +40,7 @@
 //! component-wise, so a pose sequence handed to [`Trajectory::fit`] should not jump between
 //! equivalent rotation vectors (θ and θ − 2π along the same axis): unwrap it first.
 
+pub mod cuts;
 pub mod polynomial;
 pub mod rbf;
 pub mod registry;
@@ -53,6 +54,7 @@ use serde::de::Error as _;
 use serde::ser::SerializeMap;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
+pub use cuts::{CutModel, ShotSpans};
 pub use lstsq::DEFAULT_RIDGE;
 pub use polynomial::Polynomial;
 pub use rbf::{Rbf, RbfNormalisation};
@@ -162,6 +164,16 @@ pub enum TrajectoryModel {
     Polynomial(Polynomial),
     /// A model registered by another crate ([`ModelRegistry`]).
     Custom(CustomModel),
+    /// A built-in model cut into shots, each its own path (`kind = "cuts"`, [`cuts`]).
+    Cuts(CutModel),
+}
+
+/// A cut model's serde form: its fields after `kind = "cuts"`.
+#[derive(Serialize)]
+struct TaggedCuts<'a> {
+    kind: &'static str,
+    #[serde(flatten)]
+    model: &'a CutModel,
 }
 
 /// The built-in models' serde form (the internally tagged enum the derive writes).
@@ -179,6 +191,11 @@ impl Serialize for TrajectoryModel {
             Self::Rbf(m) => Builtin::Rbf(m.clone()).serialize(serializer),
             Self::Waypoint(m) => Builtin::Waypoint(m.clone()).serialize(serializer),
             Self::Polynomial(m) => Builtin::Polynomial(m.clone()).serialize(serializer),
+            Self::Cuts(m) => TaggedCuts {
+                kind: "cuts",
+                model: m,
+            }
+            .serialize(serializer),
             Self::Custom(c) => {
                 let mut map = serializer.serialize_map(None)?;
                 map.serialize_entry("kind", &c.kind())?;
@@ -197,6 +214,13 @@ impl<'de> Deserialize<'de> for TrajectoryModel {
     fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
         let value = toml::Value::deserialize(deserializer)?;
         let kind = value.get("kind").and_then(toml::Value::as_str);
+        if kind == Some("cuts") {
+            let mut table = value.as_table().cloned().unwrap_or_default();
+            table.remove("kind");
+            return CutModel::deserialize(toml::Value::Table(table))
+                .map(Self::Cuts)
+                .map_err(|e| D::Error::custom(e.message().trim_end()));
+        }
         let custom_name = kind
             .and_then(|k| k.strip_prefix(CUSTOM_PREFIX))
             .map(str::to_string);
@@ -277,6 +301,7 @@ impl TrajectoryModel {
             Self::Waypoint(b) => b,
             Self::Polynomial(b) => b,
             Self::Custom(c) => c.basis(),
+            Self::Cuts(c) => c,
         }
     }
 
@@ -288,6 +313,7 @@ impl TrajectoryModel {
             Self::Waypoint(_) => "waypoint".into(),
             Self::Polynomial(_) => "polynomial".into(),
             Self::Custom(c) => c.kind(),
+            Self::Cuts(c) => format!("{} with cuts", c.model().name()),
         }
     }
 
@@ -299,6 +325,27 @@ impl TrajectoryModel {
             Self::Rbf(rbf) => Self::Rbf(Rbf { windows: n, ..rbf }),
             other => other,
         }
+    }
+
+    /// The shots of this model over `windows` windows: a cut model's, else one shot.
+    pub fn shots(&self, windows: usize) -> ShotSpans {
+        match self {
+            Self::Cuts(c) => c.spans().clone(),
+            _ => ShotSpans::single(windows),
+        }
+    }
+
+    /// This model cut into `spans`' shots (itself when there is no cut; a cut model is cut
+    /// afresh from the model its shots use).
+    pub fn cut(self, spans: ShotSpans) -> Result<Self, TrajectoryError> {
+        let base = match self {
+            Self::Cuts(c) => c.model().clone(),
+            other => other,
+        };
+        if spans.is_empty() {
+            return Ok(base.with_windows(spans.windows));
+        }
+        Ok(Self::Cuts(CutModel::new(base, spans)?))
     }
 }
 
