@@ -38,6 +38,7 @@ fn tiny_scene(dir: &Path) -> PathBuf {
 /// room from its middle.
 fn nerfstudio_path(dir: &Path, frames: usize, (width, height): (usize, usize)) -> PathBuf {
     let path = CameraPath {
+        cuts: Vec::new(),
         frames: (0..frames)
             .map(|i| Frame {
                 pose: CameraPose::from_phi([0.0, 0.01 * i as f64, 0.0, 0.0, 0.0, -1.0]),

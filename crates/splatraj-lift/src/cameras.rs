@@ -104,6 +104,7 @@ pub fn checked_intrinsics(p: &Intrinsics) -> Result<Intrinsics, CameraError> {
 /// `frame_NNNN` by every writer).
 pub fn camera_path(views: &[View]) -> CameraPath {
     CameraPath {
+        cuts: Vec::new(),
         frames: views
             .iter()
             .map(|v| Frame {

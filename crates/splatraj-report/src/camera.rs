@@ -18,7 +18,8 @@ pub struct Frame {
     pub camera: Option<Intrinsics>,
 }
 
-/// A camera path: frames in order, shown at `fps` frames per second.
+/// A camera path: frames in order, shown at `fps` frames per second, in shots separated by
+/// cuts.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CameraPath {
     /// The frames, in playing order.
@@ -28,6 +29,10 @@ pub struct CameraPath {
     /// Length in seconds, where the file says (readers check it is finite and > 0; its
     /// frames at `fps` are sized by whoever renders them).
     pub seconds: Option<f64>,
+    /// The frames that begin a new shot after a cut, ascending, each in 1..frames: between
+    /// frame k − 1 and frame k of a cut the camera switches, and nothing interpolates across
+    /// (empty: one continuous shot).
+    pub cuts: Vec<usize>,
 }
 
 impl CameraPath {
@@ -37,6 +42,7 @@ impl CameraPath {
             frames,
             fps: None,
             seconds: None,
+            cuts: Vec::new(),
         }
     }
 
@@ -52,7 +58,18 @@ impl CameraPath {
                 .collect(),
             fps: Some(fps),
             seconds: None,
+            cuts: Vec::new(),
         }
+    }
+
+    /// Checks `cuts` against the frames: ascending, each in 1..frames (why not, in words).
+    pub fn check_cuts(&self) -> Result<(), String> {
+        check_cuts(&self.cuts, self.frames.len())
+    }
+
+    /// The shot frame `frame` belongs to (0 before the first cut).
+    pub fn shot_of_frame(&self, frame: usize) -> usize {
+        self.cuts.iter().take_while(|&&c| c <= frame).count()
     }
 
     /// The poses as Φ = [ω, c].
@@ -91,7 +108,8 @@ impl CameraPath {
     }
 
     /// [`CameraPath::continuous_phis`] resampled at `count` evenly spaced times over the path
-    /// (the frames at evenly spaced times, linear in Φ between them): dense samples to fit a
+    /// (the frames at evenly spaced times, linear in Φ between them, but never across a cut:
+    /// between the two frames of a cut a sample takes the nearer one): dense samples to fit a
     /// trajectory model to.
     pub fn resampled_phis(&self, count: usize) -> Vec<[f64; 6]> {
         let phis = self.continuous_phis();
@@ -104,8 +122,24 @@ impl CameraPath {
                 let s = i as f64 / (count - 1) as f64 * last;
                 let k = (s.floor() as usize).min(phis.len() - 2);
                 let f = s - k as f64;
+                if self.cuts.contains(&(k + 1)) {
+                    return if f < 0.5 { phis[k] } else { phis[k + 1] };
+                }
                 std::array::from_fn(|j| phis[k][j] * (1.0 - f) + phis[k + 1][j] * f)
             })
             .collect()
     }
+}
+
+/// Checks frame indices of cuts against `frames` frames: ascending, each in 1..frames.
+pub fn check_cuts(cuts: &[usize], frames: usize) -> Result<(), String> {
+    if let Some(bad) = cuts.iter().find(|&&c| c == 0 || c >= frames) {
+        return Err(format!(
+            "a cut before frame {bad} is not between two of the {frames} frames"
+        ));
+    }
+    if cuts.windows(2).any(|w| w[0] >= w[1]) {
+        return Err(format!("{cuts:?} are not ascending"));
+    }
+    Ok(())
 }

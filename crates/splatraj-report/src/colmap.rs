@@ -69,6 +69,12 @@ pub fn export(path: &CameraPath) -> Result<ColmapFiles> {
         "# Number of images: {}, mean observations per image: 0",
         frames.len()
     );
+    path.check_cuts()
+        .map_err(|p| crate::error::export_error(FORMAT, p))?;
+    if !path.cuts.is_empty() {
+        let list: Vec<String> = path.cuts.iter().map(|c| c.to_string()).collect();
+        let _ = writeln!(images, "{CUTS_COMMENT} {}", list.join(" "));
+    }
     for (i, (pose, camera)) in frames.iter().enumerate() {
         let camera_id = match cameras.iter().position(|c| c == camera) {
             Some(k) => k + 1,
@@ -306,8 +312,31 @@ pub fn import_named(
         return Err(invalid(file, "images", "the file lists no images"));
     }
     images.sort_by_key(|(_, id, _)| *id);
-    let (names, frames) = images.into_iter().map(|(n, _, f)| (n, f)).unzip();
-    Ok((CameraPath::untimed(frames), names))
+    let (names, frames): (Vec<String>, Vec<Frame>) =
+        images.into_iter().map(|(n, _, f)| (n, f)).unzip();
+    let mut path = CameraPath::untimed(frames);
+    path.cuts = comment_cuts(text, file)?;
+    path.check_cuts()
+        .map_err(|p| invalid(file, CUTS_COMMENT, p))?;
+    Ok((path, names))
+}
+
+/// The comment line of `images.txt` that lists the cuts: the 0-based indices, in image id
+/// order, of the images that begin a new shot. COLMAP lists views, not a timed path, and
+/// skips comments; splatraj reads the cuts back from it.
+pub const CUTS_COMMENT: &str = "# splatraj cuts:";
+
+/// The cuts the [`CUTS_COMMENT`] line of `text` lists (none without one).
+fn comment_cuts(text: &str, file: &str) -> Result<Vec<usize>> {
+    let Some(line) = text
+        .lines()
+        .find_map(|l| l.trim().strip_prefix(CUTS_COMMENT))
+    else {
+        return Ok(Vec::new());
+    };
+    line.split_whitespace()
+        .map(|token| number(file, CUTS_COMMENT, "cut", token))
+        .collect()
 }
 
 /// Reads `images.txt` and, when it is there, `cameras.txt` beside it.

@@ -9,6 +9,10 @@
 //! readers put it at the image centre, so an off-centre principal point reads back centred.
 //! SuperSplat's camera-pose import takes `position` and the third column of `rotation` as the
 //! viewing direction.
+//!
+//! The file lists views, not a timed path. A path with cuts gives each camera the key `shot`
+//! (its shot's index, from 0; other readers ignore it), and a camera whose `shot` differs
+//! from the one before begins a new shot when we read it back.
 
 use serde::{Deserialize, Serialize};
 
@@ -30,11 +34,15 @@ struct Entry {
     rotation: [[f64; 3]; 3],
     fx: f64,
     fy: f64,
+    /// splatraj's shot of the camera, on a path with cuts (module docs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    shot: Option<usize>,
 }
 
 /// `path` as `cameras.json` text; camera `i` is named like frame `i` of a run.
 pub fn export(path: &CameraPath) -> Result<String> {
     let frames = check_export(path, FORMAT)?;
+    path.check_cuts().map_err(|p| export_error(FORMAT, p))?;
     let entries: Vec<Entry> = frames
         .iter()
         .enumerate()
@@ -50,6 +58,7 @@ pub fn export(path: &CameraPath) -> Result<String> {
                 rotation: [row(0), row(1), row(2)],
                 fx: camera.fx,
                 fy: camera.fy,
+                shot: (!path.cuts.is_empty()).then(|| path.shot_of_frame(i)),
             }
         })
         .collect();
@@ -104,8 +113,12 @@ pub fn import_named(text: &str, file: &str) -> Result<(CameraPath, Vec<Option<St
             })
         })
         .collect::<Result<Vec<_>>>()?;
+    let mut path = CameraPath::untimed(frames);
+    path.cuts = (1..entries.len())
+        .filter(|&i| entries[i].shot.is_some() && entries[i].shot != entries[i - 1].shot)
+        .collect();
     let names = entries.into_iter().map(|e| e.img_name).collect();
-    Ok((CameraPath::untimed(frames), names))
+    Ok((path, names))
 }
 
 /// Reads a `cameras.json`.

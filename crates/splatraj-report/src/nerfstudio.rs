@@ -22,6 +22,14 @@
 //! Keyframes are a subset of the frames (`keyframes_per_second`, always the first and the last
 //! frame); each transition's length is written as an override so the viewer's spline passes the
 //! keyframes at the same times as the frames.
+//!
+//! **Cuts.** nerfstudio has no cut: `ns-render` plays `camera_path` frame by frame (so a
+//! switch between two consecutive entries is a cut as rendered), and the viewer's spline
+//! flies through keyframes. We write a path with cuts ([`CameraPath::cuts`]) as its frames,
+//! both frames of each cut as keyframes (the viewer's flight between them lasts one frame,
+//! `1/fps` s, the least its editor can express), and the cuts themselves under the top-level
+//! key `cuts` (frame indices that begin a new shot), which nerfstudio ignores and we read
+//! back.
 
 use serde::{Deserialize, Serialize};
 
@@ -53,6 +61,9 @@ struct CameraPathFile {
     #[serde(default)]
     smoothness_value: f64,
     camera_path: Vec<PathEntry>,
+    /// splatraj's cuts: the frames that begin a new shot (module docs).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    cuts: Vec<usize>,
 }
 
 fn perspective() -> String {
@@ -129,7 +140,13 @@ pub fn export(path: &CameraPath, options: &NerfstudioOptions) -> Result<String> 
         })
         .collect();
 
-    let indices = keyframe_indices(n, options.fps, options.keyframes_per_second);
+    path.check_cuts()
+        .map_err(|p| crate::error::export_error(FORMAT, p))?;
+    let mut indices = keyframe_indices(n, options.fps, options.keyframes_per_second);
+    // Both frames of every cut are keyframes, so the viewer's spline switches in one frame.
+    indices.extend(path.cuts.iter().flat_map(|&c| [c - 1, c]));
+    indices.sort_unstable();
+    indices.dedup();
     let mut previous = None;
     let keyframes = indices
         .iter()
@@ -164,6 +181,7 @@ pub fn export(path: &CameraPath, options: &NerfstudioOptions) -> Result<String> 
         is_cycle: false,
         smoothness_value: 0.0,
         camera_path,
+        cuts: path.cuts.clone(),
     };
     serde_json::to_string_pretty(&file)
         .map(|t| t + "\n")
@@ -280,10 +298,12 @@ pub fn import(text: &str, file: &str) -> Result<CameraPath> {
             })
         })
         .collect::<Result<Vec<_>>>()?;
+    crate::camera::check_cuts(&parsed.cuts, frames.len()).map_err(|p| invalid(file, "cuts", p))?;
     Ok(CameraPath {
         frames,
         fps,
         seconds: parsed.seconds,
+        cuts: parsed.cuts,
     })
 }
 

@@ -28,6 +28,13 @@
 //! within a [`Tolerance`]), which leaves a track a person can edit; [`Keyframes::EveryFrame`]
 //! keeps one key per frame. Reading plays the track back at every frame, so dense and sparse
 //! files read alike.
+//!
+//! **Cuts.** A track is one spline: the format has no step. A path with cuts
+//! ([`CameraPath::cuts`]) keys both frames of each cut (k − 1 and k, one frame apart), so
+//! played at the track's frame rate, as we read it, no frame falls between them and the cut
+//! is exact; a viewer that draws between frames flies the one frame (1/`frameRate` s) from
+//! one shot to the next, the least the format can express. The cuts are also written in the
+//! track as `cuts` (frames that begin a new shot), which the viewer ignores and we read back.
 
 use serde::{Deserialize, Serialize};
 use serde_json::json;
@@ -263,11 +270,19 @@ fn miss(played: &Key, wanted: &Key, position_tolerance: f64, tolerance: &Toleran
 /// The frames to key so the viewer's playback of `values` (one per frame) stays within
 /// `tolerance`: greedy insertion of the worst-played frame, from the first and last frames,
 /// then removal of each key the others make unnecessary.
-fn sparse_keys(values: &[Key], duration: f64, fps: f64, tolerance: &Tolerance) -> Vec<usize> {
+fn sparse_keys(
+    values: &[Key],
+    cuts: &[usize],
+    duration: f64,
+    fps: f64,
+    tolerance: &Tolerance,
+) -> Vec<usize> {
     let n = values.len();
     if n <= 2 {
         return (0..n).collect();
     }
+    // Both frames of a cut are keys, whatever the tolerance, and stay keys.
+    let forced: Vec<usize> = cuts.iter().flat_map(|&c| [c - 1, c]).collect();
     let (lo, hi) = values.iter().fold(
         (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
         |(lo, hi), v| {
@@ -293,6 +308,9 @@ fn sparse_keys(values: &[Key], duration: f64, fps: f64, tolerance: &Tolerance) -
             )
     };
     let mut keys = vec![0, n - 1];
+    keys.extend(&forced);
+    keys.sort_unstable();
+    keys.dedup();
     loop {
         let (frame, score) = worst(&keys);
         // A key plays exactly, so the worst frame is never one already keyed.
@@ -306,6 +324,10 @@ fn sparse_keys(values: &[Key], duration: f64, fps: f64, tolerance: &Tolerance) -
     // of it); keys that the ones placed later made redundant are dropped again.
     let mut i = 1;
     while i + 1 < keys.len() {
+        if forced.contains(&keys[i]) {
+            i += 1;
+            continue;
+        }
         let without: Vec<usize> = keys[..i].iter().chain(&keys[i + 1..]).copied().collect();
         if worst(&without).1 <= 1.0 {
             keys = without;
@@ -322,6 +344,7 @@ fn sparse_keys(values: &[Key], duration: f64, fps: f64, tolerance: &Tolerance) -
 pub fn export(path: &CameraPath, options: &SupersplatOptions) -> Result<String> {
     let frames = check_export(path, FORMAT)?;
     check_fps(options.fps, FORMAT)?;
+    path.check_cuts().map_err(|p| export_error(FORMAT, p))?;
     if let Keyframes::Sparse(t) = &options.keyframes {
         let bad = [
             ("position", t.position),
@@ -369,7 +392,9 @@ pub fn export(path: &CameraPath, options: &SupersplatOptions) -> Result<String> 
     let duration = (frames.len() - 1) as f64 / options.fps;
     let keys = match &options.keyframes {
         Keyframes::EveryFrame => (0..values.len()).collect(),
-        Keyframes::Sparse(tolerance) => sparse_keys(&values, duration, options.fps, tolerance),
+        Keyframes::Sparse(tolerance) => {
+            sparse_keys(&values, &path.cuts, duration, options.fps, tolerance)
+        }
     };
     let times: Vec<f64> = keys.iter().map(|&k| k as f64).collect();
     let positions: Vec<f64> = keys
@@ -417,6 +442,10 @@ pub fn export(path: &CameraPath, options: &SupersplatOptions) -> Result<String> 
         "annotations": [],
         "startMode": "animTrack"
     });
+    let mut settings = settings;
+    if !path.cuts.is_empty() {
+        settings["animTracks"][0]["cuts"] = json!(path.cuts);
+    }
     serde_json::to_string_pretty(&settings)
         .map(|t| t + "\n")
         .map_err(|e| export_error(FORMAT, e.to_string()))
@@ -441,6 +470,9 @@ struct Track {
     #[serde(default)]
     smoothness: Option<f64>,
     keyframes: Keys,
+    /// splatraj's cuts: frames that begin a new shot (module docs).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    cuts: Vec<usize>,
 }
 
 #[derive(Debug, Deserialize, Serialize)]
@@ -621,10 +653,13 @@ pub fn import(text: &str, file: &str, height: usize, aspect: f64) -> Result<Came
             Ok(Frame { pose, camera })
         })
         .collect::<Result<Vec<_>>>()?;
+    crate::camera::check_cuts(&track.cuts, frames.len())
+        .map_err(|p| invalid(file, "animTracks[0].cuts", p))?;
     Ok(CameraPath {
         frames,
         fps: Some(track.frame_rate),
         seconds: Some(duration),
+        cuts: track.cuts.clone(),
     })
 }
 

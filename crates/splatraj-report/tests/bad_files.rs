@@ -312,6 +312,7 @@ fn exports_refuse_what_they_cannot_write() {
             .to_string();
         mentions(&err, &["frame 1 has no intrinsics"]);
         let empty = CameraPath {
+            cuts: Vec::new(),
             frames: vec![],
             fps: None,
             seconds: None,

@@ -203,6 +203,7 @@ fn supersplat_round_trip_of_upright_cameras() {
         })
         .collect();
     let path = CameraPath {
+        cuts: Vec::new(),
         frames,
         fps: Some(30.0),
         seconds: None,
@@ -238,6 +239,7 @@ fn every_format_round_trips_through_files_and_detection() {
         })
         .collect();
     let path = CameraPath {
+        cuts: Vec::new(),
         frames,
         fps: Some(30.0),
         seconds: None,

@@ -205,6 +205,7 @@ fn path_of(
         })
         .collect();
     CameraPath {
+        cuts: Vec::new(),
         frames,
         fps: Some(FPS),
         seconds: None,
