@@ -39,6 +39,10 @@ pub struct Counts {
     pub bytes_up: u64,
     /// Whole scenes uploaded.
     pub scene_uploads: u64,
+    /// Render passes ([`crate::render::render_at`] calls): an optimisation step makes one,
+    /// whatever its windows.
+    #[serde(default)]
+    pub renders: u64,
 }
 
 impl Counts {
@@ -52,6 +56,7 @@ impl Counts {
             uploads: self.uploads / p,
             bytes_up: self.bytes_up / p,
             scene_uploads: self.scene_uploads / p,
+            renders: self.renders / p,
         }
     }
 
@@ -64,6 +69,7 @@ impl Counts {
             uploads: self.uploads - earlier.uploads,
             bytes_up: self.bytes_up - earlier.bytes_up,
             scene_uploads: self.scene_uploads - earlier.scene_uploads,
+            renders: self.renders - earlier.renders,
         }
     }
 }
@@ -74,6 +80,7 @@ static BYTES_DOWN: AtomicU64 = AtomicU64::new(0);
 static UPLOADS: AtomicU64 = AtomicU64::new(0);
 static BYTES_UP: AtomicU64 = AtomicU64::new(0);
 static SCENE_UPLOADS: AtomicU64 = AtomicU64::new(0);
+static RENDERS: AtomicU64 = AtomicU64::new(0);
 
 /// The counts so far.
 pub fn snapshot() -> Counts {
@@ -85,6 +92,7 @@ pub fn snapshot() -> Counts {
         uploads: load(&UPLOADS),
         bytes_up: load(&BYTES_UP),
         scene_uploads: load(&SCENE_UPLOADS),
+        renders: load(&RENDERS),
     }
 }
 
@@ -98,6 +106,11 @@ pub fn read(bytes: usize) {
 pub fn upload(bytes: usize) {
     UPLOADS.fetch_add(1, Ordering::Relaxed);
     BYTES_UP.fetch_add(bytes as u64, Ordering::Relaxed);
+}
+
+/// A render pass.
+pub fn render() {
+    RENDERS.fetch_add(1, Ordering::Relaxed);
 }
 
 /// A whole scene of `bytes` uploaded.

@@ -13,7 +13,7 @@ use splatraj_scene::Scene;
 use crate::camera::{Intrinsics, Pose, zoomed_intrinsics};
 use glam::DVec3;
 
-use crate::focus::{FocusCache, ObjectFocus};
+use crate::focus::{FocusCache, ObjectFocus, PoseFocus, Surroundings};
 
 use crate::project::{FOV_CLAMP, LOW_PASS, cull_and_radius, world_covariance};
 use crate::tile_grid::{TILE_SIZE, TileGrid};
@@ -231,22 +231,32 @@ pub fn decide(
     near: f64,
     focus: Option<&ObjectFocus>,
 ) -> Decisions {
-    decide_zoomed(geometry, poses, None, intrinsics, near, focus)
+    let focus: Vec<Option<PoseFocus>> = vec![
+        focus.map(|object| PoseFocus {
+            object,
+            surroundings: Surroundings::Scene,
+        });
+        poses.len()
+    ];
+    decide_zoomed(geometry, poses, None, intrinsics, near, &focus)
 }
 
 /// [`decide`] with pose b seen through `intrinsics` zoomed by `zoom[b]` (fx·s, fy·s; `None`:
-/// s = 1), as the zoomed projection draws it. Panics if `zoom` is not one value per pose.
+/// s = 1), as the zoomed projection draws it, and each pose with its own focus `focus[b]`
+/// (`None`: the whole frame; [`Surroundings::Nothing`]: the object's Gaussians only). Panics
+/// if `zoom` or `focus` is not one per pose.
 pub fn decide_zoomed(
     geometry: &HostGeometry,
     poses: &[Pose],
     zoom: Option<&[f64]>,
     intrinsics: &Intrinsics,
     near: f64,
-    focus: Option<&ObjectFocus>,
+    focus: &[Option<PoseFocus>],
 ) -> Decisions {
     if let Some(zoom) = zoom {
         assert_eq!(zoom.len(), poses.len(), "one zoom per pose");
     }
+    assert_eq!(focus.len(), poses.len(), "one focus per pose");
     let grid = TileGrid::new(intrinsics.width, intrinsics.height);
     // The tile grid's extent in whole tiles: a square that reaches into the last partial tile
     // is listed there, as the binning rule says.
@@ -256,11 +266,6 @@ pub fn decide_zoomed(
         (grid.tiles_x * TILE_SIZE) as f64,
         (grid.tiles_y * TILE_SIZE) as f64,
     ];
-    // The object's sorted positions come listed (an object is a small part of a scene, and
-    // its positions are close together); membership is read by sorted position, so the
-    // members of a block are tested one after the other.
-    let in_focus = |k: usize| focus.is_some_and(|focus| focus.sorted.contains(k));
-    let object: Option<&[u32]> = focus.map(|focus| focus.sorted_list.as_slice());
     let kept = poses
         .iter()
         .enumerate()
@@ -270,10 +275,15 @@ pub fn decide_zoomed(
                 None => *intrinsics,
             };
             let camera = Camera::new(pose, &intrinsics, near);
-            let Some(object) = object else {
+            let Some(focus) = focus[b] else {
                 return camera.decide_blocks(geometry, &|_| true, Reach::everywhere(whole_grid));
             };
+            // The object's sorted positions come listed (an object is a small part of a
+            // scene, and its positions are close together); membership is read by sorted
+            // position, so the members of a block are tested one after the other.
+            let object = focus.object;
             let mut kept: Vec<Decided> = object
+                .sorted_list
                 .par_chunks(CHUNK)
                 .flat_map_iter(|chunk| {
                     let (camera, reach) = (&camera, Reach::everywhere(whole_grid));
@@ -282,6 +292,9 @@ pub fn decide_zoomed(
                         .filter_map(move |&k| camera.kept(geometry, k, reach))
                 })
                 .collect();
+            if focus.surroundings == Surroundings::Nothing {
+                return kept;
+            }
             // The box of tiles the object touches (in pixels), then everything else against it.
             let mut tiles = [
                 f64::INFINITY,
@@ -308,7 +321,8 @@ pub fn decide_zoomed(
                     bounds: tiles,
                     max_depth: deepest,
                 };
-                kept.extend(camera.decide_blocks(geometry, &|k| !in_focus(k), reach));
+                let outside = |k: usize| !object.sorted.contains(k);
+                kept.extend(camera.decide_blocks(geometry, &outside, reach));
             }
             kept
         })

@@ -48,8 +48,29 @@ impl ObjectFocus {
     }
 }
 
-/// Masks whose focus a scene keeps: one per query window of a run, with room to spare.
-const CACHED_MASKS: usize = 8;
+/// What a pose of a mask pass draws around its object.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Surroundings {
+    /// The scene: whatever can cover the object is drawn (the object as the camera sees it).
+    #[default]
+    Scene,
+    /// Nothing: the object alone, as if the rest of the scene were not there (the visibility
+    /// cost's unoccluded mask).
+    Nothing,
+}
+
+/// One pose's object in a mask pass, and what the pose draws around it.
+#[derive(Debug, Clone, Copy)]
+pub struct PoseFocus<'a> {
+    /// The object.
+    pub object: &'a ObjectFocus,
+    /// The scene around it, or nothing.
+    pub surroundings: Surroundings,
+}
+
+/// Masks whose focus a scene keeps: one per object of a run (a step renders every window's
+/// object in one pass), with room to spare.
+const CACHED_MASKS: usize = 16;
 
 /// The [`ObjectFocus`] of the masks a scene rendered lately, found by the mask's non-zero
 /// pattern (all a focus depends on), so the answer is always the one a fresh build would give.

@@ -12,7 +12,7 @@ use splatraj_scene::Scene;
 use crate::bitset::GaussianBits;
 use crate::camera::{Intrinsics, Pose};
 use crate::decide::{HostGeometry, decide_zoomed};
-use crate::focus::ObjectFocus;
+use crate::focus::{ObjectFocus, PoseFocus, Surroundings};
 use crate::fused::projection::{
     PackedColumn, ProjectionCamera, ProjectionPlan, SPLAT_COLUMNS, project_packed_zoomed,
 };
@@ -35,6 +35,9 @@ pub enum Channel {
     Depth,
     /// A per-Gaussian 0/1 (or fractional) mask, one value per Gaussian (1 value).
     Mask(Vec<f32>),
+    /// Several objects' masks in one pass (1 value): each pose composites its own object's
+    /// mask, drawn in the scene or alone ([`ObjectMasks`]).
+    ObjectMasks(ObjectMasks),
     /// Per-Gaussian feature vectors, flat `[N, dim]` (dim values).
     Features {
         /// Length of each vector.
@@ -49,10 +52,31 @@ impl Channel {
     pub fn width(&self) -> usize {
         match self {
             Channel::Rgb => 3,
-            Channel::Depth | Channel::Mask(_) => 1,
+            Channel::Depth | Channel::Mask(_) | Channel::ObjectMasks(_) => 1,
             Channel::Features { dim, .. } => *dim,
         }
     }
+}
+
+/// The masks of several objects and which one each pose of the batch renders: how every
+/// window of an optimisation step (and each window's object alone) shares one pass, so the
+/// launches of a step do not grow with the number of windows (docs/gpu.md).
+#[derive(Debug, Clone)]
+pub struct ObjectMasks {
+    /// One value per Gaussian for each object. `[M][N]`
+    pub masks: Vec<Vec<f32>>,
+    /// Per pose of the batch, its object and what it draws around it. `[B]`
+    pub views: Vec<ObjectView>,
+}
+
+/// One pose's object in an [`ObjectMasks`] pass.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ObjectView {
+    /// Index into [`ObjectMasks::masks`].
+    pub object: usize,
+    /// The scene around the object (pruned to what can cover it when the request prunes), or
+    /// nothing (the object alone, always pruned to it).
+    pub surroundings: Surroundings,
 }
 
 /// Which tiles and Gaussians a pass visits.
@@ -61,7 +85,8 @@ pub enum Pruning {
     /// Every tile and every Gaussian touching it.
     #[default]
     None,
-    /// For a single-mask pass: only what can change that mask (exact for the mask channel).
+    /// For a single-mask pass (one [`Channel::Mask`], or one [`Channel::ObjectMasks`] with
+    /// each pose's own object): only what can change that mask (exact for the mask channel).
     ObjectOnly,
 }
 
@@ -174,6 +199,18 @@ pub enum RenderError {
     /// Object-only pruning needs exactly one mask channel.
     #[error("pruning to the object needs exactly one channel, a mask")]
     PruningNeedsOneMask,
+    /// A request has more than one [`Channel::ObjectMasks`] (each says what its poses draw).
+    #[error("a render takes at most one object-masks channel, got {got}")]
+    ManyObjectMasks {
+        /// Object-masks channels in the request.
+        got: usize,
+    },
+    /// An [`ObjectMasks`] channel does not give one view per pose, or names a missing object.
+    #[error("object-masks channel: {reason}")]
+    ObjectViews {
+        /// What is wrong.
+        reason: String,
+    },
     /// The request has no channel.
     #[error("a render needs at least one channel")]
     NoChannel,
@@ -309,6 +346,12 @@ pub fn render_at(
         }
         let got = match channel {
             Channel::Mask(values) => values.len(),
+            Channel::ObjectMasks(objects) => objects
+                .masks
+                .iter()
+                .map(Vec::len)
+                .find(|&len| len != n)
+                .unwrap_or(n),
             Channel::Features { dim, values } => values.len() / (*dim).max(1),
             Channel::Rgb | Channel::Depth => n,
         };
@@ -340,18 +383,8 @@ pub fn render_at(
     };
     let started = std::time::Instant::now();
     let counted = crate::counters::snapshot();
-    let focus: Option<Arc<ObjectFocus>> = match (
-        request.pruning,
-        request.channels.as_slice(),
-        &request.gaussian_values,
-    ) {
-        (Pruning::None, _, _) => None,
-        (Pruning::ObjectOnly, [Channel::Mask(mask)], None) => {
-            Some(scene.host.focus.focus(&scene.host.scene_from_sorted, mask))
-        }
-        (Pruning::ObjectOnly, _, _) => return Err(RenderError::PruningNeedsOneMask),
-    };
-
+    crate::counters::render();
+    let focus = pose_focus(scene, request, batch)?;
     // Decisions (cull, tiles, order, pruning) on all Gaussians without gradient, then the
     // differentiable pass on only the Gaussians some tile uses.
     let grid = TileGrid::new(request.intrinsics.width, request.intrinsics.height);
@@ -407,13 +440,14 @@ pub fn render_at(
         }
     });
     // Each pose's decisions (cull, radii, tiles) through its own zoomed intrinsics.
+    let pose_focus: Vec<Option<PoseFocus>> = focus.iter().map(PoseObject::focus).collect();
     let mut decisions = decide_zoomed(
         &scene.host,
         &host_poses,
         host_zoom.as_deref(),
         &request.intrinsics,
         request.near,
-        focus.as_deref(),
+        &pose_focus,
     );
     let min_opacity = request.approximations.min_opacity as f32;
     if min_opacity > 0.0 {
@@ -422,11 +456,14 @@ pub fn render_at(
         }
     }
     let decided = started.elapsed();
-    let selection = match &focus {
-        Some(focus) => TileSelection::Object(&focus.scene),
-        None => TileSelection::All,
-    };
-    let mut work = bin_tiles(&decisions, &grid, selection);
+    let selection: Vec<TileSelection> = pose_focus
+        .iter()
+        .map(|focus| match focus {
+            Some(focus) => TileSelection::Object(&focus.object.scene),
+            None => TileSelection::All,
+        })
+        .collect();
+    let mut work = bin_tiles(&decisions, &grid, &selection);
     let binned = started.elapsed();
 
     // used[u] = scene index of the u-th Gaussian some tile needs (increasing); lists are
@@ -523,6 +560,21 @@ pub fn render_at(
                 let mask: Vec<f32> = used.iter().map(|&g| mask[g]).collect();
                 per_gaussian(&mask, u, 1, batch, &device, dtype)
             }
+            Channel::ObjectMasks(objects) => {
+                // Each object's values at the used Gaussians go up once, and each pose picks
+                // its object's row on the device (one select): M·U values, not B·U.
+                let rows: Vec<f32> = objects
+                    .masks
+                    .iter()
+                    .flat_map(|mask| used.iter().map(|&g| mask[g]))
+                    .collect();
+                let masks = objects.masks.len();
+                let rows = upload::<2>(TensorData::new(rows, [masks, u]), &device, dtype);
+                let object: Vec<i64> = objects.views.iter().map(|v| v.object as i64).collect();
+                crate::counters::upload(8 * batch);
+                let object = Tensor::<1, Int>::from_data(TensorData::new(object, [batch]), &device);
+                rows.select(0, object).unsqueeze_dim::<3>(2) // [B, U, 1]
+            }
             Channel::Features { dim, values } => {
                 let rows: Vec<f32> = used
                     .iter()
@@ -594,6 +646,98 @@ pub fn render_at(
         "render"
     );
     Ok(composited)
+}
+
+/// A pose's object in a pass that prunes to it or draws it alone.
+#[derive(Clone)]
+struct PoseObject {
+    object: Arc<ObjectFocus>,
+    surroundings: Surroundings,
+}
+
+impl PoseObject {
+    fn focus(pose: &Option<PoseObject>) -> Option<PoseFocus<'_>> {
+        pose.as_ref().map(|p| PoseFocus {
+            object: &p.object,
+            surroundings: p.surroundings,
+        })
+    }
+}
+
+/// Each pose's object (None: the whole frame), from the request's pruning and its masks;
+/// the objects' foci come from the scene's cache, each built once.
+fn pose_focus(
+    scene: &DeviceScene,
+    request: &RenderRequest,
+    batch: usize,
+) -> Result<Vec<Option<PoseObject>>, RenderError> {
+    let focus_of = |mask: &[f32]| scene.host.focus.focus(&scene.host.scene_from_sorted, mask);
+    let object_masks: Vec<&ObjectMasks> = request
+        .channels
+        .iter()
+        .filter_map(|c| match c {
+            Channel::ObjectMasks(m) => Some(m),
+            _ => None,
+        })
+        .collect();
+    if let [_, _, ..] = object_masks.as_slice() {
+        return Err(RenderError::ManyObjectMasks {
+            got: object_masks.len(),
+        });
+    }
+    let pruned = request.pruning == Pruning::ObjectOnly;
+    if pruned {
+        let one_mask = matches!(
+            request.channels.as_slice(),
+            [Channel::Mask(_) | Channel::ObjectMasks(_)]
+        );
+        if !one_mask || request.gaussian_values.is_some() {
+            return Err(RenderError::PruningNeedsOneMask);
+        }
+    }
+    if let Some(objects) = object_masks.first() {
+        if objects.views.len() != batch {
+            return Err(RenderError::ObjectViews {
+                reason: format!("{} views for a batch of {batch} poses", objects.views.len()),
+            });
+        }
+        if let Some(view) = objects
+            .views
+            .iter()
+            .find(|v| v.object >= objects.masks.len())
+        {
+            return Err(RenderError::ObjectViews {
+                reason: format!(
+                    "a view names object {}, but there are {} masks",
+                    view.object,
+                    objects.masks.len()
+                ),
+            });
+        }
+        let mut foci: Vec<Option<Arc<ObjectFocus>>> = vec![None; objects.masks.len()];
+        return Ok(objects
+            .views
+            .iter()
+            .map(|view| {
+                let drawn_alone = view.surroundings == Surroundings::Nothing;
+                (pruned || drawn_alone).then(|| PoseObject {
+                    object: Arc::clone(
+                        foci[view.object]
+                            .get_or_insert_with(|| focus_of(&objects.masks[view.object])),
+                    ),
+                    surroundings: view.surroundings,
+                })
+            })
+            .collect());
+    }
+    let object = match request.channels.as_slice() {
+        [Channel::Mask(mask)] if pruned => Some(PoseObject {
+            object: focus_of(mask),
+            surroundings: Surroundings::Scene,
+        }),
+        _ => None,
+    };
+    Ok(vec![object; batch])
 }
 
 /// A pass's Gaussians in screen space, as its rasterizer takes them.

@@ -36,17 +36,24 @@ pub struct TileWork {
 
 /// Bins the Gaussians every pose keeps into tiles and sorts each tile front to back.
 ///
-/// Returns only non-empty tiles (after pruning), ordered by (batch, tile).
+/// Pose b visits the tiles and Gaussians of `selection[b]` (a pass of several objects' masks
+/// selects per pose). Returns only non-empty tiles (after pruning), ordered by (batch, tile).
+/// Panics if `selection` is not one per pose.
 pub fn bin_tiles(
     decisions: &Decisions,
     grid: &TileGrid,
-    selection: TileSelection,
+    selection: &[TileSelection],
 ) -> Vec<TileWork> {
+    assert_eq!(
+        selection.len(),
+        decisions.kept.len(),
+        "one selection per pose"
+    );
     decisions
         .kept
         .par_iter()
         .enumerate()
-        .flat_map_iter(|(b, kept)| bin_one_pose(kept, b, grid, selection))
+        .flat_map_iter(|(b, kept)| bin_one_pose(kept, b, grid, selection[b]))
         .collect()
 }
 

@@ -7,7 +7,7 @@ mod common;
 use std::sync::Arc;
 
 use burn::tensor::{DType, Device, Tensor, TensorData};
-use common::{Rng, host, pose_tensor};
+use common::{host, pose_tensor};
 use glam::DVec3;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::decide::{HostGeometry, decide};
@@ -15,44 +15,10 @@ use splatraj_render::project::NEAR_PLANE;
 use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
 use splatraj_scene::Scene;
 
-/// A 40 m × 40 m floor of small clusters (SH degree 1), a camera's view covering a few of
-/// them; the object is the clusters within 1.5 m of (1, 4).
+/// The wide floor of tests/common with the clusters within 1.5 m of (1, 4) as the object.
 fn wide_scene() -> (Scene, Vec<f32>) {
-    let mut rng = Rng(0x5eed);
-    let mut scene = Scene {
-        sh_degree: 1,
-        ..Default::default()
-    };
-    let mut mask = Vec::new();
-    for cx in -20..20 {
-        for cy in -20..20 {
-            let centre = DVec3::new(cx as f64 + 0.5, cy as f64 + 0.5, 0.0);
-            for _ in 0..12 {
-                let mean = centre
-                    + DVec3::new(
-                        rng.range(-0.3, 0.3),
-                        rng.range(-0.3, 0.3),
-                        rng.range(0.0, 0.6),
-                    );
-                scene.means.push(mean.to_array().map(|v| v as f32));
-                // A few wide ones reach far beyond their block's bounding sphere.
-                let size = if rng.next() < 0.05 { 1.5 } else { 0.15 };
-                scene
-                    .scales
-                    .push([0, 1, 2].map(|_| rng.range(0.01, size) as f32));
-                let q = [0, 1, 2, 3].map(|_| rng.range(-1.0, 1.0));
-                let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
-                scene.rotations.push(q.map(|v| (v / norm) as f32));
-                scene.opacities.push(rng.range(0.2, 1.0) as f32);
-                scene
-                    .sh
-                    .extend((0..12).map(|_| rng.range(-1.0, 1.0) as f32));
-                let in_object = centre.truncate().distance(glam::DVec2::new(1.0, 4.0)) < 1.5;
-                mask.push(f32::from(u8::from(in_object)));
-            }
-        }
-    }
-    (scene, mask)
+    let (scene, clusters) = common::floor_of_clusters();
+    (scene, common::mask_near(&clusters, [1.0, 4.0], 1.5))
 }
 
 fn intrinsics() -> Intrinsics {

@@ -66,19 +66,6 @@ fn windows(scene: &Scene, names: &[&str]) -> Vec<WindowTarget> {
         .collect()
 }
 
-/// Each window's object alone, for the visibility cost.
-fn alone(scene: &Scene, windows: &[WindowTarget], device: &Device) -> Vec<DeviceScene> {
-    windows
-        .iter()
-        .map(|w| {
-            let keep: Vec<bool> = w.mask.iter().map(|&m| m != 0.0).collect();
-            let mut alone = scene.clone();
-            alone.retain(&keep);
-            DeviceScene::new(&alone, device, DType::F32)
-        })
-        .collect()
-}
-
 #[test]
 fn a_step_reads_once_and_the_scene_is_uploaded_once() {
     let _counted = COUNTED.lock().unwrap();
@@ -86,7 +73,6 @@ fn a_step_reads_once_and_the_scene_is_uploaded_once() {
     let windows = windows(&scene, &["blue box", "red mug"]);
     let device = Device::flex().autodiff();
     let on_device = DeviceScene::new(&scene, &device, DType::F32);
-    let alone = alone(&scene, &windows, &device);
     let occupancy = Occupancy::new(
         &scene,
         OccupancySpec {
@@ -123,9 +109,8 @@ fn a_step_reads_once_and_the_scene_is_uploaded_once() {
     let start = window_start_trajectory(model, &per_window, &device, DType::F32)
         .unwrap()
         .record();
-    let problem = Problem::new(&on_device, &windows, &costs, intrinsics())
-        .with_alone(Some(&alone))
-        .with_occupancy(Some(&occupancy));
+    let problem =
+        Problem::new(&on_device, &windows, &costs, intrinsics()).with_occupancy(Some(&occupancy));
     let iterations = 5;
     let options = TrajectoryOptions {
         iterations,
@@ -150,6 +135,11 @@ fn a_step_reads_once_and_the_scene_is_uploaded_once() {
     assert_eq!(
         counts.scene_uploads, 0,
         "the scene is uploaded once, before"
+    );
+    // Both windows and both objects alone share one render pass a step.
+    assert_eq!(
+        counts.renders, iterations as u64,
+        "one render pass per step: {counts:?}"
     );
     assert!(
         counts.uploads > 0,

@@ -103,12 +103,10 @@ impl Experiment {
         let scene = self.autodiff_scene();
         let windows = self.optimisation_windows();
         let occupancy = self.occupancy()?;
-        let alone = self.autodiff_alone(&costs);
         let problem = Problem::new(&scene, &windows, &costs, self.intrinsics)
             .with_rasterizer(self.config.rasterizer)
             .with_approximations(self.config.approximations)
             .with_occupancy(occupancy.as_ref())
-            .with_alone(alone.as_deref())
             .window(self.config.pose.query)?;
         work(&problem, &costs)
     }

@@ -200,7 +200,8 @@ impl Experiment {
     ) -> Result<TrajectoryRun> {
         let starts = self.start_trajectories()?;
         let costs = self.with_shot_cost(self.costs()?)?;
-        let model = self.model.clone();
+        // Cut into shots where the windows cut (`[output] transitions`).
+        let model = self.run_model()?;
         let scene = self.autodiff_scene();
         let steps = self.config.optimiser.iterations;
         // The time limit is the run's, not each restart's: this loop enforces it.
@@ -256,7 +257,6 @@ impl Experiment {
             });
         }
         let occupancy = self.occupancy()?;
-        let alone = self.autodiff_alone(&costs);
         let windows = self.optimisation_windows();
         let started = Instant::now();
         let mut stop = RunStop::Finished;
@@ -289,7 +289,6 @@ impl Experiment {
                 .with_rasterizer(self.config.rasterizer)
                 .with_approximations(self.config.approximations)
                 .with_occupancy(occupancy.as_ref())
-                .with_alone(alone.as_deref())
                 .with_seconds(self.path_seconds());
             let mut restart_options = optimiser.clone();
             restart_options.iterations = steps - steps_before;

@@ -85,18 +85,17 @@ impl Experiment {
         let spw = self.config.optimiser.samples_per_window;
         let camera = &self.config.camera;
         let camera_pixels = camera.width as f64 * camera.height as f64;
-        // The visibility cost also renders each part alone, from its own copy of the part's
-        // Gaussians on the autodiff device.
+        // The visibility cost also renders each part alone: the same poses again in the step's
+        // one pass, drawing only the part's Gaussians.
         let alone = if self.config.costs.visibility.is_some() {
             let largest = selected.iter().copied().max().unwrap_or(0);
-            selected.iter().map(|&s| scene_bytes(s, fb)).sum::<f64>()
-                + render_bytes(
-                    windows.saturating_mul(spw),
-                    camera_pixels,
-                    largest,
-                    true,
-                    fb,
-                )
+            render_bytes(
+                windows.saturating_mul(spw),
+                camera_pixels,
+                largest,
+                true,
+                fb,
+            )
         } else {
             0.0
         };

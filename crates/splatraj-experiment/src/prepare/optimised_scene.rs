@@ -9,7 +9,6 @@ use burn::tensor::Device;
 use splatraj_render::render::DeviceScene;
 use splatraj_scene::Scene;
 use splatraj_scene::coarse::{MAX_CLASSES, coarsen};
-use splatraj_traj::costs::WeightedCosts;
 use splatraj_traj::optimise::WindowTarget;
 
 use crate::prepare::experiment::{CoarseCopy, Derived, Experiment};
@@ -105,19 +104,5 @@ impl Experiment {
         };
         let keep: Vec<bool> = mask.iter().map(|&m| m != 0.0).collect();
         DeviceScene::new(&self.optimisation_scene().subset(&keep), device, self.dtype)
-    }
-
-    /// Every window's object alone in the optimisation scene on the autodiff device, when
-    /// `costs` read it (the visibility cost); None otherwise.
-    pub fn autodiff_alone(&self, costs: &WeightedCosts) -> Option<Vec<DeviceScene>> {
-        let needed = costs
-            .channels()
-            .contains(&splatraj_traj::costs::ImageChannel::MaskAlone);
-        let device = self.device.clone().autodiff();
-        needed.then(|| {
-            (0..self.windows.len())
-                .map(|i| self.optimisation_alone(i, &device))
-                .collect()
-        })
     }
 }

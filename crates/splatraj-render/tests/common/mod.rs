@@ -94,3 +94,53 @@ pub fn row_weights(batch: usize, rows: usize, device: &Device, dtype: DType) -> 
         (device, dtype),
     )
 }
+
+/// A 40 m × 40 m floor of small clusters (SH degree 1; 12 Gaussians per square metre, a few
+/// wide ones reaching far beyond their cluster), and each Gaussian's cluster centre (x, y).
+pub fn floor_of_clusters() -> (Scene, Vec<[f64; 2]>) {
+    let mut rng = Rng(0x5eed);
+    let mut scene = Scene {
+        sh_degree: 1,
+        ..Default::default()
+    };
+    let mut clusters = Vec::new();
+    for cx in -20..20 {
+        for cy in -20..20 {
+            let centre = DVec3::new(cx as f64 + 0.5, cy as f64 + 0.5, 0.0);
+            for _ in 0..12 {
+                let mean = centre
+                    + DVec3::new(
+                        rng.range(-0.3, 0.3),
+                        rng.range(-0.3, 0.3),
+                        rng.range(0.0, 0.6),
+                    );
+                scene.means.push(mean.to_array().map(|v| v as f32));
+                let size = if rng.next() < 0.05 { 1.5 } else { 0.15 };
+                scene
+                    .scales
+                    .push([0, 1, 2].map(|_| rng.range(0.01, size) as f32));
+                let q = [0, 1, 2, 3].map(|_| rng.range(-1.0, 1.0));
+                let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+                scene.rotations.push(q.map(|v| (v / norm) as f32));
+                scene.opacities.push(rng.range(0.2, 1.0) as f32);
+                scene
+                    .sh
+                    .extend((0..12).map(|_| rng.range(-1.0, 1.0) as f32));
+                clusters.push([centre.x, centre.y]);
+            }
+        }
+    }
+    (scene, clusters)
+}
+
+/// 1 for the Gaussians whose cluster lies within `radius` of `centre`, else 0.
+pub fn mask_near(clusters: &[[f64; 2]], centre: [f64; 2], radius: f64) -> Vec<f32> {
+    clusters
+        .iter()
+        .map(|c| {
+            f32::from(u8::from(
+                glam::DVec2::from(*c).distance(centre.into()) < radius,
+            ))
+        })
+        .collect()
+}

@@ -11,10 +11,11 @@
 
 use burn::tensor::{DType, Device, Tensor};
 use splatraj_render::camera::{Intrinsics, Pose};
+use splatraj_render::focus::Surroundings;
 use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::rasterize::{Approximations, RenderStats};
 use splatraj_render::render::{
-    Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render_at,
+    Channel, DeviceScene, ObjectMasks, ObjectView, Pruning, Rasterizer, RenderRequest, render_at,
 };
 
 use super::sampling::window_bounds;
@@ -48,9 +49,52 @@ pub struct Problem<'a> {
     pub seconds: Option<f64>,
     /// Rendering shortcuts of the optimisation passes (exact by default).
     pub approximations: Approximations,
-    /// Each window's object alone (its Gaussians only, on the scene's device), for costs
-    /// that read [`ImageChannel::MaskAlone`].
-    pub alone: Option<&'a [DeviceScene]>,
+}
+
+/// How a problem's windows render ([`Problem::renders`]): the request, and each window's
+/// object-alone mask when a cost reads the object alone.
+#[derive(Debug, Clone)]
+pub struct WindowRenders {
+    /// The channels the costs read; the object masks' views are set per pass.
+    request: RenderRequest,
+    /// Per window, the index of its object-alone mask in the request's object masks.
+    alone: Option<Vec<usize>>,
+}
+
+/// One window's samples in a pass of several windows ([`Problem::evaluate_windows`]).
+#[derive(Debug, Clone)]
+pub struct WindowSamples<'s> {
+    /// Which window.
+    pub window: usize,
+    /// Its samples: the next `count` rows of the poses.
+    pub count: usize,
+    /// Their times t ∈ [0, 1] of the whole trajectory, for costs that depend on time.
+    pub times: Option<&'s [f64]>,
+    /// The window's densely sampled path `[P, 6]` and its time step, for the path costs.
+    pub path: Option<(Tensor<2>, f64)>,
+    /// The host values of the samples and the path, when the caller has them.
+    pub host: Option<&'s HostPoses>,
+}
+
+/// What [`Problem::evaluate_windows`] found: each window's terms, the object masks of all
+/// samples `[ΣS, H, W]` when one was rendered, and the pass's compositing work.
+#[derive(Debug, Clone)]
+pub struct StepEvaluation {
+    /// Per window (as listed), each term and the weighted total per sample.
+    pub windows: Vec<CostTerms>,
+    /// Every sample's object mask, windows one after the other.
+    pub masks: Option<Tensor<3>>,
+    /// How much compositing work the pass had (None when nothing was rendered).
+    pub stats: Option<RenderStats>,
+}
+
+/// One window's images from a pass (each `[S, H, W]`, colour `[S, H, W, 3]`).
+#[derive(Default)]
+struct Images {
+    mask: Option<Tensor<3>>,
+    mask_alone: Option<Tensor<3>>,
+    depth: Option<Tensor<3>>,
+    rgb: Option<Tensor<4>>,
 }
 
 /// One evaluation: the cost terms and the object mask when one was rendered.
@@ -107,14 +151,7 @@ impl<'a> Problem<'a> {
             occupancy: None,
             seconds: None,
             approximations: Approximations::default(),
-            alone: None,
         }
-    }
-
-    /// The same problem with each window's object alone (needed by the visibility cost).
-    pub fn with_alone(mut self, alone: Option<&'a [DeviceScene]>) -> Self {
-        self.alone = alone;
-        self
     }
 
     /// The same problem with rendering shortcuts (`[approximations]`; not for metrics).
@@ -150,12 +187,7 @@ impl<'a> Problem<'a> {
                     field: "window",
                     reason: format!("= {index}, but there are {} windows", self.windows.len()),
                 })?;
-        let alone = self.alone.and_then(|a| a.get(index..=index));
-        Ok(Problem {
-            windows,
-            alone,
-            ..*self
-        })
+        Ok(Problem { windows, ..*self })
     }
 
     /// The one window of a single-pose problem.
@@ -172,35 +204,64 @@ impl<'a> Problem<'a> {
         }
     }
 
-    /// The render request for window `index`: the channels the costs read, pruned to the
-    /// object when the mask is the only one; None when no cost reads an image.
-    pub fn request(&self, index: usize) -> Option<RenderRequest> {
-        // The object alone is another scene's render (see `evaluate_along`).
-        let needed: Vec<ImageChannel> = self
-            .costs
-            .channels()
-            .into_iter()
-            .filter(|c| *c != ImageChannel::MaskAlone)
-            .collect();
+    /// How the windows render: one request for the channels the costs read, every window's
+    /// object mask among them (pruned to each pose's object when the mask is the only channel),
+    /// and each window's object alone when a cost reads it; None when no cost reads an image.
+    /// Made once per run (it copies the masks); each pass says which poses are whose.
+    pub fn renders(&self) -> Option<WindowRenders> {
+        let needed = self.costs.channels();
         if needed.is_empty() {
             return None;
         }
-        let channels = needed
+        let wants_mask = needed
             .iter()
-            .map(|c| match c {
-                ImageChannel::Mask => Channel::Mask(self.windows[index].mask.clone()),
-                ImageChannel::Depth => Channel::Depth,
-                ImageChannel::Rgb => Channel::Rgb,
-                ImageChannel::MaskAlone => unreachable!("filtered out above"),
+            .any(|c| matches!(c, ImageChannel::Mask | ImageChannel::MaskAlone));
+        let mut masks: Vec<Vec<f32>> = Vec::new();
+        let mut alone = None;
+        if wants_mask {
+            masks = self.windows.iter().map(|w| w.mask.clone()).collect();
+            if needed.contains(&ImageChannel::MaskAlone) {
+                // The object alone is its Gaussians (non-zero mask) with value 1 each: the
+                // window's own mask where that is already so, else one more mask.
+                let mut objects = Vec::with_capacity(self.windows.len());
+                for (i, w) in self.windows.iter().enumerate() {
+                    if w.mask.iter().all(|&m| m == 0.0 || m == 1.0) {
+                        objects.push(i);
+                    } else {
+                        objects.push(masks.len());
+                        masks.push(w.mask.iter().map(|&m| f32::from(m != 0.0)).collect());
+                    }
+                }
+                alone = Some(objects);
+            }
+        }
+        let channels: Vec<Channel> = needed
+            .iter()
+            .filter_map(|c| match c {
+                ImageChannel::Mask | ImageChannel::MaskAlone => None,
+                ImageChannel::Depth => Some(Channel::Depth),
+                ImageChannel::Rgb => Some(Channel::Rgb),
             })
             .collect();
+        let channels = if wants_mask {
+            let objects = Channel::ObjectMasks(ObjectMasks {
+                masks,
+                views: Vec::new(),
+            });
+            std::iter::once(objects).chain(channels).collect()
+        } else {
+            channels
+        };
         let mut request = RenderRequest::new(self.intrinsics, channels);
-        if self.prune && needed == [ImageChannel::Mask] {
+        let mask_only = needed
+            .iter()
+            .all(|c| matches!(c, ImageChannel::Mask | ImageChannel::MaskAlone));
+        if self.prune && mask_only {
             request.pruning = Pruning::ObjectOnly;
         }
         request.rasterizer = self.rasterizer;
         request.approximations = self.approximations;
-        Some(request)
+        Some(WindowRenders { request, alone })
     }
 
     /// The scene's device (checked to be autodiff) and dtype, and that every window's
@@ -229,9 +290,9 @@ impl<'a> Problem<'a> {
         index: usize,
         poses: Tensor<2>,
         step: usize,
-        request: Option<&RenderRequest>,
+        renders: Option<&WindowRenders>,
     ) -> Result<Evaluated, OptimiseError> {
-        self.evaluate_along(index, poses, None, None, None, step, request)
+        self.evaluate_along(index, poses, None, None, None, step, renders)
     }
 
     /// [`Problem::evaluate`] with the samples' times `[B]` (t ∈ [0, 1] of the whole
@@ -248,116 +309,200 @@ impl<'a> Problem<'a> {
         path: Option<(Tensor<2>, f64)>,
         host: Option<&HostPoses>,
         step: usize,
-        request: Option<&RenderRequest>,
+        renders: Option<&WindowRenders>,
     ) -> Result<Evaluated, OptimiseError> {
-        let window = &self.windows[index];
-        let seconds = self.seconds;
-        let occupancy = self.occupancy;
-        let (start, end) = window_bounds(index, self.windows.len());
-        let times = times.map(|ts| SampleTimes {
+        let [count, _] = poses.dims();
+        let window = WindowSamples {
             window: index,
-            within: ts.iter().map(|t| (t - start) / (end - start)).collect(),
-        });
-        let attach = move |mut inputs: CostInputs| {
-            if let Some(t) = times.clone() {
-                inputs = inputs.with_times(t);
-            }
-            if let Some((poses, time_step)) = path.clone() {
-                inputs = inputs.with_path(PathSamples {
-                    poses,
-                    time_step,
-                    seconds,
-                });
-            }
-            if let Some(o) = occupancy {
-                inputs = inputs.with_occupancy(o.clone());
-            }
-            if let Some(h) = host {
-                inputs = inputs.with_host_poses(h.clone());
-            }
-            inputs
+            count,
+            times,
+            path,
+            host,
         };
-        let host_samples: Option<Vec<Pose>> =
-            host.map(|h| h.samples.iter().map(|&p| Pose(p)).collect());
+        let mut evaluated = self.evaluate_windows(poses, vec![window], step, renders)?;
+        Ok(Evaluated {
+            terms: evaluated.windows.remove(0),
+            masks: evaluated.masks,
+            stats: evaluated.stats,
+        })
+    }
+
+    /// Renders what the costs read for the samples of several windows in **one pass** and
+    /// evaluates each window's costs at step `step`: `poses` `[ΣS, 6]` holds the windows'
+    /// samples one window after the other, as `windows` lists them. One render call for the
+    /// whole step (each window's object alone included) keeps the launches and the host
+    /// decisions of a step from growing with the number of windows (docs/gpu.md).
+    /// `renders`: [`Problem::renders`] when the caller keeps it (made here otherwise).
+    pub fn evaluate_windows(
+        &self,
+        poses: Tensor<2>,
+        windows: Vec<WindowSamples<'_>>,
+        step: usize,
+        renders: Option<&WindowRenders>,
+    ) -> Result<StepEvaluation, OptimiseError> {
+        let [rows, _] = poses.dims();
+        let total: usize = windows.iter().map(|w| w.count).sum();
+        if total != rows {
+            return Err(OptimiseError::InvalidOptions {
+                field: "windows",
+                reason: format!("the windows' samples add up to {total}, the poses to {rows}"),
+            });
+        }
+        if let Some(w) = windows.iter().find(|w| w.window >= self.windows.len()) {
+            return Err(OptimiseError::InvalidOptions {
+                field: "window",
+                reason: format!(
+                    "= {}, but there are {} windows",
+                    w.window,
+                    self.windows.len()
+                ),
+            });
+        }
         let owned;
-        let request = match request {
+        let renders = match renders {
             Some(r) => Some(r),
             None => {
-                owned = self.request(index);
+                owned = self.renders();
                 owned.as_ref()
             }
         };
-        let Some(request) = request else {
-            let inputs = attach(CostInputs::new(poses, None, step, window.context)?);
-            let terms = self.costs.evaluate(&inputs)?;
-            return Ok(Evaluated {
-                terms,
+        let host_samples: Option<Vec<Pose>> = windows
+            .iter()
+            .map(|w| w.host.map(|h| h.samples.iter().map(|&p| Pose(p))))
+            .collect::<Option<Vec<_>>>()
+            .map(|each| each.into_iter().flatten().collect());
+        let Some(renders) = renders else {
+            let mut offset = 0;
+            let mut terms = Vec::with_capacity(windows.len());
+            for w in windows {
+                let window_poses = poses.clone().narrow(0, offset, w.count);
+                offset += w.count;
+                terms.push(self.window_terms(w, window_poses, Images::default(), step)?);
+            }
+            return Ok(StepEvaluation {
+                windows: terms,
                 masks: None,
                 stats: None,
             });
         };
-        let rendered = render_at(self.scene, poses.clone(), host_samples.as_deref(), request)?;
-        let images = rendered.images;
-        let [batch, height, width, _] = images.dims();
-        let mut masks = None;
-        let (mut depth, mut rgb) = (None, None);
-        let mut offset = 0;
-        for channel in &request.channels {
-            let w = channel.width();
-            let part = images.clone().narrow(3, offset, w);
-            offset += w;
-            match channel {
-                Channel::Mask(_) => masks = Some(part.reshape([batch, height, width])),
-                Channel::Depth => depth = Some(part.reshape([batch, height, width])),
-                Channel::Rgb => rgb = Some(part),
-                Channel::Features { .. } => {}
+        let mut request = renders.request.clone();
+        let alone = renders.alone.as_ref();
+        let mut render_poses = poses.clone();
+        let mut render_host = host_samples.clone();
+        if let Some(Channel::ObjectMasks(objects)) = request.channels.first_mut() {
+            let scene_views = windows.iter().flat_map(|w| {
+                std::iter::repeat_n(
+                    ObjectView {
+                        object: w.window,
+                        surroundings: Surroundings::Scene,
+                    },
+                    w.count,
+                )
+            });
+            objects.views = scene_views.collect();
+            if let Some(alone) = alone {
+                // The same poses again, each drawing its window's object alone.
+                objects.views.extend(windows.iter().flat_map(|w| {
+                    std::iter::repeat_n(
+                        ObjectView {
+                            object: alone[w.window],
+                            surroundings: Surroundings::Nothing,
+                        },
+                        w.count,
+                    )
+                }));
+                render_poses = Tensor::cat(vec![poses.clone(), poses.clone()], 0);
+                render_host = host_samples.map(|h| [h.clone(), h].concat());
             }
         }
-        let mut inputs = attach(CostInputs::new(
-            poses.clone(),
-            masks.clone(),
-            step,
-            window.context,
-        )?);
-        if let Some(d) = depth {
-            inputs = inputs.with_depth(d);
+        let rendered = render_at(self.scene, render_poses, render_host.as_deref(), &request)?;
+        let images = rendered.images; // [B', H, W, C]
+        let [_, height, width, _] = images.dims();
+        let channel = |name: fn(&Channel) -> bool| -> Option<(usize, usize)> {
+            let mut offset = 0;
+            for c in &request.channels {
+                if name(c) {
+                    return Some((offset, c.width()));
+                }
+                offset += c.width();
+            }
+            None
+        };
+        let mask_at = channel(|c| matches!(c, Channel::ObjectMasks(_)));
+        let depth_at = channel(|c| matches!(c, Channel::Depth));
+        let rgb_at = channel(|c| matches!(c, Channel::Rgb));
+        let part = |(offset, width): (usize, usize), rows: (usize, usize)| {
+            images
+                .clone()
+                .narrow(0, rows.0, rows.1)
+                .narrow(3, offset, width)
+        };
+        let flat = |t: Tensor<4>, count: usize| t.reshape([count, height, width]);
+        let masks = mask_at.map(|at| flat(part(at, (0, rows)), rows));
+        let mut offset = 0;
+        let mut terms = Vec::with_capacity(windows.len());
+        for w in windows {
+            let count = w.count;
+            let own = (offset, count);
+            let window_images = Images {
+                mask: masks.as_ref().map(|m| m.clone().narrow(0, offset, count)),
+                mask_alone: alone
+                    .and(mask_at)
+                    .map(|at| flat(part(at, (rows + offset, count)), count)),
+                depth: depth_at.map(|at| flat(part(at, own), count)),
+                rgb: rgb_at.map(|at| part(at, own)),
+            };
+            let window_poses = poses.clone().narrow(0, offset, count);
+            offset += count;
+            terms.push(self.window_terms(w, window_poses, window_images, step)?);
         }
-        if let Some(c) = rgb {
-            inputs = inputs.with_rgb(c);
-        }
-        if self.costs.channels().contains(&ImageChannel::MaskAlone)
-            && let Some(alone) = self.alone.and_then(|a| a.get(index))
-        {
-            inputs = inputs.with_mask_alone(self.render_alone(
-                alone,
-                poses,
-                host_samples.as_deref(),
-                request,
-            )?);
-        }
-        let terms = self.costs.evaluate(&inputs)?;
-        Ok(Evaluated {
-            terms,
+        Ok(StepEvaluation {
+            windows: terms,
             masks,
             stats: Some(rendered.stats),
         })
     }
 
-    /// The object alone's mask `[B, H, W]` at `poses`, rendered as `request` renders the
-    /// scene (camera, rasterizer, approximations), pruned to the object (all of it).
-    fn render_alone(
+    /// One window's cost terms from its samples' poses and images.
+    fn window_terms(
         &self,
-        alone: &DeviceScene,
+        samples: WindowSamples<'_>,
         poses: Tensor<2>,
-        host_poses: Option<&[Pose]>,
-        request: &RenderRequest,
-    ) -> Result<Tensor<3>, OptimiseError> {
-        let mut request = request.clone();
-        request.channels = vec![Channel::Mask(vec![1.0; alone.len()])];
-        request.pruning = Pruning::ObjectOnly;
-        let images = render_at(alone, poses, host_poses, &request)?.images;
-        let [batch, height, width, _] = images.dims();
-        Ok(images.reshape([batch, height, width]))
+        images: Images,
+        step: usize,
+    ) -> Result<CostTerms, OptimiseError> {
+        let index = samples.window;
+        let (start, end) = window_bounds(index, self.windows.len());
+        let mut inputs = CostInputs::new(poses, images.mask, step, self.windows[index].context)?;
+        if let Some(ts) = samples.times {
+            inputs = inputs.with_times(SampleTimes {
+                window: index,
+                within: ts.iter().map(|t| (t - start) / (end - start)).collect(),
+            });
+        }
+        if let Some((poses, time_step)) = samples.path {
+            inputs = inputs.with_path(PathSamples {
+                poses,
+                time_step,
+                seconds: self.seconds,
+            });
+        }
+        if let Some(o) = self.occupancy {
+            inputs = inputs.with_occupancy(o.clone());
+        }
+        if let Some(h) = samples.host {
+            inputs = inputs.with_host_poses(h.clone());
+        }
+        if let Some(m) = images.mask_alone {
+            inputs = inputs.with_mask_alone(m);
+        }
+        if let Some(d) = images.depth {
+            inputs = inputs.with_depth(d);
+        }
+        if let Some(c) = images.rgb {
+            inputs = inputs.with_rgb(c);
+        }
+        Ok(self.costs.evaluate(&inputs)?)
     }
 
     /// The loss of `pose` for window `index` (step 0), read back to the host, and its

@@ -125,7 +125,7 @@ pub fn sample_poses_sgld(
     problem.single()?;
     check_starts(starts, "chains")?;
     let (device, dtype) = problem.gradient_setup()?;
-    let request = problem.request(0);
+    let renders = problem.renders();
     let chains = starts.len();
     let mut theta: Vec<[f64; 6]> = starts.iter().map(|p| units.normalise(&p.0)).collect();
     let noise = Normal::new(0.0, (options.step_size * options.temperature).sqrt())
@@ -147,7 +147,7 @@ pub fn sample_poses_sgld(
             path: None,
         };
         let terms = problem
-            .evaluate_along(0, poses, None, None, Some(&host), step, request.as_ref())?
+            .evaluate_along(0, poses, None, None, Some(&host), step, renders.as_ref())?
             .terms;
         let grads = terms.total.clone().sum().backward();
         let grad = normalised.grad(&grads).map(|g| g.reshape([chains * 6]));

@@ -194,7 +194,7 @@ pub fn optimise_poses_observed(
     problem.single()?;
     check_starts(starts, "starts")?;
     let (device, dtype) = problem.gradient_setup()?;
-    let request = problem.request(0);
+    let renders = problem.renders();
     let units = options.units();
     let to_tensor = |rows: &[[f64; 6]]| {
         let flat: Vec<f64> = rows.iter().flat_map(|p| units.normalise(p)).collect();
@@ -235,7 +235,7 @@ pub fn optimise_poses_observed(
             path: None,
         };
         let terms = problem
-            .evaluate_along(0, poses, None, None, Some(&host), step, request.as_ref())?
+            .evaluate_along(0, poses, None, None, Some(&host), step, renders.as_ref())?
             .terms;
         let mut updated = false;
         let (samples, grad, grads) = if last {

@@ -4,7 +4,9 @@
 //! Each step k, for every query window i (docs/conventions.md "Optimisation problem"):
 //! 1. draw S times stratified inside T_i ([`super::sampling`]);
 //! 2. poses Φ(t) = Ψ(t)·W `[S, 6]` (one matmul, differentiable in W);
-//! 3. render the window's object mask at all S poses in one batched, object-pruned render;
+//! 3. render the window's object mask at all S poses, object-pruned; every window's samples
+//!    (and each object alone, when a cost reads it) share one render call
+//!    ([`Problem::evaluate_windows`]);
 //! 4. evaluate the [`WeightedCosts`] at step k and average over the S samples.
 //!
 //! The loss is the mean over windows of those averages, the Monte Carlo estimate of
@@ -34,17 +36,15 @@
 
 use std::time::{Duration, Instant};
 
+use super::units::PoseUnits;
+use super::{OptimiseError, Problem, WindowSamples, check_adam, sampling};
+use crate::costs::{HostPoses, QueryContext};
+use crate::trajectory::{POSE_DIM, Trajectory, TrajectoryModel, TrajectoryRecord};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::Tensor;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-use splatraj_render::render::RenderRequest;
-
-use super::units::PoseUnits;
-use super::{OptimiseError, Problem, check_adam, sampling};
-use crate::costs::{HostPoses, QueryContext};
-use crate::trajectory::{POSE_DIM, Trajectory, TrajectoryModel, TrajectoryRecord};
 
 /// Default points per window of the path the path costs read each step.
 pub const DEFAULT_PATH_SAMPLES: usize = 16;
@@ -281,8 +281,7 @@ pub fn optimise_trajectory(
     let windows = problem.windows;
     let units = options.units(windows);
     units.validate()?;
-    let requests: Vec<Option<RenderRequest>> =
-        (0..windows.len()).map(|i| problem.request(i)).collect();
+    let renders = problem.renders();
     let normalised: Vec<_> = start.weights.iter().map(|w| units.normalise(w)).collect();
     let mut module = Trajectory::from_weights(start.model.clone(), &normalised, &device, dtype)?;
     let mut optim = AdamConfig::new()
@@ -347,28 +346,32 @@ pub fn optimise_trajectory(
             }
         }
 
+        // Every window's samples in one pass: one render call a step, whatever the windows.
+        let samples: usize = host.windows.iter().map(|w| w.samples.1).sum();
+        let window_samples: Vec<WindowSamples> = host
+            .windows
+            .iter()
+            .enumerate()
+            .map(|(i, segment)| WindowSamples {
+                window: i,
+                count: segment.samples.1,
+                times: Some(&times[i].samples),
+                path: segment.path.map(|(offset, count, time_step)| {
+                    (poses.clone().narrow(0, offset, count), time_step)
+                }),
+                host: Some(&segment.poses),
+            })
+            .collect();
+        let evaluated = problem.evaluate_windows(
+            poses.clone().narrow(0, 0, samples),
+            window_samples,
+            step,
+            renders.as_ref(),
+        )?;
         let mut loss: Option<Tensor<1>> = None;
         let mut labels = Vec::with_capacity(n);
         let mut means = Vec::with_capacity(n);
-        for (i, request) in requests.iter().enumerate() {
-            let segment = &host.windows[i];
-            let window_poses = poses
-                .clone()
-                .narrow(0, segment.samples.0, segment.samples.1);
-            let path = segment.path.map(|(offset, count, time_step)| {
-                (poses.clone().narrow(0, offset, count), time_step)
-            });
-            let terms = problem
-                .evaluate_along(
-                    i,
-                    window_poses,
-                    Some(&times[i].samples),
-                    path,
-                    Some(&segment.poses),
-                    step,
-                    request.as_ref(),
-                )?
-                .terms;
+        for terms in evaluated.windows {
             labels.push(terms.labels());
             means.push(terms.means_on_device());
             let mean = terms.total.mean();
@@ -496,11 +499,16 @@ fn step_poses(
     times: &[StepTimes],
     pending: Option<&Pending>,
 ) -> Result<(Tensor<2>, StepRead), OptimiseError> {
+    // Every window's samples first, one window after the other (the step's one render takes
+    // them as one block), then every window's path.
     let mut all = Vec::new();
-    let mut layout = Vec::with_capacity(times.len());
+    let mut sample_rows = Vec::with_capacity(times.len());
     for t in times {
-        let samples = (all.len(), t.samples.len());
+        sample_rows.push((all.len(), t.samples.len()));
         all.extend_from_slice(&t.samples);
+    }
+    let mut layout = Vec::with_capacity(times.len());
+    for (t, samples) in times.iter().zip(sample_rows) {
         let path = t.path.as_ref().map(|(path, time_step)| {
             let rows = (all.len(), path.len(), *time_step);
             all.extend_from_slice(path);
