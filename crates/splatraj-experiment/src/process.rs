@@ -325,6 +325,11 @@ impl Experiment {
                 d.key, d.value, d.why
             ));
         }
+        // Where the windows pan or cut (`output.transitions`); a failure here (the view
+        // search) is the start check's to report.
+        for line in experiment.transition_lines().unwrap_or_default() {
+            lines.push(format!("transitions: {line}"));
+        }
         // The search already ran for the start check (`start_trajectories`), which caches it.
         let views = experiment.start_views().ok().flatten();
         for (i, w) in experiment.windows.iter().enumerate() {

@@ -61,6 +61,7 @@ fn pipelined_and_batched_frames_are_the_sequential_frames_byte_for_byte() {
     let eye = DVec3::from_array(DEMO_VIEWPOINT.map(f64::from));
     let count = 7;
     let frames = PathFrames {
+        cuts: Vec::new(),
         times: (0..count).map(|i| i as f64 / (count - 1) as f64).collect(),
         poses: (0..count)
             .map(|i| {
@@ -156,6 +157,7 @@ fn a_failing_writer_stops_the_render_with_its_error() {
     let eye = DVec3::from_array(DEMO_VIEWPOINT.map(f64::from));
     let pose = Pose::look_at(eye, DVec3::new(0.0, 0.3, 0.8), DVec3::Z).unwrap();
     let frames = PathFrames {
+        cuts: Vec::new(),
         times: vec![0.0; 20],
         poses: vec![pose.0; 20],
         cameras: vec![k; 20],

@@ -162,6 +162,7 @@ fn orbit_frames(setup: &BenchScene, k: Intrinsics, bench: &FramesBench) -> Resul
         poses: Vec::with_capacity(count),
         cameras: vec![k; count],
         fps: bench.fps,
+        cuts: Vec::new(),
     };
     for i in 0..count {
         // Frame index in the whole video, spread evenly.

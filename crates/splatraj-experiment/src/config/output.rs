@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 use splatraj_config::ConfigError;
 use splatraj_report::video::{MAX_FPS, MIN_FPS, check_fps};
+use splatraj_traj::transitions::TransitionMode;
 
 /// Overlay of the target's mask on the output frames.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -62,6 +63,10 @@ pub struct OutputConfig {
     pub metric_samples: usize,
     /// Samples of the whole trajectory for LDJ.
     pub ldj_samples: usize,
+    /// How consecutive windows are joined: `"pan"`, `"cut"` (each window its own shot) or
+    /// `"auto"` (the default: cut where a pan would break the pacing limits, hide a part or
+    /// need a long route; `splatraj_traj::transitions`).
+    pub transitions: TransitionMode,
 }
 
 /// Seconds of video per query when neither `frames` nor `seconds` is given: long enough to
@@ -88,6 +93,7 @@ impl Default for OutputConfig {
             trajectory_samples: 201,
             metric_samples: 30,
             ldj_samples: splatraj_traj::metrics::DEFAULT_LDJ_SAMPLES,
+            transitions: TransitionMode::Auto,
         }
     }
 }

@@ -14,7 +14,7 @@ use splatraj_render::camera_file::{check_pose_range, resize};
 use splatraj_report::supersplat::Focus;
 use splatraj_report::{CameraPath, ExportOptions, Format, Frame};
 use splatraj_traj::optimise::sampling::window_of;
-use splatraj_traj::trajectory::{Basis, TrajectoryRecord, uniform_times};
+use splatraj_traj::trajectory::{Basis, ShotSpans, TrajectoryRecord, uniform_times};
 
 use crate::outputs::output_folder::OutputFolder;
 use crate::outputs::records::SceneRecord;
@@ -38,6 +38,16 @@ pub struct PathFrames {
     pub cameras: Vec<Intrinsics>,
     /// Frames per second.
     pub fps: f64,
+    /// The frames that begin a new shot after a cut, ascending (empty: one shot).
+    pub cuts: Vec<usize>,
+}
+
+/// The frames at `times` that begin a new shot of `shots` (the first frame of each shot but
+/// the first).
+pub fn frame_cuts(times: &[f64], shots: &ShotSpans) -> Vec<usize> {
+    (1..times.len())
+        .filter(|&k| !shots.same_shot(times[k - 1], times[k]))
+        .collect()
 }
 
 impl PathFrames {
@@ -55,6 +65,7 @@ impl PathFrames {
                 .collect(),
             fps: Some(self.fps),
             seconds: None,
+            cuts: self.cuts.clone(),
         }
     }
 }
@@ -400,11 +411,14 @@ impl RunTrajectory {
         if poses.is_empty() {
             bail!("{}: no poses", self.file.display());
         }
+        // A cut model switches shots between two frames: those frames are its cuts.
+        let cuts = frame_cuts(&times, &self.record.model.shots(self.windows.len()));
         PathFrames {
             cameras: vec![camera; poses.len()],
             times,
             poses,
             fps,
+            cuts,
         }
         .checked(&self.file)
     }
@@ -547,11 +561,14 @@ fn imported_frames(
             0,
         )?;
     }
+    path.check_cuts()
+        .map_err(|p| anyhow!("{}: cuts: {p}", file.display()))?;
     PathFrames {
         times: uniform_times(path.frames.len()),
         poses: path.phis(),
         cameras,
         fps,
+        cuts: path.cuts.clone(),
     }
     .checked(file)
 }

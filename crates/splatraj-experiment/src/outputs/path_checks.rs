@@ -4,7 +4,7 @@
 
 use anyhow::{Result, bail};
 use splatraj_traj::clearance::Occupancy;
-use splatraj_traj::metrics::{WindowMetrics, path_metrics, shot_metrics};
+use splatraj_traj::metrics::{WindowMetrics, shot_metrics, shot_path_metrics};
 use splatraj_traj::trajectory::Trajectory;
 
 use crate::prepare::experiment::Experiment;
@@ -71,9 +71,10 @@ impl Experiment {
             .iter()
             .map(|w| w.context.object_centre)
             .collect();
-        let paths = path_metrics(
+        // A cut is no motion: rates are taken within each shot only.
+        let paths = shot_path_metrics(
             &|t: &[f64]| trajectory.poses_at(t),
-            windows.len(),
+            &trajectory.model().shots(windows.len()),
             self.config.output.ldj_samples,
             clearance,
             self.path_seconds(),

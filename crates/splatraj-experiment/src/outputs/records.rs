@@ -8,6 +8,7 @@ use splatraj_render::camera_file::matrix_rows;
 use splatraj_traj::optimise::sampling::{window_bounds, window_of};
 use splatraj_traj::optimise::{SinglePoseResult, StopReason};
 use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, uniform_times};
+use splatraj_traj::transitions::{JoinKind, shot_spans};
 
 use crate::config::Ablation;
 use crate::optimise::pose_run::{PoseRun, Posterior};
@@ -49,6 +50,25 @@ pub struct WindowInfo {
     pub target_ratio: f64,
 }
 
+/// One shot in `trajectory.json`: a run of windows joined by pans, its own continuous path;
+/// a cut separates it from the next (`[output] transitions`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ShotInfo {
+    /// Shot index.
+    pub index: usize,
+    /// Start of the shot in t (a cut's time, or 0).
+    pub start: f64,
+    /// End of the shot in t (the next cut's time, or 1).
+    pub end: f64,
+    /// Its windows.
+    pub windows: Vec<usize>,
+    /// Their queries.
+    pub queries: Vec<String>,
+    /// Why the cut into this shot was made, in words (none for the first shot).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cut_reason: Option<String>,
+}
+
 /// The scene a trajectory was made on, as `trajectory.json` records it (key `scene`): a path
 /// means nothing in another scene's world, so a render checks it ([`crate::outputs::camera_paths`]).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -88,6 +108,11 @@ pub struct TrajectoryFile {
     pub output_intrinsics: Intrinsics,
     /// The query windows.
     pub windows: Vec<WindowInfo>,
+    /// Times of the cuts in t, ascending (empty: one continuous shot; the model holds them
+    /// too, as `kind = "cuts"`).
+    pub cuts: Vec<f64>,
+    /// The shots, in order.
+    pub shots: Vec<ShotInfo>,
     /// Densely sampled poses (`output.trajectory_samples`).
     pub poses: Vec<SampledPose>,
 }
@@ -134,6 +159,40 @@ impl Experiment {
                 }
             })
             .collect();
+        let spans = trajectory.model().shots(n);
+        // The reasons of the joins when they made this model's cuts (a start from a file may
+        // bring its own).
+        let joins = self
+            .joins()
+            .ok()
+            .filter(|j| shot_spans(n, j).ok().as_ref() == Some(&spans));
+        let shots = (0..spans.len())
+            .map(|j| {
+                let (start, end) = spans.span(j);
+                let windows: Vec<usize> = spans.window_range(j).collect();
+                let cut_reason = (j > 0).then(|| {
+                    joins
+                        .as_ref()
+                        .and_then(|joins| joins.get(windows[0] - 1))
+                        .and_then(|join| match join {
+                            JoinKind::Cut(reason) => Some(reason.describe()),
+                            JoinKind::Pan => None,
+                        })
+                        .unwrap_or_else(|| "the trajectory's own cut".to_string())
+                });
+                ShotInfo {
+                    index: j,
+                    start,
+                    end,
+                    queries: windows
+                        .iter()
+                        .map(|&i| self.windows[i].name.clone())
+                        .collect(),
+                    windows,
+                    cut_reason,
+                }
+            })
+            .collect();
         let record = trajectory.record();
         Ok(TrajectoryFile {
             scene: SceneRecord::of(self),
@@ -144,6 +203,8 @@ impl Experiment {
             intrinsics: self.intrinsics,
             output_intrinsics: self.output_intrinsics()?,
             windows,
+            cuts: spans.cut_times(),
+            shots,
             poses,
         })
     }

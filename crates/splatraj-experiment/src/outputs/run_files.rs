@@ -11,7 +11,7 @@ use splatraj_scene::stop::Since;
 use splatraj_traj::trajectory::{Trajectory, uniform_times};
 
 use crate::optimise::trajectory_run::Evaluation;
-use crate::outputs::camera_paths::{PathFrames, write_all_exports};
+use crate::outputs::camera_paths::{PathFrames, frame_cuts, write_all_exports};
 use crate::outputs::path_render::{PathObject, PathRender, RenderedPath, Video, render_path};
 use crate::outputs::run_report::write_run_report;
 use crate::prepare::experiment::Experiment;
@@ -66,11 +66,13 @@ impl Experiment {
     pub fn output_frames(&self, trajectory: &Trajectory) -> Result<PathFrames> {
         let times = uniform_times(self.config.output.frame_count(self.windows.len()));
         let poses = trajectory.poses_at(&times);
+        let cuts = frame_cuts(&times, &trajectory.model().shots(self.windows.len()));
         Ok(PathFrames {
             cameras: vec![self.output_intrinsics()?; times.len()],
             times,
             poses,
             fps: self.config.output.fps,
+            cuts,
         })
     }
 

@@ -83,6 +83,9 @@ pub struct Experiment {
     #[allow(clippy::type_complexity)]
     pub(crate) views_cache:
         std::sync::Mutex<Option<(String, Vec<Vec<splatraj_traj::optimise::Candidate>>)>>,
+    /// What each join of windows becomes (`[output] transitions`), judged once
+    /// ([`Experiment::joins`]): the starts, the run's model and the plan all ask for it.
+    pub(crate) joins_cache: std::sync::Mutex<Option<Vec<splatraj_traj::transitions::JoinKind>>>,
     /// The coarse copy the optimisation renders instead of `scene`, when `optimise_gaussians`
     /// asks for one ([`Experiment::optimisation_scene`]).
     pub coarse: Option<CoarseCopy>,
@@ -157,6 +160,7 @@ impl Experiment {
             intrinsics,
             occupancy_cache: Default::default(),
             views_cache: Default::default(),
+            joins_cache: Default::default(),
             coarse: None,
             prepared_at,
         };

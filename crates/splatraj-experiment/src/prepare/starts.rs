@@ -9,6 +9,7 @@ use anyhow::{Context, Result};
 use glam::DVec3;
 use splatraj_render::camera::Pose;
 use splatraj_traj::costs::{ShotCost, WeightedCosts};
+use splatraj_traj::optimise::route::ROUTE_TRANSITION;
 use splatraj_traj::optimise::start::START_FIT_SAMPLES;
 use splatraj_traj::optimise::start::window_joins;
 use splatraj_traj::optimise::{
@@ -18,6 +19,7 @@ use splatraj_traj::optimise::{
 };
 use splatraj_traj::shots::{ShotFrame, ShotPath};
 use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord, uniform_times};
+use splatraj_traj::transitions::JoinKind;
 
 use crate::config::StartKind;
 use crate::prepare::experiment::Experiment;
@@ -46,7 +48,8 @@ impl Experiment {
     /// proportion to `start.restarts`.
     pub fn first_start_trajectories(&self, count: usize) -> Result<Vec<TrajectoryRecord>> {
         let config = &self.config;
-        let model = self.model.clone();
+        // `[trajectory]`'s model, cut into shots where the windows cut (`[output] transitions`).
+        let model = self.run_model()?;
         let (device, dtype) = (&self.device, self.dtype);
         if let Some(file) = &config.start.trajectory {
             let path = config.resolve(file);
@@ -97,15 +100,8 @@ impl Experiment {
             .enumerate()
             .map(|(r, per_window)| {
                 since.stop_point(|| format!("{r} of {count} starts were built, none run"))?;
-                let starts: Vec<WindowStart> = per_window
-                    .iter()
-                    .zip(&shots)
-                    .map(|(pose, shot)| match shot {
-                        Some(s) => WindowStart::Shot(*s),
-                        None => WindowStart::Hold(*pose),
-                    })
-                    .collect();
-                let shares = self.pan_shares(&starts);
+                let starts = self.window_starts(per_window, &shots);
+                let shares = self.join_shares(&starts)?;
                 let transitions = match &planner {
                     Some(planner) => {
                         let has_shot: Vec<bool> = shots.iter().map(Option::is_some).collect();
@@ -135,6 +131,21 @@ impl Experiment {
             .collect()
     }
 
+    /// The share of each window on both sides of each join over which the start pans: none
+    /// at a cut (each side holds its view up to the switch), else [`Experiment::pan_shares`].
+    fn join_shares(&self, starts: &[WindowStart]) -> Result<Vec<f64>> {
+        let pans = self.pan_shares(starts);
+        Ok(self
+            .joins()?
+            .iter()
+            .enumerate()
+            .map(|(k, join)| match join {
+                JoinKind::Cut(_) => 0.0,
+                JoinKind::Pan => pans.get(k).copied().unwrap_or(ROUTE_TRANSITION),
+            })
+            .collect())
+    }
+
     /// How long the start pans at each join of `starts`: long enough for the motion cost's
     /// turning and orbit limits ([`pan_shares`]); a quarter window each side without limits.
     fn pan_shares(&self, starts: &[WindowStart]) -> Vec<f64> {
@@ -156,7 +167,7 @@ impl Experiment {
 
     /// The grid `[start] route` plans on (None when the starts go straight): over the
     /// scene's robust bounds and every start's camera centres, keeping the clearance margin.
-    fn route_planner(
+    pub(crate) fn route_planner(
         &self,
         per_restart: &[Vec<Pose>],
         shots: &[Option<ShotPath>],

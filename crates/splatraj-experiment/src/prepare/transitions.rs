@@ -1,0 +1,147 @@
+//! Where the run pans and where it cuts (`[output] transitions`): each join of consecutive
+//! windows judged on the first restart's start (its views, shots and planned routes,
+//! `splatraj_traj::transitions`), and the run's trajectory model cut into the shots that
+//! gives. Every restart, the checkpoint and `trajectory.json` share that one model.
+
+use anyhow::{Result, bail};
+use splatraj_render::camera::Pose;
+use splatraj_traj::optimise::WindowStart;
+use splatraj_traj::pacing::{MAX_ORBIT_RATE, MAX_TURN_RATE};
+use splatraj_traj::trajectory::TrajectoryModel;
+use splatraj_traj::transitions::{
+    CutReason, Join, JoinKind, JoinLimits, JoinPart, TransitionMode, plan_joins, shot_spans,
+};
+
+use crate::prepare::experiment::Experiment;
+
+impl Experiment {
+    /// What each join of windows k and k + 1 becomes (one per join), judged once and kept.
+    ///
+    /// `"pan"` and `"cut"` are what they say. `"auto"` judges the first restart's start
+    /// against the verdict's pacing limits (module docs of `splatraj_traj::transitions`); a
+    /// start from a file (`start.trajectory`) or a fixed `start.pose`, or a custom trajectory
+    /// model (whose basis cannot be cut), pans.
+    pub fn joins(&self) -> Result<Vec<JoinKind>> {
+        let mut cache = self
+            .joins_cache
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(joins) = cache.as_ref() {
+            return Ok(joins.clone());
+        }
+        let joins = self.judge_joins()?;
+        *cache = Some(joins.clone());
+        Ok(joins)
+    }
+
+    /// [`Experiment::joins`] without the cache.
+    fn judge_joins(&self) -> Result<Vec<JoinKind>> {
+        let n = self.windows.len();
+        let mode = self.config.output.transitions;
+        let custom = matches!(self.model, TrajectoryModel::Custom(_));
+        if mode == TransitionMode::Cut && custom {
+            bail!(
+                "`output.transitions` = \"cut\" needs a built-in trajectory model (rbf, waypoint \
+                 or polynomial): `trajectory.kind` = {:?} cannot be cut into shots",
+                self.model.name()
+            );
+        }
+        let start = &self.config.start;
+        let judged = mode == TransitionMode::Auto
+            && !custom
+            && start.trajectory.is_none()
+            && start.pose.is_none();
+        if n < 2 || !judged {
+            let kind = match mode {
+                TransitionMode::Cut => JoinKind::Cut(CutReason::Asked),
+                TransitionMode::Pan | TransitionMode::Auto => JoinKind::Pan,
+            };
+            return Ok(vec![kind; n.saturating_sub(1)]);
+        }
+        let all: Vec<usize> = (0..n).collect();
+        let per_window = self
+            .start_poses(&all, 1)?
+            .into_iter()
+            .next()
+            .unwrap_or_default();
+        let shots = self.shot_paths()?;
+        let starts = self.window_starts(&per_window, &shots);
+        let planner = self.route_planner(std::slice::from_ref(&per_window), &shots)?;
+        let joins: Vec<Join> = (0..n - 1)
+            .map(|k| {
+                let (from, to) = (starts[k].pose_at(1.0), starts[k + 1].pose_at(0.0));
+                Join {
+                    from,
+                    to,
+                    parts: [k, k + 1].map(|i| JoinPart {
+                        centre: self.windows[i].context.object_centre,
+                        bounds: self.boxes[i],
+                    }),
+                    route: planner
+                        .as_ref()
+                        .map(|p| p.route(from.centre(), to.centre())),
+                }
+            })
+            .collect();
+        Ok(plan_joins(mode, &joins, &self.join_limits()))
+    }
+
+    /// The limits joins are judged against: the verdict's turning and orbit rates, the
+    /// motion cost's speed limit when it has one, the windows' duration.
+    fn join_limits(&self) -> JoinLimits {
+        let n = self.windows.len().max(1);
+        JoinLimits {
+            turn: MAX_TURN_RATE,
+            orbit: MAX_ORBIT_RATE,
+            speed: self
+                .config
+                .costs
+                .motion
+                .as_ref()
+                .and_then(|m| m.max_speed)
+                .and_then(|s| s.value()),
+            window_seconds: self.path_seconds().unwrap_or(1.0) / n as f64,
+        }
+    }
+
+    /// The trajectory model the run optimises: `[trajectory]`'s, cut into shots where
+    /// [`Experiment::joins`] cuts (the model itself when every join pans).
+    pub fn run_model(&self) -> Result<TrajectoryModel> {
+        let spans = shot_spans(self.windows.len(), &self.joins()?)?;
+        if spans.is_empty() {
+            return Ok(self.model.clone());
+        }
+        Ok(self.model.clone().cut(spans)?)
+    }
+
+    /// One line per join: pan, or cut and why (for the plan a run prints).
+    pub fn transition_lines(&self) -> Result<Vec<String>> {
+        Ok(self
+            .joins()?
+            .iter()
+            .enumerate()
+            .map(|(k, join)| match join {
+                JoinKind::Pan => format!("windows {k} → {}: pan", k + 1),
+                JoinKind::Cut(reason) => {
+                    format!("windows {k} → {}: cut ({})", k + 1, reason.describe())
+                }
+            })
+            .collect())
+    }
+
+    /// What each window of a start asks: its shot's path (`shots[i]`) or holding its pose.
+    pub(crate) fn window_starts(
+        &self,
+        per_window: &[Pose],
+        shots: &[Option<splatraj_traj::shots::ShotPath>],
+    ) -> Vec<WindowStart> {
+        per_window
+            .iter()
+            .zip(shots)
+            .map(|(pose, shot)| match shot {
+                Some(s) => WindowStart::Shot(*s),
+                None => WindowStart::Hold(*pose),
+            })
+            .collect()
+    }
+}
