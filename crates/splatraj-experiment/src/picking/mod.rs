@@ -1,6 +1,9 @@
 //! Picking parts before a run: `splatraj query` (a phrase, region or selection against a
-//! scene, drawn as a picture: [`query`]) and `splatraj scene views` (the click-to-pick page:
-//! [`views_page`]).
+//! scene, drawn as a picture: [`query`]; its options made into one config:
+//! [`query_options`]) and `splatraj scene views` (the click-to-pick page:
+//! [`views_page`], with its strip of candidate ups: [`up_choices`]).
 
 pub mod query;
+pub mod query_options;
+pub mod up_choices;
 pub mod views_page;

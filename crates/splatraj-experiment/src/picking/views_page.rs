@@ -6,8 +6,9 @@
 //! rendered in colour and depth (camera z composited and divided by the pixel's opacity,
 //! kept where that opacity exceeds [`MIN_COVER`]); the page also carries the Gaussians' centres,
 //! all of them or an even sample of at most [`ViewsPageOptions::max_centres`], to count what a
-//! ball holds. [`write_views_page`] checks the request, reads, renders and writes the page
-//! whole or not at all.
+//! ball holds. Above the views, the scene upright for the up they use and for the geometry's
+//! next candidates ([`crate::picking::up_choices`]). [`write_views_page`] checks the request,
+//! reads, renders and writes the page whole or not at all.
 
 use std::path::{Path, PathBuf};
 
@@ -24,6 +25,7 @@ use splatraj_scene::formats::check_output_target;
 use splatraj_scene::up_axis::{ResolvedUp, resolve_up};
 use splatraj_scene::{ReadOptions, Scene, UpSource, read_scene};
 
+use crate::picking::up_choices::{up_choices, vector};
 use crate::resources::{MemoryLimit, MemoryPlan, render_bytes, scene_bytes};
 
 /// A pixel's depth is kept where the render covers at least this share of it; elsewhere the
@@ -41,6 +43,9 @@ const FIRST_RADIUS: f64 = 0.05;
 const COORDINATE_STEP: f64 = 1e-4;
 /// The candidates [`plan_views`] weighs keep one f32 per Gaussian each; fewer than this many.
 const PLAN_CANDIDATES: f64 = 100.0;
+/// Side of the "Which way is up?" pictures at most, pixels (three side by side above the
+/// views).
+const UP_PICTURE_SIZE: usize = 320;
 
 /// How the page is made.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -126,6 +131,8 @@ pub struct WrittenViewsPage {
     pub seen_share: f64,
     /// World up and where it came from.
     pub up: ResolvedUp,
+    /// The ups the page's "Which way is up?" strip shows, `up` first.
+    pub up_choices: Vec<[f64; 3]>,
     /// Size of the page, bytes.
     pub bytes: usize,
 }
@@ -154,6 +161,19 @@ impl WrittenViewsPage {
                 self.around,
                 self.inside,
                 100.0 * self.seen_share
+            ),
+            format!(
+                "which way is up: the page's first strip shows the scene upright for {}",
+                self.up_choices
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &up)| if i == 0 {
+                        format!("{} (these views)", vector(up))
+                    } else {
+                        vector(up)
+                    })
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ),
             format!(
                 "wrote {} ({:.1} MB; {counts})",
@@ -203,7 +223,7 @@ pub fn write_views_page(
         .scene
         .file_name()
         .map_or_else(|| "scene".into(), |n| n.to_string_lossy().into_owned());
-    let page = views_page(
+    let mut page = views_page(
         scene,
         &uploaded,
         &views,
@@ -213,6 +233,14 @@ pub fn write_views_page(
             up: up.up,
             max_centres: request.options.max_centres,
         },
+        progress,
+    )?;
+    page.up_choices = up_choices(
+        scene,
+        &uploaded,
+        &up,
+        request.options.fov_degrees,
+        request.options.size.min(UP_PICTURE_SIZE),
         progress,
     )?;
     let html = page.to_html()?;
@@ -230,6 +258,7 @@ pub fn write_views_page(
         around: plan.views.len() - inside,
         inside,
         seen_share: plan.seen_share,
+        up_choices: page.up_choices.iter().map(|c| c.up).collect(),
         up,
         bytes: html.len(),
     })
@@ -283,11 +312,16 @@ pub fn views_page(
             .clamp(1.0, 9.0) as usize,
         radius: FIRST_RADIUS * diagonal,
         views: picked,
+        up_choices: Vec::new(),
     })
 }
 
 /// Colour and depth of one view.
-fn render_view(uploaded: &DeviceScene, view: &View, caption: String) -> Result<PickView> {
+pub(crate) fn render_view(
+    uploaded: &DeviceScene,
+    view: &View,
+    caption: String,
+) -> Result<PickView> {
     let k = view.intrinsics;
     let request = RenderRequest::new(k, vec![Channel::Rgb, Channel::Depth]);
     let rendered = render(uploaded, uploaded.poses(&[view.pose]), &request)?;

@@ -7,10 +7,12 @@
 //! the Gaussians inside, and writes the `[targets]` lines `splatraj run` reads
 //! (`name = { sphere = [x, y, z, r] }` under `[targets.regions]`). The data travel in one JSON
 //! block ([`DATA_ELEMENT_ID`]): cameras as in `trajectory.json` (OpenCV axes, Φ = [ω, c] and
-//! the 4×4 world-to-camera matrix), depths and centres as base64 ([`encode`]). Nothing is
-//! fetched, so the page works from a file, offline.
+//! the 4×4 world-to-camera matrix), depths and centres as base64 ([`encode`]). Above the views,
+//! a strip shows the scene upright for a few candidate ups with the line that sets each
+//! ([`up_strip`]). Nothing is fetched, so the page works from a file, offline.
 
 pub mod encode;
+pub mod up_strip;
 
 use base64::Engine;
 use base64::engine::general_purpose::STANDARD as BASE64;
@@ -19,6 +21,7 @@ use splatraj_camera::{Intrinsics, Pose};
 
 use crate::report::{STYLE, escape};
 use encode::{EncodedDepth, encode_depth, encode_points};
+use up_strip::{STRIP_STYLE, UpChoice, strip_html};
 
 /// The `id` of the `<script type="application/json">` element holding the page's data.
 pub const DATA_ELEMENT_ID: &str = "splatraj-views";
@@ -71,6 +74,8 @@ pub struct ViewsPage {
     pub radius: f64,
     /// The views.
     pub views: Vec<PickView>,
+    /// The ups the "Which way is up?" strip shows, the one the views use first; none: no strip.
+    pub up_choices: Vec<UpChoice>,
 }
 
 /// A page that cannot be laid out from its data.
@@ -135,10 +140,11 @@ impl ViewsPage {
         let title = escape(&self.title);
         let mut page = format!(
             "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"/>\
-             <title>splatraj views: {title}</title><style>{STYLE}\n{PAGE_STYLE}</style></head>\n\
-             <body>\n<h1>splatraj views: {title}</h1><p class=\"sub\">{}</p>\n",
+             <title>splatraj views: {title}</title><style>{STYLE}\n{PAGE_STYLE}\n{STRIP_STYLE}\
+             </style></head>\n<body>\n<h1>splatraj views: {title}</h1><p class=\"sub\">{}</p>\n",
             escape(&self.scene)
         );
+        page.push_str(&strip_html(&self.up_choices));
         page.push_str(&format!(
             "<p class=\"note\">Click a part in any view: the point under the pixel (from the \
              view's depth and camera) becomes the centre of a ball; drag from it, scroll over \
@@ -277,6 +283,7 @@ mod tests {
                 png: vec![1, 2, 3],
                 depth: vec![3.0; 12],
             }],
+            up_choices: Vec::new(),
         }
     }
 

@@ -66,8 +66,9 @@
   // state.point: the ball's centre; state.view/pixel: where it was picked.
   const state = { point: null, radius: data.radius, view: null, pixel: null, parts: [] };
 
-  function setStatus(text, warn) {
-    const el = $("status");
+  // A message in the panel, or in the element `where` names (the up strip's own line).
+  function setStatus(text, warn, where) {
+    const el = $(where || "status");
     el.textContent = text;
     el.className = warn ? "note warn" : "note";
   }
@@ -264,18 +265,18 @@
   $("radius").addEventListener("change", () => setRadius(Number($("radius").value)));
   $("name").addEventListener("input", update);
 
-  function copy(text) {
-    const done = () => setStatus("Copied.", false);
+  function copy(text, where) {
+    const done = () => setStatus("Copied.", false, where);
     // The clipboard API needs a secure context (file:// is one in current browsers); the
     // selection route is the fallback, and the text stays visible in the panel either way.
     if (navigator.clipboard && navigator.clipboard.writeText) {
-      navigator.clipboard.writeText(text).then(done, () => fallbackCopy(text, done));
+      navigator.clipboard.writeText(text).then(done, () => fallbackCopy(text, done, where));
     } else {
-      fallbackCopy(text, done);
+      fallbackCopy(text, done, where);
     }
   }
 
-  function fallbackCopy(text, done) {
+  function fallbackCopy(text, done, where) {
     const area = document.createElement("textarea");
     area.value = text;
     document.body.appendChild(area);
@@ -283,7 +284,7 @@
     const ok = document.execCommand && document.execCommand("copy");
     document.body.removeChild(area);
     if (ok) done();
-    else setStatus("Could not copy: select the text and copy it yourself.", true);
+    else setStatus("Could not copy: select the text and copy it yourself.", true, where);
   }
 
   $("copy-line").addEventListener("click", () => {
@@ -291,6 +292,10 @@
   });
   $("copy-targets").addEventListener("click", () => copy(targetsText(false)));
   $("copy-config").addEventListener("click", () => copy(targetsText(true)));
+  // The "Which way is up?" strip: each button copies the `[scene]` line it carries.
+  for (const button of document.querySelectorAll("button.copy-up")) {
+    button.addEventListener("click", () => copy(button.dataset.copy + "\n", "up-status"));
+  }
 
   function renderParts() {
     const list = $("parts");
