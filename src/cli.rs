@@ -194,14 +194,14 @@ pub struct MemoryArgs {
 }
 
 impl MemoryArgs {
-    /// The `--set` override it makes (none when not given); errors name the option when the
-    /// value is not a positive number (TOML has no spelling for NaN's `{:?}`).
-    pub fn overrides(&self) -> anyhow::Result<Option<String>> {
+    /// The config's `max_memory_gb` it sets (none when not given); errors name the option
+    /// when the value is not a positive number.
+    pub fn max_memory_gb(&self) -> anyhow::Result<Option<f64>> {
         match self.max_memory {
             Some(gb) if !(gb.is_finite() && gb > 0.0) => {
                 anyhow::bail!("--max-memory {gb} must be a finite number of GB > 0")
             }
-            gb => Ok(gb.map(|gb| format!("max_memory_gb={gb:?}"))),
+            gb => Ok(gb),
         }
     }
 }

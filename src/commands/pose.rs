@@ -12,7 +12,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use splatraj::experiment::Experiment;
 use splatraj::experiment::config::{Ablation, Config};
@@ -53,18 +53,19 @@ fn parse_ablation(s: &str) -> Result<Ablation, String> {
 
 /// Runs `splatraj pose`.
 pub fn run(args: PoseArgs) -> Result<()> {
-    let mut overrides = args.set.clone();
-    if let Some(a) = args.ablation {
-        overrides.push(format!(
-            "pose.ablation={}",
-            toml::Value::try_from(a).context("ablation")?
-        ));
-    }
-    if let Some(r) = args.restarts {
-        overrides.push(format!("start.restarts={r}"));
-    }
-    overrides.extend(args.memory.overrides()?);
-    let config = Config::load(&args.config, &overrides)?;
+    let max_memory_gb = args.memory.max_memory_gb()?;
+    // Low to high: the file, --set, the options (typed fields, checked with the rest).
+    let config = Config::load_edited(&args.config, &args.set, |config| {
+        if let Some(a) = args.ablation {
+            config.pose.ablation = a;
+        }
+        if let Some(r) = args.restarts {
+            config.start.restarts = r;
+        }
+        if max_memory_gb.is_some() {
+            config.max_memory_gb = max_memory_gb;
+        }
+    })?;
     let experiment = Experiment::prepare(&config)?;
     let plan = experiment.check_pose_run(args.sgld)?;
     let index = config.pose.query;

@@ -56,11 +56,10 @@ pub struct RunArgs {
 
 /// Runs `splatraj run`.
 pub fn run(args: RunArgs) -> Result<()> {
-    let mut overrides = args.set.clone();
-    overrides.extend(args.memory.overrides()?);
-    let (config, checkpoint) = match (&args.resume, &args.config) {
+    let max_memory_gb = args.memory.max_memory_gb()?;
+    let (mut config, checkpoint) = match (&args.resume, &args.config) {
         (Some(dir), _) => {
-            let (config, checkpoint) = resumable(dir, &overrides)?;
+            let (config, checkpoint) = resumable(dir, &args.set)?;
             eprintln!(
                 "resuming {}: restart {}/{} at step {}/{}, best sampled loss so far {:.4}",
                 dir.display(),
@@ -72,9 +71,13 @@ pub fn run(args: RunArgs) -> Result<()> {
             );
             (config, Some(checkpoint))
         }
-        (None, Some(path)) => (Config::load(path, &overrides)?, None),
+        (None, Some(path)) => (Config::load(path, &args.set)?, None),
         (None, None) => bail!("give a config file, or --resume RUN_DIR"),
     };
+    // Over the file and --set; checked as the option was read.
+    if max_memory_gb.is_some() {
+        config.max_memory_gb = max_memory_gb;
+    }
     let experiment = Experiment::prepare(&config)?;
     let plan = experiment.check_trajectory_run(checkpoint.is_some())?;
     for line in experiment.plan_lines() {

@@ -16,9 +16,10 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use splatraj::experiment::Extensions;
+use splatraj::experiment::config::ConfigFile;
 use splatraj::experiment::study::plan::PlanOptions;
 use splatraj::experiment::study::{
-    Factor, Preset, RunPlace, Shard, StudyPlan, StudyRequest, conduct_study, measure_one,
+    Factor, PlannedStudy, Preset, RunPlace, Shard, StudyRequest, conduct_study, measure_one,
     merge_studies, study_dir, write_study,
 };
 
@@ -144,16 +145,19 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
     };
     let extensions = Extensions::default();
     let options = plan_options(args)?;
-    let plan = StudyPlan::new(config, &options, &extensions)?;
+    // The config file is read once; every variant's, run's and the evaluation's config is
+    // made from it.
+    let study = PlannedStudy::new(&ConfigFile::read(config)?, &options, &extensions)?;
     if let Some(index) = args.one {
-        let rows = measure_one(&plan, index, &extensions)?;
+        let rows = measure_one(&study, index, &extensions)?;
         println!("{}", serde_json::to_string(&rows)?);
         return Ok(());
     }
+    let plan = &study.plan;
     let runs = plan.runs_of(args.shard);
     // Everything that can be known before the first run is checked now, dry run or not; a
     // refusal is the only thing printed.
-    let check = plan.check(&runs, args.out.as_deref(), &extensions)?;
+    let check = study.check(&runs, args.out.as_deref(), &extensions)?;
     eprintln!(
         "study of {}: {} variant(s), {} run(s){}",
         plan.name,
@@ -198,10 +202,10 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
             RunPlace::Child { exe: &exe }
         },
     };
-    let folder = study_dir(&plan, &request)?;
+    let folder = study_dir(&study, &request)?;
     eprintln!("study folder: {}", folder.dir.display());
     let outcome = conduct_study(
-        plan,
+        study,
         &runs,
         folder,
         &request,

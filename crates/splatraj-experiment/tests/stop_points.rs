@@ -10,12 +10,13 @@
 use std::path::Path;
 use std::sync::Mutex;
 
+use splatraj_experiment::config::ConfigFile;
 use splatraj_experiment::optimise::observer::{Flow, Phase, Progress};
 use splatraj_experiment::process::RunFolder;
 use splatraj_experiment::study::context::measure_runs;
 use splatraj_experiment::study::measure::MemoryReading;
 use splatraj_experiment::study::plan::PlanOptions;
-use splatraj_experiment::study::{StudyPlan, measure_run};
+use splatraj_experiment::study::{PlannedStudy, measure_run};
 use splatraj_experiment::{Config, Experiment, Extensions};
 use splatraj_scene::stop::{self, Since, Stopped};
 
@@ -127,19 +128,20 @@ fn a_study_run_stops_within_itself_and_the_study_between_runs() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
     let extensions = Extensions::default();
-    let plan = StudyPlan::new(
-        &config_file(dir.path()),
+    let study = PlannedStudy::new(
+        &ConfigFile::read(&config_file(dir.path())).unwrap(),
         &PlanOptions::default(),
         &extensions,
     )
     .unwrap();
+    let plan = &study.plan;
     assert!(plan.runs.len() >= 2, "the default plan has several runs");
 
     // A request after `since`: the run stops at its first step and is not measured.
     let since = Since::now();
     stop::request();
     let error = measure_run(
-        &plan,
+        &study,
         &plan.runs[0],
         &extensions,
         MemoryReading::Shared,
@@ -153,7 +155,7 @@ fn a_study_run_stops_within_itself_and_the_study_between_runs() {
     let since = Since::now();
     let mut measured = Vec::new();
     let (rows, failures) = measure_runs(
-        &plan,
+        plan,
         &plan.runs,
         |run| {
             measured.push(run.index);

@@ -5,12 +5,13 @@
 use std::path::{Path, PathBuf};
 
 use splatraj_experiment::Extensions;
+use splatraj_experiment::config::ConfigFile;
 use splatraj_experiment::study::measure::MemoryReading;
 use splatraj_experiment::study::plan::PlanOptions;
 use splatraj_experiment::study::rows::StudyRow;
 use splatraj_experiment::study::summary::StudyContext;
 use splatraj_experiment::study::{
-    Design, Factor, StudyFile, StudyPlan, StudySummary, measure_run, read_study, write_study,
+    Design, Factor, PlannedStudy, StudyFile, StudySummary, measure_run, read_study, write_study,
 };
 
 const TINY: &str = r#"
@@ -43,13 +44,13 @@ samples = 2
 ldj_samples = 11
 "#;
 
-/// Every run of `plan`, measured in this process.
-fn measure_all(plan: &StudyPlan, extensions: &Extensions) -> Vec<StudyRow> {
+/// Every run of `study`, measured in this process.
+fn measure_all(study: &PlannedStudy, extensions: &Extensions) -> Vec<StudyRow> {
     let mut rows = Vec::new();
-    for run in &plan.runs {
+    for run in &study.plan.runs {
         rows.extend(
             measure_run(
-                plan,
+                study,
                 run,
                 extensions,
                 MemoryReading::Shared,
@@ -59,6 +60,11 @@ fn measure_all(plan: &StudyPlan, extensions: &Extensions) -> Vec<StudyRow> {
         );
     }
     rows
+}
+
+/// The study of the config file `path` with `options`.
+fn planned(path: &Path, options: &PlanOptions, extensions: &Extensions) -> PlannedStudy {
+    PlannedStudy::new(&ConfigFile::read(path).unwrap(), options, extensions).unwrap()
 }
 
 fn config(dir: &Path) -> PathBuf {
@@ -81,8 +87,8 @@ fn options(grid: bool) -> PlanOptions {
 #[test]
 fn one_at_a_time_is_the_baseline_and_each_value_alone() {
     let dir = tempfile::tempdir().unwrap();
-    let plan =
-        StudyPlan::new(&config(dir.path()), &options(false), &Extensions::default()).unwrap();
+    let study = planned(&config(dir.path()), &options(false), &Extensions::default());
+    let plan = &study.plan;
     assert_eq!(plan.design, Design::OneAtATime);
     let labels: Vec<&str> = plan.variants.iter().map(|v| v.label.as_str()).collect();
     assert_eq!(
@@ -106,14 +112,15 @@ fn one_at_a_time_is_the_baseline_and_each_value_alone() {
         vary: vec![Factor::parse("optimiser.iterations=3,4").unwrap()],
         ..PlanOptions::default()
     };
-    let plan = StudyPlan::new(&config(dir.path()), &same, &Extensions::default()).unwrap();
-    assert_eq!(plan.variants.len(), 2);
+    let study = planned(&config(dir.path()), &same, &Extensions::default());
+    assert_eq!(study.plan.variants.len(), 2);
     // A bad value fails before anything runs, naming the variant and the key.
     let bad = PlanOptions {
         vary: vec![Factor::parse("optimiser.samples_per_window=0").unwrap()],
         ..PlanOptions::default()
     };
-    let err = StudyPlan::new(&config(dir.path()), &bad, &Extensions::default()).unwrap_err();
+    let file = ConfigFile::read(&config(dir.path())).unwrap();
+    let err = PlannedStudy::new(&file, &bad, &Extensions::default()).unwrap_err();
     let text = format!("{err:#}");
     assert!(text.contains("samples_per_window=0"), "{text}");
 }
@@ -122,10 +129,11 @@ fn one_at_a_time_is_the_baseline_and_each_value_alone() {
 fn a_grid_study_has_a_row_per_run_and_a_non_dominated_frontier() {
     let dir = tempfile::tempdir().unwrap();
     let extensions = Extensions::default();
-    let plan = StudyPlan::new(&config(dir.path()), &options(true), &extensions).unwrap();
+    let study = planned(&config(dir.path()), &options(true), &extensions);
+    let plan = &study.plan;
     assert_eq!(plan.variants.len(), 4);
     assert_eq!(plan.runs.len(), 8);
-    let rows = measure_all(&plan, &extensions);
+    let rows = measure_all(&study, &extensions);
     for v in &plan.variants {
         let seeds: Vec<u64> = rows
             .iter()
@@ -155,7 +163,7 @@ fn a_grid_study_has_a_row_per_run_and_a_non_dominated_frontier() {
         assert!((r.error - expected).abs() < 1e-12);
     }
 
-    let summary = StudySummary::new(&plan, &rows);
+    let summary = StudySummary::new(plan, &rows);
     assert_eq!(summary.variants.len(), 4);
     // Brute force: a variant is on the frontier iff no other is at least as fast and as good
     // and strictly better in one.
@@ -204,7 +212,7 @@ fn a_grid_study_has_a_row_per_run_and_a_non_dominated_frontier() {
         assert!(out.join(file).is_file(), "{file}");
     }
     let back = read_study(&out).unwrap();
-    assert_eq!(back.plan, plan);
+    assert_eq!(back.plan, *plan);
     // serde_json reads floats back to within an ulp.
     assert_eq!(back.rows.len(), study.rows.len());
     for (a, b) in back.rows.iter().zip(&study.rows) {
@@ -257,8 +265,9 @@ fn a_clearance_config_reports_the_paths_clearance() {
         vary: vec![Factor::parse("optimiser.iterations=1").unwrap()],
         ..PlanOptions::default()
     };
-    let plan = StudyPlan::new(&path, &options, &extensions).unwrap();
-    let rows = measure_all(&plan, &extensions);
+    let study = planned(&path, &options, &extensions);
+    let plan = &study.plan;
+    let rows = measure_all(&study, &extensions);
     assert_eq!(rows.len(), 2);
     for r in &rows {
         let per_window: Vec<f64> = r.windows.iter().map(|w| w.min_clearance.unwrap()).collect();
@@ -273,9 +282,63 @@ fn a_clearance_config_reports_the_paths_clearance() {
         assert!((r.inside_margin.unwrap() - inside).abs() < 1e-12);
         assert!((0.0..=1.0).contains(&inside));
     }
-    let md = StudySummary::new(&plan, &rows).markdown(&plan, &StudyContext::default());
+    let md = StudySummary::new(plan, &rows).markdown(plan, &StudyContext::default());
     assert!(
         md.contains("| min clearance | time inside margin |"),
         "{md}"
+    );
+}
+
+/// A study reads its config file once: with the file gone once read, the plan, its check,
+/// every run's config and the evaluation's are still made (from the typed configs), and each
+/// is the config that loading the file with the same `--set` edits gives.
+#[test]
+fn a_study_reads_its_config_file_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = config(dir.path());
+    let file = ConfigFile::read(&path).unwrap();
+    std::fs::remove_file(&path).unwrap();
+    let extensions = Extensions::default();
+    let options = PlanOptions {
+        vary: vec![
+            Factor::parse("optimiser.iterations=2").unwrap(),
+            Factor::parse("camera={width=16,height=12}").unwrap(),
+        ],
+        ..PlanOptions::default()
+    };
+    let study = PlannedStudy::new(&file, &options, &extensions).unwrap();
+    let runs = study.plan.runs_of(None);
+    let check = study
+        .check(&runs, Some(&dir.path().join("out")), &extensions)
+        .unwrap();
+    assert_eq!(check.variants, 3);
+    let configs: Vec<_> = runs
+        .iter()
+        .map(|run| study.run_config(run, &extensions).unwrap())
+        .collect();
+    let evaluation = study.evaluation_config(&extensions).unwrap();
+
+    // The same configs as loading the file again with each edit as `--set` text.
+    std::fs::write(&path, TINY).unwrap();
+    for (run, config) in runs.iter().zip(&configs) {
+        let mut set = study.plan.variants[run.variant].overrides.clone();
+        set.push(format!("seed={}", 3 + run.repeat));
+        assert_eq!(
+            *config,
+            splatraj_experiment::Config::load(&path, &set).unwrap(),
+            "run {}",
+            run.index
+        );
+    }
+    let sizes = [
+        "output.width=40",
+        "output.height=30",
+        "output.metric_samples=2",
+        "output.ldj_samples=11",
+    ]
+    .map(String::from);
+    assert_eq!(
+        evaluation,
+        splatraj_experiment::Config::load(&path, &sizes).unwrap()
     );
 }

@@ -2,6 +2,10 @@
 //! each holding exactly its keys (the text keys as one [`TextKeys`]), and one
 //! [`TargetSourceConfig::init`] that builds the source (burn's `XConfig` → `init()`).
 //!
+//! The per-source structs also serialise, set keys only: a command line's options
+//! (`splatraj query --phrases`) are written into a `[targets]` table through them, so that
+//! the options and a config file name each key the same way.
+//!
 //! [`crate::TargetsConfig`] holds the table as written (so that the source can still be chosen
 //! after reading it, e.g. from the scene); [`TargetSourceConfig::from_keys`] turns its keys into
 //! this type, refusing a key of another source by name.
@@ -10,8 +14,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
-use serde::Deserialize;
 use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
 
 use crate::embeddings::read_feature_sidecar;
 use crate::error::{Result, SemanticError};
@@ -46,30 +50,34 @@ pub enum TargetSourceConfig {
 }
 
 /// `labels`: `label_names = { "3" = "apple" }`, `synonyms = { "red mug" = ["cup", "mug"] }`.
-#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct LabelsConfig {
     /// Label id (written as a string key) → name, adding to or replacing the names the scene
     /// carries.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub label_names: BTreeMap<String, String>,
     /// Label name → other words that mean it.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub synonyms: BTreeMap<String, Vec<String>>,
 }
 
 /// `region`: `regions = { shelf = { box = [x0, y0, z0, x1, y1, z1] }, head = { selection =
 /// "head.ply" } }`; a query names one.
-#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RegionConfig {
     /// Regions by name.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub regions: BTreeMap<String, RegionSpec>,
 }
 
 /// `features`: the per-Gaussian vectors and the [`TextKeys`].
-#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct FeaturesConfig {
     /// Per-Gaussian feature sidecar `[N, D]`; `None`: the scene's own features.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub features: Option<PathBuf>,
     /// Text embeddings and scoring (the table's text keys).
     #[serde(skip)]
@@ -77,12 +85,14 @@ pub struct FeaturesConfig {
 }
 
 /// `langsplat`: latents, the autoencoder checkpoint and the [`TextKeys`].
-#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct LangsplatConfig {
     /// Per-Gaussian 3-d latents `[N, 3]` (`.npy`).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub latents: Option<PathBuf>,
     /// The LangSplat autoencoder checkpoint (`.pth`).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub checkpoint: Option<PathBuf>,
     /// Text embeddings and scoring (the table's text keys).
     #[serde(skip)]
@@ -91,11 +101,12 @@ pub struct LangsplatConfig {
 
 /// `lifted`: `[targets.lifted]` and the text keys the lifted source takes
 /// ([`LIFTED_TEXT_KEYS`]).
-#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct LiftedConfig {
     /// Views, field and cache options (`views.count`, `field.components`, `cache_dir`, …),
     /// read by the registered `lifted` source.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub lifted: Option<toml::Table>,
     /// The text keys of [`LIFTED_TEXT_KEYS`].
     #[serde(skip)]

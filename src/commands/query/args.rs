@@ -1,19 +1,22 @@
-//! The arguments of `splatraj query`, and how they become the library's config (each scene
-//! and source option sets a key of it) and [`PictureOptions`].
+//! The arguments of `splatraj query`, and how they become the library's typed options
+//! ([`QueryOptions`]: each scene and source option sets a key of the config) and
+//! [`PictureOptions`].
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::str::FromStr;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::Args;
 use splatraj::experiment::picking::query::{
     PictureOptions, RejectedView, option_of_key, parse_direction, parse_region, parse_source_keys,
     parse_synonyms,
 };
+use splatraj::experiment::picking::query_options::{QueryOptions, SelectionKeys, TargetOptions};
 use splatraj::experiment::prepare::views::ViewOptions;
 use splatraj_render::backend::BackendKind;
-use splatraj_scene::InvalidPolicy;
-use splatraj_semantic::{Activation, SourceKind};
+use splatraj_semantic::{
+    Activation, FeaturesConfig, LabelsConfig, LangsplatConfig, RegionSpec, SourceKind, TextKeys,
+};
 
 use crate::cli::ReadArgs;
 
@@ -192,53 +195,15 @@ impl QueryArgs {
             .context("the picture (--width, --height, --elevation)")
     }
 
-    /// The config the scene and source options make (paths relative to the working
-    /// directory): `[scene]`, one `[[queries]]`, and `[targets]` with each option as its key.
-    pub(super) fn config_table(&self) -> Result<toml::Table> {
-        let query = self
-            .query_text()
-            .context("--query is needed without --config")?;
-        if self.scene.is_none() {
-            bail!("--scene (or --config) is needed");
-        }
-        let mut table = self.option_keys(FlagPaths::AsGiven)?;
-        table.insert("name".into(), toml::Value::String("query".into()));
-        table.insert(
-            "queries".into(),
-            toml::Value::Array(vec![toml::Value::Table(toml::Table::from_iter([(
-                "text".to_string(),
-                toml::Value::String(query),
-            )]))]),
-        );
-        Ok(table)
-    }
-
-    /// The config keys the scene and source options set, only those given: `[scene]`
-    /// (`path`, `labels`, `drop_invalid`) and `[targets]` (each option under its key), for
-    /// the config the options make or to override a run config's keys.
-    pub(super) fn option_keys(&self, paths: FlagPaths) -> Result<toml::Table> {
-        let path_value = |path: &Path| paths.value(path);
-        let read = self.read.options();
-        let mut scene = toml::Table::new();
-        if let Some(path) = &self.scene {
-            scene.insert("path".into(), path_value(path)?);
-        }
-        if let Some(labels) = &read.labels {
-            scene.insert("labels".into(), path_value(labels)?);
-        }
-        if read.invalid == InvalidPolicy::Drop {
-            scene.insert("drop_invalid".into(), toml::Value::Boolean(true));
-        }
-        let targets = self
-            .source_options
-            .targets_table(self.query_text().as_deref(), &path_value)?;
-        let mut table = toml::Table::new();
-        for (key, keys) in [("scene", scene), ("targets", targets)] {
-            if !keys.is_empty() {
-                table.insert(key.into(), toml::Value::Table(keys));
-            }
-        }
-        Ok(table)
+    /// The scene and source options, typed: what they set of the config
+    /// ([`QueryOptions::config`] makes it).
+    pub(super) fn options(&self) -> Result<QueryOptions> {
+        Ok(QueryOptions {
+            scene: self.scene.clone(),
+            read: self.read.options(),
+            query: self.query_text(),
+            targets: self.source_options.targets()?,
+        })
     }
 
     /// The query: `--query`, else the name of the `--selection` file (`head` for
@@ -258,93 +223,45 @@ impl QueryArgs {
 }
 
 impl SourceArgs {
-    /// The `[targets]` table these options make: each option under its config key; for a
-    /// registered source (`custom.<name>`) the source's keys (`--source-key`, the phrase
-    /// options, `--synonym`) go in its own `[targets.custom.<name>]` table, and for `lifted`
-    /// the `--source-key` items in `[targets.lifted]`.
-    /// The region (`--box`/`--sphere`) is named `query`, which it then needs.
-    fn targets_table(
-        &self,
-        query: Option<&str>,
-        path_value: &dyn Fn(&Path) -> Result<toml::Value>,
-    ) -> Result<toml::Table> {
-        let mut keys = toml::Table::new();
+    /// The `[targets]` keys these options set, typed.
+    fn targets(&self) -> Result<TargetOptions> {
         let synonyms = parse_synonyms(&self.synonym)?;
-        if !synonyms.is_empty() {
-            keys.insert("synonyms".into(), toml::Value::try_from(synonyms)?);
-        }
-        if let Some(region) = parse_region(self.region_box.as_deref(), self.sphere.as_deref())? {
-            let query = query.context("--box/--sphere need --query: it names the region")?;
-            let regions = std::collections::BTreeMap::from([(query.trim().to_string(), region)]);
-            keys.insert("regions".into(), toml::Value::try_from(regions)?);
-        }
-        if let Some(path) = &self.selection {
-            let query = query.context("--selection needs --query: it names the region")?;
-            let selection = toml::Table::from_iter([("selection".to_string(), path_value(path)?)]);
-            let regions =
-                toml::Table::from_iter([(query.trim().to_string(), toml::Value::Table(selection))]);
-            keys.insert("regions".into(), toml::Value::Table(regions));
-        }
-        for (key, path) in [
-            ("features", &self.features),
-            ("phrases", &self.phrases),
-            ("phrase_names", &self.phrase_names),
-            ("text_encoder", &self.text_encoder),
-            ("latents", &self.latents),
-            ("checkpoint", &self.checkpoint),
-        ] {
-            if let Some(path) = path {
-                keys.insert(key.into(), path_value(path)?);
-            }
-        }
-        if let Some(activation) = self.text_activation {
-            keys.insert("text_activation".into(), toml::Value::try_from(activation)?);
-        }
-        if !self.negative.is_empty() {
-            keys.insert("negatives".into(), toml::Value::try_from(&self.negative)?);
-        }
-        if let Some(t) = self.temperature {
-            keys.insert("temperature".into(), toml::Value::Float(f64::from(t)));
-        }
-        let source_keys = parse_source_keys(&self.source_key)?;
-        let mut targets = toml::Table::new();
-        match &self.source {
-            Some(SourceKind::Custom(name)) => {
-                let mut own = source_keys;
-                for (key, value) in std::mem::take(&mut keys) {
-                    if own.contains_key(&key) {
-                        bail!(
-                            "--source-key {key}=… and {} both set `{key}`: give it once",
-                            option_of_key(&key)
-                        );
-                    }
-                    own.insert(key, value);
-                }
-                let custom = toml::Table::from_iter([(name.clone(), toml::Value::Table(own))]);
-                targets.insert("custom".into(), toml::Value::Table(custom));
-            }
-            _ if !source_keys.is_empty() => {
-                keys.insert("lifted".into(), toml::Value::Table(source_keys));
-            }
-            _ => {}
-        }
-        if let Some(source) = &self.source {
-            targets.insert("source".into(), toml::Value::String(source.name()));
-        }
-        targets.extend(keys);
-        let mut selection = toml::Table::new();
-        for (key, value) in [("top_fraction", self.top_fraction), ("floor", self.floor)] {
-            if let Some(value) = value {
-                selection.insert(key.into(), toml::Value::Float(f64::from(value)));
-            }
-        }
-        if self.no_cluster {
-            selection.insert("cluster".into(), toml::Value::Boolean(false));
-        }
-        if !selection.is_empty() {
-            targets.insert("selection".into(), toml::Value::Table(selection));
-        }
-        Ok(targets)
+        let region = match &self.selection {
+            Some(path) => Some(RegionSpec::Selection(path.clone())),
+            None => parse_region(self.region_box.as_deref(), self.sphere.as_deref())?,
+        };
+        Ok(TargetOptions {
+            source: self.source.clone(),
+            labels: LabelsConfig {
+                synonyms,
+                ..LabelsConfig::default()
+            },
+            region,
+            features: FeaturesConfig {
+                features: self.features.clone(),
+                ..FeaturesConfig::default()
+            },
+            langsplat: LangsplatConfig {
+                latents: self.latents.clone(),
+                checkpoint: self.checkpoint.clone(),
+                ..LangsplatConfig::default()
+            },
+            text: TextKeys {
+                phrases: self.phrases.clone(),
+                phrase_names: self.phrase_names.clone(),
+                text_encoder: self.text_encoder.clone(),
+                text_activation: self.text_activation,
+                text_heads: None,
+                negatives: (!self.negative.is_empty()).then(|| self.negative.clone()),
+                temperature: self.temperature,
+            },
+            source_keys: parse_source_keys(&self.source_key)?,
+            selection: SelectionKeys {
+                top_fraction: self.top_fraction,
+                floor: self.floor,
+                cluster: self.no_cluster.then_some(false),
+            },
+        })
     }
 }
 
@@ -361,26 +278,5 @@ pub(super) fn option_naming(key: &str) -> String {
         format!("--source-key {inner}")
     } else {
         format!("--set targets.{key}")
-    }
-}
-
-/// How the options' paths (relative to the working directory) are written into a config.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum FlagPaths {
-    /// As given: the config the options make reads paths from the working directory.
-    AsGiven,
-    /// Made absolute: a run config reads relative paths from its own folder.
-    Absolute,
-}
-
-impl FlagPaths {
-    /// `path` as a TOML string.
-    fn value(self, path: &Path) -> Result<toml::Value> {
-        let path = match self {
-            FlagPaths::AsGiven => path.to_path_buf(),
-            FlagPaths::Absolute => std::path::absolute(path)
-                .with_context(|| format!("cannot make {} absolute", path.display()))?,
-        };
-        Ok(toml::Value::String(path.to_string_lossy().into_owned()))
     }
 }

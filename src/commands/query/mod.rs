@@ -1,21 +1,24 @@
 //! `splatraj query`: what a semantic query selects in a scene, as text (or JSON) and as a
 //! picture (`query.png`, the selection tinted). The scene and source come from a run config
 //! (`--config RUN.toml`, whose keys the options given override) or from the options, which
-//! make a config of their own (`args.rs`: each option sets a key). The work is `splatraj::experiment::picking::query` ([`ConfigQuery`],
-//! [`PictureOptions`]); this file prints.
+//! make a config of their own (`args.rs` reads them into the library's typed
+//! `QueryOptions`, whose one `config` makes either). The work is
+//! `splatraj::experiment::picking` ([`ConfigQuery`], [`PictureOptions`]); this file prints.
 
 mod args;
+#[cfg(test)]
+mod flags_match_file;
 
 use anyhow::{Result, bail};
+use splatraj::experiment::Extensions;
 use splatraj::experiment::picking::query::{
     ConfigQuery, KeyNaming, PictureOptions, QueryOutcome, QueryReport, SelectionFailed,
     SourceChoice, config_query_texts,
 };
 use splatraj::experiment::write::write_into_folder;
-use splatraj::experiment::{Config, Extensions};
 
+use args::IMAGE_NAME;
 pub use args::QueryArgs;
-use args::{FlagPaths, IMAGE_NAME};
 
 /// Runs `splatraj query`.
 pub fn run(args: QueryArgs) -> Result<()> {
@@ -29,8 +32,7 @@ pub fn run(args: QueryArgs) -> Result<()> {
     };
     let extensions = Extensions::default();
     // Low to high: the file, the options given, --set.
-    let options = args.option_keys(FlagPaths::Absolute)?;
-    let config = Config::load_layered(path, options, &args.set, &extensions)?;
+    let config = args.options()?.config(Some(path), &args.set, &extensions)?;
     let texts = config_query_texts(&config);
     let query = args.query_text();
     if query.is_none() && texts.is_empty() {
@@ -153,13 +155,7 @@ fn write_picture(
 /// make, grounded as a run config is.
 fn from_options(args: &QueryArgs, picture: PictureOptions) -> Result<QueryOutcome> {
     let extensions = Extensions::default();
-    let config = Config::from_table(
-        args.config_table()?,
-        std::path::Path::new(""),
-        &args.set,
-        "the query options",
-        &extensions,
-    )?;
+    let config = args.options()?.config(None, &args.set, &extensions)?;
     let query = &config.queries[0].text;
     ConfigQuery {
         picture,

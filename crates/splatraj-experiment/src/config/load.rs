@@ -1,14 +1,77 @@
-//! Reading a config: the file and the files it `extends`, the first-try tables an override
-//! edits, the `--set` overrides, then the schema and [`Config::validate_with`].
+//! Reading a config: the file and the files it `extends` (read and parsed once, a
+//! [`ConfigFile`]), the first-try tables an override edits, the `--set` overrides, then the
+//! schema and [`Config::validate_with`]. A command that needs several configs of one file (a
+//! study's variants) reads the file once and makes each from the [`ConfigFile`].
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use splatraj_traj::costs::CostsConfig;
 
-use super::overrides::apply_override;
-use super::{Config, first_try_model};
+use super::Config;
+use super::first_try::{FIRST_TRY_COSTS, FIRST_TRY_TRAJECTORY, first_try_table};
+use super::overrides::Override;
 use crate::extensions::Extensions;
+
+/// A config file read and parsed once: its table merged over the files it `extends`, and
+/// where it lies. [`ConfigFile::config`] makes the typed config with edits over it, as often
+/// as a command needs, without reading the file again.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ConfigFile {
+    /// The file.
+    pub path: PathBuf,
+    /// Its table, over what it `extends`.
+    pub table: toml::Table,
+}
+
+impl ConfigFile {
+    /// Reads `path` and the files it `extends`.
+    pub fn read(path: &Path) -> Result<ConfigFile> {
+        Ok(ConfigFile {
+            path: path.to_path_buf(),
+            table: read_table(path, 0)?,
+        })
+    }
+
+    /// The file with `layer` merged over it, key by key as `extends` merges (the keys a
+    /// command's flags set, e.g. `splatraj query --phrases`).
+    pub fn with_layer(mut self, layer: toml::Table) -> ConfigFile {
+        merge(&mut self.table, layer);
+        self
+    }
+
+    /// The folder relative paths of the file are read from.
+    pub fn base_dir(&self) -> &Path {
+        self.path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."))
+    }
+
+    /// The typed config of the file with `overrides` applied, checked with `extensions`.
+    pub fn config(&self, overrides: &[Override], extensions: &Extensions) -> Result<Config> {
+        self.config_edited(overrides, extensions, |_| {})
+    }
+
+    /// [`ConfigFile::config`] with `edit` applied to the typed config before the checks: a
+    /// command's own options that set config fields, typed (`splatraj pose --restarts`), over
+    /// the file and the overrides.
+    pub fn config_edited(
+        &self,
+        overrides: &[Override],
+        extensions: &Extensions,
+        edit: impl FnOnce(&mut Config),
+    ) -> Result<Config> {
+        let origin = format!("config {}", self.path.display());
+        let mut config =
+            Config::unchecked(self.table.clone(), self.base_dir(), overrides, &origin)?;
+        config.path = self.path.clone();
+        edit(&mut config);
+        config
+            .validate_with(extensions)
+            .with_context(|| origin.to_string())?;
+        Ok(config)
+    }
+}
 
 impl Config {
     /// Reads `path` (and the files it `extends`), applies `overrides` (`key=value`), and
@@ -23,6 +86,21 @@ impl Config {
         Self::load_layered(path, toml::Table::new(), overrides, extensions)
     }
 
+    /// [`Config::load`] with `edit` applied over the file and `overrides` before the checks
+    /// (see [`ConfigFile::config_edited`]).
+    pub fn load_edited(
+        path: &Path,
+        overrides: &[String],
+        edit: impl FnOnce(&mut Config),
+    ) -> Result<Config> {
+        let file = ConfigFile::read(path)?;
+        file.config_edited(
+            &Override::parse_all(overrides)?,
+            &Extensions::default(),
+            edit,
+        )
+    }
+
     /// [`Config::load_with`] with `layer` merged over the file before the overrides, low to
     /// high: the file (over what it `extends`), then `layer` (the keys a command's flags set,
     /// e.g. `splatraj query --phrases`; tables merge key by key as `extends` does), then the
@@ -33,16 +111,8 @@ impl Config {
         overrides: &[String],
         extensions: &Extensions,
     ) -> Result<Config> {
-        let mut table = read_table(path, 0)?;
-        merge(&mut table, layer);
-        let base_dir = path
-            .parent()
-            .filter(|p| !p.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
-        let origin = format!("config {}", path.display());
-        let mut config = Self::from_table(table, base_dir, overrides, &origin, extensions)?;
-        config.path = path.to_path_buf();
-        Ok(config)
+        let file = ConfigFile::read(path)?.with_layer(layer);
+        file.config(&Override::parse_all(overrides)?, extensions)
     }
 
     /// A config from TOML text (no `extends`), checked with `extensions`; relative paths are
@@ -57,35 +127,59 @@ impl Config {
     /// `overrides` (`key=value`) applied, checked with `extensions`; relative paths are
     /// resolved against `base_dir`, and `origin` (`config run.toml`) names it in errors.
     pub fn from_table(
-        mut table: toml::Table,
+        table: toml::Table,
         base_dir: &Path,
         overrides: &[String],
         origin: &str,
         extensions: &Extensions,
     ) -> Result<Config> {
-        write_first_try_tables(&mut table, overrides)?;
-        let mut set_keys = Vec::with_capacity(overrides.len());
+        let overrides = Override::parse_all(overrides)?;
+        Self::from_edited_table(table, base_dir, &overrides, origin, extensions)
+    }
+
+    /// [`Config::from_table`] with the overrides already parsed.
+    pub fn from_edited_table(
+        table: toml::Table,
+        base_dir: &Path,
+        overrides: &[Override],
+        origin: &str,
+        extensions: &Extensions,
+    ) -> Result<Config> {
+        let config = Self::unchecked(table, base_dir, overrides, origin)?;
+        config
+            .validate_with(extensions)
+            .with_context(|| origin.to_string())?;
+        Ok(config)
+    }
+
+    /// The config of `table` with `overrides` applied, read by the schema but not yet
+    /// checked by [`Config::validate_with`].
+    fn unchecked(
+        mut table: toml::Table,
+        base_dir: &Path,
+        overrides: &[Override],
+        origin: &str,
+    ) -> Result<Config> {
+        write_first_try_tables(&mut table, overrides);
         for o in overrides {
-            set_keys.push((apply_override(&mut table, o)?, o.as_str()));
+            o.apply(&mut table)?;
         }
         let mut config: Config = deserialize_table(table).map_err(|(key, message)| {
             let (key, message) = inner_key(key, message);
             // A key an override set, a key below it, or the table holding it (a tagged table
             // like `[trajectory]` reports its own name) is the option's fault, not the file's.
-            let set_by = set_keys.iter().rev().find(|(k, _)| {
+            let set_by = overrides.iter().rev().find(|o| {
+                let k = &o.key;
                 key == *k
                     || key.starts_with(&format!("{k}."))
                     || (!key.is_empty() && k.starts_with(&format!("{key}.")))
             });
             match set_by {
-                Some((_, o)) => anyhow::anyhow!("--set {o}: `{key}`: {message}"),
+                Some(o) => anyhow::anyhow!("{} {}: `{key}`: {message}", o.option, o.written),
                 None => anyhow::anyhow!("{origin}: {}", at_key(&key, &message)),
             }
         })?;
         config.base_dir = base_dir.to_path_buf();
-        config
-            .validate_with(extensions)
-            .with_context(|| origin.to_string())?;
         Ok(config)
     }
 }
@@ -95,28 +189,24 @@ impl Config {
 /// trajectory.centres_per_window=4` then tunes the set the config runs with, instead of
 /// becoming the only cost (a `[costs]` table lists exactly the costs that are on) or a model
 /// without its `kind`.
-fn write_first_try_tables(value: &mut toml::Table, overrides: &[String]) -> Result<()> {
+fn write_first_try_tables(value: &mut toml::Table, overrides: &[Override]) {
     let edits = |table: &str| {
         overrides
             .iter()
-            .any(|o| o.trim_start().starts_with(&format!("{table}.")))
+            .any(|o| o.key.starts_with(&format!("{table}.")))
     };
     if !value.contains_key("costs") && edits("costs") {
-        let defaults = toml::Value::try_from(CostsConfig::first_try())
-            .context("the default `[costs]` as TOML")?;
-        value.insert("costs".into(), defaults);
+        let defaults = first_try_table(FIRST_TRY_COSTS);
+        value.insert("costs".into(), toml::Value::Table(defaults));
     }
     // A new `kind` is a new model: its own keys, not the first-try RBF's.
-    let new_kind = overrides.iter().any(|o| {
-        let key = o.split_once('=').map_or(o.as_str(), |(k, _)| k).trim();
-        key == "trajectory" || key == "trajectory.kind"
-    });
+    let new_kind = overrides
+        .iter()
+        .any(|o| o.key == "trajectory" || o.key == "trajectory.kind");
     if !value.contains_key("trajectory") && edits("trajectory") && !new_kind {
-        let defaults = toml::Value::try_from(first_try_model())
-            .context("the default `[trajectory]` as TOML")?;
-        value.insert("trajectory".into(), defaults);
+        let defaults = first_try_table(FIRST_TRY_TRAJECTORY);
+        value.insert("trajectory".into(), toml::Value::Table(defaults));
     }
-    Ok(())
 }
 
 /// Deserialises the whole config, or says at which key (dotted, list entries by index:

@@ -67,11 +67,14 @@
 //! Relative paths are relative to the config file's folder ([`Config::base_dir`]).
 //!
 //! This module tree is the bottom of the crate: the schema (one file per table), [`load`]
-//! (`extends`, first-try tables), [`overrides`] (`--set`) and [`validate`] (range checks, each
-//! a [`ConfigError`] naming the key) import nothing of the crate but [`crate::extensions`]
-//! (the registries a config may name), so anything can read a config without the runs.
+//! (the file read once as a [`ConfigFile`], `extends`), [`first_try`] (the tables an override
+//! of a left-out `[costs]` or `[trajectory]` edits), [`overrides`] (`--set`, parsed once) and
+//! [`validate`] (range checks, each a [`ConfigError`] naming the key) import nothing of the
+//! crate but [`crate::extensions`] (the registries a config may name), so anything can read a
+//! config without the runs.
 
 pub mod camera;
+pub mod first_try;
 pub mod load;
 pub mod optimise_gaussians;
 pub mod output;
@@ -96,9 +99,10 @@ use splatraj_traj::optimise::{SgldOptions, TrajectoryOptions};
 use splatraj_traj::trajectory::TrajectoryModel;
 
 pub use camera::{CameraConfig, DEFAULT_CAMERA_HEIGHT, DEFAULT_CAMERA_WIDTH, WorkingDistance};
+pub use load::ConfigFile;
 pub use optimise_gaussians::{AUTO_OPTIMISE_GAUSSIANS, OptimiseGaussians};
 pub use output::{MaskOverlay, OutputConfig, SECONDS_PER_QUERY, VerdictPolicy};
-pub use overrides::{apply_assignment, apply_override};
+pub use overrides::{Override, apply_assignment, apply_override};
 pub use pose::{Ablation, PoseConfig};
 pub use queries::QueryConfig;
 pub use scene::{DemoSceneConfig, SceneConfig};

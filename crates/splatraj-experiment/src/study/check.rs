@@ -21,7 +21,8 @@ use anyhow::{Context, Result};
 
 use super::StudyTask;
 use super::files::STUDY_NAMES;
-use super::plan::{Run, StudyPlan};
+use super::plan::Run;
+use super::planned::PlannedStudy;
 use crate::config::Config;
 use crate::config::scene::SceneConfig;
 use crate::extensions::Extensions;
@@ -42,7 +43,7 @@ pub struct StudyCheck {
     pub peak: Option<Stage>,
 }
 
-impl StudyPlan {
+impl PlannedStudy {
     /// Checks `runs` of this plan (all of them, or a shard's) and the study folder `out`
     /// (default: a new folder under the base config's `output.runs_dir`) without running any;
     /// an error names the variant, and the key, file or query to blame.
@@ -52,10 +53,15 @@ impl StudyPlan {
         out: Option<&Path>,
         extensions: &Extensions,
     ) -> Result<StudyCheck> {
-        let base = Config::load_with(&self.config, &self.base_overrides, extensions)?;
         match out {
             Some(dir) => OutputFolder::check(dir, &STUDY_NAMES)?,
-            None => check_writable(&base.output.runs_dir.join(format!("{}-study", self.name)))?,
+            None => check_writable(
+                &self
+                    .base
+                    .output
+                    .runs_dir
+                    .join(format!("{}-study", self.plan.name)),
+            )?,
         }
         let mut scenes = SceneCache::default();
         let mut peaks: Vec<Stage> = Vec::new();
@@ -65,12 +71,12 @@ impl StudyPlan {
                 continue;
             }
             checked.push(run.variant);
-            let label = &self.variants[run.variant].label;
+            let label = &self.plan.variants[run.variant].label;
             let config = self.run_config(run, extensions)?;
             let experiment = scenes
                 .prepare(&config, extensions)
                 .with_context(|| format!("study variant `{label}`"))?;
-            let plan = match self.task {
+            let plan = match self.plan.task {
                 StudyTask::Trajectory => experiment.check_trajectory_work(),
                 StudyTask::Pose => experiment.check_pose_run(None),
             }
@@ -91,7 +97,7 @@ impl StudyPlan {
     }
 
     /// The memory of one run's evaluation on `evaluation` (prepared from
-    /// [`StudyPlan::evaluation_config`]), and the time of `runs` of them.
+    /// [`PlannedStudy::evaluation_config`]), and the time of `runs` of them.
     fn evaluation_plans(
         &self,
         evaluation: &Experiment,
@@ -106,7 +112,7 @@ impl StudyPlan {
         );
         // A trajectory is judged at `samples` poses per window; a single-pose run at each of
         // its starts' poses, one at a time.
-        let (what, at_once, renders) = match self.task {
+        let (what, at_once, renders) = match self.plan.task {
             StudyTask::Trajectory => (
                 format!(
                     "`study.evaluation.samples` = {} poses per window of {windows} windows",
@@ -116,9 +122,9 @@ impl StudyPlan {
                 e.metric_samples as f64 * windows as f64,
             ),
             StudyTask::Pose => (
-                format!("the pose of each of `--seeds` = {} starts", self.seeds),
+                format!("the pose of each of `--seeds` = {} starts", self.plan.seeds),
                 1,
-                self.seeds as f64,
+                self.plan.seeds as f64,
             ),
         };
         // The run's own experiment is still held while its evaluation renders: two scenes.
@@ -129,7 +135,7 @@ impl StudyPlan {
             format!("the study's evaluation of a run: {what}, at {size}"),
             held + 2.0 * render_bytes(at_once, pixels(e.width, e.height), n, false, fb),
         );
-        if self.task == StudyTask::Trajectory {
+        if self.plan.task == StudyTask::Trajectory {
             let basis = evaluation.model.basis().count();
             memory.stage(
                 format!(

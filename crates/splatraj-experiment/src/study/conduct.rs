@@ -9,10 +9,10 @@ use anyhow::{Context, Result};
 use super::context::{measure_in_child, measure_runs};
 use super::files::{StudyFile, study_folder, write_study};
 use super::measure::{MemoryReading, measure_run};
-use super::plan::{PlanOptions, Run, Shard, StudyPlan};
+use super::plan::{PlanOptions, Run, Shard};
+use super::planned::PlannedStudy;
 use super::rows::StudyRow;
 use super::summary::StudyContext;
-use crate::config::Config;
 use crate::extensions::Extensions;
 
 /// Where each run of a study is measured.
@@ -52,20 +52,18 @@ pub struct StudyOutcome {
     pub study: StudyFile,
 }
 
-/// A study's folder, made, and the base config its files describe.
+/// A study's folder, made.
 #[derive(Debug)]
 pub struct StudyFolder {
     /// The folder (a new one is named by the time it was made).
     pub dir: PathBuf,
-    /// The base config, with the plan's overrides.
-    pub base: Config,
 }
 
-/// Makes the study folder `request` writes into.
-pub fn study_dir(plan: &StudyPlan, request: &StudyRequest<'_>) -> Result<StudyFolder> {
-    let base = Config::load(request.config, &plan.base_overrides)?;
-    let dir = study_folder(request.out, &base.output.runs_dir, &plan.name)?;
-    Ok(StudyFolder { dir, base })
+/// Makes the study folder `request` writes into (default: under the base config's
+/// `output.runs_dir`).
+pub fn study_dir(study: &PlannedStudy, request: &StudyRequest<'_>) -> Result<StudyFolder> {
+    let dir = study_folder(request.out, &study.base.output.runs_dir, &study.plan.name)?;
+    Ok(StudyFolder { dir })
 }
 
 /// Measures `runs` of `plan` into `folder` (from [`study_dir`]) and writes the study there;
@@ -74,7 +72,7 @@ pub fn study_dir(plan: &StudyPlan, request: &StudyRequest<'_>) -> Result<StudyFo
 /// under way): what was measured is written all the same, then the stop is the error
 /// ([`splatraj_scene::stop::Stopped`], naming the folder).
 pub fn conduct_study(
-    plan: StudyPlan,
+    study: PlannedStudy,
     runs: &[Run],
     folder: StudyFolder,
     request: &StudyRequest<'_>,
@@ -84,15 +82,15 @@ pub fn conduct_study(
 ) -> Result<StudyOutcome> {
     let since = splatraj_scene::stop::Since::now();
     let measure = |run: &Run| match request.place {
-        RunPlace::InProcess => measure_run(&plan, run, extensions, MemoryReading::Shared, since)
+        RunPlace::InProcess => measure_run(&study, run, extensions, MemoryReading::Shared, since)
             .map_err(|e| format!("{e:#}")),
         RunPlace::Child { exe } => {
             measure_in_child(exe, request.config, request.options, run.index)
         }
     };
-    let (rows, failures) = measure_runs(&plan, runs, measure, progress, since);
-    let context = StudyContext::new(&plan, &folder.base, args);
-    let study = StudyFile::new(plan, request.shard, context, rows, failures);
+    let (rows, failures) = measure_runs(&study.plan, runs, measure, progress, since);
+    let context = StudyContext::new(&study.plan, &study.base, args);
+    let study = StudyFile::new(study.plan, request.shard, context, rows, failures);
     write_study(&folder.dir, &study)?;
     if since.stopped() {
         return Err(splatraj_scene::stop::Stopped {
@@ -114,14 +112,15 @@ pub fn conduct_study(
 /// Measures run `index` of `plan` in this process, with its own peak memory (what a child of
 /// [`RunPlace::Child`] does: `splatraj study … --one index`).
 pub fn measure_one(
-    plan: &StudyPlan,
+    study: &PlannedStudy,
     index: usize,
     extensions: &Extensions,
 ) -> Result<Vec<StudyRow>> {
+    let plan = &study.plan;
     let run = plan
         .runs
         .get(index)
         .with_context(|| format!("--one {index}: the plan has {} runs", plan.runs.len()))?;
     let since = splatraj_scene::stop::Since::now();
-    measure_run(plan, run, extensions, MemoryReading::OwnProcess, since)
+    measure_run(study, run, extensions, MemoryReading::OwnProcess, since)
 }

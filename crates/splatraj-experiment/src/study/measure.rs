@@ -5,7 +5,7 @@
 //! config to the end of the optimisation, `optimisation_s` the optimisation alone. Peak memory
 //! (VmHWM) is read before the evaluation so that the evaluation's renders, the same for every
 //! variant, do not hide the variant's own peak. The evaluation is built from the base config
-//! ([`StudyPlan::evaluation_config`]): its resolution, sample grid, precision, rasterizer and
+//! ([`PlannedStudy::evaluation_config`]): its resolution, sample grid, precision, rasterizer and
 //! exact rendering rules are the same whatever the variant changed.
 
 use std::time::Instant;
@@ -15,7 +15,8 @@ use splatraj_render::camera::Pose;
 use splatraj_render::stages::{self, Stage};
 
 use super::StudyTask;
-use super::plan::{Run, StudyPlan};
+use super::plan::Run;
+use super::planned::PlannedStudy;
 use super::rows::{StageTimes, StudyRow, WindowScore};
 use crate::extensions::Extensions;
 use crate::optimise::observer;
@@ -45,7 +46,7 @@ pub enum MemoryReading {
 /// A stop requested `since` ([`splatraj_scene::stop`]) ends it at the next step or window
 /// with [`Stopped`]: a run cut short is not measured.
 pub fn measure_run(
-    plan: &StudyPlan,
+    study: &PlannedStudy,
     run: &Run,
     extensions: &Extensions,
     memory: MemoryReading,
@@ -56,14 +57,15 @@ pub fn measure_run(
         crate::children::exit_with_parent();
     }
     let started = Instant::now();
-    let config = plan.run_config(run, extensions)?;
+    let plan = &study.plan;
+    let config = study.run_config(run, extensions)?;
     let experiment = Experiment::prepare_with(&config, extensions)?;
     let variant = &plan.variants[run.variant];
     let peak = || match memory {
         MemoryReading::OwnProcess => peak_mb(),
         MemoryReading::Shared => None,
     };
-    let evaluation = Experiment::prepare_with(&plan.evaluation_config(extensions)?, extensions)?;
+    let evaluation = Experiment::prepare_with(&study.evaluation_config(extensions)?, extensions)?;
     let row = |repeat: usize, seed: u64, windows: Vec<WindowScore>| {
         let mean = |f: fn(&WindowScore) -> f64| {
             windows.iter().map(f).sum::<f64>() / windows.len().max(1) as f64

@@ -11,14 +11,15 @@
 //! variant with one seed (`seed`, `seed + 1`, … for `--seeds N`); a single-pose study runs
 //! each variant once with `N` random starts instead.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 
+use super::planned::PlannedStudy;
 use super::text::short_value;
 use super::{Design, EvaluationConfig, Quality, StudyConfig, StudyTask};
-use crate::config::{Ablation, Config};
+use crate::config::{Ablation, Config, ConfigFile, Override};
 use crate::extensions::Extensions;
 use crate::resources::check_study;
 
@@ -212,15 +213,17 @@ pub struct StudyPlan {
     pub runs: Vec<Run>,
 }
 
-impl StudyPlan {
-    /// The plan for `config` and `options`; every variant's config is loaded and checked, so
-    /// a bad value fails here naming its `--vary`/`[study]` setting.
-    pub fn new(config: &Path, options: &PlanOptions, extensions: &Extensions) -> Result<Self> {
+impl PlannedStudy {
+    /// The plan for the config `file` (read once) and `options`, with every variant's config
+    /// made and checked from it, so a bad value fails here naming its `--vary`/`[study]`
+    /// setting.
+    pub fn new(file: &ConfigFile, options: &PlanOptions, extensions: &Extensions) -> Result<Self> {
         let mut base_overrides = options.set.clone();
         if let Some(preset) = options.preset {
             base_overrides.extend(preset_overrides(preset));
         }
-        let base = Config::load_with(config, &base_overrides, extensions)?;
+        let base_edits = Override::parse_all(&base_overrides)?;
+        let base = file.config(&base_edits, extensions)?;
         let mut study = base.study.clone();
         if let Some(preset) = options.preset {
             apply_preset(preset, &base, &mut study);
@@ -255,6 +258,8 @@ impl StudyPlan {
         } else {
             default_sweep(&base)
         };
+        // The base config as TOML, only read: which keys hold tables (and of what kind) for a
+        // table value, and the baseline's value for the table; never made into a config again.
         let base_table = toml::Table::try_from(&base).context("serialising the config")?;
         let baseline_value = study
             .table_by
@@ -276,27 +281,31 @@ impl StudyPlan {
             Design::Grid => grid(&factors),
         };
         let mut variants: Vec<Variant> = Vec::new();
-        let mut resolved: Vec<String> = Vec::new();
+        let mut configs: Vec<Config> = Vec::new();
         for settings in settings {
-            let overrides: Vec<String> = settings
-                .iter()
-                .flat_map(|(k, v)| assignments(&base_table, k, v))
-                .collect();
             let label = label(&settings);
-            let mut all = base_overrides.clone();
-            all.extend(overrides.iter().cloned());
-            let variant_config = Config::load_with(config, &all, extensions)
+            let edits: Vec<Override> = settings
+                .iter()
+                .map(|(k, v)| assignments(&base_table, k, v))
+                .collect::<Result<Vec<_>>>()
+                .with_context(|| format!("study variant `{label}`"))?
+                .into_iter()
+                .flatten()
+                .collect();
+            let mut all = base_edits.clone();
+            all.extend(edits.iter().cloned());
+            let variant_config = file
+                .config(&all, extensions)
                 .with_context(|| format!("study variant `{label}`"))?;
-            let text = toml::to_string(&variant_config)?;
-            if resolved.contains(&text) {
+            if configs.contains(&variant_config) {
                 continue;
             }
-            resolved.push(text);
+            configs.push(variant_config);
             variants.push(Variant {
                 index: variants.len(),
                 label,
                 settings,
-                overrides,
+                overrides: edits.into_iter().map(|o| o.written).collect(),
             });
         }
         let runs = match study.task {
@@ -319,8 +328,8 @@ impl StudyPlan {
                 })
                 .collect(),
         };
-        Ok(StudyPlan {
-            config: config.to_path_buf(),
+        let plan = StudyPlan {
+            config: file.path.clone(),
             name: base.name.clone(),
             base_overrides,
             preset: options.preset,
@@ -335,9 +344,16 @@ impl StudyPlan {
             evaluation: study.evaluation.clone(),
             variants,
             runs,
+        };
+        Ok(PlannedStudy {
+            plan,
+            base,
+            variants: configs,
         })
     }
+}
 
+impl StudyPlan {
     /// The runs of `shard` (all runs without one).
     pub fn runs_of(&self, shard: Option<Shard>) -> Vec<Run> {
         self.runs
@@ -345,52 +361,6 @@ impl StudyPlan {
             .filter(|r| shard.is_none_or(|s| s.holds(r.index)))
             .copied()
             .collect()
-    }
-
-    /// The overrides that make run `run`'s config: base, variant, then its seed (trajectory)
-    /// or its starts (pose).
-    pub fn run_overrides(&self, run: &Run) -> Vec<String> {
-        let mut all = self.base_overrides.clone();
-        all.extend(self.variants[run.variant].overrides.iter().cloned());
-        match self.task {
-            StudyTask::Trajectory => {
-                all.push(format!(
-                    "seed={}",
-                    self.base_seed.wrapping_add(run.repeat as u64)
-                ));
-            }
-            StudyTask::Pose => all.push(format!("start.restarts={}", self.seeds)),
-        }
-        all
-    }
-
-    /// Run `run`'s config.
-    pub fn run_config(&self, run: &Run, extensions: &Extensions) -> Result<Config> {
-        Config::load_with(&self.config, &self.run_overrides(run), extensions).with_context(|| {
-            format!(
-                "study run {} (`{}`)",
-                run.index, self.variants[run.variant].label
-            )
-        })
-    }
-
-    /// The config of the fixed evaluation: the base config at the evaluation's size and
-    /// sample counts, whatever the variant.
-    pub fn evaluation_config(&self, extensions: &Extensions) -> Result<Config> {
-        let base = Config::load_with(&self.config, &self.base_overrides, extensions)?;
-        let e = &self.evaluation;
-        let mut all = self.base_overrides.clone();
-        all.push(format!(
-            "output.width={}",
-            e.width.unwrap_or(base.output.width)
-        ));
-        all.push(format!(
-            "output.height={}",
-            e.height.unwrap_or(base.output.height)
-        ));
-        all.push(format!("output.metric_samples={}", e.samples));
-        all.push(format!("output.ldj_samples={}", e.ldj_samples));
-        Config::load_with(&self.config, &all, extensions).context("the study's evaluation")
     }
 }
 
@@ -556,37 +526,40 @@ fn label(settings: &[(String, String)]) -> String {
         .join(" ")
 }
 
-/// The `--set` assignments of `key = raw` over `base`: a table value sets each of its keys
-/// when the base holds a table there with the same `kind` (or none), else the value is set
-/// whole.
-fn assignments(base: &toml::Table, key: &str, raw: &str) -> Vec<String> {
-    let parsed = raw
-        .trim_start()
-        .starts_with('{')
-        .then(|| toml::from_str::<toml::Table>(&format!("v = {raw}")).ok())
-        .flatten()
-        .and_then(|mut t| t.remove("v"));
-    match (parsed, lookup(base, key)) {
-        (Some(toml::Value::Table(over)), Some(toml::Value::Table(existing)))
-            if over
-                .get("kind")
-                .is_none_or(|k| Some(k) == existing.get("kind")) =>
+/// The edits of `key = raw` over `base`, each written as `--set` would write it: a table
+/// value sets each of its keys when the base holds a table there with the same `kind` (or
+/// none), else the value is set whole. `raw` is parsed here, once.
+fn assignments(base: &toml::Table, key: &str, raw: &str) -> Result<Vec<Override>> {
+    let whole = Override::from_text(key, raw, "--set", &format!("{key}={raw}"))?;
+    match (&whole.value, lookup(base, key)) {
+        (toml::Value::Table(over), Some(toml::Value::Table(existing)))
+            if raw.trim_start().starts_with('{')
+                && over
+                    .get("kind")
+                    .is_none_or(|k| Some(k) == existing.get("kind")) =>
         {
-            flatten(key, &over)
+            flatten(key, over)
         }
-        _ => vec![format!("{key}={raw}")],
+        _ => Ok(vec![whole]),
     }
 }
 
-/// `prefix.k=v` for every leaf of `table`.
-fn flatten(prefix: &str, table: &toml::Table) -> Vec<String> {
-    table
-        .iter()
-        .flat_map(|(k, v)| match v {
-            toml::Value::Table(t) => flatten(&format!("{prefix}.{k}"), t),
-            v => vec![format!("{prefix}.{k}={v}")],
-        })
-        .collect()
+/// An edit of `prefix.k` for every leaf `k` of `table`, written `prefix.k=v`.
+fn flatten(prefix: &str, table: &toml::Table) -> Result<Vec<Override>> {
+    let mut edits = Vec::new();
+    for (k, v) in table {
+        let key = format!("{prefix}.{k}");
+        match v {
+            toml::Value::Table(t) => edits.extend(flatten(&key, t)?),
+            v => edits.push(Override::new(
+                &key,
+                v.clone(),
+                "--set",
+                &format!("{key}={v}"),
+            )?),
+        }
+    }
+    Ok(edits)
 }
 
 /// The value at a dotted key (numeric segments index arrays).
@@ -634,21 +607,27 @@ mod tests {
         );
     }
 
+    /// The edits of `key = raw` over `base`, as written.
+    fn written(base: &toml::Table, key: &str, raw: &str) -> Vec<String> {
+        let edits = assignments(base, key, raw).unwrap();
+        edits.into_iter().map(|o| o.written).collect()
+    }
+
     #[test]
     fn a_table_value_merges_unless_its_kind_differs() {
         let base: toml::Table =
             toml::from_str("[camera]\nwidth = 1\nfov_x = 60.0\n[trajectory]\nkind = \"rbf\"\ncentres_per_window = 8\n")
                 .unwrap();
         assert_eq!(
-            assignments(&base, "camera", "{width=64,height=48}"),
+            written(&base, "camera", "{width=64,height=48}"),
             ["camera.height=48", "camera.width=64"]
         );
         assert_eq!(
-            assignments(&base, "trajectory", "{kind=\"waypoint\"}"),
+            written(&base, "trajectory", "{kind=\"waypoint\"}"),
             ["trajectory={kind=\"waypoint\"}"]
         );
         assert_eq!(
-            assignments(&base, "trajectory", "{kind=\"rbf\"}"),
+            written(&base, "trajectory", "{kind=\"rbf\"}"),
             ["trajectory.kind=\"rbf\""]
         );
     }
