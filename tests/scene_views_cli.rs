@@ -29,8 +29,18 @@ fn writes_the_page_of_a_real_scene() {
         "{}",
         stderr(&run)
     );
+    // The tabletop's guess (+z) first in the strip, then two others.
+    assert!(
+        stderr(&run).contains(
+            "which way is up: the page's first strip shows the scene upright for [0, 0, 1] \
+             (these views), "
+        ),
+        "{}",
+        stderr(&run)
+    );
     let html = std::fs::read_to_string(&out).unwrap();
     assert!(html.starts_with("<!DOCTYPE html>"));
+    assert_eq!(html.matches("<figure class=\"up-choice").count(), 3);
     assert!(html.contains("id=\"splatraj-views\""));
     assert!(html.trim_end().ends_with("</html>"));
 }

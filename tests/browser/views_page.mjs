@@ -2,7 +2,9 @@
 // with no network, a click at a known pixel gives the point the view's depth and camera give
 // (computed here from the page's data by another route than the page's script), dragging
 // sizes the ball, and the [targets] table the page writes is accepted by `splatraj run --check`,
-// which selects as many Gaussians as the page counted.
+// which selects as many Gaussians as the page counted. The "Which way is up?" strip shows three
+// distinct ups, the views' own first, and the `[scene]` line it copies is the up `run --check`
+// takes.
 //
 //   node tests/browser/views_page.mjs      (after `npm install` here and a debug build)
 //
@@ -91,7 +93,8 @@ async function shownPoint(page) {
 const scene = path.join(work, "demo.ply");
 const html = path.join(work, "views.html");
 splatraj(["scene", "demo", "--out", scene, "--gaussians", "20000"]);
-console.log(splatraj(["scene", "views", scene, "--out", html, "--views", "4", "--size", "256", "--up", "0,0,1"]).trim());
+// No --up: the views stand on the geometry's guess, and the strip offers it and two others.
+console.log(splatraj(["scene", "views", scene, "--out", html, "--views", "4", "--size", "256"]).trim());
 const data = pageData(fs.readFileSync(html, "utf8"));
 assert.ok(data.views.length >= 2, "at least two views");
 assert.equal(data.sampled, 20000, "all centres carried: counts exact");
@@ -116,6 +119,30 @@ try {
   const errors = [];
   page.on("pageerror", (e) => errors.push(String(e)));
   await page.goto(pathToFileURL(html).href);
+
+  // 0. The strip: three pictures, loaded, of three distinct ups; the first is the views' own.
+  const choices = await page.locator("figure.up-choice").evaluateAll((figures) =>
+    figures.map((f) => ({
+      up: JSON.parse(f.dataset.up),
+      inUse: f.dataset.inUse === "true",
+      line: f.querySelector("code.up-line").textContent,
+      copies: f.querySelector("button.copy-up").dataset.copy,
+      loaded: f.querySelector("img").naturalWidth > 0,
+    })));
+  assert.equal(choices.length, 3, "three ups to choose from");
+  assert.deepEqual(choices.map((c) => c.inUse), [true, false, false]);
+  assert.deepEqual(choices[0].up, data.up, "the first is the up the views use");
+  for (const [k, c] of choices.entries()) {
+    assert.ok(c.loaded, `picture ${k + 1} shows`);
+    assert.match(c.line, /^up = \[-?[0-9.]+, -?[0-9.]+, -?[0-9.]+\]$/);
+    assert.equal(c.copies, c.line);
+    assert.ok(Math.abs(Math.hypot(...c.up) - 1) < 1e-6, `unit up: ${c.up}`);
+    for (const d of choices.slice(k + 1)) {
+      const cos = c.up.reduce((s, v, i) => s + v * d.up[i], 0);
+      assert.ok(Math.abs(cos) < Math.cos((20 * Math.PI) / 180), `distinct: ${c.up} vs ${d.up}`);
+    }
+  }
+  console.log(`up choices: ${choices.map((c) => c.line).join("; ")}`);
 
   // 1. A click at a known pixel gives the depth-derived point.
   const parts = [];
@@ -157,36 +184,49 @@ try {
   const after = Number(await page.locator("#radius").inputValue());
   assert.ok(after > before, `scrolling up grows the ball: ${before} → ${after}`);
 
-  // 3. The [targets] table: copied as the button copies it (the clipboard when the browser
-  // lets us read it back, else the panel's text, which is what the button copies).
-  await page.locator("#copy-config").click();
-  const shown = await page.locator("#targets").inputValue();
-  let copied = shown;
-  try {
-    await context.grantPermissions(["clipboard-read", "clipboard-write"]);
-    copied = await page.evaluate(() => navigator.clipboard.readText());
-  } catch (e) {
-    console.log(`clipboard not readable here (${String(e).split("\n")[0]}); using the panel's text`);
+  // 3. The [targets] table and the up line: copied as the buttons copy them (the clipboard
+  // when the browser lets us read it back, else the text the button carries).
+  async function copyWith(button, shown) {
+    await button.click();
+    try {
+      await context.grantPermissions(["clipboard-read", "clipboard-write"]);
+      return await page.evaluate(() => navigator.clipboard.readText());
+    } catch (e) {
+      console.log(`clipboard not readable here (${String(e).split("\n")[0]}); using the shown text`);
+      return shown;
+    }
   }
+  const shown = await page.locator("#targets").inputValue();
+  const copied = await copyWith(page.locator("#copy-config"), shown);
   assert.equal(copied, shown);
+  const upLine = await copyWith(page.locator("figure.up-choice").first().locator("button.copy-up").first(),
+    choices[0].line + "\n");
+  assert.equal(upLine, choices[0].line + "\n");
+  assert.equal(await page.locator("#up-status").textContent(), "Copied.");
   assert.match(copied, /^\[targets\]\nsource = "region"\n\n\[targets\.regions\]\nfirst = \{ sphere = \[/);
   if (process.env.SCREENSHOT) await page.screenshot({ path: process.env.SCREENSHOT, fullPage: true });
   assert.deepEqual(errors, [], "no script errors");
   assert.deepEqual(requests, [], "no network requests");
 
-  // 4. `run --check` accepts it and selects what the page counted.
+  // 4. `run --check` accepts them: it selects what the page counted and takes the up line
+  // as `scene.up` (the views' own, and another candidate's).
   const config = path.join(work, "picked.toml");
-  fs.writeFileSync(config, [
+  const withUp = (line) => fs.writeFileSync(config, [
     'name = "picked"',
     "[scene]",
     `path = ${JSON.stringify(scene)}`,
-    "up = [0.0, 0.0, 1.0]",
+    line.trim(),
     "[output]",
     `runs_dir = ${JSON.stringify(path.join(work, "runs"))}`,
     "",
     copied,
   ].join("\n"));
+  const takes = (check, up) => assert.ok(
+    check.includes(`up [${up.map((v) => v.toFixed(3)).join(", ")}] (config)`),
+    `run --check takes up ${up}:\n${check}`);
+  withUp(upLine);
   const check = splatraj(["run", config, "--check"]);
+  takes(check, choices[0].up);
   for (const [q, part] of parts.entries()) {
     const m = check.match(new RegExp(`query ${q}: "${part.name}" → (\\d+) Gaussians`));
     assert.ok(m, `run --check grounds ${part.name}:\n${check}`);
@@ -196,7 +236,10 @@ try {
       `${part.name}: run selects ${m[1]}, the page counted ${part.count}`);
   }
   assert.match(check, /check passed/);
-  console.log(`run --check accepted the copied [targets] (${parts.map((p) => p.name).join(", ")})`);
+  withUp(choices[1].line);
+  takes(splatraj(["run", config, "--check"]), choices[1].up);
+  console.log(`run --check accepted the copied [targets] (${parts.map((p) => p.name).join(", ")}) ` +
+    `and the up lines ${choices[0].line} and ${choices[1].line}`);
 } finally {
   await context.close();
   fs.rmSync(profile, { recursive: true, force: true });

@@ -313,9 +313,9 @@ impl Experiment {
         if experiment.up.doubtful() {
             lines.push(
                 "warning: the up guess is unsure; `splatraj scene views SCENE --out views.html` \
-                 shows the scene as a run would film it (`--up x,y,z` to try another), and \
-                 `scene.up` sets it (y-down captures: [0, -1, 0]; z-up: [0, 0, 1]), or \
-                 `scene.cameras` takes it from the capture's cameras"
+                 shows the scene upright for the guess and its two next candidates, each \
+                 with the `scene.up` line that sets it (y-down captures: [0, -1, 0]; z-up: \
+                 [0, 0, 1]), or `scene.cameras` takes it from the capture's cameras"
                     .to_string(),
             );
         }

@@ -171,7 +171,10 @@ fn counts_are_marked_as_estimates_when_the_centres_are_sampled() {
     assert_eq!(written.up_choices[0], written.up.up);
     assert_eq!(html.matches("<figure class=\"up-choice").count(), 3);
     assert_eq!(html.matches("data-in-use=\"true\"").count(), 1);
-    assert!(html.contains("data-copy=\"up = [0, 0, 1]\""), "the guess's line");
+    assert!(
+        html.contains("data-copy=\"up = [0, 0, 1]\""),
+        "the guess's line"
+    );
     let data = page_data(&html);
     assert_eq!(data["sampled"], 1000);
     assert_eq!(

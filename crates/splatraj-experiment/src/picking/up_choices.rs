@@ -30,6 +30,8 @@ pub const SAME_AXIS_DEGREES: f64 = 20.0;
 /// The strip's cameras look at the scene from this far above its horizon: a floor or a base
 /// then shows as ground, not as a line.
 const ELEVATION_DEGREES: f64 = 20.0;
+/// A candidate's camera looks across the first up, turned this far toward it.
+const TOWARD_SIDEWAYS_DEGREES: f64 = 30.0;
 /// Horizontal directions tried for the scene's broadest side.
 const SIDES_TRIED: usize = 36;
 
@@ -164,21 +166,29 @@ pub fn upright_view(
     let (east, north) = up.any_orthonormal_pair();
     // The box is thinnest, seen along this horizontal direction: its broadest face shows.
     let width = |d: DVec3| d.abs().dot(sides);
-    let across = sideways
-        .map(|s| up.cross(DVec3::from(s)).normalize_or_zero())
-        .filter(|d| *d != DVec3::ZERO);
-    let mut side = across.unwrap_or_else(|| {
-        (0..SIDES_TRIED)
-            .map(|k| {
-                let a = std::f64::consts::PI * k as f64 / SIDES_TRIED as f64;
-                a.cos() * east + a.sin() * north
-            })
-            .min_by(|a, b| width(*a).total_cmp(&width(*b)))
-            .unwrap_or(east)
+    let toward_origin = |d: DVec3| if d.dot(-centre) < 0.0 { -d } else { d };
+    let across = sideways.map(DVec3::from).and_then(|s| {
+        let level = (s - up * s.dot(up)).normalize_or_zero();
+        let w = up.cross(level);
+        (w != DVec3::ZERO).then_some((w, level))
     });
-    if side.dot(-centre) < 0.0 {
-        side = -side;
-    }
+    let side = match across {
+        // Turned a little toward `sideways`, so that the ground it stands for shows from its
+        // upper side (a tabletop seen exactly edge on is a line).
+        Some((w, level)) => {
+            let a = TOWARD_SIDEWAYS_DEGREES.to_radians();
+            a.cos() * toward_origin(w) + a.sin() * level
+        }
+        None => toward_origin(
+            (0..SIDES_TRIED)
+                .map(|k| {
+                    let a = std::f64::consts::PI * k as f64 / SIDES_TRIED as f64;
+                    a.cos() * east + a.sin() * north
+                })
+                .min_by(|a, b| width(*a).total_cmp(&width(*b)))
+                .unwrap_or(east),
+        ),
+    };
     let e = ELEVATION_DEGREES.to_radians();
     let direction = e.cos() * side + e.sin() * up;
     let radius = (0.5 * sides.length()).max(1e-6);
