@@ -5,8 +5,8 @@
 use base64::Engine;
 use base64::engine::general_purpose::STANDARD as BASE64;
 use splatraj_report::report::{
-    CostHistory, FrameMetrics, Keyframe, PathSample, RunReport, SceneView, Table, VideoSource,
-    Window,
+    CostHistory, FrameMetrics, Keyframe, PathSample, RunReport, SceneView, Shot, Table,
+    VideoSource, Window,
 };
 
 fn made_up_run(video: VideoSource) -> RunReport {
@@ -56,6 +56,7 @@ fn made_up_run(video: VideoSource) -> RunReport {
         })
         .collect();
     RunReport {
+        shots: Vec::new(),
         title: "demo".into(),
         folder: "runs/demo/2026-01-01T00-00-00Z".into(),
         summary: vec![("scene".into(), "demo (seed 7)".into())],
@@ -238,4 +239,58 @@ fn a_large_video_is_linked_beside_the_page() {
     .unwrap();
     assert!(attributes(&doc, "src").contains(&"video.mp4"));
     assert!(attributes(&doc, "href").contains(&"video.mp4"));
+}
+
+#[test]
+fn the_shot_list_names_each_shot_its_cut_and_shows_its_first_frame() {
+    let run = RunReport {
+        shots: vec![
+            Shot {
+                windows: vec![0],
+                queries: vec!["red mug".into()],
+                start: 0.0,
+                end: 0.5,
+                cut_reason: None,
+            },
+            Shot {
+                windows: vec![1],
+                queries: vec!["a <b> & \"c\"".into()],
+                start: 0.5,
+                end: 1.0,
+                cut_reason: Some("a pan turning 170° needs 5.7 s".into()),
+            },
+        ],
+        ..made_up_run(VideoSource::Link("video.mp4".into()))
+    };
+    let page = run.to_html().unwrap();
+    let doc = roxmltree::Document::parse_with_options(
+        &page,
+        roxmltree::ParsingOptions {
+            allow_dtd: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let section = doc
+        .descendants()
+        .find(|n| n.attribute("id") == Some("shots"))
+        .expect("a shots section");
+    let words: String = section.descendants().filter_map(|n| n.text()).collect();
+    assert!(
+        words.contains("a cut: a pan turning 170° needs 5.7 s"),
+        "{words}"
+    );
+    assert!(words.contains("1: a <b> & \"c\""), "{words}");
+    let thumbnails = section
+        .descendants()
+        .filter(|n| n.has_tag_name("img"))
+        .count();
+    assert_eq!(thumbnails, 2);
+    // A run folder from before the shot list says so.
+    assert!(
+        made_up_run(VideoSource::Link("video.mp4".into()))
+            .to_html()
+            .unwrap()
+            .contains("No shot list in this run folder")
+    );
 }

@@ -189,6 +189,18 @@ fn auto_cuts_between_two_sides_of_a_small_part_and_pans_between_neighbours() {
         route: None,
     };
     assert_eq!(judge_join(&neighbours, &limits(1.0)), JoinKind::Pan);
+    // Two parts of a room 0.7 apart, each seen from 0.3 in front: the camera's move sweeps
+    // 130° about the first part, but it trucks from one to the next (neither view looks at
+    // their common centre): a pan, as the demo's pans pass the verdict at 3 s windows.
+    let far = DVec3::new(0.7, 0.0, 0.0);
+    let front = DVec3::new(0.0, -0.3, 0.0);
+    let trucking = Join {
+        from: Pose::look_at(mug + front, mug, UP).unwrap(),
+        to: Pose::look_at(far + front, far, UP).unwrap(),
+        parts: parts(mug, far, 0.05),
+        route: None,
+    };
+    assert_eq!(judge_join(&trucking, &limits(3.0)), JoinKind::Pan);
     // A 10 s window gives even the opposite sides time enough to pan, but the straight way
     // between them runs through the part: still a cut, for another reason.
     assert!(matches!(

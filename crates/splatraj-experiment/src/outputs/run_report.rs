@@ -18,7 +18,7 @@ use serde_json::Value;
 use splatraj_report::CameraPose;
 use splatraj_report::report::{
     CostHistory, FrameMetrics, INLINE_VIDEO_BYTES, Keyframe, PathSample, RunReport, SceneView,
-    Table, VideoSource, Window,
+    Shot, Table, VideoSource, Window,
 };
 use splatraj_scene::demo::{DemoConfig, demo_scene};
 use splatraj_scene::{InvalidPolicy, ReadOptions, Scene, read_scene};
@@ -70,6 +70,7 @@ pub fn run_report(dir: &Path, scene: Option<&Scene>) -> Result<RunReport> {
         .and_then(|c| c.get("name")?.as_str().map(String::from))
         .unwrap_or_else(|| "run".into());
     let windows = windows_of(&trajectory);
+    let shots = shots_of(&trajectory);
     let measured = metrics
         .get("windows")
         .and_then(Value::as_array)
@@ -94,6 +95,7 @@ pub fn run_report(dir: &Path, scene: Option<&Scene>) -> Result<RunReport> {
         view: scene.map(|s| scene_view(s, &trajectory)),
         along,
         windows,
+        shots,
         video,
         config,
     })
@@ -281,6 +283,39 @@ fn windows_of(trajectory: &Value) -> Vec<Window> {
                 start: w["start"].as_f64().unwrap_or(0.0),
                 end: w["end"].as_f64().unwrap_or(1.0),
                 target_ratio: w["target_ratio"].as_f64().unwrap_or(f64::NAN),
+            })
+            .collect()
+    })
+    .unwrap_or_default()
+}
+
+/// The shots of `trajectory.json` (none in a file written before they were recorded).
+fn shots_of(trajectory: &Value) -> Vec<Shot> {
+    let list = trajectory.get("shots").and_then(Value::as_array);
+    let strings = |v: &Value| -> Vec<String> {
+        v.as_array()
+            .map(|a| {
+                a.iter()
+                    .filter_map(|s| s.as_str().map(String::from))
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    list.map(|a| {
+        a.iter()
+            .map(|s| Shot {
+                windows: s["windows"]
+                    .as_array()
+                    .map(|w| {
+                        w.iter()
+                            .filter_map(|i| i.as_u64().map(|i| i as usize))
+                            .collect()
+                    })
+                    .unwrap_or_default(),
+                queries: strings(&s["queries"]),
+                start: s["start"].as_f64().unwrap_or(0.0),
+                end: s["end"].as_f64().unwrap_or(1.0),
+                cut_reason: s["cut_reason"].as_str().map(String::from),
             })
             .collect()
     })

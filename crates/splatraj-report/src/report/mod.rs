@@ -49,6 +49,22 @@ pub struct Window {
     pub target_ratio: f64,
 }
 
+/// One shot of the run: a run of windows joined by pans; a cut begins every shot but the
+/// first.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Shot {
+    /// Its windows.
+    pub windows: Vec<usize>,
+    /// Their queries.
+    pub queries: Vec<String>,
+    /// Start of the shot in t.
+    pub start: f64,
+    /// End of the shot in t.
+    pub end: f64,
+    /// Why the cut into it was made (None for the first shot).
+    pub cut_reason: Option<String>,
+}
+
 /// One rendered frame with its metrics, in time order.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FrameMetrics {
@@ -110,6 +126,8 @@ pub struct RunReport {
     pub metrics: Table,
     /// The query windows.
     pub windows: Vec<Window>,
+    /// The shots (`trajectory.json`'s `shots`; empty for a run written before them).
+    pub shots: Vec<Shot>,
     /// Keyframes of each window, in window order.
     pub keyframes: Vec<Vec<Keyframe>>,
     /// Metrics of every frame.
@@ -154,6 +172,7 @@ impl RunReport {
         for (id, name) in [
             ("summary", "summary"),
             ("video", "video"),
+            ("shots", "shots"),
             ("keyframes", "keyframes"),
             ("along", "along t"),
             ("history", "cost history"),
@@ -215,6 +234,8 @@ impl RunReport {
             None => page.push_str("<p class=\"note\">No video in this run folder.</p>"),
         }
         page.push_str("</section>\n");
+
+        page.push_str(&self.shot_list());
 
         page.push_str("<section id=\"keyframes\"><h2>Keyframes</h2>");
         if self.keyframes.iter().all(Vec::is_empty) {
@@ -285,6 +306,60 @@ impl RunReport {
             escape(&self.config)
         ));
         Ok(page)
+    }
+}
+
+impl RunReport {
+    /// The shot list: per shot its windows, its span of t, how it begins (a cut and why)
+    /// and its first keyframe as a thumbnail.
+    fn shot_list(&self) -> String {
+        let mut html = String::from("<section id=\"shots\"><h2>Shots</h2>");
+        if self.shots.is_empty() {
+            html.push_str("<p class=\"note\">No shot list in this run folder.</p></section>\n");
+            return html;
+        }
+        if self.shots.len() == 1 {
+            html.push_str(
+                "<p class=\"note\">One continuous shot: every window pans on to the next \
+                 (<code>[output] transitions</code>).</p>",
+            );
+        }
+        html.push_str(
+            "<table><tr><th>shot</th><th>windows</th><th>t</th><th>begins with</th>\
+             <th>first frame</th></tr>",
+        );
+        for (j, shot) in self.shots.iter().enumerate() {
+            let windows: Vec<String> = shot
+                .windows
+                .iter()
+                .zip(&shot.queries)
+                .map(|(i, q)| format!("{i}: {}", escape(q)))
+                .collect();
+            let begins = match &shot.cut_reason {
+                Some(reason) => format!("a cut: {}", escape(reason)),
+                None => "the start".to_string(),
+            };
+            let thumbnail = shot
+                .windows
+                .first()
+                .and_then(|&i| self.keyframes.get(i))
+                .and_then(|frames| frames.first())
+                .map_or(String::new(), |k| {
+                    format!(
+                        "<img alt=\"{}\" style=\"width:160px\" src=\"data:image/png;base64,{}\"/>",
+                        escape(&k.name),
+                        BASE64.encode(&k.png)
+                    )
+                });
+            html.push_str(&format!(
+                "<tr><td>{j}</td><td>{}</td><td>{:.3}–{:.3}</td><td>{begins}</td><td>{thumbnail}</td></tr>",
+                windows.join(", "),
+                shot.start,
+                shot.end
+            ));
+        }
+        html.push_str("</table></section>\n");
+        html
     }
 }
 
