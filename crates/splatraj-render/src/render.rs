@@ -513,9 +513,16 @@ pub fn render_at(
     // Screen space: the fused projection's packed rows, or the tensor projection's outputs.
     let (splats, depth) = match request.rasterizer {
         Rasterizer::Fused => {
+            let mut rows_read = GaussianBits::new(batch * u);
+            for list in &work {
+                for &g in &list.gaussians {
+                    rows_read.insert(list.batch * u + g as usize);
+                }
+            }
             let plan = ProjectionPlan {
                 used: used.iter().map(|&g| g as u32).collect(),
                 camera: ProjectionCamera::new(&request.intrinsics, request.near),
+                rows_read: Some(Arc::new(rows_read)),
             };
             let rows = project_packed_zoomed(&scene.geometry, poses.clone(), zoom, plan); // [B, U, 7]
             let depth = rows.clone().narrow(2, PackedColumn::Depth as usize, 1); // [B, U, 1]

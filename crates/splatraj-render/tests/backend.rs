@@ -390,6 +390,7 @@ fn gpu_projection_matches_host_projection() {
             ProjectionPlan {
                 used: used.clone(),
                 camera: ProjectionCamera::new(&intrinsics, NEAR_PLANE),
+                rows_read: None,
             },
         );
         let w = Tensor::<3>::from_data(
@@ -495,6 +496,7 @@ fn gpu_zoomed_projection_matches_host_projection() {
             ProjectionPlan {
                 used: used.clone(),
                 camera: ProjectionCamera::new(&intrinsics, NEAR_PLANE),
+                rows_read: None,
             },
         );
         let w = Tensor::<3>::from_data(

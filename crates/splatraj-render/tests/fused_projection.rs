@@ -76,6 +76,7 @@ fn project(
             ProjectionPlan {
                 used: used.to_vec(),
                 camera: ProjectionCamera::new(&intrinsics, NEAR_PLANE),
+                rows_read: None,
             },
         ),
         Projection::Tensor => tensor_packed(&geometry, poses.clone(), &intrinsics, used),

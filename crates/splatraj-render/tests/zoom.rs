@@ -58,6 +58,7 @@ fn packed(
             ProjectionPlan {
                 used: (0..n as u32).collect(),
                 camera: ProjectionCamera::new(intrinsics, NEAR_PLANE),
+                rows_read: None,
             },
         ),
         Projection::Tensor => {

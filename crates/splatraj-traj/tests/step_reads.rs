@@ -24,7 +24,7 @@ use splatraj_traj::costs::{
     default_prior_radius,
 };
 use splatraj_traj::optimise::{
-    Flow, ObjectView, Problem, TrajectoryOptions, WindowTarget, object_start_poses,
+    Flow, ObjectView, Problem, StepPasses, TrajectoryOptions, WindowTarget, object_start_poses,
     optimise_trajectory, window_start_trajectory,
 };
 use splatraj_traj::trajectory::{Polynomial, Rbf, Trajectory, TrajectoryModel};
@@ -68,6 +68,19 @@ fn windows(scene: &Scene, names: &[&str]) -> Vec<WindowTarget> {
 
 #[test]
 fn a_step_reads_once_and_the_scene_is_uploaded_once() {
+    let shared = counted_steps(StepPasses::Shared);
+    let per_window = counted_steps(StepPasses::PerWindow);
+    // The same images either way, so the same optimisation (to f32 rounding).
+    for (a, b) in shared.iter().zip(&per_window) {
+        assert!(
+            (a - b).abs() <= 1e-5 * b.abs().max(1.0),
+            "{shared:?} vs {per_window:?}"
+        );
+    }
+}
+
+/// Five steps of two windows with every kind of cost, counted; the sampled loss of each step.
+fn counted_steps(passes: StepPasses) -> Vec<f64> {
     let _counted = COUNTED.lock().unwrap();
     let scene = scene();
     let windows = windows(&scene, &["blue box", "red mug"]);
@@ -109,8 +122,9 @@ fn a_step_reads_once_and_the_scene_is_uploaded_once() {
     let start = window_start_trajectory(model, &per_window, &device, DType::F32)
         .unwrap()
         .record();
-    let problem =
-        Problem::new(&on_device, &windows, &costs, intrinsics()).with_occupancy(Some(&occupancy));
+    let problem = Problem::new(&on_device, &windows, &costs, intrinsics())
+        .with_occupancy(Some(&occupancy))
+        .with_step_passes(passes);
     let iterations = 5;
     let options = TrajectoryOptions {
         iterations,
@@ -136,15 +150,22 @@ fn a_step_reads_once_and_the_scene_is_uploaded_once() {
         counts.scene_uploads, 0,
         "the scene is uploaded once, before"
     );
-    // Both windows and both objects alone share one render pass a step.
+    // Both windows and both objects alone share one render pass a step, or each window
+    // (with its object alone) has one.
+    let per_step = match passes {
+        StepPasses::Shared => 1,
+        StepPasses::PerWindow => windows.len() as u64,
+    };
     assert_eq!(
-        counts.renders, iterations as u64,
-        "one render pass per step: {counts:?}"
+        counts.renders,
+        per_step * iterations as u64,
+        "{passes:?}: render passes: {counts:?}"
     );
     assert!(
         counts.uploads > 0,
         "poses, indices and mask values go up each pass"
     );
+    result.history.iter().map(|row| row.total).collect()
 }
 
 /// A cost that is 0 and whose gradient is NaN from step 2 on (√u at u = 0, u ≡ 0).

@@ -14,7 +14,7 @@ use splatraj_traj::metrics::{
     Smoothness, WindowMetrics, WindowObject, trajectory_ldj, verdict, window_metrics,
 };
 use splatraj_traj::optimise::{
-    Flow, Problem, StopReason, TrajectoryResult, TrajectoryStep, optimise_trajectory,
+    Flow, Problem, StepPasses, StopReason, TrajectoryResult, TrajectoryStep, optimise_trajectory,
 };
 use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord};
 
@@ -289,6 +289,7 @@ impl Experiment {
                 .with_rasterizer(self.config.rasterizer)
                 .with_approximations(self.config.approximations)
                 .with_occupancy(occupancy.as_ref())
+                .with_step_passes(StepPasses::for_backend(self.config.backend))
                 .with_seconds(self.path_seconds());
             let mut restart_options = optimiser.clone();
             restart_options.iterations = steps - steps_before;

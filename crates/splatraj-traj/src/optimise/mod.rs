@@ -31,7 +31,9 @@ use crate::costs::{CostError, CostTerms};
 use crate::trajectory::TrajectoryError;
 
 pub use pans::{PanLimits, pan_shares};
-pub use problem::{Evaluated, PoseLoss, Problem, StepEvaluation, WindowRenders, WindowSamples};
+pub use problem::{
+    Evaluated, PoseLoss, Problem, StepEvaluation, StepPasses, WindowRenders, WindowSamples,
+};
 pub use route::{Route, RouteKind, RoutePlanner, Transition, plan_transitions};
 pub use sgld::{SgldOptions, SgldResult, SgldSample, sample_poses_sgld};
 pub use single_pose::{

@@ -10,6 +10,7 @@
 //! [`Cost::channels`]: crate::costs::Cost::channels
 
 use burn::tensor::{DType, Device, Tensor};
+use splatraj_render::backend::BackendKind;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::focus::Surroundings;
 use splatraj_render::host::{OnDevice, to_host};
@@ -49,6 +50,36 @@ pub struct Problem<'a> {
     pub seconds: Option<f64>,
     /// Rendering shortcuts of the optimisation passes (exact by default).
     pub approximations: Approximations,
+    /// How the windows of a step share render calls.
+    pub step_passes: StepPasses,
+}
+
+/// How the windows of an optimisation step share render calls ([`Problem::evaluate_windows`]).
+///
+/// One call for all windows makes a step's launches independent of the number of windows,
+/// which is what a GPU is bound by. But one call lays the packed rows out per pose over the
+/// union U of every window's Gaussians (`[B, U, 7]`, each pose reading only its own part),
+/// and on the CPU moving those dense rows costs more than the calls it saves: demo 1 M,
+/// 3 windows × 4 samples with each object alone, 128×72, flex on 2 cores: 1.27 s a step in
+/// one call, 0.64 s in one call per window (docs/gpu.md, "One pass a step"). Rows laid out
+/// only where a pose reads them would make one call the better choice everywhere.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum StepPasses {
+    /// One render call for every window of the step, each object alone included (the GPU).
+    Shared,
+    /// One render call per window, its object alone included (the CPU).
+    #[default]
+    PerWindow,
+}
+
+impl StepPasses {
+    /// The faster choice on `backend` (measured; see the type's docs).
+    pub fn for_backend(backend: BackendKind) -> Self {
+        match backend {
+            BackendKind::Wgpu => StepPasses::Shared,
+            BackendKind::Flex | BackendKind::Ndarray => StepPasses::PerWindow,
+        }
+    }
 }
 
 /// How a problem's windows render ([`Problem::renders`]): the request, and each window's
@@ -84,7 +115,8 @@ pub struct StepEvaluation {
     pub windows: Vec<CostTerms>,
     /// Every sample's object mask, windows one after the other.
     pub masks: Option<Tensor<3>>,
-    /// How much compositing work the pass had (None when nothing was rendered).
+    /// How much compositing work the passes had, summed over them (None when nothing was
+    /// rendered).
     pub stats: Option<RenderStats>,
 }
 
@@ -151,7 +183,14 @@ impl<'a> Problem<'a> {
             occupancy: None,
             seconds: None,
             approximations: Approximations::default(),
+            step_passes: StepPasses::default(),
         }
+    }
+
+    /// The same problem with its windows sharing render calls as `passes` says.
+    pub fn with_step_passes(mut self, passes: StepPasses) -> Self {
+        self.step_passes = passes;
+        self
     }
 
     /// The same problem with rendering shortcuts (`[approximations]`; not for metrics).
@@ -327,11 +366,12 @@ impl<'a> Problem<'a> {
         })
     }
 
-    /// Renders what the costs read for the samples of several windows in **one pass** and
-    /// evaluates each window's costs at step `step`: `poses` `[ΣS, 6]` holds the windows'
-    /// samples one window after the other, as `windows` lists them. One render call for the
-    /// whole step (each window's object alone included) keeps the launches and the host
-    /// decisions of a step from growing with the number of windows (docs/gpu.md).
+    /// Renders what the costs read for the samples of several windows and evaluates each
+    /// window's costs at step `step`: `poses` `[ΣS, 6]` holds the windows' samples one window
+    /// after the other, as `windows` lists them. With [`StepPasses::Shared`] one render call
+    /// serves the whole step (each window's object alone included), so the launches of a step
+    /// do not grow with the number of windows; with [`StepPasses::PerWindow`] each window has
+    /// a call of its own (docs/gpu.md, "One pass a step").
     /// `renders`: [`Problem::renders`] when the caller keeps it (made here otherwise).
     pub fn evaluate_windows(
         &self,
@@ -366,6 +406,35 @@ impl<'a> Problem<'a> {
                 owned.as_ref()
             }
         };
+        if self.step_passes == StepPasses::PerWindow && windows.len() > 1 {
+            let mut each = StepEvaluation {
+                windows: Vec::with_capacity(windows.len()),
+                masks: None,
+                stats: None,
+            };
+            let mut masks = Vec::with_capacity(windows.len());
+            let mut offset = 0;
+            for w in windows {
+                let count = w.count;
+                let window_poses = poses.clone().narrow(0, offset, count);
+                offset += count;
+                let one = self.evaluate_windows(window_poses, vec![w], step, renders)?;
+                each.windows.extend(one.windows);
+                masks.extend(one.masks);
+                each.stats = match (each.stats, one.stats) {
+                    (Some(a), Some(b)) => Some(RenderStats {
+                        tiles: a.tiles + b.tiles,
+                        pairs: a.pairs + b.pairs,
+                        gaussians_used: a.gaussians_used + b.gaussians_used,
+                    }),
+                    (a, b) => a.or(b),
+                };
+            }
+            if masks.len() == each.windows.len() {
+                each.masks = Some(Tensor::cat(masks, 0));
+            }
+            return Ok(each);
+        }
         let host_samples: Option<Vec<Pose>> = windows
             .iter()
             .map(|w| w.host.map(|h| h.samples.iter().map(|&p| Pose(p))))

@@ -4,9 +4,9 @@
 //! Each step k, for every query window i (docs/conventions.md "Optimisation problem"):
 //! 1. draw S times stratified inside T_i ([`super::sampling`]);
 //! 2. poses Φ(t) = Ψ(t)·W `[S, 6]` (one matmul, differentiable in W);
-//! 3. render the window's object mask at all S poses, object-pruned; every window's samples
-//!    (and each object alone, when a cost reads it) share one render call
-//!    ([`Problem::evaluate_windows`]);
+//! 3. render the window's object mask at all S poses, object-pruned; on a GPU every window's
+//!    samples (and each object alone, when a cost reads it) share one render call
+//!    ([`Problem::evaluate_windows`], [`super::StepPasses`]);
 //! 4. evaluate the [`WeightedCosts`] at step k and average over the S samples.
 //!
 //! The loss is the mean over windows of those averages, the Monte Carlo estimate of
@@ -346,7 +346,7 @@ pub fn optimise_trajectory(
             }
         }
 
-        // Every window's samples in one pass: one render call a step, whatever the windows.
+        // Every window's samples together: one render call a step on a GPU (`StepPasses`).
         let samples: usize = host.windows.iter().map(|w| w.samples.1).sum();
         let window_samples: Vec<WindowSamples> = host
             .windows

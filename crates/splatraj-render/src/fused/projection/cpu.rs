@@ -12,6 +12,7 @@
 use rayon::prelude::*;
 
 use super::{PackedColumn, ProjectionCamera, SPLAT_COLUMNS};
+use crate::bitset::GaussianBits;
 use crate::camera::SERIES_BELOW_THETA_SQ;
 use crate::fused::real::Real;
 use crate::project::{LOW_PASS, NORMALISED_DET_FLOOR};
@@ -421,13 +422,15 @@ fn lenses<E: Real>(camera: &ProjectionCamera, zoom: &[f64]) -> Vec<Lens<E>> {
 }
 
 /// The packed rows `[B, U, 7]` of the Gaussians `used` (scene indices) seen from `poses`
-/// (`[B, 6]`, Φ = ω, c) through `camera` zoomed by `zoom` (`[B]`, s > 0).
+/// (`[B, 6]`, Φ = ω, c) through `camera` zoomed by `zoom` (`[B]`, s > 0); with `rows_read`,
+/// only those rows (the rest zero).
 pub fn forward<E: Real>(
     poses: &[f64],
     zoom: &[f64],
     scene: SceneRows<'_, E>,
     used: &[u32],
     camera: &ProjectionCamera,
+    rows_read: Option<&GaussianBits>,
 ) -> Vec<E> {
     let (_, frames) = frames::<E>(poses);
     let lenses = lenses::<E>(camera, zoom);
@@ -438,6 +441,9 @@ pub fn forward<E: Real>(
         .for_each(|(chunk, out)| {
             for (i, packed) in out.chunks_exact_mut(SPLAT_COLUMNS).enumerate() {
                 let r = chunk * ROWS_PER_CHUNK + i;
+                if rows_read.is_some_and(|read| !read.contains(r)) {
+                    continue;
+                }
                 let (b, g) = (r / used.len(), used[r % used.len()] as usize);
                 packed.copy_from_slice(&scene.project(g, &frames[b], &lenses[b]).out);
             }

@@ -34,6 +34,7 @@ use burn::backend::{Backend, Dispatch, TensorMetadata, backend_extension};
 use burn::tensor::{DType, Tensor, TensorData};
 
 use super::real::Real;
+use crate::bitset::GaussianBits;
 use crate::camera::Intrinsics;
 use crate::project::{FOV_CLAMP, SceneTensors};
 
@@ -106,6 +107,11 @@ pub struct ProjectionPlan {
     pub used: Vec<u32>,
     /// The camera.
     pub camera: ProjectionCamera,
+    /// The rows b·U + u some tile list reads, when known: the host kernels project only
+    /// those (the others stay zero; nothing reads them). Poses of one pass that look at
+    /// different objects share U but each reads only its own part of it, so without this a
+    /// pass of several windows would project every pose's rows for every window. `[B·U] bits`
+    pub rows_read: Option<Arc<GaussianBits>>,
 }
 
 /// The fused projection, dispatched to the backend a tensor lives on.
@@ -217,7 +223,8 @@ pub fn host_forward<B: HostView>(
                     components,
                     opacities,
                 };
-                cpu::forward(poses, zoom, scene, &plan.used, &plan.camera)
+                let rows_read = plan.rows_read.as_deref();
+                cpu::forward(poses, zoom, scene, &plan.used, &plan.camera, rows_read)
             })
         })
     }
