@@ -21,8 +21,7 @@ use anyhow::{Context, Result};
 
 use super::StudyTask;
 use super::files::STUDY_NAMES;
-use super::plan::Run;
-use super::planned::PlannedStudy;
+use super::plan::{PlannedStudy, Run};
 use crate::config::Config;
 use crate::config::scene::SceneConfig;
 use crate::extensions::Extensions;

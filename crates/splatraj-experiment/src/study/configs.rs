@@ -1,27 +1,14 @@
-//! A study's plan with its typed configs: the base config and one per variant, made once
-//! from the config file read once ([`crate::config::ConfigFile`]). A run's config is its
-//! variant's with the seed (trajectory) or the starts (pose) set, and the fixed evaluation's
-//! is the base's at the evaluation's size and sample counts: typed fields changed, nothing
-//! read or parsed again.
+//! The config of each run of a study and of its fixed evaluation, from the typed configs its
+//! plan was made of ([`PlannedStudy`]): a run's is its variant's with the seed (trajectory) or
+//! the starts (pose) set, the evaluation's is the base's at the evaluation's size and sample
+//! counts. Typed fields changed; nothing read or parsed again.
 
 use anyhow::{Context, Result};
 
 use super::StudyTask;
-use super::plan::{Run, StudyPlan};
+use super::plan::{PlannedStudy, Run};
 use crate::config::Config;
 use crate::extensions::Extensions;
-
-/// A study ready to check and run: its plan (what `study.json` records) and the configs the
-/// plan was made of.
-#[derive(Debug, Clone)]
-pub struct PlannedStudy {
-    /// The plan.
-    pub plan: StudyPlan,
-    /// The base config with the plan's base overrides (`--set`, the preset's).
-    pub base: Config,
-    /// Each variant's config, in the plan's order.
-    pub variants: Vec<Config>,
-}
 
 impl PlannedStudy {
     /// Run `run`'s config: its variant's, with its seed (trajectory: the base seed plus the

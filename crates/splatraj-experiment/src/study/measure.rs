@@ -15,8 +15,7 @@ use splatraj_render::camera::Pose;
 use splatraj_render::stages::{self, Stage};
 
 use super::StudyTask;
-use super::plan::Run;
-use super::planned::PlannedStudy;
+use super::plan::{PlannedStudy, Run};
 use super::rows::{StageTimes, StudyRow, WindowScore};
 use crate::extensions::Extensions;
 use crate::optimise::observer;

@@ -3,9 +3,9 @@
 //! A study runs variants of one experiment and measures each the same way. [`plan`] makes the
 //! variants (factors from `--vary KEY=V1,V2`, the `[study]` table, a preset or the default
 //! sweep of every accuracy-for-time knob; one factor at a time around the config, or the full
-//! grid) and the runs (variant × seed), and slices them into shards; [`planned`] holds the
-//! plan with its typed configs, made from the config file read once (every run's and the
-//! evaluation's config is one of them with typed fields changed). [`measure`] runs one run
+//! grid) and the runs (variant × seed), and slices them into shards, with its typed configs
+//! (the base and one per variant) made from the config file read once; [`configs`] makes
+//! each run's and the evaluation's config from those with typed fields changed. [`measure`] runs one run
 //! in this process: the variant's optimisation, timed (wall time, per-stage times), its peak
 //! memory, then one fixed evaluation built from the base config that no variant changes.
 //! [`rows`] holds the measured rows; [`summary`] aggregates them per variant (mean ± sd over
@@ -21,11 +21,11 @@
 
 pub mod check;
 pub mod conduct;
+pub mod configs;
 pub mod context;
 pub mod files;
 pub mod measure;
 pub mod plan;
-pub mod planned;
 pub mod plot;
 pub mod rows;
 pub mod summary;
@@ -38,7 +38,6 @@ pub use check::StudyCheck;
 pub use conduct::{RunPlace, StudyOutcome, StudyRequest, conduct_study, measure_one, study_dir};
 pub use files::{StudyFile, merge_studies, read_study, study_folder, write_study};
 pub use measure::measure_run;
-pub use plan::{Factor, Preset, Run, Shard, StudyPlan, Variant};
-pub use planned::PlannedStudy;
+pub use plan::{Factor, PlannedStudy, Preset, Run, Shard, StudyPlan, Variant};
 pub use rows::StudyRow;
 pub use summary::StudySummary;

@@ -7,7 +7,9 @@
 //! applied as `--set` would apply it, except that a TOML table (`camera={width=64,height=48}`)
 //! sets each of its keys, merged into the config's table as `extends` merges (a table whose
 //! `kind` differs from the config's replaces it whole: `trajectory={kind="waypoint"}`).
-//! Variants whose resolved configs are equal are one variant (the first is kept). A run is a
+//! Variants whose resolved configs are equal are one variant (the first is kept). The plan is
+//! made with its typed configs ([`PlannedStudy`]): the base and one per variant, from the
+//! config file read once ([`ConfigFile`]). A run is a
 //! variant with one seed (`seed`, `seed + 1`, … for `--seeds N`); a single-pose study runs
 //! each variant once with `N` random starts instead.
 
@@ -16,7 +18,6 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 
-use super::planned::PlannedStudy;
 use super::text::short_value;
 use super::{Design, EvaluationConfig, Quality, StudyConfig, StudyTask};
 use crate::config::{Ablation, Config, ConfigFile, Override};
@@ -211,6 +212,18 @@ pub struct StudyPlan {
     pub variants: Vec<Variant>,
     /// The runs, variant-major.
     pub runs: Vec<Run>,
+}
+
+/// A study ready to check and run: its plan (what `study.json` records) and the configs the
+/// plan was made of.
+#[derive(Debug, Clone)]
+pub struct PlannedStudy {
+    /// The plan.
+    pub plan: StudyPlan,
+    /// The base config with the plan's base overrides (`--set`, the preset's).
+    pub base: Config,
+    /// Each variant's config, in the plan's order.
+    pub variants: Vec<Config>,
 }
 
 impl PlannedStudy {
