@@ -2,7 +2,8 @@
 //! `splatraj_render::counters`: the kernel launches of a forward + backward pass do not grow
 //! with the number of poses, a pass whose poses the caller holds reads nothing back before its
 //! gradient, and the scene is not uploaded again; the same with a zoom per pose whose values
-//! the caller holds.
+//! the caller holds; and a pass of several objects (an optimisation step's windows, each
+//! object alone) launches what one object's pass does.
 //!
 //! Its own test binary with one test: the counters are process-wide and the harness runs the
 //! tests of one binary side by side.
@@ -15,7 +16,10 @@ use glam::DVec3;
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::counters::{self, Counts};
-use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, Zoom, render_at};
+use splatraj_render::focus::Surroundings;
+use splatraj_render::render::{
+    Channel, DeviceScene, ObjectMasks, ObjectView, Pruning, RenderRequest, Zoom, render_at,
+};
 use splatraj_scene::Scene;
 
 /// 400 Gaussians in a slab in front of the cameras; the first half is the object.
@@ -52,8 +56,19 @@ fn pass(
     device: &Device,
     zoomed: bool,
 ) -> (Counts, Counts) {
+    pass_of(scene, Channel::Mask(mask.to_vec()), poses, device, zoomed)
+}
+
+/// [`pass`] of any one mask channel.
+fn pass_of(
+    scene: &DeviceScene,
+    channel: Channel,
+    poses: &[Pose],
+    device: &Device,
+    zoomed: bool,
+) -> (Counts, Counts) {
     let intrinsics = Intrinsics::from_fov_x(60.0, 64, 48).unwrap();
-    let mut request = RenderRequest::new(intrinsics, vec![Channel::Mask(mask.to_vec())]);
+    let mut request = RenderRequest::new(intrinsics, vec![channel]);
     request.pruning = Pruning::ObjectOnly;
     let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
     let before = counters::snapshot();
@@ -140,4 +155,46 @@ fn launches_do_not_grow_with_the_batch_and_reads_stay_at_one() {
         zoomed_batch.launches, zoomed_single.launches,
         "5 zoomed poses launch what 1 does"
     );
+
+    // An optimisation step's one pass: two objects' poses and each object alone launch what
+    // one object's pass launches, but for the select that gives each pose its object's mask.
+    let halves: Vec<Vec<f32>> = [0..100, 100..200]
+        .map(|part| {
+            (0..400)
+                .map(|i| f32::from(u8::from(part.contains(&i))))
+                .collect()
+        })
+        .into();
+    let views: Vec<ObjectView> = [
+        (0, Surroundings::Scene),
+        (1, Surroundings::Scene),
+        (0, Surroundings::Nothing),
+        (1, Surroundings::Nothing),
+    ]
+    .iter()
+    .flat_map(|&(object, surroundings)| {
+        std::iter::repeat_n(
+            ObjectView {
+                object,
+                surroundings,
+            },
+            poses.len(),
+        )
+    })
+    .collect();
+    let step_poses: Vec<Pose> = (0..4).flat_map(|_| poses.iter().copied()).collect();
+    let objects = Channel::ObjectMasks(ObjectMasks {
+        masks: halves,
+        views,
+    });
+    pass_of(&on_device, objects.clone(), &step_poses, &device, false);
+    let (step, step_forward) = pass_of(&on_device, objects, &step_poses, &device, false);
+    eprintln!("a step of two objects and each alone, 20 poses: {step:?}");
+    assert!(
+        step.launches <= batch.launches + 2,
+        "one pass for every window: {step:?} against one window's {batch:?}"
+    );
+    assert_eq!(step_forward.reads, 0, "{step_forward:?}");
+    assert_eq!(step.reads, 1, "{step:?}");
+    assert_eq!(step.renders, 1, "{step:?}");
 }
