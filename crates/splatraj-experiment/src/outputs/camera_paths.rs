@@ -499,15 +499,17 @@ impl PathFile {
     pub fn describe(&self) -> String {
         match self {
             Self::Trajectory(t) => format!(
-                "{} (model {}, {} windows)",
+                "{} (model {}, {} windows{})",
                 t.file.display(),
                 t.record.model.name(),
-                t.windows.len()
+                t.windows.len(),
+                shots_note(t.record.model.shots(t.windows.len()).len())
             ),
             Self::Imported { file, format, path } => format!(
-                "{} ({format}, {} frames)",
+                "{} ({format}, {} frames{})",
                 file.display(),
-                path.frames.len()
+                path.frames.len(),
+                shots_note(path.cuts.len() + 1)
             ),
         }
     }
@@ -520,6 +522,15 @@ impl PathFile {
             Self::Trajectory(t) => t.frames(request),
             Self::Imported { file, format, path } => imported_frames(file, *format, path, request),
         }
+    }
+}
+
+/// `", N shots"` for a path cut into N > 1 shots, else nothing.
+fn shots_note(shots: usize) -> String {
+    if shots > 1 {
+        format!(", {shots} shots")
+    } else {
+        String::new()
     }
 }
 
