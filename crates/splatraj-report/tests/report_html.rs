@@ -122,6 +122,18 @@ fn made_up_run(video: VideoSource) -> RunReport {
     }
 }
 
+/// The page as XML (its DOCTYPE allowed).
+fn parse_page(page: &str) -> roxmltree::Document<'_> {
+    roxmltree::Document::parse_with_options(
+        page,
+        roxmltree::ParsingOptions {
+            allow_dtd: true,
+            ..Default::default()
+        },
+    )
+    .unwrap()
+}
+
 fn attributes<'a>(doc: &'a roxmltree::Document<'a>, name: &'a str) -> Vec<&'a str> {
     doc.descendants()
         .flat_map(|n| n.attributes())
@@ -229,14 +241,7 @@ fn a_large_video_is_linked_beside_the_page() {
     let html = made_up_run(VideoSource::Link("video.mp4".into()))
         .to_html()
         .unwrap();
-    let doc = roxmltree::Document::parse_with_options(
-        &html,
-        roxmltree::ParsingOptions {
-            allow_dtd: true,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let doc = parse_page(&html);
     assert!(attributes(&doc, "src").contains(&"video.mp4"));
     assert!(attributes(&doc, "href").contains(&"video.mp4"));
 }
@@ -263,14 +268,7 @@ fn the_shot_list_names_each_shot_its_cut_and_shows_its_first_frame() {
         ..made_up_run(VideoSource::Link("video.mp4".into()))
     };
     let page = run.to_html().unwrap();
-    let doc = roxmltree::Document::parse_with_options(
-        &page,
-        roxmltree::ParsingOptions {
-            allow_dtd: true,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let doc = parse_page(&page);
     let section = doc
         .descendants()
         .find(|n| n.attribute("id") == Some("shots"))
