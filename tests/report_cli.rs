@@ -67,8 +67,21 @@ fn the_report_is_rebuilt_from_the_run_folder_and_shows_it() {
     };
     // Along t, cost history, top view, side view.
     assert_eq!(count("svg"), 4);
-    // The tiny run has 3 frames: t = 0 in window 0, t = 0.5 and 1 in window 1.
-    assert_eq!(count("img"), 3);
+    // The tiny run has 3 frames: t = 0 in window 0, t = 0.5 and 1 in window 1; the shot list
+    // shows each shot's first keyframe again (the tiny run's 0.1 s windows cut: 2 shots).
+    let images_in = |id: &str| {
+        doc.descendants()
+            .find(|n| n.attribute("id") == Some(id))
+            .map_or(0, |section| {
+                section
+                    .descendants()
+                    .filter(|n| n.tag_name().name() == "img")
+                    .count()
+            })
+    };
+    assert_eq!(images_in("keyframes"), 3);
+    assert_eq!(images_in("shots"), 2);
+    assert_eq!(count("img"), 5);
 
     // The video is the run's video.mp4, whole.
     let video = values("src")

@@ -69,6 +69,8 @@ pub enum TransitionMode {
 pub enum CutReason {
     /// `transitions = "cut"` asks for it.
     Asked,
+    /// The start trajectory (`[start] trajectory`, a file) cuts there.
+    Start,
     /// The pan would turn or orbit faster than the pacing limits.
     TooFast {
         /// Turn of the view from one window's view to the next, degrees.
@@ -106,6 +108,7 @@ impl CutReason {
     pub fn describe(&self) -> String {
         match self {
             Self::Asked => "`output.transitions` = \"cut\"".into(),
+            Self::Start => "the start trajectory (`start.trajectory`) cuts there".into(),
             Self::TooFast {
                 turn_degrees,
                 orbit_degrees,

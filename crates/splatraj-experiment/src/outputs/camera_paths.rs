@@ -188,7 +188,8 @@ struct TrajectoryExtras {
 }
 
 /// Refuses windows that cannot be a run's: a window that does not lie in [0, 1] or ends
-/// before it starts, or (for the RBF model, which knows its windows) a list of another length.
+/// before it starts, or (for the RBF and cut models, which know their windows) a list of
+/// another length.
 fn check_windows(file: &Path, record: &TrajectoryRecord, windows: &[WindowEntry]) -> Result<()> {
     for (i, w) in windows.iter().enumerate() {
         if let (Some(start), Some(end)) = (w.start, w.end)
@@ -201,15 +202,19 @@ fn check_windows(file: &Path, record: &TrajectoryRecord, windows: &[WindowEntry]
             );
         }
     }
-    if let splatraj_traj::trajectory::TrajectoryModel::Rbf(rbf) = &record.model
+    let model_windows = match &record.model {
+        splatraj_traj::trajectory::TrajectoryModel::Rbf(rbf) => Some(rbf.windows),
+        splatraj_traj::trajectory::TrajectoryModel::Cuts(cuts) => Some(cuts.spans().windows),
+        _ => None,
+    };
+    if let Some(model_windows) = model_windows
         && !windows.is_empty()
-        && windows.len() != rbf.windows
+        && windows.len() != model_windows
     {
         bail!(
-            "{}: key `windows` lists {} windows, key `model.windows` says {}",
+            "{}: key `windows` lists {} windows, key `model.windows` says {model_windows}",
             file.display(),
             windows.len(),
-            rbf.windows
         );
     }
     Ok(())

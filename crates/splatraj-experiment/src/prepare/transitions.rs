@@ -7,7 +7,7 @@ use anyhow::{Result, bail};
 use splatraj_render::camera::Pose;
 use splatraj_traj::optimise::WindowStart;
 use splatraj_traj::pacing::{MAX_ORBIT_RATE, MAX_TURN_RATE};
-use splatraj_traj::trajectory::TrajectoryModel;
+use splatraj_traj::trajectory::{TrajectoryModel, TrajectoryRecord};
 use splatraj_traj::transitions::{
     CutReason, Join, JoinKind, JoinLimits, JoinPart, TransitionMode, plan_joins, shot_spans,
 };
@@ -19,8 +19,9 @@ impl Experiment {
     ///
     /// `"pan"` and `"cut"` are what they say. `"auto"` judges the first restart's start
     /// against the verdict's pacing limits (module docs of `splatraj_traj::transitions`); a
-    /// start from a file (`start.trajectory`) or a fixed `start.pose`, or a custom trajectory
-    /// model (whose basis cannot be cut), pans.
+    /// start from a file (`start.trajectory`) keeps the file's cuts (each at the window
+    /// boundary nearest it); a fixed `start.pose`, or a custom trajectory model (whose basis
+    /// cannot be cut), pans.
     pub fn joins(&self) -> Result<Vec<JoinKind>> {
         let mut cache = self
             .joins_cache
@@ -47,6 +48,9 @@ impl Experiment {
             );
         }
         let start = &self.config.start;
+        if mode == TransitionMode::Auto && !custom && n >= 2 && start.trajectory.is_some() {
+            return self.start_file_joins();
+        }
         let judged = mode == TransitionMode::Auto
             && !custom
             && start.trajectory.is_none()
@@ -84,6 +88,40 @@ impl Experiment {
             })
             .collect();
         Ok(plan_joins(mode, &joins, &self.join_limits()))
+    }
+
+    /// The joins of a start from a file (`start.trajectory`): a cut where the file cuts, at
+    /// the window boundary nearest it (our `trajectory.json`: its cut model's shots; another
+    /// tool's camera file: its marked cuts, its frames spread evenly over t ∈ [0, 1]).
+    fn start_file_joins(&self) -> Result<Vec<JoinKind>> {
+        let n = self.windows.len();
+        let Some(file) = &self.config.start.trajectory else {
+            return Ok(vec![JoinKind::Pan; n.saturating_sub(1)]);
+        };
+        let path = self.config.resolve(file);
+        let text = splatraj_scene::input::read_text(&path).unwrap_or_default();
+        // Cut times in t; a file neither reads is the start's to refuse, naming it.
+        let times: Vec<f64> = match serde_json::from_str::<TrajectoryRecord>(&text) {
+            Ok(record) => record.model.shots(n).cut_times(),
+            Err(_) => match splatraj_report::read_camera_path(&path) {
+                Ok((_, camera_path)) => {
+                    let last = camera_path.frames.len().saturating_sub(1).max(1) as f64;
+                    camera_path.cuts.iter().map(|&c| c as f64 / last).collect()
+                }
+                Err(_) => Vec::new(),
+            },
+        };
+        let cut_before: Vec<usize> = times
+            .iter()
+            .map(|t| (t * n as f64).round() as usize)
+            .filter(|&w| w >= 1 && w < n)
+            .collect();
+        Ok((1..n)
+            .map(|w| match cut_before.contains(&w) {
+                true => JoinKind::Cut(CutReason::Start),
+                false => JoinKind::Pan,
+            })
+            .collect())
     }
 
     /// The limits joins are judged against: the verdict's turning and orbit rates, the
