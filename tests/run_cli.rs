@@ -41,8 +41,11 @@ fn run_writes_a_complete_run_folder() {
 
     let text = std::fs::read_to_string(run.join("trajectory.json")).unwrap();
     let record: TrajectoryRecord = serde_json::from_str(&text).unwrap();
-    assert_eq!(record.model.name(), "rbf");
+    // The tiny config's 0.05 s windows cut (`output.transitions` auto): an RBF per shot.
+    assert_eq!(record.model.name(), "rbf with cuts");
     let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(json["cuts"], serde_json::json!([0.5]));
+    assert_eq!(json["shots"].as_array().unwrap().len(), 2);
     let poses = json["poses"].as_array().unwrap();
     assert_eq!(poses.len(), 5);
     assert_eq!(poses[0]["window"], 0);
@@ -92,7 +95,8 @@ fn run_writes_a_complete_run_folder() {
     let record: TrajectoryRecord =
         serde_json::from_str(&std::fs::read_to_string(second.join("trajectory.json")).unwrap())
             .unwrap();
-    assert_eq!(record.model.name(), "polynomial");
+    // The start's cut is kept (`output.transitions` auto), the shots refitted polynomials.
+    assert_eq!(record.model.name(), "polynomial with cuts");
 }
 
 #[test]
