@@ -257,20 +257,30 @@ impl PlannedStudy {
                 }
             )
         })?;
-        let factors = if !options.vary.is_empty() {
-            options.vary.clone()
+        // Each value parsed (or, for the default sweep, made) once: the text is the plan's
+        // record and label, the value what the variant sets.
+        let parsed: Vec<FactorValues> = if !options.vary.is_empty() {
+            options
+                .vary
+                .iter()
+                .map(FactorValues::parse)
+                .collect::<Result<_>>()?
         } else if !study.vary.is_empty() {
             study
                 .vary
                 .iter()
-                .map(|f| Factor {
-                    key: f.key.clone(),
-                    values: f.values.iter().map(value_text).collect(),
+                .map(|f| FactorValues {
+                    factor: Factor {
+                        key: f.key.clone(),
+                        values: f.values.iter().map(value_text).collect(),
+                    },
+                    values: f.values.clone(),
                 })
                 .collect()
         } else {
             default_sweep(&base)
         };
+        let factors: Vec<Factor> = parsed.iter().map(|f| f.factor.clone()).collect();
         // The base config as TOML, only read: which keys hold tables (and of what kind) for a
         // table value, and the baseline's value for the table; never made into a config again.
         let base_table = toml::Table::try_from(&base).context("serialising the config")?;
@@ -299,7 +309,7 @@ impl PlannedStudy {
             let label = label(&settings);
             let edits: Vec<Override> = settings
                 .iter()
-                .map(|(k, v)| assignments(&base_table, k, v))
+                .map(|(k, text)| assignments(&base_table, k, text, value_of(&parsed, k, text)))
                 .collect::<Result<Vec<_>>>()
                 .with_context(|| format!("study variant `{label}`"))?
                 .into_iter()
@@ -445,56 +455,127 @@ fn apply_preset(preset: Preset, base: &Config, study: &mut StudyConfig) {
 
 /// The default sweep: every accuracy-for-time knob around the config (half and twice the
 /// optimisation resolution, samples per window and iterations; two stop transmittances and
-/// opacity floors; the other precision and rasterizer).
-pub fn default_sweep(base: &Config) -> Vec<Factor> {
+/// opacity floors; the other precision and rasterizer), each value made as a TOML value with
+/// the text the plan records.
+fn default_sweep(base: &Config) -> Vec<FactorValues> {
     let (w, h) = (base.camera.width, base.camera.height);
+    let size = |w: usize, h: usize| {
+        let table = toml::Table::from_iter([
+            ("width".to_string(), integer(w)),
+            ("height".to_string(), integer(h)),
+        ]);
+        (
+            format!("{{width={w},height={h}}}"),
+            toml::Value::Table(table),
+        )
+    };
     let mut resolutions = Vec::new();
     if w >= 16 && h >= 16 {
-        resolutions.push(format!("{{width={},height={}}}", w / 2, h / 2));
+        resolutions.push(size(w / 2, h / 2));
     }
-    resolutions.push(format!("{{width={},height={}}}", w * 2, h * 2));
+    resolutions.push(size(w * 2, h * 2));
+    let count = |n: usize| (n.to_string(), integer(n));
     let s = base.optimiser.samples_per_window;
     let i = base.optimiser.iterations;
     let mut samples = vec![(s / 2).max(1), s * 2];
     samples.dedup();
+    let number = |text: &str, x: f64| (text.to_string(), toml::Value::Float(x));
+    let word = |w: &str| (format!("\"{w}\""), toml::Value::String(w.to_string()));
     let other_precision = match base.precision {
-        splatraj_render::backend::Precision::F32 => "\"f64\"",
-        splatraj_render::backend::Precision::F64 => "\"f32\"",
+        splatraj_render::backend::Precision::F32 => "f64",
+        splatraj_render::backend::Precision::F64 => "f32",
     };
     let other_rasterizer = match base.rasterizer {
-        splatraj_render::render::Rasterizer::Fused => "\"tensor\"",
-        splatraj_render::render::Rasterizer::Tensor => "\"fused\"",
+        splatraj_render::render::Rasterizer::Fused => "tensor",
+        splatraj_render::render::Rasterizer::Tensor => "fused",
     };
-    vec![
-        Factor {
-            key: "camera".into(),
-            values: resolutions,
-        },
-        Factor {
-            key: "optimiser.samples_per_window".into(),
-            values: samples.iter().map(|v| v.to_string()).collect(),
-        },
-        Factor {
-            key: "optimiser.iterations".into(),
-            values: vec![(i / 2).max(1).to_string(), (i * 2).to_string()],
-        },
-        Factor {
-            key: "approximations.stop_transmittance".into(),
-            values: vec!["0.001".into(), "0.01".into()],
-        },
-        Factor {
-            key: "approximations.min_opacity".into(),
-            values: vec!["0.02".into(), "0.1".into()],
-        },
-        Factor {
-            key: "precision".into(),
-            values: vec![other_precision.into()],
-        },
-        Factor {
-            key: "rasterizer".into(),
-            values: vec![other_rasterizer.into()],
-        },
+    [
+        ("camera", resolutions),
+        (
+            "optimiser.samples_per_window",
+            samples.into_iter().map(count).collect(),
+        ),
+        (
+            "optimiser.iterations",
+            vec![count((i / 2).max(1)), count(i * 2)],
+        ),
+        (
+            "approximations.stop_transmittance",
+            vec![number("0.001", 0.001), number("0.01", 0.01)],
+        ),
+        (
+            "approximations.min_opacity",
+            vec![number("0.02", 0.02), number("0.1", 0.1)],
+        ),
+        ("precision", vec![word(other_precision)]),
+        ("rasterizer", vec![word(other_rasterizer)]),
     ]
+    .into_iter()
+    .map(|(key, values)| FactorValues::made(key, values))
+    .collect()
+}
+
+/// `n` as a TOML integer.
+fn integer(n: usize) -> toml::Value {
+    toml::Value::Integer(i64::try_from(n).unwrap_or(i64::MAX))
+}
+
+/// A factor with each value twice: as the text the plan records (and labels show), and as the
+/// TOML value a variant sets, parsed or made once.
+struct FactorValues {
+    /// The factor as the plan records it.
+    factor: Factor,
+    /// Its values, in the order of `factor.values`.
+    values: Vec<toml::Value>,
+}
+
+impl FactorValues {
+    /// `factor` with each text value parsed (as `--set` reads a value).
+    fn parse(factor: &Factor) -> Result<FactorValues> {
+        let values = factor
+            .values
+            .iter()
+            .map(|text| {
+                let written = format!("{}={text}", factor.key);
+                Override::from_text(&factor.key, text, "--set", &written)
+                    .map(|edit| edit.value)
+                    .with_context(|| {
+                        format!(
+                            "study variant `{}`",
+                            label(&[(factor.key.clone(), text.clone())])
+                        )
+                    })
+            })
+            .collect::<Result<_>>()?;
+        Ok(FactorValues {
+            factor: factor.clone(),
+            values,
+        })
+    }
+
+    /// The factor `key` with `values` made in code, each with its text.
+    fn made(key: &str, values: Vec<(String, toml::Value)>) -> FactorValues {
+        let (texts, values) = values.into_iter().unzip();
+        FactorValues {
+            factor: Factor {
+                key: key.to_string(),
+                values: texts,
+            },
+            values,
+        }
+    }
+}
+
+/// The value of factor `key` written `text`.
+fn value_of<'a>(factors: &'a [FactorValues], key: &str, text: &str) -> &'a toml::Value {
+    factors
+        .iter()
+        .filter(|f| f.factor.key == key)
+        .find_map(|f| {
+            let at = f.factor.values.iter().position(|t| t == text)?;
+            f.values.get(at)
+        })
+        .expect("every setting comes from a factor")
 }
 
 /// The baseline, then each factor's values alone.
@@ -539,21 +620,29 @@ fn label(settings: &[(String, String)]) -> String {
         .join(" ")
 }
 
-/// The edits of `key = raw` over `base`, each written as `--set` would write it: a table
-/// value sets each of its keys when the base holds a table there with the same `kind` (or
-/// none), else the value is set whole. `raw` is parsed here, once.
-fn assignments(base: &toml::Table, key: &str, raw: &str) -> Result<Vec<Override>> {
-    let whole = Override::from_text(key, raw, "--set", &format!("{key}={raw}"))?;
-    match (&whole.value, lookup(base, key)) {
+/// The edits of `key` = `value` (written `text`) over `base`, each written as `--set` would
+/// write it: a table value sets each of its keys when the base holds a table there with the
+/// same `kind` (or none), else the value is set whole.
+fn assignments(
+    base: &toml::Table,
+    key: &str,
+    text: &str,
+    value: &toml::Value,
+) -> Result<Vec<Override>> {
+    match (value, lookup(base, key)) {
         (toml::Value::Table(over), Some(toml::Value::Table(existing)))
-            if raw.trim_start().starts_with('{')
-                && over
-                    .get("kind")
-                    .is_none_or(|k| Some(k) == existing.get("kind")) =>
+            if over
+                .get("kind")
+                .is_none_or(|k| Some(k) == existing.get("kind")) =>
         {
             flatten(key, over)
         }
-        _ => Ok(vec![whole]),
+        _ => Ok(vec![Override::new(
+            key,
+            value.clone(),
+            "--set",
+            &format!("{key}={text}"),
+        )?]),
     }
 }
 
@@ -622,7 +711,8 @@ mod tests {
 
     /// The edits of `key = raw` over `base`, as written.
     fn written(base: &toml::Table, key: &str, raw: &str) -> Vec<String> {
-        let edits = assignments(base, key, raw).unwrap();
+        let value = Override::from_text(key, raw, "--set", raw).unwrap().value;
+        let edits = assignments(base, key, raw, &value).unwrap();
         edits.into_iter().map(|o| o.written).collect()
     }
 
@@ -643,6 +733,22 @@ mod tests {
             written(&base, "trajectory", "{kind=\"rbf\"}"),
             ["trajectory.kind=\"rbf\""]
         );
+    }
+
+    #[test]
+    fn the_default_sweeps_values_are_what_their_texts_read_as() {
+        let text = "name = \"x\"\n[scene]\ndemo = { gaussians = 100 }\n[[queries]]\ntext = \"a\"\n";
+        let base =
+            Config::from_toml(text, std::path::Path::new("."), &Extensions::default()).unwrap();
+        let sweep = default_sweep(&base);
+        assert_eq!(sweep.len(), 7);
+        for f in &sweep {
+            assert_eq!(f.factor.values.len(), f.values.len());
+            for (text, value) in f.factor.values.iter().zip(&f.values) {
+                let read = Override::from_text(&f.factor.key, text, "--set", text).unwrap();
+                assert_eq!(read.value, *value, "{} = {text}", f.factor.key);
+            }
+        }
     }
 
     #[test]
