@@ -1,9 +1,10 @@
 //! `splatraj encode-text`: CLIP text embeddings of phrases, written as a phrase table (a cache
 //! of what `--text-encoder` computes at run time, and a table for tools without the weights).
 //!
-//! The encoder is `splatraj_semantic::text_encoder`; the table's forms are those
-//! `PhraseTable::read` takes (`.safetensors` with the phrases in its metadata, or `.json`).
-//! The file is written whole or not at all.
+//! The work is `splatraj_semantic::text_encoder::phrase_file` (one call: the weights read,
+//! the canonical negatives added, the phrases encoded, the table written whole or not at all);
+//! the table's forms are those `PhraseTable::read` takes (`.safetensors` with the phrases in
+//! its metadata, or `.json`). This file checks the phrases, calls it and prints.
 
 use std::path::PathBuf;
 use std::str::FromStr;
@@ -11,8 +12,10 @@ use std::str::FromStr;
 use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
 use splatraj_render::backend::BackendKind;
-use splatraj_semantic::vectors::DEFAULT_NEGATIVES;
-use splatraj_semantic::{Activation, TextEncoder, TextEncoderOptions};
+use splatraj_semantic::text_encoder::phrase_file::{
+    CanonicalNegatives, PhraseFileRequest, write_phrase_file,
+};
+use splatraj_semantic::{Activation, TextEncoderOptions};
 
 /// Arguments of `splatraj encode-text`.
 #[derive(Debug, Args)]
@@ -58,27 +61,28 @@ pub fn run(args: EncodeTextArgs) -> Result<()> {
         }
         phrases.push(p.trim().to_string());
     }
-    if args.negatives == Negatives::Default {
-        for n in DEFAULT_NEGATIVES {
-            if !phrases.iter().any(|p| p.eq_ignore_ascii_case(n)) {
-                phrases.push(n.to_string());
-            }
-        }
-    }
     let device = args.backend.device()?;
-    let options = TextEncoderOptions {
-        activation: args.text_activation,
-        heads: None,
+    let request = PhraseFileRequest {
+        phrases: &phrases,
+        negatives: match args.negatives {
+            Negatives::Default => CanonicalNegatives::Added,
+            Negatives::None => CanonicalNegatives::Left,
+        },
+        weights: &args.text_encoder,
+        options: TextEncoderOptions {
+            activation: args.text_activation,
+            heads: None,
+        },
+        out: &args.out,
     };
-    let encoder = TextEncoder::from_file(&args.text_encoder, options, &device)?;
-    eprintln!("{}", encoder.describe());
-    let table = encoder.table(&phrases)?;
-    table.write(&args.out)?;
+    let written = write_phrase_file(&request, &device, |encoder| {
+        eprintln!("{}", encoder.describe())
+    })?;
     eprintln!(
         "wrote {} ({} phrases, {}-d)",
         args.out.display(),
-        phrases.len(),
-        table.dim()
+        written.phrases,
+        written.dim
     );
     Ok(())
 }

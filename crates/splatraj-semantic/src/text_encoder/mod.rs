@@ -21,6 +21,7 @@
 //!   `width / 64` heads (the rule of every OpenAI and open_clip CLIP text tower) and GELU.
 
 mod model;
+pub mod phrase_file;
 mod tokenizer;
 
 use std::collections::BTreeMap;
