@@ -85,7 +85,9 @@ pub struct Experiment {
         std::sync::Mutex<Option<(String, Vec<Vec<splatraj_traj::optimise::Candidate>>)>>,
     /// What each join of windows becomes (`[output] transitions`), judged once
     /// ([`Experiment::joins`]): the starts, the run's model and the plan all ask for it.
-    pub(crate) joins_cache: std::sync::Mutex<Option<Vec<splatraj_traj::transitions::JoinKind>>>,
+    #[allow(clippy::type_complexity)]
+    pub(crate) joins_cache:
+        std::sync::Mutex<Option<(String, Vec<splatraj_traj::transitions::JoinKind>)>>,
     /// The coarse copy the optimisation renders instead of `scene`, when `optimise_gaussians`
     /// asks for one ([`Experiment::optimisation_scene`]).
     pub coarse: Option<CoarseCopy>,

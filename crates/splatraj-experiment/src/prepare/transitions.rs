@@ -23,15 +23,27 @@ impl Experiment {
     /// boundary nearest it); a fixed `start.pose`, or a custom trajectory model (whose basis
     /// cannot be cut), pans.
     pub fn joins(&self) -> Result<Vec<JoinKind>> {
+        // What the judgement reads besides the scene and the windows (fixed by `prepare`):
+        // a config edited since is judged afresh.
+        let config = &self.config;
+        let key = format!(
+            "{:?} {:?} {:?} {:?} {:?} {:?}",
+            config.output.transitions,
+            self.path_seconds(),
+            config.start,
+            config.costs.motion,
+            config.costs.clearance,
+            self.intrinsics
+        );
         let mut cache = self
             .joins_cache
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
-        if let Some(joins) = cache.as_ref() {
+        if let Some((_, joins)) = cache.as_ref().filter(|(k, _)| *k == key) {
             return Ok(joins.clone());
         }
         let joins = self.judge_joins()?;
-        *cache = Some(joins.clone());
+        *cache = Some((key, joins.clone()));
         Ok(joins)
     }
 
