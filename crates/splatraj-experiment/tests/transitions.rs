@@ -106,6 +106,8 @@ fn cut_makes_shots_that_jump_only_at_the_cuts_and_every_file_carries_them() {
     let dir = tempfile::tempdir().unwrap();
     let file = experiment.trajectory_file(&trajectory).unwrap();
     assert_eq!(file.shots.len(), 3);
+    assert_eq!(file.cuts, vec![1.0 / 3.0, 2.0 / 3.0]);
+    assert!(file.poses.iter().all(|p| p.shot == p.window));
     assert_eq!(file.shots[1].queries, vec!["green ball".to_string()]);
     assert!(file.shots[1].cut_reason.as_deref().unwrap().contains("cut"));
     let path = dir.path().join("trajectory.json");

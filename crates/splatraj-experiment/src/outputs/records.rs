@@ -23,6 +23,9 @@ pub struct SampledPose {
     pub t: f64,
     /// The window t falls in.
     pub window: usize,
+    /// The shot t falls in (0 without cuts): consecutive samples of different shots are the
+    /// two sides of a cut, not a motion.
+    pub shot: usize,
     /// Φ = [ω, c].
     pub pose: [f64; 6],
     /// 4×4 world-to-camera matrix (OpenCV axes), row-major.
@@ -131,12 +134,14 @@ impl Experiment {
         {
             anyhow::bail!("the trajectory is not finite at t = {t}: pose {pose:?}");
         }
+        let spans = trajectory.model().shots(n);
         let poses = sampled
             .into_iter()
             .zip(&times)
             .map(|(pose, &t)| SampledPose {
                 t,
                 window: window_of(t, n),
+                shot: spans.shot_of(t),
                 pose,
                 world_to_camera: matrix_rows(&Pose(pose).world_to_camera()),
             })
@@ -159,7 +164,6 @@ impl Experiment {
                 }
             })
             .collect();
-        let spans = trajectory.model().shots(n);
         // The reasons of the joins when they made this model's cuts (a start from a file may
         // bring its own).
         let joins = self
