@@ -97,7 +97,11 @@ fn a_killed_run_leaves_its_best_trajectory_and_resume_finishes_it() {
     let checkpoint = std::fs::read_to_string(run.join("checkpoint.json")).unwrap();
     let record: TrajectoryRecord = serde_json::from_str(&checkpoint).unwrap();
     // The tiny config's windows cut (`output.transitions` auto): an RBF cut into shots.
-    assert!(record.model.name().starts_with("rbf"), "{}", record.model.name());
+    assert!(
+        record.model.name().starts_with("rbf"),
+        "{}",
+        record.model.name()
+    );
     assert!(record.weights.iter().flatten().all(|v| v.is_finite()));
     let state: serde_json::Value = serde_json::from_str(&checkpoint).unwrap();
     let done = state["steps_done"].as_u64().unwrap() as usize;
