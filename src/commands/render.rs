@@ -7,20 +7,19 @@
 //! Every input is checked before anything is rendered or written, and the output folder
 //! (`--out`, `render/` by default) is written whole: a re-run replaces it, a failure leaves it
 //! as it was. `--grad` computes TCE + TRE through the optimiser's loss path.
-//! The work is the library's ([`splatraj::experiment::outputs::camera_render`]).
+//! The work is the library's ([`splatraj::experiment::outputs::camera_render`]: one call that
+//! reads the camera and the scene, checks, renders and writes); this file checks the options,
+//! calls it and prints.
 
 use std::path::PathBuf;
 use std::str::FromStr;
 
 use anyhow::{Result, bail};
 use clap::Args;
-use splatraj::experiment::io::read_camera_file;
 use splatraj::experiment::outputs::camera_render::{
     CameraRenderRequest, GradRequest, RenderObject, render_camera,
 };
-use splatraj::experiment::resources::MemoryLimit;
 use splatraj_render::backend::BackendKind;
-use splatraj_render::camera_file::resize;
 use splatraj_render::render::Rasterizer;
 use splatraj_traj::costs::DEFAULT_TARGET_RATIO;
 
@@ -91,39 +90,35 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if args.width == Some(0) || args.height == Some(0) {
         bail!("--width and --height must be at least 1");
     }
-    let device = args.backend.device()?;
-    let camera = read_camera_file(&args.camera)?;
-    let intrinsics = resize(&camera.intrinsics, args.width, args.height)?;
-    let limit = MemoryLimit::new(args.memory.max_memory)?;
-    let scene = args.read.load_to_render(&args.scene)?.scene;
-    let object = match (args.mask, args.label) {
-        (Some(path), _) => Some(RenderObject::MaskFile(path)),
-        (None, Some(label)) => Some(RenderObject::Label(label)),
-        (None, None) => None,
-    };
     let request = CameraRenderRequest {
-        pose: camera.pose,
-        intrinsics,
-        object,
+        scene: args.scene,
+        read: args.read.options(),
+        camera: args.camera,
+        width: args.width,
+        height: args.height,
+        object: match (args.mask, args.label) {
+            (Some(path), _) => Some(RenderObject::MaskFile(path)),
+            (None, Some(label)) => Some(RenderObject::Label(label)),
+            (None, None) => None,
+        },
         grad: args.grad.then_some(GradRequest {
             target_ratio: args.target_ratio,
             repeats: args.repeats,
         }),
         backend: args.backend,
-        device,
         precision: args.dtype.precision(),
         rasterizer: args.rasterizer,
-        limit,
+        max_memory_gb: args.memory.max_memory,
         out: args.out,
     };
-    let rendered = render_camera(&scene, &args.scene, &request)?;
+    let rendered = render_camera(&request, |warning| eprintln!("warning: {warning}"))?;
     eprintln!(
         "wrote {} to {} ({}×{}, {} Gaussians)",
         rendered.files.join(", "),
         request.out.display(),
-        intrinsics.width,
-        intrinsics.height,
-        scene.len()
+        rendered.intrinsics.width,
+        rendered.intrinsics.height,
+        rendered.gaussians
     );
     if let Some(report) = rendered.grad {
         println!("{}", serde_json::to_string(&report)?);

@@ -1,26 +1,30 @@
-//! One camera, one scene, into a folder (`splatraj render`): `rgb.png`, and with an object
+//! One camera, one scene, into a folder (`splatraj render`, one call: the camera file and the
+//! scene read, the memory plan checked, the images rendered and written): `rgb.png`, and with an object
 //! `mask.png` and `mask.npy`; with a gradient request also TCE + TRE of the mask and their pose
 //! gradient ([`MaskProbe`]). Every input is checked and every image rendered before anything is
 //! written, and the folder is written whole ([`OutputFolder`]): a re-run replaces an earlier
 //! render (no `mask.png` of an earlier object beside a new `rgb.png`), a failure leaves it as
 //! it was, and a second writer of the same folder is refused.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use burn::tensor::Device;
 use serde::Serialize;
 use splatraj_render::backend::{BackendKind, Precision};
-use splatraj_render::camera::{Intrinsics, Pose};
+use splatraj_render::camera::Intrinsics;
+use splatraj_render::camera_file::resize;
 use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::images::{png_gray, png_rgb};
 use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
-use splatraj_scene::Scene;
+use splatraj_scene::ReadOptions;
 use splatraj_semantic::{label_mask, read_mask_file};
+
+use crate::io::read_camera_file;
 
 use crate::optimise::probe::{MaskProbe, ProbeReport};
 use crate::outputs::npy_f32;
 use crate::outputs::output_folder::OutputFolder;
+use crate::prepare::scene_files::read_scene_to_render;
 use crate::resources::{MemoryLimit, RenderWork};
 use crate::write::write_into_folder;
 
@@ -42,27 +46,32 @@ pub struct GradRequest {
     pub repeats: usize,
 }
 
-/// What [`render_camera`] renders and where.
+/// What [`render_camera`] renders and where: the files `splatraj render` names, read and
+/// checked by it.
 #[derive(Debug, Clone)]
 pub struct CameraRenderRequest {
-    /// The camera's pose.
-    pub pose: Pose,
-    /// The camera, at the size to render.
-    pub intrinsics: Intrinsics,
+    /// The scene file.
+    pub scene: PathBuf,
+    /// How to read it (labels sidecar, invalid Gaussians).
+    pub read: ReadOptions,
+    /// The camera file (`splatraj_render::camera_file`: intrinsics and a pose).
+    pub camera: PathBuf,
+    /// The width to render at (`None`: the camera's; alone, the aspect ratio is kept).
+    pub width: Option<usize>,
+    /// The height to render at (`None`: the camera's; alone, the aspect ratio is kept).
+    pub height: Option<usize>,
     /// The object, if any.
     pub object: Option<RenderObject>,
     /// The costs and gradient to measure (needs an object).
     pub grad: Option<GradRequest>,
-    /// The backend the device belongs to (for the report).
+    /// The backend to render on.
     pub backend: BackendKind,
-    /// The device to render on.
-    pub device: Device,
     /// Float precision.
     pub precision: Precision,
     /// Compositing.
     pub rasterizer: Rasterizer,
-    /// Memory the render may use.
-    pub limit: MemoryLimit,
+    /// The most memory (GB) the render may plan to use (`None`: the default limit).
+    pub max_memory_gb: Option<f64>,
     /// The output folder, written whole: new, or holding only an earlier render
     /// ([`RENDER_NAMES`]).
     pub out: PathBuf,
@@ -101,18 +110,34 @@ pub struct GradReport {
 pub struct CameraRender {
     /// The files written into the output folder, in order.
     pub files: Vec<&'static str>,
+    /// The size rendered at.
+    pub intrinsics: Intrinsics,
+    /// Gaussians in the scene rendered.
+    pub gaussians: usize,
     /// The measured costs and gradient, when asked.
     pub grad: Option<GradReport>,
 }
 
-/// Renders `scene` (read from `scene_path`, named in messages) as `request` asks and writes the
-/// images into `request.out`: the memory plan is checked first, files are written last.
+/// Reads the camera and the scene `request` names, checks the memory plan, renders and
+/// writes the images into `request.out` (files last); `warn` hears what reading the scene
+/// dropped.
 pub fn render_camera(
-    scene: &Scene,
-    scene_path: &Path,
     request: &CameraRenderRequest,
+    mut warn: impl FnMut(String),
 ) -> Result<CameraRender> {
-    let intrinsics = request.intrinsics;
+    let device = request.backend.device()?;
+    let camera = read_camera_file(&request.camera)?;
+    let intrinsics = resize(&camera.intrinsics, request.width, request.height)?;
+    let limit = MemoryLimit::new(request.max_memory_gb)?;
+    let loaded = read_scene_to_render(&request.scene, &request.read)?;
+    if loaded.dropped > 0 {
+        warn(format!(
+            "{}: dropped {} invalid Gaussians",
+            request.scene.display(),
+            loaded.dropped
+        ));
+    }
+    let (scene, scene_path) = (&loaded.scene, request.scene.as_path());
     let dtype = request.precision.dtype();
     let float_bytes = dtype.size();
     let repeats = request.grad.as_ref().map_or(1, |grad| grad.repeats);
@@ -129,7 +154,7 @@ pub fn render_camera(
         gradient: request.grad.is_some(),
         float_bytes,
     }
-    .check(request.limit, "--max-memory GB")?;
+    .check(limit, "--max-memory GB")?;
     let mask = match &request.object {
         Some(RenderObject::MaskFile(path)) => Some(read_mask_file(path, scene.len())?),
         Some(RenderObject::Label(label)) => {
@@ -150,8 +175,8 @@ pub fn render_camera(
     // Before the renders: a folder of other files, or one another process writes, is refused.
     let folder = OutputFolder::begin(&request.out, &RENDER_NAMES)?;
 
-    let pose = request.pose;
-    let uploaded = DeviceScene::new(scene, &request.device, dtype);
+    let pose = camera.pose;
+    let uploaded = DeviceScene::new(scene, &device, dtype);
     let image = |render_request: RenderRequest| -> Result<Vec<f64>> {
         let render_request = RenderRequest {
             rasterizer: request.rasterizer,
@@ -177,7 +202,7 @@ pub fn render_camera(
         if let Some(asked) = request.grad {
             let probe = MaskProbe::new(
                 scene,
-                (&request.device, dtype),
+                (&device, dtype),
                 mask,
                 asked.target_ratio,
                 intrinsics,
@@ -202,6 +227,8 @@ pub fn render_camera(
     folder.commit()?;
     Ok(CameraRender {
         files: outputs.iter().map(|(name, _)| *name).collect(),
+        intrinsics,
+        gaussians: scene.len(),
         grad,
     })
 }
