@@ -91,12 +91,18 @@ fn the_run_video_is_its_frames_and_its_exported_path_renders_them_again() {
     let windows: Vec<f64> = metrics.iter().map(|r| r[2]).collect();
     assert_eq!(windows, [0.0, 0.0, 0.0, 1.0, 1.0, 1.0]);
 
-    // Every export format, holding the 6 frames.
+    // Every export format, holding the 6 frames, and the cut: the tiny config's 0.25 s windows
+    // cut (`output.transitions` auto), so frames 0–2 are one shot and 3–5 the next.
     for format in Format::ALL {
         for name in format.file_names() {
             let file = run.join("exports").join(format.name()).join(name);
             assert!(file.is_file(), "{} missing", file.display());
         }
+        let main = format.file_names()[usize::from(format == Format::Colmap)];
+        let (_, path) =
+            splatraj_report::read_camera_path(&run.join("exports").join(format.name()).join(main))
+                .unwrap();
+        assert_eq!(path.cuts, vec![3], "{format}");
     }
     // Nothing half-written is left anywhere in the folder.
     for entry in walk(&run) {
