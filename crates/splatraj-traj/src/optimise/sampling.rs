@@ -9,11 +9,9 @@
 
 use rand::Rng;
 
-/// Window `[start, end)` of query `index` among `windows` queries.
-pub fn window_bounds(index: usize, windows: usize) -> (f64, f64) {
-    let n = windows.max(1) as f64;
-    (index as f64 / n, (index + 1) as f64 / n)
-}
+// Which window a time is in is the trajectory's own split of t (its shots are runs of
+// windows, `trajectory::cuts`): one rule for the samples, the frames and the shots.
+pub use crate::trajectory::cuts::{window_bounds, window_of};
 
 /// `per_window` stratified times inside window `index` of `windows`, ascending.
 ///
@@ -34,10 +32,4 @@ pub fn stratified_times(
     (0..per_window)
         .map(|s| start + (s as f64 + offsets()) * width)
         .collect()
-}
-
-/// Which window a time belongs to (t = 1 belongs to the last one).
-pub fn window_of(t: f64, windows: usize) -> usize {
-    let n = windows.max(1);
-    ((t * n as f64).floor().max(0.0) as usize).min(n - 1)
 }

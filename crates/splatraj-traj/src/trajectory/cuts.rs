@@ -1,12 +1,13 @@
 //! Cuts: a trajectory made of shots, each its own continuous path, with hard switches between.
 //!
 //! A cut ends one shot and starts the next at the boundary of two query windows (`[output]
-//! transitions`, [`crate::optimise::transitions`]). The windows split t ∈ [0, 1] evenly
+//! transitions`, [`crate::transitions`]). The windows split t ∈ [0, 1] evenly
 //! (window i of n is [i/n, (i+1)/n]); a shot is a run of consecutive windows, so shot j spans
 //! [a_j, b_j] with a_j = (first window)/n and b_j = (last window + 1)/n. A time belongs to the
 //! shot of its window ([`crate::optimise::sampling::window_of`]: a time on a cut belongs to the
-//! later shot, t = 1 to the last), the same rule the frames, the metrics and the optimiser's
-//! samples use, so every reader agrees on which side of a cut a time lies.
+//! later shot, t = 1 to the last), the same rule ([`window_of`], here, which
+//! `optimise::sampling` re-exports) the frames, the metrics and the optimiser's samples use,
+//! so every reader agrees on which side of a cut a time lies.
 //!
 //! [`CutModel`] is a [`Basis`] built from any built-in model: shot j gets its own copy of the
 //! model for its m_j windows over its local time s = (t − a_j)/(b_j − a_j) ∈ [0, 1], and the
@@ -27,7 +28,18 @@
 use serde::{Deserialize, Serialize};
 
 use super::{Basis, TrajectoryError, TrajectoryModel};
-use crate::optimise::sampling::{window_bounds, window_of};
+
+/// Window `[start, end)` of query `index` among `windows` queries.
+pub fn window_bounds(index: usize, windows: usize) -> (f64, f64) {
+    let n = windows.max(1) as f64;
+    (index as f64 / n, (index + 1) as f64 / n)
+}
+
+/// Which window a time belongs to (t = 1 belongs to the last one).
+pub fn window_of(t: f64, windows: usize) -> usize {
+    let n = windows.max(1);
+    ((t * n as f64).floor().max(0.0) as usize).min(n - 1)
+}
 
 /// Which windows form which shot: the windows where a new shot begins.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
