@@ -70,7 +70,9 @@ fn windows(scene: &Scene, names: &[&str]) -> Vec<WindowTarget> {
 fn a_step_reads_once_and_the_scene_is_uploaded_once() {
     let shared = counted_steps(StepPasses::Shared);
     let per_window = counted_steps(StepPasses::PerWindow);
-    // The same images either way, so the same optimisation (to f32 rounding).
+    // The same images and costs either way (the shared pass evaluates the batching costs once
+    // on every window's samples), so the same optimisation, term by term (to f32 rounding).
+    assert_eq!(shared.len(), per_window.len());
     for (a, b) in shared.iter().zip(&per_window) {
         assert!(
             (a - b).abs() <= 1e-5 * b.abs().max(1.0),
@@ -165,7 +167,15 @@ fn counted_steps(passes: StepPasses) -> Vec<f64> {
         counts.uploads > 0,
         "poses, indices and mask values go up each pass"
     );
-    result.history.iter().map(|row| row.total).collect()
+    // Each step's loss, then each window's weighted terms in order.
+    result
+        .history
+        .iter()
+        .flat_map(|row| {
+            let terms = row.windows.iter().flatten().map(|&(_, w, mean)| w * mean);
+            std::iter::once(row.total).chain(terms)
+        })
+        .collect()
 }
 
 /// A cost that is 0 and whose gradient is NaN from step 2 on (√u at u = 0, u ≡ 0).

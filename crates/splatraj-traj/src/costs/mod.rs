@@ -200,6 +200,9 @@ pub struct CostInputs {
     host_poses: Option<HostPoses>,
     step: usize,
     query: QueryContext,
+    /// One context per sample when the batch spans several windows (None: every sample has
+    /// `query`).
+    contexts: Option<std::sync::Arc<[QueryContext]>>,
 }
 
 /// The values of the poses a cost reads, already on the host (read once per optimisation
@@ -306,7 +309,47 @@ impl CostInputs {
             host_poses: None,
             step,
             query,
+            contexts: None,
         })
+    }
+
+    /// The same inputs for a batch whose samples belong to several windows: `contexts[b]` is
+    /// sample b's (each validated). Only costs that [`Cost::batches_windows`] read them.
+    pub fn with_contexts(mut self, contexts: Vec<QueryContext>) -> Result<Self, CostError> {
+        if contexts.len() != self.batch() {
+            return Err(CostError::Shape(format!(
+                "{} contexts for {} samples",
+                contexts.len(),
+                self.batch()
+            )));
+        }
+        for c in &contexts {
+            c.validate()?;
+        }
+        self.contexts = Some(contexts.into());
+        Ok(self)
+    }
+
+    /// The one context of every sample, or None when the samples' windows differ.
+    pub fn single_query(&self) -> Option<&QueryContext> {
+        match &self.contexts {
+            None => Some(&self.query),
+            Some(_) => None,
+        }
+    }
+
+    /// `f` of each sample's context as rows on the poses' device: `[1, K]` when every sample
+    /// shares one context (it broadcasts), else `[B, K]` (one upload either way).
+    pub fn context_rows<const K: usize>(&self, f: impl Fn(&QueryContext) -> [f64; K]) -> Tensor<2> {
+        let rows: Vec<f64> = match &self.contexts {
+            None => f(&self.query).to_vec(),
+            Some(each) => each.iter().flat_map(f).collect(),
+        };
+        let count = rows.len() / K;
+        Tensor::from_data(
+            TensorData::new(rows, [count, K]),
+            (&self.poses.device(), self.poses.dtype()),
+        )
     }
 
     /// Adds the host values of the poses (they must be those of the tensors).
@@ -464,7 +507,8 @@ impl CostInputs {
         self.step
     }
 
-    /// The query's context.
+    /// The query's context (of the first sample, when the batch spans several windows: a
+    /// cost that [`Cost::batches_windows`] reads [`CostInputs::context_rows`] instead).
     pub fn query(&self) -> &QueryContext {
         &self.query
     }
@@ -505,6 +549,14 @@ pub trait Cost: std::fmt::Debug + Send + Sync {
     /// The scene geometry it reads ([`CostInputs::require_occupancy`]), if any.
     fn occupancy(&self) -> Option<OccupancySpec> {
         None
+    }
+
+    /// Whether one evaluation may serve the samples of several windows (an optimisation
+    /// step's whole batch, so its launches do not grow with the windows): the cost reads the
+    /// query context only through [`CostInputs::context_rows`] (or [`CostInputs::single_query`])
+    /// and reads no times, path, host poses or geometry. Default false: evaluated per window.
+    fn batches_windows(&self) -> bool {
+        false
     }
 
     /// Checks the config values; errors name the full key (`costs.<name>.<field>`).
@@ -782,10 +834,21 @@ impl WeightedCosts {
     /// Every term and Σ_i w_i(k)·cost_i per sample `[B]` (a path cost adds its mean over the
     /// path to every sample).
     pub fn evaluate(&self, inputs: &CostInputs) -> Result<CostTerms, CostError> {
+        self.evaluate_where(inputs, |_| true)?
+            .ok_or_else(|| CostError::Set("no cost is configured".into()))
+    }
+
+    /// [`WeightedCosts::evaluate`] of the costs `keep` selects (in order); None when it keeps
+    /// none.
+    pub fn evaluate_where(
+        &self,
+        inputs: &CostInputs,
+        keep: impl Fn(&dyn Cost) -> bool,
+    ) -> Result<Option<CostTerms>, CostError> {
         let mut total: Option<Tensor<1>> = None;
         let mut terms = Vec::with_capacity(self.costs.len());
         let batch = inputs.batch();
-        for cost in &self.costs {
+        for cost in self.costs.iter().filter(|c| keep(c.as_ref())) {
             let weight = cost.weight(inputs.step());
             let value = cost.evaluate(inputs)?;
             let on_path = cost.domain() == CostDomain::Path && inputs.path().is_some();
@@ -804,8 +867,6 @@ impl WeightedCosts {
                 value,
             });
         }
-        // `new` guarantees at least one cost.
-        let total = total.ok_or_else(|| CostError::Set("no cost is configured".into()))?;
-        Ok(CostTerms { total, terms })
+        Ok(total.map(|total| CostTerms { total, terms }))
     }
 }

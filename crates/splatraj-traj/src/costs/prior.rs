@@ -52,6 +52,18 @@ pub fn prior(
     (distance.clamp_min(radius) - alignment + 1.0).reshape([batch])
 }
 
+/// [`prior`] with each sample's object centre, radius and ε² in `rows` `[B, 5]`
+/// (x, y, z, r, ε²): the samples of several windows in one evaluation.
+pub fn prior_per_sample(rotations: Tensor<3>, centres: Tensor<2>, rows: Tensor<2>) -> Tensor<1> {
+    let [batch, _] = centres.dims();
+    let forward = rotations.narrow(2, 2, 1).reshape([batch, 3]); // z_cam [B, 3]
+    let to_object = rows.clone().narrow(1, 0, 3) - centres; // o − c [B, 3]
+    let radius = rows.clone().narrow(1, 3, 1); // [B, 1]
+    let distance = (to_object.clone().square().sum_dim(1) + rows.narrow(1, 4, 1)).sqrt();
+    let alignment = (forward * to_object).sum_dim(1) / distance.clone();
+    (distance.max_pair(radius) - alignment + 1.0).reshape([batch])
+}
+
 /// Default prior radius: the distance at which an object of axis-aligned extent `extent`
 /// (side lengths in world units) covers `target_ratio` of a frame with full fields of view
 /// `fov_x`, `fov_y` (radians).
@@ -157,6 +169,9 @@ impl Cost for PriorCost {
     fn channels(&self) -> &'static [ImageChannel] {
         &[]
     }
+    fn batches_windows(&self) -> bool {
+        true
+    }
     fn validate(&self) -> Result<(), CostError> {
         check_weight(self.name(), "alpha0", self.alpha0)?;
         if !(self.gamma > 0.0 && self.gamma <= 1.0) {
@@ -178,13 +193,26 @@ impl Cost for PriorCost {
         Ok(())
     }
     fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
-        let radius = self.radius.unwrap_or(inputs.query().prior_radius);
-        Ok(prior(
+        if let Some(query) = inputs.single_query() {
+            let radius = self.radius.unwrap_or(query.prior_radius);
+            return Ok(prior(
+                inputs.rotations().clone(),
+                inputs.centres(),
+                inputs.row(query.object_centre),
+                radius,
+                PRIOR_EPSILON_FRACTION * radius,
+            ));
+        }
+        // Several windows: each sample's object, radius and ε² as a row (one upload).
+        let rows = inputs.context_rows(|q| {
+            let radius = self.radius.unwrap_or(q.prior_radius);
+            let [x, y, z] = q.object_centre;
+            [x, y, z, radius, (PRIOR_EPSILON_FRACTION * radius).powi(2)]
+        }); // [B, 5]
+        Ok(prior_per_sample(
             inputs.rotations().clone(),
             inputs.centres(),
-            inputs.row(inputs.query().object_centre),
-            radius,
-            PRIOR_EPSILON_FRACTION * radius,
+            rows,
         ))
     }
 }

@@ -82,6 +82,9 @@ impl Cost for TceCost {
     fn channels(&self) -> &'static [ImageChannel] {
         &[ImageChannel::Mask]
     }
+    fn batches_windows(&self) -> bool {
+        true
+    }
     fn validate(&self) -> Result<(), CostError> {
         check_weight(self.name(), "weight", self.weight)
     }

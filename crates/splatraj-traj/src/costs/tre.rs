@@ -56,13 +56,20 @@ impl Cost for TreCost {
     fn channels(&self) -> &'static [ImageChannel] {
         &[ImageChannel::Mask]
     }
+    fn batches_windows(&self) -> bool {
+        true
+    }
     fn validate(&self) -> Result<(), CostError> {
         check_weight(self.name(), "weight", self.weight)
     }
     fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
-        Ok(tre_of(
-            inputs.require_mask_moments(self.name())?,
-            inputs.query().target_ratio,
-        ))
+        let moments = inputs.require_mask_moments(self.name())?;
+        if let Some(query) = inputs.single_query() {
+            return Ok(tre_of(moments, query.target_ratio));
+        }
+        let target = inputs
+            .context_rows(|q| [q.target_ratio])
+            .reshape([inputs.batch()]);
+        Ok((moments.coverage() - target).abs())
     }
 }

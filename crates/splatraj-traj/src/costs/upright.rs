@@ -18,7 +18,7 @@
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostError, CostInputs, ImageChannel, check_weight};
+use super::{Cost, CostError, CostInputs, ImageChannel, QueryContext, check_weight};
 
 /// Which uprightness cost (config `mode`, kebab-case).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -76,11 +76,14 @@ impl Cost for UprightCost {
     fn channels(&self) -> &'static [ImageChannel] {
         &[]
     }
+    fn batches_windows(&self) -> bool {
+        true
+    }
     fn validate(&self) -> Result<(), CostError> {
         check_weight(self.name(), "weight", self.weight)
     }
     fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
-        let up = inputs.row(inputs.query().unit_up());
+        let up = inputs.context_rows(QueryContext::unit_up); // [1 or B, 3]
         Ok(upright(inputs.rotations().clone(), up, self.mode))
     }
 }

@@ -88,6 +88,9 @@ impl Cost for VisibilityCost {
     fn channels(&self) -> &'static [ImageChannel] {
         &[ImageChannel::Mask, ImageChannel::MaskAlone]
     }
+    fn batches_windows(&self) -> bool {
+        true
+    }
     fn validate(&self) -> Result<(), CostError> {
         check_weight(self.name(), "weight", self.weight)?;
         if !(0.0..1.0).contains(&self.tolerance) {

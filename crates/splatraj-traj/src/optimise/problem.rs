@@ -9,7 +9,7 @@
 //!
 //! [`Cost::channels`]: crate::costs::Cost::channels
 
-use burn::tensor::{DType, Device, Tensor};
+use burn::tensor::{DType, Device, Int, Tensor, TensorData};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::focus::Surroundings;
@@ -23,8 +23,8 @@ use super::sampling::window_bounds;
 use super::{OptimiseError, WindowTarget};
 use crate::clearance::Occupancy;
 use crate::costs::{
-    CostInputs, CostTerms, HostPoses, ImageChannel, PathSamples, SampleTimes, WeightedCosts,
-    coverage,
+    Cost, CostDomain, CostError, CostInputs, CostTerms, HostPoses, ImageChannel, PathSamples,
+    QueryContext, SampleTimes, WeightedCosts, coverage,
 };
 
 /// A scene, its query windows, the costs and the camera: the arguments every optimiser shares.
@@ -107,17 +107,198 @@ pub struct WindowSamples<'s> {
     pub host: Option<&'s HostPoses>,
 }
 
-/// What [`Problem::evaluate_windows`] found: each window's terms, the object masks of all
-/// samples `[ΣS, H, W]` when one was rendered, and the pass's compositing work.
+/// What [`Problem::evaluate_windows`] found: the step's loss, each window's term means, the
+/// object masks of all samples `[ΣS, H, W]` when one was rendered, and the passes' work.
 #[derive(Debug, Clone)]
 pub struct StepEvaluation {
-    /// Per window (as listed), each term and the weighted total per sample.
-    pub windows: Vec<CostTerms>,
+    /// The mean over the windows of each window's mean weighted total, `[1]`
+    /// (differentiable).
+    pub loss: Tensor<1>,
+    /// Each window's unweighted term means, window after window, each in the costs' order,
+    /// detached `[Σ terms]` (what a history row reads).
+    pub means: Tensor<1>,
+    /// Per window, each term's `(name, weight)` in the order of `means`.
+    pub labels: Vec<Vec<(&'static str, f64)>>,
     /// Every sample's object mask, windows one after the other.
     pub masks: Option<Tensor<3>>,
     /// How much compositing work the passes had, summed over them (None when nothing was
     /// rendered).
     pub stats: Option<RenderStats>,
+}
+
+impl StepEvaluation {
+    /// The evaluation of windows whose terms were made one window at a time.
+    fn of_windows(
+        terms: Vec<CostTerms>,
+        masks: Option<Tensor<3>>,
+        stats: Option<RenderStats>,
+    ) -> Self {
+        let n = terms.len().max(1) as f64;
+        let loss = terms
+            .iter()
+            .map(|t| t.total.clone().mean())
+            .reduce(|a, b| a + b)
+            .expect("at least one window")
+            .div_scalar(n);
+        StepEvaluation {
+            loss,
+            means: Tensor::cat(terms.iter().map(CostTerms::means_on_device).collect(), 0),
+            labels: terms.iter().map(CostTerms::labels).collect(),
+            masks,
+            stats,
+        }
+    }
+
+    /// The evaluation of windows whose batching costs ran once on all `counts` samples
+    /// (`batched`) and whose other costs ran per window (`per_window`). The windows' means
+    /// come from one matrix product with the averaging weights, not a slice per window.
+    fn of_batch(
+        costs: &WeightedCosts,
+        batched: Option<CostTerms>,
+        per_window: Vec<Option<CostTerms>>,
+        counts: &[usize],
+        masks: Option<Tensor<3>>,
+        stats: Option<RenderStats>,
+    ) -> Self {
+        let n = counts.len();
+        let rows: usize = counts.iter().sum();
+        let mut loss: Vec<Tensor<1>> = Vec::with_capacity(n + 1);
+        let mut parts: Vec<Tensor<1>> = Vec::with_capacity(n + 1);
+        // Where each window's term of each cost sits in `parts` concatenated.
+        let mut place: Vec<std::collections::HashMap<&'static str, (usize, f64)>> =
+            vec![Default::default(); n];
+        if let Some(batched) = &batched {
+            let (device, dtype) = (batched.total.device(), batched.total.dtype());
+            // a[s] = 1 / (n·S_i) for sample s of window i: the loss's weights.
+            let weights: Vec<f64> = counts
+                .iter()
+                .flat_map(|&c| std::iter::repeat_n(1.0 / (n * c) as f64, c))
+                .collect();
+            let weights =
+                Tensor::<1>::from_data(TensorData::new(weights, [rows]), (&device, dtype));
+            loss.push((batched.total.clone() * weights).sum());
+            // Means per window: [n, ΣS] (1/S_i on window i's samples) · [ΣS, terms].
+            let averages: Vec<f64> = (0..n)
+                .flat_map(|i| {
+                    counts.iter().enumerate().flat_map(move |(j, &c)| {
+                        std::iter::repeat_n(if i == j { 1.0 / c as f64 } else { 0.0 }, c)
+                    })
+                })
+                .collect();
+            let averages =
+                Tensor::<2>::from_data(TensorData::new(averages, [n, rows]), (&device, dtype));
+            let terms = batched.terms.len();
+            let values = Tensor::cat(
+                batched
+                    .terms
+                    .iter()
+                    .map(|t| t.value.clone().without_autodiff().reshape([rows, 1]))
+                    .collect(),
+                1,
+            ); // [ΣS, terms]
+            parts.push(averages.matmul(values).reshape([n * terms])); // window-major
+            for (i, place) in place.iter_mut().enumerate() {
+                for (k, t) in batched.terms.iter().enumerate() {
+                    place.insert(t.name, (i * terms + k, t.weight));
+                }
+            }
+        }
+        let mut offset = parts.first().map_or(0, |p| p.dims()[0]);
+        for (i, terms) in per_window.iter().enumerate() {
+            let Some(terms) = terms else { continue };
+            loss.push(terms.total.clone().mean().div_scalar(n as f64));
+            parts.push(terms.means_on_device());
+            for (k, t) in terms.terms.iter().enumerate() {
+                place[i].insert(t.name, (offset + k, t.weight));
+            }
+            offset += terms.terms.len();
+        }
+        let mut labels = Vec::with_capacity(n);
+        let mut order: Vec<i64> = Vec::with_capacity(offset);
+        for place in &place {
+            let mut window = Vec::with_capacity(place.len());
+            for cost in costs.costs() {
+                if let Some(&(at, weight)) = place.get(cost.name()) {
+                    order.push(at as i64);
+                    window.push((cost.name(), weight));
+                }
+            }
+            labels.push(window);
+        }
+        let flat = Tensor::cat(parts, 0);
+        let in_order = order.iter().enumerate().all(|(k, &at)| k as i64 == at);
+        let means = if in_order {
+            flat
+        } else {
+            let device = flat.device();
+            let index = Tensor::<1, Int>::from_data(TensorData::new(order, [offset]), &device);
+            flat.select(0, index)
+        };
+        StepEvaluation {
+            loss: loss
+                .into_iter()
+                .reduce(|a, b| a + b)
+                .expect("at least one cost"),
+            means,
+            labels,
+            masks,
+            stats,
+        }
+    }
+}
+
+/// A pass's images of all its samples (each `[ΣS, H, W]`, colour `[ΣS, H, W, 3]`; the
+/// object alone of the same samples), and its work.
+struct Pass {
+    masks: Option<Tensor<3>>,
+    mask_alone: Option<Tensor<3>>,
+    depth: Option<Tensor<3>>,
+    rgb: Option<Tensor<4>>,
+    stats: RenderStats,
+}
+
+impl Pass {
+    /// The images of samples `first .. first + count` (no slice when that is all of them).
+    fn window(&self, first: usize, count: usize) -> Images {
+        let all = self
+            .masks
+            .as_ref()
+            .or(self.depth.as_ref())
+            .map(|t| t.dims()[0]);
+        let cut3 = |t: &Option<Tensor<3>>| {
+            t.clone().map(|t| match all {
+                Some(rows) if first == 0 && count == rows => t,
+                _ => t.narrow(0, first, count),
+            })
+        };
+        Images {
+            mask: cut3(&self.masks),
+            mask_alone: cut3(&self.mask_alone),
+            depth: cut3(&self.depth),
+            rgb: self.rgb.clone().map(|t| {
+                if first == 0 && Some(count) == all {
+                    t
+                } else {
+                    t.narrow(0, first, count)
+                }
+            }),
+        }
+    }
+}
+
+/// A value lent by the caller or made here.
+enum Borrowed<'r, T> {
+    Lent(Option<&'r T>),
+    Owned(Option<T>),
+}
+
+impl<T> Borrowed<'_, T> {
+    fn get(&self) -> Option<&T> {
+        match self {
+            Borrowed::Lent(r) => *r,
+            Borrowed::Owned(t) => t.as_ref(),
+        }
+    }
 }
 
 /// One window's images from a pass (each `[S, H, W]`, colour `[S, H, W, 3]`).
@@ -358,21 +539,33 @@ impl<'a> Problem<'a> {
             path,
             host,
         };
-        let mut evaluated = self.evaluate_windows(poses, vec![window], step, renders)?;
+        let renders = self.renders_or(renders);
+        let pass = self.render_pass(poses.clone(), std::slice::from_ref(&window), renders.get())?;
+        let images = pass
+            .as_ref()
+            .map(|p| p.window(0, count))
+            .unwrap_or_default();
+        let terms = self.window_terms(window, poses, images, step)?;
         Ok(Evaluated {
-            terms: evaluated.windows.remove(0),
-            masks: evaluated.masks,
-            stats: evaluated.stats,
+            terms,
+            masks: pass.as_ref().and_then(|p| p.masks.clone()),
+            stats: pass.map(|p| p.stats),
         })
     }
 
-    /// Renders what the costs read for the samples of several windows and evaluates each
-    /// window's costs at step `step`: `poses` `[ΣS, 6]` holds the windows' samples one window
-    /// after the other, as `windows` lists them. With [`StepPasses::Shared`] one render call
-    /// serves the whole step (each window's object alone included), so the launches of a step
-    /// do not grow with the number of windows; with [`StepPasses::PerWindow`] each window has
-    /// a call of its own (docs/gpu.md, "One pass a step").
-    /// `renders`: [`Problem::renders`] when the caller keeps it (made here otherwise).
+    /// Renders what the costs read for the samples of several windows and evaluates their
+    /// costs at step `step`: `poses` `[ΣS, 6]` holds the windows' samples one window after
+    /// the other, as `windows` lists them; the result is the step's loss (the mean over the
+    /// windows of each window's mean weighted total) and each window's term means.
+    ///
+    /// With [`StepPasses::Shared`] one render call serves the whole step (each window's
+    /// object alone included), and the costs that [`Cost::batches_windows`] run once on the
+    /// whole batch with each sample's own context, so neither the render's launches nor those
+    /// costs' grow with the number of windows; the other costs (path costs, time-dependent
+    /// ones, custom ones) run per window. With [`StepPasses::PerWindow`] each window has its
+    /// own render call and costs (docs/gpu.md, "One pass a step").
+    ///
+    /// [`Cost::batches_windows`]: crate::costs::Cost::batches_windows
     pub fn evaluate_windows(
         &self,
         poses: Tensor<2>,
@@ -398,99 +591,148 @@ impl<'a> Problem<'a> {
                 ),
             });
         }
-        let owned;
-        let renders = match renders {
-            Some(r) => Some(r),
-            None => {
-                owned = self.renders();
-                owned.as_ref()
-            }
-        };
-        if self.step_passes == StepPasses::PerWindow && windows.len() > 1 {
-            let mut each = StepEvaluation {
-                windows: Vec::with_capacity(windows.len()),
-                masks: None,
-                stats: None,
-            };
+        let renders = self.renders_or(renders);
+        let counts: Vec<usize> = windows.iter().map(|w| w.count).collect();
+        if self.step_passes == StepPasses::PerWindow || windows.len() == 1 {
+            let mut terms = Vec::with_capacity(windows.len());
             let mut masks = Vec::with_capacity(windows.len());
+            let mut stats: Option<RenderStats> = None;
             let mut offset = 0;
             for w in windows {
                 let count = w.count;
-                let window_poses = poses.clone().narrow(0, offset, count);
+                let own = poses.clone().narrow(0, offset, count);
                 offset += count;
-                let one = self.evaluate_windows(window_poses, vec![w], step, renders)?;
-                each.windows.extend(one.windows);
-                masks.extend(one.masks);
-                each.stats = match (each.stats, one.stats) {
-                    (Some(a), Some(b)) => Some(RenderStats {
-                        tiles: a.tiles + b.tiles,
-                        pairs: a.pairs + b.pairs,
-                        gaussians_used: a.gaussians_used + b.gaussians_used,
-                    }),
-                    (a, b) => a.or(b),
-                };
+                let pass =
+                    self.render_pass(own.clone(), std::slice::from_ref(&w), renders.get())?;
+                let images = pass
+                    .as_ref()
+                    .map(|p| p.window(0, count))
+                    .unwrap_or_default();
+                terms.push(self.window_terms(w, own, images, step)?);
+                if let Some(pass) = pass {
+                    masks.extend(pass.masks);
+                    stats = Some(match stats {
+                        Some(a) => RenderStats {
+                            tiles: a.tiles + pass.stats.tiles,
+                            pairs: a.pairs + pass.stats.pairs,
+                            gaussians_used: a.gaussians_used + pass.stats.gaussians_used,
+                        },
+                        None => pass.stats,
+                    });
+                }
             }
-            if masks.len() == each.windows.len() {
-                each.masks = Some(Tensor::cat(masks, 0));
-            }
-            return Ok(each);
+            let masks = (masks.len() == terms.len()).then(|| Tensor::cat(masks, 0));
+            return Ok(StepEvaluation::of_windows(terms, masks, stats));
         }
+
+        let pass = self.render_pass(poses.clone(), &windows, renders.get())?;
+        let batched_cost = |c: &dyn Cost| c.batches_windows() && c.domain() == CostDomain::Samples;
+        // The costs that batch: once, on every sample with its own window's context.
+        let contexts: Vec<QueryContext> = windows
+            .iter()
+            .flat_map(|w| std::iter::repeat_n(self.windows[w.window].context, w.count))
+            .collect();
+        let whole = pass.as_ref().map(|p| p.window(0, rows)).unwrap_or_default();
+        let mut inputs = self.attach_images(
+            CostInputs::new(poses.clone(), whole.mask, step, contexts[0])?
+                .with_contexts(contexts)?,
+            Images {
+                mask: None,
+                ..whole
+            },
+        );
+        if let Some(o) = self.occupancy {
+            inputs = inputs.with_occupancy(o.clone());
+        }
+        let batched = self.costs.evaluate_where(&inputs, batched_cost)?;
+        // The others, window by window (images cut out only when such a cost reads one).
+        let others_read_images = self
+            .costs
+            .costs()
+            .iter()
+            .any(|c| !batched_cost(c.as_ref()) && !c.channels().is_empty());
+        let mut per_window = Vec::with_capacity(windows.len());
+        let mut offset = 0;
+        for w in windows {
+            let count = w.count;
+            let own = poses.clone().narrow(0, offset, count);
+            let images = match (&pass, others_read_images) {
+                (Some(pass), true) => pass.window(offset, count),
+                _ => Images::default(),
+            };
+            offset += count;
+            per_window.push(self.window_terms_where(w, own, images, step, |c| !batched_cost(c))?);
+        }
+        Ok(StepEvaluation::of_batch(
+            self.costs,
+            batched,
+            per_window,
+            &counts,
+            pass.as_ref().and_then(|p| p.masks.clone()),
+            pass.map(|p| p.stats),
+        ))
+    }
+
+    /// `renders`, or the problem's own when the caller keeps none.
+    fn renders_or<'r>(&self, renders: Option<&'r WindowRenders>) -> Borrowed<'r, WindowRenders> {
+        match renders {
+            Some(r) => Borrowed::Lent(Some(r)),
+            None => Borrowed::Owned(self.renders()),
+        }
+    }
+
+    /// One render call for `windows`' samples at `poses` (their rows in order), each
+    /// window's object alone after them when a cost reads it; None when no cost reads an
+    /// image.
+    fn render_pass(
+        &self,
+        poses: Tensor<2>,
+        windows: &[WindowSamples<'_>],
+        renders: Option<&WindowRenders>,
+    ) -> Result<Option<Pass>, OptimiseError> {
+        let Some(renders) = renders else {
+            return Ok(None);
+        };
+        let [rows, _] = poses.dims();
         let host_samples: Option<Vec<Pose>> = windows
             .iter()
             .map(|w| w.host.map(|h| h.samples.iter().map(|&p| Pose(p))))
             .collect::<Option<Vec<_>>>()
             .map(|each| each.into_iter().flatten().collect());
-        let Some(renders) = renders else {
-            let mut offset = 0;
-            let mut terms = Vec::with_capacity(windows.len());
-            for w in windows {
-                let window_poses = poses.clone().narrow(0, offset, w.count);
-                offset += w.count;
-                terms.push(self.window_terms(w, window_poses, Images::default(), step)?);
-            }
-            return Ok(StepEvaluation {
-                windows: terms,
-                masks: None,
-                stats: None,
-            });
-        };
         let mut request = renders.request.clone();
         let alone = renders.alone.as_ref();
         let mut render_poses = poses.clone();
         let mut render_host = host_samples.clone();
         if let Some(Channel::ObjectMasks(objects)) = request.channels.first_mut() {
-            let scene_views = windows.iter().flat_map(|w| {
-                std::iter::repeat_n(
-                    ObjectView {
-                        object: w.window,
-                        surroundings: Surroundings::Scene,
-                    },
-                    w.count,
-                )
-            });
-            objects.views = scene_views.collect();
+            let views = |object: &dyn Fn(usize) -> usize, surroundings| -> Vec<ObjectView> {
+                windows
+                    .iter()
+                    .flat_map(|w| {
+                        let view = ObjectView {
+                            object: object(w.window),
+                            surroundings,
+                        };
+                        std::iter::repeat_n(view, w.count)
+                    })
+                    .collect()
+            };
+            objects.views = views(&|i| i, Surroundings::Scene);
             if let Some(alone) = alone {
                 // The same poses again, each drawing its window's object alone.
-                objects.views.extend(windows.iter().flat_map(|w| {
-                    std::iter::repeat_n(
-                        ObjectView {
-                            object: alone[w.window],
-                            surroundings: Surroundings::Nothing,
-                        },
-                        w.count,
-                    )
-                }));
-                render_poses = Tensor::cat(vec![poses.clone(), poses.clone()], 0);
+                objects
+                    .views
+                    .extend(views(&|i| alone[i], Surroundings::Nothing));
+                render_poses = Tensor::cat(vec![poses.clone(), poses], 0);
                 render_host = host_samples.map(|h| [h.clone(), h].concat());
             }
         }
         let rendered = render_at(self.scene, render_poses, render_host.as_deref(), &request)?;
         let images = rendered.images; // [B', H, W, C]
         let [_, height, width, _] = images.dims();
-        let channel = |name: fn(&Channel) -> bool| -> Option<(usize, usize)> {
+        let channel = |wanted: fn(&Channel) -> bool| -> Option<(usize, usize)> {
             let mut offset = 0;
             for c in &request.channels {
-                if name(c) {
+                if wanted(c) {
                     return Some((offset, c.width()));
                 }
                 offset += c.width();
@@ -498,38 +740,35 @@ impl<'a> Problem<'a> {
             None
         };
         let mask_at = channel(|c| matches!(c, Channel::ObjectMasks(_)));
-        let depth_at = channel(|c| matches!(c, Channel::Depth));
-        let rgb_at = channel(|c| matches!(c, Channel::Rgb));
-        let part = |(offset, width): (usize, usize), rows: (usize, usize)| {
+        let part = |(offset, width): (usize, usize), first: usize| {
             images
                 .clone()
-                .narrow(0, rows.0, rows.1)
+                .narrow(0, first, rows)
                 .narrow(3, offset, width)
         };
-        let flat = |t: Tensor<4>, count: usize| t.reshape([count, height, width]);
-        let masks = mask_at.map(|at| flat(part(at, (0, rows)), rows));
-        let mut offset = 0;
-        let mut terms = Vec::with_capacity(windows.len());
-        for w in windows {
-            let count = w.count;
-            let own = (offset, count);
-            let window_images = Images {
-                mask: masks.as_ref().map(|m| m.clone().narrow(0, offset, count)),
-                mask_alone: alone
-                    .and(mask_at)
-                    .map(|at| flat(part(at, (rows + offset, count)), count)),
-                depth: depth_at.map(|at| flat(part(at, own), count)),
-                rgb: rgb_at.map(|at| part(at, own)),
-            };
-            let window_poses = poses.clone().narrow(0, offset, count);
-            offset += count;
-            terms.push(self.window_terms(w, window_poses, window_images, step)?);
+        let flat = |t: Tensor<4>| t.reshape([rows, height, width]);
+        Ok(Some(Pass {
+            masks: mask_at.map(|at| flat(part(at, 0))),
+            mask_alone: alone.and(mask_at).map(|at| flat(part(at, rows))),
+            depth: channel(|c| matches!(c, Channel::Depth)).map(|at| flat(part(at, 0))),
+            rgb: channel(|c| matches!(c, Channel::Rgb)).map(|at| part(at, 0)),
+            stats: rendered.stats,
+        }))
+    }
+
+    /// `inputs` with the images of `images` that are there (the mask is given to
+    /// [`CostInputs::new`]).
+    fn attach_images(&self, mut inputs: CostInputs, images: Images) -> CostInputs {
+        if let Some(m) = images.mask_alone {
+            inputs = inputs.with_mask_alone(m);
         }
-        Ok(StepEvaluation {
-            windows: terms,
-            masks,
-            stats: Some(rendered.stats),
-        })
+        if let Some(d) = images.depth {
+            inputs = inputs.with_depth(d);
+        }
+        if let Some(c) = images.rgb {
+            inputs = inputs.with_rgb(c);
+        }
+        inputs
     }
 
     /// One window's cost terms from its samples' poses and images.
@@ -540,9 +779,26 @@ impl<'a> Problem<'a> {
         images: Images,
         step: usize,
     ) -> Result<CostTerms, OptimiseError> {
+        self.window_terms_where(samples, poses, images, step, |_| true)?
+            .ok_or_else(|| OptimiseError::Cost(CostError::Set("no cost is configured".into())))
+    }
+
+    /// [`Problem::window_terms`] of the costs `keep` selects; None when it keeps none.
+    fn window_terms_where(
+        &self,
+        samples: WindowSamples<'_>,
+        poses: Tensor<2>,
+        images: Images,
+        step: usize,
+        keep: impl Fn(&dyn Cost) -> bool,
+    ) -> Result<Option<CostTerms>, OptimiseError> {
         let index = samples.window;
         let (start, end) = window_bounds(index, self.windows.len());
-        let mut inputs = CostInputs::new(poses, images.mask, step, self.windows[index].context)?;
+        let mask = images.mask.clone();
+        let mut inputs = self.attach_images(
+            CostInputs::new(poses, mask, step, self.windows[index].context)?,
+            images,
+        );
         if let Some(ts) = samples.times {
             inputs = inputs.with_times(SampleTimes {
                 window: index,
@@ -562,16 +818,7 @@ impl<'a> Problem<'a> {
         if let Some(h) = samples.host {
             inputs = inputs.with_host_poses(h.clone());
         }
-        if let Some(m) = images.mask_alone {
-            inputs = inputs.with_mask_alone(m);
-        }
-        if let Some(d) = images.depth {
-            inputs = inputs.with_depth(d);
-        }
-        if let Some(c) = images.rgb {
-            inputs = inputs.with_rgb(c);
-        }
-        Ok(self.costs.evaluate(&inputs)?)
+        Ok(self.costs.evaluate_where(&inputs, keep)?)
     }
 
     /// The loss of `pose` for window `index` (step 0), read back to the host, and its

@@ -37,7 +37,7 @@
 use std::time::{Duration, Instant};
 
 use super::units::PoseUnits;
-use super::{OptimiseError, Problem, WindowSamples, check_adam, sampling};
+use super::{OptimiseError, Problem, StepEvaluation, WindowSamples, check_adam, sampling};
 use crate::costs::{HostPoses, QueryContext};
 use crate::trajectory::{POSE_DIM, Trajectory, TrajectoryModel, TrajectoryRecord};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
@@ -362,25 +362,21 @@ pub fn optimise_trajectory(
                 host: Some(&segment.poses),
             })
             .collect();
-        let evaluated = problem.evaluate_windows(
-            poses.clone().narrow(0, 0, samples),
-            window_samples,
-            step,
-            renders.as_ref(),
-        )?;
-        let mut loss: Option<Tensor<1>> = None;
-        let mut labels = Vec::with_capacity(n);
-        let mut means = Vec::with_capacity(n);
-        for terms in evaluated.windows {
-            labels.push(terms.labels());
-            means.push(terms.means_on_device());
-            let mean = terms.total.mean();
-            loss = Some(match loss {
-                Some(l) => l + mean,
-                None => mean,
-            });
-        }
-        let loss = loss.expect("at least one window").div_scalar(n as f64);
+        let [rows, _] = poses.dims();
+        let sample_poses = if samples == rows {
+            poses.clone()
+        } else {
+            poses.clone().narrow(0, 0, samples)
+        };
+        let evaluated =
+            problem.evaluate_windows(sample_poses, window_samples, step, renders.as_ref())?;
+        let StepEvaluation {
+            loss,
+            means,
+            labels,
+            ..
+        } = evaluated;
+        let mut means = vec![means];
         // Weights before the update: they are what the loss is measured at.
         let evaluated = module.weights.val().without_autodiff();
         let backward_started = Instant::now();
