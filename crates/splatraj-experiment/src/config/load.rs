@@ -83,7 +83,7 @@ impl Config {
     /// [`Config::load`] for a config that may name the costs, trajectory models and target
     /// sources registered in `extensions`.
     pub fn load_with(path: &Path, overrides: &[String], extensions: &Extensions) -> Result<Config> {
-        Self::load_layered(path, toml::Table::new(), overrides, extensions)
+        ConfigFile::read(path)?.config(&Override::parse_all(overrides)?, extensions)
     }
 
     /// [`Config::load`] with `edit` applied over the file and `overrides` before the checks
@@ -99,20 +99,6 @@ impl Config {
             &Extensions::default(),
             edit,
         )
-    }
-
-    /// [`Config::load_with`] with `layer` merged over the file before the overrides, low to
-    /// high: the file (over what it `extends`), then `layer` (the keys a command's flags set,
-    /// e.g. `splatraj query --phrases`; tables merge key by key as `extends` does), then the
-    /// `--set` overrides.
-    pub fn load_layered(
-        path: &Path,
-        layer: toml::Table,
-        overrides: &[String],
-        extensions: &Extensions,
-    ) -> Result<Config> {
-        let file = ConfigFile::read(path)?.with_layer(layer);
-        file.config(&Override::parse_all(overrides)?, extensions)
     }
 
     /// A config from TOML text (no `extends`), checked with `extensions`; relative paths are
