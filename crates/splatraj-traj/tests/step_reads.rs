@@ -12,20 +12,21 @@ mod common;
 use std::sync::Mutex;
 
 use burn::tensor::{DType, Device, Tensor};
-use splatraj_render::camera::Intrinsics;
+use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::counters;
+use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::render::DeviceScene;
 use splatraj_scene::Scene;
 use splatraj_scene::demo::DEMO_UP;
 use splatraj_traj::clearance::{Occupancy, OccupancySpec};
 use splatraj_traj::costs::{
     ClearanceCost, Cost, CostError, CostInputs, CostsConfig, DEFAULT_CLEARANCE_SIGMA,
-    DEFAULT_MIN_OPACITY, MotionCost, OrAuto, QueryContext, VisibilityCost, WeightedCosts,
-    default_prior_radius,
+    DEFAULT_MIN_OPACITY, HostPoses, MotionCost, OrAuto, QueryContext, VisibilityCost,
+    WeightedCosts, default_prior_radius,
 };
 use splatraj_traj::optimise::{
-    Flow, ObjectView, Problem, StepPasses, TrajectoryOptions, WindowTarget, object_start_poses,
-    optimise_trajectory, window_start_trajectory,
+    Flow, ObjectView, Problem, StepPasses, TrajectoryOptions, WindowSamples, WindowTarget,
+    object_start_poses, optimise_trajectory, window_start_trajectory,
 };
 use splatraj_traj::trajectory::{Polynomial, Rbf, Trajectory, TrajectoryModel};
 
@@ -331,4 +332,129 @@ fn pose_loops_read_twice_and_once_a_step() {
     let counts = counters::snapshot().since(&before);
     assert_eq!(result.samples.len(), 2 * 2);
     assert_eq!(counts.reads, 6, "{counts:?}");
+}
+
+/// Several windows evaluated together (the costs that batch run once on every sample with its
+/// own window's context; one render call or one per window) give each window's terms, the
+/// loss and its pose gradient of one window evaluated at a time (f64).
+#[test]
+fn windows_together_equal_windows_one_at_a_time() {
+    let _counted = COUNTED.lock().unwrap();
+    let scene = scene();
+    let windows = windows(&scene, &["blue box", "red mug", "plant"]);
+    let device = Device::flex().autodiff();
+    let on_device = DeviceScene::new(&scene, &device, DType::F64);
+    let costs = CostsConfig {
+        visibility: Some(VisibilityCost::default()),
+        ..CostsConfig::default()
+    }
+    .build()
+    .unwrap();
+    let objects: Vec<([f64; 3], f64)> = windows
+        .iter()
+        .map(|w| (w.context.object_centre, w.context.prior_radius))
+        .collect();
+    let starts = object_start_poses(
+        &objects,
+        [0.0, 0.0, 0.5],
+        DEMO_UP.map(f64::from),
+        ObjectView::default(),
+        0,
+        1,
+    )
+    .unwrap();
+    // Three samples a window, spread around each window's start; windows of 3, 2 and 3.
+    let counts = [3, 2, 3];
+    let rows: Vec<Vec<Pose>> = starts
+        .iter()
+        .zip(counts)
+        .map(|(start, count)| {
+            (0..count)
+                .map(|k| {
+                    let mut p = start.0;
+                    p[3] += 0.07 * k as f64;
+                    p[1] += 0.05 * k as f64;
+                    Pose(p)
+                })
+                .collect()
+        })
+        .collect();
+    let hosts: Vec<HostPoses> = rows
+        .iter()
+        .map(|r| HostPoses {
+            samples: r.iter().map(|p| p.0).collect(),
+            path: None,
+        })
+        .collect();
+    let all: Vec<Pose> = rows.iter().flatten().copied().collect();
+
+    // One window at a time: the mean over windows of each window's mean total.
+    let poses = on_device.poses(&all).require_grad();
+    let problem = Problem::new(&on_device, &windows, &costs, intrinsics());
+    let mut offset = 0;
+    let mut loss = None;
+    let mut means = Vec::new();
+    for (i, count) in counts.iter().enumerate() {
+        let own = poses.clone().narrow(0, offset, *count);
+        offset += count;
+        let terms = problem
+            .evaluate_along(i, own, None, None, Some(&hosts[i]), 0, None)
+            .unwrap()
+            .terms;
+        means.extend(terms.means().into_iter().map(|(_, _, m)| m));
+        let mean = terms.total.mean().div_scalar(windows.len() as f64);
+        loss = Some(match loss {
+            Some(l) => l + mean,
+            None => mean,
+        });
+    }
+    let loss = loss.unwrap();
+    let gradient = to_host(poses.grad(&loss.clone().backward()).unwrap()).unwrap();
+    let loss = to_host(loss).unwrap()[0];
+    assert!(gradient.iter().any(|g| g.abs() > 1e-6));
+
+    for passes in [StepPasses::Shared, StepPasses::PerWindow] {
+        let poses = on_device.poses(&all).require_grad();
+        let samples = counts
+            .iter()
+            .enumerate()
+            .map(|(i, &count)| WindowSamples {
+                window: i,
+                count,
+                times: None,
+                path: None,
+                host: Some(&hosts[i]),
+            })
+            .collect();
+        let together = problem
+            .with_step_passes(passes)
+            .evaluate_windows(poses.clone(), samples, 0, None)
+            .unwrap();
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b.abs().max(1.0);
+        let got = to_host(together.means).unwrap();
+        assert_eq!(got.len(), means.len());
+        for (k, (a, b)) in got.iter().zip(&means).enumerate() {
+            assert!(close(*a, *b), "{passes:?}: mean {k}: {a} vs {b}");
+        }
+        let names: Vec<Vec<&str>> = together
+            .labels
+            .iter()
+            .map(|w| w.iter().map(|l| l.0).collect())
+            .collect();
+        assert!(names.iter().all(|w| *w == costs.names()), "{names:?}");
+        let v = to_host(poses.grad(&together.loss.clone().backward()).unwrap()).unwrap();
+        let together_loss = to_host(together.loss).unwrap()[0];
+        assert!(
+            close(together_loss, loss),
+            "{passes:?}: {together_loss} vs {loss}"
+        );
+        // The reference's gradient is uniformly 3e-8 (relative) larger than this one, what 1/3
+        // rounded to f32 (0.33333334) would give in its division by the window count.
+        for (a, b) in v.iter().zip(&gradient) {
+            assert!(
+                (a - b).abs() <= 1e-7 * b.abs().max(1e-3),
+                "{passes:?}: gradient {v:?} vs {gradient:?}"
+            );
+        }
+    }
 }

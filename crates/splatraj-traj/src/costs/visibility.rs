@@ -46,12 +46,14 @@ pub fn hidden_share_of(seen: &MaskMoments, alone: Tensor<3>) -> Tensor<1> {
     let [batch, _, _] = alone.dims();
     let mass = |m: &MaskMoments| m.mass().reshape([batch]);
     let whole = mass(&MaskMoments::of(alone));
-    // 1 where the object alone is in frame, else 0 (off the graph: a switch, not a slope).
+    // 1 where the object alone is in frame, else 0 (off the graph: a switch, not a slope);
+    // in the masks' float type (a bool tensor becomes the default float, f32).
     let in_frame = whole
         .clone()
         .detach()
         .greater_equal_elem(MIN_ALONE_PIXELS)
-        .float();
+        .float()
+        .cast(whole.dtype());
     let ratio = mass(seen) / whole.clamp_min(MIN_ALONE_PIXELS);
     ratio.neg().add_scalar(1.0).clamp_min(0.0) * in_frame
 }

@@ -258,6 +258,44 @@ struct Pass {
 }
 
 impl Pass {
+    /// The passes of consecutive samples as one (images joined in order, work summed); None
+    /// for none.
+    fn join(passes: Vec<Pass>) -> Option<Pass> {
+        if passes.len() <= 1 {
+            return passes.into_iter().next();
+        }
+        fn cat<const D: usize>(parts: Vec<Option<Tensor<D>>>) -> Option<Tensor<D>> {
+            parts
+                .into_iter()
+                .collect::<Option<Vec<_>>>()
+                .map(|parts| Tensor::cat(parts, 0))
+        }
+        let stats = passes
+            .iter()
+            .fold(RenderStats::default(), |a, p| RenderStats {
+                tiles: a.tiles + p.stats.tiles,
+                pairs: a.pairs + p.stats.pairs,
+                gaussians_used: a.gaussians_used + p.stats.gaussians_used,
+            });
+        let mut masks = Vec::new();
+        let mut alone = Vec::new();
+        let mut depth = Vec::new();
+        let mut rgb = Vec::new();
+        for p in passes {
+            masks.push(p.masks);
+            alone.push(p.mask_alone);
+            depth.push(p.depth);
+            rgb.push(p.rgb);
+        }
+        Some(Pass {
+            masks: cat(masks),
+            mask_alone: cat(alone),
+            depth: cat(depth),
+            rgb: cat(rgb),
+            stats,
+        })
+    }
+
     /// The images of samples `first .. first + count` (no slice when that is all of them).
     fn window(&self, first: usize, count: usize) -> Images {
         let all = self
@@ -540,12 +578,7 @@ impl<'a> Problem<'a> {
             host,
         };
         let renders = self.renders_or(renders);
-        let pass = self.render_pass(poses.clone(), std::slice::from_ref(&window), renders.get())?;
-        let images = pass
-            .as_ref()
-            .map(|p| p.window(0, count))
-            .unwrap_or_default();
-        let terms = self.window_terms(window, poses, images, step)?;
+        let (terms, pass) = self.evaluate_one(window, poses, step, renders.get())?;
         Ok(Evaluated {
             terms,
             masks: pass.as_ref().and_then(|p| p.masks.clone()),
@@ -593,39 +626,29 @@ impl<'a> Problem<'a> {
         }
         let renders = self.renders_or(renders);
         let counts: Vec<usize> = windows.iter().map(|w| w.count).collect();
-        if self.step_passes == StepPasses::PerWindow || windows.len() == 1 {
-            let mut terms = Vec::with_capacity(windows.len());
-            let mut masks = Vec::with_capacity(windows.len());
-            let mut stats: Option<RenderStats> = None;
-            let mut offset = 0;
-            for w in windows {
-                let count = w.count;
-                let own = poses.clone().narrow(0, offset, count);
-                offset += count;
-                let pass =
-                    self.render_pass(own.clone(), std::slice::from_ref(&w), renders.get())?;
-                let images = pass
-                    .as_ref()
-                    .map(|p| p.window(0, count))
-                    .unwrap_or_default();
-                terms.push(self.window_terms(w, own, images, step)?);
-                if let Some(pass) = pass {
-                    masks.extend(pass.masks);
-                    stats = Some(match stats {
-                        Some(a) => RenderStats {
-                            tiles: a.tiles + pass.stats.tiles,
-                            pairs: a.pairs + pass.stats.pairs,
-                            gaussians_used: a.gaussians_used + pass.stats.gaussians_used,
-                        },
-                        None => pass.stats,
-                    });
-                }
-            }
-            let masks = (masks.len() == terms.len()).then(|| Tensor::cat(masks, 0));
-            return Ok(StepEvaluation::of_windows(terms, masks, stats));
+        if let [_] = windows.as_slice() {
+            let w = windows.into_iter().next().expect("one window");
+            let (terms, pass) = self.evaluate_one(w, poses, step, renders.get())?;
+            return Ok(StepEvaluation::of_windows(
+                vec![terms],
+                pass.as_ref().and_then(|p| p.masks.clone()),
+                pass.map(|p| p.stats),
+            ));
         }
-
-        let pass = self.render_pass(poses.clone(), &windows, renders.get())?;
+        let pass = match self.step_passes {
+            StepPasses::Shared => self.render_pass(poses.clone(), &windows, renders.get())?,
+            StepPasses::PerWindow => {
+                // A call per window; their images joined, so the costs still run once.
+                let mut passes = Vec::with_capacity(windows.len());
+                let mut offset = 0;
+                for w in &windows {
+                    let own = poses.clone().narrow(0, offset, w.count);
+                    offset += w.count;
+                    passes.extend(self.render_pass(own, std::slice::from_ref(w), renders.get())?);
+                }
+                Pass::join(passes)
+            }
+        };
         let batched_cost = |c: &dyn Cost| c.batches_windows() && c.domain() == CostDomain::Samples;
         // The costs that batch: once, on every sample with its own window's context.
         let contexts: Vec<QueryContext> = windows
@@ -671,6 +694,23 @@ impl<'a> Problem<'a> {
             pass.as_ref().and_then(|p| p.masks.clone()),
             pass.map(|p| p.stats),
         ))
+    }
+
+    /// One window's render and cost terms.
+    fn evaluate_one(
+        &self,
+        window: WindowSamples<'_>,
+        poses: Tensor<2>,
+        step: usize,
+        renders: Option<&WindowRenders>,
+    ) -> Result<(CostTerms, Option<Pass>), OptimiseError> {
+        let [count, _] = poses.dims();
+        let pass = self.render_pass(poses.clone(), std::slice::from_ref(&window), renders)?;
+        let images = pass
+            .as_ref()
+            .map(|p| p.window(0, count))
+            .unwrap_or_default();
+        Ok((self.window_terms(window, poses, images, step)?, pass))
     }
 
     /// `renders`, or the problem's own when the caller keeps none.
