@@ -20,7 +20,7 @@ use splatraj_report::views_page::up_strip::{InUse, UpChoice};
 use splatraj_scene::up_axis::{ResolvedUp, UpCandidates, UpMethod, up_candidates};
 use splatraj_scene::{Scene, UpSource};
 
-use super::views_page::render_view;
+use super::view_render::render_view;
 
 /// Ups the strip shows: the one in use and the geometry's next candidates.
 pub const CHOICES: usize = 3;

@@ -16,21 +16,18 @@ use anyhow::{Context, Result, anyhow, bail};
 use burn::tensor::{DType, Device};
 use glam::DVec3;
 use splatraj_lift::{LiftStage, Placement, Progress, View, ViewOptions, ViewPlan, plan_views};
-use splatraj_render::host::{OnDevice, to_host};
-use splatraj_render::images::{png_rgb8, rgb8};
-use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render};
-use splatraj_report::views_page::{PickView, ViewsPage};
+use splatraj_render::render::DeviceScene;
+use splatraj_report::views_page::ViewsPage;
 use splatraj_scene::atomic::write_atomically;
 use splatraj_scene::formats::check_output_target;
 use splatraj_scene::up_axis::{ResolvedUp, resolve_up};
 use splatraj_scene::{ReadOptions, Scene, UpSource, read_scene};
 
 use crate::picking::up_choices::{up_choices, vector};
+use crate::picking::view_render::render_view;
 use crate::resources::{MemoryLimit, MemoryPlan, render_bytes, scene_bytes};
 
-/// A pixel's depth is kept where the render covers at least this share of it; elsewhere the
-/// pixel is background (a click there picks nothing) rather than a depth diluted by emptiness.
-pub const MIN_COVER: f64 = 0.5;
+pub use crate::picking::view_render::MIN_COVER;
 /// Most views a page may hold (each adds its picture and depth, about 5 bytes a pixel).
 pub const MAX_VIEWS: usize = 32;
 /// Side of the views, pixels: least and most.
@@ -313,38 +310,6 @@ pub fn views_page(
         radius: FIRST_RADIUS * diagonal,
         views: picked,
         up_choices: Vec::new(),
-    })
-}
-
-/// Colour and depth of one view.
-pub(crate) fn render_view(
-    uploaded: &DeviceScene,
-    view: &View,
-    caption: String,
-) -> Result<PickView> {
-    let k = view.intrinsics;
-    let request = RenderRequest::new(k, vec![Channel::Rgb, Channel::Depth]);
-    let rendered = render(uploaded, uploaded.poses(&[view.pose]), &request)?;
-    let pixels = to_host(rendered.images)?;
-    let alpha = to_host(rendered.alpha)?;
-    let png = png_rgb8(&rgb8(&pixels, 4, None), k.width, k.height)?;
-    let depth = pixels
-        .chunks_exact(4)
-        .zip(&alpha)
-        .map(|(px, &a)| {
-            if a >= MIN_COVER {
-                (px[3] / a) as f32
-            } else {
-                f32::NAN
-            }
-        })
-        .collect();
-    Ok(PickView {
-        caption,
-        intrinsics: k,
-        pose: view.pose,
-        png,
-        depth,
     })
 }
 
