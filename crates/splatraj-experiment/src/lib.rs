@@ -4,15 +4,16 @@
 //! `--set` overrides, checks that name the key), at the bottom of the crate: it imports nothing
 //! of it but the [`Extensions`] registries, and no module imports in a circle.
 //! [`Experiment::prepare`] reads and checks the scene, world up, one target per query
-//! ([`grounding`], shared with `splatraj query`), their windows and prior radii; then
+//! ([`prepare::grounding`], shared with `splatraj query`), their windows and prior radii; then
 //! [`Experiment::run_trajectory`] (the paper's method, restarts included),
 //! [`Experiment::evaluate`] (per-window metrics, LDJ),
 //! [`Experiment::optimise_pose`] (the single-pose ablations, restarts as one batch) and
 //! [`Experiment::sample_posterior`] (SGLD) do the work, telling an [`Observer`] of each step
-//! (which may stop them, keeping the best so far). [`records`] and [`outputs`] turn results
-//! into the run folder's files, each written whole or not at all. [`Extensions`] carries what
-//! another crate adds (its own costs), and [`probe`], [`views`], [`io`], [`views_page`] serve
-//! the smaller commands (`render --grad`, `bench`, `query`, `scene views`).
+//! (which may stop them, keeping the best so far). [`outputs::records`] and [`outputs`] turn
+//! results into the run folder's files, each written whole or not at all. [`Extensions`]
+//! carries what another crate adds (its own costs), and [`optimise::probe`],
+//! [`prepare::views`], [`outputs::camera_file`], [`picking::views_page`] serve the smaller
+//! commands (`render --grad`, `bench`, `query`, `scene views`).
 //!
 //! ```no_run
 //! use std::path::Path;
@@ -38,7 +39,6 @@ pub mod children;
 pub mod config;
 pub mod extensions;
 pub mod frame_metrics;
-pub mod io;
 pub mod json;
 pub mod optimise;
 pub mod outputs;

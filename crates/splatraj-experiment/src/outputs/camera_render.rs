@@ -19,8 +19,7 @@ use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderR
 use splatraj_scene::ReadOptions;
 use splatraj_semantic::{label_mask, read_mask_file};
 
-use crate::io::read_camera_file;
-
+use super::camera_file::read_camera_file;
 use crate::optimise::probe::{MaskProbe, ProbeReport};
 use crate::outputs::npy_f32;
 use crate::outputs::output_folder::OutputFolder;

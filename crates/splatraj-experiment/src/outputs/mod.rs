@@ -6,11 +6,11 @@
 //!
 //! **This folder** is the outputs stage: what a finished optimisation becomes on disk. The run
 //! folder ([`run_folder`], [`output_folder`]), its records ([`records`], [`run_files`]), the
-//! frames and video of a camera path ([`path_render`], [`path_checks`], [`camera_render`];
-//! `render-path` whole: [`path_job`]),
-//! other tools' camera files ([`camera_paths`]) and `report.html`'s data
-//! ([`run_report`]).
+//! frames and video of a camera path ([`path_render`], [`path_checks`], [`camera_render`] with
+//! its [`camera_file`]; `render-path` whole: [`path_job`]), other tools' camera files
+//! ([`camera_paths`]) and `report.html`'s data ([`run_report`]).
 
+pub mod camera_file;
 pub mod camera_paths;
 pub mod camera_render;
 pub mod output_folder;

@@ -1,4 +1,4 @@
-//! Reading the small input files of the commands: camera files (JSON).
+//! Reading a camera file (JSON, `splatraj render`'s camera): intrinsics and a pose, strictly.
 
 use std::path::Path;
 
@@ -26,7 +26,7 @@ pub fn read_camera_file(path: &Path) -> Result<CameraSpec> {
     let camera = file
         .camera()
         .map_err(|e| anyhow!("camera file {}: {e}", path.display()))?;
-    crate::outputs::camera_paths::check_image_side(&camera.intrinsics)
+    super::camera_paths::check_image_side(&camera.intrinsics)
         .map_err(|e| anyhow!("camera file {}: {e}", path.display()))?;
     Ok(camera)
 }
