@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes the fixtures of splatraj-report's tests/tools.rs (crates/splatraj-report/tests/data/tools/):
+"""Writes the fixtures of splatraj-camera-paths' tests/tools.rs (crates/splatraj-camera-paths/tests/data/tools/):
 our camera exports as the real tools load them, and camera paths made by those tools.
 
 The references:
@@ -25,7 +25,7 @@ The references:
   FoVy = focal2fov(fy, height), and their world-to-view matrix getWorld2View2(R, T) (identity
   translate, scale 1) = [R^T | T].
 
-Run (after `SPLATRAJ_WRITE_TOOL_INPUTS=1 cargo test -p splatraj-report --release --test tools`
+Run (after `SPLATRAJ_WRITE_TOOL_INPUTS=1 cargo test -p splatraj-camera-paths --release --test tools`
 has written `ours/`, if our exports changed):
     python3 -m venv --system-site-packages /tmp/nsenv     # torch comes from the system
     /tmp/nsenv/bin/pip install --no-deps nerfstudio==1.1.5
@@ -34,7 +34,7 @@ has written `ours/`, if our exports changed):
 (nerfstudio's full dependency set, with tinycudann, gsplat, etc., is not needed to import
 `nerfstudio.cameras.camera_paths`.)
 
-Writes, under DATA_DIR (default crates/splatraj-report/tests/data/tools):
+Writes, under DATA_DIR (default crates/splatraj-camera-paths/tests/data/tools):
 - nerfstudio_loaded.json      per frame of ours/camera_path.json: camera_to_world (3x4), fx,
                               fy, cx, cy, width, height as get_path_from_json's Cameras hold them
 - pycolmap_loaded.json        per image of ours/ (by id): name, camera_id, cam_from_world (3x4);
@@ -63,7 +63,7 @@ from nerfstudio.cameras.cameras import Cameras  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 DATA = sys.argv[1] if len(sys.argv) > 1 else os.path.join(
-    HERE, "..", "crates", "splatraj-report", "tests", "data", "tools")
+    HERE, "..", "crates", "splatraj-camera-paths", "tests", "data", "tools")
 OURS = os.path.join(DATA, "ours")
 
 

@@ -6,7 +6,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use common::{TINY_CONFIG as TINY, assert_clean_failure, s, splatraj, stderr, stdout};
-use splatraj_report::{CameraPose, Format, read_camera_path};
+use splatraj_camera_paths::{CameraPose, Format, read_camera_path};
 
 fn tiny_run(dir: &Path) -> PathBuf {
     let config = dir.join("tiny.toml");

@@ -15,7 +15,7 @@ use splatraj::lift::{ViewOptions, plan_views};
 use splatraj::render::render::DeviceScene;
 use splatraj::scene::demo::DEMO_UP;
 use splatraj::scene::{ReadOptions, read_scene};
-use splatraj_report::{ExportOptions, Format};
+use splatraj_camera_paths::{ExportOptions, Format};
 
 /// Mask side, pixels.
 const SIZE: usize = 128;
@@ -52,7 +52,7 @@ fn lifted_masks_become_labels_that_query_reads() {
         &silent,
     )
     .unwrap();
-    let files = splatraj_report::export(
+    let files = splatraj_camera_paths::export(
         &camera_path(&plan.views),
         Format::Inria,
         &ExportOptions::default(),

@@ -12,8 +12,8 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use common::{TINY_CONFIG, assert_clean_failure, s, splatraj, stderr};
-use splatraj_report::camera::{CameraPath, CameraPose, Frame, Intrinsics};
-use splatraj_report::{ExportOptions, Format};
+use splatraj_camera_paths::camera::{CameraPath, CameraPose, Frame, Intrinsics};
+use splatraj_camera_paths::{ExportOptions, Format};
 
 /// The tiny config in `dir`, its runs going to `dir/runs`.
 fn tiny_config(dir: &Path) -> PathBuf {
@@ -55,8 +55,8 @@ fn nerfstudio_path(dir: &Path, frames: usize, (width, height): (usize, usize)) -
         fps: Some(30.0),
         seconds: None,
     };
-    let files =
-        splatraj_report::export(&path, Format::Nerfstudio, &ExportOptions::default()).unwrap();
+    let files = splatraj_camera_paths::export(&path, Format::Nerfstudio, &ExportOptions::default())
+        .unwrap();
     let file = dir.join("camera_path.json");
     std::fs::write(&file, &files[0].1).unwrap();
     file

@@ -7,7 +7,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use common::{TINY_CONFIG, assert_clean_failure, s, splatraj, stderr, stdout};
-use splatraj_report::Format;
+use splatraj_camera_paths::Format;
 use splatraj_report::video::decode_mp4;
 
 /// The tiny config run with 6 frames at 12 fps; returns the config file and the run folder.
@@ -99,9 +99,10 @@ fn the_run_video_is_its_frames_and_its_exported_path_renders_them_again() {
             assert!(file.is_file(), "{} missing", file.display());
         }
         let main = format.file_names()[usize::from(format == Format::Colmap)];
-        let (_, path) =
-            splatraj_report::read_camera_path(&run.join("exports").join(format.name()).join(main))
-                .unwrap();
+        let (_, path) = splatraj_camera_paths::read_camera_path(
+            &run.join("exports").join(format.name()).join(main),
+        )
+        .unwrap();
         assert_eq!(path.cuts, vec![3], "{format}");
     }
     // Nothing half-written is left anywhere in the folder.

@@ -14,7 +14,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 use splatraj::experiment::outputs::camera_paths::{ExportRequest, FrameRequest, export_run};
-use splatraj_report::Format;
+use splatraj_camera_paths::Format;
 
 /// Arguments of `splatraj export`.
 #[derive(Debug, Args)]

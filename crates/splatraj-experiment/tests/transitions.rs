@@ -7,9 +7,9 @@
 use std::path::Path;
 
 use glam::DVec3;
+use splatraj_camera_paths::Format;
 use splatraj_experiment::outputs::camera_paths::{RunTrajectory, export_files};
 use splatraj_experiment::{Config, Experiment, Extensions, optimise::observer};
-use splatraj_report::Format;
 use splatraj_traj::trajectory::TrajectoryModel;
 
 const ROOM: &str = r#"
@@ -134,7 +134,7 @@ fn cut_makes_shots_that_jump_only_at_the_cuts_and_every_file_carries_them() {
         let main = dir
             .path()
             .join(format.file_names()[if format == Format::Colmap { 1 } else { 0 }]);
-        let (_, read) = splatraj_report::read_camera_path(&main).unwrap();
+        let (_, read) = splatraj_camera_paths::read_camera_path(&main).unwrap();
         assert_eq!(read.cuts, vec![10, 20], "{format}");
     }
 }

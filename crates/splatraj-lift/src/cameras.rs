@@ -1,6 +1,6 @@
 //! The capture's cameras as views to lift from, read from the files other tools write.
 //!
-//! [`read_views`] reads any camera file `splatraj_report` reads (INRIA `cameras.json`, COLMAP
+//! [`read_views`] reads any camera file `splatraj_camera_paths` reads (INRIA `cameras.json`, COLMAP
 //! `images.txt` with `cameras.txt` beside it, nerfstudio `transforms.json` or
 //! `camera_path.json`, a SuperSplat track) and keeps, with each view, the image it was taken
 //! for, so that masks and photos can be matched to it by name. Both crates share the
@@ -9,9 +9,9 @@
 
 use std::path::Path;
 
+use splatraj_camera_paths::colmap::frame_name;
+use splatraj_camera_paths::{CameraPath, Frame};
 use splatraj_render::camera::{CameraError, CameraPose, Intrinsics, Pose};
-use splatraj_report::colmap::frame_name;
-use splatraj_report::{CameraPath, Frame};
 
 use crate::error::{LiftError, Result};
 use crate::views::View;
@@ -56,10 +56,10 @@ pub fn image_stem(name: &str) -> &str {
     }
 }
 
-/// Reads the cameras of `path` (any format [`splatraj_report::detect`] recognises) as views,
+/// Reads the cameras of `path` (any format [`splatraj_camera_paths::detect`] recognises) as views,
 /// in file order. Every camera needs intrinsics (COLMAP: `cameras.txt` beside `images.txt`).
 pub fn read_views(path: &Path) -> Result<Vec<NamedView>> {
-    let cameras = splatraj_report::read_named_cameras(path)?;
+    let cameras = splatraj_camera_paths::read_named_cameras(path)?;
     cameras
         .path
         .frames
@@ -73,7 +73,7 @@ pub fn read_views(path: &Path) -> Result<Vec<NamedView>> {
                     path,
                     format!(
                         "camera {i} ({name}) has no intrinsics{}",
-                        if cameras.format == splatraj_report::Format::Colmap {
+                        if cameras.format == splatraj_camera_paths::Format::Colmap {
                             " (put COLMAP's cameras.txt beside images.txt)"
                         } else {
                             ""
@@ -100,7 +100,7 @@ pub fn checked_intrinsics(p: &Intrinsics) -> Result<Intrinsics, CameraError> {
     Intrinsics::new(p.fx, p.fy, p.cx, p.cy, p.width, p.height)
 }
 
-/// `views` as a camera path, to write with `splatraj_report::export` (frame `i` is named
+/// `views` as a camera path, to write with `splatraj_camera_paths::export` (frame `i` is named
 /// `frame_NNNN` by every writer).
 pub fn camera_path(views: &[View]) -> CameraPath {
     CameraPath {

@@ -16,7 +16,7 @@ pub enum LiftError {
     Camera(#[from] splatraj_render::camera::CameraError),
     /// A camera file could not be read (the error names the file and the element).
     #[error(transparent)]
-    Cameras(#[from] splatraj_report::InterchangeError),
+    Cameras(#[from] splatraj_camera_paths::InterchangeError),
     /// The CLIP towers or their weights failed.
     #[error(transparent)]
     Semantic(#[from] splatraj_semantic::SemanticError),

@@ -10,6 +10,7 @@ use std::sync::OnceLock;
 
 use burn::tensor::{DType, Device};
 use image::{GrayImage, Luma, Rgb, RgbImage};
+use splatraj_camera_paths::{ExportOptions, Format};
 use splatraj_lift::cameras::{NamedView, camera_path};
 use splatraj_lift::mask_files::{MaskCoding, render_label_mask};
 use splatraj_lift::progress::silent;
@@ -18,7 +19,6 @@ use splatraj_lift::{
 };
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::render::DeviceScene;
-use splatraj_report::{ExportOptions, Format};
 use splatraj_scene::Scene;
 use splatraj_scene::demo::{DEMO_UP, DemoConfig, demo_scene};
 
@@ -81,8 +81,9 @@ fn colour(object: i32) -> [u8; 3] {
 
 /// Writes `views` in `format` into `dir`; returns the file to read back.
 fn write_cameras(dir: &Path, views: &[View], format: Format) -> std::path::PathBuf {
-    let files = splatraj_report::export(&camera_path(views), format, &ExportOptions::default())
-        .expect("exports");
+    let files =
+        splatraj_camera_paths::export(&camera_path(views), format, &ExportOptions::default())
+            .expect("exports");
     for (name, text) in &files {
         std::fs::write(dir.join(name), text).unwrap();
     }

@@ -233,10 +233,10 @@ fn the_captures_cameras_and_photos_replace_planned_views() {
             intrinsics,
         })
         .collect();
-    let files = splatraj_report::export(
+    let files = splatraj_camera_paths::export(
         &camera_path(&views),
-        splatraj_report::Format::Inria,
-        &splatraj_report::ExportOptions::default(),
+        splatraj_camera_paths::Format::Inria,
+        &splatraj_camera_paths::ExportOptions::default(),
     )
     .unwrap();
     let cameras = dir.path().join(files[0].0);

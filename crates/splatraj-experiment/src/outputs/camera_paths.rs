@@ -8,11 +8,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow, bail};
 use serde::Deserialize;
+use splatraj_camera_paths::supersplat::Focus;
+use splatraj_camera_paths::{CameraPath, ExportOptions, Format, Frame};
 use splatraj_lift::cameras::checked_intrinsics;
 use splatraj_render::camera::{CameraPose, Intrinsics};
 use splatraj_render::camera_file::{check_pose_range, resize};
-use splatraj_report::supersplat::Focus;
-use splatraj_report::{CameraPath, ExportOptions, Format, Frame};
 use splatraj_traj::optimise::sampling::window_of;
 use splatraj_traj::trajectory::{Basis, ShotSpans, TrajectoryRecord, uniform_times};
 
@@ -492,7 +492,7 @@ impl PathFile {
         if ours {
             return Ok(Self::Trajectory(Box::new(RunTrajectory::read(path)?)));
         }
-        let (format, camera_path) = splatraj_report::read_camera_path(path)?;
+        let (format, camera_path) = splatraj_camera_paths::read_camera_path(path)?;
         Ok(Self::Imported {
             file: path.to_path_buf(),
             format,
@@ -617,7 +617,7 @@ pub fn export_files(
         focus,
         ..ExportOptions::default()
     };
-    Ok(splatraj_report::export(
+    Ok(splatraj_camera_paths::export(
         &frames.camera_path(),
         format,
         &options,

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use serde_json::Value;
-use splatraj_report::CameraPose;
+use splatraj_camera_paths::CameraPose;
 use splatraj_report::report::{
     CostHistory, FrameMetrics, INLINE_VIDEO_BYTES, Keyframe, PathSample, RunReport, SceneView,
     Shot, Table, VideoSource, Window,

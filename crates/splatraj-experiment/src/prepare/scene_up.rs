@@ -98,7 +98,7 @@ pub fn camera_files_beside(scene_file: &Path) -> Vec<PathBuf> {
 
 /// Up from the cameras of `path`, checked for agreement and for standing near `scene`.
 fn up_from_file(path: &Path, scene: &Scene) -> Result<ResolvedUp> {
-    let (_, cameras) = splatraj_report::read_camera_path(path).map_err(|e| anyhow!("{e}"))?;
+    let (_, cameras) = splatraj_camera_paths::read_camera_path(path).map_err(|e| anyhow!("{e}"))?;
     let rotations: Vec<DMat3> = cameras.frames.iter().map(|f| f.pose.rotation).collect();
     let centres: Vec<DVec3> = cameras.frames.iter().map(|f| f.pose.centre).collect();
     check_near_scene(&centres, scene, path)?;

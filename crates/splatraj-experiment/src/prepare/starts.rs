@@ -58,7 +58,7 @@ impl Experiment {
             let record: TrajectoryRecord = match serde_json::from_str(&text) {
                 Ok(record) => record,
                 // Another tool's camera file: its poses, fitted to the model.
-                Err(_) if splatraj_report::detect(&path).is_ok() => {
+                Err(_) if splatraj_camera_paths::detect(&path).is_ok() => {
                     return Ok(vec![self.camera_file_start(&path, model)?]);
                 }
                 Err(e) => {
@@ -261,7 +261,8 @@ impl Experiment {
         model: TrajectoryModel,
     ) -> Result<TrajectoryRecord> {
         let context = || format!("`start.trajectory`: {}", path.display());
-        let (_, camera_path) = splatraj_report::read_camera_path(path).with_context(context)?;
+        let (_, camera_path) =
+            splatraj_camera_paths::read_camera_path(path).with_context(context)?;
         let times = uniform_times(START_FIT_SAMPLES);
         let poses = camera_path.resampled_phis(START_FIT_SAMPLES);
         let fitted = Trajectory::fit(model, &times, &poses, &self.device, self.dtype)

@@ -115,7 +115,7 @@ impl Experiment {
         // Cut times in t; a file neither reads is the start's to refuse, naming it.
         let times: Vec<f64> = match serde_json::from_str::<TrajectoryRecord>(&text) {
             Ok(record) => record.model.shots(n).cut_times(),
-            Err(_) => match splatraj_report::read_camera_path(&path) {
+            Err(_) => match splatraj_camera_paths::read_camera_path(&path) {
                 Ok((_, camera_path)) => {
                     let last = camera_path.frames.len().saturating_sub(1).max(1) as f64;
                     camera_path.cuts.iter().map(|&c| c as f64 / last).collect()

@@ -3,8 +3,8 @@
 //! claims more records than the bytes hold is refused before anything is reserved. (Poses read
 //! from `images.bin` against a closed form: `splatraj-experiment`'s `tests/scene_up.rs`.)
 
-use splatraj_report::colmap::read_named;
-use splatraj_report::colmap_binary::{cameras_text, images_text};
+use splatraj_camera_paths::colmap::read_named;
+use splatraj_camera_paths::colmap_binary::{cameras_text, images_text};
 
 /// One image record: id 7, the identity pose, camera 1, `a b.png`, no points.
 fn one_image() -> Vec<u8> {

@@ -4,9 +4,9 @@
 
 use std::f64::consts::PI;
 
-use splatraj_report::camera::{CameraPath, CameraPose, Frame, Intrinsics};
-use splatraj_report::supersplat::{Focus, Keyframes, SupersplatOptions};
-use splatraj_report::{ExportOptions, Format, colmap, inria, nerfstudio, supersplat};
+use splatraj_camera_paths::camera::{CameraPath, CameraPose, Frame, Intrinsics};
+use splatraj_camera_paths::supersplat::{Focus, Keyframes, SupersplatOptions};
+use splatraj_camera_paths::{ExportOptions, Format, colmap, inria, nerfstudio, supersplat};
 
 const TOL: f64 = 1e-6;
 
@@ -224,7 +224,7 @@ fn supersplat_round_trip_of_upright_cameras() {
 
 #[test]
 fn every_format_round_trips_through_files_and_detection() {
-    let dir = std::env::temp_dir().join(format!("splatraj-report-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("splatraj-camera-paths-{}", std::process::id()));
     let camera = Intrinsics::centred(300.0, 320, 240);
     let up = glam::DVec3::new(0.0, -1.0, 0.0);
     let frames = (0..5)
@@ -252,7 +252,7 @@ fn every_format_round_trips_through_files_and_detection() {
             supersplat_keyframes: Keyframes::EveryFrame,
             ..ExportOptions::default()
         };
-        let files = splatraj_report::export(&path, format, &options).unwrap();
+        let files = splatraj_camera_paths::export(&path, format, &options).unwrap();
         let names: Vec<&str> = files.iter().map(|f| f.0).collect();
         assert_eq!(names, format.file_names());
         for (name, text) in &files {
@@ -262,7 +262,7 @@ fn every_format_round_trips_through_files_and_detection() {
             Format::Colmap => "images.txt",
             _ => format.file_names()[0],
         };
-        let (detected, back) = splatraj_report::read_camera_path(&folder.join(main)).unwrap();
+        let (detected, back) = splatraj_camera_paths::read_camera_path(&folder.join(main)).unwrap();
         assert_eq!(detected, format);
         same_poses(&path, &back, format.name());
         if format == Format::Colmap {

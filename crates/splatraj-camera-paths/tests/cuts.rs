@@ -5,8 +5,8 @@
 //! refused naming the key.
 
 use glam::DVec3;
-use splatraj_report::camera::{CameraPath, CameraPose, Frame, Intrinsics};
-use splatraj_report::{ExportOptions, Format, colmap, export, inria, nerfstudio, supersplat};
+use splatraj_camera_paths::camera::{CameraPath, CameraPose, Frame, Intrinsics};
+use splatraj_camera_paths::{ExportOptions, Format, colmap, export, inria, nerfstudio, supersplat};
 
 fn camera() -> Intrinsics {
     Intrinsics::centred(300.0, 320, 240)

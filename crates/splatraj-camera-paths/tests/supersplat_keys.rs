@@ -15,8 +15,8 @@ use std::f64::consts::TAU;
 
 use glam::DVec3;
 use serde_json::Value;
-use splatraj_report::camera::{CameraPath, CameraPose, Frame, Intrinsics};
-use splatraj_report::supersplat::{self, Focus, Keyframes, SupersplatOptions};
+use splatraj_camera_paths::camera::{CameraPath, CameraPose, Frame, Intrinsics};
+use splatraj_camera_paths::supersplat::{self, Focus, Keyframes, SupersplatOptions};
 
 const FPS: f64 = 30.0;
 const FOCUS: f64 = 2.0;

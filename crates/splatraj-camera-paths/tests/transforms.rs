@@ -6,7 +6,9 @@
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
-use splatraj_report::{CameraPose, Format, Intrinsics, detect, read_named_cameras, transforms};
+use splatraj_camera_paths::{
+    CameraPose, Format, Intrinsics, detect, read_named_cameras, transforms,
+};
 
 fn fixture() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/transforms.json")

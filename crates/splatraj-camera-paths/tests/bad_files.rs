@@ -1,11 +1,13 @@
 //! Bad camera files end in an error that names the file, the element and the problem, and
 //! never in a panic (every prefix of a good file is tried too).
 
-use splatraj_report::camera::{CameraPath, Frame, Intrinsics};
-use splatraj_report::supersplat::{Focus, SupersplatOptions};
-use splatraj_report::{ExportOptions, Format, colmap, inria, nerfstudio, supersplat, transforms};
+use splatraj_camera_paths::camera::{CameraPath, Frame, Intrinsics};
+use splatraj_camera_paths::supersplat::{Focus, SupersplatOptions};
+use splatraj_camera_paths::{
+    ExportOptions, Format, colmap, inria, nerfstudio, supersplat, transforms,
+};
 
-fn message(result: Result<CameraPath, splatraj_report::InterchangeError>) -> String {
+fn message(result: Result<CameraPath, splatraj_camera_paths::InterchangeError>) -> String {
     match result {
         Ok(path) => panic!("should fail, read {} frames", path.frames.len()),
         Err(e) => e.to_string(),
@@ -273,11 +275,12 @@ fn supersplat_errors_name_the_element() {
 
 #[test]
 fn detection_says_what_it_expected() {
-    let dir = std::env::temp_dir().join(format!("splatraj-report-bad-{}", std::process::id()));
+    let dir =
+        std::env::temp_dir().join(format!("splatraj-camera-paths-bad-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let odd = dir.join("odd.json");
     std::fs::write(&odd, "{\"frames\": []}").unwrap();
-    let err = splatraj_report::read_camera_path(&odd)
+    let err = splatraj_camera_paths::read_camera_path(&odd)
         .unwrap_err()
         .to_string();
     mentions(
@@ -285,13 +288,13 @@ fn detection_says_what_it_expected() {
         &["odd.json", "camera_path.json", "cameras.json", "images.txt"],
     );
     let missing = dir.join("missing.json");
-    let err = splatraj_report::read_camera_path(&missing)
+    let err = splatraj_camera_paths::read_camera_path(&missing)
         .unwrap_err()
         .to_string();
     mentions(&err, &["cannot read", "missing.json"]);
     let cameras = dir.join("cameras.txt");
     std::fs::write(&cameras, CAMERAS_OK).unwrap();
-    let err = splatraj_report::read_camera_path(&cameras)
+    let err = splatraj_camera_paths::read_camera_path(&cameras)
         .unwrap_err()
         .to_string();
     mentions(&err, &["images.txt"]);
@@ -307,7 +310,7 @@ fn exports_refuse_what_they_cannot_write() {
         ..path.frames[1]
     };
     for format in Format::ALL {
-        let err = splatraj_report::export(&path, format, &ExportOptions::default())
+        let err = splatraj_camera_paths::export(&path, format, &ExportOptions::default())
             .unwrap_err()
             .to_string();
         mentions(&err, &["frame 1 has no intrinsics"]);
@@ -317,7 +320,7 @@ fn exports_refuse_what_they_cannot_write() {
             fps: None,
             seconds: None,
         };
-        let err = splatraj_report::export(&empty, format, &ExportOptions::default())
+        let err = splatraj_camera_paths::export(&empty, format, &ExportOptions::default())
             .unwrap_err()
             .to_string();
         mentions(&err, &["no frames"]);
@@ -358,7 +361,8 @@ fn truncated_files_never_panic() {
         30.0,
     );
     for format in Format::ALL {
-        let files = splatraj_report::export(&path, format, &ExportOptions::default()).unwrap();
+        let files =
+            splatraj_camera_paths::export(&path, format, &ExportOptions::default()).unwrap();
         for (name, text) in &files {
             for cut in 0..text.len() {
                 if !text.is_char_boundary(cut) {
@@ -396,7 +400,7 @@ fn causes_are_said_once_in_a_printed_chain() {
         (broken.clone(), "EOF while parsing"),
         (dir.join("missing.json"), "No such file"),
     ] {
-        let Err(error) = splatraj_report::read_named_cameras(&file) else {
+        let Err(error) = splatraj_camera_paths::read_named_cameras(&file) else {
             panic!("{} is refused", file.display());
         };
         let chain = format!("{:#}", anyhow_like(&error));

@@ -12,9 +12,9 @@
 use std::f64::consts::PI;
 
 use serde_json::Value;
-use splatraj_report::camera::{CameraPath, CameraPose, Intrinsics};
-use splatraj_report::supersplat::{Focus, SupersplatOptions};
-use splatraj_report::{colmap, inria, nerfstudio, supersplat};
+use splatraj_camera_paths::camera::{CameraPath, CameraPose, Intrinsics};
+use splatraj_camera_paths::supersplat::{Focus, SupersplatOptions};
+use splatraj_camera_paths::{colmap, inria, nerfstudio, supersplat};
 
 const FOV_A: f64 = 53.13010235415598;
 

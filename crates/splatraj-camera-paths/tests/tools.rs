@@ -13,8 +13,8 @@ use std::path::{Path, PathBuf};
 
 use glam::{DMat3, DVec3};
 use serde_json::Value;
-use splatraj_report::camera::{CameraPath, CameraPose, Intrinsics};
-use splatraj_report::{ExportOptions, Format};
+use splatraj_camera_paths::camera::{CameraPath, CameraPose, Intrinsics};
+use splatraj_camera_paths::{ExportOptions, Format};
 
 const TOL: f64 = 1e-6;
 
@@ -87,7 +87,7 @@ fn our_exports_are_the_committed_tool_inputs() {
     let write = std::env::var_os("SPLATRAJ_WRITE_TOOL_INPUTS").is_some();
     for format in [Format::Nerfstudio, Format::Colmap, Format::Inria] {
         for (name, text) in
-            splatraj_report::export(&path, format, &ExportOptions::default()).unwrap()
+            splatraj_camera_paths::export(&path, format, &ExportOptions::default()).unwrap()
         {
             let file = data("ours").join(name);
             if write {
@@ -108,7 +108,7 @@ fn our_exports_are_the_committed_tool_inputs() {
 
 /// What our reader makes of one of our exported files.
 fn ours(file: &str) -> CameraPath {
-    splatraj_report::read_camera_path(&data("ours").join(file))
+    splatraj_camera_paths::read_camera_path(&data("ours").join(file))
         .unwrap()
         .1
 }
@@ -165,7 +165,7 @@ fn pycolmap_loads_our_model_as_we_wrote_it() {
     let images = loaded["images"].as_array().unwrap();
     assert_eq!(images.len(), path.frames.len());
     for (i, (tool, frame)) in images.iter().zip(&path.frames).enumerate() {
-        assert_eq!(tool["name"], splatraj_report::colmap::frame_name(i));
+        assert_eq!(tool["name"], splatraj_camera_paths::colmap::frame_name(i));
         close_all(
             &numbers(&tool["cam_from_world"]),
             &top(frame.pose.world_to_camera()),
@@ -253,7 +253,8 @@ fn a_spiral_made_by_nerfstudio_reads_as_nerfstudio_holds_it() {
     // reading of the file, which the script checks equal).
     let truth = json("nerfstudio_spiral/truth.json");
     let (format, path) =
-        splatraj_report::read_camera_path(&data("nerfstudio_spiral/camera_path.json")).unwrap();
+        splatraj_camera_paths::read_camera_path(&data("nerfstudio_spiral/camera_path.json"))
+            .unwrap();
     assert_eq!(format, Format::Nerfstudio);
     let cameras = truth["cameras"].as_array().unwrap();
     assert_eq!(path.frames.len(), cameras.len());
@@ -278,7 +279,7 @@ fn a_model_written_by_pycolmap_reads_as_pycolmap_holds_it() {
     // each image's cam_from_world and camera params as pycolmap holds them.
     let truth = json("pycolmap_model/truth.json");
     let (format, path) =
-        splatraj_report::read_camera_path(&data("pycolmap_model/images.txt")).unwrap();
+        splatraj_camera_paths::read_camera_path(&data("pycolmap_model/images.txt")).unwrap();
     assert_eq!(format, Format::Colmap);
     let images = truth["images"].as_array().unwrap();
     assert_eq!(path.frames.len(), images.len());
