@@ -15,7 +15,9 @@
 #   2. output frames: `bench frames` (biker and demo 1 M at 1080p, pipelined);
 #   3. the first-try guitar run (`configs/first-try/guitar.toml`) whole: time, each window's
 #      verdict and TCE;
-#   4. where a wgpu pass spends its time: the mask passes of 1. again with CubeCL's profiling
+#   4. an optimisation step of the guitar config: `bench step` with its windows in one render
+#      call and in a call per window: ms per step, launches, reads and render calls a step;
+#   5. where a wgpu pass spends its time: the mask passes of 1. again with CubeCL's profiling
 #      on (`CUBECL_DEBUG_OPTION=profile-medium` waits for each kernel), so that each stage's
 #      column holds its kernels' time instead of "other" holding all of it (a GPU runs
 #      asynchronously: without it only the final read waits).
@@ -38,9 +40,9 @@ export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
 export CUBECL_AUTOTUNE_LEVEL="${CUBECL_AUTOTUNE_LEVEL:-minimal}"
 cd "$repo"
 
-sizes=100000,1000000 repeats=5 frame_size=1080p demo=1000000 quick=()
+sizes=100000,1000000 repeats=5 frame_size=1080p demo=1000000 steps=10 quick=()
 if [ "${GPU_CHECK_QUICK:-0}" = 1 ]; then
-  sizes=10000 repeats=1 frame_size=160x90 demo=10000
+  sizes=10000 repeats=1 frame_size=160x90 demo=10000 steps=2
   quick=(--set optimiser.iterations=3 --set output.frames=3 --set output.width=160
     --set output.height=90 --set output.metric_samples=8)
 fi
@@ -53,6 +55,10 @@ for backend in wgpu flex; do
   "$bin" bench frames --backend "$backend" --sizes "$frame_size" --frames 4 \
     --gaussians "$demo" --schedule pipelined --scene "$data/biker.compressed.ply" --json \
     >"$out/frames_$backend.json"
+  echo "== $backend: bench step (guitar)" >&2
+  "$bin" bench step --config configs/first-try/guitar.toml --steps "$steps" \
+    --set "backend=\"$backend\"" --set "scene.path=\"$data/guitar.compressed.ply\"" --json \
+    >"$out/step_$backend.json"
   echo "== $backend: first-try guitar" >&2
   "$bin" bench first-try configs/first-try/guitar.toml --set "backend=\"$backend\"" \
     --set "scene.path=\"$data/guitar.compressed.ply\"" "${quick[@]}" \
@@ -111,6 +117,14 @@ for r in frames["wgpu"]["rows"]:
               (r["scene"], r["gaussians"], r["width"], r["schedule"])), None)
     if f:
         print(f"| {r['scene']} {r['gaussians']} {r['schedule']} | {r['frame_ms']:.0f} | {f['frame_ms']:.0f} |")
+steps = {b: load(f"step_{b}.json") for b in ("wgpu", "flex")}
+print("\n| optimisation step, guitar | ms | launches | reads | render calls | best loss |")
+print("|---|---:|---:|---:|---:|---:|")
+for b in ("wgpu", "flex"):
+    for r in steps[b]:
+        c = r["counts"]
+        print(f"| {b}, {r['passes']} | {r['ms_per_step']:.1f} | {c['launches']} | {c['reads']} | "
+              f"{c.get('renders', '-')} | {r['best_total']:.6f} |")
 runs = {b: load(f"first_try_{b}.json") for b in ("wgpu", "flex")}
 print("\n| first-try guitar | wgpu | flex |")
 print("|---|---:|---:|")

@@ -1,6 +1,7 @@
 //! `splatraj bench render`: time the object-mask pass, forward and forward + backward, with
 //! each rasterizer; `bench first-try` runs the first-try configs; `bench frames` times a run's
-//! output frames; `bench scale` runs a config whole at several demo scene sizes.
+//! output frames; `bench scale` runs a config whole at several demo scene sizes; `bench step`
+//! measures one optimisation step with its windows in one render call and in one each.
 //!
 //! Each configuration (scene, resolution, pruning, rasterizer) runs in a fresh child process
 //! of this binary (hidden `--one` flag), so that the peak memory it reports (VmHWM of
@@ -21,7 +22,7 @@ use splatraj_traj::costs::DEFAULT_TARGET_RATIO;
 
 pub use frames::BenchFramesArgs;
 pub use render::BenchRenderArgs;
-pub use runs::{BenchFirstTryArgs, BenchScaleArgs};
+pub use runs::{BenchFirstTryArgs, BenchScaleArgs, BenchStepArgs};
 
 /// The `bench` subcommands.
 #[derive(Debug, Subcommand)]
@@ -40,6 +41,10 @@ pub enum BenchCommand {
     /// Run a config (default: the demo's) whole on the demo scene at several sizes, each in a
     /// child process, and tabulate the time per step, each stage's time and the peak memory.
     Scale(BenchScaleArgs),
+    /// Time one optimisation step of a config (default: the demo's) with its windows in one
+    /// render call and in a call per window, with the kernel launches, reads, uploads and
+    /// render calls of a step.
+    Step(BenchStepArgs),
 }
 
 /// How the benches' camera frames the demo object (`bench frames`, `bench render`).
@@ -63,5 +68,6 @@ pub fn run(command: BenchCommand) -> Result<()> {
         BenchCommand::Frames(args) => frames::run(&args),
         BenchCommand::Scale(args) => runs::scale(&args),
         BenchCommand::Render(args) => render::run(&args),
+        BenchCommand::Step(args) => runs::step(&args),
     }
 }

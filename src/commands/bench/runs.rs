@@ -108,3 +108,33 @@ pub(super) fn first_try(args: &BenchFirstTryArgs) -> Result<()> {
     }
     Ok(())
 }
+
+/// Arguments of `splatraj bench step`.
+#[derive(Debug, Args)]
+pub struct BenchStepArgs {
+    /// Config whose optimisation step is measured (its backend, scene, windows and costs).
+    #[arg(long, default_value = "configs/demo.toml")]
+    config: PathBuf,
+    /// Steps timed per variant (after one untimed step).
+    #[arg(long, default_value_t = 10)]
+    steps: usize,
+    /// Override a config value, e.g. `--set backend="wgpu"` (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Print one JSON array instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// `splatraj bench step`: the steps and their counts are the library's
+/// (`splatraj::experiment::bench::step`); this prints them.
+pub(super) fn step(args: &BenchStepArgs) -> Result<()> {
+    use splatraj::experiment::bench::step::{run_step_bench, step_table};
+    let rows = run_step_bench(&args.config, &args.set, args.steps)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+    } else {
+        print!("{}", step_table(&rows));
+    }
+    Ok(())
+}

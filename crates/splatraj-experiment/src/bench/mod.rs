@@ -6,12 +6,14 @@
 //! peak memory a row reports (VmHWM, a process-wide high-water mark) is that configuration's.
 //!
 //! **This folder** is the benchmarks: the mask pass (here), output frames ([`frames`]), scale
-//! ([`scale`], on the demo scenes of [`scenes`]) and the first-try quality figures ([`quality`]).
+//! ([`scale`], on the demo scenes of [`scenes`]), an optimisation step's render calls
+//! ([`step`]) and the first-try quality figures ([`quality`]).
 
 pub mod frames;
 pub mod quality;
 pub mod scale;
 pub mod scenes;
+pub mod step;
 
 use std::path::PathBuf;
 use std::time::Instant;

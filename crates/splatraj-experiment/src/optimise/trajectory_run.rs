@@ -10,11 +10,15 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use serde::Serialize;
+use splatraj_render::render::DeviceScene;
+use splatraj_traj::clearance::Occupancy;
+use splatraj_traj::costs::WeightedCosts;
 use splatraj_traj::metrics::{
     Smoothness, WindowMetrics, WindowObject, trajectory_ldj, verdict, window_metrics,
 };
 use splatraj_traj::optimise::{
-    Flow, Problem, StepPasses, StopReason, TrajectoryResult, TrajectoryStep, optimise_trajectory,
+    Flow, Problem, StepPasses, StopReason, TrajectoryResult, TrajectoryStep, WindowTarget,
+    optimise_trajectory,
 };
 use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord};
 
@@ -183,6 +187,25 @@ impl Tracker<'_> {
 }
 
 impl Experiment {
+    /// The trajectory problem of a run: `windows` and `costs` on the autodiff `scene`, with
+    /// the scene's `occupancy` and the run's camera, rasterizer, shortcuts and duration, its
+    /// windows sharing render calls as `passes` says (a run: `StepPasses::for_backend`).
+    pub fn trajectory_problem<'a>(
+        &self,
+        scene: &'a DeviceScene,
+        windows: &'a [WindowTarget],
+        costs: &'a WeightedCosts,
+        occupancy: Option<&'a Occupancy>,
+        passes: StepPasses,
+    ) -> Problem<'a> {
+        Problem::new(scene, windows, costs, self.intrinsics)
+            .with_rasterizer(self.config.rasterizer)
+            .with_approximations(self.config.approximations)
+            .with_occupancy(occupancy)
+            .with_step_passes(passes)
+            .with_seconds(self.path_seconds())
+    }
+
     /// Optimises a trajectory from each of [`Experiment::start_trajectories`] (restart r uses
     /// seed `seed + r`); `observer` sees every step and may stop the run, which keeps the best
     /// trajectory so far.
@@ -268,6 +291,7 @@ impl Experiment {
                         TrajectoryRecord {
                             model: model.clone(),
                             weights: weights.clone(),
+                            lens: None,
                         },
                         c.steps_done,
                     ),
@@ -278,6 +302,8 @@ impl Experiment {
             if steps_before >= steps {
                 continue;
             }
+            // `[camera] lens`: the zoom starts at s ≡ 1 (or as a start file has it).
+            let start = start.with_lens(self.config.camera.lens()?);
             let shifted_costs;
             let costs = if steps_before > 0 {
                 shifted_costs = self.with_shot_cost(self.costs_from_step(steps_before)?)?;
@@ -285,12 +311,9 @@ impl Experiment {
             } else {
                 &costs
             };
-            let problem = Problem::new(&scene, &windows, costs, self.intrinsics)
-                .with_rasterizer(self.config.rasterizer)
-                .with_approximations(self.config.approximations)
-                .with_occupancy(occupancy.as_ref())
-                .with_step_passes(StepPasses::for_backend(self.config.backend))
-                .with_seconds(self.path_seconds());
+            let passes = StepPasses::for_backend(self.config.backend);
+            let problem =
+                self.trajectory_problem(&scene, &windows, costs, occupancy.as_ref(), passes);
             let mut restart_options = optimiser.clone();
             restart_options.iterations = steps - steps_before;
             let mut stopped_by = None;

@@ -1,0 +1,110 @@
+//! `splatraj bench step`: what one optimisation step of a config costs with its windows in one
+//! render call ([`StepPasses::Shared`], the costs that batch run once) and with a call per
+//! window ([`StepPasses::PerWindow`]), on the config's backend: the wall time per step and,
+//! per step, the kernel launches, reads back, uploads and render calls
+//! ([`splatraj_render::counters`]). It is the instrument of docs/gpu.md's "One pass a step":
+//! on a GPU it says whether the shared step wins and by how much, which lavapipe's counts can
+//! only suggest.
+//!
+//! Each variant runs `steps` steps from the config's first start after one untimed step (the
+//! kernels compile and tune on first use); the time is the median of the steps' own timings.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::Result;
+use serde::Serialize;
+use splatraj_render::counters::{self, Counts};
+use splatraj_traj::optimise::{Flow, StepPasses, TrajectoryStep, optimise_trajectory};
+
+use crate::config::Config;
+use crate::prepare::experiment::Experiment;
+
+/// One variant's figures.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StepRow {
+    /// `shared` or `per-window`.
+    pub passes: &'static str,
+    /// Median wall time of a step, ms.
+    pub ms_per_step: f64,
+    /// Per step: launches, reads, uploads, bytes, render calls.
+    pub counts: Counts,
+    /// Steps timed.
+    pub steps: usize,
+    /// The best sampled loss the steps reached (the variants optimise alike).
+    pub best_total: f64,
+}
+
+/// Runs `steps` optimisation steps of the trajectory of the config at `path` (with `set`'s
+/// overrides) with each way of sharing render calls, after one untimed step each.
+pub fn run_step_bench(path: &Path, set: &[String], steps: usize) -> Result<Vec<StepRow>> {
+    let config = Config::load(path, set)?;
+    let experiment = Experiment::prepare(&config)?;
+    let experiment = &experiment;
+    let start = experiment
+        .start_trajectories()?
+        .into_iter()
+        .next()
+        .ok_or_else(|| anyhow::anyhow!("the config makes no start trajectory"))?;
+    let costs = experiment.with_shot_cost(experiment.costs()?)?;
+    let scene = experiment.autodiff_scene();
+    let windows = experiment.optimisation_windows();
+    let occupancy = experiment.occupancy()?;
+    let mut rows = Vec::new();
+    for (passes, name) in [
+        (StepPasses::PerWindow, "per-window"),
+        (StepPasses::Shared, "shared"),
+    ] {
+        let problem =
+            experiment.trajectory_problem(&scene, &windows, &costs, occupancy.as_ref(), passes);
+        let mut options = experiment.config.optimiser.clone();
+        options.time_limit_s = None;
+        options.iterations = 1;
+        optimise_trajectory(&problem, &start, &options, 0, &mut |_| Flow::Continue)?;
+        options.iterations = steps.max(1);
+        let before = counters::snapshot();
+        let mut times: Vec<f64> = Vec::with_capacity(options.iterations);
+        let result =
+            optimise_trajectory(&problem, &start, &options, 0, &mut |s: &TrajectoryStep| {
+                let t = s.timing;
+                times.push((t.evaluate + t.backward + t.update).as_secs_f64() * 1e3);
+                Flow::Continue
+            })?;
+        let counts = counters::snapshot()
+            .since(&before)
+            .per(options.iterations as u64);
+        times.sort_by(f64::total_cmp);
+        rows.push(StepRow {
+            passes: name,
+            ms_per_step: times.get(times.len() / 2).copied().unwrap_or(f64::NAN),
+            counts,
+            steps: options.iterations,
+            best_total: result.best_total,
+        });
+    }
+    Ok(rows)
+}
+
+/// The rows as a table.
+pub fn step_table(rows: &[StepRow]) -> String {
+    let mut out = format!(
+        "{:<11} {:>9} {:>9} {:>6} {:>8} {:>9} {:>8} {:>12}\n",
+        "passes", "ms/step", "launches", "reads", "uploads", "KB up", "renders", "best loss"
+    );
+    for r in rows {
+        let c = &r.counts;
+        let _ = writeln!(
+            out,
+            "{:<11} {:>9.1} {:>9} {:>6} {:>8} {:>9.1} {:>8} {:>12.6}",
+            r.passes,
+            r.ms_per_step,
+            c.launches,
+            c.reads,
+            c.uploads,
+            c.bytes_up as f64 / 1024.0,
+            c.renders,
+            r.best_total
+        );
+    }
+    out
+}
