@@ -142,8 +142,22 @@ impl<K: Kind> Registry<K> {
         self.factories.contains_key(name)
     }
 
+    /// What is wrong with a name no factory is registered under, in the one wording of every
+    /// registry: "names no registered cost (registered: a, b)" ("none" when empty).
+    pub fn unregistered(&self) -> String {
+        format!(
+            "names no registered {} (registered: {})",
+            K::WHAT,
+            if self.factories.is_empty() {
+                "none".to_string()
+            } else {
+                self.names().join(", ")
+            }
+        )
+    }
+
     /// Builds the part registered as `name` from its config table at `key`; an unknown name
-    /// is a [`ConfigError`] on `key` listing the registered names.
+    /// is a [`ConfigError`] on `key` listing the registered names ([`Registry::unregistered`]).
     pub fn build(
         &self,
         name: &str,
@@ -153,19 +167,7 @@ impl<K: Kind> Registry<K> {
     ) -> Result<K::Output, K::Error> {
         match self.factories.get(name) {
             Some(factory) => factory(table, context, key),
-            None => Err(ConfigError::new(
-                key,
-                format!(
-                    "names no registered {} (registered: {})",
-                    K::WHAT,
-                    if self.factories.is_empty() {
-                        "none".to_string()
-                    } else {
-                        self.names().join(", ")
-                    }
-                ),
-            )
-            .into()),
+            None => Err(ConfigError::new(key, self.unregistered()).into()),
         }
     }
 }
@@ -240,6 +242,10 @@ mod tests {
         assert!(
             e.contains("no registered scaler (registered: times)"),
             "{e}"
+        );
+        assert_eq!(
+            Registry::<Scaled>::default().unregistered(),
+            "names no registered scaler (registered: none)"
         );
     }
 }

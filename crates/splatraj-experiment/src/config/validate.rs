@@ -91,13 +91,7 @@ impl Config {
         {
             return bad(
                 "targets.source",
-                format!(
-                    "= \"custom.{name}\" names no registered target source (registered: {})",
-                    match extensions.sources.names() {
-                        n if n.is_empty() => "none".to_string(),
-                        n => n.join(", "),
-                    }
-                ),
+                format!("= \"custom.{name}\" {}", extensions.sources.unregistered()),
             );
         }
         self.optimiser

@@ -146,6 +146,11 @@ impl SourceRegistry {
         self.0.contains(name)
     }
 
+    /// Why a name that is not registered is refused, listing the registered ones.
+    pub fn unregistered(&self) -> String {
+        self.0.unregistered()
+    }
+
     /// Builds the source registered as `name` from its config table; errors name `key` (the
     /// table's config key, e.g. `targets.custom.near`).
     pub fn build(
