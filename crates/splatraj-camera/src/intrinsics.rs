@@ -98,6 +98,26 @@ impl Intrinsics {
         )
     }
 
+    /// The camera zoomed by `s`: focal lengths fx·s, fy·s about the same principal point (the
+    /// lens over time, docs/conventions.md "The lens").
+    pub fn zoomed(&self, s: f64) -> Result<Self, CameraError> {
+        Self::new(
+            self.fx * s,
+            self.fy * s,
+            self.cx,
+            self.cy,
+            self.width,
+            self.height,
+        )
+    }
+
+    /// Horizontal field of view in degrees, atan(cx/fx) + atan((width − cx)/fx) (the angle
+    /// between the rays through the image's left and right edges).
+    pub fn horizontal_fov_degrees(&self) -> f64 {
+        let w = self.width as f64;
+        ((self.cx / self.fx).atan() + ((w - self.cx) / self.fx).atan()).to_degrees()
+    }
+
     /// tan of half the field of view along x and y (for the 1.3·tan(fov) Jacobian clamp).
     pub fn tan_half_fov(&self) -> (f64, f64) {
         (

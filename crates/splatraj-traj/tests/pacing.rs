@@ -118,6 +118,7 @@ fn window(framed_share: f64, turning: f64, orbit: f64) -> WindowMetrics {
             wobble: None,
         },
         verdict: None,
+        lens: None,
     }
 }
 

@@ -424,6 +424,7 @@ fn windows_together_equal_windows_one_at_a_time() {
                 times: None,
                 path: None,
                 host: Some(&hosts[i]),
+                zoom: None,
             })
             .collect();
         let together = problem

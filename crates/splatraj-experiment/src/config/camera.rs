@@ -4,6 +4,9 @@ use serde::{Deserialize, Serialize};
 use splatraj_config::ConfigError;
 use splatraj_render::camera::Intrinsics;
 use splatraj_traj::costs::DEFAULT_TARGET_RATIO;
+use splatraj_traj::trajectory::{
+    DEFAULT_ZOOM_MAX, DEFAULT_ZOOM_MIN, Lens, TrajectoryError, ZoomRange,
+};
 
 /// `[camera]`: the optimisation camera (pinhole, principal point at the centre unless given).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -32,6 +35,23 @@ pub struct CameraConfig {
     /// How each query's working distance (the prior radius, the distance at which its object
     /// covers r_t) is found: `measured` (default) or `box`.
     pub working_distance: WorkingDistance,
+    /// The lens over the trajectory: `fixed` (default: the focal length above throughout) or
+    /// `zoom` (a zoom s(t) optimised with the pose, `splatraj_traj::trajectory::lens`).
+    pub lens: LensKind,
+    /// Bounds `[min, max]` of the zoom s of `lens = "zoom"` (focal lengths fx·s, fy·s);
+    /// default `[0.5, 2]`.
+    pub zoom_range: [f64; 2],
+}
+
+/// What the lens does over the trajectory (`[camera] lens`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LensKind {
+    /// The configured focal length throughout.
+    #[default]
+    Fixed,
+    /// A zoom in `zoom_range`, optimised with the pose.
+    Zoom,
 }
 
 /// How a query's working distance is found (`[camera] working_distance`).
@@ -69,11 +89,30 @@ impl Default for CameraConfig {
             cy: None,
             target_ratio: DEFAULT_TARGET_RATIO,
             working_distance: WorkingDistance::Measured,
+            lens: LensKind::Fixed,
+            zoom_range: [DEFAULT_ZOOM_MIN, DEFAULT_ZOOM_MAX],
         }
     }
 }
 
 impl CameraConfig {
+    /// The lens of `lens` and `zoom_range`; errors name `camera.zoom_range`.
+    pub fn lens(&self) -> Result<Lens, ConfigError> {
+        let [min, max] = self.zoom_range;
+        let range = ZoomRange { min, max };
+        range.validate().map_err(|e| {
+            let reason = match e {
+                TrajectoryError::InvalidModel { reason, .. } => reason,
+                other => other.to_string(),
+            };
+            ConfigError::new("camera.zoom_range", reason)
+        })?;
+        Ok(match self.lens {
+            LensKind::Fixed => Lens::Fixed,
+            LensKind::Zoom => Lens::Zoom(range),
+        })
+    }
+
     /// The intrinsics at the configured size; errors name the key.
     pub fn intrinsics(&self) -> Result<Intrinsics, ConfigError> {
         if self.width == 0 || self.height == 0 {

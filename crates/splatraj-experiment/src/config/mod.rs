@@ -98,7 +98,9 @@ use splatraj_traj::costs::CostsConfig;
 use splatraj_traj::optimise::{SgldOptions, TrajectoryOptions};
 use splatraj_traj::trajectory::TrajectoryModel;
 
-pub use camera::{CameraConfig, DEFAULT_CAMERA_HEIGHT, DEFAULT_CAMERA_WIDTH, WorkingDistance};
+pub use camera::{
+    CameraConfig, DEFAULT_CAMERA_HEIGHT, DEFAULT_CAMERA_WIDTH, LensKind, WorkingDistance,
+};
 pub use load::ConfigFile;
 pub use optimise_gaussians::{AUTO_OPTIMISE_GAUSSIANS, OptimiseGaussians};
 pub use output::{MaskOverlay, OutputConfig, SECONDS_PER_QUERY, VerdictPolicy};

@@ -79,6 +79,7 @@ impl Config {
             );
         }
         self.camera.intrinsics()?;
+        self.camera.lens()?;
         self.costs
             .build_with(&extensions.costs)
             .map_err(cost_error)?;

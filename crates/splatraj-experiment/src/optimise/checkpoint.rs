@@ -59,6 +59,8 @@ impl Checkpoint {
         TrajectoryRecord {
             model: self.model.clone(),
             weights: self.weights.clone(),
+            // The zoom is not checkpointed: a resumed zooming run starts it again at s ≡ 1.
+            lens: None,
         }
     }
 

@@ -188,7 +188,7 @@ impl Experiment {
             (0, 1),
             1,
             &output,
-            &|t: &[f64]| vec![pose.0; t.len()],
+            (&|t: &[f64]| vec![pose.0; t.len()], None),
         )
     }
 }

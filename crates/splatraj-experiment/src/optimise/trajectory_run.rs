@@ -14,7 +14,7 @@ use splatraj_render::render::DeviceScene;
 use splatraj_traj::clearance::Occupancy;
 use splatraj_traj::costs::WeightedCosts;
 use splatraj_traj::metrics::{
-    Smoothness, WindowMetrics, WindowObject, trajectory_ldj, verdict, window_metrics,
+    Smoothness, WindowMetrics, WindowObject, ZoomAt, trajectory_ldj, verdict, window_metrics_zoomed,
 };
 use splatraj_traj::optimise::{
     Flow, Problem, StepPasses, StopReason, TrajectoryResult, TrajectoryStep, WindowTarget,
@@ -399,12 +399,10 @@ impl Experiment {
             }
             builtin => builtin.clone(),
         };
-        Ok(Trajectory::from_weights(
-            model,
-            &record.weights,
-            &self.device,
-            self.dtype,
-        )?)
+        Ok(
+            Trajectory::from_weights(model, &record.weights, &self.device, self.dtype)?
+                .with_lens(record.lens.as_ref())?,
+        )
     }
 
     /// Per-window metrics at the output resolution (`output.metric_samples` per window) and
@@ -424,11 +422,14 @@ impl Experiment {
         let plain = self.plain_scene();
         let n = self.windows.len();
         let pose_at = |times: &[f64]| trajectory.poses_at(times);
+        let zoom_at = |times: &[f64]| trajectory.zooms_at(times);
+        let zoom_at: Option<ZoomAt<'_>> = trajectory.lens.is_some().then_some(&zoom_at);
         let windows = (0..n)
             .map(|i| {
                 since.stop_point(|| format!("the metrics of {i} of {n} windows were computed"))?;
                 let samples = self.config.output.metric_samples;
-                self.window_metrics(&plain, i, (i, n), samples, &output, &pose_at)
+                let path = (&pose_at as &dyn Fn(&[f64]) -> Vec<[f64; 6]>, zoom_at);
+                self.window_metrics(&plain, i, (i, n), samples, &output, path)
             })
             .collect::<Result<Vec<_>>>()?;
         let mut windows = self.with_path_metrics(windows, trajectory)?;
@@ -440,7 +441,8 @@ impl Experiment {
     }
 
     /// Metrics of window `i`'s object on the time grid of window `grid.0` of `grid.1`, at the
-    /// poses `pose_at` gives for the grid times.
+    /// poses `pose_at` gives for the grid times, through the zoom `zoom_at` gives (None: the
+    /// fixed lens).
     pub(crate) fn window_metrics(
         &self,
         plain: &splatraj_render::render::DeviceScene,
@@ -448,7 +450,7 @@ impl Experiment {
         (index, n): (usize, usize),
         samples: usize,
         intrinsics: &splatraj_render::camera::Intrinsics,
-        pose_at: &dyn Fn(&[f64]) -> Vec<[f64; 6]>,
+        (pose_at, zoom_at): PathAt<'_>,
     ) -> Result<WindowMetrics> {
         let w = &self.windows[i];
         let alone = self.object_alone(i);
@@ -460,10 +462,15 @@ impl Experiment {
             rasterizer: self.config.rasterizer,
             bounds: self.boxes.get(i).copied(),
         };
-        window_metrics(plain, &object, index, n, samples, intrinsics, pose_at)
-            .with_context(|| format!("metrics of window {i}"))
+        window_metrics_zoomed(
+            plain, &object, index, n, samples, intrinsics, pose_at, zoom_at,
+        )
+        .with_context(|| format!("metrics of window {i}"))
     }
 }
+
+/// Where a path is at given times: its poses, and its zooms when the lens zooms.
+pub(crate) type PathAt<'a> = (&'a dyn Fn(&[f64]) -> Vec<[f64; 6]>, Option<ZoomAt<'a>>);
 
 /// An observer that stops when `stop()` says so (e.g. a Ctrl-C flag), after calling `each`.
 pub fn stop_when(mut stop: impl FnMut() -> bool, mut each: impl FnMut(&Progress)) -> impl Observer {

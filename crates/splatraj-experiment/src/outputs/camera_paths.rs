@@ -168,6 +168,9 @@ pub struct WindowEntry {
 #[derive(Debug, Deserialize)]
 struct SampledPose {
     pose: [f64; 6],
+    /// The zoom there (files of a zooming lens; absent: 1).
+    #[serde(default)]
+    zoom: Option<f64>,
 }
 
 /// What paths need of a `trajectory.json` besides the model and weights.
@@ -234,6 +237,8 @@ pub struct RunTrajectory {
     /// The densely sampled poses the file holds (for a custom model, whose basis needs its
     /// registry).
     pub sampled: Vec<[f64; 6]>,
+    /// The zoom at each sampled pose (1 where the file gives none).
+    pub sampled_zoom: Vec<f64>,
     /// The run's frame rate and frame count (its `config.toml` beside the file), if known.
     pub run_frames: Option<(f64, usize)>,
     /// The scene it was made on, where the file records it.
@@ -308,6 +313,7 @@ impl RunTrajectory {
             record,
             output_intrinsics: extras.output_intrinsics,
             windows: extras.windows,
+            sampled_zoom: extras.poses.iter().map(|p| p.zoom.unwrap_or(1.0)).collect(),
             sampled: extras.poses.into_iter().map(|p| p.pose).collect(),
             run_frames: run_frames(folder),
             scene: extras.scene,
@@ -401,8 +407,12 @@ impl RunTrajectory {
         )?;
         let count = count as usize;
         let camera = resize(&self.output_intrinsics, request.width, request.height)?;
-        let (times, poses) = match self.poses_at(&uniform_times(count)) {
-            Some(poses) => (uniform_times(count), poses),
+        let (times, poses, zooms) = match self.poses_at(&uniform_times(count)) {
+            Some(poses) => {
+                let times = uniform_times(count);
+                let zooms = self.record.zooms_at(&times);
+                (times, poses, zooms)
+            }
             None => {
                 tracing::warn!(
                     "model {} is not built in: using the {} poses sampled in {}",
@@ -410,16 +420,26 @@ impl RunTrajectory {
                     self.sampled.len(),
                     self.file.display()
                 );
-                (uniform_times(self.sampled.len()), self.sampled.clone())
+                (
+                    uniform_times(self.sampled.len()),
+                    self.sampled.clone(),
+                    self.sampled_zoom.clone(),
+                )
             }
         };
+        // The lens over time: each frame's camera zoomed by its s(t).
+        let cameras = zooms
+            .iter()
+            .map(|&s| camera.zoomed(s))
+            .collect::<Result<Vec<_>, _>>()
+            .with_context(|| format!("{}: key `lens`", self.file.display()))?;
         if poses.is_empty() {
             bail!("{}: no poses", self.file.display());
         }
         // A cut model switches shots between two frames: those frames are its cuts.
         let cuts = frame_cuts(&times, &self.record.model.shots(self.windows.len()));
         PathFrames {
-            cameras: vec![camera; poses.len()],
+            cameras,
             times,
             poses,
             fps,

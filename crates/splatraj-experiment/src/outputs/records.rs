@@ -7,7 +7,7 @@ use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::camera_file::matrix_rows;
 use splatraj_traj::optimise::sampling::{window_bounds, window_of};
 use splatraj_traj::optimise::{SinglePoseResult, StopReason};
-use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, uniform_times};
+use splatraj_traj::trajectory::{LensPath, Trajectory, TrajectoryModel, uniform_times};
 use splatraj_traj::transitions::{JoinKind, shot_spans};
 
 use crate::config::Ablation;
@@ -30,6 +30,12 @@ pub struct SampledPose {
     pub pose: [f64; 6],
     /// 4×4 world-to-camera matrix (OpenCV axes), row-major.
     pub world_to_camera: [[f64; 4]; 4],
+    /// The zoom s there, when the lens zooms (the frame camera's focal lengths times s).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zoom: Option<f64>,
+    /// The frame camera's horizontal field of view there (degrees), when the lens zooms.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fov_x_degrees: Option<f64>,
 }
 
 /// One window in `trajectory.json`.
@@ -101,6 +107,10 @@ pub struct TrajectoryFile {
     pub model: TrajectoryModel,
     /// Weights `[K][6]`, scene units.
     pub weights: Vec<[f64; 6]>,
+    /// The zoom s(t) (range and weights, docs/conventions.md "The lens"); absent for the
+    /// fixed lens.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lens: Option<LensPath>,
     /// The pose convention in words.
     pub convention: &'static str,
     /// World up.
@@ -135,17 +145,29 @@ impl Experiment {
             anyhow::bail!("the trajectory is not finite at t = {t}: pose {pose:?}");
         }
         let spans = trajectory.model().shots(n);
+        let output = self.output_intrinsics()?;
+        let zooms = trajectory.zooms_at(&times);
+        let zooming = trajectory.lens.is_some();
         let poses = sampled
             .into_iter()
             .zip(&times)
-            .map(|(pose, &t)| SampledPose {
-                t,
-                window: window_of(t, n),
-                shot: spans.shot_of(t),
-                pose,
-                world_to_camera: matrix_rows(&Pose(pose).world_to_camera()),
+            .zip(zooms)
+            .map(|((pose, &t), s)| {
+                Ok(SampledPose {
+                    t,
+                    window: window_of(t, n),
+                    shot: spans.shot_of(t),
+                    pose,
+                    world_to_camera: matrix_rows(&Pose(pose).world_to_camera()),
+                    zoom: zooming.then_some(s),
+                    fov_x_degrees: if zooming {
+                        Some(output.zoomed(s)?.horizontal_fov_degrees())
+                    } else {
+                        None
+                    },
+                })
             })
-            .collect();
+            .collect::<Result<Vec<_>>>()?;
         let windows = self
             .windows
             .iter()
@@ -202,6 +224,7 @@ impl Experiment {
             scene: SceneRecord::of(self),
             model: record.model,
             weights: record.weights,
+            lens: record.lens,
             convention: "pose = [ω (rotation vector of camera-to-world), camera centre]; OpenCV camera axes (x right, y down, z forward); t in [0, 1]",
             world_up: self.up.up,
             intrinsics: self.intrinsics,

@@ -62,13 +62,20 @@ impl Experiment {
     }
 
     /// The frames of the run's output: `output.frame_count()` evenly spaced times over [0, 1],
-    /// the trajectory's poses there, the output camera, at `output.fps`.
+    /// the trajectory's poses there, the output camera (zoomed by the trajectory's s(t) when
+    /// the lens zooms), at `output.fps`.
     pub fn output_frames(&self, trajectory: &Trajectory) -> Result<PathFrames> {
         let times = uniform_times(self.config.output.frame_count(self.windows.len()));
         let poses = trajectory.poses_at(&times);
         let cuts = frame_cuts(&times, &trajectory.model().shots(self.windows.len()));
+        let camera = self.output_intrinsics()?;
+        let cameras = trajectory
+            .zooms_at(&times)
+            .into_iter()
+            .map(|s| camera.zoomed(s))
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(PathFrames {
-            cameras: vec![self.output_intrinsics()?; times.len()],
+            cameras,
             times,
             poses,
             fps: self.config.output.fps,

@@ -152,7 +152,7 @@ pub fn measure_run(
                         (0, 1),
                         1,
                         &intrinsics,
-                        &|t: &[f64]| vec![pose.0; t.len()],
+                        (&|t: &[f64]| vec![pose.0; t.len()], None),
                     )?;
                     Ok(StudyRow {
                         optimisation_s: result.elapsed.as_secs_f64(),

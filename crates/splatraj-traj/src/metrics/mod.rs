@@ -20,5 +20,8 @@ pub use ldj::{DEFAULT_LDJ_SAMPLES, Smoothness, ldj, pose_ldj, trajectory_ldj};
 pub use path::{ClearanceMetrics, MotionMetrics, PathMetrics, path_metrics, shot_path_metrics};
 pub use shot::{Deviation, ShotMetrics, shot_metrics};
 pub use verdict::{Check, CheckKind, Verdict, verdict};
-pub use window::{Framing, Occlusion, WindowMetrics, WindowObject, window_metrics};
+pub use window::{
+    Framing, LensSamples, Occlusion, WindowMetrics, WindowObject, ZoomAt, window_metrics,
+    window_metrics_zoomed,
+};
 pub use wobble::wobble;

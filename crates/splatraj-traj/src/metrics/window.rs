@@ -32,12 +32,12 @@
 //! (`output.metric_samples`) 18 fall in the middle 60 %, one every 0.1 s of a 3 s window (every
 //! third frame at 30 fps), so the share moves in steps of 1/18.
 
-use burn::tensor::Tensor;
+use burn::tensor::{Tensor, TensorData};
 use serde::Serialize;
 use splatraj_render::camera::{Intrinsics, Pose as CameraPose};
 use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::render::{
-    Channel, DeviceScene, Pruning, Rasterizer, RenderError, RenderRequest, render,
+    Channel, DeviceScene, Pruning, Rasterizer, RenderError, RenderRequest, Zoom, render,
 };
 
 use crate::costs::{IOU_THRESHOLD, MaskMoments, bbox_iou_batch, mask_box, tce_of, tre_of};
@@ -96,6 +96,22 @@ pub struct WindowMetrics {
     /// [`super::verdict()`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub verdict: Option<super::Verdict>,
+    /// The lens at each sample when the trajectory zooms (absent for the fixed lens).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lens: Option<LensSamples>,
+}
+
+/// The lens at each of a window's samples (docs/conventions.md "The lens").
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LensSamples {
+    /// The samples' times t ∈ [0, 1].
+    pub t: Vec<f64>,
+    /// The zoom s at each (focal lengths fx·s, fy·s).
+    pub zoom: Vec<f64>,
+    /// Horizontal field of view, degrees, at each.
+    pub fov_x_degrees: Vec<f64>,
+    /// Vertical field of view, degrees, at each.
+    pub fov_y_degrees: Vec<f64>,
 }
 
 /// Framing over the samples that show the object (module docs).
@@ -188,7 +204,41 @@ pub fn window_metrics(
     intrinsics: &Intrinsics,
     pose_at: &dyn Fn(&[f64]) -> Vec<Pose>,
 ) -> Result<WindowMetrics, RenderError> {
+    window_metrics_zoomed(
+        scene, object, index, windows, samples, intrinsics, pose_at, None,
+    )
+}
+
+/// The zoom s of a path at given times (docs/conventions.md "The lens").
+pub type ZoomAt<'a> = &'a dyn Fn(&[f64]) -> Vec<f64>;
+
+/// [`window_metrics`] of a camera that zooms: `zoom_at` gives the zoom s at the grid times
+/// (the masks are rendered through fx·s, fy·s, and the metrics record the lens per sample).
+#[allow(clippy::too_many_arguments)]
+pub fn window_metrics_zoomed(
+    scene: &DeviceScene,
+    object: &WindowObject<'_>,
+    index: usize,
+    windows: usize,
+    samples: usize,
+    intrinsics: &Intrinsics,
+    pose_at: &dyn Fn(&[f64]) -> Vec<Pose>,
+    zoom_at: Option<ZoomAt<'_>>,
+) -> Result<WindowMetrics, RenderError> {
     let times = stratified_times(index, windows, samples.max(1), None);
+    let zooms = zoom_at.map(|z| z(&times));
+    let lens = zooms.as_ref().map(|zooms| {
+        let cameras: Vec<Intrinsics> = zooms
+            .iter()
+            .map(|&s| intrinsics.zoomed(s).unwrap_or(*intrinsics))
+            .collect();
+        LensSamples {
+            t: times.clone(),
+            zoom: zooms.clone(),
+            fov_x_degrees: cameras.iter().map(|k| k.horizontal_fov_degrees()).collect(),
+            fov_y_degrees: cameras.iter().map(|k| k.vertical_fov_degrees()).collect(),
+        }
+    });
     let poses = pose_at(&times);
     let poses: Vec<CameraPose> = poses.into_iter().map(CameraPose).collect();
     let inside = poses
@@ -201,10 +251,18 @@ pub fn window_metrics(
         })
         .count();
     let poses = scene.poses(&poses);
+    let zoom = zooms.map(|host| {
+        let data = TensorData::new(host.clone(), [host.len()]);
+        Zoom::at(
+            Tensor::from_data(data, (&scene.device(), scene.dtype())),
+            host,
+        )
+    });
     let mask_of = |scene: &DeviceScene, mask: Vec<f32>| -> Result<Tensor<3>, RenderError> {
         let request = RenderRequest {
             pruning: Pruning::ObjectOnly,
             rasterizer: object.rasterizer,
+            zoom: zoom.clone(),
             ..RenderRequest::new(*intrinsics, vec![Channel::Mask(mask)])
         };
         let images = render(scene, poses.clone(), &request)?.images;
@@ -283,5 +341,6 @@ pub fn window_metrics(
         shot: None,
         framing,
         verdict: None,
+        lens,
     })
 }

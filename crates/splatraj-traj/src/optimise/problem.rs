@@ -16,7 +16,8 @@ use splatraj_render::focus::Surroundings;
 use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::rasterize::{Approximations, RenderStats};
 use splatraj_render::render::{
-    Channel, DeviceScene, ObjectMasks, ObjectView, Pruning, Rasterizer, RenderRequest, render_at,
+    Channel, DeviceScene, ObjectMasks, ObjectView, Pruning, Rasterizer, RenderRequest, Zoom,
+    render_at,
 };
 
 use super::sampling::window_bounds;
@@ -106,6 +107,8 @@ pub struct WindowSamples<'s> {
     pub path: Option<(Tensor<2>, f64)>,
     /// The host values of the samples and the path, when the caller has them.
     pub host: Option<&'s HostPoses>,
+    /// The samples' zoom `[count]` when the lens zooms (None: the configured focal length).
+    pub zoom: Option<Zoom>,
 }
 
 /// What [`Problem::evaluate_windows`] found: the step's loss, each window's term means, the
@@ -539,6 +542,7 @@ impl<'a> Problem<'a> {
             times,
             path,
             host,
+            zoom: None,
         };
         let renders = self.renders_or(renders);
         let (terms, pass) = self.evaluate_one(window, poses, step, renders.get())?;
@@ -708,6 +712,7 @@ impl<'a> Problem<'a> {
             .map(|each| each.into_iter().flatten().collect());
         let mut request = renders.request.clone();
         let alone = renders.alone.as_ref();
+        request.zoom = pass_zoom(windows, alone.is_some());
         let mut render_poses = poses.clone();
         let mut render_host = host_samples.clone();
         if let Some(Channel::ObjectMasks(objects)) = request.channels.first_mut() {
@@ -889,6 +894,39 @@ impl<'a> Problem<'a> {
             stats: evaluated.stats,
         })
     }
+}
+
+/// The zoom of a pass over `windows`' samples (twice over when each object alone follows
+/// them); None when no window zooms (a window without a zoom then has s = 1).
+fn pass_zoom(windows: &[WindowSamples<'_>], twice: bool) -> Option<Zoom> {
+    let first = windows.iter().find_map(|w| w.zoom.as_ref())?;
+    let ones =
+        |count: usize| Tensor::<1>::ones([count], (&first.values.device(), first.values.dtype()));
+    let (mut values, mut host) = (Vec::new(), Some(Vec::new()));
+    for w in windows {
+        match &w.zoom {
+            Some(z) => {
+                values.push(z.values.clone());
+                host = host.zip(z.host.as_ref()).map(|(mut h, more)| {
+                    h.extend_from_slice(more);
+                    h
+                });
+            }
+            None => {
+                values.push(ones(w.count));
+                host = host.map(|mut h| {
+                    h.extend(std::iter::repeat_n(1.0, w.count));
+                    h
+                });
+            }
+        }
+    }
+    let mut values = Tensor::cat(values, 0);
+    if twice {
+        values = Tensor::cat(vec![values.clone(), values], 0);
+        host = host.map(|h| [h.clone(), h].concat());
+    }
+    Some(Zoom { values, host })
 }
 
 fn read<const D: usize>(t: Tensor<D>) -> Result<Vec<f64>, OptimiseError> {

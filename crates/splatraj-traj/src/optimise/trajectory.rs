@@ -39,12 +39,13 @@ use std::time::{Duration, Instant};
 use super::units::PoseUnits;
 use super::{OptimiseError, Problem, StepEvaluation, WindowSamples, check_adam, sampling};
 use crate::costs::{HostPoses, QueryContext};
-use crate::trajectory::{POSE_DIM, Trajectory, TrajectoryModel, TrajectoryRecord};
+use crate::trajectory::{LensPath, POSE_DIM, Trajectory, TrajectoryModel, TrajectoryRecord};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::Tensor;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
+use splatraj_render::render::Zoom;
 
 /// Default points per window of the path the path costs read each step.
 pub const DEFAULT_PATH_SAMPLES: usize = 16;
@@ -229,6 +230,8 @@ pub struct TrajectoryStep {
     /// The weights `[K][6]` (scene units) when this step set a new best, so that an observer
     /// can checkpoint the best trajectory while the loop runs; `None` otherwise.
     pub new_best: Option<Vec<[f64; 6]>>,
+    /// The zoom's weights w_s `[K]` of that new best when the lens zooms.
+    pub new_best_lens: Option<Vec<f64>>,
     /// Where the step's time went.
     pub timing: StepTiming,
 }
@@ -283,7 +286,8 @@ pub fn optimise_trajectory(
     units.validate()?;
     let renders = problem.renders();
     let normalised: Vec<_> = start.weights.iter().map(|w| units.normalise(w)).collect();
-    let mut module = Trajectory::from_weights(start.model.clone(), &normalised, &device, dtype)?;
+    let mut module = Trajectory::from_weights(start.model.clone(), &normalised, &device, dtype)?
+        .with_lens(start.lens.as_ref())?;
     let mut optim = AdamConfig::new()
         .with_beta_1(options.beta1 as f32)
         .with_beta_2(options.beta2 as f32)
@@ -360,6 +364,13 @@ pub fn optimise_trajectory(
                     (poses.clone().narrow(0, offset, count), time_step)
                 }),
                 host: Some(&segment.poses),
+                zoom: host.zoom.as_ref().map(|(zoom, values)| {
+                    let (offset, count) = segment.samples;
+                    Zoom::at(
+                        zoom.clone().narrow(0, offset, count),
+                        values[offset..offset + count].to_vec(),
+                    )
+                }),
             })
             .collect();
         let [rows, _] = poses.dims();
@@ -379,6 +390,7 @@ pub fn optimise_trajectory(
         let mut means = vec![means];
         // Weights before the update: they are what the loss is measured at.
         let evaluated = module.weights.val().without_autodiff();
+        let evaluated_lens = module.lens.as_ref().map(|l| l.val().without_autodiff());
         let backward_started = Instant::now();
         let grads = loss.backward();
         let finite = match module.weights.val().grad(&grads) {
@@ -395,10 +407,17 @@ pub fn optimise_trajectory(
         means.push(loss.clone().without_autodiff());
         means.push(finite);
         means.push(evaluated.reshape([rows * POSE_DIM]));
+        let lens_weights = if let Some(lens) = evaluated_lens {
+            means.push(lens.reshape([rows]));
+            rows
+        } else {
+            0
+        };
         pending = Some(Pending {
             step,
             labels,
             values: Tensor::cat(means, 0),
+            lens_weights,
             before,
             timing: StepTiming {
                 evaluate: backward_started - step_started,
@@ -422,12 +441,26 @@ pub fn optimise_trajectory(
         ..
     } = bookkeeping;
     let model: TrajectoryModel = module.model().clone();
-    let (best_total, best_step, weights) =
-        best.unwrap_or_else(|| (f64::NAN, 0, module.host_weights()));
+    let Best {
+        total: best_total,
+        step: best_step,
+        weights,
+        lens,
+    } = best.unwrap_or_else(|| Best {
+        total: f64::NAN,
+        step: 0,
+        weights: module.host_weights(),
+        lens: module.lens_path().map(|l| l.weights),
+    });
+    let lens = module.lens_path().map(|path| LensPath {
+        weights: lens.unwrap_or(path.weights),
+        ..path
+    });
     Ok(TrajectoryResult {
         best: TrajectoryRecord {
             model,
             weights: weights.iter().map(|w| units.denormalise(w)).collect(),
+            lens,
         },
         best_total,
         best_step,
@@ -456,6 +489,8 @@ struct WindowRows {
 /// What a step's one read brought back.
 struct StepRead {
     windows: Vec<WindowRows>,
+    /// Every row's zoom `[T]` (differentiable) and its host values, when the lens zooms.
+    zoom: Option<(Tensor<1>, Vec<f64>)>,
     /// The previous step's values ([`Pending::values`]), empty at the first step.
     previous: Vec<f64>,
 }
@@ -466,8 +501,10 @@ struct Pending {
     /// Per window, each term's `(name, weight)`.
     labels: Vec<Vec<(&'static str, f64)>>,
     /// Per window its terms' means, then the loss, the gradient's finiteness (1 or 0) and
-    /// the weights the loss was measured at `[K·6]`.
+    /// the weights the loss was measured at `[K·6]`, then the zoom's `[K]` when it zooms.
     values: Tensor<1>,
+    /// How many zoom weights end `values` (0 for the fixed lens).
+    lens_weights: usize,
     /// The model and optimiser before this step's update, to undo it if its gradient was
     /// not finite.
     before: Box<(Trajectory, ModuleOptimizer)>,
@@ -514,13 +551,14 @@ fn step_poses(
     }
     let count = all.len();
     let poses = units.to_scene(module.forward_at(&all)); // [T, 6]
-    let flat = poses.clone().without_autodiff().reshape([count * POSE_DIM]);
-    let read = match pending {
-        Some(p) => Tensor::cat(vec![flat, p.values.clone()], 0),
-        None => flat,
-    };
-    let mut values = read_values(read)?;
-    let previous = values.split_off(count * POSE_DIM);
+    let zoom = module.zoom_at(&all); // [T] when the lens zooms
+    let mut read = vec![poses.clone().without_autodiff().reshape([count * POSE_DIM])];
+    read.extend(zoom.clone().map(|z| z.without_autodiff()));
+    read.extend(pending.map(|p| p.values.clone()));
+    let mut values = read_values(Tensor::cat(read, 0))?;
+    let zoom_rows = if zoom.is_some() { count } else { 0 };
+    let previous = values.split_off(count * POSE_DIM + zoom_rows);
+    let zoom = zoom.map(|z| (z, values.split_off(count * POSE_DIM)));
     let rows = |(offset, len): (usize, usize)| -> Vec<[f64; 6]> {
         values[offset * POSE_DIM..(offset + len) * POSE_DIM]
             .chunks_exact(POSE_DIM)
@@ -538,7 +576,22 @@ fn step_poses(
             },
         })
         .collect();
-    Ok((poses, StepRead { windows, previous }))
+    Ok((
+        poses,
+        StepRead {
+            windows,
+            zoom,
+            previous,
+        },
+    ))
+}
+
+/// The lowest sampled loss so far, its step, weights (normalised) and zoom weights.
+struct Best {
+    total: f64,
+    step: usize,
+    weights: Vec<[f64; 6]>,
+    lens: Option<Vec<f64>>,
 }
 
 /// The host side of the loop: history rows, the best weights, the observer.
@@ -547,7 +600,7 @@ struct Bookkeeping<'a> {
     units: &'a PoseUnits,
     started: Instant,
     history: Vec<TrajectoryStep>,
-    best: Option<(f64, usize, Vec<[f64; 6]>)>,
+    best: Option<Best>,
     skipped_steps: usize,
     observer: &'a mut dyn FnMut(&TrajectoryStep) -> Flow,
 }
@@ -568,7 +621,9 @@ impl Bookkeeping<'_> {
             .collect();
         let total = next.next().unwrap_or(f64::NAN);
         let finite = next.next().is_some_and(|flag| flag != 0.0);
-        let rest: Vec<f64> = next.collect();
+        let mut rest: Vec<f64> = next.collect();
+        // The zoom's K weights follow the K·6 pose weights when the lens zooms.
+        let lens = (done.lens_weights > 0).then(|| rest.split_off(rest.len() - done.lens_weights));
         let evaluated: Vec<[f64; 6]> = rest
             .chunks_exact(POSE_DIM)
             .map(|p| std::array::from_fn(|k| p[k]))
@@ -584,15 +639,21 @@ impl Bookkeeping<'_> {
         if !finite {
             self.skipped_steps += 1;
         }
-        let improved = self.best.as_ref().is_none_or(|(b, _, _)| total < *b);
+        let improved = self.best.as_ref().is_none_or(|b| total < b.total);
         let new_best = improved.then(|| {
             evaluated
                 .iter()
                 .map(|w| self.units.denormalise(w))
                 .collect()
         });
+        let new_best_lens = lens.clone().filter(|_| improved);
         if improved {
-            self.best = Some((total, step, evaluated));
+            self.best = Some(Best {
+                total,
+                step,
+                weights: evaluated,
+                lens,
+            });
         }
         let row = TrajectoryStep {
             step,
@@ -600,8 +661,9 @@ impl Bookkeeping<'_> {
             total,
             windows,
             updated: finite,
-            best_total: self.best.as_ref().map_or(f64::NAN, |b| b.0),
+            best_total: self.best.as_ref().map_or(f64::NAN, |b| b.total),
             new_best,
+            new_best_lens,
             timing: done.timing,
         };
         let out_of_time = self

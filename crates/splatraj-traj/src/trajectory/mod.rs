@@ -41,6 +41,7 @@
 //! equivalent rotation vectors (θ and θ − 2π along the same axis): unwrap it first.
 
 pub mod cuts;
+pub mod lens;
 pub mod polynomial;
 pub mod rbf;
 pub mod registry;
@@ -55,6 +56,7 @@ use serde::ser::SerializeMap;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 pub use cuts::{CutModel, ShotSpans};
+pub use lens::{DEFAULT_ZOOM_MAX, DEFAULT_ZOOM_MIN, Lens, LensPath, ZoomRange};
 pub use lstsq::DEFAULT_RIDGE;
 pub use polynomial::Polynomial;
 pub use rbf::{Rbf, RbfNormalisation};
@@ -378,6 +380,10 @@ pub struct TrajectoryRecord {
     pub model: TrajectoryModel,
     /// Weights W, one row of six per basis function `[K][6]`.
     pub weights: Vec<Pose>,
+    /// The zoom s(t) when the lens zooms ([`lens`]); absent (files from before the zoom, or a
+    /// fixed lens): s ≡ 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lens: Option<LensPath>,
 }
 
 impl TrajectoryRecord {
@@ -408,7 +414,34 @@ impl TrajectoryRecord {
                 });
             }
         }
+        if let Some(lens) = &self.lens {
+            lens.validate(self.weights.len())?;
+        }
         Ok(())
+    }
+
+    /// This record with the lens `lens`: none for the fixed lens; for a zoom, its own zoom
+    /// when it has one of that range (a start read from a `trajectory.json`), else zero
+    /// weights (s ≡ 1).
+    pub fn with_lens(self, lens: Lens) -> Self {
+        let own = match lens {
+            Lens::Zoom(range) => self.lens.filter(|l| l.range == range),
+            Lens::Fixed => None,
+        };
+        let count = self.weights.len();
+        Self {
+            lens: own.or_else(|| lens.start(count)),
+            ..self
+        }
+    }
+
+    /// The zoom s at each of `times` (1 for a fixed lens), on the host in f64; needs a
+    /// built-in model (a custom one's basis needs its registry: [`Trajectory::zooms_at`]).
+    pub fn zooms_at(&self, times: &[f64]) -> Vec<f64> {
+        match &self.lens {
+            None => vec![1.0; times.len()],
+            Some(lens) => lens.zooms(&self.model.matrix(times)),
+        }
     }
 }
 
@@ -420,6 +453,11 @@ pub struct Trajectory {
     /// The basis; not a parameter (skipped by the Module derive).
     #[module(skip)]
     model: TrajectoryModel,
+    /// The zoom's free weights w_s `[K, 1]` when the lens zooms ([`lens`]): optimised with W.
+    pub lens: Option<Param<Tensor<2>>>,
+    /// The zoom's range (set exactly when `lens` is).
+    #[module(skip)]
+    zoom_range: Option<ZoomRange>,
 }
 
 impl Trajectory {
@@ -451,7 +489,59 @@ impl Trajectory {
         let flat: Vec<f64> = weights.iter().flatten().copied().collect();
         let data = TensorData::new(flat, [weights.len(), POSE_DIM]);
         let weights = Param::from_tensor(Tensor::from_data(data, (device, dtype)));
-        Ok(Self { weights, model })
+        Ok(Self {
+            weights,
+            model,
+            lens: None,
+            zoom_range: None,
+        })
+    }
+
+    /// This trajectory with the zoom `lens` (None: the fixed lens), on the weights' device and
+    /// in their dtype.
+    pub fn with_lens(mut self, lens: Option<&LensPath>) -> Result<Self, TrajectoryError> {
+        let Some(lens) = lens else {
+            self.lens = None;
+            self.zoom_range = None;
+            return Ok(self);
+        };
+        lens.validate(self.model.count())?;
+        let value = self.weights.val();
+        let data = TensorData::new(lens.weights.clone(), [lens.weights.len(), 1]);
+        let tensor = Tensor::from_data(data, (&value.device(), value.dtype()));
+        self.lens = Some(Param::from_tensor(tensor));
+        self.zoom_range = Some(lens.range);
+        Ok(self)
+    }
+
+    /// The zoom's range and weights on the host; None for the fixed lens.
+    pub fn lens_path(&self) -> Option<LensPath> {
+        let (param, range) = (self.lens.as_ref()?, self.zoom_range?);
+        let weights = param
+            .val()
+            .into_data()
+            .try_into_vec_as::<f64>()
+            .expect("float tensor data converts to f64");
+        Some(LensPath { range, weights })
+    }
+
+    /// Zooms s(t) `[B]` for host times `[B]`, differentiable in the zoom's weights (the basis
+    /// evaluated on the host, as [`Trajectory::forward_at`]); None for the fixed lens.
+    pub fn zoom_at(&self, times: &[f64]) -> Option<Tensor<1>> {
+        let (param, range) = (self.lens.as_ref()?, self.zoom_range?);
+        let weights = param.val();
+        let (device, dtype) = (weights.device(), weights.dtype());
+        let data = TensorData::new(self.model.matrix(times), [times.len(), self.model.count()]);
+        let u = splatraj_render::host::upload::<2>(data, &device, dtype).matmul(weights); // [B, 1]
+        Some(range.zoom_tensor(u.reshape([times.len()])))
+    }
+
+    /// Zooms s(t) at any times on the host in f64 (1 for the fixed lens).
+    pub fn zooms_at(&self, times: &[f64]) -> Vec<f64> {
+        match self.lens_path() {
+            None => vec![1.0; times.len()],
+            Some(lens) => lens.zooms(&self.model.matrix(times)),
+        }
     }
 
     /// A trajectory from a record (e.g. a `trajectory.json` read back).
@@ -460,7 +550,8 @@ impl Trajectory {
         device: &Device,
         dtype: DType,
     ) -> Result<Self, TrajectoryError> {
-        Self::from_weights(record.model.clone(), &record.weights, device, dtype)
+        Self::from_weights(record.model.clone(), &record.weights, device, dtype)?
+            .with_lens(record.lens.as_ref())
     }
 
     /// The least-squares trajectory of this model through `poses` at `times`.
@@ -551,6 +642,7 @@ impl Trajectory {
         TrajectoryRecord {
             model: self.model.clone(),
             weights: self.host_weights(),
+            lens: self.lens_path(),
         }
     }
 
