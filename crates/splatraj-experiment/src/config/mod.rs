@@ -32,6 +32,8 @@
 //! height = 54
 //! fov_x = 60.0
 //! # working_distance = "measured"   # or "box": the prior radius measured on renders, or estimated
+//! # lens = "fixed"        # or "zoom": a zoom s(t) optimised with the pose, bounded by
+//! # zoom_range = [0.5, 2.0]  # [min, max] of s (0 < min < 1 < max; docs/conventions.md "The lens")
 //!
 //! [trajectory]             # kind = "rbf" | "waypoint" | "polynomial" and its parameters,
 //!                          # or kind = "custom.<name>" and [trajectory.custom.<name>]: a

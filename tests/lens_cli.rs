@@ -1,0 +1,192 @@
+//! The lens over time end to end (`[camera] lens = "zoom"`, docs/conventions.md "The lens"): a
+//! zooming run's `trajectory.json` carries the lens, `metrics.json` the field of view per
+//! sample, and every export, read back by our own readers, the zoomed camera per frame; a bad
+//! `zoom_range` fails naming its key; a fixed lens writes no lens.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{TINY_CONFIG as TINY, assert_clean_failure, s, splatraj, stderr, stdout};
+use splatraj::render::camera::Intrinsics;
+use splatraj::traj::trajectory::{TrajectoryRecord, uniform_times};
+
+fn setup() -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("tiny.toml");
+    std::fs::write(&config, TINY).unwrap();
+    (dir, config)
+}
+
+fn runs_set(dir: &Path) -> String {
+    format!("output.runs_dir=\"{}\"", dir.join("runs").display())
+}
+
+fn run(config: &Path, dir: &Path, sets: &[&str]) -> PathBuf {
+    let runs = runs_set(dir);
+    let mut args = vec!["run", s(config), "--quiet", "--set", &runs];
+    for set in sets {
+        args.extend(["--set", set]);
+    }
+    let out = splatraj(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    PathBuf::from(stdout(&out).lines().last().unwrap().trim())
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn a_zooming_run_records_and_exports_its_lens() {
+    let (dir, config) = setup();
+    // Thirty steps at 0.05: the zoom moves to about 0.76 in the first window, 1.18 in the
+    // second (measured).
+    let folder = run(
+        &config,
+        dir.path(),
+        &[
+            "camera.lens=\"zoom\"",
+            "optimiser.iterations=30",
+            "optimiser.learning_rate=0.05",
+            "output.frames=6",
+        ],
+    );
+    let text = std::fs::read_to_string(folder.join("trajectory.json")).unwrap();
+    let record: TrajectoryRecord = serde_json::from_str(&text).unwrap();
+    let lens = record
+        .lens
+        .clone()
+        .expect("trajectory.json carries the lens");
+    assert_eq!((lens.range.min, lens.range.max), (0.5, 2.0));
+    assert_eq!(lens.weights.len(), record.weights.len());
+
+    // The frame camera: [output] 40 × 30 at the default 60° horizontal.
+    let output = Intrinsics::from_fov_x(60.0, 40, 30).unwrap();
+    let file = json(&folder.join("trajectory.json"));
+    for pose in file["poses"].as_array().unwrap() {
+        let t = pose["t"].as_f64().unwrap();
+        let s = record.zooms_at(&[t])[0];
+        assert!((pose["zoom"].as_f64().unwrap() - s).abs() < 1e-12);
+        let fov = output.zoomed(s).unwrap().horizontal_fov_degrees();
+        assert!((pose["fov_x_degrees"].as_f64().unwrap() - fov).abs() < 1e-9);
+    }
+
+    // metrics.json: per sample, t, zoom and both fields of view.
+    let metrics = json(&folder.join("metrics.json"));
+    for w in metrics["windows"].as_array().unwrap() {
+        let l = &w["lens"];
+        let ts = l["t"].as_array().unwrap();
+        assert_eq!(ts.len(), 2, "metric_samples = 2");
+        for (k, t) in ts.iter().enumerate() {
+            let s = record.zooms_at(&[t.as_f64().unwrap()])[0];
+            assert!((l["zoom"][k].as_f64().unwrap() - s).abs() < 1e-12);
+            let camera = output.zoomed(s).unwrap();
+            let fov_x = l["fov_x_degrees"][k].as_f64().unwrap();
+            let fov_y = l["fov_y_degrees"][k].as_f64().unwrap();
+            // Closed form: 2·atan(w / (2·fx·s)) with the principal point at the centre.
+            let want_x = 2.0 * (20.0 / (output.fx * s)).atan().to_degrees();
+            assert!((fov_x - want_x).abs() < 1e-9, "{fov_x} vs {want_x}");
+            assert!((fov_y - camera.vertical_fov_degrees()).abs() < 1e-9);
+        }
+    }
+
+    // Every frame's zoom, and it moved.
+    let times = uniform_times(6);
+    let zooms = record.zooms_at(&times);
+    assert!(
+        zooms.iter().any(|s| (s - 1.0).abs() > 0.05),
+        "the zoom moved: {zooms:?}"
+    );
+    let fovs: Vec<f64> = zooms
+        .iter()
+        .map(|&s| output.zoomed(s).unwrap().vertical_fov_degrees())
+        .collect();
+    // Read back by our own readers: nerfstudio's `fov`, COLMAP's camera per image and
+    // INRIA's focal lengths give each frame's field of view.
+    for file in [
+        "nerfstudio/camera_path.json",
+        "colmap/images.txt",
+        "inria/cameras.json",
+    ] {
+        let (_, path) =
+            splatraj_camera_paths::read_camera_path(&folder.join("exports").join(file)).unwrap();
+        assert_eq!(path.frames.len(), 6, "{file}");
+        for (k, (frame, want)) in path.frames.iter().zip(&fovs).enumerate() {
+            let got = frame
+                .camera
+                .expect("a camera per frame")
+                .vertical_fov_degrees();
+            assert!(
+                (got - want).abs() < 1e-6,
+                "{file} frame {k}: {got} vs {want}"
+            );
+        }
+    }
+    // SuperSplat: the fov of each key, every key one of the frames'.
+    let (_, path) =
+        splatraj_camera_paths::read_camera_path(&folder.join("exports/supersplat/settings.json"))
+            .unwrap();
+    assert!(!path.frames.is_empty());
+    let settings = json(&folder.join("exports/supersplat/settings.json"));
+    let keyed = settings["animTracks"][0]["keyframes"]["values"]["fov"]
+        .as_array()
+        .unwrap();
+    for fov in keyed {
+        let fov = fov.as_f64().unwrap();
+        assert!(
+            fovs.iter().any(|f| (f - fov).abs() < 1e-6),
+            "SuperSplat key fov {fov} is a frame's ({fovs:?})"
+        );
+    }
+    for frame in &path.frames {
+        let got = frame.camera.unwrap().vertical_fov_degrees();
+        let (lo, hi) = fovs
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), &f| (a.min(f), b.max(f)));
+        assert!(
+            got > lo - 1e-6 && got < hi + 1e-6,
+            "{got} within [{lo}, {hi}]"
+        );
+    }
+}
+
+#[test]
+fn a_fixed_lens_writes_no_lens() {
+    let (dir, config) = setup();
+    let folder = run(&config, dir.path(), &[]);
+    let file = json(&folder.join("trajectory.json"));
+    assert!(file.get("lens").is_none());
+    assert!(file["poses"][0].get("zoom").is_none());
+    let metrics = json(&folder.join("metrics.json"));
+    assert!(metrics["windows"][0].get("lens").is_none());
+}
+
+#[test]
+fn a_bad_zoom_range_names_its_key() {
+    let (dir, config) = setup();
+    for range in ["[1.5, 3.0]", "[0.0, 2.0]", "[0.5, 0.8]"] {
+        let set = format!("camera.zoom_range={range}");
+        let runs = runs_set(dir.path());
+        let out = splatraj(&[
+            "run",
+            s(&config),
+            "--check",
+            "--set",
+            &runs,
+            "--set",
+            "camera.lens=\"zoom\"",
+            "--set",
+            &set,
+        ]);
+        assert_clean_failure(&out, &["camera.zoom_range", "0 < min < 1 < max"]);
+    }
+    let out = splatraj(&[
+        "run",
+        s(&config),
+        "--check",
+        "--set",
+        "camera.lens=\"wide\"",
+    ]);
+    assert_clean_failure(&out, &["camera.lens"]);
+}
