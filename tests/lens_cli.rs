@@ -190,3 +190,80 @@ fn a_bad_zoom_range_names_its_key() {
     ]);
     assert_clean_failure(&out, &["camera.lens"]);
 }
+
+/// A dolly-zoom window's zoom is locked to its camera's distance, s = d/r_w (r_w the window's
+/// working radius, `prior_radius` in trajectory.json), up to the basis fit.
+#[test]
+fn a_dolly_zoom_window_zooms_with_its_distance() {
+    let (dir, config) = setup();
+    let folder = run(
+        &config,
+        dir.path(),
+        &[
+            "camera.lens=\"zoom\"",
+            "queries.1.shot={kind=\"dolly-zoom\"}",
+            "output.transitions=\"cut\"",
+            "output.trajectory_samples=41",
+        ],
+    );
+    let file = json(&folder.join("trajectory.json"));
+    let window = &file["windows"][1];
+    let centre: Vec<f64> = window["object_centre"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let working = window["prior_radius"].as_f64().unwrap();
+    let mut checked = 0;
+    let mut zooms = Vec::new();
+    for pose in file["poses"].as_array().unwrap() {
+        let t = pose["t"].as_f64().unwrap();
+        // The window's inner 80 %: the fit of a jump at the cut rounds its very ends.
+        if !(0.55..=0.95).contains(&t) {
+            continue;
+        }
+        let c: Vec<f64> = (3..6).map(|k| pose["pose"][k].as_f64().unwrap()).collect();
+        let d = (0..3)
+            .map(|k| (c[k] - centre[k]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let zoom = pose["zoom"].as_f64().unwrap();
+        assert!(
+            (zoom / (d / working) - 1.0).abs() < 0.02,
+            "t = {t}: zoom {zoom} vs d/r_w {}",
+            d / working
+        );
+        zooms.push(zoom);
+        checked += 1;
+    }
+    assert!(checked >= 10);
+    let (lo, hi) = zooms
+        .iter()
+        .fold((f64::MAX, 0.0f64), |(a, b), &z| (a.min(z), b.max(z)));
+    assert!(
+        hi / lo > 1.5,
+        "the camera dollies and the lens zooms: {zooms:?}"
+    );
+}
+
+#[test]
+fn a_dolly_zoom_with_a_fixed_lens_names_the_key() {
+    let (dir, config) = setup();
+    let runs = runs_set(dir.path());
+    let out = splatraj(&[
+        "run",
+        s(&config),
+        "--quiet",
+        "--set",
+        &runs,
+        "--set",
+        "queries.1.shot={kind=\"dolly-zoom\"}",
+    ]);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert!(
+        err.contains("camera.lens") && err.contains("queries.1.shot"),
+        "{err}"
+    );
+}

@@ -14,6 +14,7 @@
 //! ```text
 //! orbit:  c*(s) = o + r·(cos ε·h(±s·sweep) + sin ε·u)          (+ ccw, − cw)
 //! dolly:  c*(s) = o + ((1 − s)·r₀ + s·r₁)·(cos ε·h₀ + sin ε·u)
+//! dolly-zoom: the dolly's c*(s), with the zoom z*(s) = r(s)/r_w (r_w the working radius)
 //! reveal: c*(s) = o + r·(cos ε·h₀ + sin ε·u),   view turned by ∓pan·(1 − smooth(s/f)) about u
 //! group:  c*(s) = o + r·(cos ε·h₀ + sin ε·u),   o and r those of the objects' union
 //! ```
@@ -28,6 +29,16 @@
 //! 3x² − 2x³ of x = s/`framed_from` (no jolt at either end), framing o from s = `framed_from`
 //! to the window's end: a(s) = c* + R(u, θ(s))·(o − c*), θ(0) = ∓pan, θ = 0 from
 //! `framed_from` on. `direction` is the way the view turns toward the object.
+//!
+//! **Dolly zoom** moves the camera along the dolly's view line while the lens zooms so that the
+//! object keeps its projected size: a size on the image is ∝ f·z/r, and at the working
+//! radius r_w the object fills its target ratio at z = 1, so z*(s) = r(s)/r_w keeps it there
+//! while the background's perspective changes (it grows as the camera backs away and zooms
+//! in). It needs `[camera] lens = "zoom"` with z*(s) inside `zoom_range`; the start's zoom is
+//! z*(s) fitted into the trajectory's basis, and TRE (rendered through the zoom) holds the size
+//! while the shot's cost moves the camera; after the optimisation a run locks the window's zoom
+//! to the camera's actual distance, s = d/r_w (`splatraj-experiment`, `prepare/shot_lens.rs`). Defaults: from 0.6·r_w to 1.8·r_w, so the zoom goes
+//! from 0.6 to 1.8 (3×) and a 60° horizontal field of view from 88° to 36° (2.5×).
 //!
 //! **Group** frames several queries' objects together: the caller grounds each of the
 //! `objects` and passes their union's centre and working radius in the [`ShotFrame`]; the
@@ -45,6 +56,10 @@ pub const DEFAULT_ORBIT_SWEEP: f64 = 90.0;
 pub const DEFAULT_SHOT_WEIGHT: f64 = 10.0;
 /// Default start radius of a dolly as a multiple of the window's working radius (an approach).
 pub const DEFAULT_DOLLY_FROM: f64 = 1.5;
+/// Default start radius of a dolly zoom as a multiple of the working radius (zoom 0.6).
+pub const DEFAULT_DOLLY_ZOOM_FROM: f64 = 0.6;
+/// Default end radius of a dolly zoom as a multiple of the working radius (zoom 1.8).
+pub const DEFAULT_DOLLY_ZOOM_TO: f64 = 1.8;
 /// Default angle a reveal's view starts turned away from its object, degrees: out of frame
 /// for any horizontal field of view below 180° minus the object's width.
 pub const DEFAULT_REVEAL_PAN: f64 = 90.0;
@@ -81,6 +96,9 @@ pub enum ShotSpec {
     Orbit(OrbitSpec),
     /// Approach (or retreat from) the object along one view line.
     Dolly(DollySpec),
+    /// A dolly whose zoom keeps the object's projected size (the "Vertigo" effect); the
+    /// dolly's keys, other default radii.
+    DollyZoom(DollySpec),
     /// Start with the object out of frame, pan to frame it.
     Reveal(RevealSpec),
     /// Frame several queries' objects together.
@@ -122,16 +140,19 @@ impl Default for OrbitSpec {
     }
 }
 
-/// `kind = "dolly"`: along one view line from radius `from` to radius `to`.
+/// `kind = "dolly"` (and `"dolly-zoom"`): along one view line from radius `from` to radius
+/// `to`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct DollySpec {
     /// Elevation of the view line above the horizontal, degrees, in (−90, 90). Default 30.
     pub elevation: f64,
-    /// Distance at the window's start, scene units (> 0). Default 1.5 × the working radius.
+    /// Distance at the window's start, scene units (> 0). Default 1.5 × the working radius
+    /// (dolly-zoom: 0.6 ×).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub from: Option<f64>,
-    /// Distance at the window's end, scene units (> 0). Default: the working radius.
+    /// Distance at the window's end, scene units (> 0). Default: the working radius
+    /// (dolly-zoom: 1.8 ×).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub to: Option<f64>,
     /// Azimuth of the view line, degrees, as for an orbit. Default 0.
@@ -286,6 +307,9 @@ pub struct ShotPath {
     pub framed_from: f64,
     /// Weight of the shot's cost.
     pub weight: f64,
+    /// The radius at which the zoom is 1 when the shot zooms (dolly zoom: the working radius;
+    /// [`ShotPath::zoom_at`]); None: the shot leaves the lens alone.
+    pub zoom_radius: Option<f64>,
 }
 
 fn check(ok: bool, field: &'static str, reason: impl FnOnce() -> String) -> Result<(), ShotError> {
@@ -312,6 +336,7 @@ impl ShotSpec {
         match self {
             ShotSpec::Orbit(_) => "orbit",
             ShotSpec::Dolly(_) => "dolly",
+            ShotSpec::DollyZoom(_) => "dolly-zoom",
             ShotSpec::Reveal(_) => "reveal",
             ShotSpec::Group(_) => "group",
         }
@@ -329,7 +354,7 @@ impl ShotSpec {
     pub fn validate(&self) -> Result<(), ShotError> {
         let (elevation, azimuth, weight) = match self {
             ShotSpec::Orbit(o) => (o.elevation, o.azimuth, o.weight),
-            ShotSpec::Dolly(d) => (d.elevation, d.azimuth, d.weight),
+            ShotSpec::Dolly(d) | ShotSpec::DollyZoom(d) => (d.elevation, d.azimuth, d.weight),
             ShotSpec::Reveal(r) => (r.elevation, r.azimuth, r.weight),
             ShotSpec::Group(g) => (g.elevation, g.azimuth, g.weight),
         };
@@ -351,7 +376,7 @@ impl ShotSpec {
                     format!("= {}° must be in (0°, 3600°]", o.sweep)
                 })
             }
-            ShotSpec::Dolly(d) => {
+            ShotSpec::Dolly(d) | ShotSpec::DollyZoom(d) => {
                 if let Some(r) = d.from {
                     positive("from", r)?;
                 }
@@ -441,6 +466,18 @@ impl ShotSpec {
                 0.0,
                 1.0,
             ),
+            ShotSpec::DollyZoom(s) => (
+                s.elevation,
+                s.azimuth,
+                s.weight,
+                (
+                    s.from.unwrap_or(DEFAULT_DOLLY_ZOOM_FROM * working),
+                    s.to.unwrap_or(DEFAULT_DOLLY_ZOOM_TO * working),
+                ),
+                0.0,
+                0.0,
+                1.0,
+            ),
             // The view turns toward the object in `direction`, so it starts turned the
             // other way.
             ShotSpec::Reveal(s) => (
@@ -473,6 +510,7 @@ impl ShotSpec {
             pan,
             framed_from,
             weight,
+            zoom_radius: matches!(self, ShotSpec::DollyZoom(_)).then_some(working),
         })
     }
 }
@@ -511,6 +549,12 @@ impl ShotPath {
     pub fn pose_at(&self, s: f64) -> Pose {
         Pose::look_at(self.centre_at(s), self.aim_at(s), self.up)
             .expect("a shot's elevation is within (−90°, 90°), so the view is not along up")
+    }
+
+    /// The zoom z*(s) = r(s)/r_w the shot asks for at s (dolly zoom; module docs), None for a
+    /// shot that leaves the lens alone.
+    pub fn zoom_at(&self, s: f64) -> Option<f64> {
+        self.zoom_radius.map(|r| self.radius_at(s) / r)
     }
 
     /// Mean of the radii at the ends (the cost's length scale).

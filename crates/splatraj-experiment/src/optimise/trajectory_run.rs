@@ -302,8 +302,9 @@ impl Experiment {
             if steps_before >= steps {
                 continue;
             }
-            // `[camera] lens`: the zoom starts at s ≡ 1 (or as a start file has it).
-            let start = start.with_lens(self.config.camera.lens()?);
+            // `[camera] lens`: the zoom starts at s ≡ 1 (or as a start file has it), or as
+            // the dolly-zoom shots ask.
+            let start = self.with_shot_zoom(start.with_lens(self.config.camera.lens()?))?;
             let shifted_costs;
             let costs = if steps_before > 0 {
                 shifted_costs = self.with_shot_cost(self.costs_from_step(steps_before)?)?;
@@ -349,6 +350,11 @@ impl Experiment {
                 self.config.seed.wrapping_add(r as u64),
                 &mut step_observer,
             )?;
+            // A dolly zoom holds the object's size exactly: its zoom follows the distance.
+            let result = TrajectoryResult {
+                best: self.lock_shot_zoom(result.best)?,
+                ..result
+            };
             if let Some(e) = failure {
                 return Err(e.context("writing the checkpoint"));
             }

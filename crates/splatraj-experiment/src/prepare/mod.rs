@@ -14,6 +14,7 @@ pub mod memory_plans;
 pub mod optimised_scene;
 pub mod scene_files;
 pub mod scene_up;
+pub mod shot_lens;
 pub mod starts;
 pub mod transitions;
 pub mod views;

@@ -22,7 +22,7 @@ use burn::tensor::Tensor;
 use burn::tensor::activation::sigmoid;
 use serde::{Deserialize, Serialize};
 
-use super::TrajectoryError;
+use super::{Basis, TrajectoryError, TrajectoryModel};
 
 /// Smallest zoom of the default range: the focal length halved (field of view about doubled).
 pub const DEFAULT_ZOOM_MIN: f64 = 0.5;
@@ -159,6 +159,49 @@ impl LensPath {
             });
         }
         Ok(())
+    }
+
+    /// The lens of `range` on `model`'s basis whose zoom best matches `zooms` at `times`: the
+    /// free values u = [`ZoomRange::free`] of the zooms fitted by least squares (the ridge of
+    /// [`super::Trajectory::fit`]). Every zoom must lie strictly inside the range.
+    pub fn fit(
+        model: &TrajectoryModel,
+        range: ZoomRange,
+        times: &[f64],
+        zooms: &[f64],
+    ) -> Result<Self, TrajectoryError> {
+        range.validate()?;
+        model.validate()?;
+        if times.len() != zooms.len() || times.is_empty() {
+            return Err(TrajectoryError::FitData(format!(
+                "{} times for {} zooms",
+                times.len(),
+                zooms.len()
+            )));
+        }
+        if let Some(s) = zooms.iter().find(|&&s| !(s > range.min && s < range.max)) {
+            return Err(TrajectoryError::FitData(format!(
+                "zoom {s} is not inside the zoom range [{}, {}]",
+                range.min, range.max
+            )));
+        }
+        // The pose fit's solver, with u in the first of its six columns.
+        let targets: Vec<f64> = zooms
+            .iter()
+            .flat_map(|&s| [range.free(s), 0.0, 0.0, 0.0, 0.0, 0.0])
+            .collect();
+        let basis = model.matrix(times);
+        let rows = super::lstsq::ridge_lstsq(
+            &basis,
+            times.len(),
+            model.count(),
+            &targets,
+            super::DEFAULT_RIDGE,
+        );
+        Ok(Self {
+            range,
+            weights: rows.iter().map(|row| row[0]).collect(),
+        })
     }
 
     /// The zoom at each of `times`, on the host, through the model's basis `basis` `[B, K]`
