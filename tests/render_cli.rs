@@ -531,3 +531,33 @@ fn label_sidecar_of_a_real_scene() {
     assert_clean_failure(&out, &["fruit_drops_minimal.ply", "no labels", "--mask"]);
     assert!(files_in(&dir.path().join("none")).is_empty());
 }
+
+#[test]
+fn bench_step_counts_one_render_call_shared_and_one_per_window() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("tiny.toml");
+    std::fs::write(&config, common::TINY_CONFIG).unwrap();
+    let out = splatraj(&[
+        "bench",
+        "step",
+        "--config",
+        s(&config),
+        "--steps",
+        "2",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let rows: Value = serde_json::from_slice(&out.stdout).expect("JSON on stdout");
+    let rows = rows.as_array().unwrap();
+    let renders = |passes: &str| {
+        let row = rows.iter().find(|r| r["passes"] == passes).expect(passes);
+        assert_eq!(row["steps"], 2);
+        assert_eq!(row["counts"]["reads"], 1, "one read a step: {row}");
+        assert!(row["ms_per_step"].as_f64().unwrap() > 0.0);
+        assert!(row["best_total"].as_f64().unwrap().is_finite());
+        row["counts"]["renders"].as_u64().unwrap()
+    };
+    // The tiny config has two windows.
+    assert_eq!(renders("per-window"), 2);
+    assert_eq!(renders("shared"), 1);
+}
