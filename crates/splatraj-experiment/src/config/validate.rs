@@ -5,9 +5,10 @@
 use splatraj_config::ConfigError;
 use splatraj_traj::costs::CostError;
 use splatraj_traj::optimise::{OptimiseError, RouteKind};
+use splatraj_traj::shots::ShotSpec;
 use splatraj_traj::trajectory::TrajectoryError;
 
-use super::Config;
+use super::{Config, LensKind};
 use crate::extensions::Extensions;
 
 impl Config {
@@ -68,6 +69,19 @@ impl Config {
                 && let Err(e) = shot.validate()
             {
                 return bad(&format!("queries.{i}.shot.{}", e.field), e.reason);
+            }
+            // A dolly zoom zooms: refused before any work when the lens cannot.
+            if let Some(shot) = &q.shot
+                && matches!(shot, ShotSpec::DollyZoom(_))
+                && self.camera.lens == LensKind::Fixed
+            {
+                return bad(
+                    "camera.lens",
+                    format!(
+                        "= \"fixed\", but `queries.{i}.shot` (dolly-zoom) zooms: set \
+                         `camera.lens = \"zoom\"`"
+                    ),
+                );
             }
         }
         if self.start.route == RouteKind::Planned && self.costs.clearance.is_none() {
