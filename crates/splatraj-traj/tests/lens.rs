@@ -12,8 +12,8 @@ use splatraj_scene::Scene;
 use splatraj_scene::demo::DEMO_UP;
 use splatraj_traj::costs::{CostsConfig, HostPoses, QueryContext, TreCost, default_prior_radius};
 use splatraj_traj::optimise::{
-    Flow, ObjectView, Problem, TrajectoryOptions, WindowSamples, WindowTarget, object_start_poses,
-    optimise_trajectory, window_start_trajectory,
+    Flow, ObjectView, Problem, StepPasses, TrajectoryOptions, WindowSamples, WindowTarget,
+    object_start_poses, optimise_trajectory, window_start_trajectory,
 };
 use splatraj_traj::trajectory::{
     Lens, LensPath, Polynomial, Trajectory, TrajectoryModel, TrajectoryRecord, ZoomRange,
@@ -292,4 +292,83 @@ fn trajectory_json_carries_the_lens_and_reads_old_files() {
             .to_string()
             .contains("lens.weights")
     );
+}
+
+/// The zoom in a pass of several windows (one render call, each object alone after the
+/// samples: the GPU's `StepPasses::Shared`) is each sample's own: the loss and its gradient in
+/// the zoom weights equal those of a call per window (f64).
+#[test]
+fn the_zoom_of_a_shared_pass_is_each_samples_own() {
+    let scene = common::demo_room(20_000);
+    let windows = vec![
+        window(&scene, "blue box", 0.15),
+        window(&scene, "red mug", 0.15),
+    ];
+    let device = Device::flex().autodiff();
+    let on_device = DeviceScene::new(&scene, &device, DType::F64);
+    let costs = CostsConfig {
+        visibility: Some(splatraj_traj::costs::VisibilityCost::default()),
+        ..CostsConfig::default()
+    }
+    .build()
+    .unwrap();
+    let model = TrajectoryModel::Polynomial(Polynomial { terms: 3 });
+    let starts = [start_pose(&windows[0]), start_pose(&windows[1])];
+    let times = [[0.1, 0.3], [0.6, 0.9]];
+    let run = |passes: StepPasses| -> (f64, Vec<f64>) {
+        let trajectory = window_start_trajectory(model.clone(), &starts, &device, DType::F64)
+            .unwrap()
+            .with_lens(Some(&LensPath {
+                range: ZoomRange::default(),
+                weights: vec![0.4, -1.1, 0.9],
+            }))
+            .unwrap();
+        let all: Vec<f64> = times.iter().flatten().copied().collect();
+        let poses = trajectory.forward_at(&all);
+        let zoom = trajectory.zoom_at(&all).unwrap();
+        let host_zoom = trajectory.zooms_at(&all);
+        let hosts: Vec<HostPoses> = times
+            .iter()
+            .map(|t| HostPoses {
+                samples: trajectory.poses_at(t),
+                path: None,
+            })
+            .collect();
+        let samples = (0..2)
+            .map(|i| WindowSamples {
+                window: i,
+                count: 2,
+                times: Some(&times[i]),
+                path: None,
+                host: Some(&hosts[i]),
+                zoom: Some(Zoom::at(
+                    zoom.clone().narrow(0, 2 * i, 2),
+                    host_zoom[2 * i..2 * i + 2].to_vec(),
+                )),
+            })
+            .collect();
+        let problem =
+            Problem::new(&on_device, &windows, &costs, intrinsics()).with_step_passes(passes);
+        let evaluated = problem.evaluate_windows(poses, samples, 0, None).unwrap();
+        let grads = evaluated.loss.clone().backward();
+        let lens = trajectory.lens.as_ref().unwrap().val();
+        let gradient = to_host(lens.grad(&grads).unwrap()).unwrap();
+        (to_host(evaluated.loss).unwrap()[0], gradient)
+    };
+    let (shared, shared_gradient) = run(StepPasses::Shared);
+    let (per_window, per_window_gradient) = run(StepPasses::PerWindow);
+    assert!(
+        (shared - per_window).abs() <= 1e-9 * per_window.abs().max(1.0),
+        "{shared} vs {per_window}"
+    );
+    assert!(
+        per_window_gradient.iter().any(|g| g.abs() > 1e-4),
+        "{per_window_gradient:?}"
+    );
+    for (a, b) in shared_gradient.iter().zip(&per_window_gradient) {
+        assert!(
+            (a - b).abs() <= 1e-7 * b.abs().max(1e-3),
+            "{shared_gradient:?} vs {per_window_gradient:?}"
+        );
+    }
 }
