@@ -17,10 +17,15 @@ use splatraj::traj::trajectory::TrajectoryRecord;
 const STEPS: usize = 600;
 
 fn setup() -> (tempfile::TempDir, PathBuf) {
+    setup_with(TINY_CONFIG)
+}
+
+/// [`setup`] of another config text (the tiny config edited).
+fn setup_with(config_text: &str) -> (tempfile::TempDir, PathBuf) {
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("tiny.toml");
     let runs = dir.path().join("runs");
-    let text = TINY_CONFIG
+    let text = config_text
         .replace(
             "iterations = 3\nsamples",
             &format!("iterations = {STEPS}\nsamples"),
@@ -181,4 +186,39 @@ fn a_time_limit_is_recorded_as_such() {
     let metrics = json(&run.join("metrics.json"));
     assert_eq!(metrics["run"]["stop"], "time_limit");
     assert!((metrics["run"]["iterations_run"].as_u64().unwrap() as usize) < STEPS);
+}
+
+#[test]
+fn a_resumed_zooming_run_goes_on_from_its_checkpointed_zoom() {
+    let zooming = TINY_CONFIG.replace("[camera]\n", "[camera]\nlens = \"zoom\"\n");
+    assert!(zooming.contains("lens = \"zoom\""));
+    let (dir, config) = setup_with(&zooming);
+    let mut child = spawn_run(&config);
+    let run = wait_for_checkpoint(&dir.path().join("runs"), &mut child);
+    child.kill().unwrap();
+    child.wait().unwrap();
+
+    // The checkpoint holds the best trajectory's zoom and the restart's own, one weight per
+    // row of the trajectory (a checkpoint without them restarted the zoom at s = 1).
+    let checkpoint = std::fs::read_to_string(run.join("checkpoint.json")).unwrap();
+    let record: TrajectoryRecord = serde_json::from_str(&checkpoint).unwrap();
+    let lens = record.lens.as_ref().expect("the checkpoint keeps the zoom");
+    assert_eq!(lens.weights.len(), record.weights.len());
+    assert!(lens.weights.iter().all(|w| w.is_finite()));
+    let state: serde_json::Value = serde_json::from_str(&checkpoint).unwrap();
+    assert_eq!(
+        state["restart_best_lens"]["weights"]
+            .as_array()
+            .map(Vec::len),
+        Some(record.weights.len()),
+        "{state}"
+    );
+
+    let out = splatraj(&["run", "--resume", s(&run), "--quiet"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let finished: TrajectoryRecord =
+        serde_json::from_str(&std::fs::read_to_string(run.join("trajectory.json")).unwrap())
+            .unwrap();
+    let finished_lens = finished.lens.expect("the resumed run zooms");
+    assert_eq!(finished_lens.range, lens.range);
 }

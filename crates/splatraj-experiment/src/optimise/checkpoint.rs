@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
+use splatraj_traj::trajectory::lens::LensPath;
 use splatraj_traj::trajectory::{Pose, TrajectoryModel, TrajectoryRecord};
 
 use crate::write::write_json;
@@ -51,6 +52,14 @@ pub struct Checkpoint {
     pub elapsed_s: f64,
     /// Folder the run's relative input paths resolve against (its config's folder).
     pub base_dir: PathBuf,
+    /// The best trajectory's zoom when the lens zooms (absent: a fixed lens, or a checkpoint
+    /// from before the zoom).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lens: Option<LensPath>,
+    /// The restart in progress' own best zoom, beside `restart_best` (where a resumed run
+    /// continues it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub restart_best_lens: Option<LensPath>,
 }
 
 impl Checkpoint {
@@ -59,8 +68,7 @@ impl Checkpoint {
         TrajectoryRecord {
             model: self.model.clone(),
             weights: self.weights.clone(),
-            // The zoom is not checkpointed: a resumed zooming run starts it again at s ≡ 1.
-            lens: None,
+            lens: self.lens.clone(),
         }
     }
 
@@ -143,6 +151,22 @@ impl Checkpoint {
                 return bad(key, format!("holds the loss {loss:?}, which is not finite"));
             }
         }
+        // A zoom has one weight per basis function, as its trajectory has a row of six.
+        let zooms = [
+            ("lens", self.lens.as_ref(), self.weights.len()),
+            (
+                "restart_best_lens",
+                self.restart_best_lens.as_ref(),
+                self.restart_best.as_ref().map_or(0, |(w, _)| w.len()),
+            ),
+        ];
+        for (key, lens, rows) in zooms {
+            if let Some(lens) = lens
+                && let Err(e) = lens.validate(rows)
+            {
+                return bad(key, format!("does not fit its trajectory: {e}"));
+            }
+        }
         Ok(())
     }
 }
@@ -207,6 +231,8 @@ mod tests {
             steps: 200,
             elapsed_s: 12.5,
             base_dir: PathBuf::from("."),
+            lens: None,
+            restart_best_lens: None,
         }
     }
 
@@ -215,7 +241,7 @@ mod tests {
     fn bookkeeping_no_run_writes_is_refused_by_its_key() {
         assert_eq!(checkpoint().check(), Ok(()));
         type Edit = fn(&mut Checkpoint);
-        let cases: [(Edit, &str); 8] = [
+        let cases: [(Edit, &str); 9] = [
             (|c| c.steps_done = 1_000_000_000_000_000_000, "`steps_done`"),
             (|c| c.restart = 4, "`restart` = 4 is beyond"),
             (|c| c.best_restart = 3, "`best_restart` = 3"),
@@ -226,6 +252,16 @@ mod tests {
             (
                 |c| c.restart_best = Some((vec![], f64::INFINITY)),
                 "`restart_best`",
+            ),
+            // Seven zoom weights for a trajectory of eight rows.
+            (
+                |c| {
+                    c.lens = Some(LensPath {
+                        range: splatraj_traj::trajectory::ZoomRange { min: 0.5, max: 2.0 },
+                        weights: vec![0.0; 7],
+                    })
+                },
+                "`lens` does not fit",
             ),
         ];
         for (edit, mentions) in cases {

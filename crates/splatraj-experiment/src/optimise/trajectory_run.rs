@@ -20,7 +20,9 @@ use splatraj_traj::optimise::{
     Flow, Problem, StepPasses, StopReason, TrajectoryResult, TrajectoryStep, WindowTarget,
     optimise_trajectory,
 };
-use splatraj_traj::trajectory::{Trajectory, TrajectoryModel, TrajectoryRecord};
+use splatraj_traj::trajectory::{
+    Lens, LensPath, Trajectory, TrajectoryModel, TrajectoryRecord, ZoomRange,
+};
 
 use crate::optimise::checkpoint::{Checkpoint, Checkpointer};
 use crate::optimise::observer::{Observer, Progress};
@@ -146,6 +148,8 @@ struct Tracker<'a> {
     checkpointer: Option<Checkpointer>,
     state: Checkpoint,
     model: &'a TrajectoryModel,
+    /// The zoom's range when the lens zooms (the steps report only its weights).
+    zoom_range: Option<ZoomRange>,
 }
 
 impl Tracker<'_> {
@@ -155,14 +159,21 @@ impl Tracker<'_> {
         if state.restart != restart {
             state.restart = restart;
             state.restart_best = None;
+            state.restart_best_lens = None;
         }
         state.steps_done = steps_before + s.step + 1;
         if let Some(weights) = &s.new_best {
             state.restart_best = Some((weights.clone(), s.total));
+            let lens = self
+                .zoom_range
+                .zip(s.new_best_lens.clone())
+                .map(|(range, weights)| LensPath { range, weights });
+            state.restart_best_lens = lens.clone();
             // The first finite loss, or a lower one (best_total starts as NaN).
             if state.best_total.is_nan() || s.total < state.best_total {
                 state.model = self.model.clone();
                 state.weights = weights.clone();
+                state.lens = lens;
                 state.best_total = s.total;
                 state.best_restart = restart;
                 state.best_step = steps_before + s.step;
@@ -252,8 +263,14 @@ impl Experiment {
                     steps,
                     elapsed_s: 0.0,
                     base_dir,
+                    lens: None,
+                    restart_best_lens: None,
                 }),
             model: &model,
+            zoom_range: match self.config.camera.lens()? {
+                Lens::Zoom(range) => Some(range),
+                Lens::Fixed => None,
+            },
         };
         let elapsed_before = tracker.state.elapsed_s;
         let mut results: Vec<TrajectoryResult> = Vec::new();
@@ -291,7 +308,9 @@ impl Experiment {
                         TrajectoryRecord {
                             model: model.clone(),
                             weights: weights.clone(),
-                            lens: None,
+                            // Its zoom as checkpointed (None: a fixed lens, or an older
+                            // checkpoint: the zoom starts again at s ≡ 1).
+                            lens: c.restart_best_lens.clone(),
                         },
                         c.steps_done,
                     ),
@@ -304,7 +323,13 @@ impl Experiment {
             }
             // `[camera] lens`: the zoom starts at s ≡ 1 (or as a start file has it), or as
             // the dolly-zoom shots ask.
-            let start = self.with_shot_zoom(start.with_lens(self.config.camera.lens()?))?;
+            let start = start.with_lens(self.config.camera.lens()?);
+            // A resumed restart's zoom is its own; a fresh one's dolly zooms are fitted.
+            let start = if steps_before > 0 && start.lens.is_some() {
+                start
+            } else {
+                self.with_shot_zoom(start)?
+            };
             let shifted_costs;
             let costs = if steps_before > 0 {
                 shifted_costs = self.with_shot_cost(self.costs_from_step(steps_before)?)?;
