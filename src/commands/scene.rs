@@ -18,6 +18,8 @@ use splatraj_scene::demo::DemoConfig;
 use splatraj_scene::summary::SceneInfo;
 use splatraj_scene::{InvalidPolicy, SceneFormat};
 
+use indicatif::ProgressBar;
+
 use crate::cli::{MemoryArgs, ReadArgs, progress_bar};
 
 /// The `scene` subcommands.
@@ -148,22 +150,10 @@ pub fn run(command: SceneCommand) -> Result<()> {
             read,
         } => {
             let converted = convert_scene(&input, &output, format, &read.options())?;
-            let (scene, format) = (&converted.loaded.scene, converted.format);
             warn_dropped(&input, converted.loaded.dropped);
-            if !converted.dropped_extras.is_empty() {
-                eprintln!(
-                    "warning: {} cannot hold {}; they are not written (INRIA .ply keeps them)",
-                    format.name(),
-                    converted.dropped_extras.join(", ")
-                );
+            for line in converted.summary(&output) {
+                eprintln!("{line}");
             }
-            eprintln!(
-                "wrote {} Gaussians (SH degree {}) to {} ({})",
-                scene.len(),
-                scene.sh_degree,
-                output.display(),
-                format.name()
-            );
         }
         SceneCommand::Demo {
             out,
@@ -181,6 +171,19 @@ pub fn run(command: SceneCommand) -> Result<()> {
         SceneCommand::Views(args) => views(args)?,
     }
     Ok(())
+}
+
+/// One progress bar for a lift's stages, and the callback that draws them on it (the stage's
+/// name as its message).
+fn stage_bar() -> (ProgressBar, impl Fn(LiftStage, usize, usize)) {
+    let bar = progress_bar(0, false);
+    let drawn = bar.clone();
+    let progress = move |stage: LiftStage, done: usize, total: usize| {
+        drawn.set_message(stage.name());
+        drawn.set_length(total as u64);
+        drawn.set_position(done as u64);
+    };
+    (bar, progress)
 }
 
 /// The warning for Gaussians dropped as invalid while reading `path`.
@@ -212,13 +215,7 @@ fn lift_masks(args: LiftMasksArgs) -> Result<()> {
             InvalidPolicy::Reject
         },
     };
-    let bar = progress_bar(0, false);
-    bar.set_message(LiftStage::Lift.name());
-    let drawn = bar.clone();
-    let progress = move |_: LiftStage, done: usize, total: usize| {
-        drawn.set_length(total as u64);
-        drawn.set_position(done as u64);
-    };
+    let (bar, progress) = stage_bar();
     let (lift, dropped) = lift_masks_to_sidecar(&request, &device, &progress)?;
     bar.finish_and_clear();
     warn_dropped(&request.scene, dropped);
@@ -251,13 +248,7 @@ fn views(args: ViewsArgs) -> Result<()> {
         max_memory_gb: args.memory.max_memory,
     };
     let device = args.backend.device()?;
-    let bar = progress_bar(0, false);
-    let drawn = bar.clone();
-    let progress = move |stage: LiftStage, done: usize, total: usize| {
-        drawn.set_message(stage.name());
-        drawn.set_length(total as u64);
-        drawn.set_position(done as u64);
-    };
+    let (bar, progress) = stage_bar();
     let written = write_views_page(&request, &device, &progress)?;
     bar.finish_and_clear();
     warn_dropped(&request.scene, written.dropped);

@@ -114,13 +114,7 @@ fn run_merge(args: &MergeArgs) -> Result<()> {
     let dirs: Vec<&Path> = args.dirs.iter().map(PathBuf::as_path).collect();
     let study = merge_studies(&dirs)?;
     write_study(&args.out, &study)?;
-    eprintln!(
-        "merged {} folder(s): {} rows of {} runs, {} failed",
-        dirs.len(),
-        study.rows.len(),
-        study.plan.runs.len(),
-        study.failures.len()
-    );
+    eprintln!("{}", study.merged_line(dirs.len()));
     println!("{}", args.out.display());
     Ok(())
 }
@@ -158,36 +152,11 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
     // Everything that can be known before the first run is checked now, dry run or not; a
     // refusal is the only thing printed.
     let check = study.check(&runs, args.out.as_deref(), &extensions)?;
-    eprintln!(
-        "study of {}: {} variant(s), {} run(s){}",
-        plan.name,
-        plan.variants.len(),
-        plan.runs.len(),
-        args.shard
-            .map(|s| format!(", shard {}/{}: {} run(s)", s.index, s.count, runs.len()))
-            .unwrap_or_default()
-    );
-    for v in &plan.variants {
-        eprintln!(
-            "  variant {}: {}  [{}]",
-            v.index,
-            v.label,
-            v.overrides.join(" ")
-        );
+    for line in plan.outline(runs.len(), args.shard) {
+        eprintln!("{line}");
     }
     if args.dry_run {
-        eprintln!(
-            "check passed: {} variant(s) prepared{}",
-            check.variants,
-            check
-                .peak
-                .map(|p| format!(
-                    "; peak memory about {} ({})",
-                    splatraj::experiment::resources::show_bytes(p.bytes),
-                    p.what
-                ))
-                .unwrap_or_default()
-        );
+        eprintln!("{}", check.summary());
         return Ok(());
     }
     let exe = std::env::current_exe().context("cannot find the splatraj binary to re-run")?;
@@ -216,13 +185,7 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
             match measured {
                 Ok(rows) if !args.quiet => {
                     for r in rows {
-                        eprintln!(
-                            "{at} (repeat {}): error {:.4}, optimisation {:.2} s, peak {}",
-                            r.repeat,
-                            r.error,
-                            r.optimisation_s,
-                            r.peak_mb.map_or("–".into(), |m| format!("{m:.0} MB"))
-                        );
+                        eprintln!("{}", r.progress_line(&at));
                     }
                 }
                 Ok(_) => {}
@@ -231,13 +194,8 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
         },
     )?;
     let (dir, study) = (&outcome.dir, &outcome.study);
-    if let Some(summary) = &study.summary
-        && let Some(c) = summary.cheapest_within_5_percent
-    {
-        eprintln!(
-            "cheapest within 5 % of the best error: {}",
-            summary.variants[c].label
-        );
+    if let Some(line) = study.cheapest_line() {
+        eprintln!("{line}");
     }
     println!("{}", dir.display());
     let failed = study.failures.len();

@@ -47,6 +47,30 @@ pub struct Converted {
     pub dropped_extras: Vec<String>,
 }
 
+impl Converted {
+    /// What `scene convert` says after writing `output`: the extras the format could not hold
+    /// (a warning), then what it wrote.
+    pub fn summary(&self, output: &Path) -> Vec<String> {
+        let (scene, format) = (&self.loaded.scene, self.format);
+        let mut lines = Vec::with_capacity(2);
+        if !self.dropped_extras.is_empty() {
+            lines.push(format!(
+                "warning: {} cannot hold {}; they are not written (INRIA .ply keeps them)",
+                format.name(),
+                self.dropped_extras.join(", ")
+            ));
+        }
+        lines.push(format!(
+            "wrote {} Gaussians (SH degree {}) to {} ({})",
+            scene.len(),
+            scene.sh_degree,
+            output.display(),
+            format.name()
+        ));
+        lines
+    }
+}
+
 /// Reads `input` and writes it to `output` in `format` (else the one its name asks for): the
 /// format and the target are checked before the scene is read.
 pub fn convert_scene(

@@ -24,6 +24,7 @@ pub mod conduct;
 pub mod configs;
 pub mod context;
 pub mod files;
+pub mod lines;
 pub mod measure;
 pub mod plan;
 pub mod plot;
