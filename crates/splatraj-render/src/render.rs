@@ -63,8 +63,9 @@ impl Channel {
 /// launches of a step do not grow with the number of windows (docs/gpu.md).
 #[derive(Debug, Clone)]
 pub struct ObjectMasks {
-    /// One value per Gaussian for each object. `[M][N]`
-    pub masks: Vec<Vec<f32>>,
+    /// One value per Gaussian for each object, shared: a step's request is cloned each pass
+    /// with only its views changed, and the masks are `M·N` values. `[M][N]`
+    pub masks: Arc<[Vec<f32>]>,
     /// Per pose of the batch, its object and what it draws around it. `[B]`
     pub views: Vec<ObjectView>,
 }
@@ -476,9 +477,14 @@ pub fn render_at(
     }
     let used: Vec<usize> = is_used.iter().collect();
     let compact_from_scene = is_used.ranks();
+    let u = used.len();
+    // The rows b·U + u some list reads, marked while the lists are renumbered: the host
+    // projection kernels project only those (`ProjectionPlan::rows_read`).
+    let mut rows_read = GaussianBits::new(batch * u);
     for list in &mut work {
         for g in &mut list.gaussians {
             *g = compact_from_scene.rank(*g as usize);
+            rows_read.insert(list.batch * u + *g as usize);
         }
     }
     let width: usize = request.channels.iter().map(Channel::width).sum::<usize>() + tensor_width;
@@ -496,7 +502,6 @@ pub fn render_at(
             stats: RenderStats::default(),
         });
     }
-    let u = used.len();
     // The scene indices used, uploaded once and only when a select needs them (the fused
     // projection takes them as a plan; SH colours, per-Gaussian tensors and the tensor path
     // select with them).
@@ -513,12 +518,6 @@ pub fn render_at(
     // Screen space: the fused projection's packed rows, or the tensor projection's outputs.
     let (splats, depth) = match request.rasterizer {
         Rasterizer::Fused => {
-            let mut rows_read = GaussianBits::new(batch * u);
-            for list in &work {
-                for &g in &list.gaussians {
-                    rows_read.insert(list.batch * u + g as usize);
-                }
-            }
             let plan = ProjectionPlan {
                 used: used.iter().map(|&g| g as u32).collect(),
                 camera: ProjectionCamera::new(&request.intrinsics, request.near),

@@ -184,7 +184,7 @@ fn launches_do_not_grow_with_the_batch_and_reads_stay_at_one() {
     .collect();
     let step_poses: Vec<Pose> = (0..4).flat_map(|_| poses.iter().copied()).collect();
     let objects = Channel::ObjectMasks(ObjectMasks {
-        masks: halves,
+        masks: halves.into(),
         views,
     });
     pass_of(&on_device, objects.clone(), &step_poses, &device, false);

@@ -95,7 +95,7 @@ fn one_pass_of_several_objects_equals_a_pass_per_pose() {
         for pruning in [Pruning::ObjectOnly, Pruning::None] {
             let what = format!("{rasterizer:?} {pruning:?}");
             let shared = Channel::ObjectMasks(ObjectMasks {
-                masks: objects.to_vec(),
+                masks: objects.to_vec().into(),
                 views: rows
                     .iter()
                     .map(|&(_, object, surroundings)| ObjectView {
@@ -159,7 +159,7 @@ fn object_masks_name_one_object_per_pose() {
         let request = RenderRequest::new(
             intrinsics(),
             vec![Channel::ObjectMasks(ObjectMasks {
-                masks: vec![mask.clone()],
+                masks: vec![mask.clone()].into(),
                 views,
             })],
         );

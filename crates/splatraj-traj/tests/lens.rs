@@ -10,7 +10,7 @@ use splatraj_render::host::to_host;
 use splatraj_render::render::{DeviceScene, Zoom};
 use splatraj_scene::Scene;
 use splatraj_scene::demo::DEMO_UP;
-use splatraj_traj::costs::{CostsConfig, HostPoses, QueryContext, TreCost, default_prior_radius};
+use splatraj_traj::costs::{CostsConfig, HostPoses, QueryContext, TreCost};
 use splatraj_traj::optimise::{
     Flow, ObjectView, Problem, StepPasses, TrajectoryOptions, WindowSamples, WindowTarget,
     object_start_poses, optimise_trajectory, window_start_trajectory,
@@ -24,25 +24,7 @@ fn intrinsics() -> Intrinsics {
 }
 
 fn window(scene: &Scene, name: &str, target_ratio: f64) -> WindowTarget {
-    let k = intrinsics();
-    let (tx, ty) = k.tan_half_fov();
-    let o = common::demo_object(name);
-    WindowTarget {
-        name: name.to_string(),
-        mask: common::demo_mask(scene, &o),
-        context: QueryContext {
-            object_centre: o.center.map(f64::from),
-            prior_radius: default_prior_radius(
-                o.size.map(f64::from),
-                2.0 * tx.atan(),
-                2.0 * ty.atan(),
-                0.15,
-            )
-            .unwrap(),
-            world_up: DEMO_UP.map(f64::from),
-            target_ratio,
-        },
-    }
+    common::demo_window(scene, name, &intrinsics(), target_ratio)
 }
 
 fn start_pose(w: &WindowTarget) -> Pose {

@@ -21,8 +21,7 @@ use splatraj_scene::demo::DEMO_UP;
 use splatraj_traj::clearance::{Occupancy, OccupancySpec};
 use splatraj_traj::costs::{
     ClearanceCost, Cost, CostError, CostInputs, CostsConfig, DEFAULT_CLEARANCE_SIGMA,
-    DEFAULT_MIN_OPACITY, HostPoses, MotionCost, OrAuto, QueryContext, VisibilityCost,
-    WeightedCosts, default_prior_radius,
+    DEFAULT_MIN_OPACITY, HostPoses, MotionCost, OrAuto, VisibilityCost, WeightedCosts,
 };
 use splatraj_traj::optimise::{
     Flow, ObjectView, Problem, StepPasses, TrajectoryOptions, WindowSamples, WindowTarget,
@@ -41,29 +40,9 @@ fn intrinsics() -> Intrinsics {
 }
 
 fn windows(scene: &Scene, names: &[&str]) -> Vec<WindowTarget> {
-    let k = intrinsics();
-    let (tx, ty) = k.tan_half_fov();
     names
         .iter()
-        .map(|name| {
-            let o = common::demo_object(name);
-            WindowTarget {
-                name: name.to_string(),
-                mask: common::demo_mask(scene, &o),
-                context: QueryContext {
-                    object_centre: o.center.map(f64::from),
-                    prior_radius: default_prior_radius(
-                        o.size.map(f64::from),
-                        2.0 * tx.atan(),
-                        2.0 * ty.atan(),
-                        0.15,
-                    )
-                    .unwrap(),
-                    world_up: DEMO_UP.map(f64::from),
-                    target_ratio: 0.15,
-                },
-            }
-        })
+        .map(|name| common::demo_window(scene, name, &intrinsics(), 0.15))
         .collect()
 }
 

@@ -469,7 +469,7 @@ impl<'a> Problem<'a> {
             .collect();
         let channels = if wants_mask {
             let objects = Channel::ObjectMasks(ObjectMasks {
-                masks,
+                masks: masks.into(),
                 views: Vec::new(),
             });
             std::iter::once(objects).chain(channels).collect()

@@ -40,3 +40,31 @@ pub fn demo_mask(scene: &Scene, object: &splatraj_scene::demo::DemoObject) -> Ve
         .map(|&id| f32::from(u8::from(id == object.id)))
         .collect()
 }
+
+/// The query window of demo object `name` seen through `intrinsics`: its mask, centre, the
+/// default prior radius at 15 % of the frame, the demo's up and `target_ratio`.
+pub fn demo_window(
+    scene: &Scene,
+    name: &str,
+    intrinsics: &splatraj_render::camera::Intrinsics,
+    target_ratio: f64,
+) -> splatraj_traj::optimise::WindowTarget {
+    let (tx, ty) = intrinsics.tan_half_fov();
+    let o = demo_object(name);
+    splatraj_traj::optimise::WindowTarget {
+        name: name.to_string(),
+        mask: demo_mask(scene, &o),
+        context: splatraj_traj::costs::QueryContext {
+            object_centre: o.center.map(f64::from),
+            prior_radius: splatraj_traj::costs::default_prior_radius(
+                o.size.map(f64::from),
+                2.0 * tx.atan(),
+                2.0 * ty.atan(),
+                0.15,
+            )
+            .unwrap(),
+            world_up: splatraj_scene::demo::DEMO_UP.map(f64::from),
+            target_ratio,
+        },
+    }
+}
