@@ -3,8 +3,8 @@
 
 use burn::tensor::{DType, Device, Tensor, TensorData};
 use splatraj_traj::trajectory::{
-    Basis, POSE_DIM, Polynomial, Pose, Rbf, RbfNormalisation, Trajectory, TrajectoryError,
-    TrajectoryModel, TrajectoryRecord, Waypoint, uniform_times,
+    Basis, LensPath, POSE_DIM, Polynomial, Pose, Rbf, RbfNormalisation, Trajectory,
+    TrajectoryError, TrajectoryModel, TrajectoryRecord, Waypoint, ZoomRange, uniform_times,
 };
 
 fn host<const D: usize>(t: Tensor<D>) -> Vec<f64> {
@@ -479,4 +479,99 @@ fn refit_moves_a_trajectory_into_a_model_that_contains_it() {
         );
         assert!(err < 1e-9, "{} refit error {err}", fine.name());
     }
+}
+
+/// A zooming trajectory of `model` with the weights of [`weights`] and the zoom `lens`.
+fn zooming(model: &TrajectoryModel, lens: &LensPath) -> Trajectory {
+    Trajectory::from_weights(
+        model.clone(),
+        &weights(model.count()),
+        &Device::flex(),
+        DType::F64,
+    )
+    .unwrap()
+    .with_lens(Some(lens))
+    .unwrap()
+}
+
+#[test]
+fn refit_carries_the_zoom_into_a_model_that_contains_it() {
+    // As the poses above: the coarse model's u(t) = Ψ(t)·w_s lies in the fine model's span, so
+    // the refitted zoom is the source's up to rounding, at times the fit never saw.
+    let range = ZoomRange { min: 0.4, max: 3.0 };
+    let cases = [
+        (
+            TrajectoryModel::Waypoint(Waypoint { segments: 50 }),
+            TrajectoryModel::Waypoint(Waypoint::default()),
+        ),
+        (
+            TrajectoryModel::Polynomial(Polynomial { terms: 4 }),
+            TrajectoryModel::Polynomial(Polynomial::default()),
+        ),
+    ];
+    let times = odd_times(200);
+    for (coarse, fine) in cases {
+        let lens = LensPath {
+            range,
+            weights: weights(coarse.count()).iter().map(|w| 0.7 * w[0]).collect(),
+        };
+        let source = zooming(&coarse, &lens);
+        let zooms = source.zooms_at(&times);
+        let (lo, hi) = zooms
+            .iter()
+            .fold((f64::MAX, 0.0f64), |(a, b), &s| (a.min(s), b.max(s)));
+        assert!(
+            hi / lo > 1.5,
+            "{}: the source zooms: {lo}..{hi}",
+            coarse.name()
+        );
+        let moved = source.refit(fine.clone(), 1001).unwrap();
+        assert_eq!(moved.lens_path().map(|l| l.range), Some(range));
+        let err = max_abs_diff(&moved.zooms_at(&times), &zooms);
+        assert!(err < 1e-9, "{} zoom refit error {err}", fine.name());
+    }
+}
+
+#[test]
+fn refit_into_waypoints_keeps_the_zoom_within_each_segments_own_variation() {
+    // A smooth zoom (a quintic's u(t)) refitted into 100 piecewise-constant segments from 1001
+    // even samples: each segment's free value is the mean of the source's u at the samples in
+    // it (the ridge aside, 1e-8 of the column norm), so it lies between their smallest and
+    // largest, and s = zoom(u) being monotone, the refitted s at any time t of the segment lies
+    // within the source's s over those samples and t itself.
+    let range = ZoomRange::default();
+    let source_model = TrajectoryModel::Polynomial(Polynomial::default());
+    let fit_times = uniform_times(1001);
+    let wanted: Vec<f64> = fit_times
+        .iter()
+        .map(|t| (0.5 * (2.0 * std::f64::consts::PI * t).sin() + 0.3 * t).exp())
+        .collect();
+    let lens = LensPath::fit(&source_model, range, &fit_times, &wanted).unwrap();
+    let source = zooming(&source_model, &lens);
+    let target = Waypoint::default();
+    let moved = source
+        .refit(TrajectoryModel::Waypoint(target.clone()), 1001)
+        .unwrap();
+    let source_at_samples = source.zooms_at(&fit_times);
+    let segment = |t: f64| ((t * target.segments as f64).floor() as usize).min(target.segments - 1);
+    let held_out = odd_times(300);
+    let refitted = moved.zooms_at(&held_out);
+    let own = source.zooms_at(&held_out);
+    let mut widest = 0.0f64;
+    for ((&t, &got), &at_t) in held_out.iter().zip(&refitted).zip(&own) {
+        let (lo, hi) = fit_times
+            .iter()
+            .zip(&source_at_samples)
+            .filter(|(u, _)| segment(**u) == segment(t))
+            .map(|(_, &s)| s)
+            .fold((at_t, at_t), |(a, b), s| (a.min(s), b.max(s)));
+        assert!(
+            got >= lo - 1e-9 && got <= hi + 1e-9,
+            "t = {t}: refitted zoom {got} outside the segment's [{lo}, {hi}]"
+        );
+        widest = widest.max(hi - lo);
+    }
+    // The bound is tight, not vacuous: s' = s·(π·cos 2πt + 0.3) is at most 1.78 × 3.44 ≈ 6.1,
+    // so s moves at most 0.061 across a segment of 0.01 (against a swing from 0.76 to 1.78).
+    assert!(widest < 0.062, "{widest}");
 }

@@ -170,25 +170,46 @@ impl LensPath {
         times: &[f64],
         zooms: &[f64],
     ) -> Result<Self, TrajectoryError> {
+        // The range first: `free` needs a valid one (the rest is `fit_free`'s to check).
         range.validate()?;
-        model.validate()?;
-        if times.len() != zooms.len() || times.is_empty() {
-            return Err(TrajectoryError::FitData(format!(
-                "{} times for {} zooms",
-                times.len(),
-                zooms.len()
-            )));
-        }
         if let Some(s) = zooms.iter().find(|&&s| !(s > range.min && s < range.max)) {
             return Err(TrajectoryError::FitData(format!(
                 "zoom {s} is not inside the zoom range [{}, {}]",
                 range.min, range.max
             )));
         }
+        let free: Vec<f64> = zooms.iter().map(|&s| range.free(s)).collect();
+        Self::fit_free(model, range, times, &free)
+    }
+
+    /// The lens of `range` on `model`'s basis whose free value u(t) best matches `free` at
+    /// `times`, by least squares (the ridge of [`super::Trajectory::fit`]): [`LensPath::fit`]
+    /// without the zooms' round trip through [`ZoomRange::free`], for a zoom already given as
+    /// free values (another basis' u(t), which may lie where s rounds to the range's ends).
+    pub fn fit_free(
+        model: &TrajectoryModel,
+        range: ZoomRange,
+        times: &[f64],
+        free: &[f64],
+    ) -> Result<Self, TrajectoryError> {
+        range.validate()?;
+        model.validate()?;
+        if times.len() != free.len() || times.is_empty() {
+            return Err(TrajectoryError::FitData(format!(
+                "{} times for {} zooms",
+                times.len(),
+                free.len()
+            )));
+        }
+        if let Some(u) = free.iter().find(|u| !u.is_finite()) {
+            return Err(TrajectoryError::FitData(format!(
+                "the zoom's free value {u} is not finite"
+            )));
+        }
         // The pose fit's solver, with u in the first of its six columns.
-        let targets: Vec<f64> = zooms
+        let targets: Vec<f64> = free
             .iter()
-            .flat_map(|&s| [range.free(s), 0.0, 0.0, 0.0, 0.0, 0.0])
+            .flat_map(|&u| [u, 0.0, 0.0, 0.0, 0.0, 0.0])
             .collect();
         let basis = model.matrix(times);
         let rows = super::lstsq::ridge_lstsq(
@@ -207,12 +228,17 @@ impl LensPath {
     /// The zoom at each of `times`, on the host, through the model's basis `basis` `[B, K]`
     /// (row-major, as [`super::Basis::matrix`] gives it).
     pub fn zooms(&self, basis: &[f64]) -> Vec<f64> {
+        self.free_values(basis)
+            .into_iter()
+            .map(|u| self.range.zoom(u))
+            .collect()
+    }
+
+    /// The free value u = Ψ·w_s at each row of `basis` `[B, K]` (row-major), on the host.
+    pub fn free_values(&self, basis: &[f64]) -> Vec<f64> {
         basis
             .chunks_exact(self.weights.len().max(1))
-            .map(|row| {
-                let u: f64 = row.iter().zip(&self.weights).map(|(p, w)| p * w).sum();
-                self.range.zoom(u)
-            })
+            .map(|row| row.iter().zip(&self.weights).map(|(p, w)| p * w).sum())
             .collect()
     }
 }

@@ -611,12 +611,22 @@ impl Trajectory {
         Self::from_weights(model, &weights, device, dtype)
     }
 
-    /// This trajectory's poses re-fitted with another model on `samples` evenly spaced times.
+    /// This trajectory's poses, and its zoom when the lens zooms, re-fitted with another model
+    /// on `samples` evenly spaced times (the zoom as its free value u(t) at the same times,
+    /// [`LensPath::fit_free`], in the same range).
     pub fn refit(&self, model: TrajectoryModel, samples: usize) -> Result<Self, TrajectoryError> {
         let times = uniform_times(samples);
         let poses = self.poses_at(&times);
         let value = self.weights.val();
-        Self::fit(model, &times, &poses, &value.device(), value.dtype())
+        let fitted = Self::fit(model, &times, &poses, &value.device(), value.dtype())?;
+        let lens = self
+            .lens_path()
+            .map(|lens| {
+                let free = lens.free_values(&self.model.matrix(&times));
+                LensPath::fit_free(fitted.model(), lens.range, &times, &free)
+            })
+            .transpose()?;
+        fitted.with_lens(lens.as_ref())
     }
 
     /// The basis model.
