@@ -50,35 +50,15 @@ impl ReadArgs {
         }
         Ok(loaded)
     }
-
-    /// Reads `path` for a command that renders it (a scene without Gaussians is refused,
-    /// naming the file), warning about dropped Gaussians.
-    pub fn load_to_render(&self, path: &Path) -> Result<LoadedScene> {
-        let loaded = splatraj::experiment::prepare::scene_files::read_scene_to_render(
-            path,
-            &self.options(),
-        )?;
-        if loaded.dropped > 0 {
-            eprintln!(
-                "warning: {}: dropped {} invalid Gaussians",
-                path.display(),
-                loaded.dropped
-            );
-        }
-        Ok(loaded)
-    }
 }
 
 /// Set by the first Ctrl-C or SIGTERM ([`install_stop_handler`]).
 static INTERRUPTED: OnceLock<Arc<AtomicBool>> = OnceLock::new();
 
-/// Set by Ctrl-C (or SIGTERM): the optimisation stops at the end of the current step.
+/// Set by Ctrl-C (or SIGTERM): an observer that reads it stops the optimisation at the end of
+/// the current step, once the library honours stop requests ([`splatraj_scene::stop::honour`],
+/// from the moment its run folder exists).
 pub fn interrupt_flag() -> Arc<AtomicBool> {
-    splatraj_scene::stop::honour();
-    stop_flag()
-}
-
-fn stop_flag() -> Arc<AtomicBool> {
     INTERRUPTED
         .get_or_init(|| Arc::new(AtomicBool::new(false)))
         .clone()
@@ -92,7 +72,7 @@ fn stop_flag() -> Arc<AtomicBool> {
 /// checkpoint keeps its best trajectory).
 /// Work that does not check for requests ([`splatraj_scene::stop::honour`]) ends at the first.
 pub fn install_stop_handler() {
-    let flag = stop_flag();
+    let flag = interrupt_flag();
     let on_signal = move || {
         if flag.swap(true, Ordering::SeqCst) || !splatraj_scene::stop::honoured() {
             splatraj_scene::atomic::remove_partial_files_and_exit(EXIT_INTERRUPTED.into());

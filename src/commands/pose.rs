@@ -8,16 +8,17 @@
 //! `pose.json` (best pose and every start's result), `history.csv`, `metrics.json` (TCE, TRE,
 //! IoU of the best pose at the output resolution), `frame.png`, and with `--sgld`
 //! `sgld_samples.csv`. Ctrl-C during the optimisation stops it and keeps each start's best.
-//! The work, and every file, is the library's ([`splatraj::experiment::process`]).
+//! The work, and every file, is the library's, one call
+//! ([`splatraj::experiment::process::run_pose_experiment`]); this file parses, draws progress
+//! and prints.
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use splatraj::experiment::Experiment;
-use splatraj::experiment::config::{Ablation, Config};
+use splatraj::experiment::config::Ablation;
 use splatraj::experiment::optimise::observer::{Flow, Observer, Phase, Progress};
-use splatraj::experiment::process::RunFolder;
+use splatraj::experiment::process::{PoseRequest, run_pose_experiment};
 
 use crate::cli::{Ended, MemoryArgs, bar_observer, interrupt_flag, progress_bar};
 
@@ -53,66 +54,24 @@ fn parse_ablation(s: &str) -> Result<Ablation, String> {
 
 /// Runs `splatraj pose`.
 pub fn run(args: PoseArgs) -> Result<()> {
-    let max_memory_gb = args.memory.max_memory_gb()?;
-    // Low to high: the file, --set, the options (typed fields, checked with the rest).
-    let config = Config::load_edited(&args.config, &args.set, |config| {
-        if let Some(a) = args.ablation {
-            config.pose.ablation = a;
-        }
-        if let Some(r) = args.restarts {
-            config.start.restarts = r;
-        }
-        if max_memory_gb.is_some() {
-            config.max_memory_gb = max_memory_gb;
-        }
-    })?;
-    let experiment = Experiment::prepare(&config)?;
-    let plan = experiment.check_pose_run(args.sgld)?;
-    let index = config.pose.query;
-    let window = &experiment.windows[index];
-    eprintln!(
-        "query {:?}: {} Gaussians, {} start(s), costs {:?}",
-        window.name,
-        experiment.selected[index],
-        experiment.pose_starts()?.len(),
-        experiment.pose_costs()?.names()
-    );
-    // Ctrl-C is honoured before the run folder exists (as `run` does): a signal in between
-    // would end the process at once and leave an empty folder.
-    let interrupted = interrupt_flag();
-    let folder = RunFolder::create(&experiment)?;
-    eprintln!("run folder: {}", folder.dir().display());
-
-    let bar = progress_bar(plan.steps as u64, args.quiet);
-    let mut observer = |p: &Progress| {
-        if let Progress::Phase(Phase::Sgld { chains }) = *p {
-            bar.finish_and_clear();
-            eprintln!("SGLD, {chains} chains");
-            return Flow::Continue;
-        }
-        bar_observer(&bar, interrupted.clone()).progress(p)
+    let request = PoseRequest {
+        config: &args.config,
+        set: &args.set,
+        ablation: args.ablation,
+        restarts: args.restarts,
+        max_memory_gb: args.memory.max_memory_gb()?,
+        sgld: args.sgld,
     };
-    let outcome = experiment.run_pose_in(&folder, args.sgld, &mut observer)?;
-    bar.finish_and_clear();
+    let mut progress = PoseProgress {
+        bar: progress_bar(0, args.quiet),
+        interrupted: interrupt_flag(),
+    };
+    let outcome = run_pose_experiment(&request, &mut progress)?;
+    progress.bar.finish_and_clear();
     if outcome.interrupted {
         eprintln!("stopped by Ctrl-C: wrote the best pose so far");
     }
-    let (metrics, pose) = (&outcome.metrics.metrics, &outcome.pose);
-    eprintln!(
-        "best pose {:?}\nTCE {}  TRE {:.4}  IoU {:.3}  visible {}  ({:.1} s, {:.0} ms/iteration for {} start(s))",
-        pose.pose,
-        metrics
-            .tce
-            .map_or("undefined (never in view)".to_string(), |t| format!(
-                "{t:.4}"
-            )),
-        metrics.tre,
-        metrics.iou,
-        metrics.visible,
-        pose.optimisation_s,
-        pose.per_iteration_ms,
-        pose.starts.len()
-    );
+    eprintln!("{}", outcome.summary());
     println!("{}", outcome.dir.display());
     if outcome.interrupted {
         return Err(Ended::interrupted(format!(
@@ -122,4 +81,32 @@ pub fn run(args: PoseArgs) -> Result<()> {
         .into());
     }
     Ok(())
+}
+
+/// The bar of a pose run, with the library's lines (the query's plan, the folder) and the
+/// switch to SGLD.
+struct PoseProgress {
+    bar: indicatif::ProgressBar,
+    interrupted: std::sync::Arc<std::sync::atomic::AtomicBool>,
+}
+
+impl Observer for PoseProgress {
+    fn progress(&mut self, progress: &Progress) -> Flow {
+        match *progress {
+            Progress::Phase(Phase::Optimisation { steps }) => {
+                self.bar.set_length(steps as u64);
+                Flow::Continue
+            }
+            Progress::Phase(Phase::Sgld { chains }) => {
+                self.bar.finish_and_clear();
+                eprintln!("SGLD, {chains} chains");
+                Flow::Continue
+            }
+            _ => bar_observer(&self.bar, self.interrupted.clone()).progress(progress),
+        }
+    }
+
+    fn line(&mut self, line: &str) {
+        eprintln!("{line}");
+    }
 }

@@ -18,7 +18,7 @@ use clap::Args;
 use splatraj::experiment::config::MaskOverlay;
 use splatraj::experiment::frame_metrics::FrameMetrics;
 use splatraj::experiment::outputs::camera_paths::{FrameRequest, SceneMismatch};
-use splatraj::experiment::outputs::path_job::{PathJob, PathPlan, PathScene, render_path_job};
+use splatraj::experiment::outputs::path_job::{PathJob, PathPlan, SceneArgument, render_path_job};
 use splatraj::experiment::outputs::path_render::Video;
 use splatraj_render::backend::BackendKind;
 use splatraj_render::render::Rasterizer;
@@ -88,7 +88,12 @@ fn parse_overlay(s: &str) -> Result<MaskOverlay, String> {
 /// Runs `splatraj render-path`.
 pub fn run(args: RenderPathArgs) -> Result<()> {
     let job = PathJob {
-        scene: PathScene::of(&args.scene, &args.set, args.read.options(), args.backend)?,
+        scene: SceneArgument {
+            path: &args.scene,
+            set: &args.set,
+            read: args.read.options(),
+            backend: args.backend,
+        },
         path: &args.path,
         frames: FrameRequest {
             fps: args.fps,

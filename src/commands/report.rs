@@ -1,13 +1,14 @@
 //! `splatraj report RUN_DIR [--scene FILE]`: rebuilds a run folder's `report.html` from its
 //! files, with the scene's points under the path views (the scene its `config.toml` names,
-//! found as `run_scene` says, or `--scene`). The work is the library's
-//! ([`splatraj::experiment::outputs::run_report`], as at the end of `splatraj run`).
+//! found as `run_scene` says, or `--scene`). The work is the library's, one call
+//! ([`splatraj::experiment::outputs::run_report::rebuild_run_report`], the report as at the end
+//! of `splatraj run`).
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use splatraj::experiment::outputs::run_report::{run_scene, write_run_report};
+use splatraj::experiment::outputs::run_report::rebuild_run_report;
 
 use crate::cli::ReadArgs;
 
@@ -25,14 +26,15 @@ pub struct ReportArgs {
 
 /// Runs `splatraj report`.
 pub fn run(args: ReportArgs) -> Result<()> {
-    if !args.run.is_dir() {
-        anyhow::bail!("{} is not a run folder", args.run.display());
+    let read = args.read.options();
+    let scene = args.scene.as_deref().map(|path| (path, &read));
+    let rebuilt = rebuild_run_report(&args.run, scene)?;
+    if let (Some(path), dropped @ 1..) = (&args.scene, rebuilt.dropped) {
+        eprintln!(
+            "warning: {}: dropped {dropped} invalid Gaussians",
+            path.display()
+        );
     }
-    let scene = match &args.scene {
-        Some(path) => args.read.load_to_render(path)?.scene,
-        None => run_scene(&args.run)?,
-    };
-    let path = write_run_report(&args.run, Some(&scene))?;
-    println!("{}", path.display());
+    println!("{}", rebuilt.path.display());
     Ok(())
 }

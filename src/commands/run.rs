@@ -5,8 +5,9 @@
 //! made; optimise from each start (a progress bar shows iteration, cost and time left; Ctrl-C
 //! or `optimiser.time_limit_s` stops early and keeps the best so far); then evaluate the
 //! per-window metrics on a fixed time grid at the output resolution, LDJ, and render frames.
-//! The work, and every file, is the library's ([`splatraj::experiment::process`]); this file
-//! parses, draws progress and prints.
+//! The work, and every file, is the library's, one call
+//! ([`splatraj::experiment::process::run_trajectory_experiment`]); this file parses, draws
+//! progress and prints.
 //!
 //! Nothing is lost: the estimated peak memory is checked against the limit before any work
 //! (`--check` runs the same checks, reads every input and tests that the runs folder is
@@ -22,11 +23,11 @@ use std::sync::atomic::AtomicBool;
 use anyhow::{Result, bail};
 use clap::Args;
 use indicatif::ProgressBar;
-use splatraj::experiment::config::{Config, VerdictPolicy};
+use splatraj::experiment::RunStop;
 use splatraj::experiment::optimise::observer::{Flow, Observer, Phase, Progress};
-use splatraj::experiment::outputs::run_folder::resumable;
-use splatraj::experiment::process::RunFolder;
-use splatraj::experiment::{Experiment, RunStop};
+use splatraj::experiment::process::{
+    RunSource, TrajectoryEnd, TrajectoryRequest, run_trajectory_experiment,
+};
 
 use crate::cli::{Ended, MemoryArgs, bar_observer, interrupt_flag, progress_bar};
 
@@ -57,53 +58,32 @@ pub struct RunArgs {
 /// Runs `splatraj run`.
 pub fn run(args: RunArgs) -> Result<()> {
     let max_memory_gb = args.memory.max_memory_gb()?;
-    let (mut config, checkpoint) = match (&args.resume, &args.config) {
-        (Some(dir), _) => {
-            let (config, checkpoint) = resumable(dir, &args.set)?;
-            eprintln!(
-                "resuming {}: restart {}/{} at step {}/{}, best sampled loss so far {:.4}",
-                dir.display(),
-                checkpoint.restart + 1,
-                checkpoint.restarts,
-                checkpoint.steps_done,
-                checkpoint.steps,
-                checkpoint.best_total
-            );
-            (config, Some(checkpoint))
-        }
-        (None, Some(path)) => (Config::load(path, &args.set)?, None),
+    let source = match (&args.resume, &args.config) {
+        (Some(dir), _) => RunSource::Resume {
+            dir,
+            set: &args.set,
+        },
+        (None, Some(path)) => RunSource::Config {
+            path,
+            set: &args.set,
+        },
         (None, None) => bail!("give a config file, or --resume RUN_DIR"),
     };
-    // Over the file and --set; checked as the option was read.
-    if max_memory_gb.is_some() {
-        config.max_memory_gb = max_memory_gb;
-    }
-    let experiment = Experiment::prepare(&config)?;
-    let plan = experiment.check_trajectory_run(checkpoint.is_some())?;
-    for line in experiment.plan_lines() {
-        eprintln!("{line}");
-    }
-    if args.check {
-        if let Some(peak) = plan.memory.peak() {
-            eprintln!(
-                "check passed; peak memory about {} ({})",
-                splatraj::experiment::resources::show_bytes(peak.bytes),
-                peak.what
-            );
-        }
-        return Ok(());
-    }
-    // Ctrl-C is honoured (a request the loops act on at their next whole step) before the run
-    // folder exists: a signal between the two would otherwise end the process at once and
-    // leave a folder without a checkpoint, which `--resume` cannot continue.
-    let mut progress = RunProgress::new(plan.steps as u64, args.quiet);
-    let folder = match (&args.resume, checkpoint) {
-        (Some(dir), Some(checkpoint)) => RunFolder::resume(dir, checkpoint)?,
-        _ => RunFolder::create(&experiment)?,
+    let request = TrajectoryRequest {
+        source,
+        max_memory_gb,
+        check_only: args.check,
     };
-    eprintln!("run folder: {}", folder.dir().display());
-
-    let outcome = experiment.run_trajectory_in(&folder, &mut progress)?;
+    let mut progress = RunProgress::new(args.quiet);
+    let outcome = match run_trajectory_experiment(&request, &mut progress)? {
+        TrajectoryEnd::Checked(plan) => {
+            if let Some(line) = plan.check_line() {
+                eprintln!("{line}");
+            }
+            return Ok(());
+        }
+        TrajectoryEnd::Ran(outcome) => outcome,
+    };
     progress.finish();
     for line in outcome.summary_lines() {
         eprintln!("{line}");
@@ -122,14 +102,14 @@ pub fn run(args: RunArgs) -> Result<()> {
         ))
         .into());
     }
-    if outcome.problems.is_empty() || config.output.verdict == VerdictPolicy::Warn {
+    if !outcome.verdict_fails() {
         Ok(())
     } else {
         Err(Ended::verdict_failed(format!(
             "verdict: {} of {} windows do not show their object as asked (see the warnings \
              above, `metrics.json`'s `verdict` and {}); exit status {}",
             outcome.failing,
-            experiment.windows.len(),
+            outcome.evaluation.windows.len(),
             dir.join("report.html").display(),
             crate::cli::EXIT_VERDICT
         ))
@@ -138,7 +118,7 @@ pub fn run(args: RunArgs) -> Result<()> {
 }
 
 /// The bars of a run: the optimisation's, then the outputs' (metrics, frames), with the
-/// reason a stopped optimisation ended.
+/// library's lines (the plan, the folder) and the reason a stopped optimisation ended.
 struct RunProgress {
     bar: ProgressBar,
     quiet: bool,
@@ -146,9 +126,9 @@ struct RunProgress {
 }
 
 impl RunProgress {
-    fn new(steps: u64, quiet: bool) -> Self {
+    fn new(quiet: bool) -> Self {
         RunProgress {
-            bar: progress_bar(steps, quiet),
+            bar: progress_bar(0, quiet),
             quiet,
             interrupted: interrupt_flag(),
         }
@@ -161,6 +141,10 @@ impl RunProgress {
 
 impl Observer for RunProgress {
     fn progress(&mut self, progress: &Progress) -> Flow {
+        if let Progress::Phase(Phase::Optimisation { steps }) = *progress {
+            self.bar.set_length(steps as u64);
+            return Flow::Continue;
+        }
         if let Progress::Phase(Phase::Outputs { frames, stop }) = *progress {
             self.bar.finish_and_clear();
             match stop {
@@ -181,5 +165,9 @@ impl Observer for RunProgress {
             return Flow::Continue;
         }
         bar_observer(&self.bar, self.interrupted.clone()).progress(progress)
+    }
+
+    fn line(&mut self, line: &str) {
+        eprintln!("{line}");
     }
 }

@@ -9,6 +9,8 @@
 //! stopped run's folder; then [`Experiment::run_trajectory_in`] / [`Experiment::run_pose_in`]
 //! optimise (checkpointing a trajectory run) and write every file. Progress of every kind
 //! (steps, restarts, the switch to the outputs, frames, SGLD) reaches the [`Observer`].
+//! [`run_trajectory_experiment`] and [`run_pose_experiment`] are that order whole, from the
+//! config file: the one call of `splatraj run` and `splatraj pose`.
 //!
 //! ```no_run
 //! use splatraj_experiment::{Config, Experiment, optimise::observer, process::RunFolder};
@@ -30,12 +32,13 @@ use serde::Serialize;
 use splatraj_traj::metrics::WindowMetrics;
 use splatraj_traj::optimise::StopReason;
 
-use crate::config::MaskOverlay;
+use crate::config::{Ablation, Config, MaskOverlay, VerdictPolicy};
 use crate::optimise::checkpoint::{CHECKPOINT_FILE, Checkpoint};
 use crate::optimise::observer::{Observer, Phase, Progress};
 use crate::outputs::records::{PoseFile, pose_history, sgld_samples, trajectory_history};
 use crate::outputs::run_folder::{
     MetricsFile, RunReport, StageTimes, check_writable, remove_checkpoint, remove_partial_files,
+    resumable,
 };
 use crate::outputs::{FrameSpec, create_run_dir, frame_png};
 use crate::prepare::experiment::Experiment;
@@ -181,9 +184,17 @@ pub struct TrajectoryOutcome {
     pub problems: Vec<String>,
     /// Windows failing their verdict.
     pub failing: usize,
+    /// What a failing verdict does (`output.verdict`).
+    pub policy: VerdictPolicy,
 }
 
 impl TrajectoryOutcome {
+    /// Whether the run ends as failed: some window fails its verdict and `output.verdict`
+    /// does not only warn.
+    pub fn verdict_fails(&self) -> bool {
+        !self.problems.is_empty() && self.policy != VerdictPolicy::Warn
+    }
+
     /// The run's result, a line each: per window TCE, TRE, in view, visible, hidden, clearance
     /// and verdict, then LDJ and the optimisation's figures.
     pub fn summary_lines(&self) -> Vec<String> {
@@ -518,6 +529,7 @@ impl Experiment {
             report,
             problems,
             failing,
+            policy: self.config.output.verdict,
         })
     }
 
@@ -598,6 +610,182 @@ impl Experiment {
             interrupted,
             pose,
             metrics,
+        })
+    }
+}
+
+/// Where `splatraj run`'s config comes from.
+#[derive(Debug, Clone, Copy)]
+pub enum RunSource<'a> {
+    /// A config file and its `KEY=VALUE` overrides: a new run.
+    Config {
+        /// The config file.
+        path: &'a Path,
+        /// `--set` overrides.
+        set: &'a [String],
+    },
+    /// A stopped run's folder (its `config.toml` with the overrides, and `checkpoint.json`).
+    Resume {
+        /// The run folder.
+        dir: &'a Path,
+        /// `--set` overrides.
+        set: &'a [String],
+    },
+}
+
+/// Everything `splatraj run` is asked.
+#[derive(Debug, Clone, Copy)]
+pub struct TrajectoryRequest<'a> {
+    /// The config, or the run to resume.
+    pub source: RunSource<'a>,
+    /// `max_memory_gb` over the file's and the overrides' (already checked).
+    pub max_memory_gb: Option<f64>,
+    /// Only check (`--check`): every check before the work, and stop.
+    pub check_only: bool,
+}
+
+/// How `splatraj run` ended.
+#[derive(Debug)]
+pub enum TrajectoryEnd {
+    /// `--check`: every check passed; what the run would take.
+    Checked(RunPlan),
+    /// The run ran and wrote its folder.
+    Ran(Box<TrajectoryOutcome>),
+}
+
+/// `splatraj run` whole: the config read (or the stopped run's, resumed), the experiment
+/// prepared and checked ([`Experiment::check_trajectory_run`]), then, unless only checking,
+/// the run folder made ([`RunFolder::create`] or [`RunFolder::resume`]) and the run into it
+/// ([`Experiment::run_trajectory_in`]). The observer hears the plan, the folder and a resume
+/// as [`Observer::line`]s, [`Phase::Optimisation`] before the first step, then every step,
+/// phase and frame.
+pub fn run_trajectory_experiment(
+    request: &TrajectoryRequest<'_>,
+    observer: &mut dyn Observer,
+) -> Result<TrajectoryEnd> {
+    let (mut config, resume) = match request.source {
+        RunSource::Resume { dir, set } => {
+            let (config, checkpoint) = resumable(dir, set)?;
+            observer.line(&checkpoint.resuming_line(dir));
+            (config, Some((dir, checkpoint)))
+        }
+        RunSource::Config { path, set } => (Config::load(path, set)?, None),
+    };
+    // Over the file and the overrides; checked as the option was read.
+    if request.max_memory_gb.is_some() {
+        config.max_memory_gb = request.max_memory_gb;
+    }
+    let experiment = Experiment::prepare(&config)?;
+    let plan = experiment.check_trajectory_run(resume.is_some())?;
+    for line in experiment.plan_lines() {
+        observer.line(&line);
+    }
+    if request.check_only {
+        return Ok(TrajectoryEnd::Checked(plan));
+    }
+    // Stop requests are honoured (acted on at the loops' next whole step) before the run
+    // folder exists: a signal between the two would otherwise end the process at once and
+    // leave a folder without a checkpoint, which a resume cannot continue.
+    splatraj_scene::stop::honour();
+    let folder = match resume {
+        Some((dir, checkpoint)) => RunFolder::resume(dir, checkpoint)?,
+        None => RunFolder::create(&experiment)?,
+    };
+    observer.line(&format!("run folder: {}", folder.dir().display()));
+    observer.progress(&Progress::Phase(Phase::Optimisation { steps: plan.steps }));
+    experiment
+        .run_trajectory_in(&folder, observer)
+        .map(|outcome| TrajectoryEnd::Ran(Box::new(outcome)))
+}
+
+/// Everything `splatraj pose` is asked: the config with its overrides, then the options that
+/// set typed fields over both, and the SGLD chains.
+#[derive(Debug, Clone, Copy)]
+pub struct PoseRequest<'a> {
+    /// The config file.
+    pub config: &'a Path,
+    /// `--set` overrides.
+    pub set: &'a [String],
+    /// `pose.ablation`, when given.
+    pub ablation: Option<Ablation>,
+    /// `start.restarts`, when given.
+    pub restarts: Option<usize>,
+    /// `max_memory_gb`, when given (already checked).
+    pub max_memory_gb: Option<f64>,
+    /// SGLD chains to run from the best pose, when asked.
+    pub sgld: Option<usize>,
+}
+
+/// `splatraj pose` whole: the config read (low to high: the file, the overrides, the
+/// options), the experiment prepared and checked ([`Experiment::check_pose_run`]), the run
+/// folder made and the pose run into it ([`Experiment::run_pose_in`]). The observer hears the
+/// query's plan and the folder as [`Observer::line`]s, [`Phase::Optimisation`], then every
+/// step and [`Phase::Sgld`].
+pub fn run_pose_experiment(
+    request: &PoseRequest<'_>,
+    observer: &mut dyn Observer,
+) -> Result<PoseOutcome> {
+    let config = Config::load_edited(request.config, request.set, |config| {
+        if let Some(a) = request.ablation {
+            config.pose.ablation = a;
+        }
+        if let Some(r) = request.restarts {
+            config.start.restarts = r;
+        }
+        if request.max_memory_gb.is_some() {
+            config.max_memory_gb = request.max_memory_gb;
+        }
+    })?;
+    let experiment = Experiment::prepare(&config)?;
+    let plan = experiment.check_pose_run(request.sgld)?;
+    let index = config.pose.query;
+    observer.line(&format!(
+        "query {:?}: {} Gaussians, {} start(s), costs {:?}",
+        experiment.windows[index].name,
+        experiment.selected[index],
+        experiment.pose_starts()?.len(),
+        experiment.pose_costs()?.names()
+    ));
+    // Honoured before the run folder exists, as a trajectory run does: a signal in between
+    // would end the process at once and leave an empty folder.
+    splatraj_scene::stop::honour();
+    let folder = RunFolder::create(&experiment)?;
+    observer.line(&format!("run folder: {}", folder.dir().display()));
+    observer.progress(&Progress::Phase(Phase::Optimisation { steps: plan.steps }));
+    experiment.run_pose_in(&folder, request.sgld, observer)
+}
+
+impl PoseOutcome {
+    /// The best pose and its metrics, in two lines.
+    pub fn summary(&self) -> String {
+        let (metrics, pose) = (&self.metrics.metrics, &self.pose);
+        format!(
+            "best pose {:?}\nTCE {}  TRE {:.4}  IoU {:.3}  visible {}  ({:.1} s, {:.0} ms/iteration for {} start(s))",
+            pose.pose,
+            metrics
+                .tce
+                .map_or("undefined (never in view)".to_string(), |t| format!(
+                    "{t:.4}"
+                )),
+            metrics.tre,
+            metrics.iou,
+            metrics.visible,
+            pose.optimisation_s,
+            pose.per_iteration_ms,
+            pose.starts.len()
+        )
+    }
+}
+
+impl RunPlan {
+    /// What `--check` says when every check passed: the estimated peak memory and its stage.
+    pub fn check_line(&self) -> Option<String> {
+        self.memory.peak().map(|peak| {
+            format!(
+                "check passed; peak memory about {} ({})",
+                crate::resources::show_bytes(peak.bytes),
+                peak.what
+            )
         })
     }
 }

@@ -63,6 +63,19 @@ pub struct Checkpoint {
 }
 
 impl Checkpoint {
+    /// What resuming the run folder `dir` from this checkpoint continues, in one line.
+    pub fn resuming_line(&self, dir: &Path) -> String {
+        format!(
+            "resuming {}: restart {}/{} at step {}/{}, best sampled loss so far {:.4}",
+            dir.display(),
+            self.restart + 1,
+            self.restarts,
+            self.steps_done,
+            self.steps,
+            self.best_total
+        )
+    }
+
     /// The best trajectory so far as a record.
     pub fn best_record(&self) -> TrajectoryRecord {
         TrajectoryRecord {

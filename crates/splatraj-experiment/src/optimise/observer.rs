@@ -41,9 +41,14 @@ pub enum Progress {
     },
 }
 
-/// A phase of an experiment after its optimisation.
+/// A phase of an experiment: its optimisation, and what follows it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Phase {
+    /// The optimisation begins (its run folder made): `steps` in all, over every restart.
+    Optimisation {
+        /// Steps in all (restarts × iterations, or a pose run's iterations).
+        steps: usize,
+    },
     /// The optimisation ended (`stop` says why); metrics, frames, video and exports follow.
     Outputs {
         /// Frames to render.
@@ -62,6 +67,10 @@ pub enum Phase {
 pub trait Observer {
     /// One step finished.
     fn progress(&mut self, progress: &Progress) -> Flow;
+
+    /// A line for the person running the work, worded by the library (the plan of a run, its
+    /// folder, a resume): a command shows it as it comes; by default it is dropped.
+    fn line(&mut self, _line: &str) {}
 }
 
 impl<F: FnMut(&Progress) -> Flow> Observer for F {

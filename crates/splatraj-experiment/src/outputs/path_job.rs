@@ -1,8 +1,8 @@
 //! `splatraj render-path` as one library call: every input read and checked before anything is
 //! rendered or written (the camera path, its frames, the scene or the experiment config whose
 //! scene and queries give each frame's object), then the frames, video and metrics of
-//! [`super::path_render`]. The command only parses its flags into a [`PathJob`], calls
-//! [`render_path_job`] and prints.
+//! [`super::path_render`]. The command only parses its flags into a [`PathJob`] (SCENE as
+//! given: [`SceneArgument`]), calls [`render_path_job`] and prints.
 
 use std::path::Path;
 
@@ -41,15 +41,25 @@ pub enum PathScene<'a> {
     },
 }
 
+/// `render-path`'s SCENE as given, with what goes with a config (`set`) or a scene file
+/// (`read`, `backend`); [`PathScene::of`] tells which it is.
+#[derive(Debug, Clone)]
+pub struct SceneArgument<'a> {
+    /// A scene file or an experiment config.
+    pub path: &'a Path,
+    /// `KEY=VALUE` overrides (a config only).
+    pub set: &'a [String],
+    /// How a scene file is read (invalid Gaussians, a label sidecar).
+    pub read: ReadOptions,
+    /// The tensor backend of a scene file (a config names its own).
+    pub backend: BackendKind,
+}
+
 impl<'a> PathScene<'a> {
     /// A config when `path` is a TOML table with `[scene]`, else a scene file: what
     /// `render-path SCENE` means by its first argument. Overrides (`set`) need a config.
-    pub fn of(
-        path: &'a Path,
-        set: &'a [String],
-        read: ReadOptions,
-        backend: BackendKind,
-    ) -> Result<Self> {
+    pub fn of(argument: &SceneArgument<'a>) -> Result<Self> {
+        let (path, set) = (argument.path, argument.set);
         let is_config = splatraj_scene::input::read_text(path)
             .ok()
             .and_then(|text| toml::from_str::<toml::Table>(&text).ok())
@@ -65,8 +75,8 @@ impl<'a> PathScene<'a> {
         }
         Ok(PathScene::File {
             path,
-            read,
-            backend,
+            read: argument.read.clone(),
+            backend: argument.backend,
         })
     }
 }
@@ -74,8 +84,8 @@ impl<'a> PathScene<'a> {
 /// Everything `render-path` is asked for.
 #[derive(Debug, Clone)]
 pub struct PathJob<'a> {
-    /// The scene, or the config whose scene it is.
-    pub scene: PathScene<'a>,
+    /// The scene, or the config whose scene it is, as given.
+    pub scene: SceneArgument<'a>,
     /// The camera path file (a run folder, `trajectory.json` or another tool's file).
     pub path: &'a Path,
     /// Frame rate, length and size asked for.
@@ -115,7 +125,8 @@ pub fn render_path_job(
     plan: &mut dyn FnMut(&PathPlan),
     progress: &mut dyn FnMut(usize),
 ) -> Result<RenderedPath> {
-    if let PathScene::File { path: scene, .. } = &job.scene
+    let scene = PathScene::of(&job.scene)?;
+    if let PathScene::File { path: scene, .. } = &scene
         && job.overlay == MaskOverlay::Tint
     {
         bail!(
@@ -128,7 +139,7 @@ pub fn render_path_job(
     let frames = path.frames(&job.frames)?;
     // The experiment outlives the objects borrowed from it.
     let mut experiment = None;
-    let (scene, objects, rasterizer, dropped) = match &job.scene {
+    let (scene, objects, rasterizer, dropped) = match &scene {
         PathScene::Config { path: config, set } => {
             let e: &Experiment =
                 experiment.insert(Experiment::prepare(&Config::load(config, set)?)?);

@@ -49,6 +49,37 @@ pub fn write_run_report(dir: &Path, scene: Option<&Scene>) -> Result<PathBuf> {
     Ok(path)
 }
 
+/// What [`rebuild_run_report`] wrote.
+#[derive(Debug, Clone)]
+pub struct RebuiltReport {
+    /// `report.html`.
+    pub path: PathBuf,
+    /// Invalid Gaussians dropped from the scene file given (under `InvalidPolicy::Drop`).
+    pub dropped: usize,
+}
+
+/// `splatraj report` whole: rebuilds `report.html` of the run folder `dir` from its files, with
+/// the scene under the path views: the file `scene` names, read with its options (a scene
+/// without Gaussians is refused, naming it), else the one the run's config names
+/// ([`run_scene`]).
+pub fn rebuild_run_report(
+    dir: &Path,
+    scene: Option<(&Path, &ReadOptions)>,
+) -> Result<RebuiltReport> {
+    if !dir.is_dir() {
+        bail!("{} is not a run folder", dir.display());
+    }
+    let (scene, dropped) = match scene {
+        Some((path, read)) => {
+            let loaded = crate::prepare::scene_files::read_scene_to_render(path, read)?;
+            (loaded.scene, loaded.dropped)
+        }
+        None => (run_scene(dir)?, 0),
+    };
+    let path = write_run_report(dir, Some(&scene))?;
+    Ok(RebuiltReport { path, dropped })
+}
+
 /// What `report.html` shows of the run folder `dir`.
 pub fn run_report(dir: &Path, scene: Option<&Scene>) -> Result<RunReport> {
     if !dir.is_dir() {
