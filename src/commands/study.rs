@@ -8,19 +8,19 @@
 //! memory it reports (VmHWM, a process-wide high-water mark) is its own and no run's
 //! allocations slow the next; `--in-process` runs them here instead (no memory figure). Before
 //! the first run the plan is checked whole (`--dry-run` stops after the check). The plan, the
-//! check, the measuring and the files are `splatraj::experiment::study`; this file parses,
-//! spawns, shows progress and writes.
+//! check, the measuring and the files are `splatraj::experiment::study`, one call each
+//! (`run_study`, a child's `measure_one`, `merge_into`); this file parses, shows progress and
+//! prints.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use splatraj::experiment::Extensions;
-use splatraj::experiment::config::ConfigFile;
 use splatraj::experiment::study::plan::PlanOptions;
 use splatraj::experiment::study::{
-    Factor, PlannedStudy, Preset, RunPlace, Shard, StudyRequest, conduct_study, measure_one,
-    merge_studies, study_dir, write_study,
+    Factor, Preset, RunPlace, Shard, StudyEnd, StudyNews, StudyRequest, measure_one, merge_into,
+    run_study,
 };
 
 /// Arguments of `splatraj study`.
@@ -106,14 +106,13 @@ fn parse_shard(s: &str) -> Result<Shard, String> {
 pub fn run(args: StudyArgs) -> Result<()> {
     match args.command {
         Some(StudyCommand::Merge(merge)) => run_merge(&merge),
-        None => run_study(&args.run),
+        None => run_study_command(&args.run),
     }
 }
 
 fn run_merge(args: &MergeArgs) -> Result<()> {
     let dirs: Vec<&Path> = args.dirs.iter().map(PathBuf::as_path).collect();
-    let study = merge_studies(&dirs)?;
-    write_study(&args.out, &study)?;
+    let study = merge_into(&dirs, &args.out)?;
     eprintln!("{}", study.merged_line(dirs.len()));
     println!("{}", args.out.display());
     Ok(())
@@ -133,30 +132,15 @@ fn plan_options(args: &StudyRunArgs) -> Result<PlanOptions> {
     })
 }
 
-fn run_study(args: &StudyRunArgs) -> Result<()> {
+fn run_study_command(args: &StudyRunArgs) -> Result<()> {
     let Some(config) = &args.config else {
         bail!("give a config file (splatraj study CONFIG.toml), or `splatraj study merge DIR...`");
     };
     let extensions = Extensions::default();
     let options = plan_options(args)?;
-    // The config file is read once; every variant's, run's and the evaluation's config is
-    // made from it.
-    let study = PlannedStudy::new(&ConfigFile::read(config)?, &options, &extensions)?;
     if let Some(index) = args.one {
-        let rows = measure_one(&study, index, &extensions)?;
+        let rows = measure_one(config, &options, index, &extensions)?;
         println!("{}", serde_json::to_string(&rows)?);
-        return Ok(());
-    }
-    let plan = &study.plan;
-    let runs = plan.runs_of(args.shard);
-    // Everything that can be known before the first run is checked now, dry run or not; a
-    // refusal is the only thing printed.
-    let check = study.check(&runs, args.out.as_deref(), &extensions)?;
-    for line in plan.outline(runs.len(), args.shard) {
-        eprintln!("{line}");
-    }
-    if args.dry_run {
-        eprintln!("{}", check.summary());
         return Ok(());
     }
     let exe = std::env::current_exe().context("cannot find the splatraj binary to re-run")?;
@@ -171,28 +155,21 @@ fn run_study(args: &StudyRunArgs) -> Result<()> {
             RunPlace::Child { exe: &exe }
         },
     };
-    let folder = study_dir(&study, &request)?;
-    eprintln!("study folder: {}", folder.dir.display());
-    let outcome = conduct_study(
-        study,
-        &runs,
-        folder,
+    let mut tell = |news: StudyNews<'_>| match news {
+        StudyNews::Line(line) | StudyNews::Failed(line) => eprintln!("{line}"),
+        StudyNews::Row(line) if !args.quiet => eprintln!("{line}"),
+        StudyNews::Row(_) => {}
+    };
+    let outcome = match run_study(
         &request,
+        args.dry_run,
         &extensions,
         std::env::args(),
-        |i, label, measured| {
-            let at = format!("[{}/{}] {label}", i + 1, runs.len());
-            match measured {
-                Ok(rows) if !args.quiet => {
-                    for r in rows {
-                        eprintln!("{}", r.progress_line(&at));
-                    }
-                }
-                Ok(_) => {}
-                Err(error) => eprintln!("{at}: failed: {error}"),
-            }
-        },
-    )?;
+        &mut tell,
+    )? {
+        StudyEnd::Checked => return Ok(()),
+        StudyEnd::Conducted(outcome) => outcome,
+    };
     let (dir, study) = (&outcome.dir, &outcome.study);
     if let Some(line) = study.cheapest_line() {
         eprintln!("{line}");

@@ -1,6 +1,7 @@
-//! A whole study: its runs measured one after another (each in a child process or here), then
-//! its folder written, also when a stop cut it short. What `splatraj study` does after the
-//! plan and its check; the command only shows the progress and the outcome.
+//! A whole study: its plan made from the config file read once and checked whole, then its
+//! runs measured one after another (each in a child process or here), then its folder
+//! written, also when a stop cut it short. [`run_study`] is `splatraj study` in one call (the
+//! command shows what it tells and the outcome); [`measure_one`] is a child's run.
 
 use std::path::{Path, PathBuf};
 
@@ -12,6 +13,7 @@ use super::measure::{MemoryReading, measure_run};
 use super::plan::{PlanOptions, PlannedStudy, Run, Shard};
 use super::rows::StudyRow;
 use super::summary::StudyContext;
+use crate::config::ConfigFile;
 use crate::extensions::Extensions;
 
 /// Where each run of a study is measured.
@@ -108,13 +110,17 @@ pub fn conduct_study(
     })
 }
 
-/// Measures run `index` of `plan` in this process, with its own peak memory (what a child of
-/// [`RunPlace::Child`] does: `splatraj study … --one index`).
+/// Measures run `index` of the plan `options` make of the config file `config`, in this
+/// process, with its own peak memory (what a child of [`RunPlace::Child`] does: `splatraj
+/// study … --one index`).
 pub fn measure_one(
-    study: &PlannedStudy,
+    config: &Path,
+    options: &PlanOptions,
     index: usize,
     extensions: &Extensions,
 ) -> Result<Vec<StudyRow>> {
+    let study = PlannedStudy::new(&ConfigFile::read(config)?, options, extensions)?;
+    let study = &study;
     let plan = &study.plan;
     let run = plan
         .runs
@@ -122,4 +128,80 @@ pub fn measure_one(
         .with_context(|| format!("--one {index}: the plan has {} runs", plan.runs.len()))?;
     let since = splatraj_scene::stop::Since::now();
     measure_run(study, run, extensions, MemoryReading::OwnProcess, since)
+}
+
+/// What a study tells as it goes, worded by the library ([`super::lines`]).
+#[derive(Debug, Clone, Copy)]
+pub enum StudyNews<'a> {
+    /// The plan, a dry run's verdict or the study folder.
+    Line(&'a str),
+    /// A measured row's progress line.
+    Row(&'a str),
+    /// A run that failed, and why.
+    Failed(&'a str),
+}
+
+/// How [`run_study`] ended.
+#[derive(Debug)]
+pub enum StudyEnd {
+    /// A dry run: the plan was checked whole, nothing ran.
+    Checked,
+    /// The runs were measured and the study written.
+    Conducted(Box<StudyOutcome>),
+}
+
+/// `splatraj study` whole: the plan made from the config file read once, checked whole before
+/// its first run ([`PlannedStudy::check`]; a dry run stops there), its folder made, then its
+/// runs measured and the study written ([`conduct_study`]). `tell` hears the plan's outline,
+/// the check's verdict (dry run), the folder, and each run's rows or failure. `args` is the
+/// command line the study's files record.
+pub fn run_study(
+    request: &StudyRequest<'_>,
+    dry_run: bool,
+    extensions: &Extensions,
+    args: impl IntoIterator<Item = String>,
+    tell: &mut dyn FnMut(StudyNews<'_>),
+) -> Result<StudyEnd> {
+    let study = PlannedStudy::new(
+        &ConfigFile::read(request.config)?,
+        request.options,
+        extensions,
+    )?;
+    let runs = study.plan.runs_of(request.shard);
+    // Everything that can be known before the first run is checked now, dry run or not; a
+    // refusal is the only thing told.
+    let check = study.check(&runs, request.out, extensions)?;
+    for line in study.plan.outline(runs.len(), request.shard) {
+        tell(StudyNews::Line(&line));
+    }
+    if dry_run {
+        tell(StudyNews::Line(&check.summary()));
+        return Ok(StudyEnd::Checked);
+    }
+    let folder = study_dir(&study, request)?;
+    tell(StudyNews::Line(&format!(
+        "study folder: {}",
+        folder.dir.display()
+    )));
+    let total = runs.len();
+    let outcome = conduct_study(
+        study,
+        &runs,
+        folder,
+        request,
+        extensions,
+        args,
+        |i, label, measured| {
+            let at = format!("[{}/{total}] {label}", i + 1);
+            match measured {
+                Ok(rows) => {
+                    for r in rows {
+                        tell(StudyNews::Row(&r.progress_line(&at)));
+                    }
+                }
+                Err(error) => tell(StudyNews::Failed(&format!("{at}: failed: {error}"))),
+            }
+        },
+    )?;
+    Ok(StudyEnd::Conducted(Box::new(outcome)))
 }

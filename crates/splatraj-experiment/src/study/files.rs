@@ -161,6 +161,14 @@ pub fn read_study(dir: &Path) -> Result<StudyFile> {
     Ok(study)
 }
 
+/// `splatraj study merge` whole: the shards' folders `dirs` merged ([`merge_studies`]) and
+/// written into `out` ([`write_study`]); returns the merged study.
+pub fn merge_into(dirs: &[&Path], out: &Path) -> Result<StudyFile> {
+    let study = merge_studies(dirs)?;
+    write_study(out, &study)?;
+    Ok(study)
+}
+
 /// Joins the study folders `dirs` (shards of one study) into one study: same plan, every
 /// shard once, no run twice. Missing shards are an error naming them.
 pub fn merge_studies(dirs: &[&Path]) -> Result<StudyFile> {

@@ -36,8 +36,11 @@ pub use crate::config::study::{
     Design, EvaluationConfig, FactorConfig, Quality, StudyConfig, StudyTask,
 };
 pub use check::StudyCheck;
-pub use conduct::{RunPlace, StudyOutcome, StudyRequest, conduct_study, measure_one, study_dir};
-pub use files::{StudyFile, merge_studies, read_study, study_folder, write_study};
+pub use conduct::{
+    RunPlace, StudyEnd, StudyNews, StudyOutcome, StudyRequest, conduct_study, measure_one,
+    run_study, study_dir,
+};
+pub use files::{StudyFile, merge_into, merge_studies, read_study, study_folder, write_study};
 pub use measure::measure_run;
 pub use plan::{Factor, PlannedStudy, Preset, Run, Shard, StudyPlan, Variant};
 pub use rows::StudyRow;
