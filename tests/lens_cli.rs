@@ -204,6 +204,7 @@ fn a_dolly_zoom_window_zooms_with_its_distance() {
             "queries.1.shot={kind=\"dolly-zoom\"}",
             "output.transitions=\"cut\"",
             "output.trajectory_samples=41",
+            "output.frames=41",
         ],
     );
     let file = json(&folder.join("trajectory.json"));
@@ -245,6 +246,70 @@ fn a_dolly_zoom_window_zooms_with_its_distance() {
         hi / lo > 1.5,
         "the camera dollies and the lens zooms: {zooms:?}"
     );
+
+    // metrics.json's `shot.zoom`, computed again from frame_metrics.csv and the lens: frames
+    // t = k/40, window 1 from k = 20, its middle 60 % k = 24 … 36; linear size √coverage
+    // over its mean there; the horizontal field of view 2·atan(W/(2·fx·s)) at the 40-pixel
+    // frame's 60°.
+    let record: TrajectoryRecord =
+        serde_json::from_str(&std::fs::read_to_string(folder.join("trajectory.json")).unwrap())
+            .unwrap();
+    let fx = 20.0 / 30f64.to_radians().tan();
+    let fov = |t: f64| 2.0 * (20.0 / (fx * record.zooms_at(&[t])[0])).atan().to_degrees();
+    let csv = std::fs::read_to_string(folder.join("frame_metrics.csv")).unwrap();
+    let rows: Vec<(usize, f64, f64)> = csv
+        .lines()
+        .skip(1)
+        .map(|line| {
+            let f: Vec<&str> = line.split(',').collect();
+            (
+                f[0].parse().unwrap(),
+                f[1].parse().unwrap(),
+                f[5].parse().unwrap(),
+            )
+        })
+        .collect();
+    let ratio = |keep: &dyn Fn(usize) -> bool| {
+        let fovs: Vec<f64> = rows
+            .iter()
+            .filter(|r| keep(r.0))
+            .map(|r| fov(r.1))
+            .collect();
+        fovs.iter().copied().fold(0.0, f64::max) / fovs.iter().copied().fold(f64::MAX, f64::min)
+    };
+    let sizes: Vec<f64> = rows
+        .iter()
+        .filter(|r| (24..=36).contains(&r.0))
+        .map(|r| r.2.sqrt())
+        .collect();
+    let mean = sizes.iter().sum::<f64>() / sizes.len() as f64;
+    assert!(
+        mean > 0.0,
+        "the object shows in the window's middle: {sizes:?}"
+    );
+    let hold = &json(&folder.join("metrics.json"))["windows"][1]["shot"]["zoom"];
+    let close = |key: &str, want: f64| {
+        let got = hold[key].as_f64().unwrap();
+        assert!((got - want).abs() < 1e-6, "{key}: {got} vs {want}");
+    };
+    assert_eq!(hold["frames"], 13);
+    close(
+        "size_min",
+        sizes.iter().copied().fold(f64::MAX, f64::min) / mean,
+    );
+    close("size_max", sizes.iter().copied().fold(0.0, f64::max) / mean);
+    close("fov_ratio", ratio(&|k| k >= 20));
+    close("fov_ratio_middle", ratio(&|k| (24..=36).contains(&k)));
+    // And the verdict judges it.
+    let metrics = json(&folder.join("metrics.json"));
+    let checks = metrics["windows"][1]["verdict"]["checks"]
+        .as_array()
+        .unwrap();
+    assert!(
+        checks.iter().any(|c| c["check"] == "held_size"),
+        "{checks:?}"
+    );
+    assert!(metrics["windows"][0]["shot"].is_null());
 }
 
 #[test]
@@ -263,4 +328,39 @@ fn a_dolly_zoom_with_a_fixed_lens_names_the_key() {
     ]);
     assert_clean_failure(&out, &["camera.lens", "queries.1.shot"]);
     assert!(!dir.path().join("runs").exists());
+}
+
+/// A dolly zoom whose zoom leaves `camera.zoom_range` is refused while the run is prepared:
+/// by `--check`, and by a run before its folder is made. The default dolly zoom goes from 0.6
+/// to 1.8 times the working radius, so it needs the zoom 0.6 → 1.8 whatever the scene.
+#[test]
+fn a_dolly_zoom_outside_the_zoom_range_is_refused_before_the_run_folder() {
+    let (dir, config) = setup();
+    let runs = runs_set(dir.path());
+    for check in [Some("--check"), None] {
+        let mut args = vec!["run", s(&config), "--quiet", "--set", &runs];
+        args.extend(check);
+        args.extend([
+            "--set",
+            "camera.lens=\"zoom\"",
+            "--set",
+            "camera.zoom_range=[0.8, 1.5]",
+            "--set",
+            "queries.1.shot={kind=\"dolly-zoom\"}",
+        ]);
+        let out = splatraj(&args);
+        assert_clean_failure(
+            &out,
+            &[
+                s(&config),
+                "`queries.1.shot` (dolly-zoom)",
+                "from 0.600 to 1.800",
+                "`camera.zoom_range` = [0.8, 1.5]",
+            ],
+        );
+        assert!(
+            !dir.path().join("runs").exists(),
+            "{check:?}: no run folder is left behind"
+        );
+    }
 }

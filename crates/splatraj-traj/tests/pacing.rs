@@ -2,12 +2,12 @@
 //! its subject, one panning on the spot, one walking straight at it), and the verdict's
 //! `framed_share`, `turning` and `orbiting` checks on both sides of their limits.
 
+mod common;
+
 use glam::DVec3;
 use splatraj_render::camera::Pose;
 use splatraj_traj::metrics::verdict::{MAX_ORBIT_RATE, MAX_TURN_RATE, MIN_FRAMED_SHARE};
-use splatraj_traj::metrics::{
-    CheckKind, Framing, MotionMetrics, Occlusion, PathMetrics, WindowMetrics, path_metrics, verdict,
-};
+use splatraj_traj::metrics::{CheckKind, MotionMetrics, path_metrics, verdict};
 
 const UP: DVec3 = DVec3::Z;
 
@@ -79,52 +79,9 @@ fn turning_and_orbit_rates_match_closed_forms() {
     );
 }
 
-/// A window that passes every check but the ones the test sets: in view throughout, centred,
-/// at the size asked for, unhidden, with the given framed share and rates.
-fn window(framed_share: f64, turning: f64, orbit: f64) -> WindowMetrics {
-    WindowMetrics {
-        window: 1,
-        name: "jaw".into(),
-        samples: 30,
-        tce: Some(0.05),
-        tre: 0.01,
-        iou: 1.0,
-        coverage: 0.15,
-        target_ratio: 0.15,
-        visible_fraction: 1.0,
-        visible: true,
-        tce_max: Some(0.1),
-        tre_max: 0.02,
-        occlusion: Occlusion::from_shares(&[Some(0.0); 30]),
-        path: Some(PathMetrics {
-            samples: 100,
-            clearance: None,
-            motion: MotionMetrics {
-                seconds: Some(9.0),
-                peak_speed: 0.1,
-                peak_acceleration: 0.1,
-                peak_angular_speed: turning,
-                peak_orbit_speed: Some(orbit),
-                speed_spread: 0.0,
-            },
-        }),
-        shot: None,
-        framing: Framing {
-            tce_middle: Some(0.05),
-            coverage_middle: Some(0.15),
-            tce_in_view: Some(0.05),
-            framed_share: Some(framed_share),
-            inside_object: 0.0,
-            wobble: None,
-        },
-        verdict: None,
-        lens: None,
-    }
-}
-
 #[test]
 fn the_verdict_holds_framed_share_and_pacing_to_their_limits() {
-    let good = verdict(&window(0.85, 44.0, 44.0));
+    let good = verdict(&common::passing_window(0.85, 44.0, 44.0));
     assert!(good.pass, "{good:#?}");
     let names: Vec<&str> = good.checks.iter().map(|c| c.check.name()).collect();
     for name in ["framed_share", "turning", "orbiting"] {
@@ -148,17 +105,17 @@ fn the_verdict_holds_framed_share_and_pacing_to_their_limits() {
     // figure and a fix.
     for (metrics, kind, says) in [
         (
-            window(0.75, 44.0, 44.0),
+            common::passing_window(0.75, 44.0, 44.0),
             CheckKind::FramedShare,
             "75 % of the window's middle 60 %",
         ),
         (
-            window(0.85, 61.0, 44.0),
+            common::passing_window(0.85, 61.0, 44.0),
             CheckKind::Turning,
             "turns at up to 61°/s",
         ),
         (
-            window(0.85, 44.0, 83.0),
+            common::passing_window(0.85, 44.0, 83.0),
             CheckKind::Orbiting,
             "circles the object at up to 83°/s",
         ),
@@ -175,7 +132,7 @@ fn the_verdict_holds_framed_share_and_pacing_to_their_limits() {
     }
 
     // Rates per unit of normalised time mean nothing to a viewer: not judged.
-    let mut unknown = window(0.85, 500.0, 500.0);
+    let mut unknown = common::passing_window(0.85, 500.0, 500.0);
     if let Some(p) = unknown.path.as_mut() {
         p.motion.seconds = None;
     }

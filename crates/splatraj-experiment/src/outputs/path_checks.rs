@@ -1,11 +1,17 @@
 //! The scene's solid geometry for the clearance cost, and the per-window clearance and motion
 //! metrics of a trajectory (`metrics.json`'s `path` of each window), its shot adherence
-//! (`shot`) and the occlusion's longest stretch in seconds.
+//! (`shot`, with a dolly zoom's hold of the size from the frames) and the occlusion's longest
+//! stretch in seconds.
 
 use anyhow::{Result, bail};
+use splatraj_render::camera::Intrinsics;
 use splatraj_traj::clearance::Occupancy;
-use splatraj_traj::metrics::{WindowMetrics, shot_metrics, shot_path_metrics};
+use splatraj_traj::metrics::{
+    WindowMetrics, ZoomFrame, shot_metrics, shot_path_metrics, zoom_hold,
+};
 use splatraj_traj::trajectory::Trajectory;
+
+use crate::frame_metrics::FrameMetrics;
 
 use crate::prepare::experiment::Experiment;
 
@@ -93,5 +99,42 @@ impl Experiment {
             }
         }
         Ok(windows)
+    }
+
+    /// `windows` (of the frames' evaluation) with each dolly-zoom window's `shot.zoom` filled
+    /// in from the rendered frames: their coverage (`metrics`, one per frame) and their
+    /// cameras (`cameras`, frame k's at index k) ([`zoom_hold`]); the other windows as they
+    /// are.
+    pub fn with_zoom_holds(
+        &self,
+        windows: &mut [WindowMetrics],
+        metrics: &[FrameMetrics],
+        cameras: &[Intrinsics],
+    ) -> Result<()> {
+        let shots = self.shot_paths()?;
+        let n = windows.len();
+        for (i, w) in windows.iter_mut().enumerate() {
+            let zooms = shots
+                .get(i)
+                .copied()
+                .flatten()
+                .is_some_and(|s| s.zoom_radius.is_some());
+            let Some(shot) = w.shot.as_mut().filter(|_| zooms) else {
+                continue;
+            };
+            let frames: Vec<ZoomFrame> = metrics
+                .iter()
+                .filter(|f| f.window == i)
+                .filter_map(|f| {
+                    Some(ZoomFrame {
+                        t: f.t,
+                        coverage: f.coverage,
+                        fov_x_degrees: cameras.get(f.frame)?.horizontal_fov_degrees(),
+                    })
+                })
+                .collect();
+            shot.zoom = zoom_hold(&frames, i, n);
+        }
+        Ok(())
     }
 }

@@ -30,7 +30,8 @@ pub struct Outputs {
 impl Experiment {
     /// The outputs of a finished `trajectory` in the run folder `dir`: its metrics and
     /// verdicts ([`Experiment::evaluate`]), the frames, `frame_metrics.csv` and `video.mp4`
-    /// (the verdicts judged again with the frames' wobble: [`Evaluation::with_frames`]), then
+    /// (the verdicts judged again with the frames' wobble, [`Evaluation::with_frames`], and a
+    /// dolly zoom's hold of its object's size, [`Experiment::with_zoom_holds`]), then
     /// the same poses in every export format. `progress` hears each frame done (of
     /// `output.frame_count`). A stop requested `since` ([`splatraj_scene::stop`]) ends it at
     /// the next whole window of metrics, frame or export format with
@@ -51,6 +52,8 @@ impl Experiment {
         let started = Instant::now();
         let frames = self.output_frames(trajectory)?;
         if let Some(rendered) = self.write_output_frames(&frames, dir, progress)? {
+            // Before `with_frames`, which judges the windows again with what the frames add.
+            self.with_zoom_holds(&mut evaluation.windows, &rendered.metrics, &frames.cameras)?;
             evaluation.with_frames(&rendered.metrics, frames.fps);
         }
         self.write_exports(&frames, dir, since)?;

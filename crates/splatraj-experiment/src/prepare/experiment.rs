@@ -176,6 +176,10 @@ impl Experiment {
             experiment.measure_working_distances()?;
         }
         experiment.derive_from_scene()?;
+        // The dolly zooms' zoom is r/r_w: checkable now that the working radii are known.
+        experiment
+            .check_shot_zoom()
+            .with_context(|| format!("config {}", config.path.display()))?;
         experiment.build_coarse_copy()?;
         Ok(experiment)
     }

@@ -14,7 +14,7 @@ use anyhow::{Context, Result, bail};
 use glam::DVec3;
 use splatraj_traj::optimise::sampling::{window_bounds, window_of};
 use splatraj_traj::shots::ShotPath;
-use splatraj_traj::trajectory::{Lens, LensPath, TrajectoryRecord};
+use splatraj_traj::trajectory::{Lens, LensPath, TrajectoryRecord, ZoomRange};
 
 use crate::prepare::experiment::Experiment;
 
@@ -71,20 +71,58 @@ impl Experiment {
         })
     }
 
-    /// `start` with its zoom following the dolly-zoom shots' z*(s) in their windows (and
-    /// s = 1 in the others), fitted into the trajectory's basis; `start` as it is when no
-    /// shot zooms. Errors name the key: a zooming shot needs `camera.lens = "zoom"` and its
-    /// zooms inside `camera.zoom_range`.
-    pub fn with_shot_zoom(&self, start: TrajectoryRecord) -> Result<TrajectoryRecord> {
-        let shots = self.shot_paths()?;
-        let Some(first) = first_zooming(&shots) else {
-            return Ok(start);
+    /// Errors naming the key when a dolly-zoom shot cannot zoom as it asks: the lens is fixed
+    /// (`camera.lens`), or its zoom z*(s) = r(s)/r_w leaves `camera.zoom_range`. The zoom
+    /// depends on the working radius r_w, known once the scene is read: [`Experiment::prepare`]
+    /// calls this, so `run --check` refuses such a shot and no run folder is made for it.
+    pub fn check_shot_zoom(&self) -> Result<()> {
+        self.shot_zoom_range(&self.shot_paths()?).map(drop)
+    }
+
+    /// The zoom's range when some shot of `shots` zooms (None when none does), after checking
+    /// that each zooming shot's zoom lies strictly inside it (the lens's map never reaches its
+    /// ends: `splatraj_traj::trajectory::lens`); errors name the key.
+    fn shot_zoom_range(&self, shots: &[Option<ShotPath>]) -> Result<Option<ZoomRange>> {
+        let Some(first) = first_zooming(shots) else {
+            return Ok(None);
         };
         let Lens::Zoom(range) = self.config.camera.lens()? else {
             bail!(
                 "`queries.{first}.shot` (dolly-zoom) zooms: it needs `camera.lens = \"zoom\"` \
                  (the camera's lens is fixed)"
             );
+        };
+        for (i, shot) in shots.iter().enumerate() {
+            let Some((shot, working)) = shot.and_then(|s| s.zoom_radius.map(|r| (s, r))) else {
+                continue;
+            };
+            // r(s) is linear in s (the dolly's line), so the zoom's extremes are its ends.
+            let (from, to) = shot.radius;
+            let (low, high) = (from.min(to) / working, from.max(to) / working);
+            if !(low > range.min && high < range.max) {
+                bail!(
+                    "`queries.{i}.shot` (dolly-zoom) needs the zoom from {:.3} to {:.3} (its \
+                     radius from {from:.4} to {to:.4} over the working radius {working:.4}), \
+                     not strictly inside `camera.zoom_range` = [{}, {}]: widen the range \
+                     beyond [{low:.3}, {high:.3}], or bring `from` and `to` toward the working \
+                     radius",
+                    from / working,
+                    to / working,
+                    range.min,
+                    range.max
+                );
+            }
+        }
+        Ok(Some(range))
+    }
+
+    /// `start` with its zoom following the dolly-zoom shots' z*(s) in their windows (and
+    /// s = 1 in the others), fitted into the trajectory's basis; `start` as it is when no
+    /// shot zooms. Errors name the key as [`Experiment::check_shot_zoom`]'s.
+    pub fn with_shot_zoom(&self, start: TrajectoryRecord) -> Result<TrajectoryRecord> {
+        let shots = self.shot_paths()?;
+        let Some(range) = self.shot_zoom_range(&shots)? else {
+            return Ok(start);
         };
         let n = self.windows.len();
         let mut times = Vec::with_capacity(n * ZOOM_FIT_POINTS);
@@ -93,18 +131,8 @@ impl Experiment {
             let (start_t, end_t) = window_bounds(i, n);
             for k in 0..ZOOM_FIT_POINTS {
                 let s = (k as f64 + 0.5) / ZOOM_FIT_POINTS as f64;
-                let zoom = shot.and_then(|shot| shot.zoom_at(s)).unwrap_or(1.0);
-                if !(zoom > range.min && zoom < range.max) {
-                    bail!(
-                        "`queries.{i}.shot` (dolly-zoom) asks for the zoom {zoom:.3} (its radius \
-                         over the working radius), outside `camera.zoom_range` = [{}, {}]: \
-                         widen the range or bring `from` and `to` toward the working radius",
-                        range.min,
-                        range.max
-                    );
-                }
                 times.push(start_t + s * (end_t - start_t));
-                zooms.push(zoom);
+                zooms.push(shot.and_then(|shot| shot.zoom_at(s)).unwrap_or(1.0));
             }
         }
         let lens = LensPath::fit(&start.model, range, &times, &zooms)

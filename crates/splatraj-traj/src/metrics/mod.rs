@@ -18,7 +18,7 @@ pub mod wobble;
 
 pub use ldj::{DEFAULT_LDJ_SAMPLES, Smoothness, ldj, pose_ldj, trajectory_ldj};
 pub use path::{ClearanceMetrics, MotionMetrics, PathMetrics, path_metrics, shot_path_metrics};
-pub use shot::{Deviation, ShotMetrics, shot_metrics};
+pub use shot::{Deviation, ShotMetrics, ZoomFrame, ZoomHold, shot_metrics, zoom_hold};
 pub use verdict::{Check, CheckKind, Verdict, verdict};
 pub use window::{
     Framing, LensSamples, Occlusion, WindowMetrics, WindowObject, ZoomAt, window_metrics,

@@ -12,11 +12,20 @@
 //!   orbit's progress along its sweep; 0 when either is vertical);
 //! - `aim`: the angle between f and a(s) − c, degrees (how far the view is off the object, or
 //!   off a reveal's pan).
+//!
+//! **A dolly zoom's hold** ([`ZoomHold`], `zoom`, once frames are rendered): a dolly zoom is
+//! defined by the object keeping its projected size while the field of view changes, so its
+//! window also reports, from the frames' coverage, the object's linear size (√coverage: a
+//! length in the image, where coverage is an area) over the window's middle
+//! [`MIDDLE_SHARE`] (where no pan should be, as `framed_share` judges), its smallest and
+//! largest over its mean there, and how much the horizontal field of view changes: widest
+//! over narrowest, over the window's frames and over the same middle frames.
 
 use glam::DVec3;
 use serde::Serialize;
 use splatraj_render::camera::rotation_vector_to_matrix;
 
+use super::window::MIDDLE_SHARE;
 use crate::optimise::sampling::window_bounds;
 use crate::shots::ShotPath;
 use crate::trajectory::Pose;
@@ -56,6 +65,78 @@ pub struct ShotMetrics {
     pub azimuth: Deviation,
     /// View direction off the shot's aim point, degrees.
     pub aim: Deviation,
+    /// How a dolly zoom held its object's size (module docs), once frames are rendered
+    /// (filled in by the caller from [`zoom_hold`]); absent for the other shots.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zoom: Option<ZoomHold>,
+}
+
+/// One output frame of a window as [`zoom_hold`] reads it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ZoomFrame {
+    /// Its time t ∈ [0, 1].
+    pub t: f64,
+    /// Share of the frame the visible object covers.
+    pub coverage: f64,
+    /// The frame camera's horizontal field of view, degrees.
+    pub fov_x_degrees: f64,
+}
+
+/// How a dolly-zoom window held its object's projected size while its field of view changed
+/// (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ZoomHold {
+    /// Frames in the window's middle [`MIDDLE_SHARE`], where the size is judged.
+    pub frames: usize,
+    /// Smallest linear size (√coverage) of those frames over their mean (None: the object
+    /// shows in none of them).
+    pub size_min: Option<f64>,
+    /// Largest linear size of those frames over their mean.
+    pub size_max: Option<f64>,
+    /// Widest over narrowest horizontal field of view over the window's frames.
+    pub fov_ratio: f64,
+    /// The same over the middle frames.
+    pub fov_ratio_middle: f64,
+}
+
+impl ZoomHold {
+    /// The largest change of the linear size from its mean over the middle frames, as a share
+    /// of the mean: max(1 − `size_min`, `size_max` − 1) (None with the sizes).
+    pub fn size_change(&self) -> Option<f64> {
+        Some((1.0 - self.size_min?).max(self.size_max? - 1.0))
+    }
+}
+
+/// The hold of window `index` of `windows` (module docs) from its frames (each frame of the
+/// window once, in any order); None when no frame lies in the window's middle
+/// [`MIDDLE_SHARE`].
+pub fn zoom_hold(frames: &[ZoomFrame], index: usize, windows: usize) -> Option<ZoomHold> {
+    let (start, end) = window_bounds(index, windows.max(1));
+    // As `framing.framed_share`: the share of the window, about its middle.
+    let in_middle =
+        |t: f64| ((t - start) / (end - start) - 0.5).abs() <= 0.5 * MIDDLE_SHARE + 1e-12;
+    let middle: Vec<&ZoomFrame> = frames.iter().filter(|f| in_middle(f.t)).collect();
+    if middle.is_empty() {
+        return None;
+    }
+    let ratio = |fovs: &mut dyn Iterator<Item = f64>| {
+        let (lo, hi) = fovs.fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+        hi / lo
+    };
+    let sizes: Vec<f64> = middle.iter().map(|f| f.coverage.max(0.0).sqrt()).collect();
+    let mean = sizes.iter().sum::<f64>() / sizes.len() as f64;
+    let relative = |pick: fn(f64, f64) -> f64, from: f64| {
+        (mean > 0.0).then(|| sizes.iter().copied().fold(from, pick) / mean)
+    };
+    Some(ZoomHold {
+        frames: middle.len(),
+        size_min: relative(f64::min, f64::INFINITY),
+        size_max: relative(f64::max, 0.0),
+        fov_ratio: ratio(&mut frames.iter().map(|f| f.fov_x_degrees)),
+        fov_ratio_middle: ratio(&mut middle.iter().map(|f| f.fov_x_degrees)),
+    })
 }
 
 /// The deviations of window `index` of `windows` from `shot`, at `samples` (≥ 2) evenly spaced
@@ -112,5 +193,6 @@ pub fn shot_metrics(
         radius_relative: Deviation::of(&relative),
         azimuth: Deviation::of(&azimuth),
         aim: Deviation::of(&aim),
+        zoom: None,
     }
 }

@@ -2,6 +2,7 @@
 #![allow(dead_code)] // each test binary uses a different subset
 
 use splatraj_scene::Scene;
+use splatraj_traj::metrics::{Framing, MotionMetrics, Occlusion, PathMetrics, WindowMetrics};
 
 /// Opaque (0.99), axis-aligned, black Gaussians at `means` with `scales`.
 pub fn scene_of(means: Vec<[f32; 3]>, scales: Vec<[f32; 3]>) -> Scene {
@@ -66,5 +67,48 @@ pub fn demo_window(
             world_up: splatraj_scene::demo::DEMO_UP.map(f64::from),
             target_ratio,
         },
+    }
+}
+
+/// A window that passes every check but the ones the test sets: in view throughout, centred,
+/// at the size asked for, unhidden, with the given framed share and rates.
+pub fn passing_window(framed_share: f64, turning: f64, orbit: f64) -> WindowMetrics {
+    WindowMetrics {
+        window: 1,
+        name: "jaw".into(),
+        samples: 30,
+        tce: Some(0.05),
+        tre: 0.01,
+        iou: 1.0,
+        coverage: 0.15,
+        target_ratio: 0.15,
+        visible_fraction: 1.0,
+        visible: true,
+        tce_max: Some(0.1),
+        tre_max: 0.02,
+        occlusion: Occlusion::from_shares(&[Some(0.0); 30]),
+        path: Some(PathMetrics {
+            samples: 100,
+            clearance: None,
+            motion: MotionMetrics {
+                seconds: Some(9.0),
+                peak_speed: 0.1,
+                peak_acceleration: 0.1,
+                peak_angular_speed: turning,
+                peak_orbit_speed: Some(orbit),
+                speed_spread: 0.0,
+            },
+        }),
+        shot: None,
+        framing: Framing {
+            tce_middle: Some(0.05),
+            coverage_middle: Some(0.15),
+            tce_in_view: Some(0.05),
+            framed_share: Some(framed_share),
+            inside_object: 0.0,
+            wobble: None,
+        },
+        verdict: None,
+        lens: None,
     }
 }
