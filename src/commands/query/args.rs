@@ -22,8 +22,6 @@ use crate::cli::ReadArgs;
 
 /// Default elevation of the viewing direction above the horizontal, degrees.
 const DEFAULT_ELEVATION_DEGREES: f64 = 30.0;
-/// Name of the picture written into `--out`.
-pub(super) const IMAGE_NAME: &str = "query.png";
 
 /// Arguments of `splatraj query`.
 #[derive(Debug, Args)]

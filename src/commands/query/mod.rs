@@ -2,8 +2,8 @@
 //! picture (`query.png`, the selection tinted). The scene and source come from a run config
 //! (`--config RUN.toml`, whose keys the options given override) or from the options, which
 //! make a config of their own (`args.rs` reads them into the library's typed
-//! `QueryOptions`, whose one `config` makes either). The work is
-//! `splatraj::experiment::picking` ([`ConfigQuery`], [`PictureOptions`]); this file prints.
+//! `QueryOptions`, whose one `config` makes either). The work is one library call,
+//! [`run_query`] (`splatraj::experiment::picking::query_run`); this file parses and prints.
 
 mod args;
 #[cfg(test)]
@@ -11,13 +11,11 @@ mod flags_match_file;
 
 use anyhow::{Result, bail};
 use splatraj::experiment::Extensions;
-use splatraj::experiment::picking::query::{
-    ConfigQuery, KeyNaming, PictureOptions, QueryOutcome, QueryReport, SelectionFailed,
-    SourceChoice, config_query_texts,
+use splatraj::experiment::picking::query::SelectionFailed;
+use splatraj::experiment::picking::query_run::{
+    Answered, ConfigAnswer, QueryAnswers, QueryRequest, run_query,
 };
-use splatraj::experiment::write::write_into_folder;
 
-use args::IMAGE_NAME;
 pub use args::QueryArgs;
 
 /// Runs `splatraj query`.
@@ -26,53 +24,31 @@ pub fn run(args: QueryArgs) -> Result<()> {
     if args.query.as_ref().is_some_and(|q| q.trim().is_empty()) {
         bail!("--query is empty: give a label name, a phrase or a region name");
     }
-    let picture = args.picture()?;
-    let Some(path) = &args.config else {
-        return show_one(&args, from_options(&args, picture));
-    };
-    let extensions = Extensions::default();
-    // Low to high: the file, the options given, --set.
-    let config = args.options()?.config(Some(path), &args.set, &extensions)?;
-    let texts = config_query_texts(&config);
-    let query = args.query_text();
-    if query.is_none() && texts.is_empty() {
-        bail!(
-            "config {}: no query to check (every [[queries]] uses a mask file); give --query",
-            path.display()
-        );
-    }
-    let prepared = ConfigQuery {
-        picture,
+    let request = QueryRequest {
+        config: args.config.as_deref(),
+        picture: args.picture()?,
+        options: args.options()?,
+        set: &args.set,
         backend: args.backend,
-        source: SourceChoice::Configured,
-        naming: KeyNaming::Config,
-    }
-    .prepare(&config, &extensions)?;
-    if let Some(query) = &query {
-        return show_one(&args, prepared.find(query));
-    }
-    // Every query of the config, each with its own picture; one failing does not stop the
-    // others. JSON: one array of {key, report} or {key, query, error, explanation}.
-    let mut entries = Vec::with_capacity(texts.len());
-    let mut failed = Vec::new();
-    for item in &texts {
-        let key = item.key();
+        source_given: args.source_given(),
+        option_naming: args::option_naming,
+        out: &args.out,
+    };
+    // A config's queries: each shown as it is answered. JSON: one array of {key, report} or
+    // {key, query, error, explanation}, printed at the end.
+    let mut entries = Vec::new();
+    let mut each = |answer: &ConfigAnswer| {
+        let key = answer.item.key();
         if !args.json {
-            println!("== {key}: {}", item.text);
+            println!("== {key}: {}", answer.item.text);
         }
-        let picture = match item.object {
-            None => format!("query-{}.png", item.window + 1),
-            Some(j) => format!("query-{}-{}.png", item.window + 1, j + 1),
-        };
-        match prepared
-            .find(&item.text)
-            .and_then(|outcome| write_picture(&args, &outcome, &picture))
-        {
-            Ok(report) => {
+        match &answer.answer {
+            Ok(answered) => {
+                tell_written(&args, answered);
                 if !args.json {
-                    print!("{}", report.text());
+                    print!("{}", answered.report.text());
                 }
-                entries.push(serde_json::json!({ "key": key, "report": report }));
+                entries.push(serde_json::json!({ "key": key, "report": answered.report }));
             }
             Err(error) => {
                 let explanation = error
@@ -86,33 +62,15 @@ pub fn run(args: QueryArgs) -> Result<()> {
                 }
                 entries.push(serde_json::json!({
                     "key": key,
-                    "query": item.text,
+                    "query": answer.item.text,
                     "error": format!("{error:#}"),
                     "explanation": explanation,
                 }));
-                failed.push(format!("{key} ({:?})", item.text));
             }
         }
-    }
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&entries)?);
-    }
-    if !failed.is_empty() {
-        bail!(
-            "config {}: {} of {} queries failed: {}",
-            path.display(),
-            failed.len(),
-            texts.len(),
-            failed.join(", ")
-        );
-    }
-    Ok(())
-}
-
-/// One query: why nothing was selected when that is the error, else the picture
-/// (`query.png` in `--out`) and the report, as text or JSON.
-fn show_one(args: &QueryArgs, outcome: Result<QueryOutcome>) -> Result<()> {
-    let outcome = outcome.inspect_err(|e| {
+    };
+    let answers = run_query(&request, &Extensions::default(), &mut each).inspect_err(|e| {
+        // One query whose selection failed: why nothing was selected.
         if let Some(failed) = e.downcast_ref::<SelectionFailed>() {
             match serde_json::to_string_pretty(&failed.explanation) {
                 Ok(json) if args.json => println!("{json}"),
@@ -120,53 +78,38 @@ fn show_one(args: &QueryArgs, outcome: Result<QueryOutcome>) -> Result<()> {
             }
         }
     })?;
-    let report = write_picture(args, &outcome, IMAGE_NAME)?;
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
-    } else {
-        print!("{}", report.text());
+    match &answers {
+        QueryAnswers::One(answered) => {
+            tell_written(&args, answered);
+            if args.json {
+                println!("{}", serde_json::to_string_pretty(&answered.report)?);
+            } else {
+                print!("{}", answered.report.text());
+            }
+        }
+        QueryAnswers::Each(_) if args.json => {
+            println!("{}", serde_json::to_string_pretty(&entries)?)
+        }
+        QueryAnswers::Each(_) => {}
+    }
+    if let Some(path) = &args.config
+        && let Some(failures) = answers.failures(path)
+    {
+        bail!("{failures}");
     }
     Ok(())
 }
 
-/// Writes the outcome's picture as `image_name` into `--out` and returns its report.
-fn write_picture(
-    args: &QueryArgs,
-    outcome: &QueryOutcome,
-    image_name: &str,
-) -> Result<QueryReport> {
-    let written = write_into_folder(&args.out, &[(image_name, &outcome.png)])?;
-    let path = &written[0];
-    let report = outcome.report(path);
-    for w in &report.warnings {
+/// The picture's warnings and where it was written.
+fn tell_written(args: &QueryArgs, answered: &Answered) {
+    for w in &answered.report.warnings {
         eprintln!("warning: {w}");
     }
     eprintln!(
         "wrote {} ({}×{}, {:.1}% of the pixels highlighted)",
-        path.display(),
+        answered.picture.display(),
         args.width,
         args.height,
-        100.0 * outcome.highlighted_share
+        100.0 * answered.highlighted_share
     );
-    Ok(report)
-}
-
-/// The query on the scene file of `--scene` with the built-in sources: the config the options
-/// make, grounded as a run config is.
-fn from_options(args: &QueryArgs, picture: PictureOptions) -> Result<QueryOutcome> {
-    let extensions = Extensions::default();
-    let config = args.options()?.config(None, &args.set, &extensions)?;
-    let query = &config.queries[0].text;
-    ConfigQuery {
-        picture,
-        backend: args.backend,
-        source: if args.source_given() {
-            SourceChoice::Configured
-        } else {
-            SourceChoice::FromInputs
-        },
-        naming: KeyNaming::Options(args::option_naming),
-    }
-    .prepare(&config, &extensions)?
-    .find(query)
 }
