@@ -3,7 +3,8 @@
 //! with the number of poses, a pass whose poses the caller holds reads nothing back before its
 //! gradient, and the scene is not uploaded again; the same with a zoom per pose whose values
 //! the caller holds; and a pass of several objects (an optimisation step's windows, each
-//! object alone) launches what one object's pass does.
+//! object alone) launches what one object's pass does; and burn's fusion merges a chain of
+//! elementwise ops.
 //!
 //! Its own test binary with one test: the counters are process-wide and the harness runs the
 //! tests of one binary side by side.
@@ -197,4 +198,24 @@ fn launches_do_not_grow_with_the_batch_and_reads_stay_at_one() {
     assert_eq!(step_forward.reads, 0, "{step_forward:?}");
     assert_eq!(step.reads, 1, "{step:?}");
     assert_eq!(step.renders, 1, "{step:?}");
+
+    // burn's fusion is on (docs/gpu.md, "Kernel fusion"): a chain of eight elementwise ops, the
+    // kind the costs and Adam are made of, runs as fewer kernels than ops (one each without it).
+    let x = Tensor::<1>::from_data(TensorData::new(vec![0.5f32; 4096], [4096]), &device);
+    let chain = |x: Tensor<1>| {
+        ((x.clone() * 2.0 + 1.0).exp() * x.clone() - 3.0)
+            .abs()
+            .sqrt()
+            .mul_scalar(0.5)
+            .add(x)
+    };
+    splatraj_render::host::to_host(chain(x.clone())).unwrap();
+    let before = counters::snapshot();
+    splatraj_render::host::to_host(chain(x)).unwrap();
+    let fused = counters::snapshot().since(&before);
+    eprintln!("eight elementwise ops: {fused:?}");
+    assert!(
+        fused.launches > 0 && fused.launches < 8,
+        "eight elementwise ops are fused into fewer kernels: {fused:?}"
+    );
 }

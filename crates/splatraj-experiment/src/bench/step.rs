@@ -18,6 +18,7 @@ use splatraj_render::counters::{self, Counts};
 use splatraj_traj::optimise::{Flow, StepPasses, TrajectoryStep, optimise_trajectory};
 
 use crate::config::Config;
+use crate::optimise::trajectory_run::TrajectoryOptimisation;
 use crate::prepare::experiment::Experiment;
 
 /// One variant's figures.
@@ -33,6 +34,9 @@ pub struct StepRow {
     pub steps: usize,
     /// The best sampled loss the steps reached (the variants optimise alike).
     pub best_total: f64,
+    /// Launches per step by kernel name, most first (empty on the CPU backends): what is left
+    /// to merge.
+    pub launch_names: Vec<(String, u64)>,
 }
 
 /// Runs `steps` optimisation steps of the trajectory of the config at `path` (with `set`'s
@@ -41,31 +45,27 @@ pub fn run_step_bench(path: &Path, set: &[String], steps: usize) -> Result<Vec<S
     let config = Config::load(path, set)?;
     let experiment = Experiment::prepare(&config)?;
     let experiment = &experiment;
-    let start = experiment
-        .start_trajectories()?
-        .into_iter()
-        .next()
+    let optimisation = TrajectoryOptimisation::new(experiment)?;
+    let start = optimisation
+        .starts
+        .first()
         .ok_or_else(|| anyhow::anyhow!("the config makes no start trajectory"))?;
-    let costs = experiment.with_shot_cost(experiment.costs()?)?;
-    let scene = experiment.autodiff_scene();
-    let windows = experiment.optimisation_windows();
-    let occupancy = experiment.occupancy()?;
     let mut rows = Vec::new();
     for (passes, name) in [
         (StepPasses::PerWindow, "per-window"),
         (StepPasses::Shared, "shared"),
     ] {
-        let problem =
-            experiment.trajectory_problem(&scene, &windows, &costs, occupancy.as_ref(), passes);
+        let problem = optimisation.problem(&optimisation.costs, passes);
         let mut options = experiment.config.optimiser.clone();
         options.time_limit_s = None;
         options.iterations = 1;
-        optimise_trajectory(&problem, &start, &options, 0, &mut |_| Flow::Continue)?;
+        optimise_trajectory(&problem, start, &options, 0, &mut |_| Flow::Continue)?;
         options.iterations = steps.max(1);
+        counters::tally_launch_names(true);
         let before = counters::snapshot();
         let mut times: Vec<f64> = Vec::with_capacity(options.iterations);
         let result =
-            optimise_trajectory(&problem, &start, &options, 0, &mut |s: &TrajectoryStep| {
+            optimise_trajectory(&problem, start, &options, 0, &mut |s: &TrajectoryStep| {
                 let t = s.timing;
                 times.push((t.evaluate + t.backward + t.update).as_secs_f64() * 1e3);
                 Flow::Continue
@@ -73,6 +73,11 @@ pub fn run_step_bench(path: &Path, set: &[String], steps: usize) -> Result<Vec<S
         let counts = counters::snapshot()
             .since(&before)
             .per(options.iterations as u64);
+        let launch_names = counters::launch_names()
+            .into_iter()
+            .map(|(name, n)| (name, n / options.iterations as u64))
+            .collect();
+        counters::tally_launch_names(false);
         times.sort_by(f64::total_cmp);
         rows.push(StepRow {
             passes: name,
@@ -80,6 +85,7 @@ pub fn run_step_bench(path: &Path, set: &[String], steps: usize) -> Result<Vec<S
             counts,
             steps: options.iterations,
             best_total: result.best_total,
+            launch_names,
         });
     }
     Ok(rows)
@@ -105,6 +111,15 @@ pub fn step_table(rows: &[StepRow]) -> String {
             c.renders,
             r.best_total
         );
+    }
+    for r in rows.iter().filter(|r| !r.launch_names.is_empty()) {
+        let top: Vec<String> = r
+            .launch_names
+            .iter()
+            .take(8)
+            .map(|(name, n)| format!("{n} {name}"))
+            .collect();
+        let _ = writeln!(out, "{} launches a step: {}", r.passes, top.join(", "));
     }
     out
 }

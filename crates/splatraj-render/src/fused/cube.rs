@@ -1,4 +1,4 @@
-//! The fused compositing kernels on the GPU backend (`Cube`: wgpu, and any CubeCL runtime):
+//! The fused compositing kernels on the GPU backend (`CubeBackend`: wgpu and any CubeCL runtime, under burn's fusion: [`super::fusion`]):
 //! the same rules, saved state and back-to-front replay as the host kernels ([`super::cpu`]),
 //! written as CubeCL kernels with one cube (workgroup) of 256 units per work tile, one unit
 //! per pixel.
@@ -18,12 +18,12 @@
 
 use std::sync::Arc;
 
-use burn::backend::Cube;
 use burn::backend::TensorMetadata;
 use burn::backend::tensor::FloatTensor;
 use burn::tensor::{DType, TensorData};
 use burn_backend::cubecl::dtype_to_storage_type;
 use burn_backend::ops::{FloatTensorOps, IntTensorOps};
+use burn_cubecl::CubeBackend;
 use burn_cubecl::cubecl::prelude::*;
 use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::tensor::CubeTensor;
@@ -424,7 +424,7 @@ pub(crate) fn int_tensor(values: Vec<i32>, device: &CubeDevice) -> CubeTensor {
     let values = if values.is_empty() { vec![0] } else { values };
     let len = values.len();
     crate::counters::upload(4 * len);
-    Cube::int_from_data(TensorData::new(values, [len]), device)
+    CubeBackend::int_from_data(TensorData::new(values, [len]), device)
 }
 
 fn upload_plan(plan: &CompositePlan, device: &CubeDevice) -> PlanTensors {
@@ -449,7 +449,7 @@ fn tile_grid(work: usize) -> CubeCount {
 }
 
 fn zeros(shape: Vec<usize>, device: &CubeDevice, dtype: DType) -> CubeTensor {
-    Cube::float_zeros(shape.into(), device, dtype.into())
+    CubeBackend::float_zeros(shape.into(), device, dtype.into())
 }
 
 /// Rows grouped by the slots (list entries) that hold their gradients, in plan order.
@@ -471,7 +471,7 @@ fn slots_by_row(plan: &CompositePlan, rows: usize) -> (Vec<i32>, Vec<i32>) {
 }
 
 fn device_forward(
-    inputs: SplatPrimitives<Cube>,
+    inputs: SplatPrimitives<CubeBackend>,
     plan: Arc<CompositePlan>,
 ) -> (CubeTensor, DeviceSaved) {
     let inputs = [inputs.splats, inputs.values].map(into_contiguous);
@@ -525,7 +525,7 @@ fn device_forward(
     (image, saved)
 }
 
-fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<Cube> {
+fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<CubeBackend> {
     let v_image = into_contiguous(v_image);
     let DeviceSaved {
         inputs,
@@ -597,7 +597,7 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
     }
 }
 
-impl CompositeKernels for Cube {
+impl CompositeKernels for CubeBackend {
     type Saved = CubeSaved;
 
     fn composite_forward(
@@ -620,7 +620,7 @@ impl CompositeKernels for Cube {
     }
 }
 
-impl FusedComposite for Cube {
+impl FusedComposite for CubeBackend {
     fn fused_composite(
         inputs: SplatPrimitives<Self>,
         plan: Arc<CompositePlan>,

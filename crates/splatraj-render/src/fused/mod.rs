@@ -16,6 +16,8 @@
 pub mod cpu;
 #[cfg(feature = "wgpu")]
 pub mod cube;
+#[cfg(feature = "wgpu")]
+pub mod fusion;
 pub mod plan;
 pub mod projection;
 pub mod real;

@@ -1,4 +1,4 @@
-//! The fused projection on the GPU backend (`Cube`: wgpu, and any CubeCL runtime): the host
+//! The fused projection on the GPU backend (`CubeBackend`: wgpu and any CubeCL runtime, under burn's fusion: [`crate::fused::fusion`]): the host
 //! kernels' rules ([`super::cpu`]) as CubeCL kernels.
 //!
 //! - Forward: one unit per row (pose, Gaussian); each unit builds its pose's rotation from ω
@@ -14,12 +14,12 @@
 
 use std::sync::Arc;
 
-use burn::backend::Cube;
 use burn::backend::TensorMetadata;
 use burn::backend::tensor::FloatTensor;
 use burn::tensor::{DType, TensorData};
 use burn_backend::cubecl::dtype_to_storage_type;
 use burn_backend::ops::FloatTensorOps;
+use burn_cubecl::CubeBackend;
 use burn_cubecl::cubecl::prelude::*;
 use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::tensor::CubeTensor;
@@ -554,7 +554,7 @@ pub enum CubeSaved {
     /// f32 passes: everything on the device.
     Device(Box<DeviceSaved>),
     /// f64 passes: the host kernels' state.
-    Host(Box<HostSaved<Cube>>),
+    Host(Box<HostSaved<CubeBackend>>),
 }
 
 /// The launch grid: (cubes per pose, poses), and the chunks of 256 Gaussians each pose has.
@@ -569,7 +569,7 @@ fn grid(batch: usize, count: usize) -> (CubeCount, u32, usize) {
 }
 
 fn empty(shape: Vec<usize>, device: &CubeDevice, dtype: DType) -> CubeTensor {
-    Cube::float_empty(shape.into(), device, dtype.into())
+    CubeBackend::float_empty(shape.into(), device, dtype.into())
 }
 
 /// The camera's constants as a device tensor `[7]` in `dtype` (seven floats up with the indices).
@@ -578,7 +578,7 @@ fn camera_tensor(plan: &ProjectionPlan, device: &CubeDevice, dtype: DType) -> Cu
     let (lim_x, lim_y) = c.limits();
     let values = vec![c.fx, c.fy, c.cx, c.cy, lim_x, lim_y, c.near];
     crate::counters::upload(values.len() * dtype.size());
-    Cube::float_from_data(TensorData::new(values, [7]).convert_dtype(dtype), device)
+    CubeBackend::float_from_data(TensorData::new(values, [7]).convert_dtype(dtype), device)
 }
 
 fn device_forward(
@@ -688,9 +688,9 @@ fn device_backward(saved: DeviceSaved, v_rows: CubeTensor) -> (CubeTensor, CubeT
 }
 
 /// f64 passes read the scene's rows back (a copy) and run the host kernels.
-impl HostView for Cube {}
+impl HostView for CubeBackend {}
 
-impl ProjectionKernels for Cube {
+impl ProjectionKernels for CubeBackend {
     type Saved = CubeSaved;
 
     fn projection_forward(
@@ -719,7 +719,7 @@ impl ProjectionKernels for Cube {
     }
 }
 
-impl FusedProjection for Cube {
+impl FusedProjection for CubeBackend {
     fn fused_project(
         poses: FloatTensor<Self>,
         zoom: FloatTensor<Self>,
