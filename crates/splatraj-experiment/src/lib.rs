@@ -5,8 +5,9 @@
 //! of it but the [`Extensions`] registries, and no module imports in a circle.
 //! [`Experiment::prepare`] reads and checks the scene, world up, one target per query
 //! ([`prepare::grounding`], shared with `splatraj query`), their windows and prior radii; then
-//! [`Experiment::run_trajectory`] (the paper's method, restarts included),
-//! [`Experiment::evaluate`] (per-window metrics, LDJ),
+//! [`TrajectoryOptimisation`] (the paper's method, restarts included; built from the
+//! experiment, it gives a [`TrajectoryRun`]; [`Experiment::run_trajectory`] in one call),
+//! [`Experiment::evaluate`] (per-window metrics, LDJ: [`outputs::evaluation`]),
 //! [`Experiment::optimise_pose`] (the single-pose ablations, restarts as one batch) and
 //! [`Experiment::sample_posterior`] (SGLD) do the work, telling an [`Observer`] of each step
 //! (which may stop them, keeping the best so far). [`outputs::records`] and [`outputs`] turn
@@ -53,5 +54,6 @@ pub use config::Config;
 pub use extensions::Extensions;
 pub use optimise::observer::{Flow, Observer, Progress};
 pub use optimise::pose_run::{PoseRun, Posterior};
-pub use optimise::trajectory_run::{Evaluation, RunOptions, RunStop, TrajectoryRun};
+pub use optimise::trajectory_run::{RunOptions, RunStop, TrajectoryOptimisation, TrajectoryRun};
+pub use outputs::evaluation::Evaluation;
 pub use prepare::experiment::Experiment;

@@ -44,7 +44,7 @@ use crate::outputs::{FrameSpec, create_run_dir, frame_png};
 use crate::prepare::experiment::Experiment;
 use crate::resources::{MAX_STEPS_PER_SECOND, MemoryPlan, RAISE_LIMIT, TimeBound};
 use crate::write::{write_bytes, write_csv, write_json};
-use crate::{Evaluation, Posterior, RunOptions, RunStop, TrajectoryRun};
+use crate::{Evaluation, Posterior, RunOptions, RunStop, TrajectoryOptimisation, TrajectoryRun};
 
 /// The run's config as run: every `"auto"` replaced by what was derived from the scene.
 pub const CONFIG_FILE: &str = "config.toml";
@@ -446,8 +446,8 @@ impl Experiment {
             checkpoint_dir: Some(dir),
             resume: folder.checkpoint(),
         };
-        let run = self
-            .run_trajectory_with(options, observer)
+        let run = TrajectoryOptimisation::new(self)
+            .and_then(|optimisation| optimisation.run(options, observer))
             .map_err(|e| folder.after_failure(e, Stage::Preparing))?;
         self.write_trajectory_outputs(folder, &run, observer)
             .map_err(|e| folder.after_failure(e, Stage::Outputs))

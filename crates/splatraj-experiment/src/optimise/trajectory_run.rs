@@ -1,21 +1,21 @@
-//! The paper's method: optimise a trajectory from each start, keep the best, evaluate it.
+//! The paper's method: optimise a trajectory from each start and keep the best
+//! ([`TrajectoryOptimisation`], the optimisation stage's state); the outputs stage evaluates
+//! it (`crate::outputs::evaluation`).
 //!
 //! A run may write a [`Checkpoint`] of its best trajectory as it goes (at a bounded rate), and
 //! may continue from one ([`RunOptions::resume`]): the restart in progress goes on from its
 //! best weights for its remaining steps (with a fresh Adam, and the prior's weight where it
 //! had decayed to), then the remaining restarts run, and the best of all is kept.
 
+use std::borrow::Cow;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use serde::Serialize;
 use splatraj_render::render::DeviceScene;
 use splatraj_traj::clearance::Occupancy;
 use splatraj_traj::costs::WeightedCosts;
-use splatraj_traj::metrics::{
-    Smoothness, WindowMetrics, WindowObject, ZoomAt, trajectory_ldj, verdict, window_metrics_zoomed,
-};
 use splatraj_traj::optimise::{
     Flow, Problem, StepPasses, StopReason, TrajectoryResult, TrajectoryStep, WindowTarget,
     optimise_trajectory,
@@ -40,7 +40,7 @@ pub enum RunStop {
     TimeLimit,
 }
 
-/// How [`Experiment::run_trajectory_with`] runs besides the config.
+/// How [`TrajectoryOptimisation::run`] runs besides the config.
 #[derive(Debug, Default)]
 pub struct RunOptions<'a> {
     /// Write `checkpoint.json` into this run folder while optimising.
@@ -74,72 +74,6 @@ impl TrajectoryRun {
     /// Steps run over all starts.
     pub fn iterations_run(&self) -> usize {
         self.results.iter().map(|r| r.history.len()).sum()
-    }
-}
-
-/// Share of a window at each end left out of its wobble (see [`Evaluation::with_frames`]): the
-/// quarters where the start pans from and to the neighbours (`ROUTE_TRANSITION`), as the
-/// `framed` check leaves them out. Measured at 0.15 on the first-try biker, the turn of a pan
-/// away (the framing error's V as the camera leaves the jacket) counted as a wobble of 0.10.
-pub const WOBBLE_EDGE: f64 = 0.25;
-
-/// Metrics of a trajectory: per window and smoothness.
-#[derive(Debug, Clone)]
-pub struct Evaluation {
-    /// Per-window TCE, TRE, IoU, visibility at the output resolution, each with its verdict.
-    pub windows: Vec<WindowMetrics>,
-    /// LDJ of the camera centre and rotation.
-    pub ldj: Smoothness,
-}
-
-impl Evaluation {
-    /// Every failed check of every window, as sentences naming the query, what is wrong and
-    /// the likely fix (empty when every window passes).
-    pub fn problems(&self) -> Vec<String> {
-        self.windows
-            .iter()
-            .filter_map(|w| w.verdict.as_ref())
-            .flat_map(|v| v.problems.iter().cloned())
-            .collect()
-    }
-
-    /// Adds what the rendered frames tell (each window's framing wobble over its frames at
-    /// `fps`, [`splatraj_traj::metrics::wobble()`]) and judges every window again.
-    ///
-    /// A window's wobble is taken over its frames that show the object, leaving out the first
-    /// and last [`WOBBLE_EDGE`] of the window, where the camera pans from and to the
-    /// neighbouring objects (a pan is a change the wobble must not count), over each unbroken
-    /// run of such frames.
-    pub fn with_frames(&mut self, frames: &[crate::frame_metrics::FrameMetrics], fps: f64) {
-        let n = self.windows.len().max(1);
-        for (i, w) in self.windows.iter_mut().enumerate() {
-            let (start, end) = splatraj_traj::optimise::sampling::window_bounds(i, n);
-            let edge = WOBBLE_EDGE * (end - start);
-            let kept: Vec<&crate::frame_metrics::FrameMetrics> = frames
-                .iter()
-                .filter(|f| {
-                    f.window == i && f.coverage > 0.0 && f.t >= start + edge && f.t <= end - edge
-                })
-                .collect();
-            // Each unbroken run of frames on its own: frames on either side of a moment out
-            // of frame are not neighbours, and the jump between them is no swing.
-            w.framing.wobble = kept
-                .chunk_by(|a, b| b.frame == a.frame + 1)
-                .filter_map(|run| {
-                    let series: Vec<f64> = run.iter().filter_map(|f| f.tce).collect();
-                    splatraj_traj::metrics::wobble(&series, fps)
-                })
-                .reduce(f64::max);
-            w.verdict = Some(verdict(w));
-        }
-    }
-
-    /// How many windows fail their verdict.
-    pub fn failing(&self) -> usize {
-        self.windows
-            .iter()
-            .filter(|w| w.verdict.as_ref().is_some_and(|v| !v.pass))
-            .count()
     }
 }
 
@@ -197,52 +131,77 @@ impl Tracker<'_> {
     }
 }
 
-impl Experiment {
-    /// The trajectory problem of a run: `windows` and `costs` on the autodiff `scene`, with
-    /// the scene's `occupancy` and the run's camera, rasterizer, shortcuts and duration, its
+/// The optimisation stage, built once from the [`Experiment`] ([`TrajectoryOptimisation::new`]):
+/// what every restart shares. It takes the experiment's windows and config and gives a
+/// [`TrajectoryRun`], which the outputs stage turns into files.
+pub struct TrajectoryOptimisation<'a> {
+    experiment: &'a Experiment,
+    /// One start per restart ([`Experiment::start_trajectories`]).
+    pub starts: Vec<TrajectoryRecord>,
+    /// `[costs]`, with the shots' cost when some query has a shot.
+    pub costs: WeightedCosts,
+    /// The run's model: `[trajectory]`'s, cut where the windows cut
+    /// ([`Experiment::run_model`]).
+    pub model: TrajectoryModel,
+    /// The scene the passes render (the coarse copy when `optimise_gaussians` asks), on the
+    /// autodiff device.
+    scene: DeviceScene,
+    /// The windows, their masks over that scene.
+    windows: Cow<'a, [WindowTarget]>,
+    /// The clearance cost's geometry, when it is on.
+    occupancy: Option<Occupancy>,
+}
+
+impl<'a> TrajectoryOptimisation<'a> {
+    /// The starts, costs, model, scene and windows of the experiment's optimisation.
+    pub fn new(experiment: &'a Experiment) -> Result<Self> {
+        let starts = experiment.start_trajectories()?;
+        let costs = experiment.with_shot_cost(experiment.costs()?)?;
+        let model = experiment.run_model()?;
+        let scene = experiment.autodiff_scene();
+        let occupancy = experiment.occupancy()?;
+        let windows = experiment.optimisation_windows();
+        Ok(TrajectoryOptimisation {
+            experiment,
+            starts,
+            costs,
+            model,
+            scene,
+            windows,
+            occupancy,
+        })
+    }
+
+    /// The trajectory problem of a run with `costs`: the windows on the optimisation scene,
+    /// with its occupancy and the run's camera, rasterizer, shortcuts and duration, the
     /// windows sharing render calls as `passes` says (a run: `StepPasses::for_backend`).
-    pub fn trajectory_problem<'a>(
-        &self,
-        scene: &'a DeviceScene,
-        windows: &'a [WindowTarget],
-        costs: &'a WeightedCosts,
-        occupancy: Option<&'a Occupancy>,
-        passes: StepPasses,
-    ) -> Problem<'a> {
-        Problem::new(scene, windows, costs, self.intrinsics)
-            .with_rasterizer(self.config.rasterizer)
-            .with_approximations(self.config.approximations)
-            .with_occupancy(occupancy)
+    pub fn problem<'p>(&'p self, costs: &'p WeightedCosts, passes: StepPasses) -> Problem<'p> {
+        let experiment = self.experiment;
+        Problem::new(&self.scene, &self.windows, costs, experiment.intrinsics)
+            .with_rasterizer(experiment.config.rasterizer)
+            .with_approximations(experiment.config.approximations)
+            .with_occupancy(self.occupancy.as_ref())
             .with_step_passes(passes)
-            .with_seconds(self.path_seconds())
+            .with_seconds(experiment.path_seconds())
     }
 
-    /// Optimises a trajectory from each of [`Experiment::start_trajectories`] (restart r uses
-    /// seed `seed + r`); `observer` sees every step and may stop the run, which keeps the best
-    /// trajectory so far.
-    pub fn run_trajectory(&self, observer: &mut dyn Observer) -> Result<TrajectoryRun> {
-        self.run_trajectory_with(RunOptions::default(), observer)
-    }
-
-    /// [`Experiment::run_trajectory`] that checkpoints into a run folder and/or continues a
-    /// checkpoint ([`RunOptions`]). `optimiser.time_limit_s` bounds the whole run (every
-    /// restart, this process).
-    pub fn run_trajectory_with(
+    /// Optimises a trajectory from each start (restart r uses seed `seed + r`), checkpointing
+    /// into a run folder and/or continuing a checkpoint as `options` say; `observer` sees every
+    /// step and may stop the run, which keeps the best trajectory so far.
+    /// `optimiser.time_limit_s` bounds the whole run (every restart, this process).
+    pub fn run(
         &self,
         options: RunOptions<'_>,
         observer: &mut dyn Observer,
     ) -> Result<TrajectoryRun> {
-        let starts = self.start_trajectories()?;
-        let costs = self.with_shot_cost(self.costs()?)?;
-        // Cut into shots where the windows cut (`[output] transitions`).
-        let model = self.run_model()?;
-        let scene = self.autodiff_scene();
-        let steps = self.config.optimiser.iterations;
+        let experiment = self.experiment;
+        let (starts, costs, model) = (&self.starts, &self.costs, &self.model);
+        let steps = experiment.config.optimiser.iterations;
         // The time limit is the run's, not each restart's: this loop enforces it.
-        let mut optimiser = self.config.optimiser.clone();
+        let mut optimiser = experiment.config.optimiser.clone();
         let time_limit = optimiser.time_limit_s.take();
-        let base_dir = std::path::absolute(&self.config.base_dir)
-            .unwrap_or_else(|_| self.config.base_dir.clone());
+        let base_dir = std::path::absolute(&experiment.config.base_dir)
+            .unwrap_or_else(|_| experiment.config.base_dir.clone());
         let first_restart = options.resume.map_or(0, |c| c.restart);
         let mut tracker = Tracker {
             checkpointer: options.checkpoint_dir.map(Checkpointer::new),
@@ -266,8 +225,8 @@ impl Experiment {
                     lens: None,
                     restart_best_lens: None,
                 }),
-            model: &model,
-            zoom_range: match self.config.camera.lens()? {
+            model,
+            zoom_range: match experiment.config.camera.lens()? {
                 Lens::Zoom(range) => Some(range),
                 Lens::Fixed => None,
             },
@@ -283,7 +242,7 @@ impl Experiment {
                 starts.len()
             );
             anyhow::ensure!(
-                c.model == model,
+                c.model == *model,
                 "the checkpoint's trajectory model differs from the config's `[trajectory]`"
             );
             results.push(TrajectoryResult {
@@ -296,8 +255,6 @@ impl Experiment {
                 elapsed: Duration::ZERO,
             });
         }
-        let occupancy = self.occupancy()?;
-        let windows = self.optimisation_windows();
         let started = Instant::now();
         let mut stop = RunStop::Finished;
         for (r, fresh_start) in starts.iter().enumerate().skip(first_restart) {
@@ -323,23 +280,23 @@ impl Experiment {
             }
             // `[camera] lens`: the zoom starts at s ≡ 1 (or as a start file has it), or as
             // the dolly-zoom shots ask.
-            let start = start.with_lens(self.config.camera.lens()?);
+            let start = start.with_lens(experiment.config.camera.lens()?);
             // A resumed restart's zoom is its own; a fresh one's dolly zooms are fitted.
             let start = if steps_before > 0 && start.lens.is_some() {
                 start
             } else {
-                self.with_shot_zoom(start)?
+                experiment.with_shot_zoom(start)?
             };
             let shifted_costs;
             let costs = if steps_before > 0 {
-                shifted_costs = self.with_shot_cost(self.costs_from_step(steps_before)?)?;
+                shifted_costs =
+                    experiment.with_shot_cost(experiment.costs_from_step(steps_before)?)?;
                 &shifted_costs
             } else {
-                &costs
+                costs
             };
-            let passes = StepPasses::for_backend(self.config.backend);
-            let problem =
-                self.trajectory_problem(&scene, &windows, costs, occupancy.as_ref(), passes);
+            let passes = StepPasses::for_backend(experiment.config.backend);
+            let problem = self.problem(costs, passes);
             let mut restart_options = optimiser.clone();
             restart_options.iterations = steps - steps_before;
             let mut stopped_by = None;
@@ -372,12 +329,12 @@ impl Experiment {
                 &problem,
                 &start,
                 &restart_options,
-                self.config.seed.wrapping_add(r as u64),
+                experiment.config.seed.wrapping_add(r as u64),
                 &mut step_observer,
             )?;
             // A dolly zoom holds the object's size exactly: its zoom follows the distance.
             let result = TrajectoryResult {
-                best: self.lock_shot_zoom(result.best)?,
+                best: experiment.lock_shot_zoom(result.best)?,
                 ..result
             };
             if let Some(e) = failure {
@@ -405,6 +362,14 @@ impl Experiment {
             elapsed: started.elapsed(),
             cost_names: costs.names(),
         })
+    }
+}
+
+impl Experiment {
+    /// Optimises a trajectory from each of [`Experiment::start_trajectories`] with the
+    /// experiment's optimisation stage ([`TrajectoryOptimisation::run`], no checkpoint).
+    pub fn run_trajectory(&self, observer: &mut dyn Observer) -> Result<TrajectoryRun> {
+        TrajectoryOptimisation::new(self)?.run(RunOptions::default(), observer)
     }
 
     /// The costs as they weigh at step `step` and after: the prior's α_0 becomes α_0·γ^step,
@@ -435,73 +400,7 @@ impl Experiment {
                 .with_lens(record.lens.as_ref())?,
         )
     }
-
-    /// Per-window metrics at the output resolution (`output.metric_samples` per window) and
-    /// LDJ (`output.ldj_samples`) of `trajectory`.
-    pub fn evaluate(&self, trajectory: &Trajectory) -> Result<Evaluation> {
-        self.evaluate_since(trajectory, splatraj_scene::stop::Since::now())
-    }
-
-    /// [`Experiment::evaluate`] that a stop requested `since` ends before the next window's
-    /// metrics ([`splatraj_scene::stop::Stopped`]; nothing is written).
-    pub fn evaluate_since(
-        &self,
-        trajectory: &Trajectory,
-        since: splatraj_scene::stop::Since,
-    ) -> Result<Evaluation> {
-        let output = self.output_intrinsics()?;
-        let plain = self.plain_scene();
-        let n = self.windows.len();
-        let pose_at = |times: &[f64]| trajectory.poses_at(times);
-        let zoom_at = |times: &[f64]| trajectory.zooms_at(times);
-        let zoom_at: Option<ZoomAt<'_>> = trajectory.lens.is_some().then_some(&zoom_at);
-        let windows = (0..n)
-            .map(|i| {
-                since.stop_point(|| format!("the metrics of {i} of {n} windows were computed"))?;
-                let samples = self.config.output.metric_samples;
-                let path = (&pose_at as &dyn Fn(&[f64]) -> Vec<[f64; 6]>, zoom_at);
-                self.window_metrics(&plain, i, (i, n), samples, &output, path)
-            })
-            .collect::<Result<Vec<_>>>()?;
-        let mut windows = self.with_path_metrics(windows, trajectory)?;
-        for w in &mut windows {
-            w.verdict = Some(verdict(w));
-        }
-        let ldj = trajectory_ldj(trajectory, self.config.output.ldj_samples);
-        Ok(Evaluation { windows, ldj })
-    }
-
-    /// Metrics of window `i`'s object on the time grid of window `grid.0` of `grid.1`, at the
-    /// poses `pose_at` gives for the grid times, through the zoom `zoom_at` gives (None: the
-    /// fixed lens).
-    pub(crate) fn window_metrics(
-        &self,
-        plain: &splatraj_render::render::DeviceScene,
-        i: usize,
-        (index, n): (usize, usize),
-        samples: usize,
-        intrinsics: &splatraj_render::camera::Intrinsics,
-        (pose_at, zoom_at): PathAt<'_>,
-    ) -> Result<WindowMetrics> {
-        let w = &self.windows[i];
-        let alone = self.object_alone(i);
-        let object = WindowObject {
-            name: &w.name,
-            mask: &w.mask,
-            alone: &alone,
-            target_ratio: w.context.target_ratio,
-            rasterizer: self.config.rasterizer,
-            bounds: self.boxes.get(i).copied(),
-        };
-        window_metrics_zoomed(
-            plain, &object, index, n, samples, intrinsics, pose_at, zoom_at,
-        )
-        .with_context(|| format!("metrics of window {i}"))
-    }
 }
-
-/// Where a path is at given times: its poses, and its zooms when the lens zooms.
-pub(crate) type PathAt<'a> = (&'a dyn Fn(&[f64]) -> Vec<[f64; 6]>, Option<ZoomAt<'a>>);
 
 /// An observer that stops when `stop()` says so (e.g. a Ctrl-C flag), after calling `each`.
 pub fn stop_when(mut stop: impl FnMut() -> bool, mut each: impl FnMut(&Progress)) -> impl Observer {

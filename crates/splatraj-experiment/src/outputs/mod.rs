@@ -5,7 +5,8 @@
 //! an interrupted run leaves complete files or none.
 //!
 //! **This folder** is the outputs stage: what a finished optimisation becomes on disk. The run
-//! folder ([`run_folder`], [`output_folder`]), its records ([`records`], [`run_files`]), the
+//! folder ([`run_folder`], [`output_folder`]), the trajectory's metrics and verdicts
+//! ([`evaluation`]), its records ([`records`], [`run_files`]), the
 //! frames and video of a camera path ([`path_render`], [`path_checks`], [`camera_render`] with
 //! its [`camera_file`]; `render-path` whole: [`path_job`]), other tools' camera files
 //! ([`camera_paths`]) and `report.html`'s data ([`run_report`]).
@@ -13,6 +14,7 @@
 pub mod camera_file;
 pub mod camera_paths;
 pub mod camera_render;
+pub mod evaluation;
 pub mod output_folder;
 pub mod path_checks;
 pub mod path_job;

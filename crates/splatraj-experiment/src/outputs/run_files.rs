@@ -10,8 +10,8 @@ use anyhow::Result;
 use splatraj_scene::stop::Since;
 use splatraj_traj::trajectory::{Trajectory, uniform_times};
 
-use crate::optimise::trajectory_run::Evaluation;
 use crate::outputs::camera_paths::{PathFrames, frame_cuts, write_all_exports};
+use crate::outputs::evaluation::Evaluation;
 use crate::outputs::path_render::{PathObject, PathRender, RenderedPath, Video, render_path};
 use crate::outputs::run_report::write_run_report;
 use crate::prepare::experiment::Experiment;
