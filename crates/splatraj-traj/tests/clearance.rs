@@ -310,11 +310,12 @@ fn motion_cost_matches_closed_forms_and_finite_differences() {
     let build = |t: Tensor<2>| {
         CostInputs::new(t.clone(), None, 0, context([0.0; 3]))
             .unwrap()
-            .with_path(PathSamples {
-                poses: t,
+            .with_path(PathSamples::new(
+                t,
                 time_step,
-                seconds: Some(seconds),
-            })
+                Some(seconds),
+                context([0.0; 3]),
+            ))
     };
     let evaluate = |cost: &MotionCost| -> f64 {
         host(
@@ -390,11 +391,12 @@ fn orbit_limit_matches_the_circle_closed_form_and_finite_differences() {
     let build = |t: Tensor<2>| {
         CostInputs::new(t.clone(), None, 0, context(o.to_array()))
             .unwrap()
-            .with_path(PathSamples {
-                poses: t,
+            .with_path(PathSamples::new(
+                t,
                 time_step,
-                seconds: Some(seconds),
-            })
+                Some(seconds),
+                context(o.to_array()),
+            ))
     };
     let evaluate = |cost: &MotionCost, poses: &[[f64; 6]]| -> f64 {
         host(

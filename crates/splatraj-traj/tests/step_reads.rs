@@ -438,3 +438,183 @@ fn windows_together_equal_windows_one_at_a_time() {
         }
     }
 }
+
+/// The path costs (motion with every limit and even speed, clearance) evaluated once on every
+/// window's stretch of path joined give each window's terms, the loss and its pose gradient
+/// of one window evaluated at a time (f64): no term pairs one window's path with the next's.
+/// Stretches of different lengths and time steps, so each row needs its own window's.
+#[test]
+fn path_costs_together_equal_windows_one_at_a_time() {
+    let _counted = COUNTED.lock().unwrap();
+    let scene = scene();
+    let windows = windows(&scene, &["blue box", "red mug", "plant"]);
+    let device = Device::flex().autodiff();
+    let on_device = DeviceScene::new(&scene, &device, DType::F64);
+    let occupancy = Occupancy::new(
+        &scene,
+        OccupancySpec {
+            sigma: DEFAULT_CLEARANCE_SIGMA,
+            min_opacity: DEFAULT_MIN_OPACITY,
+        },
+    );
+    // Limits low enough that every term charges something.
+    let costs = CostsConfig {
+        clearance: Some(ClearanceCost {
+            margin: OrAuto::Value(0.4),
+            ..ClearanceCost::default()
+        }),
+        motion: Some(MotionCost {
+            weight: 1.0,
+            max_speed: Some(0.05.into()),
+            max_acceleration: Some(0.01),
+            max_angular_speed: Some(0.5),
+            max_orbit_speed: Some(0.5),
+            even_speed: 0.5,
+        }),
+        ..CostsConfig::default()
+    }
+    .build()
+    .unwrap();
+    let objects: Vec<([f64; 3], f64)> = windows
+        .iter()
+        .map(|w| (w.context.object_centre, w.context.prior_radius))
+        .collect();
+    let starts = object_start_poses(
+        &objects,
+        [0.0, 0.0, 0.5],
+        DEMO_UP.map(f64::from),
+        ObjectView::default(),
+        0,
+        1,
+    )
+    .unwrap();
+    // Per window: samples, path poses, the path's time step.
+    let shape = [(3, 7, 0.01), (2, 5, 0.02), (3, 9, 0.0125)];
+    let mut rng = 0x5EED_u64;
+    let mut jitter = || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        (rng % 1000) as f64 / 1000.0 - 0.5
+    };
+    let mut hosts = Vec::new();
+    for (start, &(samples, path, _)) in starts.iter().zip(&shape) {
+        let mut along = |count: usize, step: f64| -> Vec<[f64; 6]> {
+            (0..count)
+                .map(|k| {
+                    let mut p = start.0;
+                    p[3] += step * k as f64 + 0.02 * jitter();
+                    p[4] += 0.5 * step * k as f64 + 0.02 * jitter();
+                    p[2] += 0.3 * step * k as f64 + 0.02 * jitter();
+                    p
+                })
+                .collect()
+        };
+        hosts.push(HostPoses {
+            samples: along(samples, 0.07),
+            path: Some(along(path, 0.03)),
+        });
+    }
+    // Every sample, then every path, as a step holds them.
+    let rows: Vec<Pose> = hosts
+        .iter()
+        .flat_map(|h| h.samples.iter())
+        .chain(hosts.iter().flat_map(|h| h.path.iter().flatten()))
+        .map(|&p| Pose(p))
+        .collect();
+    let sample_rows: usize = shape.iter().map(|s| s.0).sum();
+    // (first sample row, first path row) per window.
+    let firsts: Vec<(usize, usize)> = shape
+        .iter()
+        .scan((0, sample_rows), |at, &(s, p, _)| {
+            let first = *at;
+            *at = (at.0 + s, at.1 + p);
+            Some(first)
+        })
+        .collect();
+    let problem = Problem::new(&on_device, &windows, &costs, intrinsics())
+        .with_occupancy(Some(&occupancy))
+        .with_seconds(Some(10.0));
+
+    // One window at a time: the mean over windows of each window's mean total.
+    let poses = on_device.poses(&rows).require_grad();
+    let mut loss = None;
+    let mut means = Vec::new();
+    for (i, (&(samples, path, time_step), &(s0, p0))) in shape.iter().zip(&firsts).enumerate() {
+        let own = poses.clone().narrow(0, s0, samples);
+        let path = Some((poses.clone().narrow(0, p0, path), time_step));
+        let terms = problem
+            .evaluate_along(i, own, None, path, Some(&hosts[i]), 0, None)
+            .unwrap()
+            .terms;
+        means.extend(terms.means().into_iter().map(|(_, _, m)| m));
+        let mean = terms.total.mean().div_scalar(windows.len() as f64);
+        loss = Some(match loss {
+            Some(l) => l + mean,
+            None => mean,
+        });
+    }
+    let loss = loss.unwrap();
+    let gradient = to_host(poses.grad(&loss.clone().backward()).unwrap()).unwrap();
+    let loss = to_host(loss).unwrap()[0];
+    let names = costs.names();
+    let term = |name: &str, window: usize| {
+        means[window * names.len() + names.iter().position(|n| *n == name).unwrap()]
+    };
+    for window in 0..windows.len() {
+        assert!(
+            term("motion", window) > 0.0,
+            "motion charges window {window}"
+        );
+    }
+    assert!(
+        (0..windows.len()).any(|w| term("clearance", w) > 0.0),
+        "clearance charges some window: {means:?}"
+    );
+
+    let poses = on_device.poses(&rows).require_grad();
+    let samples = shape
+        .iter()
+        .zip(&firsts)
+        .enumerate()
+        .map(|(i, (&(count, path, time_step), &(_, p0)))| WindowSamples {
+            window: i,
+            count,
+            times: None,
+            path: Some((poses.clone().narrow(0, p0, path), time_step)),
+            host: Some(&hosts[i]),
+            zoom: None,
+        })
+        .collect();
+    let together = problem
+        .with_step_passes(StepPasses::Shared)
+        .evaluate_windows(poses.clone().narrow(0, 0, sample_rows), samples, 0, None)
+        .unwrap();
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-10 * b.abs().max(1.0);
+    let got = to_host(together.means).unwrap();
+    assert_eq!(got.len(), means.len());
+    for (k, (a, b)) in got.iter().zip(&means).enumerate() {
+        assert!(
+            close(*a, *b),
+            "mean {k} ({}): {a} vs {b}",
+            names[k % names.len()]
+        );
+    }
+    let labels: Vec<Vec<&str>> = together
+        .labels
+        .iter()
+        .map(|w| w.iter().map(|l| l.0).collect())
+        .collect();
+    assert!(labels.iter().all(|w| *w == names), "{labels:?}");
+    let v = to_host(poses.grad(&together.loss.clone().backward()).unwrap()).unwrap();
+    let together_loss = to_host(together.loss).unwrap()[0];
+    assert!(close(together_loss, loss), "{together_loss} vs {loss}");
+    let largest = gradient.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+    for (k, (a, b)) in v.iter().zip(&gradient).enumerate() {
+        assert!(
+            (a - b).abs() <= 1e-10 * largest,
+            "gradient {k} (pose {}): {a} vs {b}",
+            k / 6
+        );
+    }
+}

@@ -19,7 +19,8 @@
 //! optimisation it sees the window's densely sampled path (a fine, randomly shifted time grid
 //! every step, including the stretch into the next window), not only the few stratified
 //! samples, so the path cannot slip through thin geometry between samples. Elsewhere (single
-//! poses) it sees the sampled poses.
+//! poses) it sees the sampled poses. It batches windows: on a joined path (every window's
+//! stretch, [`super::PathSamples::joined`]) it returns each stretch's mean `[W]`.
 
 use burn::tensor::{Tensor, TensorData};
 use glam::DVec3;
@@ -161,6 +162,9 @@ impl Cost for ClearanceCost {
     fn domain(&self) -> CostDomain {
         CostDomain::Path
     }
+    fn batches_windows(&self) -> bool {
+        true
+    }
     fn occupancy(&self) -> Option<OccupancySpec> {
         Some(OccupancySpec {
             sigma: self.sigma,
@@ -193,7 +197,7 @@ impl Cost for ClearanceCost {
         let margin = self.margin()?;
         let poses = inputs.path_or_sample_poses();
         let [batch, _] = poses.dims();
-        let centres = poses.narrow(1, 3, 3); // [P, 3]
+        let centres = poses.narrow(1, 3, 3); // [ΣP, 3]
         // Read once per optimisation step with everything else; read here only without it.
         let host: Vec<f64> = match inputs.path_or_sample_host_poses() {
             Some(poses) => poses.iter().flat_map(|p| p[3..].iter().copied()).collect(),
@@ -225,6 +229,11 @@ impl Cost for ClearanceCost {
             .map(|n| if n == [0.0; 3] { 0.0 } else { 1.0 })
             .collect();
         let keep = Tensor::<1>::from_data(TensorData::new(clear, [batch]), device);
-        Ok(value * keep)
+        let value = value * keep; // [ΣP], or per sample [B] without a path
+        Ok(match inputs.path() {
+            // Its mean per window's stretch [W] (the mean of a window's own path [1]).
+            Some(path) => path.stretch_means(value, 0, 1),
+            None => value,
+        })
     }
 }

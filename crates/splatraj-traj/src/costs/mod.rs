@@ -23,8 +23,11 @@
 //! **Samples and path.** Most costs judge each sampled pose on its own ([`CostDomain::Samples`]).
 //! A path cost ([`CostDomain::Path`]) judges the camera's motion: in a trajectory optimisation
 //! it reads [`CostInputs::path`], the window's stretch of the trajectory on a fine, evenly
-//! spaced time grid, and enters the total as its mean over that path; without a path (single
-//! poses) it reads the sampled poses like any other cost.
+//! spaced time grid, and returns its mean over that path `[1]`, which enters every sample's
+//! total; without a path (single poses) it reads the sampled poses like any other cost. A
+//! path cost that [`Cost::batches_windows`] also takes every window's stretch joined
+//! ([`PathSamples::joined`]) and returns each stretch's mean `[W]`, the value it has on that
+//! window's path alone ([`mod@path`]).
 //!
 //! **Extending.** A cost is a config struct (serde, its weights and parameters) implementing
 //! [`CostConfig`] (`init()` builds the cost, burn's `XConfig` → `init()` style) and a [`Cost`]
@@ -46,6 +49,7 @@ pub mod clearance;
 pub mod iou;
 pub mod moments;
 pub mod motion;
+pub mod path;
 pub mod prior;
 pub mod registry;
 pub mod shot;
@@ -68,6 +72,7 @@ pub use clearance::{
 pub use iou::{IOU_THRESHOLD, PixelBox, bbox_iou, bbox_iou_batch, mask_box};
 pub use moments::MaskMoments;
 pub use motion::{MotionCost, auto_max_speed};
+pub use path::{PathSamples, PathStretch, PerRow};
 pub use prior::{PRIOR_EPSILON_FRACTION, PriorCost, default_prior_radius, prior};
 pub use registry::{CostConfig, CostRegistry};
 pub use shot::ShotCost;
@@ -226,25 +231,13 @@ pub struct SampleTimes {
     pub within: Vec<f64>,
 }
 
-/// The window's stretch of a trajectory, densely sampled in time order (trajectory
-/// optimisation only): what path costs read.
-#[derive(Debug, Clone)]
-pub struct PathSamples {
-    /// Poses Φ `[P, 6]` at evenly spaced times, in time order.
-    pub poses: Tensor<2>,
-    /// Normalised time between consecutive poses.
-    pub time_step: f64,
-    /// Duration of the whole trajectory (t from 0 to 1) in seconds, when known.
-    pub seconds: Option<f64>,
-}
-
 /// Which poses a cost judges (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CostDomain {
     /// Each sampled pose on its own; one value per sample.
     Samples,
-    /// The densely sampled path when there is one (its mean enters the total), else the
-    /// sampled poses.
+    /// The densely sampled path when there is one (the cost returns its mean per stretch,
+    /// `[1]` for a window's own path, and that enters the total), else the sampled poses.
     Path,
 }
 
@@ -551,10 +544,14 @@ pub trait Cost: std::fmt::Debug + Send + Sync {
         None
     }
 
-    /// Whether one evaluation may serve the samples of several windows (an optimisation
-    /// step's whole batch, so its launches do not grow with the windows): the cost reads the
-    /// query context only through [`CostInputs::context_rows`] (or [`CostInputs::single_query`])
-    /// and reads no times, path, host poses or geometry. Default false: evaluated per window.
+    /// Whether one evaluation may serve several windows (an optimisation step's whole batch,
+    /// so its launches do not grow with the windows). A sample cost ([`CostDomain::Samples`])
+    /// then reads the query context only through [`CostInputs::context_rows`] (or
+    /// [`CostInputs::single_query`]) and reads no times, path, host poses or geometry. A path
+    /// cost ([`CostDomain::Path`]) then takes a path of several stretches ([`PathSamples`],
+    /// each with its window's context and time step) and returns each stretch's mean `[W]`,
+    /// no term pairing one stretch's poses with the next's. Default false: evaluated per
+    /// window.
     fn batches_windows(&self) -> bool {
         false
     }
@@ -715,14 +712,15 @@ pub struct CostTerm {
     pub name: &'static str,
     /// Weight w_i at this step (α_k for the prior).
     pub weight: f64,
-    /// Unweighted value per sample `[B]`.
+    /// Unweighted value per sample `[B]` (a path cost's per stretch: `[1]` on a window's own
+    /// path, `[W]` on a joined one).
     pub value: Tensor<1>,
 }
 
 /// The weighted sum and its terms, for one batch.
 #[derive(Debug, Clone)]
 pub struct CostTerms {
-    /// Σ_i w_i·cost_i per sample `[B]` (differentiable).
+    /// Σ_i w_i·cost_i per sample `[B]`, per stretch `[W]` on a joined path (differentiable).
     pub total: Tensor<1>,
     /// Each term, in the order of the [`WeightedCosts`].
     pub terms: Vec<CostTerm>,
@@ -839,7 +837,8 @@ impl WeightedCosts {
     }
 
     /// [`WeightedCosts::evaluate`] of the costs `keep` selects (in order); None when it keeps
-    /// none.
+    /// none. On a path of several stretches ([`PathSamples::joined`]) it keeps only path
+    /// costs, and their values and the total are per stretch `[W]`.
     pub fn evaluate_where(
         &self,
         inputs: &CostInputs,
@@ -848,11 +847,21 @@ impl WeightedCosts {
         let mut total: Option<Tensor<1>> = None;
         let mut terms = Vec::with_capacity(self.costs.len());
         let batch = inputs.batch();
+        let stretches = inputs.path().map_or(1, |p| p.stretches().len());
         for cost in self.costs.iter().filter(|c| keep(c.as_ref())) {
+            let on_path = cost.domain() == CostDomain::Path && inputs.path().is_some();
+            if stretches > 1 && !on_path {
+                return Err(CostError::Shape(format!(
+                    "cost `{}` judges samples, but the inputs hold {stretches} windows' paths \
+                     (evaluate it on the samples' inputs)",
+                    cost.name()
+                )));
+            }
             let weight = cost.weight(inputs.step());
             let value = cost.evaluate(inputs)?;
-            let on_path = cost.domain() == CostDomain::Path && inputs.path().is_some();
-            let weighted = if on_path {
+            let weighted = if stretches > 1 {
+                value.clone().mul_scalar(weight) // [W]
+            } else if on_path {
                 value.clone().mean().mul_scalar(weight).expand([batch])
             } else {
                 value.clone().mul_scalar(weight)

@@ -25,12 +25,16 @@
 //! optimum keeps the bound (measured: a quadratic hinge of weight 50 left a 1 unit/s limit at
 //! 1.5–1.6 units/s on `tests/clearance.rs`' two-object path). The even-speed term is the spread of the squared speed about its
 //! mean over the window's stretch of path, scale-free. It is a path cost
-//! ([`CostDomain::Path`]): with no path (single poses) it is 0.
+//! ([`CostDomain::Path`]): with no path (single poses) it is 0. It batches windows: on a
+//! joined path each term is the mean over each window's own rows (its own time step and
+//! object centre, its own mean speed for the even-speed ratio), so the differences that
+//! pair one window's last pose with the next window's first weigh nothing
+//! ([`super::path`]).
 
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostDomain, CostError, CostInputs, OrAuto, check_weight, invalid};
+use super::{Cost, CostDomain, CostError, CostInputs, OrAuto, PathSamples, check_weight, invalid};
 
 /// The motion-limit cost: table `[costs.motion]`, keys `weight` (default 1), `max_speed`
 /// (scene units per second), `max_acceleration` (scene units per second²),
@@ -138,13 +142,17 @@ fn centres_of(poses: &Tensor<2>) -> Tensor<2> {
     poses.clone().narrow(1, 3, 3)
 }
 
-/// max(0, x/limit² − 1), averaged: the charge of squared rates `x` `[N]` over `limit`.
-fn over_limit(squared_rate: Tensor<1>, limit: f64) -> Tensor<1> {
-    squared_rate
+/// Fewest poses a stretch needs for its motion to be charged (an acceleration needs three).
+const MIN_POSES: usize = 3;
+
+/// max(0, x/limit² − 1), averaged per stretch `[W]`: the charge of squared rates `x`
+/// `[ΣP − lag]` (rows of lag `lag`) over `limit`.
+fn over_limit(path: &PathSamples, squared_rate: Tensor<1>, lag: usize, limit: f64) -> Tensor<1> {
+    let charge = squared_rate
         .div_scalar(limit * limit)
         .sub_scalar(1.0)
-        .clamp_min(0.0)
-        .mean()
+        .clamp_min(0.0);
+    path.stretch_means(charge, lag, MIN_POSES)
 }
 
 impl Cost for MotionCost {
@@ -156,6 +164,9 @@ impl Cost for MotionCost {
     }
     fn domain(&self) -> CostDomain {
         CostDomain::Path
+    }
+    fn batches_windows(&self) -> bool {
+        true
     }
     fn validate(&self) -> Result<(), CostError> {
         check_weight(self.name(), "weight", self.weight)?;
@@ -187,10 +198,11 @@ impl Cost for MotionCost {
                 .reshape([inputs.batch()])
                 * 0.0);
         };
-        let poses = path.poses.clone();
+        let poses = path.poses.clone(); // [ΣP, 6]
         let [count, _] = poses.dims();
-        let zero = poses.clone().narrow(1, 0, 1).sum().mul_scalar(0.0); // [1], in the graph
-        if count < 3 {
+        // [W], in the graph
+        let zero = path.per_stretch(poses.clone().narrow(1, 0, 1).sum().mul_scalar(0.0));
+        if count < MIN_POSES {
             return Ok(zero);
         }
         let seconds = match (path.seconds, self.needs_duration()) {
@@ -203,19 +215,17 @@ impl Cost for MotionCost {
                 });
             }
         };
-        let dt = path.time_step * seconds;
-        let centres = centres_of(&poses); // [P, 3]
+        // f(Δt) per row of lag `lag`, Δt from the row's stretch's time step (a scalar when
+        // the stretches share it, as a window's own path does).
+        let of_dt = |lag: usize, f: fn(f64) -> f64| path.per_row(lag, |s| f(s.time_step * seconds));
+        let centres = centres_of(&poses); // [ΣP, 3]
         let steps = centres.clone().narrow(0, 1, count - 1) - centres.narrow(0, 0, count - 1);
-        let squared_speed = steps
-            .clone()
-            .square()
-            .sum_dim(1)
-            .reshape([count - 1])
-            .div_scalar(dt * dt); // [P − 1]
+        let squared_speed =
+            of_dt(1, |dt| dt * dt).divide(steps.clone().square().sum_dim(1).reshape([count - 1])); // [ΣP − 1]
         let mut total = zero;
         match self.max_speed {
             Some(OrAuto::Value(limit)) => {
-                total = total + over_limit(squared_speed.clone(), limit);
+                total = total + over_limit(path, squared_speed.clone(), 1, limit);
             }
             Some(OrAuto::Auto) => {
                 return Err(invalid(
@@ -230,53 +240,43 @@ impl Cost for MotionCost {
         }
         if let Some(limit) = self.max_acceleration {
             let second = steps.clone().narrow(0, 1, count - 2) - steps.narrow(0, 0, count - 2);
-            let squared = second
-                .square()
-                .sum_dim(1)
-                .reshape([count - 2])
-                .div_scalar(dt.powi(4));
-            total = total + over_limit(squared, limit);
+            let squared =
+                of_dt(2, |dt| dt.powi(4)).divide(second.square().sum_dim(1).reshape([count - 2])); // [ΣP − 2]
+            total = total + over_limit(path, squared, 2, limit);
         }
         if let Some(limit) = self.max_angular_speed {
             let rotations =
                 splatraj_render::camera::rotation_matrices(poses.clone().narrow(1, 0, 3));
             let turns =
                 rotations.clone().narrow(0, 1, count - 1) - rotations.narrow(0, 0, count - 1);
-            let squared_angle = turns
-                .square()
-                .sum_dim(2)
-                .sum_dim(1)
-                .reshape([count - 1])
-                .div_scalar(2.0 * dt * dt); // θ²/Δt² [P − 1]
-            total = total + over_limit(squared_angle, limit.to_radians());
+            let squared_angle = of_dt(1, |dt| 2.0 * dt * dt)
+                .divide(turns.square().sum_dim(2).sum_dim(1).reshape([count - 1])); // θ²/Δt² [ΣP − 1]
+            total = total + over_limit(path, squared_angle, 1, limit.to_radians());
         }
         if let Some(limit) = self.max_orbit_speed {
-            let floor = 1e-6 * inputs.query().prior_radius;
-            let offsets = centres_of(&poses) - inputs.row(inputs.query().object_centre);
+            // Each pose's own window's object centre and floor.
+            let floor_sq = path.per_row(0, |s| {
+                let floor = 1e-6 * s.context.prior_radius;
+                floor * floor
+            });
+            let offsets = centres_of(&poses) - path.context_rows(|c| c.object_centre); // [ΣP, 3]
             // Floored before the square root (no NaN gradient at the object's centre).
-            let lengths = offsets
-                .clone()
-                .square()
-                .sum_dim(1)
-                .clamp_min(floor * floor)
-                .sqrt(); // [P, 1]
+            let lengths = floor_sq.floor(offsets.clone().square().sum_dim(1)).sqrt(); // [ΣP, 1]
             let directions = offsets / lengths.expand([count, 3]);
             let chords =
                 directions.clone().narrow(0, 1, count - 1) - directions.narrow(0, 0, count - 1);
-            let squared_angle = chords
-                .square()
-                .sum_dim(1)
-                .reshape([count - 1])
-                .div_scalar(dt * dt); // φ²/Δt² [P − 1]
-            total = total + over_limit(squared_angle, limit.to_radians());
+            let squared_angle =
+                of_dt(1, |dt| dt * dt).divide(chords.square().sum_dim(1).reshape([count - 1])); // φ²/Δt² [ΣP − 1]
+            total = total + over_limit(path, squared_angle, 1, limit.to_radians());
         }
         if self.even_speed > 0.0 {
+            // Each window's ratio to its own mean: the mean per stretch [W], back on its rows.
             // Floored so that a camera at rest (mean 0) gives a finite value and gradient.
-            let mean = squared_speed.clone().mean().add_scalar(1e-12);
-            let spread = (squared_speed / mean.expand([count - 1]))
-                .sub_scalar(1.0)
-                .square()
-                .mean();
+            let mean = path
+                .stretch_means(squared_speed.clone(), 1, MIN_POSES)
+                .add_scalar(1e-12);
+            let ratio = (squared_speed / path.spread(mean, 1)).sub_scalar(1.0); // [ΣP − 1]
+            let spread = path.stretch_means(ratio.square(), 1, MIN_POSES);
             total = total + spread.mul_scalar(self.even_speed);
         }
         Ok(total)

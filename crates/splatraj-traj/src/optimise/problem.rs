@@ -25,7 +25,7 @@ use super::{OptimiseError, WindowTarget};
 use crate::clearance::Occupancy;
 use crate::costs::{
     Cost, CostDomain, CostError, CostInputs, CostTerms, HostPoses, ImageChannel, PathSamples,
-    QueryContext, SampleTimes, WeightedCosts, coverage,
+    PathStretch, QueryContext, SampleTimes, WeightedCosts, coverage,
 };
 
 /// A scene, its query windows, the costs and the camera: the arguments every optimiser shares.
@@ -154,11 +154,14 @@ impl StepEvaluation {
     }
 
     /// The evaluation of windows whose batching costs ran once on all `counts` samples
-    /// (`batched`) and whose other costs ran per window (`per_window`). The windows' means
-    /// come from one matrix product with the averaging weights, not a slice per window.
+    /// (`batched`), whose batching path costs ran once on every window's stretch of path
+    /// (`path`: each value and the total per window `[W]`) and whose other costs ran per
+    /// window (`per_window`). The windows' means come from one matrix product with the
+    /// averaging weights, not a slice per window.
     fn of_batch(
         costs: &WeightedCosts,
         batched: Option<CostTerms>,
+        path: Option<CostTerms>,
         per_window: Vec<Option<CostTerms>>,
         counts: &[usize],
         masks: Option<Tensor<3>>,
@@ -208,6 +211,25 @@ impl StepEvaluation {
             }
         }
         let mut offset = parts.first().map_or(0, |p| p.dims()[0]);
+        if let Some(path) = &path {
+            // Already a value per window: the loss's share is their mean over the windows.
+            loss.push(path.total.clone().sum().div_scalar(n as f64));
+            let terms = path.terms.len();
+            let values = Tensor::stack::<2>(
+                path.terms
+                    .iter()
+                    .map(|t| t.value.clone().without_autodiff())
+                    .collect(),
+                1,
+            ); // [W, terms]
+            parts.push(values.reshape([n * terms])); // window-major
+            for (i, place) in place.iter_mut().enumerate() {
+                for (k, t) in path.terms.iter().enumerate() {
+                    place.insert(t.name, (offset + i * terms + k, t.weight));
+                }
+            }
+            offset += n * terms;
+        }
         for (i, terms) in per_window.iter().enumerate() {
             let Some(terms) = terms else { continue };
             loss.push(terms.total.clone().mean().div_scalar(n as f64));
@@ -560,9 +582,10 @@ impl<'a> Problem<'a> {
     ///
     /// With [`StepPasses::Shared`] one render call serves the whole step (each window's
     /// object alone included), and the costs that [`Cost::batches_windows`] run once on the
-    /// whole batch with each sample's own context, so neither the render's launches nor those
-    /// costs' grow with the number of windows; the other costs (path costs, time-dependent
-    /// ones, custom ones) run per window. With [`StepPasses::PerWindow`] each window has its
+    /// whole batch with each sample's own context, and the path costs that batch run once on
+    /// every window's stretch of path joined (each window's mean over its own stretch), so
+    /// neither the render's launches nor those costs' grow with the number of windows; the
+    /// other costs (time-dependent ones, custom ones) run per window. With [`StepPasses::PerWindow`] each window has its
     /// own render call and costs (docs/gpu.md, "One pass a step").
     ///
     /// [`Cost::batches_windows`]: crate::costs::Cost::batches_windows
@@ -639,12 +662,21 @@ impl<'a> Problem<'a> {
             inputs = inputs.with_occupancy(o.clone());
         }
         let batched = self.costs.evaluate_where(&inputs, batched_cost)?;
+        // The path costs that batch: once, on every window's stretch of path joined.
+        let path = self.joined_path(poses.clone(), &windows, step)?;
+        let batched_path =
+            |c: &dyn Cost| path.is_some() && c.batches_windows() && c.domain() == CostDomain::Path;
+        let path_terms = match &path {
+            Some(inputs) => self.costs.evaluate_where(inputs, batched_path)?,
+            None => None,
+        };
+        let per_window_cost = |c: &dyn Cost| !batched_cost(c) && !batched_path(c);
         // The others, window by window (images cut out only when such a cost reads one).
         let others_read_images = self
             .costs
             .costs()
             .iter()
-            .any(|c| !batched_cost(c.as_ref()) && !c.channels().is_empty());
+            .any(|c| per_window_cost(c.as_ref()) && !c.channels().is_empty());
         let mut per_window = Vec::with_capacity(windows.len());
         let mut offset = 0;
         for w in windows {
@@ -655,16 +687,74 @@ impl<'a> Problem<'a> {
                 _ => Images::default(),
             };
             offset += count;
-            per_window.push(self.window_terms_where(w, own, images, step, |c| !batched_cost(c))?);
+            per_window.push(self.window_terms_where(w, own, images, step, per_window_cost)?);
         }
         Ok(StepEvaluation::of_batch(
             self.costs,
             batched,
+            path_terms,
             per_window,
             &counts,
             pass.as_ref().and_then(|p| p.masks.clone()),
             pass.map(|p| p.stats),
         ))
+    }
+
+    /// The inputs of the path costs that batch in a shared step: the samples `poses` and every
+    /// window's stretch of path joined `[ΣP, 6]` (each with its context and time step), their
+    /// host values when every window has them; None when a window has no path (the path
+    /// costs then judge each window's samples, per window).
+    fn joined_path(
+        &self,
+        poses: Tensor<2>,
+        windows: &[WindowSamples<'_>],
+        step: usize,
+    ) -> Result<Option<CostInputs>, OptimiseError> {
+        let batches = |c: &dyn Cost| c.batches_windows() && c.domain() == CostDomain::Path;
+        if !self.costs.costs().iter().any(|c| batches(c.as_ref())) {
+            return Ok(None);
+        }
+        let Some(paths) = windows
+            .iter()
+            .map(|w| w.path.clone())
+            .collect::<Option<Vec<_>>>()
+        else {
+            return Ok(None);
+        };
+        let stretches: Vec<PathStretch> = windows
+            .iter()
+            .zip(&paths)
+            .map(|(w, (path, time_step))| PathStretch {
+                rows: path.dims()[0],
+                time_step: *time_step,
+                context: self.windows[w.window].context,
+            })
+            .collect();
+        let joined = Tensor::cat(paths.into_iter().map(|(p, _)| p).collect(), 0); // [ΣP, 6]
+        let first = self.windows[windows[0].window].context;
+        let mut inputs = CostInputs::new(poses, None, step, first)?.with_path(PathSamples::joined(
+            joined,
+            stretches,
+            self.seconds,
+        )?);
+        if let Some(o) = self.occupancy {
+            inputs = inputs.with_occupancy(o.clone());
+        }
+        let hosts: Option<Vec<&HostPoses>> = windows.iter().map(|w| w.host).collect();
+        let host_path: Option<Vec<[f64; 6]>> = hosts.as_ref().and_then(|hosts| {
+            hosts
+                .iter()
+                .map(|h| h.path.clone())
+                .collect::<Option<Vec<_>>>()
+                .map(|each| each.concat())
+        });
+        if let (Some(hosts), Some(path)) = (hosts, host_path) {
+            inputs = inputs.with_host_poses(HostPoses {
+                samples: hosts.iter().flat_map(|h| h.samples.clone()).collect(),
+                path: Some(path),
+            });
+        }
+        Ok(Some(inputs))
     }
 
     /// One window's render and cost terms.
@@ -818,11 +908,12 @@ impl<'a> Problem<'a> {
             });
         }
         if let Some((poses, time_step)) = samples.path {
-            inputs = inputs.with_path(PathSamples {
+            inputs = inputs.with_path(PathSamples::new(
                 poses,
                 time_step,
-                seconds: self.seconds,
-            });
+                self.seconds,
+                self.windows[index].context,
+            ));
         }
         if let Some(o) = self.occupancy {
             inputs = inputs.with_occupancy(o.clone());
