@@ -42,15 +42,9 @@ impl Experiment {
             return Ok(None);
         };
         // Built once per spec (`self.scene` is not expected to change after `prepare`).
-        let mut cache = self
-            .occupancy_cache
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        if let Some(occupancy) = cache.as_ref().filter(|o| o.spec() == spec) {
-            return Ok(Some(occupancy.clone()));
-        }
-        let occupancy = Occupancy::new(&self.scene, spec);
-        *cache = Some(occupancy.clone());
+        let occupancy = self.occupancy_memo.get_or_make(spec, || {
+            Ok::<_, anyhow::Error>(Occupancy::new(&self.scene, spec))
+        })?;
         Ok(Some(occupancy))
     }
 

@@ -9,12 +9,15 @@ use splatraj_render::render::DeviceScene;
 use splatraj_scene::demo::{DemoConfig, demo_scene};
 use splatraj_scene::{InvalidPolicy, ReadOptions, ResolvedUp, Scene, read_scene};
 use splatraj_semantic::{Relevancy, Scoring, Target, read_mask_file, select};
+use splatraj_traj::clearance::{Occupancy, OccupancySpec};
 use splatraj_traj::costs::{OrAuto, QueryContext, WeightedCosts, default_prior_radius};
-use splatraj_traj::optimise::WindowTarget;
+use splatraj_traj::optimise::{Candidate, WindowTarget};
 use splatraj_traj::trajectory::TrajectoryModel;
+use splatraj_traj::transitions::JoinKind;
 
 use crate::config::Config;
 use crate::extensions::Extensions;
+use crate::prepare::memo::Memo;
 
 /// A setting derived from the scene because the config left it `"auto"` (or out).
 #[derive(Debug, Clone, PartialEq)]
@@ -73,21 +76,17 @@ pub struct Experiment {
     pub dtype: DType,
     /// The optimisation camera.
     pub intrinsics: Intrinsics,
-    /// The clearance cost's occupancy, built on first use ([`Experiment::occupancy`]): start
-    /// planning, the optimisation and the metrics all ask for it, and on a 3M-Gaussian scene
-    /// each k-d tree build took seconds.
-    pub(crate) occupancy_cache: std::sync::Mutex<Option<splatraj_traj::clearance::Occupancy>>,
+    /// The clearance cost's occupancy, built on first use per spec ([`Experiment::occupancy`]):
+    /// start planning, the optimisation and the metrics all ask for it, and on a 3M-Gaussian
+    /// scene each k-d tree build took seconds.
+    pub(crate) occupancy_memo: Memo<OccupancySpec, Occupancy>,
     /// The view search's choice for all windows, per restart, keyed by what else the search
     /// reads ([`Experiment::searched_views`]): `run` checks the starts before it runs them,
     /// and each search renders hundreds of views.
-    #[allow(clippy::type_complexity)]
-    pub(crate) views_cache:
-        std::sync::Mutex<Option<(String, Vec<Vec<splatraj_traj::optimise::Candidate>>)>>,
+    pub(crate) views_memo: Memo<String, Vec<Vec<Candidate>>>,
     /// What each join of windows becomes (`[output] transitions`), judged once
     /// ([`Experiment::joins`]): the starts, the run's model and the plan all ask for it.
-    #[allow(clippy::type_complexity)]
-    pub(crate) joins_cache:
-        std::sync::Mutex<Option<(String, Vec<splatraj_traj::transitions::JoinKind>)>>,
+    pub(crate) joins_memo: Memo<String, Vec<JoinKind>>,
     /// The coarse copy the optimisation renders instead of `scene`, when `optimise_gaussians`
     /// asks for one ([`Experiment::optimisation_scene`]).
     pub coarse: Option<CoarseCopy>,
@@ -160,9 +159,9 @@ impl Experiment {
             device,
             dtype: config.precision.dtype(),
             intrinsics,
-            occupancy_cache: Default::default(),
-            views_cache: Default::default(),
-            joins_cache: Default::default(),
+            occupancy_memo: Memo::default(),
+            views_memo: Memo::default(),
+            joins_memo: Memo::default(),
             coarse: None,
             prepared_at,
         };

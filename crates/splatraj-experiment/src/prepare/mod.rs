@@ -5,11 +5,13 @@
 //! windows pan or cut ([`transitions`]); the optimisation may
 //! render a coarse copy of a large scene ([`optimised_scene`]); and the memory and time of the
 //! work are planned against the limits ([`memory_plans`]). [`experiment::Experiment::prepare`]
-//! runs these in order, and its [`experiment::Experiment`] is what every later stage shares.
+//! runs these in order, and its [`experiment::Experiment`] is what every later stage shares
+//! (what several stages ask for is judged once, in a [`memo::Memo`]).
 
 pub mod experiment;
 pub mod grounding;
 pub mod lifted;
+pub mod memo;
 pub mod memory_plans;
 pub mod optimised_scene;
 pub mod scene_files;

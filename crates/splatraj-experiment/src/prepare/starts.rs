@@ -351,24 +351,14 @@ impl Experiment {
             self.intrinsics,
             self.config.rasterizer
         );
-        let cacheable = which == all.as_slice();
-        if cacheable {
-            let cache = self
-                .views_cache
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner);
-            if let Some((_, views)) = cache.as_ref().filter(|(k, _)| *k == key) {
-                return Ok(views.clone());
-            }
+        // Only the search over every window is kept: it is the one the check, the plan and the
+        // run each ask for.
+        if which == all.as_slice() {
+            self.views_memo
+                .get_or_make(key, || self.search_and_choose(which, restarts))
+        } else {
+            self.search_and_choose(which, restarts)
         }
-        let chosen = self.search_and_choose(which, restarts)?;
-        if cacheable {
-            *self
-                .views_cache
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner) = Some((key, chosen.clone()));
-        }
-        Ok(chosen)
     }
 
     /// [`Experiment::searched_views`] without the cache.

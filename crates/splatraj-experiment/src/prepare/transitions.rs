@@ -35,16 +35,7 @@ impl Experiment {
             config.costs.clearance,
             self.intrinsics
         );
-        let mut cache = self
-            .joins_cache
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        if let Some((_, joins)) = cache.as_ref().filter(|(k, _)| *k == key) {
-            return Ok(joins.clone());
-        }
-        let joins = self.judge_joins()?;
-        *cache = Some((key, joins.clone()));
-        Ok(joins)
+        self.joins_memo.get_or_make(key, || self.judge_joins())
     }
 
     /// [`Experiment::joins`] without the cache.
