@@ -56,4 +56,5 @@ pub use optimise::observer::{Flow, Observer, Progress};
 pub use optimise::pose_run::{PoseRun, Posterior};
 pub use optimise::trajectory_run::{RunOptions, RunStop, TrajectoryOptimisation, TrajectoryRun};
 pub use outputs::evaluation::Evaluation;
+pub use outputs::run_files::RunOutputs;
 pub use prepare::experiment::Experiment;

@@ -36,6 +36,7 @@ use crate::config::{Ablation, Config, MaskOverlay, VerdictPolicy};
 use crate::optimise::checkpoint::{CHECKPOINT_FILE, Checkpoint};
 use crate::optimise::observer::{Observer, Phase, Progress};
 use crate::outputs::records::{PoseFile, pose_history, sgld_samples, trajectory_history};
+use crate::outputs::run_files::RunOutputs;
 use crate::outputs::run_folder::{
     MetricsFile, RunReport, StageTimes, check_writable, remove_checkpoint, remove_partial_files,
     resumable,
@@ -466,10 +467,10 @@ impl Experiment {
         let since = splatraj_scene::stop::Since::now();
         let (header, rows) = trajectory_history(run, self.windows.len());
         write_csv(&dir.join("history.csv"), &header, &rows)?;
-        let trajectory = self.trajectory(&run.best().best)?;
+        let outputs = RunOutputs::of_run(self, run)?;
         write_json(
             &dir.join("trajectory.json"),
-            &self.trajectory_file(&trajectory)?,
+            &self.trajectory_file(outputs.trajectory())?,
         )?;
 
         let frames = self.config.output.frame_count(self.windows.len());
@@ -477,9 +478,8 @@ impl Experiment {
             frames,
             stop: run.stop,
         }));
-        let outputs = self
-            .write_outputs(
-                &trajectory,
+        let written = outputs
+            .write(
                 dir,
                 &mut |done| {
                     observer.progress(&Progress::Frame { done, frames });
@@ -503,12 +503,12 @@ impl Experiment {
                 Err(e) => e,
             })?;
         let times = StageTimes {
-            metrics: outputs.metrics,
-            frames: outputs.frames,
+            metrics: written.metrics,
+            frames: written.frames,
             total: self.prepared_at.elapsed(),
         };
         let report = RunReport::new(self, run, times);
-        let evaluation = outputs.evaluation;
+        let evaluation = written.evaluation;
         let (problems, failing) = (evaluation.problems(), evaluation.failing());
         write_json(
             &dir.join("metrics.json"),
@@ -518,7 +518,7 @@ impl Experiment {
                 report.clone(),
             ),
         )?;
-        self.write_report(dir)?;
+        outputs.write_report(dir)?;
         if run.stop == RunStop::Finished {
             remove_checkpoint(dir)?;
         }

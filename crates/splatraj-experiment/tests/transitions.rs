@@ -9,6 +9,7 @@ use std::path::Path;
 use glam::DVec3;
 use splatraj_camera_paths::Format;
 use splatraj_experiment::outputs::camera_paths::{RunTrajectory, export_files};
+use splatraj_experiment::outputs::run_files::RunOutputs;
 use splatraj_experiment::{Config, Experiment, Extensions, optimise::observer};
 use splatraj_traj::trajectory::TrajectoryModel;
 
@@ -64,11 +65,12 @@ fn cut_makes_shots_that_jump_only_at_the_cuts_and_every_file_carries_them() {
     };
     assert_eq!(cut.spans().cuts, vec![1, 2]);
     let run = experiment.run_trajectory(&mut observer::quiet()).unwrap();
-    let trajectory = experiment.trajectory(&run.best().best).unwrap();
+    let outputs = RunOutputs::of_run(&experiment, &run).unwrap();
+    let trajectory = outputs.trajectory();
     assert_eq!(trajectory.model(), &model);
 
     // 30 frames at 10 fps: shots of frames 0–9, 10–19, 20–29.
-    let frames = experiment.output_frames(&trajectory).unwrap();
+    let frames = outputs.frames().unwrap();
     assert_eq!(frames.cuts, vec![10, 20]);
     let steps: Vec<f64> = frames
         .poses
@@ -90,7 +92,7 @@ fn cut_makes_shots_that_jump_only_at_the_cuts_and_every_file_carries_them() {
     );
 
     // No rate across a cut: each window's peak speed is its own shot's.
-    let evaluation = experiment.evaluate(&trajectory).unwrap();
+    let evaluation = experiment.evaluate(trajectory).unwrap();
     let seconds = 3.0;
     for w in &evaluation.windows {
         let motion = &w.path.as_ref().unwrap().motion;
@@ -104,7 +106,7 @@ fn cut_makes_shots_that_jump_only_at_the_cuts_and_every_file_carries_them() {
 
     // trajectory.json lists the shots and reads back with the same cuts.
     let dir = tempfile::tempdir().unwrap();
-    let file = experiment.trajectory_file(&trajectory).unwrap();
+    let file = experiment.trajectory_file(trajectory).unwrap();
     assert_eq!(file.shots.len(), 3);
     assert_eq!(file.cuts, vec![1.0 / 3.0, 2.0 / 3.0]);
     assert!(file.poses.iter().all(|p| p.shot == p.window));

@@ -6,7 +6,8 @@
 //!
 //! **This folder** is the outputs stage: what a finished optimisation becomes on disk. The run
 //! folder ([`run_folder`], [`output_folder`]), the trajectory's metrics and verdicts
-//! ([`evaluation`]), its records ([`records`], [`run_files`]), the
+//! ([`evaluation`]), its records ([`records`]) and the rest of its files ([`run_files`]:
+//! [`run_files::RunOutputs`], the stage's state), the
 //! frames and video of a camera path ([`path_render`], [`path_checks`], [`camera_render`] with
 //! its [`camera_file`]; `render-path` whole: [`path_job`]), other tools' camera files
 //! ([`camera_paths`]) and `report.html`'s data ([`run_report`]).

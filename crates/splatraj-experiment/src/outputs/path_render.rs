@@ -29,6 +29,7 @@ pub use crate::frame_metrics::FrameMetrics;
 use crate::outputs::TINT_ALPHA;
 use crate::outputs::camera_paths::PathFrames;
 use crate::outputs::output_folder::OutputFolder;
+use crate::prepare::experiment::Experiment;
 use crate::resources::{MemoryLimit, RenderWork};
 use crate::write::{write_bytes, write_csv};
 
@@ -39,6 +40,19 @@ pub struct PathObject<'a> {
     pub mask: &'a [f32],
     /// The share of the frame it should cover (TRE's target).
     pub target_ratio: f64,
+}
+
+impl Experiment {
+    /// Each window's object, for path renders.
+    pub fn path_objects(&self) -> Vec<PathObject<'_>> {
+        self.windows
+            .iter()
+            .map(|w| PathObject {
+                mask: &w.mask,
+                target_ratio: w.context.target_ratio,
+            })
+            .collect()
+    }
 }
 
 /// Whether a path render also makes `video.mp4`.
