@@ -1,11 +1,10 @@
-//! The scene's solid geometry for the clearance cost, and the per-window clearance and motion
-//! metrics of a trajectory (`metrics.json`'s `path` of each window), its shot adherence
+//! The per-window clearance and motion metrics of a trajectory (`metrics.json`'s `path` of
+//! each window; the clearance geometry from [`crate::prepare::clearance`]), its shot adherence
 //! (`shot`, with a dolly zoom's hold of the size from the frames) and the occlusion's longest
 //! stretch in seconds.
 
-use anyhow::{Result, bail};
+use anyhow::Result;
 use splatraj_render::camera::Intrinsics;
-use splatraj_traj::clearance::Occupancy;
 use splatraj_traj::metrics::{
     WindowMetrics, ZoomFrame, shot_metrics, shot_path_metrics, zoom_hold,
 };
@@ -16,44 +15,6 @@ use crate::frame_metrics::FrameMetrics;
 use crate::prepare::experiment::Experiment;
 
 impl Experiment {
-    /// The clearance cost's margin (resolved from the scene when it was `"auto"`), when the
-    /// cost is on.
-    pub fn clearance_margin(&self) -> Option<f64> {
-        self.config
-            .costs
-            .clearance
-            .as_ref()
-            .and_then(|c| c.margin.value())
-    }
-
-    /// The scene's solid ellipsoids, indexed, when a configured cost reads them (clearance);
-    /// None otherwise. Errors when a motion limit is set without the path's duration.
-    pub fn occupancy(&self) -> Result<Option<Occupancy>> {
-        if let Some(motion) = &self.config.costs.motion
-            && motion.needs_duration()
-            && self.path_seconds().is_none()
-        {
-            bail!(
-                "`costs.motion` limits rates per second: give the path's duration in `[output] \
-                 seconds`"
-            );
-        }
-        let Some(spec) = self.costs()?.occupancy() else {
-            return Ok(None);
-        };
-        // Built once per spec (`self.scene` is not expected to change after `prepare`).
-        let occupancy = self.occupancy_memo.get_or_make(spec, || {
-            Ok::<_, anyhow::Error>(Occupancy::new(&self.scene, spec))
-        })?;
-        Ok(Some(occupancy))
-    }
-
-    /// Duration of the whole trajectory in seconds (`[output] seconds`, else `frames / fps`,
-    /// else the default seconds per query: [`crate::config::OutputConfig::duration`]).
-    pub fn path_seconds(&self) -> Option<f64> {
-        Some(self.config.output.duration(self.windows.len()))
-    }
-
     /// `windows` with each window's clearance (when the clearance cost is on) and motion
     /// metrics of `trajectory` filled in, on a grid of at least `output.ldj_samples` times;
     /// for a window with a shot, its deviation from the shot (`output.ldj_samples` / windows

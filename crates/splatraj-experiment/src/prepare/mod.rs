@@ -4,10 +4,12 @@
 //! views that show each target ([`views`]) give the starts ([`starts`]), and where the
 //! windows pan or cut ([`transitions`]); the optimisation may
 //! render a coarse copy of a large scene ([`optimised_scene`]); and the memory and time of the
-//! work are planned against the limits ([`memory_plans`]). [`experiment::Experiment::prepare`]
+//! work are planned against the limits ([`memory_plans`]); what the clearance cost and the
+//! motion limits read is in [`clearance`]. [`experiment::Experiment::prepare`]
 //! runs these in order, and its [`experiment::Experiment`] is what every later stage shares
 //! (what several stages ask for is judged once, in a [`memo::Memo`]).
 
+pub mod clearance;
 pub mod experiment;
 pub mod grounding;
 pub mod lifted;
