@@ -46,6 +46,23 @@ fn windows(scene: &Scene, names: &[&str]) -> Vec<WindowTarget> {
         .collect()
 }
 
+/// Each window's start pose (its object seen from the scene's side, restart `restart`).
+fn start_poses(windows: &[WindowTarget], restart: usize) -> Vec<Pose> {
+    let objects: Vec<([f64; 3], f64)> = windows
+        .iter()
+        .map(|w| (w.context.object_centre, w.context.prior_radius))
+        .collect();
+    object_start_poses(
+        &objects,
+        [0.0, 0.0, 0.5],
+        DEMO_UP.map(f64::from),
+        ObjectView::default(),
+        restart,
+        1,
+    )
+    .unwrap()
+}
+
 #[test]
 fn a_step_reads_once_and_the_scene_is_uploaded_once() {
     let shared = counted_steps(StepPasses::Shared);
@@ -87,19 +104,7 @@ fn counted_steps(passes: StepPasses) -> Vec<f64> {
     }
     .build()
     .unwrap();
-    let objects: Vec<([f64; 3], f64)> = windows
-        .iter()
-        .map(|w| (w.context.object_centre, w.context.prior_radius))
-        .collect();
-    let per_window = object_start_poses(
-        &objects,
-        [0.0, 0.0, 0.5],
-        DEMO_UP.map(f64::from),
-        ObjectView::default(),
-        0,
-        1,
-    )
-    .unwrap();
+    let per_window = start_poses(&windows, 0);
     let model = TrajectoryModel::Rbf(Rbf::new(windows.len(), 3, None));
     let start = window_start_trajectory(model, &per_window, &device, DType::F32)
         .unwrap()
@@ -263,24 +268,9 @@ fn pose_loops_read_twice_and_once_a_step() {
     let on_device = DeviceScene::new(&scene, &device, DType::F32);
     let costs = CostsConfig::default().build().unwrap();
     let problem = Problem::new(&on_device, &windows, &costs, intrinsics());
-    let objects = [(
-        windows[0].context.object_centre,
-        windows[0].context.prior_radius,
-    )];
     // Two starts: the object's view from two restarts.
     let starts: Vec<Pose> = (0..2)
-        .map(|restart| {
-            object_start_poses(
-                &objects,
-                [0.0, 0.0, 0.5],
-                DEMO_UP.map(f64::from),
-                ObjectView::default(),
-                restart,
-                1,
-            )
-            .unwrap()
-            .remove(0)
-        })
+        .map(|restart| start_poses(&windows[..1], restart).remove(0))
         .collect();
     assert_eq!(starts.len(), 2);
 
@@ -329,19 +319,7 @@ fn windows_together_equal_windows_one_at_a_time() {
     }
     .build()
     .unwrap();
-    let objects: Vec<([f64; 3], f64)> = windows
-        .iter()
-        .map(|w| (w.context.object_centre, w.context.prior_radius))
-        .collect();
-    let starts = object_start_poses(
-        &objects,
-        [0.0, 0.0, 0.5],
-        DEMO_UP.map(f64::from),
-        ObjectView::default(),
-        0,
-        1,
-    )
-    .unwrap();
+    let starts = start_poses(&windows, 0);
     // Three samples a window, spread around each window's start; windows of 3, 2 and 3.
     let counts = [3, 2, 3];
     let rows: Vec<Vec<Pose>> = starts
@@ -475,19 +453,7 @@ fn path_costs_together_equal_windows_one_at_a_time() {
     }
     .build()
     .unwrap();
-    let objects: Vec<([f64; 3], f64)> = windows
-        .iter()
-        .map(|w| (w.context.object_centre, w.context.prior_radius))
-        .collect();
-    let starts = object_start_poses(
-        &objects,
-        [0.0, 0.0, 0.5],
-        DEMO_UP.map(f64::from),
-        ObjectView::default(),
-        0,
-        1,
-    )
-    .unwrap();
+    let starts = start_poses(&windows, 0);
     // Per window: samples, path poses, the path's time step.
     let shape = [(3, 7, 0.01), (2, 5, 0.02), (3, 9, 0.0125)];
     let mut rng = 0x5EED_u64;

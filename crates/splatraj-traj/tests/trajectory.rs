@@ -446,13 +446,11 @@ fn record_round_trips_through_json() {
     assert!(err < 1e-14, "{err}");
 }
 
-#[test]
-fn refit_moves_a_trajectory_into_a_model_that_contains_it() {
-    // Every segment of a 100-segment waypoint model lies inside one segment of a 50-segment
-    // model, so the coarse trajectory is in the fine one's span and the refit is exact; same for
-    // a cubic polynomial (N = 4) refitted as N = 6.
-    let device = Device::flex();
-    let cases = [
+/// Pairs of models whose first lies in the second's span: every segment of a 100-segment
+/// waypoint model lies inside one of a 50-segment model's, and a cubic polynomial (N = 4) is
+/// one of degree 5 (N = 6).
+fn nested_models() -> [(TrajectoryModel, TrajectoryModel); 2] {
+    [
         (
             TrajectoryModel::Waypoint(Waypoint { segments: 50 }),
             TrajectoryModel::Waypoint(Waypoint::default()),
@@ -461,9 +459,17 @@ fn refit_moves_a_trajectory_into_a_model_that_contains_it() {
             TrajectoryModel::Polynomial(Polynomial { terms: 4 }),
             TrajectoryModel::Polynomial(Polynomial::default()),
         ),
-    ];
+    ]
+}
+
+#[test]
+fn refit_moves_a_trajectory_into_a_model_that_contains_it() {
+    // Every segment of a 100-segment waypoint model lies inside one segment of a 50-segment
+    // model, so the coarse trajectory is in the fine one's span and the refit is exact; same for
+    // a cubic polynomial (N = 4) refitted as N = 6.
+    let device = Device::flex();
     let times = odd_times(200);
-    for (coarse, fine) in cases {
+    for (coarse, fine) in nested_models() {
         let source = Trajectory::from_weights(
             coarse.clone(),
             &weights(coarse.count()),
@@ -499,18 +505,8 @@ fn refit_carries_the_zoom_into_a_model_that_contains_it() {
     // As the poses above: the coarse model's u(t) = Ψ(t)·w_s lies in the fine model's span, so
     // the refitted zoom is the source's up to rounding, at times the fit never saw.
     let range = ZoomRange { min: 0.4, max: 3.0 };
-    let cases = [
-        (
-            TrajectoryModel::Waypoint(Waypoint { segments: 50 }),
-            TrajectoryModel::Waypoint(Waypoint::default()),
-        ),
-        (
-            TrajectoryModel::Polynomial(Polynomial { terms: 4 }),
-            TrajectoryModel::Polynomial(Polynomial::default()),
-        ),
-    ];
     let times = odd_times(200);
-    for (coarse, fine) in cases {
+    for (coarse, fine) in nested_models() {
         let lens = LensPath {
             range,
             weights: weights(coarse.count()).iter().map(|w| 0.7 * w[0]).collect(),
