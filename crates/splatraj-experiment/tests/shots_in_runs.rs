@@ -177,3 +177,72 @@ fn the_demo_rooms_planned_start_keeps_clearer_than_the_straight_one() {
         "the planned start comes {planned} from the geometry"
     );
 }
+
+/// The demo room with one window on the plant whose `[[queries]]` table ends with `extra`.
+fn plant_holding(extra: &str) -> anyhow::Result<Config> {
+    let text = format!(
+        r#"
+name = "hold"
+[scene]
+demo = {{ gaussians = 20000, seed = 7 }}
+[[queries]]
+text = "red mug"
+[[queries]]
+text = "plant"
+{extra}
+[camera]
+width = 32
+height = 24
+[output]
+seconds = 9.0
+"#
+    );
+    Config::from_toml(&text, Path::new("."), &Extensions::default())
+}
+
+#[test]
+fn a_hold_names_a_shot_preset_that_breathes() {
+    // Issue 37: `hold = "still" | "orbit" | "push"`, holds a viewer can follow: a slow orbit
+    // of a few degrees a second, a slow push-in, or one framing. Each window here is 4.5 s.
+    let window_seconds = 4.5;
+    let shot_of = |hold: &str| {
+        let config = plant_holding(&format!("hold = \"{hold}\"")).unwrap();
+        let experiment = Experiment::prepare(&config).unwrap();
+        let shots = experiment.shot_paths().unwrap();
+        assert!(shots[0].is_none(), "the mug's window holds still");
+        shots[1]
+    };
+    assert_eq!(shot_of("still"), None);
+    let orbit = shot_of("orbit").expect("an orbit");
+    assert_eq!(orbit.kind, "orbit");
+    let degrees_per_second = orbit.turn.abs().to_degrees() / window_seconds;
+    assert!(
+        degrees_per_second > 1.0 && degrees_per_second <= 10.0,
+        "a slow orbit: {degrees_per_second}°/s"
+    );
+    assert_eq!(orbit.radius.0, orbit.radius.1, "it keeps its distance");
+    let push = shot_of("push").expect("a push-in");
+    assert_eq!(push.kind, "dolly");
+    assert!(
+        push.radius.0 > push.radius.1 && push.radius.1 > 0.0,
+        "it moves in: {:?}",
+        push.radius
+    );
+    assert_eq!(push.turn, 0.0, "along one view line");
+
+    // Both say what the window does: refused, naming the keys.
+    let both = format!(
+        "{:#}",
+        plant_holding("hold = \"orbit\"\nshot = { kind = \"dolly\" }").unwrap_err()
+    );
+    assert!(
+        both.contains("queries.1.hold") && both.contains("queries.1.shot"),
+        "{both}"
+    );
+    // An unknown hold names the key and the choices.
+    let unknown = format!("{:#}", plant_holding("hold = \"spin\"").unwrap_err());
+    assert!(
+        unknown.contains("hold") && unknown.contains("orbit") && unknown.contains("push"),
+        "{unknown}"
+    );
+}

@@ -87,6 +87,47 @@ impl Direction {
     }
 }
 
+/// Angle `hold = "orbit"` sweeps over its window, degrees: 15° over a 3 s window is 5°/s, a
+/// slow orbit well inside the pacing limits (the orbit's default 90° is 30°/s).
+pub const HOLD_ORBIT_SWEEP: f64 = 15.0;
+
+/// What the camera does while it holds on a part (`[[queries]] hold`): the short name of a
+/// shot preset, for the common case of a hold that breathes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Hold {
+    /// No shot: the image costs hold one framing.
+    #[default]
+    Still,
+    /// A slow orbit: `shot = { kind = "orbit", sweep = 15 }` ([`HOLD_ORBIT_SWEEP`]).
+    Orbit,
+    /// A slow push-in: `shot = { kind = "dolly" }`, from 1.5 to 1 working distance.
+    Push,
+}
+
+impl Hold {
+    /// Its name in the config (`still`, `orbit`, `push`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Hold::Still => "still",
+            Hold::Orbit => "orbit",
+            Hold::Push => "push",
+        }
+    }
+
+    /// The shot it stands for (None for `still`).
+    pub fn shot(self) -> Option<ShotSpec> {
+        match self {
+            Hold::Still => None,
+            Hold::Orbit => Some(ShotSpec::Orbit(OrbitSpec {
+                sweep: HOLD_ORBIT_SWEEP,
+                ..OrbitSpec::default()
+            })),
+            Hold::Push => Some(ShotSpec::Dolly(DollySpec::default())),
+        }
+    }
+}
+
 /// A shot as the config gives it (`[[queries]] shot = { kind = "…", … }`); distances in
 /// scene units, angles in degrees.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
-use splatraj_traj::shots::ShotSpec;
+use splatraj_traj::shots::{Hold, ShotSpec};
 
 /// `[[queries]]`: one thing to look at.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -20,4 +20,15 @@ pub struct QueryConfig {
     /// A shot preset for this window (orbit, dolly; trajectory runs): its start and its cost.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub shot: Option<ShotSpec>,
+    /// What the camera does while it holds on the part (`still`, `orbit`, `push`): a shot
+    /// preset by its short name ([`Hold::shot`]); not together with `shot`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hold: Option<Hold>,
+}
+
+impl QueryConfig {
+    /// The window's shot: `shot`, or the preset `hold` names (validation refuses both).
+    pub fn window_shot(&self) -> Option<ShotSpec> {
+        self.shot.clone().or_else(|| self.hold.and_then(Hold::shot))
+    }
 }

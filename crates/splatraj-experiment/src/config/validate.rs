@@ -65,6 +65,17 @@ impl Config {
                     format!("= {r} must be in (0, 1]"),
                 );
             }
+            if let (Some(shot), Some(hold)) = (&q.shot, q.hold) {
+                return bad(
+                    &format!("queries.{i}.hold"),
+                    format!(
+                        "= \"{}\" and `queries.{i}.shot` (kind \"{}\") both say what the \
+                         window does: `hold` is a shot preset's short name; keep one",
+                        hold.name(),
+                        shot.kind()
+                    ),
+                );
+            }
             if let Some(shot) = &q.shot
                 && let Err(e) = shot.validate()
             {

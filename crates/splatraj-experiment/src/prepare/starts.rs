@@ -224,7 +224,7 @@ impl Experiment {
             .zip(&self.windows)
             .enumerate()
             .map(|(i, (query, window))| {
-                let Some(spec) = &query.shot else {
+                let Some(spec) = query.window_shot() else {
                     return Ok(None);
                 };
                 let frame = ShotFrame {
