@@ -2,16 +2,14 @@
 //! the Ctrl-C flag. (Pipeline work lives in the library crates; commands do not import each
 //! other.)
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
-use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use splatraj::experiment::optimise::observer::{Flow, Observer, Progress};
-use splatraj_scene::formats::LoadedScene;
-use splatraj_scene::{InvalidPolicy, ReadOptions, read_scene};
+use splatraj_scene::{InvalidPolicy, ReadOptions};
 
 /// Options shared by the subcommands that read a scene.
 #[derive(Debug, Args)]
@@ -36,19 +34,6 @@ impl ReadArgs {
             },
             labels: self.labels.clone(),
         }
-    }
-
-    /// Reads `path` with these options, warning about dropped Gaussians.
-    pub fn load(&self, path: &Path) -> Result<LoadedScene> {
-        let loaded = read_scene(path, &self.options())?;
-        if loaded.dropped > 0 {
-            eprintln!(
-                "warning: {}: dropped {} invalid Gaussians",
-                path.display(),
-                loaded.dropped
-            );
-        }
-        Ok(loaded)
     }
 }
 

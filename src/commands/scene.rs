@@ -135,8 +135,8 @@ pub struct LiftMasksArgs {
 pub fn run(command: SceneCommand) -> Result<()> {
     match command {
         SceneCommand::Info { file, read, json } => {
-            let loaded = read.load(&file)?;
-            let info = SceneInfo::new(&file, &loaded);
+            let info = SceneInfo::read(&file, &read.options())?;
+            warn_dropped(&file, info.dropped_invalid);
             if json {
                 println!("{}", serde_json::to_string_pretty(&info)?);
             } else {

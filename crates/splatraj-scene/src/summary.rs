@@ -70,6 +70,11 @@ pub struct FeatureInfo {
 }
 
 impl SceneInfo {
+    /// Reads the scene at `path` and summarises it (`splatraj scene info`'s one call).
+    pub fn read(path: &Path, options: &crate::ReadOptions) -> crate::Result<Self> {
+        Ok(Self::new(path, &crate::read_scene(path, options)?))
+    }
+
     /// The summary of `loaded`, read from `path`.
     pub fn new(path: &Path, loaded: &LoadedScene) -> Self {
         let scene: &Scene = &loaded.scene;
