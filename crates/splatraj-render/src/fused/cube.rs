@@ -30,7 +30,7 @@ use burn_cubecl::tensor::CubeTensor;
 use burn_cubecl::{CubeDevice, cubecl};
 
 use super::plan::CompositePlan;
-use super::{CompositeKernels, FusedComposite, HostSaved, SplatPrimitives, host_backward};
+use super::{CompositeKernels, HostSaved, SplatPrimitives, host_backward};
 use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
 use crate::tiles::TILE_PIXELS;
 
@@ -617,15 +617,6 @@ impl CompositeKernels for CubeBackend {
             CubeSaved::Host(saved) => host_backward::<Self>(saved, v_image),
             CubeSaved::Device(saved) => device_backward(*saved, v_image),
         }
-    }
-}
-
-impl FusedComposite for CubeBackend {
-    fn fused_composite(
-        inputs: SplatPrimitives<Self>,
-        plan: Arc<CompositePlan>,
-    ) -> FloatTensor<Self> {
-        Self::composite_forward(inputs, plan).0
     }
 }
 

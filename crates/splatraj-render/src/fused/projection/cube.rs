@@ -26,8 +26,8 @@ use burn_cubecl::tensor::CubeTensor;
 use burn_cubecl::{CubeDevice, cubecl};
 
 use super::{
-    FusedProjection, HostSaved, HostView, ProjectionKernels, ProjectionPlan, SPLAT_COLUMNS,
-    host_backward, host_forward,
+    HostSaved, HostView, ProjectionKernels, ProjectionPlan, SPLAT_COLUMNS, host_backward,
+    host_forward,
 };
 use crate::camera::SERIES_BELOW_THETA_SQ;
 use crate::fused::cube::int_tensor;
@@ -716,17 +716,5 @@ impl ProjectionKernels for CubeBackend {
             CubeSaved::Host(saved) => host_backward::<Self>(*saved, v_rows),
             CubeSaved::Device(saved) => device_backward(*saved, v_rows),
         }
-    }
-}
-
-impl FusedProjection for CubeBackend {
-    fn fused_project(
-        poses: FloatTensor<Self>,
-        zoom: FloatTensor<Self>,
-        components: FloatTensor<Self>,
-        opacities: FloatTensor<Self>,
-        plan: Arc<ProjectionPlan>,
-    ) -> FloatTensor<Self> {
-        Self::projection_forward(poses, zoom, components, opacities, plan).0
     }
 }
