@@ -46,6 +46,17 @@ fn windows(scene: &Scene, names: &[&str]) -> Vec<WindowTarget> {
         .collect()
 }
 
+/// The clearance cost's occupancy of `scene` at the default settings.
+fn occupancy(scene: &Scene) -> Occupancy {
+    Occupancy::new(
+        scene,
+        OccupancySpec {
+            sigma: DEFAULT_CLEARANCE_SIGMA,
+            min_opacity: DEFAULT_MIN_OPACITY,
+        },
+    )
+}
+
 /// Each window's start pose (its object seen from the scene's side, restart `restart`).
 fn start_poses(windows: &[WindowTarget], restart: usize) -> Vec<Pose> {
     let objects: Vec<([f64; 3], f64)> = windows
@@ -85,13 +96,7 @@ fn counted_steps(passes: StepPasses) -> Vec<f64> {
     let windows = windows(&scene, &["blue box", "red mug"]);
     let device = Device::flex().autodiff();
     let on_device = DeviceScene::new(&scene, &device, DType::F32);
-    let occupancy = Occupancy::new(
-        &scene,
-        OccupancySpec {
-            sigma: DEFAULT_CLEARANCE_SIGMA,
-            min_opacity: DEFAULT_MIN_OPACITY,
-        },
-    );
+    let occupancy = occupancy(&scene);
     // Every kind of cost: image costs, the object alone, a path cost with a host lookup, motion.
     let costs = CostsConfig {
         clearance: Some(ClearanceCost {
@@ -428,13 +433,7 @@ fn path_costs_together_equal_windows_one_at_a_time() {
     let windows = windows(&scene, &["blue box", "red mug", "plant"]);
     let device = Device::flex().autodiff();
     let on_device = DeviceScene::new(&scene, &device, DType::F64);
-    let occupancy = Occupancy::new(
-        &scene,
-        OccupancySpec {
-            sigma: DEFAULT_CLEARANCE_SIGMA,
-            min_opacity: DEFAULT_MIN_OPACITY,
-        },
-    );
+    let occupancy = occupancy(&scene);
     // Limits low enough that every term charges something.
     let costs = CostsConfig {
         clearance: Some(ClearanceCost {
