@@ -23,15 +23,20 @@ pub struct ReadArgs {
     drop_invalid: bool,
 }
 
+/// What `--drop-invalid` asks for: drop invalid Gaussians with a warning, or stop with an error.
+pub fn invalid_policy(drop_invalid: bool) -> InvalidPolicy {
+    if drop_invalid {
+        InvalidPolicy::Drop
+    } else {
+        InvalidPolicy::Reject
+    }
+}
+
 impl ReadArgs {
     /// The scene reader's options these flags ask for.
     pub fn options(&self) -> ReadOptions {
         ReadOptions {
-            invalid: if self.drop_invalid {
-                InvalidPolicy::Drop
-            } else {
-                InvalidPolicy::Reject
-            },
+            invalid: invalid_policy(self.drop_invalid),
             labels: self.labels.clone(),
         }
     }

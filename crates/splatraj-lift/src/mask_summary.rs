@@ -6,6 +6,11 @@ use std::collections::BTreeMap;
 use crate::mask_files::{MaskCoding, MaskLift};
 
 impl MaskLift {
+    /// How many Gaussians the lift gave a label (id ≠ 0).
+    pub fn labelled(&self) -> usize {
+        self.labels.ids.iter().filter(|&&id| id != 0).count()
+    }
+
     /// What `scene lift-masks` prints: cameras used, the labels with their Gaussians, the unseen
     /// share.
     pub fn summary_text(&self) -> String {
