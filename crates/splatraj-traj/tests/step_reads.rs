@@ -57,6 +57,35 @@ fn occupancy(scene: &Scene) -> Occupancy {
     )
 }
 
+/// The reference a shared step must equal: each window evaluated on its own (`rows(i)`: its
+/// samples' poses and its path), the loss the mean over windows of each window's mean total.
+/// Returns the loss, every window's term means (window after window) and d loss/d `poses`.
+fn one_window_at_a_time(
+    problem: &Problem,
+    poses: &Tensor<2>,
+    hosts: &[HostPoses],
+    rows: impl Fn(usize) -> (Tensor<2>, Option<(Tensor<2>, f64)>),
+) -> (f64, Vec<f64>, Vec<f64>) {
+    let mut loss: Option<Tensor<1>> = None;
+    let mut means = Vec::new();
+    for (i, host) in hosts.iter().enumerate() {
+        let (own, path) = rows(i);
+        let terms = problem
+            .evaluate_along(i, own, None, path, Some(host), 0, None)
+            .unwrap()
+            .terms;
+        means.extend(terms.means().into_iter().map(|(_, _, m)| m));
+        let mean = terms.total.mean().div_scalar(hosts.len() as f64);
+        loss = Some(match loss {
+            Some(l) => l + mean,
+            None => mean,
+        });
+    }
+    let loss = loss.expect("at least one window");
+    let gradient = to_host(poses.grad(&loss.clone().backward()).unwrap()).unwrap();
+    (to_host(loss).unwrap()[0], means, gradient)
+}
+
 /// Each window's start pose (its object seen from the scene's side, restart `restart`).
 fn start_poses(windows: &[WindowTarget], restart: usize) -> Vec<Pose> {
     let objects: Vec<([f64; 3], f64)> = windows
@@ -353,26 +382,16 @@ fn windows_together_equal_windows_one_at_a_time() {
     // One window at a time: the mean over windows of each window's mean total.
     let poses = on_device.poses(&all).require_grad();
     let problem = Problem::new(&on_device, &windows, &costs, intrinsics());
-    let mut offset = 0;
-    let mut loss = None;
-    let mut means = Vec::new();
-    for (i, count) in counts.iter().enumerate() {
-        let own = poses.clone().narrow(0, offset, *count);
-        offset += count;
-        let terms = problem
-            .evaluate_along(i, own, None, None, Some(&hosts[i]), 0, None)
-            .unwrap()
-            .terms;
-        means.extend(terms.means().into_iter().map(|(_, _, m)| m));
-        let mean = terms.total.mean().div_scalar(windows.len() as f64);
-        loss = Some(match loss {
-            Some(l) => l + mean,
-            None => mean,
-        });
-    }
-    let loss = loss.unwrap();
-    let gradient = to_host(poses.grad(&loss.clone().backward()).unwrap()).unwrap();
-    let loss = to_host(loss).unwrap()[0];
+    let firsts: Vec<usize> = counts
+        .iter()
+        .scan(0, |at, &c| {
+            *at += c;
+            Some(*at - c)
+        })
+        .collect();
+    let (loss, means, gradient) = one_window_at_a_time(&problem, &poses, &hosts, |i| {
+        (poses.clone().narrow(0, firsts[i], counts[i]), None)
+    });
     assert!(gradient.iter().any(|g| g.abs() > 1e-6));
 
     for passes in [StepPasses::Shared, StepPasses::PerWindow] {
@@ -503,25 +522,13 @@ fn path_costs_together_equal_windows_one_at_a_time() {
 
     // One window at a time: the mean over windows of each window's mean total.
     let poses = on_device.poses(&rows).require_grad();
-    let mut loss = None;
-    let mut means = Vec::new();
-    for (i, (&(samples, path, time_step), &(s0, p0))) in shape.iter().zip(&firsts).enumerate() {
-        let own = poses.clone().narrow(0, s0, samples);
-        let path = Some((poses.clone().narrow(0, p0, path), time_step));
-        let terms = problem
-            .evaluate_along(i, own, None, path, Some(&hosts[i]), 0, None)
-            .unwrap()
-            .terms;
-        means.extend(terms.means().into_iter().map(|(_, _, m)| m));
-        let mean = terms.total.mean().div_scalar(windows.len() as f64);
-        loss = Some(match loss {
-            Some(l) => l + mean,
-            None => mean,
-        });
-    }
-    let loss = loss.unwrap();
-    let gradient = to_host(poses.grad(&loss.clone().backward()).unwrap()).unwrap();
-    let loss = to_host(loss).unwrap()[0];
+    let (loss, means, gradient) = one_window_at_a_time(&problem, &poses, &hosts, |i| {
+        let ((samples, path, time_step), (s0, p0)) = (shape[i], firsts[i]);
+        (
+            poses.clone().narrow(0, s0, samples),
+            Some((poses.clone().narrow(0, p0, path), time_step)),
+        )
+    });
     let names = costs.names();
     let term = |name: &str, window: usize| {
         means[window * names.len() + names.iter().position(|n| *n == name).unwrap()]
