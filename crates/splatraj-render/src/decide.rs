@@ -10,6 +10,7 @@
 use rayon::prelude::*;
 use splatraj_scene::Scene;
 
+use crate::alpha_reach::AlphaReach;
 use crate::camera::{Intrinsics, Pose, zoomed_intrinsics};
 use glam::DVec3;
 
@@ -17,6 +18,9 @@ use crate::focus::{FocusCache, ObjectFocus, PoseFocus, Surroundings};
 
 use crate::project::{FOV_CLAMP, LOW_PASS, cull_and_radius, world_covariance};
 use crate::tile_grid::{TILE_SIZE, TileGrid};
+
+/// A kept Gaussian's pixel radius and screen covariance (xx, xy, yy, low-pass included).
+type ScreenSize = (f32, [f64; 3]);
 
 /// Pose-independent geometry on the host, for the decisions (computed once per scene).
 ///
@@ -191,6 +195,8 @@ pub struct Decided {
     pub depth: f32,
     /// Pixel radius ceil(3·sqrt(λ_max(Σ_2D))), positive.
     pub radius: f32,
+    /// Where its α can reach 1/255 (the binning keeps only the tiles of the square it meets).
+    pub reach: AlphaReach,
 }
 
 /// The Gaussians each pose keeps, `[B][kept]` in no particular order.
@@ -389,12 +395,16 @@ impl Camera {
     /// The decision on the Gaussian at sorted position `k`, if this pose keeps it
     /// ([`Camera::decide`]).
     fn kept(&self, geometry: &HostGeometry, k: u32, reach: Reach) -> Option<Decided> {
-        let (uv, z, radius) = self.decide(geometry, k as usize, reach);
+        let (uv, z, screen) = self.decide(geometry, k as usize, reach);
+        let (radius, covariance) = screen?;
+        let gaussian = geometry.scene_from_sorted[k as usize];
+        let opacity = f64::from(geometry.opacities[gaussian as usize]);
         Some(Decided {
-            gaussian: geometry.scene_from_sorted[k as usize],
+            gaussian,
             means_2d: uv.map(|c| c as f32),
             depth: z as f32,
-            radius: radius?,
+            radius,
+            reach: AlphaReach::new(covariance, opacity),
         })
     }
 
@@ -461,16 +471,17 @@ impl Camera {
             || v_lo - bound > bounds[3])
     }
 
-    /// Pixel position, depth and radius (`None` if culled) of the Gaussian at sorted position
-    /// `k`. A Gaussian whose bounded square misses `reach.bounds` ([x0, y0, x1, y1], pixels),
-    /// or whose stored depth is beyond `reach.max_depth`, gets `None` without its covariance
-    /// being projected: it would be in no tile list there.
+    /// Pixel position, depth, and radius with screen covariance (xx, xy, yy; `None` if culled)
+    /// of the Gaussian at sorted position `k`. A Gaussian whose bounded square misses
+    /// `reach.bounds` ([x0, y0, x1, y1], pixels), or whose stored depth is beyond
+    /// `reach.max_depth`, gets `None` without its covariance being projected: it would be in
+    /// no tile list there.
     fn decide(
         &self,
         geometry: &HostGeometry,
         k: usize,
         reach: Reach,
-    ) -> ([f64; 2], f64, Option<f32>) {
+    ) -> ([f64; 2], f64, Option<ScreenSize>) {
         let bounds = reach.bounds;
         let Intrinsics { fx, fy, cx, cy, .. } = self.intrinsics;
         let [r0, r1, r2] = self.r;
@@ -510,6 +521,6 @@ impl Camera {
         let b = t1.dot(s_t2);
         let c = t2.dot(s_t2) + LOW_PASS;
         let (ok, radius) = cull_and_radius(z, a, b, c, self.near);
-        ([u, v], z, ok.then_some(radius))
+        ([u, v], z, ok.then_some((radius, [a, b, c])))
     }
 }

@@ -10,6 +10,7 @@
 
 #![warn(missing_docs)]
 
+pub mod alpha_reach;
 pub mod backend;
 pub mod bitset;
 pub mod camera;

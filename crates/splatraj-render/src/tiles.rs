@@ -63,7 +63,8 @@ fn bin_one_pose(
     grid: &TileGrid,
     selection: TileSelection,
 ) -> Vec<TileWork> {
-    // Tile rectangle [x0, x1) × [y0, y1) of every kept Gaussian, computed once. `[kept]`
+    // Tile rectangle [x0, x1) × [y0, y1) of every kept Gaussian's square, computed once.
+    // `[kept]`
     let rects: Vec<[u16; 4]> = kept
         .par_iter()
         .map(|decided| {
@@ -72,19 +73,16 @@ fn bin_one_pose(
             [xs.start, xs.end, ys.start, ys.end].map(|t| t as u16)
         })
         .collect();
-    let tiles_of = |k: usize| {
-        let [x0, x1, y0, y1] = rects[k].map(usize::from);
-        (y0..y1).flat_map(move |ty| (x0..x1).map(move |tx| ty * grid.tiles_x + tx))
-    };
     // A mask pass needs only the tiles its object touches.
     let wanted: Vec<bool> = match selection {
         TileSelection::All => vec![true; grid.len()],
         TileSelection::Object(in_object) => {
             let mut wanted = vec![false; grid.len()];
             for k in (0..kept.len()).filter(|&k| in_object.contains(kept[k].gaussian as usize)) {
-                for tile in tiles_of(k) {
+                tiles_until(&kept[k], rects[k], grid.tiles_x, |tile| {
                     wanted[tile] = true;
-                }
+                    false
+                });
             }
             wanted
         }
@@ -94,7 +92,7 @@ fn bin_one_pose(
     // u64, unique within a pose; the position in `kept` rides along to find the rectangle.
     let mut order: Vec<(u64, u32)> = (0..kept.len())
         .into_par_iter()
-        .filter(|&k| tiles_of(k).any(|tile| wanted[tile]))
+        .filter(|&k| tiles_until(&kept[k], rects[k], grid.tiles_x, |tile| wanted[tile]))
         .map(|k| {
             let decided = &kept[k];
             let key = (u64::from(ordered_bits(decided.depth)) << 32) | u64::from(decided.gaussian);
@@ -105,9 +103,13 @@ fn bin_one_pose(
     let mut lists: Vec<Vec<u32>> = vec![Vec::new(); grid.len()];
     for (key, k) in order {
         let g = key as u32; // the low 32 bits
-        for tile in tiles_of(k as usize).filter(|&tile| wanted[tile]) {
-            lists[tile].push(g);
-        }
+        let k = k as usize;
+        tiles_until(&kept[k], rects[k], grid.tiles_x, |tile| {
+            if wanted[tile] {
+                lists[tile].push(g);
+            }
+            false
+        });
     }
     lists
         .into_iter()
@@ -126,6 +128,22 @@ fn bin_one_pose(
             })
         })
         .collect()
+}
+
+/// Visits the tiles of a kept Gaussian's square `rect` ([x0, x1, y0, y1] in tiles) where its
+/// α can reach 1/255 (`alpha_reach`: the same images and gradients from far shorter lists in
+/// close-ups), row by row, until `visit` returns true; whether it did.
+fn tiles_until(
+    decided: &Decided,
+    rect: [u16; 4],
+    tiles_x: usize,
+    mut visit: impl FnMut(usize) -> bool,
+) -> bool {
+    let [x0, x1, y0, y1] = rect.map(usize::from);
+    let mean = decided.means_2d.map(f64::from);
+    (y0..y1)
+        .zip(decided.reach.row_columns(mean, y0..y1, x0..x1))
+        .any(|(ty, columns)| columns.map(|tx| ty * tiles_x + tx).any(&mut visit))
 }
 
 /// The bits of `x` as a u32 that orders like the float itself (negative values included).

@@ -140,16 +140,18 @@ fn lanes_match_scalar(channels: usize, stop_transmittance: f64) {
 
     // The rules' decisions are the same: every pixel's last contributor, exactly.
     assert_eq!(
-        lanes.1.last, scalar.1.last,
+        lanes.1.last(),
+        scalar.1.last(),
         "last contributors, lanes vs scalar"
     );
     assert_eq!(
-        lanes.1.last, state64.last,
+        lanes.1.last(),
+        state64.last(),
         "last contributors, lanes vs f64"
     );
     // The case reaches the rules it is meant to: early stops beside open pixels in one half
     // row, and an untouched tile.
-    let stopped_beside_open = lanes.1.final_t.chunks(8).any(|half_row| {
+    let stopped_beside_open = lanes.1.final_t().chunks(8).any(|half_row| {
         half_row
             .iter()
             .any(|&t| t < 2.0 * stop_transmittance as f32)
@@ -160,13 +162,13 @@ fn lanes_match_scalar(channels: usize, stop_transmittance: f64) {
         "no half row mixes stopped and open pixels"
     );
     assert!(
-        lanes.1.last[..256].iter().all(|&n| n == 0),
+        lanes.1.last()[..256].iter().all(|&n| n == 0),
         "tile 0 is empty"
     );
 
     // The scalar f32 kernels' bits: every channel and alpha of every pixel, T, every gradient.
     assert_bits("image", &lanes.0, &scalar.0);
-    assert_bits("final T", &lanes.1.final_t, &scalar.1.final_t);
+    assert_bits("final T", &lanes.1.final_t(), &scalar.1.final_t());
     let (g, s) = (&lanes.2, &scalar.2);
     assert_bits("v_means", &g.means, &s.means);
     assert_bits("v_conics", &g.conics, &s.conics);
@@ -231,7 +233,8 @@ fn lanes_give_the_same_bits_on_any_thread_count() {
         let other = run(threads);
         assert_eq!(one.0, other.0, "images with {threads} threads");
         assert_eq!(
-            one.1.final_t, other.1.final_t,
+            one.1.final_t(),
+            other.1.final_t(),
             "final T with {threads} threads"
         );
         let (a, b) = (&one.2, &other.2);

@@ -15,6 +15,7 @@ use std::path::Path;
 use anyhow::Result;
 use serde::Serialize;
 use splatraj_render::counters::{self, Counts};
+use splatraj_render::stages;
 use splatraj_traj::optimise::{Flow, StepPasses, TrajectoryStep, optimise_trajectory};
 
 use crate::config::Config;
@@ -37,6 +38,9 @@ pub struct StepRow {
     /// Launches per step by kernel name, most first (empty on the CPU backends): what is left
     /// to merge.
     pub launch_names: Vec<(String, u64)>,
+    /// Mean ms per step in each render stage ([`splatraj_render::stages`]), pipeline order:
+    /// where a step's time goes (on a GPU the stages' times are indicative only).
+    pub stages_ms: Vec<(&'static str, f64)>,
 }
 
 /// Runs `steps` optimisation steps of the trajectory of the config at `path` (with `set`'s
@@ -63,6 +67,7 @@ pub fn run_step_bench(path: &Path, set: &[String], steps: usize) -> Result<Vec<S
         options.iterations = steps.max(1);
         counters::tally_launch_names(true);
         let before = counters::snapshot();
+        stages::reset();
         let mut times: Vec<f64> = Vec::with_capacity(options.iterations);
         let result =
             optimise_trajectory(&problem, start, &options, 0, &mut |s: &TrajectoryStep| {
@@ -78,6 +83,13 @@ pub fn run_step_bench(path: &Path, set: &[String], steps: usize) -> Result<Vec<S
             .map(|(name, n)| (name, n / options.iterations as u64))
             .collect();
         counters::tally_launch_names(false);
+        let stages_ms = stages::totals()
+            .iter()
+            .map(|(stage, time)| {
+                let per_step = time.as_secs_f64() * 1e3 / options.iterations as f64;
+                (stage.name(), per_step)
+            })
+            .collect();
         times.sort_by(f64::total_cmp);
         rows.push(StepRow {
             passes: name,
@@ -86,6 +98,7 @@ pub fn run_step_bench(path: &Path, set: &[String], steps: usize) -> Result<Vec<S
             steps: options.iterations,
             best_total: result.best_total,
             launch_names,
+            stages_ms,
         });
     }
     Ok(rows)
@@ -110,6 +123,19 @@ pub fn step_table(rows: &[StepRow]) -> String {
             c.bytes_up as f64 / 1024.0,
             c.renders,
             r.best_total
+        );
+    }
+    for r in rows {
+        let stages: Vec<String> = r
+            .stages_ms
+            .iter()
+            .map(|(name, ms)| format!("{name} {ms:.1}"))
+            .collect();
+        let _ = writeln!(
+            out,
+            "{} ms a step by stage: {}",
+            r.passes,
+            stages.join(", ")
         );
     }
     for r in rows.iter().filter(|r| !r.launch_names.is_empty()) {

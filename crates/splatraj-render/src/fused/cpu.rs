@@ -87,12 +87,47 @@ pub struct HostSplats<E> {
 /// What the forward pass hands to the backward pass.
 #[derive(Debug, Clone)]
 pub struct ForwardState<E> {
-    /// T after the last contributing Gaussian, per work tile and pixel. `[work, 256]`
-    pub final_t: Vec<E>,
-    /// Number of list entries up to and including the last contributor. `[work, 256]`
-    pub last: Vec<u32>,
+    /// Each work tile's pixels, in plan order. `[work]`: kept as the tiles made them, since
+    /// joining them into one buffer was a serial copy of the whole state per pass (at 1280×720
+    /// and 30 poses, 220 MB on one thread while the other cores waited).
+    tiles: Vec<TileState<E>>,
     /// Each row's footprint, for the backward to reuse. `[R]`
     pub footprints: Vec<Footprint<E>>,
+}
+
+/// One work tile's pixels after its forward.
+#[derive(Debug, Clone)]
+struct TileState<E> {
+    /// T after the last contributing Gaussian. `[256]`
+    final_t: Vec<E>,
+    /// Number of list entries up to and including the last contributor. `[256]`
+    last: Vec<u32>,
+}
+
+impl<E: Copy> ForwardState<E> {
+    /// Work tile `w`'s T after its last contributor and its count of list entries up to that
+    /// contributor, per pixel. `[256]` each
+    fn tile(&self, w: usize) -> (&[E], &[u32]) {
+        let tile = &self.tiles[w];
+        (&tile.final_t, &tile.last)
+    }
+
+    /// T after the last contributing Gaussian, per work tile and pixel (a copy). `[work, 256]`
+    pub fn final_t(&self) -> Vec<E> {
+        self.tiles
+            .iter()
+            .flat_map(|t| t.final_t.iter().copied())
+            .collect()
+    }
+
+    /// Number of list entries up to and including the last contributor, per work tile and
+    /// pixel (a copy). `[work, 256]`
+    pub fn last(&self) -> Vec<u32> {
+        self.tiles
+            .iter()
+            .flat_map(|t| t.last.iter().copied())
+            .collect()
+    }
 }
 
 /// Gradients of the four inputs, shaped like them.
@@ -425,16 +460,14 @@ pub fn forward_with<E: Real>(
                 .collect()
         });
     let image = assemble(plan, splats.channels, &tiles);
-    let mut state = ForwardState {
-        final_t: Vec::with_capacity(tiles.len() * TILE_PIXELS),
-        last: Vec::with_capacity(tiles.len() * TILE_PIXELS),
-        footprints,
-    };
-    for tile in tiles {
-        state.final_t.extend(tile.final_t);
-        state.last.extend(tile.last);
-    }
-    (image, state)
+    let tiles = tiles
+        .into_iter()
+        .map(|tile| TileState {
+            final_t: tile.final_t,
+            last: tile.last,
+        })
+        .collect();
+    (image, ForwardState { tiles, footprints })
 }
 
 /// Every work tile's forward in 8 lanes, where `kernels` asks for them, E is f32 and the
@@ -594,8 +627,7 @@ fn backward_tile<E: Real>(
     let max_alpha = E::of(MAX_ALPHA);
     let half = E::of(0.5);
 
-    let last = &state.last[w * TILE_PIXELS..(w + 1) * TILE_PIXELS];
-    let final_t = &state.final_t[w * TILE_PIXELS..(w + 1) * TILE_PIXELS];
+    let (final_t, last) = state.tile(w);
     let v_planes = tile_output_gradients(plan, channels, v_image, w);
 
     let list = plan.list(w);

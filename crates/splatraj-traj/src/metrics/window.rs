@@ -40,7 +40,7 @@ use splatraj_render::render::{
     Channel, DeviceScene, Pruning, Rasterizer, RenderError, RenderRequest, Zoom, render,
 };
 
-use crate::costs::{IOU_THRESHOLD, MaskMoments, bbox_iou_batch, mask_box, tce_of, tre_of};
+use crate::costs::{IOU_THRESHOLD, MaskMoments, bbox_iou, mask_box, tce_of, tre_of};
 use crate::optimise::sampling::stratified_times;
 use crate::trajectory::Pose;
 
@@ -276,10 +276,15 @@ pub fn window_metrics_zoomed(
     let tces = host(tce_of(&moments));
     let tres = host(tre_of(&moments, object.target_ratio));
     let coverages = host(moments.coverage());
-    let ious = bbox_iou_batch(visible.clone(), alone.clone());
     let [batch, height, width] = visible.dims();
+    // Each mask read back once: at the output resolution they are a quarter of a GB each.
     let pixels = host(visible.reshape([batch * height * width]));
     let alone_pixels = host(alone.reshape([batch * height * width]));
+    let ious: Vec<f64> = pixels
+        .chunks_exact(height * width)
+        .zip(alone_pixels.chunks_exact(height * width))
+        .map(|(seen, alone)| bbox_iou(seen, alone, width, height))
+        .collect();
     let in_frame = |m: &[f64]| mask_box(m, width, height, IOU_THRESHOLD).is_some();
     let shows: Vec<bool> = pixels.chunks_exact(height * width).map(&in_frame).collect();
     let shown = shows.iter().filter(|&&s| s).count();

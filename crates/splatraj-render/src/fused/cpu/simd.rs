@@ -372,8 +372,7 @@ fn backward_tile(
     let half_one = _mm256_set1_ps(0.5);
     let max_alpha = _mm256_set1_ps(MAX_ALPHA as f32);
 
-    let last = &state.last[w * TILE_PIXELS..(w + 1) * TILE_PIXELS];
-    let final_t = &state.final_t[w * TILE_PIXELS..(w + 1) * TILE_PIXELS];
+    let (final_t, last) = state.tile(w);
     let list = plan.list(w);
     let mut slots = vec![0.0f32; list.len() * stride];
     let mut t = final_t.to_vec();
