@@ -280,6 +280,12 @@ impl<'a, E: Real> Gathered<'a, E> {
     }
 }
 
+/// Work tiles per rayon task at most. A tile's cost varies a hundredfold (an empty corner, the
+/// object's middle), and rayon otherwise cuts a loop into about four pieces per thread, so one
+/// thread was often left alone with a heavy piece it could not share: on the first-try guitar
+/// one of two cores idled through a third of the compositing.
+const TILES_PER_TASK: usize = 4;
+
 /// Every row's footprint, in parallel.
 fn footprints<E: Real>(splats: &HostSplats<E>) -> Vec<Footprint<E>> {
     (0..splats.opacities.len())
@@ -456,6 +462,7 @@ pub fn forward_with<E: Real>(
         .unwrap_or_else(|| {
             (0..plan.tiles.len())
                 .into_par_iter()
+                .with_max_len(TILES_PER_TASK)
                 .map(|w| forward_tile(splats, &footprints, plan, w))
                 .collect()
         });
@@ -484,6 +491,7 @@ fn forward_tiles_in_lanes<E: Real>(
     let footprints = cast_ref::<_, Vec<Footprint<f32>>>(footprints)?;
     let tiles: Vec<TileForward<f32>> = (0..plan.tiles.len())
         .into_par_iter()
+        .with_max_len(TILES_PER_TASK)
         .map(|w| lanes.forward_tile(splats, footprints, plan, w))
         .collect();
     cast(tiles)
@@ -699,6 +707,7 @@ fn backward_tiles_in_lanes<E: Real>(
     let channels = splats.channels;
     let slots: Option<Vec<Vec<f32>>> = (0..plan.tiles.len())
         .into_par_iter()
+        .with_max_len(TILES_PER_TASK)
         .map(|w| {
             let v_planes = cast(tile_output_gradients(plan, channels, v_image, w))?;
             Some(lanes.backward_tile(splats, plan, state, v_planes, w))
@@ -744,6 +753,7 @@ pub fn backward_with<E: Real>(
         .unwrap_or_else(|| {
             (0..plan.tiles.len())
                 .into_par_iter()
+                .with_max_len(TILES_PER_TASK)
                 .map(|w| backward_tile(splats, plan, state, v_image, w))
                 .collect()
         });
