@@ -1,4 +1,6 @@
-//! Tile binning on the host: which Gaussians touch which 16×16 tile, front to back.
+//! Tile binning on the host: which Gaussians touch which 16×16 tile, front to back. A Gaussian
+//! goes into the tiles of its 3σ square (the reference renderer's rule) that its α ≥ 1/255
+//! ellipse meets (`alpha_reach`), which changes no pixel.
 //!
 //! This is integer data decided without gradient (docs/conventions.md): the cull decisions, the
 //! tile lists and the depth order. It also applies the exact pruning of mask passes: a tile no
