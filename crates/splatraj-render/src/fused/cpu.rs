@@ -29,6 +29,7 @@ pub use super::real::Real;
 use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
 use crate::tile_grid::{TILE_PIXELS, TILE_SIZE, ceil_small, floor_small};
 
+mod gradient_sums;
 #[cfg(target_arch = "x86_64")]
 mod lanes_exp;
 #[cfg(target_arch = "x86_64")]
@@ -748,7 +749,6 @@ pub fn backward_with<E: Real>(
     kernels: Kernels,
 ) -> HostGradients<E> {
     let channels = splats.channels;
-    let stride = 6 + channels;
     let slots: Vec<Vec<E>> = backward_tiles_in_lanes(splats, plan, state, v_image, kernels)
         .unwrap_or_else(|| {
             (0..plan.tiles.len())
@@ -757,28 +757,5 @@ pub fn backward_with<E: Real>(
                 .map(|w| backward_tile(splats, plan, state, v_image, w))
                 .collect()
         });
-    let rows = splats.opacities.len();
-    let mut v = HostGradients {
-        means: vec![E::ZERO; 2 * rows],
-        conics: vec![E::ZERO; 3 * rows],
-        opacities: vec![E::ZERO; rows],
-        values: vec![E::ZERO; channels * rows],
-    };
-    // Fixed order (work tiles in plan order, list entries front to back): deterministic sums.
-    for (w, tile_slots) in slots.iter().enumerate() {
-        for (j, &row) in plan.list(w).iter().enumerate() {
-            let row = row as usize;
-            let slot = &tile_slots[j * stride..(j + 1) * stride];
-            v.means[2 * row] += slot[0];
-            v.means[2 * row + 1] += slot[1];
-            v.conics[3 * row] += slot[2];
-            v.conics[3 * row + 1] += slot[3];
-            v.conics[3 * row + 2] += slot[4];
-            v.opacities[row] += slot[5];
-            for k in 0..channels {
-                v.values[channels * row + k] += slot[6 + k];
-            }
-        }
-    }
-    v
+    gradient_sums::sum_slots(plan, &slots, splats.opacities.len(), channels)
 }
