@@ -16,7 +16,7 @@
 
 use std::ops::Range;
 
-use crate::rasterize::MIN_ALPHA;
+use crate::composite_rules::MIN_ALPHA;
 use crate::tile_grid::{TILE_SIZE, floor_small};
 
 /// Relative widening of r²: the compositing kernels evaluate the power in f32 from their own

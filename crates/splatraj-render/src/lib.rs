@@ -14,6 +14,7 @@ pub mod alpha_reach;
 pub mod backend;
 pub mod bitset;
 pub mod camera;
+pub mod composite_rules;
 pub mod counters;
 /// The single-camera JSON file (`splatraj render --camera`), from `splatraj-camera`.
 pub use splatraj_camera::camera_file;

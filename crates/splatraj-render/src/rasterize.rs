@@ -17,12 +17,7 @@ use splatraj_config::ConfigError;
 
 use crate::tiles::{TILE_PIXELS, TILE_SIZE, TileGrid, TileWork};
 
-/// Largest alpha a Gaussian can reach (INRIA).
-pub const MAX_ALPHA: f64 = 0.99;
-/// Smallest alpha that counts (INRIA: 1/255).
-pub const MIN_ALPHA: f64 = 1.0 / 255.0;
-/// A pixel stops before T would fall below this.
-pub const MIN_TRANSMITTANCE: f64 = 1e-4;
+pub use crate::composite_rules::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
 
 /// Screen-space Gaussians of a batch, flat over (pose, Gaussian): row b·N + g.
 #[derive(Debug, Clone)]
