@@ -43,6 +43,13 @@ pub struct Counts {
     /// whatever its windows.
     #[serde(default)]
     pub renders: u64,
+    /// Tile–Gaussian pairs composited: the compositing's work.
+    #[serde(default)]
+    pub pairs: u64,
+    /// Packed rows projected and handed to compositing (poses × Gaussians the call uses, B·U):
+    /// the host copies, footprints and gradients of a pass grow with it, read or not.
+    #[serde(default)]
+    pub rows: u64,
 }
 
 impl Counts {
@@ -57,6 +64,8 @@ impl Counts {
             bytes_up: self.bytes_up / p,
             scene_uploads: self.scene_uploads / p,
             renders: self.renders / p,
+            pairs: self.pairs / p,
+            rows: self.rows / p,
         }
     }
 
@@ -70,6 +79,8 @@ impl Counts {
             bytes_up: self.bytes_up - earlier.bytes_up,
             scene_uploads: self.scene_uploads - earlier.scene_uploads,
             renders: self.renders - earlier.renders,
+            pairs: self.pairs - earlier.pairs,
+            rows: self.rows - earlier.rows,
         }
     }
 }
@@ -81,6 +92,8 @@ static UPLOADS: AtomicU64 = AtomicU64::new(0);
 static BYTES_UP: AtomicU64 = AtomicU64::new(0);
 static SCENE_UPLOADS: AtomicU64 = AtomicU64::new(0);
 static RENDERS: AtomicU64 = AtomicU64::new(0);
+static PAIRS: AtomicU64 = AtomicU64::new(0);
+static ROWS: AtomicU64 = AtomicU64::new(0);
 
 /// The counts so far.
 pub fn snapshot() -> Counts {
@@ -93,6 +106,8 @@ pub fn snapshot() -> Counts {
         bytes_up: load(&BYTES_UP),
         scene_uploads: load(&SCENE_UPLOADS),
         renders: load(&RENDERS),
+        pairs: load(&PAIRS),
+        rows: load(&ROWS),
     }
 }
 
@@ -111,6 +126,12 @@ pub fn upload(bytes: usize) {
 /// A render pass.
 pub fn render() {
     RENDERS.fetch_add(1, Ordering::Relaxed);
+}
+
+/// A pass's compositing work: `pairs` tile–Gaussian pairs over `rows` packed rows.
+pub fn composite(pairs: usize, rows: usize) {
+    PAIRS.fetch_add(pairs as u64, Ordering::Relaxed);
+    ROWS.fetch_add(rows as u64, Ordering::Relaxed);
 }
 
 /// A whole scene of `bytes` uploaded.

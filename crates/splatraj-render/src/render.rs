@@ -487,6 +487,8 @@ pub fn render_at(
             rows_read.insert(list.batch * u + *g as usize);
         }
     }
+    let pairs: usize = work.iter().map(|list| list.gaussians.len()).sum();
+    crate::counters::composite(pairs, batch * u);
     let width: usize = request.channels.iter().map(Channel::width).sum::<usize>() + tensor_width;
     if used.is_empty() {
         // Nothing to draw: zeros that still hang off the pose graph, so a gradient exists (0).

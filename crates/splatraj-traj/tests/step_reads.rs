@@ -13,7 +13,7 @@ use std::sync::Mutex;
 
 use burn::tensor::{DType, Device, Tensor};
 use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::counters;
+use splatraj_render::counters::{self, Counts};
 use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::render::DeviceScene;
 use splatraj_scene::Scene;
@@ -105,8 +105,16 @@ fn start_poses(windows: &[WindowTarget], restart: usize) -> Vec<Pose> {
 
 #[test]
 fn a_step_reads_once_and_the_scene_is_uploaded_once() {
-    let shared = counted_steps(StepPasses::Shared);
-    let per_window = counted_steps(StepPasses::PerWindow);
+    let (shared, shared_counts) = counted_steps(StepPasses::Shared);
+    let (per_window, per_window_counts) = counted_steps(StepPasses::PerWindow);
+    // The same compositing work either way: one call composites the tile–Gaussian pairs the
+    // windows' calls do, no more (its packed rows, poses × Gaussians any window uses, may be more).
+    assert!(shared_counts.pairs > 0, "{shared_counts:?}");
+    assert_eq!(
+        shared_counts.pairs, per_window_counts.pairs,
+        "{shared_counts:?} vs {per_window_counts:?}"
+    );
+    assert!(shared_counts.rows >= per_window_counts.rows);
     // The same images and costs either way (the shared pass evaluates the batching costs once
     // on every window's samples), so the same optimisation, term by term (to f32 rounding).
     assert_eq!(shared.len(), per_window.len());
@@ -118,8 +126,9 @@ fn a_step_reads_once_and_the_scene_is_uploaded_once() {
     }
 }
 
-/// Five steps of two windows with every kind of cost, counted; the sampled loss of each step.
-fn counted_steps(passes: StepPasses) -> Vec<f64> {
+/// Five steps of two windows with every kind of cost, counted; the sampled loss of each step
+/// and the counts.
+fn counted_steps(passes: StepPasses) -> (Vec<f64>, Counts) {
     let _counted = COUNTED.lock().unwrap();
     let scene = scene();
     let windows = windows(&scene, &["blue box", "red mug"]);
@@ -187,14 +196,15 @@ fn counted_steps(passes: StepPasses) -> Vec<f64> {
         "poses, indices and mask values go up each pass"
     );
     // Each step's loss, then each window's weighted terms in order.
-    result
+    let losses = result
         .history
         .iter()
         .flat_map(|row| {
             let terms = row.windows.iter().flatten().map(|&(_, w, mean)| w * mean);
             std::iter::once(row.total).chain(terms)
         })
-        .collect()
+        .collect();
+    (losses, counts)
 }
 
 /// A cost that is 0 and whose gradient is NaN from step 2 on (√u at u = 0, u ≡ 0).

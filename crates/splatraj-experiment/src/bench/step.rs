@@ -107,14 +107,23 @@ pub fn run_step_bench(path: &Path, set: &[String], steps: usize) -> Result<Vec<S
 /// The rows as a table.
 pub fn step_table(rows: &[StepRow]) -> String {
     let mut out = format!(
-        "{:<11} {:>9} {:>9} {:>6} {:>8} {:>9} {:>8} {:>12}\n",
-        "passes", "ms/step", "launches", "reads", "uploads", "KB up", "renders", "best loss"
+        "{:<11} {:>9} {:>9} {:>6} {:>8} {:>9} {:>8} {:>9} {:>9} {:>12}\n",
+        "passes",
+        "ms/step",
+        "launches",
+        "reads",
+        "uploads",
+        "KB up",
+        "renders",
+        "k pairs",
+        "k rows",
+        "best loss"
     );
     for r in rows {
         let c = &r.counts;
         let _ = writeln!(
             out,
-            "{:<11} {:>9.1} {:>9} {:>6} {:>8} {:>9.1} {:>8} {:>12.6}",
+            "{:<11} {:>9.1} {:>9} {:>6} {:>8} {:>9.1} {:>8} {:>9.1} {:>9.1} {:>12.6}",
             r.passes,
             r.ms_per_step,
             c.launches,
@@ -122,6 +131,8 @@ pub fn step_table(rows: &[StepRow]) -> String {
             c.uploads,
             c.bytes_up as f64 / 1024.0,
             c.renders,
+            c.pairs as f64 / 1e3,
+            c.rows as f64 / 1e3,
             r.best_total
         );
     }
