@@ -29,11 +29,6 @@ pub const SLACK: f64 = 0.05;
 /// lies half a pixel inside; a whole pixel more costs a few entries and no reasoning.
 pub const MARGIN: f64 = 1.0;
 
-/// Squares of at most this many tiles are kept whole: there the test cost the binning more
-/// than the few entries it saved the compositing (`bench step`, first-try guitar: binning 15.6
-/// → 30.7 ms a step, compositing 47.3 → 44.0 ms, when every square was tested).
-pub const SMALL_SQUARE_TILES: usize = 4;
-
 /// The screen region where a Gaussian's α can reach 1/255: {d : dᵀE⁻¹d ≤ 1} about its mean,
 /// with E = r²·(1 + [`SLACK`])·Σ_2D (pixels²), or nowhere.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -69,13 +64,11 @@ impl AlphaReach {
     ) -> impl Iterator<Item = Range<usize>> {
         let [a, b, c] = self.ellipse.map(f64::from);
         let empty = columns.start..columns.start;
-        let small = rows.len() * columns.len() <= SMALL_SQUARE_TILES;
         let finite = [a, b, c, u, v].iter().all(|x| x.is_finite());
         let shape = if a == 0.0 && b == 0.0 && c == 0.0 {
             Shape::Nowhere
-        } else if small || !finite || a <= 0.0 || c <= 0.0 {
-            // Small: not worth the test; otherwise not an ellipse that can be told.
-            Shape::Square
+        } else if !finite || a <= 0.0 || c <= 0.0 {
+            Shape::Square // not an ellipse that can be told: keep what the square keeps
         } else {
             // On the ellipse at height dy, x runs over (b/c)·dy ± √(s·(1 − dy²/c)) with
             // s = a − b²/c: concave at the right edge and convex at the left, so each extreme
