@@ -20,7 +20,7 @@ use std::sync::Arc;
 
 use burn::backend::TensorMetadata;
 use burn::backend::tensor::FloatTensor;
-use burn::tensor::{DType, TensorData};
+use burn::tensor::{DType, IntDType, TensorData};
 use burn_backend::cubecl::dtype_to_storage_type;
 use burn_backend::ops::{FloatTensorOps, IntTensorOps};
 use burn_cubecl::CubeBackend;
@@ -488,8 +488,18 @@ fn device_forward(
         &device,
         dtype,
     );
-    let final_t = zeros(vec![work_count.max(1), TILE_PIXELS], &device, dtype);
-    let last = int_tensor(vec![0; work_count.max(1) * TILE_PIXELS], &device);
+    // The kernel writes both for every pixel of every work tile: neither a fill launch nor an
+    // upload of zeros (4 bytes a pixel of every work tile) is needed.
+    let final_t = CubeBackend::float_empty(
+        vec![work_count.max(1), TILE_PIXELS].into(),
+        &device,
+        dtype.into(),
+    );
+    let last = CubeBackend::int_empty(
+        vec![work_count.max(1) * TILE_PIXELS].into(),
+        &device,
+        IntDType::I32,
+    );
     if work_count > 0 {
         forward_kernel::launch(
             &client,
