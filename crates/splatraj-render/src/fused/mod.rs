@@ -24,6 +24,8 @@ pub mod real;
 
 use std::sync::Arc;
 
+use rayon::prelude::*;
+
 use burn::backend::autodiff::Autodiff;
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
@@ -114,10 +116,14 @@ fn host_splats<B: Backend, E: Real + burn::tensor::Element>(
     channels: usize,
 ) -> HostSplats<E> {
     let rows = read::<B, E>(inputs.splats);
+    // In parallel: a step's call holds millions of rows (`counters`' `rows`), and this copy on
+    // one thread kept the other cores waiting.
     let column = |from: usize, width: usize| -> Vec<E> {
-        rows.chunks_exact(columns)
-            .flat_map(|row| row[from..from + width].iter().copied())
-            .collect()
+        let mut out = vec![E::ZERO; rows.len() / columns.max(1) * width];
+        out.par_chunks_exact_mut(width)
+            .zip(rows.par_chunks_exact(columns))
+            .for_each(|(out, row)| out.copy_from_slice(&row[from..from + width]));
+        out
     };
     HostSplats {
         means: column(0, 2),
@@ -185,11 +191,14 @@ pub fn host_backward<B: Backend>(saved: HostSaved, v_image: FloatTensor<B>) -> S
         device: &B::Device,
     ) -> SplatPrimitives<B> {
         let mut splats = vec![E::ZERO; rows * columns];
-        for (r, row) in splats.chunks_exact_mut(columns).enumerate() {
-            row[..2].copy_from_slice(&v.means[2 * r..2 * r + 2]);
-            row[2..5].copy_from_slice(&v.conics[3 * r..3 * r + 3]);
-            row[5] = v.opacities[r];
-        }
+        splats
+            .par_chunks_exact_mut(columns)
+            .enumerate()
+            .for_each(|(r, row)| {
+                row[..2].copy_from_slice(&v.means[2 * r..2 * r + 2]);
+                row[2..5].copy_from_slice(&v.conics[3 * r..3 * r + 3]);
+                row[5] = v.opacities[r];
+            });
         SplatPrimitives {
             splats: upload::<B, E>(splats, vec![rows, columns], dtype, device),
             values: upload::<B, E>(v.values, vec![rows, channels], dtype, device),
