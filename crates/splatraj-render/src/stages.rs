@@ -70,6 +70,12 @@ pub fn totals() -> [(Stage, Duration); Stage::ALL.len()] {
     })
 }
 
+/// Milliseconds per unit in each stage since the last [`reset`], [`Stage::ALL`] order: the
+/// totals divided by `units` (the passes, frames or steps measured).
+pub fn ms_per(units: usize) -> [(Stage, f64); Stage::ALL.len()] {
+    totals().map(|(stage, total)| (stage, 1e3 * total.as_secs_f64() / units.max(1) as f64))
+}
+
 /// Sets every total to zero.
 pub fn reset() {
     for n in &NANOS {

@@ -220,10 +220,10 @@ fn time_frames(
         _ => None,
     };
     let per_frame = |d: Duration| 1e3 * d.as_secs_f64() / count as f64;
-    let mut parts_ms: Vec<(String, f64)> = stages::totals()
+    let mut parts_ms: Vec<(String, f64)> = stages::ms_per(count)
         .iter()
         .filter(|(stage, _)| *stage != Stage::CompositeBackward)
-        .map(|&(stage, total)| (stage.name().to_string(), per_frame(total)))
+        .map(|&(stage, ms)| (stage.name().to_string(), ms))
         .collect();
     let t = rendered.timings;
     for (name, d) in [

@@ -491,9 +491,9 @@ pub fn run_one(args: &BenchSettings, config: &BenchConfig) -> Result<BenchRow> {
         .collect();
     counters::tally_launch_names(false);
     let per_pass = |d: std::time::Duration| 1e3 * d.as_secs_f64() / args.repeats.max(1) as f64;
-    let mut stages_ms: Vec<(String, f64)> = stages::totals()
+    let mut stages_ms: Vec<(String, f64)> = stages::ms_per(args.repeats)
         .iter()
-        .map(|&(stage, total)| (stage.name().to_string(), per_pass(total)))
+        .map(|&(stage, ms)| (stage.name().to_string(), ms))
         .collect();
     let staged: f64 = stages_ms.iter().map(|(_, ms)| ms).sum();
     stages_ms.push(("other".into(), per_pass(pass.elapsed()) - staged));

@@ -83,12 +83,9 @@ pub fn run_step_bench(path: &Path, set: &[String], steps: usize) -> Result<Vec<S
             .map(|(name, n)| (name, n / options.iterations as u64))
             .collect();
         counters::tally_launch_names(false);
-        let stages_ms = stages::totals()
+        let stages_ms = stages::ms_per(options.iterations)
             .iter()
-            .map(|(stage, time)| {
-                let per_step = time.as_secs_f64() * 1e3 / options.iterations as f64;
-                (stage.name(), per_step)
-            })
+            .map(|&(stage, ms)| (stage.name(), ms))
             .collect();
         times.sort_by(f64::total_cmp);
         rows.push(StepRow {
