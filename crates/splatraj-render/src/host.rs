@@ -16,11 +16,38 @@ pub struct ReadBackError(pub String);
 
 /// The values of a float tensor on the host as f64, in row-major order (a counted read).
 pub fn to_host<const D: usize>(t: Tensor<D>) -> Result<Vec<f64>, ReadBackError> {
-    let data = t.into_data();
-    crate::counters::read(data.as_bytes().len());
-    data.convert::<f64>()
+    read_data(t)?
+        .convert::<f64>()
         .try_to_vec::<f64>()
         .map_err(|e| ReadBackError(format!("{e:?}")))
+}
+
+/// The data of a tensor on the host in its own dtype (a counted read). A failure of the device
+/// since the last read (a buffer larger than it can allocate, a lost device) surfaces here:
+/// it is returned as an error, where burn's `into_data` would panic.
+pub fn read_data<const D: usize>(t: Tensor<D>) -> Result<TensorData, ReadBackError> {
+    let data = t
+        .try_into_data()
+        .map_err(|e| ReadBackError(device_failure(&e.to_string())))?;
+    crate::counters::read(data.as_bytes().len());
+    Ok(data)
+}
+
+/// The lines of a device error's report that say what failed, joined on one line: CubeCL's
+/// report repeats "Caused by:", placeholder backtraces and every operation it skipped.
+fn device_failure(report: &str) -> String {
+    let mut said: Vec<&str> = Vec::new();
+    for line in report.lines().map(str::trim) {
+        let noise = line.is_empty()
+            || line == "Caused by:"
+            || line == "Asked at:"
+            || line == "No backtrace available"
+            || line.starts_with("skipped `");
+        if !noise && !said.contains(&line) {
+            said.push(line);
+        }
+    }
+    said.join(": ")
 }
 
 /// A tensor from host `data` on `device` in `dtype` (a counted upload).
@@ -57,5 +84,27 @@ pub trait OnDevice {
     /// Poses Φ `[B, 6]` on the scene's device, in its dtype.
     fn poses(&self, poses: &[Pose]) -> Tensor<2> {
         poses_tensor(poses, &self.device(), self.dtype())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::device_failure;
+
+    #[test]
+    fn a_device_failure_says_what_failed_on_one_line() {
+        // The shape of CubeCL's report when lavapipe refused a 221 MB buffer.
+        let report = "An error happened during execution\nCaused by:\n  Several failures at once\n\
+            Caused by:\n  The bytes were never written (failure #1856, still claiming 5 buffer(s))\n  \
+            skipped `ElemwiseFuse`: it needed memory ManagedMemoryId { value: 4513 }\n  \
+            skipped `ReduceKernel`: it needed memory ManagedMemoryId { value: 4487 }\n\
+            Caused by:\n  An IO error happened\nCaused by:\n  can't allocate buffer of size: \
+            221184000\nNo backtrace available\nAsked at:\nNo backtrace available\n";
+        assert_eq!(
+            device_failure(report),
+            "An error happened during execution: Several failures at once: The bytes were never \
+             written (failure #1856, still claiming 5 buffer(s)): An IO error happened: can't \
+             allocate buffer of size: 221184000"
+        );
     }
 }

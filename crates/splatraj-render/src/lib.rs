@@ -25,6 +25,7 @@ pub mod host;
 pub mod images;
 pub mod lift;
 pub mod orbit;
+pub mod pass_size;
 pub mod project;
 pub mod rasterize;
 pub mod reference;

@@ -565,3 +565,42 @@ fn gpu_zoomed_projection_matches_host_projection() {
         "the GPU kernels are deterministic"
     );
 }
+
+/// A GPU's largest buffer bounds a pass: `poses_per_pass` keeps the images within it, and a
+/// pass of one pose whose image is larger (possible only on a small device, such as lavapipe's
+/// 128 MiB) is an error from the read that follows, not a panic.
+#[cfg(feature = "wgpu")]
+#[test]
+fn a_pass_larger_than_the_gpus_largest_buffer_is_an_error() {
+    use splatraj_render::host::read_data;
+    use splatraj_render::pass_size::{max_buffer_bytes, poses_per_pass};
+
+    let device = BackendKind::Wgpu.device().unwrap();
+    let max = max_buffer_bytes(&device).expect("a wgpu device reports its largest buffer");
+    let per_pass = poses_per_pass(&device, DType::F32, 1280, 720, 1);
+    // Mask and alpha, 4 bytes each.
+    assert!(
+        (per_pass * 1280 * 720 * 2 * 4) as u64 <= max,
+        "{per_pass} poses, max {max}"
+    );
+    if max > 1 << 30 {
+        return; // a large GPU: an image beyond its buffers is too large to test here
+    }
+    let (scene, mask, _, pose) = setup();
+    // Square, its mask and alpha just above the largest buffer.
+    let side = ((max / 8) as f64).sqrt() as usize + 16;
+    let intrinsics = Intrinsics::from_fov_x(60.0, side, side).unwrap();
+    let uploaded = DeviceScene::new(&scene, &device, DType::F32);
+    let poses = Tensor::<2>::from_data(
+        TensorData::new(pose.0.to_vec(), [1, 6]),
+        (&device, DType::F32),
+    );
+    let request = RenderRequest::new(intrinsics, vec![Channel::Mask(mask)]);
+    let message = match render(&uploaded, poses, &request) {
+        Ok(out) => read_data(out.images)
+            .expect_err("an image beyond the largest buffer cannot be read")
+            .to_string(),
+        Err(e) => e.to_string(),
+    };
+    assert!(message.contains("allocate"), "{message}");
+}

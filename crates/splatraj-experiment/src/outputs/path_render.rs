@@ -14,11 +14,12 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, anyhow, bail};
-use burn::tensor::DType;
+use burn::tensor::{DType, Tensor};
 use rayon::prelude::*;
 use splatraj_render::camera::Pose;
-use splatraj_render::host::{OnDevice, to_host};
+use splatraj_render::host::{OnDevice, read_data, to_host};
 use splatraj_render::images::{png_rgb8, rgb8};
+use splatraj_render::pass_size::poses_per_pass;
 use splatraj_render::render::{Channel, DeviceScene, Rasterizer, RenderRequest, render};
 use splatraj_report::video::VideoEncoder;
 use splatraj_traj::costs::{coverage, tce, tre};
@@ -476,11 +477,19 @@ fn render_frames(
     while first < frames.poses.len() {
         let intrinsics = frames.cameras[first];
         let same = |i: usize| windows[i] == windows[first] && frames.cameras[i] == intrinsics;
-        let end = (first..frames.poses.len().min(first + batch.max(1)))
+        let object = job.objects.get(windows[first]);
+        // Never more poses than the device can hold the images of (RGB, and the mask).
+        let fits = poses_per_pass(
+            &scene.device(),
+            scene.dtype(),
+            intrinsics.width,
+            intrinsics.height,
+            3 + usize::from(object.is_some()),
+        );
+        let end = (first..frames.poses.len().min(first + batch.clamp(1, fits)))
             .take_while(|&i| same(i))
             .last()
             .map_or(first + 1, |i| i + 1);
-        let object = job.objects.get(windows[first]);
         let mut channels = vec![Channel::Rgb];
         if let Some(o) = object {
             channels.push(Channel::Mask(o.mask.to_vec()));
@@ -499,19 +508,28 @@ fn render_frames(
         if let Some(o) = object {
             let clock = Instant::now();
             let mask = images.clone().narrow(3, 3, 1).reshape([b, h, w]);
-            let tce = to_host(tce(mask.clone()))?; // [B]
-            let tre = to_host(tre(mask.clone(), o.target_ratio))?;
-            let coverage = to_host(coverage(mask))?;
+            // One read for the three (a wait for the device each on a GPU).
+            let three = Tensor::cat(
+                vec![
+                    tce(mask.clone()),
+                    tre(mask.clone(), o.target_ratio),
+                    coverage(mask),
+                ],
+                0,
+            ); // [3B]
+            let three = to_host(three)?;
+            let (tce, rest) = three.split_at(b);
+            let (tre, coverage) = rest.split_at(b);
             for (i, index) in (first..end).enumerate() {
                 let at = |v: &[f64]| v.get(i).copied().unwrap_or(f64::NAN);
-                let shown = at(&coverage) > 0.0;
+                let shown = at(coverage) > 0.0;
                 metrics.push(FrameMetrics {
                     frame: index,
                     t: frames.times[index],
                     window: windows[index],
-                    tce: shown.then(|| at(&tce)),
-                    tre: at(&tre),
-                    coverage: at(&coverage),
+                    tce: shown.then(|| at(tce)),
+                    tre: at(tre),
+                    coverage: at(coverage),
                 });
             }
             timings.metrics += clock.elapsed();
@@ -519,7 +537,7 @@ fn render_frames(
         let clock = Instant::now();
         // f32 images stay f32 on the host (the f64 copy cost as much as the PNG); any other
         // dtype is read as f64, as `to_host` reads it.
-        let data = images.into_data();
+        let data = read_data(images).with_context(|| format!("reading frame {first} back"))?;
         let pixels = match data.dtype() {
             DType::F32 => Pixels::F32(data.try_into_vec::<f32>().map_err(|e| anyhow!("{e:?}"))?),
             _ => Pixels::F64(

@@ -36,6 +36,7 @@ use burn::tensor::{Tensor, TensorData};
 use serde::Serialize;
 use splatraj_render::camera::{Intrinsics, Pose as CameraPose};
 use splatraj_render::host::{OnDevice, to_host};
+use splatraj_render::pass_size::{passes, poses_per_pass};
 use splatraj_render::render::{
     Channel, DeviceScene, Pruning, Rasterizer, RenderError, RenderRequest, Zoom, render,
 };
@@ -250,43 +251,35 @@ pub fn window_metrics_zoomed(
             })
         })
         .count();
-    let poses = scene.poses(&poses);
-    let zoom = zooms.map(|host| {
-        let data = TensorData::new(host.clone(), [host.len()]);
-        Zoom::at(
-            Tensor::from_data(data, (&scene.device(), scene.dtype())),
-            host,
-        )
-    });
-    let mask_of = |scene: &DeviceScene, mask: Vec<f32>| -> Result<Tensor<3>, RenderError> {
-        let request = RenderRequest {
-            pruning: Pruning::ObjectOnly,
-            rasterizer: object.rasterizer,
-            zoom: zoom.clone(),
-            ..RenderRequest::new(*intrinsics, vec![Channel::Mask(mask)])
-        };
-        let images = render(scene, poses.clone(), &request)?.images;
-        let [b, h, w, _] = images.dims();
-        Ok(images.reshape([b, h, w]))
-    };
-    let visible = mask_of(scene, object.mask.to_vec())?;
-    let alone = mask_of(object.alone, vec![1.0; object.alone.len()])?;
-    let host = |t: Tensor<1>| -> Vec<f64> { to_host(t).unwrap_or_default() };
-    let moments = MaskMoments::of(visible.clone());
-    let tces = host(tce_of(&moments));
-    let tres = host(tre_of(&moments, object.target_ratio));
-    let coverages = host(moments.coverage());
-    let [batch, height, width] = visible.dims();
-    // Each mask read back once: at the output resolution they are a quarter of a GB each.
-    let pixels = host(visible.reshape([batch * height * width]));
-    let alone_pixels = host(alone.reshape([batch * height * width]));
-    let ious: Vec<f64> = pixels
-        .chunks_exact(height * width)
-        .zip(alone_pixels.chunks_exact(height * width))
-        .map(|(seen, alone)| bbox_iou(seen, alone, width, height))
-        .collect();
-    let in_frame = |m: &[f64]| mask_box(m, width, height, IOU_THRESHOLD).is_some();
-    let shows: Vec<bool> = pixels.chunks_exact(height * width).map(&in_frame).collect();
+    // In passes that fit the device (30 masks of 1280×720 with their alpha are 221 MB, more
+    // than a software GPU's largest buffer), each pass read back and reduced before the next.
+    let per_pass = poses_per_pass(
+        &scene.device(),
+        scene.dtype(),
+        intrinsics.width,
+        intrinsics.height,
+        1,
+    );
+    let mut each = Vec::with_capacity(poses.len());
+    for pass in passes(poses.len(), per_pass) {
+        let zoom = zooms.as_ref().map(|z| z[pass.clone()].to_vec());
+        each.extend(sample_metrics(
+            scene,
+            object,
+            intrinsics,
+            &poses[pass],
+            zoom,
+        )?);
+    }
+    let batch = each.len();
+    let column = |f: fn(&SampleMetrics) -> f64| each.iter().map(f).collect::<Vec<f64>>();
+    let (tces, tres, coverages, ious) = (
+        column(|m| m.tce),
+        column(|m| m.tre),
+        column(|m| m.coverage),
+        column(|m| m.iou),
+    );
+    let shows: Vec<bool> = each.iter().map(|m| m.shows).collect();
     let shown = shows.iter().filter(|&&s| s).count();
     // The middle half of the window: samples whose stratum middle lies in [¼, ¾] of it.
     let middle = |k: usize| {
@@ -317,15 +310,7 @@ pub fn window_metrics_zoomed(
         inside_object: inside as f64 / batch.max(1) as f64,
         wobble: None,
     };
-    let occluded: Vec<Option<f64>> = pixels
-        .chunks_exact(height * width)
-        .zip(alone_pixels.chunks_exact(height * width))
-        .map(|(seen, alone)| {
-            let whole: f64 = alone.iter().sum();
-            (in_frame(alone) && whole > 0.0)
-                .then(|| (1.0 - seen.iter().sum::<f64>() / whole).clamp(0.0, 1.0))
-        })
-        .collect();
+    let occluded: Vec<Option<f64>> = each.iter().map(|m| m.occluded).collect();
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
     let max = |v: &[f64]| v.iter().copied().fold(f64::NAN, f64::max);
     Ok(WindowMetrics {
@@ -348,4 +333,148 @@ pub fn window_metrics_zoomed(
         verdict: None,
         lens,
     })
+}
+
+/// What one metric sample's masks say.
+struct SampleMetrics {
+    tce: f64,
+    tre: f64,
+    coverage: f64,
+    /// IoU of the boxes of the visible mask and of the object alone.
+    iou: f64,
+    /// Whether the visible mask shows the object (a pixel at or above the IoU threshold).
+    shows: bool,
+    /// The occluded share, where the object alone is in frame and draws something.
+    occluded: Option<f64>,
+}
+
+/// [`SampleMetrics`] of `poses` (one render pass: the visible mask and the object alone),
+/// through the lens of `zooms` when the camera zooms.
+fn sample_metrics(
+    scene: &DeviceScene,
+    object: &WindowObject<'_>,
+    intrinsics: &Intrinsics,
+    poses: &[CameraPose],
+    zooms: Option<Vec<f64>>,
+) -> Result<Vec<SampleMetrics>, RenderError> {
+    let poses_tensor = scene.poses(poses);
+    let zoom = zooms.map(|host| {
+        let data = TensorData::new(host.clone(), [host.len()]);
+        Zoom::at(
+            Tensor::from_data(data, (&scene.device(), scene.dtype())),
+            host,
+        )
+    });
+    let mask_of = |scene: &DeviceScene, mask: Vec<f32>| -> Result<Tensor<3>, RenderError> {
+        let request = RenderRequest {
+            pruning: Pruning::ObjectOnly,
+            rasterizer: object.rasterizer,
+            zoom: zoom.clone(),
+            ..RenderRequest::new(*intrinsics, vec![Channel::Mask(mask)])
+        };
+        let images = render(scene, poses_tensor.clone(), &request)?.images;
+        let [b, h, w, _] = images.dims();
+        Ok(images.reshape([b, h, w]))
+    };
+    let visible = mask_of(scene, object.mask.to_vec())?;
+    let alone = mask_of(object.alone, vec![1.0; object.alone.len()])?;
+    let host = |t: Tensor<1>| to_host(t).map_err(|e| RenderError::ReadBack(e.to_string()));
+    let moments = MaskMoments::of(visible.clone());
+    let tces = host(tce_of(&moments))?;
+    let tres = host(tre_of(&moments, object.target_ratio))?;
+    let coverages = host(moments.coverage())?;
+    let [batch, height, width] = visible.dims();
+    // Each mask read back once.
+    let pixels = host(visible.reshape([batch * height * width]))?;
+    let alone_pixels = host(alone.reshape([batch * height * width]))?;
+    let in_frame = |m: &[f64]| mask_box(m, width, height, IOU_THRESHOLD).is_some();
+    Ok(pixels
+        .chunks_exact(height * width)
+        .zip(alone_pixels.chunks_exact(height * width))
+        .enumerate()
+        .map(|(k, (seen, alone))| {
+            let whole: f64 = alone.iter().sum();
+            SampleMetrics {
+                tce: tces[k],
+                tre: tres[k],
+                coverage: coverages[k],
+                iou: bbox_iou(seen, alone, width, height),
+                shows: in_frame(seen),
+                occluded: (in_frame(alone) && whole > 0.0)
+                    .then(|| (1.0 - seen.iter().sum::<f64>() / whole).clamp(0.0, 1.0)),
+            }
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::tensor::{DType, Device};
+    use splatraj_scene::demo::{DemoConfig, demo_layout, demo_scene};
+
+    use super::*;
+
+    /// The window metrics split their samples into passes that fit the device: a sample's
+    /// metrics must not depend on which pass it was in, or on that pass's size.
+    #[test]
+    fn a_sample_measures_the_same_whatever_pass_it_is_in() {
+        let scene = demo_scene(&DemoConfig {
+            seed: 7,
+            gaussians: 3000,
+        })
+        .unwrap();
+        let object = demo_layout().into_iter().next().unwrap();
+        let ids = &scene.extras.labels.as_ref().unwrap().ids;
+        let keep: Vec<bool> = ids.iter().map(|&id| id == object.id).collect();
+        let mask: Vec<f32> = keep.iter().map(|&k| f32::from(u8::from(k))).collect();
+        let device = Device::flex();
+        let whole = DeviceScene::new(&scene, &device, DType::F64);
+        let alone = DeviceScene::new(&scene.subset(&keep), &device, DType::F64);
+        let window = WindowObject {
+            name: object.name,
+            mask: &mask,
+            alone: &alone,
+            target_ratio: 0.1,
+            rasterizer: Rasterizer::default(),
+            bounds: None,
+        };
+        let centre = glam::DVec3::from(object.center.map(f64::from));
+        // Seven cameras circling the object at varied distances, some zoomed.
+        let poses: Vec<CameraPose> = (0..7)
+            .map(|k| {
+                let angle = 0.9 * k as f64;
+                let eye = centre
+                    + glam::DVec3::new(angle.cos(), angle.sin(), 0.3) * (1.0 + 0.4 * k as f64);
+                CameraPose::look_at(eye, centre, glam::DVec3::Z).unwrap()
+            })
+            .collect();
+        let zooms: Vec<f64> = (0..7).map(|k| 1.0 + 0.2 * k as f64).collect();
+        let k = Intrinsics::from_fov_x(60.0, 64, 48).unwrap();
+        let measure = |per_pass: usize| -> Vec<Vec<Option<f64>>> {
+            passes(poses.len(), per_pass)
+                .flat_map(|pass| {
+                    let zoom = Some(zooms[pass.clone()].to_vec());
+                    sample_metrics(&whole, &window, &k, &poses[pass], zoom).unwrap()
+                })
+                .map(|m| {
+                    vec![
+                        Some(m.tce),
+                        Some(m.tre),
+                        Some(m.coverage),
+                        Some(m.iou),
+                        Some(f64::from(u8::from(m.shows))),
+                        m.occluded,
+                    ]
+                })
+                .collect()
+        };
+        let together = measure(7);
+        assert!(
+            together.iter().any(|m| m[4] == Some(1.0)),
+            "no camera sees the object: the test shows nothing"
+        );
+        for per_pass in [1, 3] {
+            assert_eq!(measure(per_pass), together, "passes of {per_pass}");
+        }
+    }
 }
