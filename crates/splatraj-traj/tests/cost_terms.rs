@@ -7,8 +7,8 @@ use glam::{DMat3, DVec3};
 use splatraj_render::camera::Pose;
 use splatraj_traj::costs::{
     Cost, CostError, CostInputs, CostsConfig, PriorCost, QueryContext, TceCost, TreCost,
-    UprightCost, UprightMode, WeightedCosts, bbox_iou, bbox_iou_batch, default_prior_radius, tce,
-    tre,
+    UprightCost, UprightMode, WeightedCosts, bbox_iou, bbox_iou_batch, box_from_hits,
+    default_prior_radius, mask_box, mask_hits, tce, tre,
 };
 
 const Z_UP: [f64; 3] = [0.0, 0.0, 1.0];
@@ -323,6 +323,47 @@ fn iou_of_boxes() {
         batch(vec![alone.clone(), alone, empty]),
     );
     assert_eq!(got, vec![1.0, 0.5, 0.0]);
+}
+
+/// The boxes found from row and column hits on the device are the boxes of the host's scan
+/// of every pixel (`mask_box`), on random masks from empty to dense, with values at and just
+/// below the threshold.
+#[test]
+fn boxes_from_device_hits_match_the_pixel_scan() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let (batch, h, w) = (40, 9, 13);
+    let masks: Vec<Vec<f64>> = (0..batch)
+        .map(|b| {
+            let density = b as f64 / batch as f64 * 0.2;
+            (0..h * w)
+                .map(|_| match rng.random::<f64>() {
+                    x if x < density / 2.0 => 0.5,
+                    x if x < density => 0.9,
+                    x if x < 2.0 * density => 0.499_999,
+                    _ => 0.1 * rng.random::<f64>(),
+                })
+                .collect()
+        })
+        .collect();
+    let device = Device::flex();
+    let tensor = Tensor::<3>::from_data(
+        TensorData::new(masks.concat(), [batch, h, w]),
+        (&device, DType::F64),
+    );
+    let (rows, columns) = mask_hits(tensor, 0.5);
+    let (rows, columns) = (host(rows), host(columns));
+    let mut empty = 0;
+    for (b, mask) in masks.iter().enumerate() {
+        let expected = mask_box(mask, w, h, 0.5);
+        empty += usize::from(expected.is_none());
+        let got = box_from_hits(&rows[b * h..(b + 1) * h], &columns[b * w..(b + 1) * w]);
+        assert_eq!(got, expected, "mask {b}");
+    }
+    assert!(
+        empty > 0 && empty < batch,
+        "{empty} empty masks: both cases must occur"
+    );
 }
 
 #[test]

@@ -85,8 +85,14 @@ pub fn mask_box(mask: &[f64], width: usize, height: usize, threshold: f64) -> Op
 /// # Panics
 /// If either mask's length is not `width * height`.
 pub fn bbox_iou(visible: &[f64], alone: &[f64], width: usize, height: usize) -> f64 {
-    let a = mask_box(visible, width, height, IOU_THRESHOLD);
-    let b = mask_box(alone, width, height, IOU_THRESHOLD);
+    box_iou(
+        mask_box(visible, width, height, IOU_THRESHOLD),
+        mask_box(alone, width, height, IOU_THRESHOLD),
+    )
+}
+
+/// IoU of two boxes; 0 when either is empty (module docs).
+pub fn box_iou(a: Option<PixelBox>, b: Option<PixelBox>) -> f64 {
     match (a, b) {
         (Some(a), Some(b)) => {
             let inter = a.intersection(&b).map_or(0, |i| i.area());
@@ -98,10 +104,35 @@ pub fn bbox_iou(visible: &[f64], alone: &[f64], width: usize, height: usize) -> 
     }
 }
 
-/// [`bbox_iou`] per sample for batches of masks `[B, H, W]` (read back to the host; no gradient).
+/// Which rows `[B, H]` and columns `[B, W]` of masks `[B, H, W]` hold a pixel at or above
+/// `threshold` (1 or 0), computed where the masks are: the boxes need H + W values a mask read
+/// back instead of H·W ([`box_from_hits`]).
+pub fn mask_hits(masks: Tensor<3>, threshold: f64) -> (Tensor<2>, Tensor<2>) {
+    let [batch, height, width] = masks.dims();
+    let dtype = masks.dtype();
+    let on = masks.greater_equal_elem(threshold).float().cast(dtype); // [B, H, W]
+    let rows = on.clone().max_dim(2).reshape([batch, height]);
+    let columns = on.max_dim(1).reshape([batch, width]);
+    (rows, columns)
+}
+
+/// The box of a mask from its row and column hits ([`mask_hits`], nonzero = hit); None when no
+/// row has one. The same box as [`mask_box`] of the mask.
+pub fn box_from_hits(rows: &[f64], columns: &[f64]) -> Option<PixelBox> {
+    let span = |hits: &[f64]| {
+        let first = hits.iter().position(|&h| h != 0.0)?;
+        let last = hits.iter().rposition(|&h| h != 0.0)?;
+        Some((first, last + 1))
+    };
+    let ((y0, y1), (x0, x1)) = (span(rows)?, span(columns)?);
+    Some(PixelBox { x0, y0, x1, y1 })
+}
+
+/// [`bbox_iou`] per sample for batches of masks `[B, H, W]` (boxes found on the device, their
+/// hits read back; no gradient).
 ///
 /// # Panics
-/// If the two batches' shapes differ.
+/// If the two batches' shapes differ, or the hits cannot be read back.
 pub fn bbox_iou_batch(visible: Tensor<3>, alone: Tensor<3>) -> Vec<f64> {
     let dims = visible.dims();
     assert_eq!(
@@ -110,19 +141,24 @@ pub fn bbox_iou_batch(visible: Tensor<3>, alone: Tensor<3>) -> Vec<f64> {
         "visible and alone masks differ in shape"
     );
     let [batch, height, width] = dims;
-    let host = |t: Tensor<3>| -> Vec<f64> {
-        splatraj_render::host::to_host(t).expect("float tensor data converts to f64")
+    let boxes = |t: Tensor<3>| -> Vec<Option<PixelBox>> {
+        let (rows, columns) = mask_hits(t, IOU_THRESHOLD);
+        let host = |t: Tensor<2>| {
+            splatraj_render::host::to_host(t).expect("float tensor data converts to f64")
+        };
+        let (rows, columns) = (host(rows), host(columns));
+        (0..batch)
+            .map(|b| {
+                box_from_hits(
+                    &rows[b * height..(b + 1) * height],
+                    &columns[b * width..(b + 1) * width],
+                )
+            })
+            .collect()
     };
-    let (v, a) = (host(visible), host(alone));
-    let n = height * width;
-    (0..batch)
-        .map(|b| {
-            bbox_iou(
-                &v[b * n..(b + 1) * n],
-                &a[b * n..(b + 1) * n],
-                width,
-                height,
-            )
-        })
+    boxes(visible)
+        .into_iter()
+        .zip(boxes(alone))
+        .map(|(v, a)| box_iou(v, a))
         .collect()
 }

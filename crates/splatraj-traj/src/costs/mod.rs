@@ -69,7 +69,9 @@ pub use auto::OrAuto;
 pub use clearance::{
     ClearanceCost, DEFAULT_CLEARANCE_SIGMA, DEFAULT_MIN_OPACITY, auto_margin, clearance,
 };
-pub use iou::{IOU_THRESHOLD, PixelBox, bbox_iou, bbox_iou_batch, mask_box};
+pub use iou::{
+    IOU_THRESHOLD, PixelBox, bbox_iou, bbox_iou_batch, box_from_hits, box_iou, mask_box, mask_hits,
+};
 pub use moments::MaskMoments;
 pub use motion::{MotionCost, auto_max_speed};
 pub use path::{PathSamples, PathStretch, PerRow};

@@ -41,7 +41,7 @@ use splatraj_render::render::{
     Channel, DeviceScene, Pruning, Rasterizer, RenderError, RenderRequest, Zoom, render,
 };
 
-use crate::costs::{IOU_THRESHOLD, MaskMoments, bbox_iou, mask_box, tce_of, tre_of};
+use crate::costs::{IOU_THRESHOLD, MaskMoments, box_from_hits, box_iou, mask_hits, tce_of, tre_of};
 use crate::optimise::sampling::stratified_times;
 use crate::trajectory::Pose;
 
@@ -378,30 +378,55 @@ fn sample_metrics(
     };
     let visible = mask_of(scene, object.mask.to_vec())?;
     let alone = mask_of(object.alone, vec![1.0; object.alone.len()])?;
-    let host = |t: Tensor<1>| to_host(t).map_err(|e| RenderError::ReadBack(e.to_string()));
-    let moments = MaskMoments::of(visible.clone());
-    let tces = host(tce_of(&moments))?;
-    let tres = host(tre_of(&moments, object.target_ratio))?;
-    let coverages = host(moments.coverage())?;
     let [batch, height, width] = visible.dims();
-    // Each mask read back once.
-    let pixels = host(visible.reshape([batch * height * width]))?;
-    let alone_pixels = host(alone.reshape([batch * height * width]))?;
-    let in_frame = |m: &[f64]| mask_box(m, width, height, IOU_THRESHOLD).is_some();
-    Ok(pixels
-        .chunks_exact(height * width)
-        .zip(alone_pixels.chunks_exact(height * width))
-        .enumerate()
-        .map(|(k, (seen, alone))| {
-            let whole: f64 = alone.iter().sum();
+    // Everything the metrics need in one read (one wait on a GPU), reduced where the masks
+    // are: the masks' boxes from their row and column hits, their sums for the occlusion.
+    let moments = MaskMoments::of(visible.clone());
+    let sums = |m: Tensor<3>| m.sum_dim(2).sum_dim(1).reshape([batch]);
+    let (seen_rows, seen_columns) = mask_hits(visible.clone(), IOU_THRESHOLD);
+    let (alone_rows, alone_columns) = mask_hits(alone.clone(), IOU_THRESHOLD);
+    let flat = |t: Tensor<2>| {
+        let [a, b] = t.dims();
+        t.reshape([a * b])
+    };
+    let read = to_host(Tensor::cat(
+        vec![
+            tce_of(&moments),
+            tre_of(&moments, object.target_ratio),
+            moments.coverage(),
+            sums(visible),
+            sums(alone),
+            flat(seen_rows),
+            flat(alone_rows),
+            flat(seen_columns),
+            flat(alone_columns),
+        ],
+        0,
+    ))
+    .map_err(|e| RenderError::ReadBack(e.to_string()))?;
+    let (per_sample, rest) = read.split_at(5 * batch);
+    let (rows, columns) = rest.split_at(2 * batch * height);
+    let column = |k: usize| &per_sample[k * batch..(k + 1) * batch];
+    let (tces, tres, coverages, seen_sums, alone_sums) =
+        (column(0), column(1), column(2), column(3), column(4));
+    let box_of = |mask: usize, k: usize| {
+        let at = mask * batch + k;
+        box_from_hits(
+            &rows[at * height..(at + 1) * height],
+            &columns[at * width..(at + 1) * width],
+        )
+    };
+    Ok((0..batch)
+        .map(|k| {
+            let (seen, alone) = (box_of(0, k), box_of(1, k));
             SampleMetrics {
                 tce: tces[k],
                 tre: tres[k],
                 coverage: coverages[k],
-                iou: bbox_iou(seen, alone, width, height),
-                shows: in_frame(seen),
-                occluded: (in_frame(alone) && whole > 0.0)
-                    .then(|| (1.0 - seen.iter().sum::<f64>() / whole).clamp(0.0, 1.0)),
+                iou: box_iou(seen, alone),
+                shows: seen.is_some(),
+                occluded: (alone.is_some() && alone_sums[k] > 0.0)
+                    .then(|| (1.0 - seen_sums[k] / alone_sums[k]).clamp(0.0, 1.0)),
             }
         })
         .collect())
