@@ -131,6 +131,13 @@ print("|---|---:|---:|")
 w, f = runs["wgpu"][0], runs["flex"][0]
 print(f"| whole run, s | {w['total_s']:.1f} | {f['total_s']:.1f} |")
 print(f"| optimisation, s | {w['optimisation_s']:.1f} | {f['optimisation_s']:.1f} |")
+print(f"| metrics, s | {w['metrics_s']:.1f} | {f['metrics_s']:.1f} |")
+print(f"| frames, video and exports, s | {w['frames_s']:.1f} | {f['frames_s']:.1f} |")
+for stage in ("optimisation", "metrics", "frames"):
+    c = (w.get("counts") or {}).get(stage)
+    if c:
+        print(f"| {stage} on wgpu: launches, reads, MB down, MB up | {c['launches']}, {c['reads']}, "
+              f"{c['bytes_down'] / 2**20:.1f}, {c['bytes_up'] / 2**20:.1f} | |")
 for a, b in zip(w["windows"], f["windows"]):
     ta, tb = a.get("tce_middle"), b.get("tce_middle")
     print(f"| {a['name']}: verdict, TCE | {'pass' if a['pass'] else 'FAIL'}, {ta} | {'pass' if b['pass'] else 'FAIL'}, {tb} |")

@@ -62,6 +62,18 @@ fn run_writes_a_complete_run_folder() {
     }
     assert!(metrics["ldj"].is_object());
     assert_eq!(metrics["run"]["iterations_run"], 3);
+    // What each stage asked of the device (a process of its own: nothing else counts here).
+    // The scene goes up once, for the optimisation (its autodiff copy); the metrics and frames
+    // render the plain copy the start search uploaded, and the objects alone uploaded while
+    // preparing. A step reads once, the last step's results once more.
+    let counts = &metrics["run"]["counts"];
+    assert_eq!(counts["optimisation"]["scene_uploads"], 1, "{counts}");
+    assert_eq!(counts["metrics"]["scene_uploads"], 0, "{counts}");
+    assert_eq!(counts["frames"]["scene_uploads"], 0, "{counts}");
+    assert_eq!(counts["optimisation"]["reads"], 3 + 1, "{counts}");
+    // Two metric samples a window fit one pass: each window's mask and its object alone.
+    assert_eq!(counts["metrics"]["renders"], 2 * 2, "{counts}");
+    assert_eq!(counts["frames"]["renders"], 3, "{counts}");
 
     let history = std::fs::read_to_string(run.join("history.csv")).unwrap();
     let lines: Vec<&str> = history.lines().collect();

@@ -29,6 +29,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
+use splatraj_render::counters::Counts;
 use splatraj_traj::metrics::WindowMetrics;
 use splatraj_traj::optimise::StopReason;
 
@@ -38,8 +39,8 @@ use crate::optimise::observer::{Observer, Phase, Progress};
 use crate::outputs::records::{PoseFile, pose_history, sgld_samples, trajectory_history};
 use crate::outputs::run_files::RunOutputs;
 use crate::outputs::run_folder::{
-    MetricsFile, RunReport, StageTimes, check_writable, remove_checkpoint, remove_partial_files,
-    resumable,
+    MetricsFile, RunReport, StageCounts, StageTimes, check_writable, remove_checkpoint,
+    remove_partial_files, resumable,
 };
 use crate::outputs::{FrameSpec, create_run_dir, frame_png};
 use crate::prepare::experiment::Experiment;
@@ -447,10 +448,12 @@ impl Experiment {
             checkpoint_dir: Some(dir),
             resume: folder.checkpoint(),
         };
+        let counted = splatraj_render::counters::snapshot();
         let run = TrajectoryOptimisation::new(self)
             .and_then(|optimisation| optimisation.run(options, observer))
             .map_err(|e| folder.after_failure(e, Stage::Preparing))?;
-        self.write_trajectory_outputs(folder, &run, observer)
+        let optimisation = splatraj_render::counters::snapshot().since(&counted);
+        self.write_trajectory_outputs(folder, &run, optimisation, observer)
             .map_err(|e| folder.after_failure(e, Stage::Outputs))
     }
 
@@ -459,6 +462,7 @@ impl Experiment {
         &self,
         folder: &RunFolder,
         run: &TrajectoryRun,
+        optimisation: Counts,
         observer: &mut dyn Observer,
     ) -> Result<TrajectoryOutcome> {
         let dir = folder.dir();
@@ -506,6 +510,11 @@ impl Experiment {
             metrics: written.metrics,
             frames: written.frames,
             total: self.prepared_at.elapsed(),
+            counts: StageCounts {
+                optimisation,
+                metrics: written.metrics_counts,
+                frames: written.frames_counts,
+            },
         };
         let report = RunReport::new(self, run, times);
         let evaluation = written.evaluation;

@@ -54,6 +54,12 @@ pub struct RunQuality {
     pub total_s: f64,
     /// Of it, optimising.
     pub optimisation_s: f64,
+    /// Of it, the metrics.
+    pub metrics_s: f64,
+    /// Of it, the frames, video and exports.
+    pub frames_s: f64,
+    /// Each stage's device counters (`metrics.json`'s `run.counts`; None in an older folder).
+    pub counts: Option<Value>,
     /// Per window.
     pub windows: Vec<WindowQuality>,
 }
@@ -129,6 +135,9 @@ pub fn read_run_quality(dir: &Path) -> Result<RunQuality> {
         gaussians: metrics["run"]["gaussians"].as_u64().unwrap_or(0),
         total_s: number(&metrics["run"]["total_s"]).unwrap_or(f64::NAN),
         optimisation_s: number(&metrics["run"]["optimisation_s"]).unwrap_or(f64::NAN),
+        metrics_s: number(&metrics["run"]["metrics_s"]).unwrap_or(f64::NAN),
+        frames_s: number(&metrics["run"]["frames_s"]).unwrap_or(f64::NAN),
+        counts: metrics["run"].get("counts").cloned(),
         windows,
     })
 }

@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
+use splatraj_render::counters::{self, Counts};
 use splatraj_scene::stop::Since;
 use splatraj_traj::trajectory::{Trajectory, uniform_times};
 
@@ -28,6 +29,10 @@ pub struct Outputs {
     pub metrics: Duration,
     /// Time of the frames, video and exports.
     pub frames: Duration,
+    /// The device counters of the metrics.
+    pub metrics_counts: Counts,
+    /// The device counters of the frames, video and exports.
+    pub frames_counts: Counts,
 }
 
 /// The outputs stage's state: the experiment every stage shares (config, scene, windows)
@@ -78,12 +83,15 @@ impl<'a> RunOutputs<'a> {
     ) -> Result<Outputs> {
         splatraj_scene::stop::honour();
         let started = Instant::now();
+        let counted = counters::snapshot();
         let experiment = self.experiment;
         let mut evaluation = experiment.evaluate_since(&self.trajectory, since)?;
         let metrics = started.elapsed();
+        let metrics_counts = counters::snapshot().since(&counted);
         // The frames begin their own count of requests: one made before must stop them here.
         since.stop_point(|| "the metrics were computed, no frame is written".to_string())?;
         let started = Instant::now();
+        let counted = counters::snapshot();
         let frames = self.frames()?;
         if let Some(rendered) = self.write_frames(&frames, dir, progress)? {
             // Before `with_frames`, which judges the windows again with what the frames add.
@@ -99,6 +107,8 @@ impl<'a> RunOutputs<'a> {
             evaluation,
             metrics,
             frames: started.elapsed(),
+            metrics_counts,
+            frames_counts: counters::snapshot().since(&counted),
         })
     }
 

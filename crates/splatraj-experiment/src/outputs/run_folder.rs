@@ -12,6 +12,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
+use splatraj_render::counters::Counts;
 use splatraj_scene::atomic::is_partial_file;
 use splatraj_traj::metrics::{Smoothness, WindowMetrics};
 
@@ -84,9 +85,23 @@ pub struct RunReport {
     pub peak_memory_mb: Option<f64>,
     /// Backend and precision.
     pub backend: String,
+    /// What each stage asked of the device: kernel launches, reads and uploads (docs/gpu.md
+    /// "Counters"; launches are counted on a GPU only).
+    pub counts: StageCounts,
 }
 
-/// Wall times of the stages after the optimisation.
+/// The device counters of a run's stages.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct StageCounts {
+    /// The optimisation (its starts and every step).
+    pub optimisation: Counts,
+    /// The metrics.
+    pub metrics: Counts,
+    /// The frames (video and exports included).
+    pub frames: Counts,
+}
+
+/// Wall times of the stages after the optimisation, and every stage's device counters.
 #[derive(Debug, Clone, Copy)]
 pub struct StageTimes {
     /// Metrics.
@@ -95,6 +110,8 @@ pub struct StageTimes {
     pub frames: Duration,
     /// The whole run so far.
     pub total: Duration,
+    /// The stages' device counters.
+    pub counts: StageCounts,
 }
 
 impl RunReport {
@@ -122,6 +139,7 @@ impl RunReport {
             total_s: times.total.as_secs_f64(),
             peak_memory_mb: crate::resources::peak_mb(),
             backend: format!("{:?} {:?}", config.backend, config.precision),
+            counts: times.counts,
         }
     }
 }

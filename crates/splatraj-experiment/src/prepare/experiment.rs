@@ -87,6 +87,12 @@ pub struct Experiment {
     /// What each join of windows becomes (`[output] transitions`), judged once
     /// ([`Experiment::joins`]): the starts, the run's model and the plan all ask for it.
     pub(crate) joins_memo: Memo<String, Vec<JoinKind>>,
+    /// The scene on the plain device, uploaded once ([`Experiment::plain_scene`]): the start
+    /// search, the metrics and the frames render it (a 6M-Gaussian capture is ~1.5 GB to copy).
+    pub(crate) scene_memo: Memo<(), DeviceScene>,
+    /// Each window's object alone on the plain device, keyed by its Gaussians' indices
+    /// ([`Experiment::object_alone`]).
+    pub(crate) alone_memo: Memo<Vec<u32>, DeviceScene>,
     /// The coarse copy the optimisation renders instead of `scene`, when `optimise_gaussians`
     /// asks for one ([`Experiment::optimisation_scene`]).
     pub coarse: Option<CoarseCopy>,
@@ -97,6 +103,10 @@ pub struct Experiment {
 /// The smallest working distance, as a share of the scene's diagonal: a millimetre in a
 /// kilometre-wide capture.
 pub const MIN_DISTANCE_OF_DIAGONAL: f64 = 1e-6;
+
+/// Objects alone kept on the device at once ([`Experiment::object_alone`]): more windows than
+/// this upload the first ones again when asked again.
+const ALONE_SCENES_KEPT: usize = 64;
 /// The largest working distance, as a multiple of the scene's diagonal: a whole capture seen
 /// small from far outside it.
 pub const MAX_DISTANCE_OF_DIAGONAL: f64 = 100.0;
@@ -162,6 +172,8 @@ impl Experiment {
             occupancy_memo: Memo::default(),
             views_memo: Memo::default(),
             joins_memo: Memo::default(),
+            scene_memo: Memo::default(),
+            alone_memo: Memo::keeping(ALONE_SCENES_KEPT),
             coarse: None,
             prepared_at,
         };
@@ -422,15 +434,24 @@ impl Experiment {
             .map_err(anyhow::Error::msg)
     }
 
-    /// The scene on the plain device (for frames and metrics).
+    /// The scene on the plain device (the start search, metrics and frames), uploaded on the
+    /// first call and shared by the later ones.
     pub fn plain_scene(&self) -> DeviceScene {
-        DeviceScene::new(&self.scene, &self.device, self.dtype)
+        self.scene_memo.get_or_insert((), || {
+            DeviceScene::new(&self.scene, &self.device, self.dtype)
+        })
     }
 
-    /// Window `i`'s object alone (its Gaussians only), on the plain device.
+    /// Window `i`'s object alone (its Gaussians only), on the plain device: uploaded on the
+    /// first call for those Gaussians and shared by the later ones.
     pub fn object_alone(&self, i: usize) -> DeviceScene {
         let keep: Vec<bool> = self.windows[i].mask.iter().map(|&m| m != 0.0).collect();
-        DeviceScene::new(&self.scene.subset(&keep), &self.device, self.dtype)
+        let indices: Vec<u32> = (0..keep.len() as u32)
+            .filter(|&g| keep[g as usize])
+            .collect();
+        self.alone_memo.get_or_insert(indices, || {
+            DeviceScene::new(&self.scene.subset(&keep), &self.device, self.dtype)
+        })
     }
 
     /// The output camera: the optimisation camera at `[output]`'s size.

@@ -1,21 +1,33 @@
-//! [`Memo`]: one value judged once and kept with the key it was judged for. The
+//! [`Memo`]: values judged once and kept with the key each was judged for. The
 //! [`Experiment`](crate::prepare::experiment::Experiment) keeps what several stages ask for
-//! and each costs seconds to make (the view search, the joins, the clearance occupancy); the
-//! key holds what the value reads besides what `prepare` fixed, so a config edited since gets
-//! a fresh value instead of a stale one.
+//! and each costs seconds to make (the view search, the joins, the clearance occupancy, the
+//! scene on the device); the key holds what the value reads besides what `prepare` fixed, so
+//! a config edited since gets a fresh value instead of a stale one.
 
+use std::collections::VecDeque;
 use std::sync::{Mutex, PoisonError};
 
-/// The last value made and the key it was made for; a different key makes it again.
+/// The last values made (at most `capacity`) and the keys they were made for; another key
+/// makes its value again, and the oldest kept goes.
 #[derive(Debug)]
 pub struct Memo<K, V> {
-    kept: Mutex<Option<(K, V)>>,
+    kept: Mutex<VecDeque<(K, V)>>,
+    capacity: usize,
 }
 
 impl<K, V> Default for Memo<K, V> {
+    /// Keeps one value.
     fn default() -> Self {
+        Self::keeping(1)
+    }
+}
+
+impl<K, V> Memo<K, V> {
+    /// A memo that keeps the last `capacity` values (at least one).
+    pub fn keeping(capacity: usize) -> Self {
         Self {
-            kept: Mutex::new(None),
+            kept: Mutex::new(VecDeque::new()),
+            capacity: capacity.max(1),
         }
     }
 }
@@ -29,20 +41,33 @@ impl<K: PartialEq, V: Clone> Memo<K, V> {
         // Made without the lock held: making one value may ask another memo (or, in another
         // thread, this one) without waiting on it.
         let value = make()?;
-        *self.lock() = Some((key, value.clone()));
+        let mut kept = self.lock();
+        kept.retain(|(k, _)| *k != key);
+        kept.push_back((key, value.clone()));
+        while kept.len() > self.capacity {
+            kept.pop_front();
+        }
         Ok(value)
     }
 
-    /// A copy of the value kept for `key`, if that is the key it was made for.
+    /// [`Memo::get_or_make`] of a `make` that cannot fail.
+    pub fn get_or_insert(&self, key: K, make: impl FnOnce() -> V) -> V {
+        match self.get_or_make(key, || Ok::<_, std::convert::Infallible>(make())) {
+            Ok(value) => value,
+            Err(never) => match never {},
+        }
+    }
+
+    /// A copy of the value kept for `key`, if one was made for it.
     fn kept_for(&self, key: &K) -> Option<V> {
         self.lock()
-            .as_ref()
-            .filter(|(k, _)| k == key)
+            .iter()
+            .find(|(k, _)| k == key)
             .map(|(_, v)| v.clone())
     }
 
     /// The slot, even after a thread panicked holding it: a value is stored whole or not.
-    fn lock(&self) -> std::sync::MutexGuard<'_, Option<(K, V)>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, VecDeque<(K, V)>> {
         self.kept.lock().unwrap_or_else(PoisonError::into_inner)
     }
 }
@@ -70,5 +95,25 @@ mod tests {
         // A failure keeps nothing.
         assert_eq!(memo.get_or_make(3, || Err("no")), Err("no"));
         assert_eq!(memo.get_or_make(2, || Err("no")), Ok("value 2".to_string()));
+    }
+
+    #[test]
+    fn a_memo_keeps_its_last_values_up_to_its_capacity() {
+        let memo = Memo::<u32, u32>::keeping(2);
+        let made = std::cell::Cell::new(0);
+        let get = |key: u32| {
+            memo.get_or_make(key, || {
+                made.set(made.get() + 1);
+                Ok::<_, ()>(10 * key)
+            })
+            .unwrap()
+        };
+        assert_eq!((get(1), get(2), get(1), get(2)), (10, 20, 10, 20));
+        assert_eq!(made.get(), 2);
+        // A third key: the oldest (1) goes, 2 stays.
+        assert_eq!((get(3), get(2)), (30, 20));
+        assert_eq!(made.get(), 3);
+        assert_eq!(get(1), 10);
+        assert_eq!(made.get(), 4);
     }
 }

@@ -91,9 +91,13 @@ impl Experiment {
         DeviceScene::new(self.optimisation_scene(), &device, self.dtype)
     }
 
-    /// The optimisation scene on the plain device (the start search's renders).
+    /// The optimisation scene on the plain device (the start search's renders): the plain
+    /// scene, uploaded once, when there is no coarse copy.
     pub fn plain_optimisation_scene(&self) -> DeviceScene {
-        DeviceScene::new(self.optimisation_scene(), &self.device, self.dtype)
+        match &self.coarse {
+            None => self.plain_scene(),
+            Some(c) => DeviceScene::new(&c.scene, &self.device, self.dtype),
+        }
     }
 
     /// Window `i`'s object alone in the optimisation scene, on `device`.
