@@ -71,9 +71,13 @@ fn run_writes_a_complete_run_folder() {
     assert_eq!(counts["metrics"]["scene_uploads"], 0, "{counts}");
     assert_eq!(counts["frames"]["scene_uploads"], 0, "{counts}");
     assert_eq!(counts["optimisation"]["reads"], 3 + 1, "{counts}");
-    // Two metric samples a window fit one pass: each window's mask and its object alone.
+    // Two metric samples a window fit one pass: each window's mask and its object alone,
+    // read once together (the passes take their poses from the host: no read before them).
     assert_eq!(counts["metrics"]["renders"], 2 * 2, "{counts}");
+    assert_eq!(counts["metrics"]["reads"], 2, "{counts}");
+    // A frame: its framing figures, then its pixels.
     assert_eq!(counts["frames"]["renders"], 3, "{counts}");
+    assert_eq!(counts["frames"]["reads"], 3 * 2, "{counts}");
 
     let history = std::fs::read_to_string(run.join("history.csv")).unwrap();
     let lines: Vec<&str> = history.lines().collect();

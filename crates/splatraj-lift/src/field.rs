@@ -15,9 +15,8 @@
 //! up to the share of variance the subspace leaves out ([`LiftedField::explained`]).
 
 use splatraj_render::camera::Intrinsics;
-use splatraj_render::host::OnDevice;
 use splatraj_render::lift::{LiftSums, lift_views};
-use splatraj_render::render::{Channel, DeviceScene, Rasterizer, RenderRequest, render};
+use splatraj_render::render::{Channel, DeviceScene, Rasterizer, RenderRequest, render_poses};
 use splatraj_semantic::image_encoder::{DenseFeatures, ImageEncoder, RgbImage};
 
 use crate::MIN_WEIGHT;
@@ -367,7 +366,7 @@ pub fn render_rgb(scene: &DeviceScene, view: &View, size: usize) -> Result<RgbIm
 /// scene's device without a gradient (the image is only read).
 fn render_rgb_with(scene: &DeviceScene, view: &View, intrinsics: &Intrinsics) -> Result<RgbImage> {
     let request = RenderRequest::new(*intrinsics, vec![Channel::Rgb]);
-    let out = render(scene, scene.poses(&[view.pose]), &request)?;
+    let out = render_poses(scene, &[view.pose], &request)?;
     let pixels: Vec<f32> = out
         .images
         .without_autodiff()

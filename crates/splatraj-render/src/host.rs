@@ -70,6 +70,21 @@ pub fn poses_tensor(poses: &[Pose], device: &Device, dtype: DType) -> Tensor<2> 
     upload(TensorData::new(flat, [poses.len(), 6]), device, dtype)
 }
 
+/// `poses` as a tensor of `dtype` holds them: each value rounded to the dtype and back (f32 and
+/// f64; None for another dtype, whose rounding the caller must read back).
+pub fn as_stored(poses: &[Pose], dtype: DType) -> Option<Vec<Pose>> {
+    match dtype {
+        DType::F64 => Some(poses.to_vec()),
+        DType::F32 => Some(
+            poses
+                .iter()
+                .map(|p| Pose(p.0.map(|v| f64::from(v as f32))))
+                .collect(),
+        ),
+        _ => None,
+    }
+}
+
 /// One pose Φ as a `[1, 6]` tensor.
 pub fn pose_tensor(pose: &Pose, device: &Device, dtype: DType) -> Tensor<2> {
     poses_tensor(std::slice::from_ref(pose), device, dtype)
@@ -106,5 +121,43 @@ mod tests {
              written (failure #1856, still claiming 5 buffer(s)): An IO error happened: can't \
              allocate buffer of size: 221184000"
         );
+    }
+}
+
+#[cfg(test)]
+mod stored_tests {
+    use burn::tensor::{DType, Device};
+
+    use super::{as_stored, poses_tensor, to_host};
+    use crate::camera::Pose;
+
+    /// The rounding `as_stored` assumes is the one burn applies when it uploads f64 values to
+    /// an f32 tensor: read back, they are the same to the bit.
+    #[test]
+    fn stored_poses_are_what_the_device_holds() {
+        let poses: Vec<Pose> = (0..50)
+            .map(|k| {
+                let x = 0.1 + k as f64 * 0.7313;
+                Pose([
+                    x.sin(),
+                    1.0 / x,
+                    -x.cos() * 3.3,
+                    x * 1e3,
+                    1e-7 / x,
+                    -x.sqrt(),
+                ])
+            })
+            .collect();
+        let device = Device::flex();
+        for dtype in [DType::F32, DType::F64] {
+            let read = to_host(poses_tensor(&poses, &device, dtype)).unwrap();
+            let stored: Vec<f64> = as_stored(&poses, dtype)
+                .unwrap()
+                .iter()
+                .flat_map(|p| p.0)
+                .collect();
+            assert_eq!(stored, read, "{dtype:?}");
+        }
+        assert!(as_stored(&poses, DType::F16).is_none());
     }
 }

@@ -17,7 +17,7 @@ use burn::tensor::{Tensor, TensorData};
 
 use crate::camera::{Intrinsics, Pose};
 use crate::host::{OnDevice, to_host};
-use crate::render::{DeviceScene, Rasterizer, RenderError, RenderRequest, render};
+use crate::render::{DeviceScene, Rasterizer, RenderError, RenderRequest, render_poses};
 
 /// Views rendered together in one lifting pass (bounds the memory of a pass).
 const VIEWS_PER_PASS: usize = 4;
@@ -130,7 +130,7 @@ pub fn lift_views(
             gaussian_values: Some(values.clone()),
             ..RenderRequest::new(*intrinsics, Vec::new())
         };
-        let rendered = render(scene, scene.poses(views), &request)?;
+        let rendered = render_poses(scene, views, &request)?;
         if rendered.stats.gaussians_used == 0 {
             continue; // nothing drawn: every weight is 0 and there is no graph to walk
         }

@@ -324,6 +324,19 @@ pub fn render(
     render_at(scene, poses, None, request)
 }
 
+/// [`render`] of poses given on the host: uploaded, and the pass's host decisions take them
+/// as the device holds them ([`crate::host::as_stored`]), so it reads nothing back (no wait
+/// for the device before its decisions on a GPU). Not differentiable in the poses.
+pub fn render_poses(
+    scene: &DeviceScene,
+    poses: &[Pose],
+    request: &RenderRequest,
+) -> Result<Composited, RenderError> {
+    let dtype = scene.dtype();
+    let stored = crate::host::as_stored(poses, dtype);
+    render_at(scene, scene.poses(poses), stored.as_deref(), request)
+}
+
 /// [`render`] with the values of `poses` already on the host (`host_poses`, the same values
 /// in the same order, e.g. read once per optimisation step for every pass of the step): the
 /// pass then reads nothing back. `None` reads them. A zoom's host values come the same way

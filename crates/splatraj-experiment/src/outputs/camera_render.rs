@@ -13,9 +13,11 @@ use serde::Serialize;
 use splatraj_render::backend::{BackendKind, Precision};
 use splatraj_render::camera::Intrinsics;
 use splatraj_render::camera_file::resize;
-use splatraj_render::host::{OnDevice, to_host};
+use splatraj_render::host::to_host;
 use splatraj_render::images::{png_gray, png_rgb};
-use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
+use splatraj_render::render::{
+    Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render_poses,
+};
 use splatraj_scene::ReadOptions;
 use splatraj_semantic::{label_mask, read_mask_file};
 
@@ -182,7 +184,7 @@ pub fn render_camera(
             ..render_request
         };
         Ok(to_host(
-            render(&uploaded, uploaded.poses(&[pose]), &render_request)?.images,
+            render_poses(&uploaded, &[pose], &render_request)?.images,
         )?)
     };
     let rgb = image(RenderRequest::new(intrinsics, vec![Channel::Rgb]))?;

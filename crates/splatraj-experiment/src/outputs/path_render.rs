@@ -20,7 +20,7 @@ use splatraj_render::camera::Pose;
 use splatraj_render::host::{OnDevice, read_data, to_host};
 use splatraj_render::images::{png_rgb8, rgb8};
 use splatraj_render::pass_size::poses_per_pass;
-use splatraj_render::render::{Channel, DeviceScene, Rasterizer, RenderRequest, render};
+use splatraj_render::render::{Channel, DeviceScene, Rasterizer, RenderRequest, render_poses};
 use splatraj_report::video::VideoEncoder;
 use splatraj_traj::costs::{coverage, tce, tre};
 use splatraj_traj::optimise::sampling::window_of;
@@ -500,7 +500,7 @@ fn render_frames(
         };
         let poses: Vec<Pose> = frames.poses[first..end].iter().map(|&p| Pose(p)).collect();
         let clock = Instant::now();
-        let images = render(scene, scene.poses(&poses), &request)
+        let images = render_poses(scene, &poses, &request)
             .with_context(|| format!("rendering frame {first}"))?
             .images; // [B, H, W, 3 or 4]
         timings.render += clock.elapsed();

@@ -15,8 +15,8 @@ use burn::tensor::Device;
 use serde::Serialize;
 use splatraj_render::backend::{BackendKind, Precision};
 use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::host::{OnDevice, to_host};
-use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render};
+use splatraj_render::host::to_host;
+use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render_poses};
 use splatraj_scene::{Scene, UpSource};
 use splatraj_semantic::{
     Cluster, ClusteringSummary, Explanation, RegionSpec, SelectionOptions, SourceKind, Spread,
@@ -530,7 +530,7 @@ pub fn picture_with_rejected(
             Channel::Mask(target.rejected_mask()),
         ],
     );
-    let pixels = to_host(render(scene, scene.poses(&[*pose]), &request)?.images)?;
+    let pixels = to_host(render_poses(scene, &[*pose], &request)?.images)?;
     // [H·W·5] (R, G, B, selected, rejected) → [H·W·4] with the rejected tint blended in.
     let tinted: Vec<f64> = pixels
         .chunks_exact(5)

@@ -4,10 +4,10 @@ use anyhow::{Result, anyhow, bail};
 use glam::DVec3;
 use serde::Serialize;
 use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::host::{OnDevice, to_host};
+use splatraj_render::host::to_host;
 use splatraj_render::images::{highlight, png_rgb};
 use splatraj_render::orbit::Orbit;
-use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, render};
+use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, render_poses};
 use splatraj_scene::{Scene, resolve_up};
 use splatraj_semantic::Target;
 
@@ -123,7 +123,7 @@ pub fn diagnostic_camera(
             pruning: Pruning::ObjectOnly,
             ..RenderRequest::new(small, vec![Channel::Mask(target.mask.clone())])
         };
-        let images = to_host(render(uploaded, uploaded.poses(&poses), &request)?.images)?;
+        let images = to_host(render_poses(uploaded, &poses, &request)?.images)?;
         let per_view = small.width * small.height;
         shown = images
             .chunks_exact(per_view)
@@ -164,7 +164,7 @@ pub fn highlighted_picture(
     k: &Intrinsics,
 ) -> Result<(Vec<u8>, f64)> {
     let request = RenderRequest::new(*k, vec![Channel::Rgb, Channel::Mask(target.mask.clone())]);
-    let pixels = to_host(render(scene, scene.poses(&[*pose]), &request)?.images)?;
+    let pixels = to_host(render_poses(scene, &[*pose], &request)?.images)?;
     highlighted_png(&pixels, k)
 }
 

@@ -38,7 +38,7 @@ use splatraj_render::camera::{Intrinsics, Pose as CameraPose};
 use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::pass_size::{passes, poses_per_pass};
 use splatraj_render::render::{
-    Channel, DeviceScene, Pruning, Rasterizer, RenderError, RenderRequest, Zoom, render,
+    Channel, DeviceScene, Pruning, Rasterizer, RenderError, RenderRequest, Zoom, render_poses,
 };
 
 use crate::costs::{IOU_THRESHOLD, MaskMoments, box_from_hits, box_iou, mask_hits, tce_of, tre_of};
@@ -357,7 +357,6 @@ fn sample_metrics(
     poses: &[CameraPose],
     zooms: Option<Vec<f64>>,
 ) -> Result<Vec<SampleMetrics>, RenderError> {
-    let poses_tensor = scene.poses(poses);
     let zoom = zooms.map(|host| {
         let data = TensorData::new(host.clone(), [host.len()]);
         Zoom::at(
@@ -372,7 +371,7 @@ fn sample_metrics(
             zoom: zoom.clone(),
             ..RenderRequest::new(*intrinsics, vec![Channel::Mask(mask)])
         };
-        let images = render(scene, poses_tensor.clone(), &request)?.images;
+        let images = render_poses(scene, poses, &request)?.images;
         let [b, h, w, _] = images.dims();
         Ok(images.reshape([b, h, w]))
     };

@@ -30,9 +30,11 @@
 use glam::DVec3;
 use serde::Serialize;
 use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::host::{OnDevice, to_host};
+use splatraj_render::host::to_host;
 use splatraj_render::orbit::Orbit;
-use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
+use splatraj_render::render::{
+    Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render_poses,
+};
 
 use super::OptimiseError;
 use crate::clearance::Occupancy;
@@ -208,7 +210,7 @@ fn mask_sums(
     let per_view = intrinsics.width * intrinsics.height;
     let mut sums = Vec::with_capacity(poses.len());
     for batch in poses.chunks(VIEW_SEARCH_BATCH) {
-        let images = render(scene, scene.poses(batch), &request)?.images; // [B, H, W, 1]
+        let images = render_poses(scene, batch, &request)?.images; // [B, H, W, 1]
         let values = to_host(images).map_err(|e| OptimiseError::ReadBack(e.to_string()))?;
         sums.extend(
             values
