@@ -457,6 +457,10 @@ impl FrameWriter {
 /// window and a size, hands each frame's pixels to `deliver` in order and tells `progress`;
 /// returns the frames' metrics (empty without objects) and adds render, metrics and read-back
 /// times to `timings`.
+///
+/// One pass is in flight while the one before it is read back: on a GPU the host decides and
+/// bins the next frames while the device composites these (the host backends run each pass
+/// when it is made, so there the order of the work is all that changes).
 fn render_frames(
     scene: &DeviceScene,
     job: &PathRender<'_>,
@@ -467,17 +471,66 @@ fn render_frames(
     deliver: &mut dyn FnMut(Frame) -> Result<()>,
 ) -> Result<Vec<FrameMetrics>> {
     let frames = job.frames;
-    let windows: Vec<usize> = frames
-        .times
-        .iter()
-        .map(|&t| window_of(t, job.objects.len()))
-        .collect();
+    let context = FrameContext {
+        job,
+        windows: frames
+            .times
+            .iter()
+            .map(|&t| window_of(t, job.objects.len()))
+            .collect(),
+        keyframes,
+        since,
+    };
     let mut metrics = Vec::new();
+    let mut in_flight: Option<QueuedFrames> = None;
     let mut first = 0;
     while first < frames.poses.len() {
+        let queued = context.queue(scene, first, batch, timings)?;
+        first = queued.frames.end;
+        if let Some(done) = in_flight.replace(queued) {
+            context.finish(done, timings, &mut metrics, progress, deliver)?;
+        }
+    }
+    if let Some(done) = in_flight {
+        context.finish(done, timings, &mut metrics, progress, deliver)?;
+    }
+    Ok(metrics)
+}
+
+/// What every pass of [`render_frames`] reads.
+struct FrameContext<'a> {
+    job: &'a PathRender<'a>,
+    /// The window each frame shows.
+    windows: Vec<usize>,
+    keyframes: &'a [usize],
+    since: splatraj_scene::stop::Since,
+}
+
+/// A pass of frames queued on the device, not read back yet.
+struct QueuedFrames {
+    /// Which frames.
+    frames: std::ops::Range<usize>,
+    /// Their images `[B, H, W, 3 or 4]`.
+    images: Tensor<4>,
+    /// Their TCE, TRE and coverage `[3B]`, when the window has an object.
+    framing: Option<Tensor<1>>,
+}
+
+impl FrameContext<'_> {
+    /// Queues the render of the frames from `first` on (up to `batch` that share a window and
+    /// a size, and fit the device), their framing figures, and has the device start on them.
+    fn queue(
+        &self,
+        scene: &DeviceScene,
+        first: usize,
+        batch: usize,
+        timings: &mut PathTimings,
+    ) -> Result<QueuedFrames> {
+        let frames = self.job.frames;
+        let windows = &self.windows;
         let intrinsics = frames.cameras[first];
         let same = |i: usize| windows[i] == windows[first] && frames.cameras[i] == intrinsics;
-        let object = job.objects.get(windows[first]);
+        let object = self.job.objects.get(windows[first]);
         // Never more poses than the device can hold the images of (RGB, and the mask).
         let fits = poses_per_pass(
             &scene.device(),
@@ -495,7 +548,7 @@ fn render_frames(
             channels.push(Channel::Mask(o.mask.to_vec()));
         }
         let request = RenderRequest {
-            rasterizer: job.rasterizer,
+            rasterizer: self.job.rasterizer,
             ..RenderRequest::new(intrinsics, channels)
         };
         let poses: Vec<Pose> = frames.poses[first..end].iter().map(|&p| Pose(p)).collect();
@@ -504,29 +557,56 @@ fn render_frames(
             .with_context(|| format!("rendering frame {first}"))?
             .images; // [B, H, W, 3 or 4]
         timings.render += clock.elapsed();
-        let [b, h, w, c] = images.dims();
-        if let Some(o) = object {
-            let clock = Instant::now();
+        let clock = Instant::now();
+        let framing = object.map(|o| {
+            let [b, h, w, _] = images.dims();
             let mask = images.clone().narrow(3, 3, 1).reshape([b, h, w]);
             // One read for the three (a wait for the device each on a GPU).
-            let three = Tensor::cat(
+            Tensor::cat(
                 vec![
                     tce(mask.clone()),
                     tre(mask.clone(), o.target_ratio),
                     coverage(mask),
                 ],
                 0,
-            ); // [3B]
-            let three = to_host(three)?;
+            ) // [3B]
+        });
+        scene
+            .device()
+            .flush()
+            .map_err(|e| anyhow!("starting frame {first} on the device: {e}"))?;
+        timings.metrics += clock.elapsed();
+        Ok(QueuedFrames {
+            frames: first..end,
+            images,
+            framing,
+        })
+    }
+
+    /// Reads `done` back, records its metrics, and delivers its frames in order.
+    fn finish(
+        &self,
+        done: QueuedFrames,
+        timings: &mut PathTimings,
+        metrics: &mut Vec<FrameMetrics>,
+        progress: &mut dyn FnMut(usize),
+        deliver: &mut dyn FnMut(Frame) -> Result<()>,
+    ) -> Result<()> {
+        let frames = self.job.frames;
+        let first = done.frames.start;
+        let [b, h, w, c] = done.images.dims();
+        if let Some(framing) = done.framing {
+            let clock = Instant::now();
+            let three = to_host(framing)?;
             let (tce, rest) = three.split_at(b);
             let (tre, coverage) = rest.split_at(b);
-            for (i, index) in (first..end).enumerate() {
+            for (i, index) in done.frames.clone().enumerate() {
                 let at = |v: &[f64]| v.get(i).copied().unwrap_or(f64::NAN);
                 let shown = at(coverage) > 0.0;
                 metrics.push(FrameMetrics {
                     frame: index,
                     t: frames.times[index],
-                    window: windows[index],
+                    window: self.windows[index],
                     tce: shown.then(|| at(tce)),
                     tre: at(tre),
                     coverage: at(coverage),
@@ -537,7 +617,7 @@ fn render_frames(
         let clock = Instant::now();
         // f32 images stay f32 on the host (the f64 copy cost as much as the PNG); any other
         // dtype is read as f64, as `to_host` reads it.
-        let data = read_data(images).with_context(|| format!("reading frame {first} back"))?;
+        let data = read_data(done.images).with_context(|| format!("reading frame {first} back"))?;
         let pixels = match data.dtype() {
             DType::F32 => Pixels::F32(data.try_into_vec::<f32>().map_err(|e| anyhow!("{e:?}"))?),
             _ => Pixels::F64(
@@ -547,13 +627,15 @@ fn render_frames(
             ),
         };
         timings.read_back += clock.elapsed();
-        for (i, index) in (first..end).enumerate() {
+        let object = self.job.objects.get(self.windows[first]);
+        for (i, index) in done.frames.enumerate() {
             let clock = Instant::now();
-            let tinted = object.is_some() && job.overlay == MaskOverlay::Tint;
+            let tinted = object.is_some() && self.job.overlay == MaskOverlay::Tint;
             let frame_pixels = h * w * c;
             let range = i * frame_pixels..(i + 1) * frame_pixels;
             let rgb = pixels.rgb8(range.clone(), c, tinted.then_some(TINT_ALPHA));
-            let keyframe = keyframes
+            let keyframe = self
+                .keyframes
                 .contains(&index)
                 .then(|| pixels.rgb8(range, c, Some(TINT_ALPHA)));
             timings.read_back += clock.elapsed();
@@ -566,7 +648,7 @@ fn render_frames(
             })?;
             progress(index + 1);
             // A whole frame is the boundary: what was delivered gets written whole.
-            if since.stopped() && index + 1 < frames.poses.len() {
+            if self.since.stopped() && index + 1 < frames.poses.len() {
                 return Err(splatraj_scene::stop::Stopped {
                     what: format!(
                         "the first {} of {} frames are written, no video",
@@ -577,9 +659,8 @@ fn render_frames(
                 .into());
             }
         }
-        first = end;
+        Ok(())
     }
-    Ok(metrics)
 }
 
 /// A batch's images on the host, `[B·H·W·C]`, in the precision they were rendered in.
