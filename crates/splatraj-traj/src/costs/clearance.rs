@@ -201,7 +201,12 @@ impl Cost for ClearanceCost {
         // Read once per optimisation step with everything else; read here only without it.
         let host: Vec<f64> = match inputs.path_or_sample_host_poses() {
             Some(poses) => poses.iter().flat_map(|p| p[3..].iter().copied()).collect(),
-            None => splatraj_render::host::to_host(centres.clone().detach()).unwrap_or_default(),
+            None => splatraj_render::host::to_host(centres.clone().detach()).map_err(|e| {
+                CostError::ReadBack {
+                    cost: self.name(),
+                    reason: e.to_string(),
+                }
+            })?,
         };
         let mut points = Vec::with_capacity(3 * batch);
         let mut normals = Vec::with_capacity(3 * batch);

@@ -130,6 +130,14 @@ pub enum CostError {
     /// Two costs share a name (their history columns would collide), or none is configured.
     #[error("costs: {0}")]
     Set(String),
+    /// A value a cost reads on the host could not be read back from the device.
+    #[error("cost `{cost}`: {reason}")]
+    ReadBack {
+        /// The cost.
+        cost: &'static str,
+        /// The device's failure.
+        reason: String,
+    },
 }
 
 /// What one query (time window) contributes to the costs, on the host.

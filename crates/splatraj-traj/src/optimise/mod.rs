@@ -187,20 +187,23 @@ pub(crate) fn check_starts(starts: &[Pose], field: &'static str) -> Result<(), O
     }
 }
 
-/// A tensor's values on the host as f64 (empty if they cannot be read).
-pub(crate) fn host_values<const D: usize>(t: Tensor<D>) -> Vec<f64> {
-    splatraj_render::host::to_host(t).unwrap_or_default()
+/// A tensor's values on the host as f64; a device's failure is [`OptimiseError::ReadBack`].
+pub(crate) fn host_values<const D: usize>(t: Tensor<D>) -> Result<Vec<f64>, OptimiseError> {
+    splatraj_render::host::to_host(t).map_err(|e| OptimiseError::ReadBack(e.to_string()))
 }
 
 /// One sample's terms as `(name, weight, unweighted value)`.
 pub(crate) type TermRow = Vec<(&'static str, f64, f64)>;
+
+/// Each sample's weighted total and its terms, on the host.
+pub(crate) type SampleRows = Vec<(f64, TermRow)>;
 
 /// Each sample's weighted total and terms on the host, and the values of `extra` (e.g. the
 /// step's gradient) when given: all of it in **one read** (one wait for the device on a GPU).
 pub(crate) fn per_sample(
     terms: &CostTerms,
     extra: Option<Tensor<1>>,
-) -> (Vec<(f64, TermRow)>, Option<Vec<f64>>) {
+) -> Result<(SampleRows, Option<Vec<f64>>), OptimiseError> {
     let batch = terms.total.dims()[0];
     let mut parts = vec![terms.total.clone().without_autodiff()];
     parts.extend(
@@ -211,7 +214,7 @@ pub(crate) fn per_sample(
     );
     let has_extra = extra.is_some();
     parts.extend(extra.map(Tensor::without_autodiff));
-    let values = host_values(Tensor::cat(parts, 0));
+    let values = host_values(Tensor::cat(parts, 0))?;
     let at = |i: usize| values.get(i).copied().unwrap_or(f64::NAN);
     let rows = (0..batch)
         .map(|b| {
@@ -226,7 +229,7 @@ pub(crate) fn per_sample(
         .collect();
     let used = (terms.terms.len() + 1) * batch;
     let extra = has_extra.then(|| values.get(used..).unwrap_or_default().to_vec());
-    (rows, extra)
+    Ok((rows, extra))
 }
 
 #[cfg(test)]

@@ -13,7 +13,7 @@ use burn::tensor::{DType, Device, Int, Tensor, TensorData};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::focus::Surroundings;
-use splatraj_render::host::{OnDevice, to_host};
+use splatraj_render::host::OnDevice;
 use splatraj_render::rasterize::{Approximations, RenderStats};
 use splatraj_render::render::{
     Channel, DeviceScene, ObjectMasks, ObjectView, Pruning, Rasterizer, RenderRequest, Zoom,
@@ -21,7 +21,7 @@ use splatraj_render::render::{
 };
 
 use super::sampling::window_bounds;
-use super::{OptimiseError, WindowTarget};
+use super::{OptimiseError, WindowTarget, host_values};
 use crate::clearance::Occupancy;
 use crate::costs::{
     Cost, CostDomain, CostError, CostInputs, CostTerms, HostPoses, ImageChannel, PathSamples,
@@ -967,7 +967,7 @@ impl<'a> Problem<'a> {
                 None => Tensor::<1>::zeros([6], (&poses.device().inner(), poses.dtype())),
             });
         }
-        let values = read(Tensor::cat(parts, 0))?;
+        let values = host_values(Tensor::cat(parts, 0))?;
         let mut next = values.into_iter();
         let total = next.next().unwrap_or(f64::NAN);
         let terms: Vec<(&'static str, f64, f64)> = terms
@@ -1018,8 +1018,4 @@ fn pass_zoom(windows: &[WindowSamples<'_>], twice: bool) -> Option<Zoom> {
         host = host.map(|h| [h.clone(), h].concat());
     }
     Some(Zoom { values, host })
-}
-
-fn read<const D: usize>(t: Tensor<D>) -> Result<Vec<f64>, OptimiseError> {
-    to_host(t).map_err(|e| OptimiseError::ReadBack(e.to_string()))
 }

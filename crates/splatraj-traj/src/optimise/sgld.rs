@@ -151,7 +151,7 @@ pub fn sample_poses_sgld(
             .terms;
         let grads = terms.total.clone().sum().backward();
         let grad = normalised.grad(&grads).map(|g| g.reshape([chains * 6]));
-        let (rows, grad) = per_sample(&terms, grad);
+        let (rows, grad) = per_sample(&terms, grad)?;
         let totals: Vec<f64> = rows.into_iter().map(|(t, _)| t).collect();
         let grad = grad.unwrap_or_else(|| vec![0.0; chains * 6]);
         if step >= options.burn_in && (step - options.burn_in).is_multiple_of(options.thin) {

@@ -201,11 +201,11 @@ pub fn optimise_poses_observed(
         Tensor::<2>::from_data(TensorData::new(flat, [rows.len(), 6]), (&device, dtype))
     };
     // Scene poses (already denormalised on the device) as host rows.
-    let from_tensor = |t: Tensor<2>| -> Vec<[f64; 6]> {
-        host_values(t)
+    let from_tensor = |t: Tensor<2>| -> Result<Vec<[f64; 6]>, OptimiseError> {
+        Ok(host_values(t)?
             .chunks_exact(6)
             .map(|r| r.try_into().expect("rows of six"))
-            .collect()
+            .collect())
     };
     let start_rows: Vec<[f64; 6]> = starts.iter().map(|p| p.0).collect();
     let mut module = PoseBatch {
@@ -229,7 +229,7 @@ pub fn optimise_poses_observed(
         let poses = units.to_scene(normalised.clone());
         // Two reads a step: the poses (the render's decisions and the history need them on
         // the host), then the totals, terms and gradient together.
-        let evaluated = from_tensor(poses.clone().without_autodiff());
+        let evaluated = from_tensor(poses.clone().without_autodiff())?;
         let host = HostPoses {
             samples: evaluated.clone(),
             path: None,
@@ -239,14 +239,14 @@ pub fn optimise_poses_observed(
             .terms;
         let mut updated = false;
         let (samples, grad, grads) = if last {
-            let (samples, _) = per_sample(&terms, None);
+            let (samples, _) = per_sample(&terms, None)?;
             (samples, None, None)
         } else {
             let grads = terms.total.clone().sum().backward();
             let grad = normalised
                 .grad(&grads)
                 .map(|g| g.reshape([starts.len() * 6]));
-            let (samples, grad) = per_sample(&terms, grad);
+            let (samples, grad) = per_sample(&terms, grad)?;
             (samples, grad, Some(grads))
         };
         if let Some(grads) = grads {

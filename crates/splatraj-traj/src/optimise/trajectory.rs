@@ -37,7 +37,9 @@
 use std::time::{Duration, Instant};
 
 use super::units::PoseUnits;
-use super::{OptimiseError, Problem, StepEvaluation, WindowSamples, check_adam, sampling};
+use super::{
+    OptimiseError, Problem, StepEvaluation, WindowSamples, check_adam, host_values, sampling,
+};
 use crate::costs::{HostPoses, QueryContext};
 use crate::trajectory::{LensPath, POSE_DIM, Trajectory, TrajectoryModel, TrajectoryRecord};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
@@ -428,7 +430,7 @@ pub fn optimise_trajectory(
     }
     // The last step's results: one more read.
     if let Some(done) = pending.take() {
-        let values = read_values(done.values.clone())?;
+        let values = host_values(done.values.clone())?;
         if let Finished::Stop = bookkeeping.finish(done, &values)? {
             stop = StopReason::Interrupted;
         }
@@ -520,10 +522,6 @@ enum Finished {
     Skipped(Box<(Trajectory, ModuleOptimizer)>),
 }
 
-fn read_values(t: Tensor<1>) -> Result<Vec<f64>, OptimiseError> {
-    splatraj_render::host::to_host(t).map_err(|e| OptimiseError::ReadBack(e.to_string()))
-}
-
 /// Every window's sample and path poses of a step in one forward of the model `[T, 6]`, and
 /// their host values read in one read together with the previous step's `pending` values.
 fn step_poses(
@@ -555,7 +553,7 @@ fn step_poses(
     let mut read = vec![poses.clone().without_autodiff().reshape([count * POSE_DIM])];
     read.extend(zoom.clone().map(|z| z.without_autodiff()));
     read.extend(pending.map(|p| p.values.clone()));
-    let mut values = read_values(Tensor::cat(read, 0))?;
+    let mut values = host_values(Tensor::cat(read, 0))?;
     let zoom_rows = if zoom.is_some() { count } else { 0 };
     let previous = values.split_off(count * POSE_DIM + zoom_rows);
     let zoom = zoom.map(|z| (z, values.split_off(count * POSE_DIM)));
