@@ -27,16 +27,17 @@
 //! beats one that hides half of it unless it costs about 14 working distances more of travel
 //! over the window's two moves.
 
+use burn::tensor::Tensor;
 use glam::DVec3;
 use serde::Serialize;
 use splatraj_render::camera::{Intrinsics, Pose};
-use splatraj_render::host::to_host;
+use splatraj_render::host::OnDevice;
 use splatraj_render::orbit::Orbit;
 use splatraj_render::render::{
     Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render_poses,
 };
 
-use super::OptimiseError;
+use super::{OptimiseError, host_values};
 use crate::clearance::Occupancy;
 
 /// Where the candidates lie (module docs, step 1).
@@ -189,8 +190,8 @@ pub fn candidate_views(
     Ok(views)
 }
 
-/// Renders batches of at most this many poses at once (bounds the search's memory).
-/// Poses the view search renders at once (its peak memory is this many images).
+/// Poses the view search renders at once (its peak memory is twice this many images: one batch
+/// is read while the next renders).
 pub const VIEW_SEARCH_BATCH: usize = 32;
 
 /// Σ of the mask `mask` (one value per Gaussian of `scene`) at each pose, rendered pruned to
@@ -209,14 +210,29 @@ fn mask_sums(
     };
     let per_view = intrinsics.width * intrinsics.height;
     let mut sums = Vec::with_capacity(poses.len());
-    for batch in poses.chunks(VIEW_SEARCH_BATCH) {
-        let images = render_poses(scene, batch, &request)?.images; // [B, H, W, 1]
-        let values = to_host(images).map_err(|e| OptimiseError::ReadBack(e.to_string()))?;
+    let mut add = |images: Tensor<4>| -> Result<(), OptimiseError> {
+        let values = host_values(images)?;
         sums.extend(
             values
                 .chunks_exact(per_view)
                 .map(|image| image.iter().sum::<f64>()),
         );
+        Ok(())
+    };
+    // One batch in flight while the one before is read: on a GPU the host decides and bins
+    // the next views while the device composites these.
+    let mut in_flight = None;
+    for batch in poses.chunks(VIEW_SEARCH_BATCH) {
+        let images = render_poses(scene, batch, &request)?.images; // [B, H, W, 1]
+        scene.device().flush().map_err(|e| {
+            OptimiseError::ReadBack(format!("starting the view search's renders: {e}"))
+        })?;
+        if let Some(done) = in_flight.replace(images) {
+            add(done)?;
+        }
+    }
+    if let Some(done) = in_flight {
+        add(done)?;
     }
     if sums.len() != poses.len() {
         return Err(OptimiseError::ReadBack(format!(
