@@ -326,16 +326,23 @@ fn backward_kernel<F: Float, I: Int>(
         // A fixed two-level sum over the tile's pixels (the same sum on every run), two
         // barriers per entry: 32 groups of 8 pixels per component, then the 32 groups. A
         // binary tree took ten; on a GPU the barriers, not the adds, bound this loop.
-        let mut u = p;
-        while u < comptime!(GROUPS * (channels + 6)) {
+        // Unrolled at compile time, not a runtime loop: llvmpipe (lavapipe) ends every loop of
+        // an invocation once all its loops together have made 65 535 iterations
+        // (LP_MAX_TGSI_LOOP_ITERATIONS, one counter shared by every loop), and a runtime loop
+        // here cost two of them per list entry on top of the entry loop's one.
+        #[unroll]
+        for r in 0..comptime!((GROUPS * (channels + 6)).div_ceil(256)) {
             // u = k·32 + g: component k, pixels 8g … 8g + 7.
-            let base = (u / GROUPS) * 256 + (u % GROUPS) * GROUP_PIXELS;
-            let mut sum = sh_sum[base];
-            for q in 1..GROUP_PIXELS {
-                sum += sh_sum[base + q];
+            let u = p + r * 256;
+            if u < comptime!(GROUPS * (channels + 6)) {
+                let base = (u / GROUPS) * 256 + (u % GROUPS) * GROUP_PIXELS;
+                let mut sum = sh_sum[base];
+                #[unroll]
+                for q in 1..GROUP_PIXELS {
+                    sum += sh_sum[base + q];
+                }
+                sh_group[u] = sum;
             }
-            sh_group[u] = sum;
-            u += 256;
         }
         sync_cube();
         // Safe without a third barrier: the next entry writes `sh_sum` (read above, before
