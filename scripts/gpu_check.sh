@@ -35,6 +35,8 @@ bin="$(cd "$(dirname "$bin")" && pwd)/$(basename "$bin")"
 for f in biker.compressed.ply guitar.compressed.ply; do
   [ -f "$data/$f" ] || { echo "gpu_check: $data/$f is missing (give DATA_DIR)" >&2; exit 2; }
 done
+# Absolute: a config resolves a relative `scene.path` against its own folder.
+data="$(cd "$data" && pwd)"
 # Mesa and the loader complain without it; kernels compile once per machine.
 export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
 export CUBECL_AUTOTUNE_LEVEL="${CUBECL_AUTOTUNE_LEVEL:-minimal}"

@@ -281,18 +281,7 @@ fn assert_gpu_kernels_match_host_kernels(case: &KernelCase) {
     use splatraj_render::fused::{CompositePlan, composite_fused};
     use splatraj_render::rasterize::SplatInputs;
 
-    let KernelCase {
-        means,
-        conics,
-        opacities,
-        values,
-        work,
-        gaussians: n,
-        batch,
-        grid,
-        channels,
-    } = case;
-    let (n, batch, grid, channels) = (*n, *batch, *grid, *channels);
+    let (n, batch, grid, channels) = (case.gaussians, case.batch, case.grid, case.channels);
     let (width, height) = (grid.width, grid.height);
     let rows = n * batch;
     let pixels = batch * height * width;
@@ -309,9 +298,13 @@ fn assert_gpu_kernels_match_host_kernels(case: &KernelCase) {
             )
             .require_grad()
         };
-        let (m, c, v) = (t2(means, 2), t2(conics, 3), t2(values, channels));
+        let (m, c, v) = (
+            t2(&case.means, 2),
+            t2(&case.conics, 3),
+            t2(&case.values, channels),
+        );
         let o = Tensor::<1>::from_data(
-            TensorData::new(opacities.clone(), [rows]),
+            TensorData::new(case.opacities.clone(), [rows]),
             (&device, DType::F32),
         )
         .require_grad();
@@ -321,7 +314,7 @@ fn assert_gpu_kernels_match_host_kernels(case: &KernelCase) {
             opacities: o.clone(),
             values: v.clone(),
         };
-        let out = composite_fused(&inputs, CompositePlan::new(work, n, batch, grid));
+        let out = composite_fused(&inputs, CompositePlan::new(&case.work, n, batch, grid));
         let weights = |range: std::ops::Range<usize>| {
             let w: Vec<f64> = w_image
                 .chunks(channels + 1)

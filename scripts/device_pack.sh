@@ -1,0 +1,69 @@
+#!/usr/bin/env bash
+# Packs what a borrowed GPU machine needs to run scripts/gpu_check.sh without building, so that a
+# session lent one spends its device minutes measuring: the wgpu binary (stripped, xz), the two
+# scenes the check reads, the Vulkan loader's Debian packages, and the script the machine runs.
+#
+#   cargo build --release --features wgpu          # here, about 30 minutes on 2 cores
+#   scripts/device_pack.sh [BINARY] [DATA_DIR]     # here: fills .gpu/ (git ignores it)
+#
+# then, on the machine (the workplace's device tool: `run` with carry [".gpu"]):
+#
+#   bash .gpu/run.sh                               # GPU_CHECK_QUICK=1 for a smoke test
+#
+# which writes $OUT/gpu_check.txt (the table and the log) and $OUT/gpu_check_json.tar.xz (every
+# measurement's JSON). BINARY defaults to $CARGO_TARGET_DIR/release/splatraj (else
+# target/release/splatraj), DATA_DIR to ../shared/data. Everything travels within the tool's
+# 64 MiB. The loader packages follow the device notes of this workplace (Debian's libvulkan1,
+# unpacked over / on the machine; the NVIDIA ICD is the machine's own).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+bin="${1:-${CARGO_TARGET_DIR:-target}/release/splatraj}"
+data="${2:-../shared/data}"
+[ -x "$bin" ] || { echo "device_pack: no binary at $bin (build with --features wgpu)" >&2; exit 2; }
+for f in biker.compressed.ply guitar.compressed.ply; do
+  [ -f "$data/$f" ] || { echo "device_pack: $data/$f is missing (give DATA_DIR)" >&2; exit 2; }
+done
+grep -qx '/.gpu/' .git/info/exclude 2>/dev/null || echo '/.gpu/' >>.git/info/exclude
+
+rm -rf .gpu && mkdir -p .gpu/data .gpu/deb
+cp "$data/biker.compressed.ply" "$data/guitar.compressed.ply" .gpu/data/
+# Debug info is most of a release binary's 600 MB; the machine needs none of it.
+strip -o .gpu/splatraj "$bin"
+xz -T0 -6 .gpu/splatraj
+# The loader for the machine's amd64 Debian, whatever this machine runs.
+lists=/tmp/device_pack_apt
+mkdir -p "$lists/partial"
+apt_opts=(-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 "-oDir::State::Lists=$lists")
+apt-get "${apt_opts[@]}" update -qq
+(cd .gpu/deb && apt-get "${apt_opts[@]}" download -qq libvulkan1)
+
+cat >.gpu/run.sh <<'RUN'
+#!/usr/bin/env bash
+# Runs on the GPU machine, from the repository root: unpacks what device_pack.sh packed and runs
+# scripts/gpu_check.sh, the table and log into $OUT/gpu_check.txt, the JSON into one archive.
+set -uo pipefail
+out="${OUT:?run on the device machine, where OUT is set}"
+if ! ldconfig -p | grep -q libvulkan.so.1; then
+  for f in .gpu/deb/*.deb; do dpkg -x "$f" /; done
+  ldconfig
+fi
+icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
+[ -f "$icd" ] && export VK_DRIVER_FILES="${VK_DRIVER_FILES:-$icd}"
+xz -dkf .gpu/splatraj.xz && chmod +x .gpu/splatraj
+json=/tmp/gpu_check_json
+rm -rf "$json" && mkdir -p "$json"
+{
+  nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader || true
+  git log -1 --format='commit %h %s' 2>/dev/null || true
+  scripts/gpu_check.sh .gpu/splatraj .gpu/data "$json"
+  echo "gpu_check exit status $?"
+} >"$out/gpu_check.txt" 2>&1
+# The run folders are large and many; the JSON holds every figure.
+(cd "$json" && tar -cJf "$out/gpu_check_json.tar.xz" --exclude='runs_*' .)
+tail -60 "$out/gpu_check.txt"
+grep -q '^gpu_check exit status 0$' "$out/gpu_check.txt"
+RUN
+chmod +x .gpu/run.sh
+du -sh .gpu
+echo "device_pack: .gpu/ is ready; on the machine: bash .gpu/run.sh (carry [\".gpu\"])"
