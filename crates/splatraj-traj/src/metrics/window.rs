@@ -260,16 +260,19 @@ pub fn window_metrics_zoomed(
         intrinsics.height,
         1,
     );
+    // One pass in flight while the one before is read: on a GPU the host decides and bins the
+    // next samples while the device composites these.
     let mut each = Vec::with_capacity(poses.len());
+    let mut in_flight: Option<QueuedSamples> = None;
     for pass in passes(poses.len(), per_pass) {
         let zoom = zooms.as_ref().map(|z| z[pass.clone()].to_vec());
-        each.extend(sample_metrics(
-            scene,
-            object,
-            intrinsics,
-            &poses[pass],
-            zoom,
-        )?);
+        let queued = queue_samples(scene, object, intrinsics, &poses[pass], zoom)?;
+        if let Some(done) = in_flight.replace(queued) {
+            each.extend(done.finish()?);
+        }
+    }
+    if let Some(done) = in_flight {
+        each.extend(done.finish()?);
     }
     let batch = each.len();
     let column = |f: fn(&SampleMetrics) -> f64| each.iter().map(f).collect::<Vec<f64>>();
@@ -348,15 +351,26 @@ struct SampleMetrics {
     occluded: Option<f64>,
 }
 
-/// [`SampleMetrics`] of `poses` (one render pass: the visible mask and the object alone),
-/// through the lens of `zooms` when the camera zooms.
-fn sample_metrics(
+/// A pass of metric samples queued on the device: everything [`SampleMetrics`] needs, in one
+/// tensor to read (see [`queue_samples`]).
+struct QueuedSamples {
+    /// TCE, TRE, coverage, the two masks' sums `[5B]`, then the row hits `[2·B·H]` and the
+    /// column hits `[2·B·W]` of the visible mask and the object alone.
+    read: Tensor<1>,
+    batch: usize,
+    height: usize,
+    width: usize,
+}
+
+/// Queues the metrics of `poses` (one render pass: the visible mask and the object alone),
+/// through the lens of `zooms` when the camera zooms, and has the device start on them.
+fn queue_samples(
     scene: &DeviceScene,
     object: &WindowObject<'_>,
     intrinsics: &Intrinsics,
     poses: &[CameraPose],
     zooms: Option<Vec<f64>>,
-) -> Result<Vec<SampleMetrics>, RenderError> {
+) -> Result<QueuedSamples, RenderError> {
     let zoom = zooms.map(|host| {
         let data = TensorData::new(host.clone(), [host.len()]);
         Zoom::at(
@@ -388,7 +402,7 @@ fn sample_metrics(
         let [a, b] = t.dims();
         t.reshape([a * b])
     };
-    let read = to_host(Tensor::cat(
+    let read = Tensor::cat(
         vec![
             tce_of(&moments),
             tre_of(&moments, object.target_ratio),
@@ -401,8 +415,40 @@ fn sample_metrics(
             flat(alone_columns),
         ],
         0,
-    ))
-    .map_err(|e| RenderError::ReadBack(e.to_string()))?;
+    );
+    scene
+        .device()
+        .flush()
+        .map_err(|e| RenderError::ReadBack(format!("starting the metrics' renders: {e}")))?;
+    Ok(QueuedSamples {
+        read,
+        batch,
+        height,
+        width,
+    })
+}
+
+impl QueuedSamples {
+    /// Reads the pass back: each sample's [`SampleMetrics`].
+    fn finish(self) -> Result<Vec<SampleMetrics>, RenderError> {
+        let Self {
+            read,
+            batch,
+            height,
+            width,
+        } = self;
+        let read = to_host(read).map_err(|e| RenderError::ReadBack(e.to_string()))?;
+        Ok(sample_metrics_of(&read, batch, height, width))
+    }
+}
+
+/// Each sample's [`SampleMetrics`] from a pass's values read back ([`QueuedSamples::read`]).
+fn sample_metrics_of(
+    read: &[f64],
+    batch: usize,
+    height: usize,
+    width: usize,
+) -> Vec<SampleMetrics> {
     let (per_sample, rest) = read.split_at(5 * batch);
     let (rows, columns) = rest.split_at(2 * batch * height);
     let column = |k: usize| &per_sample[k * batch..(k + 1) * batch];
@@ -415,7 +461,7 @@ fn sample_metrics(
             &columns[at * width..(at + 1) * width],
         )
     };
-    Ok((0..batch)
+    (0..batch)
         .map(|k| {
             let (seen, alone) = (box_of(0, k), box_of(1, k));
             SampleMetrics {
@@ -428,7 +474,7 @@ fn sample_metrics(
                     .then(|| (1.0 - seen_sums[k] / alone_sums[k]).clamp(0.0, 1.0)),
             }
         })
-        .collect())
+        .collect()
 }
 
 #[cfg(test)]
@@ -478,7 +524,9 @@ mod tests {
             passes(poses.len(), per_pass)
                 .flat_map(|pass| {
                     let zoom = Some(zooms[pass.clone()].to_vec());
-                    sample_metrics(&whole, &window, &k, &poses[pass], zoom).unwrap()
+                    queue_samples(&whole, &window, &k, &poses[pass], zoom)
+                        .and_then(QueuedSamples::finish)
+                        .unwrap()
                 })
                 .map(|m| {
                     vec![
