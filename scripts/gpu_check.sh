@@ -135,7 +135,7 @@ print(f"| whole run, s | {w['total_s']:.1f} | {f['total_s']:.1f} |")
 print(f"| optimisation, s | {w['optimisation_s']:.1f} | {f['optimisation_s']:.1f} |")
 print(f"| metrics, s | {w['metrics_s']:.1f} | {f['metrics_s']:.1f} |")
 print(f"| frames, video and exports, s | {w['frames_s']:.1f} | {f['frames_s']:.1f} |")
-for stage in ("optimisation", "metrics", "frames"):
+for stage in ("preparation", "optimisation", "metrics", "frames"):
     c = (w.get("counts") or {}).get(stage)
     if c:
         print(f"| {stage} on wgpu: launches, reads, MB down, MB up | {c['launches']}, {c['reads']}, "

@@ -67,6 +67,13 @@ fn run_writes_a_complete_run_folder() {
     // render the plain copy the start search uploaded, and the objects alone uploaded while
     // preparing. A step reads once, the last step's results once more.
     let counts = &metrics["run"]["counts"];
+    // The preparation searched the start views (renders) on the plain copy and each object
+    // alone, each uploaded once.
+    assert!(
+        counts["preparation"]["renders"].as_u64() > Some(0),
+        "{counts}"
+    );
+    assert_eq!(counts["preparation"]["scene_uploads"], 1 + 2, "{counts}");
     assert_eq!(counts["optimisation"]["scene_uploads"], 1, "{counts}");
     assert_eq!(counts["metrics"]["scene_uploads"], 0, "{counts}");
     assert_eq!(counts["frames"]["scene_uploads"], 0, "{counts}");

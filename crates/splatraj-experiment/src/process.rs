@@ -449,11 +449,12 @@ impl Experiment {
             resume: folder.checkpoint(),
         };
         let counted = splatraj_render::counters::snapshot();
+        let preparation = counted.since(&self.prepared_counts);
         let run = TrajectoryOptimisation::new(self)
             .and_then(|optimisation| optimisation.run(options, observer))
             .map_err(|e| folder.after_failure(e, Stage::Preparing))?;
         let optimisation = splatraj_render::counters::snapshot().since(&counted);
-        self.write_trajectory_outputs(folder, &run, optimisation, observer)
+        self.write_trajectory_outputs(folder, &run, [preparation, optimisation], observer)
             .map_err(|e| folder.after_failure(e, Stage::Outputs))
     }
 
@@ -462,7 +463,7 @@ impl Experiment {
         &self,
         folder: &RunFolder,
         run: &TrajectoryRun,
-        optimisation: Counts,
+        [preparation, optimisation]: [Counts; 2],
         observer: &mut dyn Observer,
     ) -> Result<TrajectoryOutcome> {
         let dir = folder.dir();
@@ -511,6 +512,7 @@ impl Experiment {
             frames: written.frames,
             total: self.prepared_at.elapsed(),
             counts: StageCounts {
+                preparation,
                 optimisation,
                 metrics: written.metrics_counts,
                 frames: written.frames_counts,

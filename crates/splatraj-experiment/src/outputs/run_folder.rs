@@ -93,6 +93,8 @@ pub struct RunReport {
 /// The device counters of a run's stages.
 #[derive(Debug, Clone, Copy, Default, Serialize)]
 pub struct StageCounts {
+    /// The preparation: reading the scene, grounding the queries, the start views' search.
+    pub preparation: Counts,
     /// The optimisation (its starts and every step).
     pub optimisation: Counts,
     /// The metrics.

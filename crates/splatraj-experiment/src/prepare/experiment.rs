@@ -5,6 +5,7 @@
 use anyhow::{Context, Result, bail};
 use burn::tensor::{DType, Device};
 use splatraj_render::camera::Intrinsics;
+use splatraj_render::counters::{self, Counts};
 use splatraj_render::render::DeviceScene;
 use splatraj_scene::demo::{DemoConfig, demo_scene};
 use splatraj_scene::{InvalidPolicy, ReadOptions, ResolvedUp, Scene, read_scene};
@@ -98,18 +99,21 @@ pub struct Experiment {
     pub coarse: Option<CoarseCopy>,
     /// When [`Experiment::prepare`] started: a run's total time counts from here.
     pub prepared_at: std::time::Instant,
+    /// The device counters then: a run's preparation counts from here (`run.counts`).
+    pub prepared_counts: Counts,
 }
 
 /// The smallest working distance, as a share of the scene's diagonal: a millimetre in a
 /// kilometre-wide capture.
 pub const MIN_DISTANCE_OF_DIAGONAL: f64 = 1e-6;
 
-/// Objects alone kept on the device at once ([`Experiment::object_alone`]): more windows than
-/// this upload the first ones again when asked again.
-const ALONE_SCENES_KEPT: usize = 64;
 /// The largest working distance, as a multiple of the scene's diagonal: a whole capture seen
 /// small from far outside it.
 pub const MAX_DISTANCE_OF_DIAGONAL: f64 = 100.0;
+
+/// Objects alone kept on the device at once ([`Experiment::object_alone`]): more windows than
+/// this upload the first ones again when asked again.
+const ALONE_SCENES_KEPT: usize = 64;
 
 impl Experiment {
     /// Loads the scene, resolves world up and grounds every query, with the built-in costs.
@@ -120,9 +124,10 @@ impl Experiment {
     /// [`Experiment::prepare`] for a config that may use the costs, trajectory models and
     /// target sources of `extensions`.
     pub fn prepare_with(config: &Config, extensions: &Extensions) -> Result<Self> {
-        let prepared_at = std::time::Instant::now();
+        let (prepared_at, prepared_counts) = (std::time::Instant::now(), counters::snapshot());
         let mut experiment = Self::prepare_on(config, extensions, load_scene(config)?)?;
         experiment.prepared_at = prepared_at;
+        experiment.prepared_counts = prepared_counts;
         Ok(experiment)
     }
 
@@ -133,7 +138,7 @@ impl Experiment {
         extensions: &Extensions,
         (scene, scene_name): (Scene, String),
     ) -> Result<Self> {
-        let prepared_at = std::time::Instant::now();
+        let (prepared_at, prepared_counts) = (std::time::Instant::now(), counters::snapshot());
         if scene.is_empty() {
             bail!("scene {scene_name} has no Gaussians");
         }
@@ -176,6 +181,7 @@ impl Experiment {
             alone_memo: Memo::keeping(ALONE_SCENES_KEPT),
             coarse: None,
             prepared_at,
+            prepared_counts,
         };
         // Grounding checks its own memory (a lifted field's views); what comes after renders at
         // the camera's size.

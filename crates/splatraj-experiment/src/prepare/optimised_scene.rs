@@ -100,9 +100,11 @@ impl Experiment {
         }
     }
 
-    /// Window `i`'s object alone in the optimisation scene, on `device`.
+    /// Window `i`'s object alone in the optimisation scene, on `device`: the one uploaded once
+    /// ([`Experiment::object_alone`]) when that is the same scene on the same device.
     pub fn optimisation_alone(&self, i: usize, device: &Device) -> DeviceScene {
         let mask = match &self.coarse {
+            None if *device == self.device => return self.object_alone(i),
             None => &self.windows[i].mask,
             Some(c) => &c.masks[i],
         };
