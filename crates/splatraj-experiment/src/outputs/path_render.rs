@@ -132,8 +132,8 @@ pub struct PathTimings {
 pub enum FrameSchedule {
     /// One frame at a time: render, read back, encode, write, then the next (the reference).
     Sequential,
-    /// Up to `batch` frames rendered per pass while one thread encodes and writes the frames
-    /// before them.
+    /// Up to `batch` frames rendered per pass, the next pass queued on the device before this
+    /// one is read back, while one thread encodes and writes the frames before them.
     Pipelined {
         /// Poses per render pass.
         batch: usize,
@@ -284,7 +284,7 @@ pub fn render_path_with(
             let metrics = render_frames(
                 scene,
                 job,
-                (1, since),
+                (schedule, since),
                 &keyframes,
                 &mut timings,
                 progress,
@@ -292,7 +292,7 @@ pub fn render_path_with(
             )?;
             (metrics, writer)
         }
-        FrameSchedule::Pipelined { batch } => std::thread::scope(|threads| {
+        FrameSchedule::Pipelined { .. } => std::thread::scope(|threads| {
             // Two frames queued: enough to keep the writer busy, and a 1080p frame with its
             // keyframe is ~12 MB, so the queue stays small.
             let (queue, frames_in) = std::sync::mpsc::sync_channel::<Frame>(2);
@@ -305,7 +305,7 @@ pub fn render_path_with(
             let rendered = render_frames(
                 scene,
                 job,
-                (batch, since),
+                (schedule, since),
                 &keyframes,
                 &mut timings,
                 progress,
@@ -378,9 +378,10 @@ fn check_path_render(
         .map(|k| (k.width, k.height))
         .max_by(|a, b| (a.0 as f64 * a.1 as f64).total_cmp(&(b.0 as f64 * b.1 as f64)))
         .unwrap_or((1, 1));
+    // A pipelined pass is queued while the one before it is still held.
     let at_once = match schedule {
         FrameSchedule::Sequential => 1,
-        FrameSchedule::Pipelined { batch } => batch.max(1),
+        FrameSchedule::Pipelined { batch } => 2 * batch.max(1),
     };
     RenderWork {
         what: format!(
@@ -458,13 +459,14 @@ impl FrameWriter {
 /// returns the frames' metrics (empty without objects) and adds render, metrics and read-back
 /// times to `timings`.
 ///
-/// One pass is in flight while the one before it is read back: on a GPU the host decides and
-/// bins the next frames while the device composites these (the host backends run each pass
-/// when it is made, so there the order of the work is all that changes).
+/// [`FrameSchedule::Pipelined`] keeps one pass in flight while the one before it is read back:
+/// on a GPU the host decides and bins the next frames while the device composites these (the
+/// host backends run each pass when it is made, so there the order of the work is all that
+/// changes). [`FrameSchedule::Sequential`] renders a frame only after the one before is written.
 fn render_frames(
     scene: &DeviceScene,
     job: &PathRender<'_>,
-    (batch, since): (usize, splatraj_scene::stop::Since),
+    (schedule, since): (FrameSchedule, splatraj_scene::stop::Since),
     keyframes: &[usize],
     timings: &mut PathTimings,
     progress: &mut dyn FnMut(usize),
@@ -481,17 +483,24 @@ fn render_frames(
         keyframes,
         since,
     };
+    let (batch, ahead) = match schedule {
+        FrameSchedule::Sequential => (1, 0),
+        FrameSchedule::Pipelined { batch } => (batch, 1),
+    };
     let mut metrics = Vec::new();
-    let mut in_flight: Option<QueuedFrames> = None;
+    let mut in_flight: std::collections::VecDeque<QueuedFrames> = Default::default();
     let mut first = 0;
     while first < frames.poses.len() {
         let queued = context.queue(scene, first, batch, timings)?;
         first = queued.frames.end;
-        if let Some(done) = in_flight.replace(queued) {
+        in_flight.push_back(queued);
+        if in_flight.len() > ahead
+            && let Some(done) = in_flight.pop_front()
+        {
             context.finish(done, timings, &mut metrics, progress, deliver)?;
         }
     }
-    if let Some(done) = in_flight {
+    for done in in_flight {
         context.finish(done, timings, &mut metrics, progress, deliver)?;
     }
     Ok(metrics)
@@ -595,6 +604,8 @@ impl FrameContext<'_> {
         let frames = self.job.frames;
         let first = done.frames.start;
         let [b, h, w, c] = done.images.dims();
+        // The frames of a window with an object have framing figures, and may be tinted.
+        let tinted = done.framing.is_some() && self.job.overlay == MaskOverlay::Tint;
         if let Some(framing) = done.framing {
             let clock = Instant::now();
             let three = to_host(framing)?;
@@ -627,10 +638,8 @@ impl FrameContext<'_> {
             ),
         };
         timings.read_back += clock.elapsed();
-        let object = self.job.objects.get(self.windows[first]);
         for (i, index) in done.frames.enumerate() {
             let clock = Instant::now();
-            let tinted = object.is_some() && self.job.overlay == MaskOverlay::Tint;
             let frame_pixels = h * w * c;
             let range = i * frame_pixels..(i + 1) * frame_pixels;
             let rgb = pixels.rgb8(range.clone(), c, tinted.then_some(TINT_ALPHA));

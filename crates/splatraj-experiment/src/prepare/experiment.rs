@@ -92,7 +92,7 @@ pub struct Experiment {
     /// search, the metrics and the frames render it (a 6M-Gaussian capture is ~1.5 GB to copy).
     pub(crate) scene_memo: Memo<(), DeviceScene>,
     /// Each window's object alone on the plain device, keyed by its Gaussians' indices
-    /// ([`Experiment::object_alone`]).
+    /// ([`Experiment::object_alone`]; how many are kept: `alone_scenes_kept`).
     pub(crate) alone_memo: Memo<Vec<u32>, DeviceScene>,
     /// The coarse copy the optimisation renders instead of `scene`, when `optimise_gaussians`
     /// asks for one ([`Experiment::optimisation_scene`]).
@@ -110,10 +110,6 @@ pub const MIN_DISTANCE_OF_DIAGONAL: f64 = 1e-6;
 /// The largest working distance, as a multiple of the scene's diagonal: a whole capture seen
 /// small from far outside it.
 pub const MAX_DISTANCE_OF_DIAGONAL: f64 = 100.0;
-
-/// Objects alone kept on the device at once ([`Experiment::object_alone`]): more windows than
-/// this upload the first ones again when asked again.
-const ALONE_SCENES_KEPT: usize = 64;
 
 impl Experiment {
     /// Loads the scene, resolves world up and grounds every query, with the built-in costs.
@@ -178,7 +174,7 @@ impl Experiment {
             views_memo: Memo::default(),
             joins_memo: Memo::default(),
             scene_memo: Memo::default(),
-            alone_memo: Memo::keeping(ALONE_SCENES_KEPT),
+            alone_memo: Memo::default(),
             coarse: None,
             prepared_at,
             prepared_counts,
@@ -186,6 +182,7 @@ impl Experiment {
         // Grounding checks its own memory (a lifted field's views); what comes after renders at
         // the camera's size.
         experiment.ground_queries()?;
+        experiment.alone_memo = Memo::keeping(experiment.alone_scenes_kept());
         experiment
             .preparation_memory()
             .check(experiment.memory_limit()?, crate::resources::RAISE_LIMIT)?;
@@ -458,6 +455,22 @@ impl Experiment {
         self.alone_memo.get_or_insert(indices, || {
             DeviceScene::new(&self.scene.subset(&keep), &self.device, self.dtype)
         })
+    }
+
+    /// How many objects alone [`Experiment::object_alone`] keeps on the device: every window's
+    /// while together they hold no more Gaussians than the scene (the memory plans count one
+    /// scene's worth of such copies), else one at a time, as each is asked for.
+    fn alone_scenes_kept(&self) -> usize {
+        let together: usize = self
+            .windows
+            .iter()
+            .map(|w| w.mask.iter().filter(|&&m| m != 0.0).count())
+            .sum();
+        if together <= self.scene.len() {
+            self.windows.len()
+        } else {
+            1
+        }
     }
 
     /// The output camera: the optimisation camera at `[output]`'s size.

@@ -28,7 +28,8 @@ impl Experiment {
         let camera_pixels = camera.width as f64 * camera.height as f64;
         let batch = splatraj_traj::optimise::VIEW_SEARCH_BATCH;
         plan.stage(format!("the scene ({n} Gaussians)"), base);
-        // Each batch is also read back as f64 on the host.
+        // Each batch is also read back as f64 on the host, while the next one renders (its
+        // mask and alpha held on the device meanwhile).
         plan.stage(
             format!(
                 "the view search: {batch} poses at once at `camera.width` × `camera.height` = \
@@ -36,7 +37,7 @@ impl Experiment {
                 camera.width, camera.height
             ),
             base + render_bytes(batch, camera_pixels, n, false, fb)
-                + batch as f64 * camera_pixels * 8.0,
+                + batch as f64 * camera_pixels * (8.0 + 2.0 * fb as f64),
         );
         plan
     }
