@@ -20,7 +20,10 @@
 #   5. where a wgpu pass spends its time: the mask passes of 1. again with CubeCL's profiling
 #      on (`CUBECL_DEBUG_OPTION=profile-medium` waits for each kernel), so that each stage's
 #      column holds its kernels' time instead of "other" holding all of it (a GPU runs
-#      asynchronously: without it only the final read waits).
+#      asynchronously: without it only the final read waits);
+#   6. the compositing backward's two ways of summing a list entry over a tile (pipelined, the
+#      default, against one entry at a time: SPLATRAJ_ENTRY_SUMS): the mask passes of 1. on
+#      wgpu both ways, time and parity.
 # then prints one table (python3, standard library only). Exit status 1 when parity fails.
 # GPU_CHECK_QUICK=1 shrinks every workload (a smoke test of the script, e.g. on lavapipe):
 # the figures then mean nothing.
@@ -70,6 +73,10 @@ echo "== wgpu: bench render, each kernel waited for" >&2
 CUBECL_DEBUG_OPTION=profile-medium "$bin" bench render --backend wgpu --sizes "$sizes" \
   --resolutions 128 --rasterizer fused --repeats 1 --scene "$data/biker.compressed.ply" --json \
   >"$out/render_wgpu_profiled.json"
+echo "== wgpu: bench render, the backward summing one entry at a time" >&2
+SPLATRAJ_ENTRY_SUMS=one-at-a-time "$bin" bench render --backend wgpu --sizes "$sizes" \
+  --resolutions 128 --rasterizer fused --repeats "$repeats" --scene "$data/biker.compressed.ply" \
+  --json >"$out/render_wgpu_one_at_a_time.json"
 
 python3 - "$out" <<'PY'
 import json, math, os, platform, subprocess, sys
@@ -85,15 +92,18 @@ render = {b: load(f"render_{b}.json") for b in ("wgpu", "flex")}
 key = lambda r: (r["scene"], r["gaussians"], r["resolution"], r["pruning"])
 flex_rows = {key(r): r for r in render["flex"]["rows"] if not r.get("skipped")}
 failed = []
+def grad_diff(r, f):
+    """|dΦ wgpu − dΦ flex| / |dΦ flex| of one mask pass."""
+    g, h = r.get("grad_pose", []), f.get("grad_pose", [])
+    norm = math.sqrt(sum(x * x for x in h)) or 1.0
+    return math.sqrt(sum((a - b) ** 2 for a, b in zip(g, h))) / norm if g and h else float("nan")
 print("\n| mask pass, fwd+bwd | wgpu ms | flex ms | wgpu/flex | launches | reads | KB up | TCE wgpu / flex | |dΦ| diff / |dΦ| |")
 print("|---|---:|---:|---:|---:|---:|---:|---|---:|")
 for r in render["wgpu"]["rows"]:
     f = flex_rows.get(key(r))
     if r.get("skipped") or f is None:
         continue
-    g, h = r.get("grad_pose", []), f.get("grad_pose", [])
-    norm = math.sqrt(sum(x * x for x in h)) or 1.0
-    diff = math.sqrt(sum((a - b) ** 2 for a, b in zip(g, h))) / norm if g and h else float("nan")
+    diff = grad_diff(r, f)
     tce_ok = abs(r["tce"] - f["tce"]) <= 1e-3 or (math.isnan(r["tce"]) and math.isnan(f["tce"]))
     if not (tce_ok and diff <= 1e-3 and abs(r["coverage"] - f["coverage"]) <= 1e-3):
         failed.append(f"{key(r)}: TCE {r['tce']} vs {f['tce']}, gradient {diff:.2e}")
@@ -102,6 +112,18 @@ for r in render["wgpu"]["rows"]:
           f"{f['forward_backward_ms']:.2f} | {r['forward_backward_ms'] / f['forward_backward_ms']:.2f} | "
           f"{c.get('launches', '-')} | {c.get('reads', '-')} | {c.get('bytes_up', 0) / 1024:.1f} | "
           f"{r['tce']:.6f} / {f['tce']:.6f} | {diff:.1e} |")
+one = {key(r): r for r in load("render_wgpu_one_at_a_time.json")["rows"] if not r.get("skipped")}
+print("\n| backward's entry sums, fwd+bwd ms | pipelined | one at a time | |dΦ| diff / |dΦ|, one at a time |")
+print("|---|---:|---:|---:|")
+for r in render["wgpu"]["rows"]:
+    o, f = one.get(key(r)), flex_rows.get(key(r))
+    if r.get("skipped") or o is None or f is None:
+        continue
+    diff = grad_diff(o, f)
+    if not diff <= 1e-3:
+        failed.append(f"{key(r)} one entry at a time: gradient {diff:.2e}")
+    print(f"| {r['scene']} {r['gaussians']} {r['resolution']}² {r['pruning']} | "
+          f"{r['forward_backward_ms']:.2f} | {o['forward_backward_ms']:.2f} | {diff:.1e} |")
 profiled = load("render_wgpu_profiled.json")
 names = [n for n, _ in profiled["rows"][0]["stages_ms"]] if profiled["rows"] else []
 print("\n| wgpu stages, ms, each kernel waited for | " + " | ".join(names) + " |")

@@ -169,7 +169,28 @@ fn f64_is_really_f64() {
 #[cfg(feature = "wgpu")]
 #[test]
 fn gpu_kernels_match_host_kernels() {
-    gpu_kernels_match_host_kernels_with(600);
+    let device = BackendKind::Wgpu.device().unwrap();
+    assert_eq!(
+        splatraj_render::fused::cube::entry_sums_on(&device, 2),
+        Some(splatraj_render::fused::cube::EntrySums::Pipelined),
+        "lavapipe's workgroup memory holds the pipelined backward of two channels"
+    );
+    gpu_kernels_match_host_kernels_with(600, 2);
+}
+
+/// The same with as many channels as it takes for the pipelined backward (two buffers of
+/// per-entry sums) not to fit the device's workgroup memory: the backward then sums one entry
+/// at a time, and agrees too.
+#[cfg(feature = "wgpu")]
+#[test]
+fn gpu_kernels_match_host_kernels_one_entry_at_a_time() {
+    use splatraj_render::fused::cube::{EntrySums, entry_sums_on};
+
+    let device = BackendKind::Wgpu.device().unwrap();
+    let channels = (1..=16)
+        .find(|&c| entry_sums_on(&device, c) == Some(EntrySums::OneAtATime))
+        .expect("a channel count whose pipelined backward does not fit");
+    gpu_kernels_match_host_kernels_with(600, channels);
 }
 
 /// The same with 50 000 Gaussians a pose: the second pose crowds them all into one column of
@@ -180,14 +201,14 @@ fn gpu_kernels_match_host_kernels() {
 #[cfg(feature = "wgpu")]
 #[test]
 fn gpu_kernels_match_host_kernels_on_crowded_lists() {
-    gpu_kernels_match_host_kernels_with(50_000);
+    gpu_kernels_match_host_kernels_with(50_000, 2);
 }
 
 #[cfg(feature = "wgpu")]
-fn gpu_kernels_match_host_kernels_with(n: usize) {
+fn gpu_kernels_match_host_kernels_with(n: usize, channels: usize) {
     use splatraj_render::tiles::{TILE_SIZE, TileGrid, TileWork};
 
-    let (width, height, batch, channels) = (45, 37, 2, 2);
+    let (width, height, batch) = (45, 37, 2);
     let grid = TileGrid::new(width, height);
     let mut rng = common::Rng(0x9e3779b97f4a7c15);
     let (mut means, mut conics, mut opacities, mut values) = (vec![], vec![], vec![], vec![]);

@@ -6,11 +6,12 @@
 //! - Forward: the tile's list is staged through shared memory 256 Gaussians at a time; each
 //!   unit composites its pixel and keeps its final T and the count of list entries up to its
 //!   last contributor. A tile stops once none of its pixels is open.
-//! - Backward: every unit replays its pixel back to front from the saved state; per list entry
-//!   the tile's 256 contributions are summed in a fixed order in shared memory (two levels,
-//!   two barriers per entry) into that entry's gradient slot, and a second kernel sums each
-//!   Gaussian's slots in plan order (the host built the map from Gaussian to its slots). No atomics, so the result is the same
-//!   on every run.
+//! - Backward: every unit replays its pixel back to front from the saved state, the list's rows
+//!   staged through shared memory 64 entries at a time; per list entry the tile's 256
+//!   contributions are summed in a fixed order in shared memory (two levels, two barriers per
+//!   entry) into that entry's gradient slot, and a second kernel sums each Gaussian's slots in
+//!   plan order (the host built the map from Gaussian to its slots). No atomics, so the result
+//!   is the same on every run.
 //!
 //! The tile lists are built on the host (binning is cheapest there: it is a per-pose sort the
 //! host already does for its decisions) and uploaded each pass as three integer tensors. f64 is
@@ -44,6 +45,94 @@ const GROUP_PIXELS: usize = 8;
 
 /// Groups of [`GROUP_PIXELS`] in a tile: the second level's terms.
 const GROUPS: usize = TILE_PIXELS / GROUP_PIXELS;
+
+/// List entries the backward stages in shared memory at once: 64 keeps a pass of up to four
+/// channels (rows, values, the per-entry sums, the replay's maximum) within WebGPU's default
+/// 16 KiB of workgroup memory.
+const STAGED_ENTRIES: usize = 64;
+
+/// How the backward sums each list entry's contributions over the tile's pixels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum EntrySums {
+    /// Contributions, group sums and the sum of the groups of one entry, then the next: two
+    /// barriers per entry, one buffer.
+    OneAtATime,
+    /// The three steps of three consecutive entries between the same barriers: one barrier
+    /// per entry, two buffers (more workgroup memory).
+    Pipelined,
+}
+
+impl EntrySums {
+    /// Buffers of contributions and of group sums held at once.
+    pub const fn buffers(self) -> usize {
+        match self {
+            EntrySums::OneAtATime => 1,
+            EntrySums::Pipelined => 2,
+        }
+    }
+
+    /// Steps from an entry's contributions to its group sums (and again to their sum).
+    pub const fn lag(self) -> usize {
+        match self {
+            EntrySums::OneAtATime => 0,
+            EntrySums::Pipelined => 1,
+        }
+    }
+
+    /// Workgroup memory the backward kernel declares for `channels` channels, bytes (f32):
+    /// the staged rows and values, the contributions, the group sums, the replay's maximum.
+    pub const fn shared_bytes(self, channels: usize) -> usize {
+        let stride = channels + 6;
+        4 * (STAGED_ENTRIES * stride
+            + self.buffers() * (TILE_PIXELS + GROUPS) * stride
+            + TILE_PIXELS)
+    }
+
+    /// Pipelined where the device's workgroup memory holds it, else one entry at a time;
+    /// [`ENTRY_SUMS_VARIABLE`] may ask for one entry at a time everywhere.
+    pub fn fitting(channels: usize, max_shared_bytes: usize) -> EntrySums {
+        let asked = *ASKED_ENTRY_SUMS.get_or_init(asked_entry_sums);
+        if asked == EntrySums::Pipelined
+            && EntrySums::Pipelined.shared_bytes(channels) <= max_shared_bytes
+        {
+            EntrySums::Pipelined
+        } else {
+            EntrySums::OneAtATime
+        }
+    }
+}
+
+/// Environment variable that picks the backward's entry sums, `one-at-a-time` or `pipelined`
+/// (the default): for measuring both on a GPU (`scripts/gpu_check.sh`), not for runs.
+pub const ENTRY_SUMS_VARIABLE: &str = "SPLATRAJ_ENTRY_SUMS";
+
+static ASKED_ENTRY_SUMS: std::sync::OnceLock<EntrySums> = std::sync::OnceLock::new();
+
+fn asked_entry_sums() -> EntrySums {
+    match std::env::var(ENTRY_SUMS_VARIABLE).as_deref() {
+        Ok("one-at-a-time") => EntrySums::OneAtATime,
+        Ok("pipelined") | Err(_) => EntrySums::Pipelined,
+        Ok(other) => {
+            tracing::warn!(
+                "{ENTRY_SUMS_VARIABLE}={other:?} is neither `one-at-a-time` nor `pipelined`; \
+                 the backward stays pipelined"
+            );
+            EntrySums::Pipelined
+        }
+    }
+}
+
+/// How the backward sums entries on `device` (a GPU device of the wgpu backend; None on the
+/// host backends) for `channels` channels.
+pub fn entry_sums_on(device: &burn::tensor::Device, channels: usize) -> Option<EntrySums> {
+    match device.as_dispatch().clone().inner() {
+        burn_dispatch::DispatchDevice::Cube(cube) => Some(EntrySums::fitting(
+            channels,
+            cube.client().properties().hardware.max_shared_memory_size,
+        )),
+        _ => None,
+    }
+}
 
 /// Work tile index of this cube (the launch grid is 2D when there are more than 65 535 tiles).
 #[cube]
@@ -224,6 +313,7 @@ fn backward_kernel<F: Float, I: Int>(
     height: u32,
     columns: u32,
     #[comptime] channels: usize,
+    #[comptime] schedule: EntrySums,
     #[define(F, I)] _dtypes: [ElemType; 2],
 ) {
     let w = work_index();
@@ -273,88 +363,140 @@ fn backward_kernel<F: Float, I: Int>(
     let replay = sh_last[0] as usize;
     let start = u32::cast_from(starts[w]) as usize;
 
-    let mut sh_sum = Shared::<[F]>::new_slice(comptime!(256usize * (channels + 6)));
-    let mut sh_group = Shared::<[F]>::new_slice(comptime!(GROUPS * (channels + 6)));
-    let mut done = 0usize;
-    while done < replay {
-        let j = replay - 1 - done;
-        let row = u32::cast_from(rows[start + j]) as usize;
-        let at = row * columns as usize;
-        let mx = splats[at] - x0f;
-        let my = splats[at + 1] - y0f;
-        let a = splats[at + 2];
-        let b = splats[at + 3];
-        let c = splats[at + 4];
-        let o = splats[at + 5];
-        for k in 0..stride {
-            sh_sum[k * 256 + p] = F::new(0.0);
-        }
-        if j < my_last {
-            let dx = px - mx;
-            let dy = py - my;
-            let power = F::new(0.0) - F::new(0.5) * (a * dx * dx + c * dy * dy) - b * dx * dy;
-            let exp_power = F::exp(min(power, F::new(0.0)));
-            let raw = o * exp_power;
-            let alpha = min(raw, F::new(MAX_ALPHA as f32));
-            if alpha >= F::new(MIN_ALPHA as f32) {
-                let keep = F::new(1.0) - alpha;
-                let t_before = t / keep;
-                let weight = alpha * t_before;
-                // dL/dα = Σ_k v_k (f_k T_i − S_k / (1 − α)) + v_A · T_final / (1 − α)
-                let mut v_alpha = v_out[channels] * t_final / keep;
-                for k in 0..channels {
-                    let value = values[row * channels + k];
-                    v_alpha += v_out[k] * (value * t_before - behind[k] / keep);
-                    sh_sum[(6 + k) * 256 + p] = v_out[k] * weight;
-                    behind[k] += value * weight;
+    // Each list entry goes through three steps: every unit's contribution (the replay), the
+    // sums of 8-pixel groups, the sums of the groups. One at a time, the three are separated
+    // by two barriers per entry. Pipelined, step e computes entry e, sums the groups of entry
+    // e − 1 and the group sums of entry e − 2 between the same two barriers (one per entry),
+    // reading the buffers the previous step wrote while the next entry writes the other one.
+    let pipelined = comptime!(schedule == EntrySums::Pipelined);
+    let buffers = comptime!(schedule.buffers());
+    let lag = comptime!(schedule.lag());
+
+    // The replayed entries' rows, staged [`STAGED_ENTRIES`] at a time (as the forward stages
+    // its lists): read per entry from global memory, a row index then the row it names were
+    // two dependent loads on every entry's path, which every unit of the tile waits for.
+    let mut sh_rows = Shared::<[F]>::new_slice(comptime!(STAGED_ENTRIES * 6));
+    let mut sh_values = Shared::<[F]>::new_slice(comptime!(STAGED_ENTRIES * channels));
+    let mut sh_sum = Shared::<[F]>::new_slice(comptime!(buffers * TILE_PIXELS * (channels + 6)));
+    let mut sh_group = Shared::<[F]>::new_slice(comptime!(buffers * GROUPS * (channels + 6)));
+    // One loop over steps, not a loop of stages around a loop of entries: llvmpipe (lavapipe)
+    // ends every loop of an invocation once all its loops together have made 65 535
+    // iterations (LP_MAX_TGSI_LOOP_ITERATIONS, one counter shared by every loop), so each
+    // iteration spent here shortens the longest list it can replay.
+    let mut e = 0usize;
+    while e < replay + 2 * lag {
+        if e < replay {
+            let s = e % STAGED_ENTRIES;
+            if s == 0 {
+                // Safe without a barrier before it: every read of the previous stage came
+                // before the barrier that ended its last entry's step.
+                let count = min(replay - e, STAGED_ENTRIES);
+                if p < count {
+                    let row = u32::cast_from(rows[start + replay - 1 - (e + p)]) as usize;
+                    let at = row * columns as usize;
+                    sh_rows[p * 6] = splats[at] - x0f;
+                    sh_rows[p * 6 + 1] = splats[at + 1] - y0f;
+                    #[unroll]
+                    for q in 2..6usize {
+                        sh_rows[p * 6 + q] = splats[at + q];
+                    }
+                    for k in 0..channels {
+                        sh_values[k * STAGED_ENTRIES + p] = values[row * channels + k];
+                    }
                 }
-                t = t_before;
-                if raw <= F::new(MAX_ALPHA as f32) {
-                    sh_sum[5usize * 256 + p] = v_alpha * exp_power;
-                    if power <= F::new(0.0) {
-                        let v_power = v_alpha * raw;
-                        sh_sum[p] = v_power * (a * dx + b * dy);
-                        sh_sum[256 + p] = v_power * (b * dx + c * dy);
-                        sh_sum[2usize * 256 + p] = F::new(0.0) - v_power * F::new(0.5) * dx * dx;
-                        sh_sum[3usize * 256 + p] = F::new(0.0) - v_power * dx * dy;
-                        sh_sum[4usize * 256 + p] = F::new(0.0) - v_power * F::new(0.5) * dy * dy;
+                sync_cube();
+            }
+            let j = replay - 1 - e;
+            let sum_at = (e % buffers) * comptime!(TILE_PIXELS * (channels + 6));
+            let mx = sh_rows[s * 6];
+            let my = sh_rows[s * 6 + 1];
+            let a = sh_rows[s * 6 + 2];
+            let b = sh_rows[s * 6 + 3];
+            let c = sh_rows[s * 6 + 4];
+            let o = sh_rows[s * 6 + 5];
+            for k in 0..stride {
+                sh_sum[sum_at + k * 256 + p] = F::new(0.0);
+            }
+            if j < my_last {
+                let dx = px - mx;
+                let dy = py - my;
+                let power = F::new(0.0) - F::new(0.5) * (a * dx * dx + c * dy * dy) - b * dx * dy;
+                let exp_power = F::exp(min(power, F::new(0.0)));
+                let raw = o * exp_power;
+                let alpha = min(raw, F::new(MAX_ALPHA as f32));
+                if alpha >= F::new(MIN_ALPHA as f32) {
+                    let keep = F::new(1.0) - alpha;
+                    let t_before = t / keep;
+                    let weight = alpha * t_before;
+                    // dL/dα = Σ_k v_k (f_k T_i − S_k / (1 − α)) + v_A · T_final / (1 − α)
+                    let mut v_alpha = v_out[channels] * t_final / keep;
+                    for k in 0..channels {
+                        let value = sh_values[k * STAGED_ENTRIES + s];
+                        v_alpha += v_out[k] * (value * t_before - behind[k] / keep);
+                        sh_sum[sum_at + (6 + k) * 256 + p] = v_out[k] * weight;
+                        behind[k] += value * weight;
+                    }
+                    t = t_before;
+                    if raw <= F::new(MAX_ALPHA as f32) {
+                        sh_sum[sum_at + 5usize * 256 + p] = v_alpha * exp_power;
+                        if power <= F::new(0.0) {
+                            let v_power = v_alpha * raw;
+                            sh_sum[sum_at + p] = v_power * (a * dx + b * dy);
+                            sh_sum[sum_at + 256 + p] = v_power * (b * dx + c * dy);
+                            sh_sum[sum_at + 2usize * 256 + p] =
+                                F::new(0.0) - v_power * F::new(0.5) * dx * dx;
+                            sh_sum[sum_at + 3usize * 256 + p] = F::new(0.0) - v_power * dx * dy;
+                            sh_sum[sum_at + 4usize * 256 + p] =
+                                F::new(0.0) - v_power * F::new(0.5) * dy * dy;
+                        }
                     }
                 }
             }
         }
-        sync_cube();
-        // A fixed two-level sum over the tile's pixels (the same sum on every run), two
-        // barriers per entry: 32 groups of 8 pixels per component, then the 32 groups. A
-        // binary tree took ten; on a GPU the barriers, not the adds, bound this loop.
-        // Unrolled at compile time, not a runtime loop: llvmpipe (lavapipe) ends every loop of
-        // an invocation once all its loops together have made 65 535 iterations
-        // (LP_MAX_TGSI_LOOP_ITERATIONS, one counter shared by every loop), and a runtime loop
-        // here cost two of them per list entry on top of the entry loop's one.
-        #[unroll]
-        for r in 0..comptime!((GROUPS * (channels + 6)).div_ceil(256)) {
-            // u = k·32 + g: component k, pixels 8g … 8g + 7.
-            let u = p + r * 256;
-            if u < comptime!(GROUPS * (channels + 6)) {
-                let base = (u / GROUPS) * 256 + (u % GROUPS) * GROUP_PIXELS;
-                let mut sum = sh_sum[base];
-                #[unroll]
-                for q in 1..GROUP_PIXELS {
-                    sum += sh_sum[base + q];
+        if !pipelined {
+            sync_cube();
+        }
+        // A fixed two-level sum over the tile's pixels (the same sum on every run): 32 groups
+        // of 8 pixels per component, then the 32 groups. A binary tree took ten barriers; on
+        // a GPU the barriers, not the adds, bound this loop. Both levels are unrolled at
+        // compile time: the second level's 31 loads are then issued together instead of one
+        // after another while the whole tile waits for them, and no loop iteration is spent.
+        if e >= lag && e - lag < replay {
+            let sum_at = ((e - lag) % buffers) * comptime!(TILE_PIXELS * (channels + 6));
+            let group_at = ((e - lag) % buffers) * comptime!(GROUPS * (channels + 6));
+            #[unroll]
+            for r in 0..comptime!((GROUPS * (channels + 6)).div_ceil(256)) {
+                // u = k·32 + g: component k, pixels 8g … 8g + 7.
+                let u = p + r * 256;
+                if u < comptime!(GROUPS * (channels + 6)) {
+                    let base = sum_at + (u / GROUPS) * 256 + (u % GROUPS) * GROUP_PIXELS;
+                    let mut sum = sh_sum[base];
+                    #[unroll]
+                    for q in 1..GROUP_PIXELS {
+                        sum += sh_sum[base + q];
+                    }
+                    sh_group[group_at + u] = sum;
                 }
-                sh_group[u] = sum;
             }
         }
-        sync_cube();
-        // Safe without a third barrier: the next entry writes `sh_sum` (read above, before
-        // the barrier) and `sh_group` only after its own first barrier.
-        if p < stride {
-            let mut sum = sh_group[p * GROUPS];
+        if !pipelined {
+            sync_cube();
+        }
+        // Safe without a barrier after it, one at a time: the next entry writes `sh_group`
+        // only after its own first barrier.
+        if e >= 2 * lag && e - 2 * lag < replay && p < stride {
+            let group_at = ((e - 2 * lag) % buffers) * comptime!(GROUPS * (channels + 6));
+            let mut sum = sh_group[group_at + p * GROUPS];
+            #[unroll]
             for g in 1..GROUPS {
-                sum += sh_group[p * GROUPS + g];
+                sum += sh_group[group_at + p * GROUPS + g];
             }
-            slots[(start + j) * stride + p] = sum;
+            slots[(start + replay - 1 - (e - 2 * lag)) * stride + p] = sum;
         }
-        done += 1;
+        if pipelined {
+            sync_cube();
+        }
+        e += 1;
     }
 }
 
@@ -580,6 +722,10 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
             grid.height as u32,
             columns as u32,
             channels,
+            EntrySums::fitting(
+                channels,
+                client.properties().hardware.max_shared_memory_size,
+            ),
             [dtype_to_storage_type(dtype), int_dtype],
         );
     }
