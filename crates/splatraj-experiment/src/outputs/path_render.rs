@@ -117,9 +117,9 @@ pub struct PathTimings {
     pub metrics: Duration,
     /// Reading the images back and making 8-bit pixels (tint included).
     pub read_back: Duration,
-    /// PNG encoding (frames and keyframes).
+    /// PNG encoding (frames and keyframes); at the same time as the video's.
     pub png: Duration,
-    /// H.264 encoding and muxing.
+    /// H.264 encoding and muxing; at the same time as the PNGs'.
     pub video: Duration,
     /// Writing files.
     pub write: Duration,
@@ -422,27 +422,38 @@ struct FrameWriter {
 }
 
 impl FrameWriter {
-    /// Writes `frame`'s PNG (and keyframe) and appends it to the video.
+    /// Writes `frame`'s PNG (and keyframe) and appends it to the video. The PNGs and the
+    /// video frame are encoded at the same time (rayon's pool): on a GPU the device renders a
+    /// frame faster than one thread encodes it both ways, so this thread sets the pace.
     fn write(&mut self, frame: Frame) -> Result<()> {
-        let clock = Instant::now();
-        let png = png_rgb8(&frame.rgb, frame.width, frame.height)?;
-        let keyframe = match &frame.keyframe {
-            Some(tinted) => Some(shrunk_png(
-                tinted,
-                frame.width,
-                frame.height,
-                KEYFRAME_WIDTH,
-            )?),
-            None => None,
-        };
-        self.timings.png += clock.elapsed();
-        let clock = Instant::now();
-        if let Some(encoder) = &mut self.encoder {
-            // PNG is lossless: these are the bytes the PNG holds, so the video shows exactly
-            // the frames.
-            encoder.push(&frame.rgb)?;
-        }
-        self.timings.video += clock.elapsed();
+        let (pngs, video) = rayon::join(
+            || -> Result<_> {
+                let clock = Instant::now();
+                let png = png_rgb8(&frame.rgb, frame.width, frame.height)?;
+                let keyframe = match &frame.keyframe {
+                    Some(tinted) => Some(shrunk_png(
+                        tinted,
+                        frame.width,
+                        frame.height,
+                        KEYFRAME_WIDTH,
+                    )?),
+                    None => None,
+                };
+                Ok((png, keyframe, clock.elapsed()))
+            },
+            || -> Result<Duration> {
+                let clock = Instant::now();
+                if let Some(encoder) = &mut self.encoder {
+                    // PNG is lossless: these are the bytes the PNG holds, so the video shows
+                    // exactly the frames.
+                    encoder.push(&frame.rgb)?;
+                }
+                Ok(clock.elapsed())
+            },
+        );
+        let (png, keyframe, png_time) = pngs?;
+        self.timings.png += png_time;
+        self.timings.video += video?;
         let clock = Instant::now();
         let name = frame_name(frame.index);
         if let Some(keyframe) = keyframe {
