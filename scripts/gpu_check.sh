@@ -23,7 +23,9 @@
 #      asynchronously: without it only the final read waits);
 #   6. the compositing backward's two ways of summing a list entry over a tile (pipelined, the
 #      default, against one entry at a time: SPLATRAJ_ENTRY_SUMS): the mask passes of 1. on
-#      wgpu both ways, time and parity.
+#      wgpu both ways, time and parity;
+#   7. where a wgpu optimisation step spends its time: `bench step` on the guitar config with
+#      each kernel waited for, by render stage and the rest (costs, backward, Adam, waits).
 # then prints one table (python3, standard library only). Exit status 1 when parity fails.
 # GPU_CHECK_QUICK=1 shrinks every workload (a smoke test of the script, e.g. on lavapipe):
 # the figures then mean nothing.
@@ -77,6 +79,10 @@ echo "== wgpu: bench render, the backward summing one entry at a time" >&2
 SPLATRAJ_ENTRY_SUMS=one-at-a-time "$bin" bench render --backend wgpu --sizes "$sizes" \
   --resolutions 128 --rasterizer fused --repeats "$repeats" --scene "$data/biker.compressed.ply" \
   --json >"$out/render_wgpu_one_at_a_time.json"
+echo "== wgpu: bench step (guitar), each kernel waited for" >&2
+CUBECL_DEBUG_OPTION=profile-medium "$bin" bench step --config configs/first-try/guitar.toml \
+  --steps "$steps" --set 'backend="wgpu"' --set "scene.path=\"$data/guitar.compressed.ply\"" --json \
+  >"$out/step_wgpu_profiled.json"
 
 python3 - "$out" <<'PY'
 import json, math, os, platform, subprocess, sys
@@ -149,6 +155,15 @@ for b in ("wgpu", "flex"):
         c = r["counts"]
         print(f"| {b}, {r['passes']} | {r['ms_per_step']:.1f} | {c['launches']} | {c['reads']} | "
               f"{c.get('renders', '-')} | {r['best_total']:.6f} |")
+profiled_steps = load("step_wgpu_profiled.json")
+names = [n for n, _ in profiled_steps[0]["stages_ms"]] if profiled_steps else []
+print("\n| wgpu step, ms, each kernel waited for | " + " | ".join(names) + " | rest | step |")
+print("|---|" + "---:|" * (len(names) + 2))
+for r in profiled_steps:
+    stages = dict(r["stages_ms"])
+    rest = r["ms_per_step"] - sum(stages.values())
+    print(f"| guitar, {r['passes']} | " + " | ".join(f"{stages.get(n, 0):.2f}" for n in names)
+          + f" | {rest:.2f} | {r['ms_per_step']:.2f} |")
 runs = {b: load(f"first_try_{b}.json") for b in ("wgpu", "flex")}
 print("\n| first-try guitar | wgpu | flex |")
 print("|---|---:|---:|")

@@ -11,6 +11,12 @@
 //!
 //! The host backends have no buffer limit, but the same bound keeps a pass's images (and their
 //! f64 copies on the host) to a few hundred MB, so it applies there too.
+//!
+//! Besides the images, a pass holds its packed rows (poses × Gaussians used × 7), its channel
+//! values, its tile lists and, with a gradient, a slot per tile–Gaussian pair; the scene holds
+//! its SH coefficients. [`first_oversized`] names the first of these a device cannot hold, so a
+//! render refuses such a pass before any work, naming the buffer, instead of failing on the
+//! device (a failure that burn reports only at the next read, as a chain of lost buffers).
 
 use std::ops::Range;
 
@@ -61,6 +67,27 @@ fn poses_within(
         .max(1)
 }
 
+/// A buffer a render pass needs: what it holds, and its bytes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PassBuffer {
+    /// What it holds, e.g. "a pass's packed rows (36 poses × 90000 Gaussians × 7 values)".
+    pub what: String,
+    /// Its size.
+    pub bytes: u64,
+}
+
+/// The first of `buffers` larger than `device`'s largest buffer, with that limit; None when
+/// all fit or on the host backends (no limit).
+pub fn first_oversized(device: &Device, buffers: &[PassBuffer]) -> Option<(PassBuffer, u64)> {
+    let limit = max_buffer_bytes(device)?;
+    over_limit(limit, buffers).map(|b| (b.clone(), limit))
+}
+
+/// The first of `buffers` above `limit` bytes.
+fn over_limit(limit: u64, buffers: &[PassBuffer]) -> Option<&PassBuffer> {
+    buffers.iter().find(|b| b.bytes > limit)
+}
+
 /// `0..total` in consecutive ranges of at most `per_pass` (at least 1) indices.
 pub fn passes(total: usize, per_pass: usize) -> impl Iterator<Item = Range<usize>> {
     let step = per_pass.max(1);
@@ -83,6 +110,18 @@ mod tests {
         // A limit of exactly k poses gives k.
         assert_eq!(poses_within(3 * 100 * 50 * 4, 4, 100, 50, 1), 3);
         assert_eq!(poses_within(3 * 100 * 50 * 4 - 1, 4, 100, 50, 1), 2);
+    }
+
+    #[test]
+    fn the_first_buffer_over_the_limit_is_named() {
+        let buffer = |what: &str, bytes| PassBuffer {
+            what: what.into(),
+            bytes,
+        };
+        let buffers = [buffer("a", 100), buffer("b", 101), buffer("c", 500)];
+        assert_eq!(over_limit(100, &buffers), Some(&buffers[1]));
+        assert_eq!(over_limit(500, &buffers), None);
+        assert_eq!(over_limit(99, &buffers), Some(&buffers[0]));
     }
 
     #[test]

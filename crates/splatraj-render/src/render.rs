@@ -18,6 +18,7 @@ use crate::fused::projection::{
 };
 use crate::fused::{CompositePlan, composite_packed};
 use crate::host::{OnDevice, to_host, upload};
+use crate::pass_size::{PassBuffer, first_oversized};
 use crate::project::{NEAR_PLANE, Projected, SceneTensors, project_zoomed};
 use crate::rasterize::{
     Approximations, CompositeOptions, Composited, RenderStats, SplatInputs, composite,
@@ -249,6 +250,22 @@ pub enum RenderError {
         /// Host poses given.
         host: usize,
     },
+    /// A buffer of the pass (or of the scene) is larger than the device's largest buffer.
+    #[error(
+        "{what} take {mb:.0} MB in one buffer, more than this device's largest buffer ({max_mb:.0} \
+         MB): render with the CPU backend (`backend = \"flex\"`) or on a device with larger \
+         buffers",
+        mb = *bytes as f64 / 1e6,
+        max_mb = *max as f64 / 1e6
+    )]
+    BufferTooLarge {
+        /// What the buffer holds.
+        what: String,
+        /// Its size, bytes.
+        bytes: u64,
+        /// The device's largest buffer, bytes.
+        max: u64,
+    },
     /// The zoom (tensor or host values) is not one value per pose.
     #[error("{got} zoom values for a batch of {batch} poses")]
     ZoomCount {
@@ -309,6 +326,71 @@ impl OnDevice for DeviceScene {
     fn dtype(&self) -> DType {
         self.geometry.means.dtype()
     }
+}
+
+/// The device buffers a pass of `batch` poses over `u` Gaussians and `pairs` tile–Gaussian
+/// pairs with `width` channel values a pixel needs (the slots of the backward when
+/// `gradient`), and the scene's largest ones, each in one buffer.
+fn pass_buffers(
+    scene: &DeviceScene,
+    batch: usize,
+    u: usize,
+    pairs: usize,
+    (grid, width): (&TileGrid, usize),
+    gradient: bool,
+) -> Vec<PassBuffer> {
+    let float = scene.dtype().size() as u64;
+    let n = scene.len();
+    let buffer = |what: String, values: usize, bytes: u64| PassBuffer {
+        what,
+        bytes: values as u64 * bytes,
+    };
+    let mut buffers = vec![
+        buffer(
+            format!("the scene's SH coefficients ({n} Gaussians)"),
+            scene.sh.coeffs.shape().num_elements(),
+            float,
+        ),
+        buffer(
+            format!("the scene's means and covariance components ({n} Gaussians)"),
+            scene.geometry.components.shape().num_elements(),
+            float,
+        ),
+        buffer(
+            format!(
+                "a pass's packed rows ({batch} poses × {u} Gaussians × {SPLAT_COLUMNS} values)"
+            ),
+            batch * u * SPLAT_COLUMNS,
+            float,
+        ),
+        buffer(
+            format!("a pass's channel values ({batch} poses × {u} Gaussians × {width})"),
+            batch * u * width,
+            float,
+        ),
+        buffer(
+            format!(
+                "a pass's images ({batch} poses × {}×{} pixels × {} values)",
+                grid.width,
+                grid.height,
+                width + 1
+            ),
+            batch * grid.width * grid.height * (width + 1),
+            float,
+        ),
+        buffer(format!("a pass's tile lists ({pairs} pairs)"), pairs, 4),
+    ];
+    if gradient {
+        buffers.push(buffer(
+            format!(
+                "a pass's gradient slots ({pairs} pairs × {} values)",
+                width + 6
+            ),
+            pairs * (width + 6),
+            float,
+        ));
+    }
+    buffers
 }
 
 /// Renders the requested channels for every pose in `poses` `[B, 6]` (Φ = ω, c).
@@ -503,6 +585,21 @@ pub fn render_at(
     let pairs: usize = work.iter().map(|list| list.gaussians.len()).sum();
     crate::counters::composite(pairs, batch * u);
     let width: usize = request.channels.iter().map(Channel::width).sum::<usize>() + tensor_width;
+    let buffers = pass_buffers(
+        scene,
+        batch,
+        u,
+        pairs,
+        (&grid, width),
+        poses.is_require_grad(),
+    );
+    if let Some((buffer, max)) = first_oversized(&device, &buffers) {
+        return Err(RenderError::BufferTooLarge {
+            what: buffer.what,
+            bytes: buffer.bytes,
+            max,
+        });
+    }
     if used.is_empty() {
         // Nothing to draw: zeros that still hang off the pose graph, so a gradient exists (0).
         let mut zero = poses.sum().mul_scalar(0.0);

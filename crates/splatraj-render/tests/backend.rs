@@ -673,11 +673,10 @@ fn gpu_zoomed_projection_matches_host_projection() {
 
 /// A GPU's largest buffer bounds a pass: `poses_per_pass` keeps the images within it, and a
 /// pass of one pose whose image is larger (possible only on a small device, such as lavapipe's
-/// 128 MiB) is an error from the read that follows, not a panic.
+/// 128 MiB) is refused before any work, naming the buffer, not a panic or a device failure.
 #[cfg(feature = "wgpu")]
 #[test]
 fn a_pass_larger_than_the_gpus_largest_buffer_is_an_error() {
-    use splatraj_render::host::read_data;
     use splatraj_render::pass_size::{max_buffer_bytes, poses_per_pass};
 
     let device = BackendKind::Wgpu.device().unwrap();
@@ -701,11 +700,57 @@ fn a_pass_larger_than_the_gpus_largest_buffer_is_an_error() {
         (&device, DType::F32),
     );
     let request = RenderRequest::new(intrinsics, vec![Channel::Mask(mask)]);
-    let message = match render(&uploaded, poses, &request) {
-        Ok(out) => read_data(out.images)
-            .expect_err("an image beyond the largest buffer cannot be read")
-            .to_string(),
-        Err(e) => e.to_string(),
-    };
-    assert!(message.contains("allocate"), "{message}");
+    let message = render(&uploaded, poses, &request)
+        .map(|_| ())
+        .expect_err("an image beyond the largest buffer is refused")
+        .to_string();
+    assert!(
+        message.contains("a pass's images (1 poses") && message.contains("largest buffer"),
+        "{message}"
+    );
+}
+
+/// The packed rows of a pass (poses × Gaussians used × 7) are one buffer too: 50 poses of a
+/// scene of 100 000 Gaussians, all in view, need 140 MB of them, over lavapipe's 128 MiB, and
+/// are refused by name (before: a device failure at the next read, as a chain of lost buffers).
+#[cfg(feature = "wgpu")]
+#[test]
+fn a_pass_whose_rows_exceed_the_gpus_largest_buffer_is_an_error() {
+    use splatraj_render::pass_size::max_buffer_bytes;
+
+    let device = BackendKind::Wgpu.device().unwrap();
+    let (n, batch) = (100_000usize, 50usize);
+    if max_buffer_bytes(&device).expect("a wgpu device reports its largest buffer")
+        >= (batch * n * 7 * 4) as u64
+    {
+        return; // a large GPU holds these rows
+    }
+    let mut scene = Scene::default();
+    for i in 0..n {
+        let (x, y) = (
+            (i % 400) as f32 / 400.0 - 0.5,
+            (i / 400) as f32 / 250.0 - 0.5,
+        );
+        scene.means.push([x, y, 3.0]);
+        scene.scales.push([0.01, 0.01, 0.01]);
+        scene.rotations.push([1.0, 0.0, 0.0, 0.0]);
+        scene.opacities.push(0.5);
+        scene.sh.extend([0.5, 0.5, 0.5]);
+    }
+    let (_, _, intrinsics, pose) = setup();
+    let uploaded = DeviceScene::new(&scene, &device, DType::F32);
+    let poses = Tensor::<2>::from_data(
+        TensorData::new(pose.0.repeat(batch), [batch, 6]),
+        (&device, DType::F32),
+    );
+    let request = RenderRequest::new(intrinsics, vec![Channel::Depth]);
+    let message = render(&uploaded, poses, &request)
+        .map(|_| ())
+        .expect_err("rows beyond the largest buffer are refused")
+        .to_string();
+    assert!(
+        message.contains("a pass's packed rows (50 poses × 100000 Gaussians")
+            && message.contains("largest buffer"),
+        "{message}"
+    );
 }
