@@ -16,8 +16,8 @@ use splatraj_render::focus::Surroundings;
 use splatraj_render::host::OnDevice;
 use splatraj_render::rasterize::{Approximations, RenderStats};
 use splatraj_render::render::{
-    Channel, DeviceScene, ObjectMasks, ObjectView, Pruning, Rasterizer, RenderRequest, Zoom,
-    render_at,
+    Channel, DeviceScene, ObjectMasks, ObjectView, Pruning, Rasterizer, RenderError, RenderRequest,
+    Zoom, render_at,
 };
 
 use super::sampling::window_bounds;
@@ -617,32 +617,21 @@ impl<'a> Problem<'a> {
         let renders = self.renders_or(renders);
         let counts: Vec<usize> = windows.iter().map(|w| w.count).collect();
         if self.step_passes == StepPasses::PerWindow || windows.len() == 1 {
-            // Each window alone, as a CPU run has always done: the same digits as before the
-            // shared pass (a run's f32 optimisation amplifies rounding; the demo's second
-            // window is framed in 90 % of its middle this way, 72 % with the costs batched).
-            let mut terms = Vec::with_capacity(windows.len());
-            let mut masks = Vec::with_capacity(windows.len());
-            let mut stats: Option<RenderStats> = None;
-            let mut offset = 0;
-            for w in windows {
-                let own = poses.clone().narrow(0, offset, w.count);
-                offset += w.count;
-                let (window_terms, pass) = self.evaluate_one(w, own, step, renders.get())?;
-                terms.push(window_terms);
-                if let Some(pass) = pass {
-                    masks.extend(pass.masks);
-                    let a = stats.unwrap_or_default();
-                    stats = Some(RenderStats {
-                        tiles: a.tiles + pass.stats.tiles,
-                        pairs: a.pairs + pass.stats.pairs,
-                        gaussians_used: a.gaussians_used + pass.stats.gaussians_used,
-                    });
-                }
-            }
-            let masks = (masks.len() == terms.len()).then(|| Tensor::cat(masks, 0));
-            return Ok(StepEvaluation::of_windows(terms, masks, stats));
+            return self.evaluate_per_window(poses, windows, step, renders.get());
         }
-        let pass = self.render_pass(poses.clone(), &windows, renders.get())?;
+        let pass = match self.render_pass(poses.clone(), &windows, renders.get()) {
+            // The union of every window's Gaussians for every pose is the largest buffer of a
+            // run; a device too small for it (lavapipe, a laptop's GPU) may hold each
+            // window's own, three or more times smaller.
+            Err(OptimiseError::Render(RenderError::BufferTooLarge { what, .. })) => {
+                tracing::info!(
+                    "step {step}: {what} do not fit the device in one render call; the windows \
+                     render one call each"
+                );
+                return self.evaluate_per_window(poses, windows, step, renders.get());
+            }
+            pass => pass?,
+        };
         let batched_cost = |c: &dyn Cost| c.batches_windows() && c.domain() == CostDomain::Samples;
         // The costs that batch: once, on every sample with its own window's context.
         let contexts: Vec<QueryContext> = windows
@@ -780,6 +769,40 @@ impl<'a> Problem<'a> {
             Some(r) => Borrowed::Lent(Some(r)),
             None => Borrowed::Owned(self.renders()),
         }
+    }
+
+    /// [`Self::evaluate_windows`] with a render call and the costs per window.
+    fn evaluate_per_window(
+        &self,
+        poses: Tensor<2>,
+        windows: Vec<WindowSamples<'_>>,
+        step: usize,
+        renders: Option<&WindowRenders>,
+    ) -> Result<StepEvaluation, OptimiseError> {
+        // Each window alone, as a CPU run has always done: the same digits as before the
+        // shared pass (a run's f32 optimisation amplifies rounding; the demo's second
+        // window is framed in 90 % of its middle this way, 72 % with the costs batched).
+        let mut terms = Vec::with_capacity(windows.len());
+        let mut masks = Vec::with_capacity(windows.len());
+        let mut stats: Option<RenderStats> = None;
+        let mut offset = 0;
+        for w in windows {
+            let own = poses.clone().narrow(0, offset, w.count);
+            offset += w.count;
+            let (window_terms, pass) = self.evaluate_one(w, own, step, renders)?;
+            terms.push(window_terms);
+            if let Some(pass) = pass {
+                masks.extend(pass.masks);
+                let a = stats.unwrap_or_default();
+                stats = Some(RenderStats {
+                    tiles: a.tiles + pass.stats.tiles,
+                    pairs: a.pairs + pass.stats.pairs,
+                    gaussians_used: a.gaussians_used + pass.stats.gaussians_used,
+                });
+            }
+        }
+        let masks = (masks.len() == terms.len()).then(|| Tensor::cat(masks, 0));
+        Ok(StepEvaluation::of_windows(terms, masks, stats))
     }
 
     /// One render call for `windows`' samples at `poses` (their rows in order), each

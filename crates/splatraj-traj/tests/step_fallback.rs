@@ -1,0 +1,150 @@
+//! A shared optimisation step (`StepPasses::Shared`: every window in one render call) lays its
+//! packed rows out over the union of every window's Gaussians for every pose, the largest
+//! buffer of a run. On a device too small for it (lavapipe's largest buffer is 128 MiB) the
+//! render refuses the call by name, and the step renders a call per window instead, whose
+//! buffers are several times smaller: the same evaluation as `StepPasses::PerWindow`.
+//!
+//! Runs on the wgpu backend (lavapipe in CI); its own test binary, as the render counters are
+//! process-wide.
+#![cfg(feature = "wgpu")]
+
+use burn::tensor::DType;
+use glam::DVec3;
+use splatraj_render::backend::BackendKind;
+use splatraj_render::camera::{Intrinsics, Pose};
+use splatraj_render::counters;
+use splatraj_render::host::{OnDevice, to_host};
+use splatraj_render::pass_size::max_buffer_bytes;
+use splatraj_render::render::DeviceScene;
+use splatraj_scene::Scene;
+use splatraj_traj::costs::{CostsConfig, HostPoses, QueryContext};
+use splatraj_traj::optimise::{Problem, StepPasses, WindowSamples, WindowTarget};
+
+/// Gaussians a wall, walls (one a window), samples a window.
+const WALL: usize = 150;
+const WINDOWS: usize = 3;
+const SAMPLES: usize = 64;
+
+/// Where wall `w` stands: 10 units apart, so a camera facing one sees no other.
+fn wall_centre(w: usize) -> DVec3 {
+    DVec3::new(10.0 * w as f64 - 10.0, 0.0, 3.0)
+}
+
+/// Three walls of WALL² large opaque Gaussians, each a window's object: a camera 0.5 in front
+/// of its wall sees only that wall, wall to wall, so every pixel is covered after a few
+/// entries and the passes stay quick on lavapipe whatever their lists' lengths.
+fn walls() -> (Scene, Vec<WindowTarget>) {
+    let mut scene = Scene::default();
+    let mut targets = Vec::new();
+    for w in 0..WINDOWS {
+        let centre = wall_centre(w);
+        let first = scene.len();
+        for i in 0..WALL * WALL {
+            let (gx, gy) = ((i % WALL) as f64, (i / WALL) as f64);
+            let step = 0.7 / WALL as f64;
+            scene.means.push([
+                (centre.x + (gx - WALL as f64 / 2.0) * step) as f32,
+                (centre.y + (gy - WALL as f64 / 2.0) * step) as f32,
+                centre.z as f32,
+            ]);
+            scene.scales.push([0.02, 0.02, 0.005]);
+            scene.rotations.push([1.0, 0.0, 0.0, 0.0]);
+            scene.opacities.push(0.95);
+            scene.sh.extend([0.5, 0.4, 0.3]);
+        }
+        let mut mask = vec![0.0; WINDOWS * WALL * WALL];
+        mask[first..first + WALL * WALL].fill(1.0);
+        targets.push(WindowTarget {
+            name: format!("wall {w}"),
+            mask,
+            context: QueryContext {
+                object_centre: centre.to_array(),
+                prior_radius: 0.5,
+                world_up: [0.0, -1.0, 0.0],
+                target_ratio: 0.5,
+            },
+        });
+    }
+    (scene, targets)
+}
+
+/// Window `w`'s samples: 0.5 in front of its wall, shifted a little sample to sample.
+fn samples(w: usize) -> Vec<Pose> {
+    let centre = wall_centre(w);
+    (0..SAMPLES)
+        .map(|k| {
+            let shift = DVec3::new(0.002 * k as f64, -0.001 * k as f64, 0.0);
+            Pose::look_at(
+                centre + shift - DVec3::new(0.0, 0.0, 0.5),
+                centre + shift,
+                DVec3::new(0.0, -1.0, 0.0),
+            )
+            .unwrap()
+        })
+        .collect()
+}
+
+#[test]
+fn a_shared_step_too_large_for_the_device_renders_a_call_per_window() {
+    let device = BackendKind::Wgpu.device().unwrap().autodiff();
+    let rows_bytes = |poses: usize, gaussians: usize| (poses * gaussians * 7 * 4) as u64;
+    let max = max_buffer_bytes(&device).expect("a wgpu device reports its largest buffer");
+    // Each pose uses at most its own wall; the shared call, every wall for every pose.
+    let every_wall = rows_bytes(WINDOWS * SAMPLES, WINDOWS * WALL * WALL);
+    if every_wall / 2 <= max {
+        return; // a device large enough for a shared step of these walls
+    }
+    assert!(rows_bytes(SAMPLES, WALL * WALL) < max / 2);
+
+    let (scene, targets) = walls();
+    let intrinsics = Intrinsics::from_fov_x(60.0, 16, 16).unwrap();
+    let on_device = DeviceScene::new(&scene, &device, DType::F32);
+    let costs = CostsConfig::default().build().unwrap();
+    let problem = Problem::new(&on_device, &targets, &costs, intrinsics);
+    let rows: Vec<Vec<Pose>> = (0..WINDOWS).map(samples).collect();
+    let hosts: Vec<HostPoses> = rows
+        .iter()
+        .map(|r| HostPoses {
+            samples: r.iter().map(|p| p.0).collect(),
+            path: None,
+        })
+        .collect();
+    let all: Vec<Pose> = rows.iter().flatten().copied().collect();
+
+    let evaluate = |passes: StepPasses| {
+        let poses = on_device.poses(&all).require_grad();
+        let windows = (0..WINDOWS)
+            .map(|w| WindowSamples {
+                window: w,
+                count: SAMPLES,
+                times: None,
+                path: None,
+                host: Some(&hosts[w]),
+                zoom: None,
+            })
+            .collect();
+        let before = counters::snapshot();
+        let step = problem
+            .with_step_passes(passes)
+            .evaluate_windows(poses.clone(), windows, 0, None)
+            .expect("the step evaluates");
+        let renders = counters::snapshot().since(&before).renders;
+        // The loss and every window's term means; not the gradient: lavapipe takes tens of
+        // seconds for the projection's backward over these rows, and the step is the same
+        // code as a step per window from the render on.
+        let loss = to_host(step.loss).unwrap();
+        let means = to_host(step.means).unwrap();
+        (renders, loss, means)
+    };
+    let (shared_renders, shared_loss, shared_means) = evaluate(StepPasses::Shared);
+    let (per_window_renders, loss, means) = evaluate(StepPasses::PerWindow);
+    assert_eq!(per_window_renders, WINDOWS as u64);
+    assert_eq!(
+        shared_renders,
+        WINDOWS as u64 + 1,
+        "the shared call is tried, refused, and each window rendered"
+    );
+    assert!(loss[0].is_finite() && means.iter().any(|m| *m != 0.0));
+    assert_eq!(shared_loss, loss);
+    assert_eq!(shared_means, means);
+}
