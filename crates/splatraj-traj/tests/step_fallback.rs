@@ -8,6 +8,8 @@
 //! process-wide.
 #![cfg(feature = "wgpu")]
 
+mod common;
+
 use burn::tensor::DType;
 use glam::DVec3;
 use splatraj_render::backend::BackendKind;
@@ -17,7 +19,7 @@ use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::pass_size::max_buffer_bytes;
 use splatraj_render::render::DeviceScene;
 use splatraj_scene::Scene;
-use splatraj_traj::costs::{CostsConfig, HostPoses, QueryContext};
+use splatraj_traj::costs::{CostsConfig, QueryContext};
 use splatraj_traj::optimise::{Problem, StepPasses, WindowSamples, WindowTarget};
 
 /// Gaussians a wall, walls (one a window), samples a window.
@@ -102,13 +104,7 @@ fn a_shared_step_too_large_for_the_device_renders_a_call_per_window() {
     let costs = CostsConfig::default().build().unwrap();
     let problem = Problem::new(&on_device, &targets, &costs, intrinsics);
     let rows: Vec<Vec<Pose>> = (0..WINDOWS).map(samples).collect();
-    let hosts: Vec<HostPoses> = rows
-        .iter()
-        .map(|r| HostPoses {
-            samples: r.iter().map(|p| p.0).collect(),
-            path: None,
-        })
-        .collect();
+    let hosts = common::host_samples(&rows);
     let all: Vec<Pose> = rows.iter().flatten().copied().collect();
 
     let evaluate = |passes: StepPasses| {

@@ -380,13 +380,7 @@ fn windows_together_equal_windows_one_at_a_time() {
                 .collect()
         })
         .collect();
-    let hosts: Vec<HostPoses> = rows
-        .iter()
-        .map(|r| HostPoses {
-            samples: r.iter().map(|p| p.0).collect(),
-            path: None,
-        })
-        .collect();
+    let hosts = common::host_samples(&rows);
     let all: Vec<Pose> = rows.iter().flatten().copied().collect();
 
     // One window at a time: the mean over windows of each window's mean total.

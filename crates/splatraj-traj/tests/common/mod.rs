@@ -112,3 +112,16 @@ pub fn passing_window(framed_share: f64, turning: f64, orbit: f64) -> WindowMetr
         lens: None,
     }
 }
+
+/// Each window's samples as the host holds them (no path).
+pub fn host_samples(
+    windows: &[Vec<splatraj_render::camera::Pose>],
+) -> Vec<splatraj_traj::costs::HostPoses> {
+    windows
+        .iter()
+        .map(|w| splatraj_traj::costs::HostPoses {
+            samples: w.iter().map(|p| p.0).collect(),
+            path: None,
+        })
+        .collect()
+}
