@@ -498,6 +498,16 @@ fn backward_kernel<F: Float, I: Int>(
         }
         e += 1;
     }
+    // The entries past the replay contribute nothing: their slots are written as zeros here,
+    // so that the slots are allocated empty (no fill launch) and every one is still written.
+    let len = u32::cast_from(starts[w + 1]) as usize - start;
+    let mut j = replay + p;
+    while j < len {
+        for k in 0..stride {
+            slots[(start + j) * stride + k] = F::new(0.0);
+        }
+        j += TILE_PIXELS;
+    }
 }
 
 #[cube(launch)]
@@ -506,7 +516,7 @@ fn gather_kernel<F: Float, I: Int>(
     slots: &Tensor<F>,        // [pairs, 6 + C]
     slot_order: &Tensor<I>,   // [pairs]: slots grouped by row, in plan order within a row
     slot_starts: &Tensor<I>,  // [R + 1]
-    v_splats: &mut Tensor<F>, // [R, S]; columns past the sixth stay 0
+    v_splats: &mut Tensor<F>, // [R, S]; columns past the sixth 0
     v_values: &mut Tensor<F>, // [R, C]
     row_count: u32,
     columns: u32,
@@ -534,6 +544,10 @@ fn gather_kernel<F: Float, I: Int>(
     let at = row * columns as usize;
     for k in 0..6usize {
         v_splats[at + k] = sums[k];
+    }
+    // Every element written: the buffer is allocated empty, with no fill launch.
+    for k in 6..columns as usize {
+        v_splats[at + k] = F::new(0.0);
     }
     for k in 0..channels {
         v_values[row * channels + k] = sums[6 + k];
@@ -701,7 +715,12 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
     let grid = plan.grid;
     let work_count = plan.tiles.len();
     let pairs = plan.rows.len();
-    let slots = zeros(vec![pairs.max(1), slot_width(channels)], &device, dtype);
+    // Written whole by the backward kernel (every list entry's slot, replayed or not).
+    let slots = CubeBackend::float_empty(
+        vec![pairs.max(1), slot_width(channels)].into(),
+        &device,
+        dtype.into(),
+    );
     let int_dtype = dtype_to_storage_type(last.dtype);
     if work_count > 0 {
         backward_kernel::launch(
@@ -729,8 +748,9 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
             [dtype_to_storage_type(dtype), int_dtype],
         );
     }
-    let v_splats = zeros(vec![rows, columns], &device, dtype);
-    let v_values = zeros(vec![rows, channels], &device, dtype);
+    // Written whole by the gather kernel (every row, every column).
+    let v_splats = CubeBackend::float_empty(vec![rows, columns].into(), &device, dtype.into());
+    let v_values = CubeBackend::float_empty(vec![rows, channels].into(), &device, dtype.into());
     if rows > 0 {
         let (order, starts) = slots_by_row(&plan, rows);
         let order = int_tensor(order, &device);
