@@ -25,7 +25,10 @@
 #      default, against one entry at a time: SPLATRAJ_ENTRY_SUMS): the mask passes of 1. on
 #      wgpu both ways, time and parity;
 #   7. where a wgpu optimisation step spends its time: `bench step` on the guitar config with
-#      each kernel waited for, by render stage and the rest (costs, backward, Adam, waits).
+#      each kernel waited for, by render stage and the rest (costs, backward, Adam, waits);
+#   0. first of all, what compiling a run's ~300 kernels costs a process: one guitar step on
+#      wgpu in a fresh process, twice (the first on this machine may also fill the driver's
+#      shader cache; the second pays only what every process pays).
 # then prints one table (python3, standard library only). Exit status 1 when parity fails.
 # GPU_CHECK_QUICK=1 shrinks every workload (a smoke test of the script, e.g. on lavapipe):
 # the figures then mean nothing.
@@ -53,6 +56,15 @@ if [ "${GPU_CHECK_QUICK:-0}" = 1 ]; then
   quick=(--set optimiser.iterations=3 --set output.frames=3 --set output.width=160
     --set output.height=90 --set output.metric_samples=8)
 fi
+compile_s=()
+for attempt in first again; do
+  echo "== wgpu: one guitar step in a fresh process ($attempt)" >&2
+  started=$(date +%s.%N)
+  "$bin" bench step --config configs/first-try/guitar.toml --steps 1 --set 'backend="wgpu"' \
+    --set "scene.path=\"$data/guitar.compressed.ply\"" --json >/dev/null
+  compile_s+=("$(python3 -c "print(f'{$(date +%s.%N) - $started:.1f}')")")
+done
+echo "{\"first_s\": ${compile_s[0]}, \"again_s\": ${compile_s[1]}}" >"$out/process_start.json"
 for backend in wgpu flex; do
   echo "== $backend: bench render" >&2
   "$bin" bench render --backend "$backend" --sizes "$sizes" --resolutions 128 \
@@ -94,6 +106,9 @@ try:
 except OSError:
     gpu = "?"
 print(f"machine: {gpu}, {os.cpu_count()} CPU cores, {platform.platform()}")
+start = load("process_start.json")
+print(f"\na fresh process, four guitar steps (two step variants, one untimed step and one timed "
+      f"each, kernels compiled on the way): {start['first_s']} s the first time, {start['again_s']} s again")
 render = {b: load(f"render_{b}.json") for b in ("wgpu", "flex")}
 key = lambda r: (r["scene"], r["gaussians"], r["resolution"], r["pruning"])
 flex_rows = {key(r): r for r in render["flex"]["rows"] if not r.get("skipped")}

@@ -128,12 +128,18 @@ fn a_shared_step_too_large_for_the_device_renders_a_call_per_window() {
         // The loss and every window's term means; not the gradient: lavapipe takes tens of
         // seconds for the projection's backward over these rows, and the step is the same
         // code as a step per window from the render on.
+        let passes = step.passes;
         let loss = to_host(step.loss).unwrap();
         let means = to_host(step.means).unwrap();
-        (renders, loss, means)
+        (renders, passes, loss, means)
     };
-    let (shared_renders, shared_loss, shared_means) = evaluate(StepPasses::Shared);
-    let (per_window_renders, loss, means) = evaluate(StepPasses::PerWindow);
+    let (shared_renders, shared_passes, shared_loss, shared_means) = evaluate(StepPasses::Shared);
+    let (per_window_renders, _, loss, means) = evaluate(StepPasses::PerWindow);
+    assert_eq!(
+        shared_passes,
+        StepPasses::PerWindow,
+        "the step says it rendered a call per window, so a run's later steps keep to it"
+    );
     assert_eq!(per_window_renders, WINDOWS as u64);
     assert_eq!(
         shared_renders,

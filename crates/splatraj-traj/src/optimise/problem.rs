@@ -128,6 +128,9 @@ pub struct StepEvaluation {
     /// How much compositing work the passes had, summed over them (None when nothing was
     /// rendered).
     pub stats: Option<RenderStats>,
+    /// How the windows were rendered: `PerWindow` also when a shared call was asked for and
+    /// the device could not hold it (the later steps of a run need not try again).
+    pub passes: StepPasses,
 }
 
 impl StepEvaluation {
@@ -150,6 +153,7 @@ impl StepEvaluation {
             labels: terms.iter().map(CostTerms::labels).collect(),
             masks,
             stats,
+            passes: StepPasses::PerWindow,
         }
     }
 
@@ -269,6 +273,7 @@ impl StepEvaluation {
             labels,
             masks,
             stats,
+            passes: StepPasses::Shared,
         }
     }
 }

@@ -282,6 +282,8 @@ pub fn optimise_trajectory(
     observer: &mut dyn FnMut(&TrajectoryStep) -> Flow,
 ) -> Result<TrajectoryResult, OptimiseError> {
     options.validate()?;
+    // A copy: a step may turn a shared render call into a call per window for the rest.
+    let mut problem = *problem;
     let (device, dtype) = problem.gradient_setup()?;
     let windows = problem.windows;
     let units = options.units(windows);
@@ -383,6 +385,8 @@ pub fn optimise_trajectory(
         };
         let evaluated =
             problem.evaluate_windows(sample_poses, window_samples, step, renders.as_ref())?;
+        // A shared call the device could not hold is not tried again.
+        problem = problem.with_step_passes(evaluated.passes);
         let StepEvaluation {
             loss,
             means,
