@@ -754,3 +754,68 @@ fn a_pass_whose_rows_exceed_the_gpus_largest_buffer_is_an_error() {
         "{message}"
     );
 }
+
+/// A GPU kernel stages every channel of 256 entries in workgroup memory, so a device holds only
+/// so many channels a composite (lavapipe 16; a feature render of a mask file has one per
+/// label). Past that, a pass failed on the device ("Too much shared memory requested"); now
+/// its channels are composited in groups that fit and joined: 2·16 + 3 feature channels (three
+/// groups, the last partial) give wgpu the image, alpha and pose gradient of flex.
+#[cfg(feature = "wgpu")]
+#[test]
+fn many_channels_are_composited_in_groups_that_fit_the_device() {
+    use splatraj_render::fused::cube::channels_per_composite;
+
+    let group = channels_per_composite(&BackendKind::Wgpu.device().unwrap())
+        .expect("a wgpu device has a channel limit");
+    let dim = 2 * group + 3;
+    let (scene, _, intrinsics, pose) = setup();
+    let values: Vec<f32> = (0..scene.len() * dim)
+        .map(|i| ((i * 7919) % 101) as f32 / 101.0 - 0.3)
+        .collect();
+    let run = |backend: BackendKind| -> Vec<Vec<f64>> {
+        let device = backend.device().unwrap().autodiff();
+        let uploaded = DeviceScene::new(&scene, &device, DType::F32);
+        let poses = Tensor::<2>::from_data(
+            TensorData::new(pose.0.to_vec(), [1, 6]),
+            (&device, DType::F32),
+        )
+        .require_grad();
+        let request = RenderRequest::new(
+            intrinsics,
+            vec![Channel::Features {
+                dim,
+                values: values.clone(),
+            }],
+        );
+        let out = render(&uploaded, poses.clone(), &request).expect("the pass renders");
+        let [_, h, w, c] = out.images.dims();
+        let weights: Vec<f32> = (0..h * w * c)
+            .map(|i| ((i * 31) % 17) as f32 / 17.0 - 0.5)
+            .collect();
+        let weights = Tensor::<4>::from_data(
+            TensorData::new(weights, [1, h, w, c]),
+            (&device, DType::F32),
+        );
+        let loss = (out.images.clone() * weights).sum() + out.alpha.clone().sum();
+        let gradient = poses.grad(&loss.backward()).unwrap();
+        vec![host(out.images), host(out.alpha), host(gradient)]
+    };
+    let (got, want) = (run(BackendKind::Wgpu), run(BackendKind::Flex));
+    for ((name, got), want) in ["images", "alpha", "pose gradient"]
+        .iter()
+        .zip(&got)
+        .zip(&want)
+    {
+        assert_eq!(got.len(), want.len(), "{name}");
+        let scale = want.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let error = got
+            .iter()
+            .zip(want)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(scale > 0.0, "{name}: something to compare");
+        assert!(
+            error <= 1e-4 * scale.max(1.0),
+            "{name}: wgpu and flex differ by {error} (largest {scale})"
+        );
+    }
+}

@@ -122,16 +122,45 @@ fn asked_entry_sums() -> EntrySums {
     }
 }
 
+/// The workgroup memory of `device` in bytes: None on the host backends.
+fn max_shared_bytes(device: &burn::tensor::Device) -> Option<usize> {
+    match device.as_dispatch().clone().inner() {
+        burn_dispatch::DispatchDevice::Cube(cube) => {
+            Some(cube.client().properties().hardware.max_shared_memory_size)
+        }
+        _ => None,
+    }
+}
+
 /// How the backward sums entries on `device` (a GPU device of the wgpu backend; None on the
 /// host backends) for `channels` channels.
 pub fn entry_sums_on(device: &burn::tensor::Device, channels: usize) -> Option<EntrySums> {
-    match device.as_dispatch().clone().inner() {
-        burn_dispatch::DispatchDevice::Cube(cube) => Some(EntrySums::fitting(
-            channels,
-            cube.client().properties().hardware.max_shared_memory_size,
-        )),
-        _ => None,
-    }
+    max_shared_bytes(device).map(|max| EntrySums::fitting(channels, max))
+}
+
+/// Workgroup memory the forward kernel declares for `channels` channels, bytes (f32): the
+/// staged rows (six values) and channel values of 256 entries, and the tile's open flag.
+pub const fn forward_shared_bytes(channels: usize) -> usize {
+    4 * (TILE_PIXELS * (6 + channels) + 1)
+}
+
+/// The most channels one composite may take on `device` (None on the host backends, which
+/// have no such limit): the forward and the backward (one entry at a time) of that many fit
+/// its workgroup memory; at least 1. More channels are composited in groups
+/// ([`super::composite_packed`]).
+pub fn channels_per_composite(device: &burn::tensor::Device) -> Option<usize> {
+    max_shared_bytes(device).map(channels_within)
+}
+
+/// The most channels whose forward and backward kernels fit `max_shared` bytes, at least 1.
+fn channels_within(max_shared: usize) -> usize {
+    (1..=4096)
+        .take_while(|&c| {
+            forward_shared_bytes(c) <= max_shared
+                && EntrySums::OneAtATime.shared_bytes(c) <= max_shared
+        })
+        .last()
+        .unwrap_or(1)
 }
 
 /// Work tile index of this cube (the launch grid is 2D when there are more than 65 535 tiles).
@@ -807,6 +836,20 @@ impl CompositeKernels for CubeBackend {
 mod tests {
     use super::*;
     use crate::tiles::{TileGrid, TileWork};
+
+    #[test]
+    fn channels_a_composite_may_take_follow_the_workgroup_memory() {
+        // By hand from the kernels' declarations (f32): the backward one entry at a time
+        // needs 4·(352·(6 + C) + 256) bytes, the forward 4·(256·(6 + C) + 1); the backward is
+        // the tighter. 32 KiB (lavapipe): 352·22 + 256 = 8 000 ≤ 8 192 < 352·23 + 256.
+        assert_eq!(channels_within(32 * 1024), 16);
+        // 48 KiB (NVIDIA's Vulkan): 352·34 + 256 = 12 224 ≤ 12 288.
+        assert_eq!(channels_within(48 * 1024), 28);
+        // WebGPU's default 16 KiB: 352·10 + 256 = 3 776 ≤ 4 096 < 352·11 + 256.
+        assert_eq!(channels_within(16 * 1024), 4);
+        // Nothing fits: still one channel a composite (the device's error, named, follows).
+        assert_eq!(channels_within(1024), 1);
+    }
 
     #[test]
     fn slots_are_grouped_by_row_in_plan_order() {

@@ -320,7 +320,47 @@ pub fn composite_fused(inputs: &SplatInputs, plan: CompositePlan) -> Composited 
 
 /// Composites packed rows `splats` `[R, S ≥ 6]` (u, v, conic a, b, c, opacity, then columns
 /// it ignores) with channel values `values` `[R, C]`: the fused projection's output as it is.
+///
+/// A GPU kernel stages every channel of 256 entries in workgroup memory, so a device holds
+/// only so many channels a composite (lavapipe 16, a 48 KiB GPU 28; feature renders of mask
+/// files have a channel per label): more are composited in groups that fit, on the same plan,
+/// and joined; the alpha is the first group's (every group's is the same), and autodiff sums
+/// each group's gradient of the rows.
 pub fn composite_packed(splats: Tensor<2>, values: Tensor<2>, plan: CompositePlan) -> Composited {
+    let channels = values.dims()[1];
+    #[cfg(feature = "wgpu")]
+    if let Some(group) = cube::channels_per_composite(&splats.device())
+        && channels > group
+    {
+        let plan = Arc::new(plan);
+        let parts: Vec<Composited> = (0..channels)
+            .step_by(group)
+            .map(|first| {
+                let count = group.min(channels - first);
+                composite_shared_plan(
+                    splats.clone(),
+                    values.clone().narrow(1, first, count),
+                    plan.clone(),
+                )
+            })
+            .collect();
+        let alpha = parts[0].alpha.clone();
+        let stats = parts[0].stats;
+        return Composited {
+            images: Tensor::cat(parts.into_iter().map(|p| p.images).collect(), 3),
+            alpha,
+            stats,
+        };
+    }
+    composite_shared_plan(splats, values, Arc::new(plan))
+}
+
+/// [`composite_packed`] of one group of channels.
+fn composite_shared_plan(
+    splats: Tensor<2>,
+    values: Tensor<2>,
+    plan: Arc<CompositePlan>,
+) -> Composited {
     let channels = values.dims()[1];
     let (batch, grid) = (plan.batch, plan.grid);
     let stats = RenderStats {
@@ -333,7 +373,7 @@ pub fn composite_packed(splats: Tensor<2>, values: Tensor<2>, plan: CompositePla
             splats: splats.into_dispatch(),
             values: values.into_dispatch(),
         },
-        Arc::new(plan),
+        plan,
     )); // [B, H, W, C + 1]
     let alpha = packed
         .clone()
