@@ -373,15 +373,11 @@ fn assert_gpu_kernels_match_host_kernels(case: &KernelCase) {
         "v_values",
     ];
     for ((name, got), want) in names.iter().zip(&got).zip(&want) {
-        let scale = want.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-        let error = got
-            .iter()
-            .zip(want)
-            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
-        assert!(scale > 0.0, "{name}: something to compare");
-        assert!(
-            error <= 1e-3 * scale.max(1.0),
-            "{name}: GPU and host kernels differ by {error} (largest value {scale})"
+        common::assert_within(
+            &format!("{name}, GPU against host kernels"),
+            got,
+            want,
+            1e-3,
         );
     }
     assert_eq!(
@@ -806,16 +802,6 @@ fn many_channels_are_composited_in_groups_that_fit_the_device() {
         .zip(&got)
         .zip(&want)
     {
-        assert_eq!(got.len(), want.len(), "{name}");
-        let scale = want.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-        let error = got
-            .iter()
-            .zip(want)
-            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
-        assert!(scale > 0.0, "{name}: something to compare");
-        assert!(
-            error <= 1e-4 * scale.max(1.0),
-            "{name}: wgpu and flex differ by {error} (largest {scale})"
-        );
+        common::assert_within(&format!("{name}, wgpu against flex"), got, want, 1e-4);
     }
 }

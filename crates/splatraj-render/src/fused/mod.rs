@@ -327,9 +327,9 @@ pub fn composite_fused(inputs: &SplatInputs, plan: CompositePlan) -> Composited 
 /// and joined; the alpha is the first group's (every group's is the same), and autodiff sums
 /// each group's gradient of the rows.
 pub fn composite_packed(splats: Tensor<2>, values: Tensor<2>, plan: CompositePlan) -> Composited {
-    let channels = values.dims()[1];
     #[cfg(feature = "wgpu")]
     if let Some(group) = cube::channels_per_composite(&splats.device())
+        && let channels = values.dims()[1]
         && channels > group
     {
         let plan = Arc::new(plan);

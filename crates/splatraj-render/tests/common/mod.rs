@@ -144,3 +144,19 @@ pub fn mask_near(clusters: &[[f64; 2]], centre: [f64; 2], radius: f64) -> Vec<f3
         })
         .collect()
 }
+
+/// Asserts `got` has `want`'s length and lies within `relative` of `want`'s largest magnitude
+/// (at least 1) everywhere, and that `want` holds something to compare (not all zeros).
+pub fn assert_within(name: &str, got: &[f64], want: &[f64], relative: f64) {
+    assert_eq!(got.len(), want.len(), "{name}: lengths");
+    let scale = want.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let error = got
+        .iter()
+        .zip(want)
+        .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+    assert!(scale > 0.0, "{name}: something to compare");
+    assert!(
+        error <= relative * scale.max(1.0),
+        "{name}: differs by {error} (largest value {scale})"
+    );
+}
