@@ -395,8 +395,8 @@ fn backward_kernel<F: Float, I: Int>(
     // Each list entry goes through three steps: every unit's contribution (the replay), the
     // sums of 8-pixel groups, the sums of the groups. One at a time, the three are separated
     // by two barriers per entry. Pipelined, step e computes entry e, sums the groups of entry
-    // e − 1 and the group sums of entry e − 2 between the same two barriers (one per entry),
-    // reading the buffers the previous step wrote while the next entry writes the other one.
+    // e − 1 and the group sums of entry e − 2, and ends at one barrier (one per entry): each
+    // step reads the buffers the step before it wrote and writes the other ones.
     let pipelined = comptime!(schedule == EntrySums::Pipelined);
     let buffers = comptime!(schedule.buffers());
     let lag = comptime!(schedule.lag());
