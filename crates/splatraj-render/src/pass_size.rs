@@ -77,10 +77,14 @@ pub struct PassBuffer {
 }
 
 /// The first of `buffers` larger than `device`'s largest buffer, with that limit; None when
-/// all fit or on the host backends (no limit).
-pub fn first_oversized(device: &Device, buffers: &[PassBuffer]) -> Option<(PassBuffer, u64)> {
+/// all fit or on the host backends (no limit), which never make the list: a render calls this
+/// every pass, and the list's descriptions are formatted strings.
+pub fn first_oversized(
+    device: &Device,
+    buffers: impl FnOnce() -> Vec<PassBuffer>,
+) -> Option<(PassBuffer, u64)> {
     let limit = max_buffer_bytes(device)?;
-    over_limit(limit, buffers).map(|b| (b.clone(), limit))
+    over_limit(limit, &buffers()).map(|b| (b.clone(), limit))
 }
 
 /// The first of `buffers` above `limit` bytes.

@@ -585,15 +585,9 @@ pub fn render_at(
     let pairs: usize = work.iter().map(|list| list.gaussians.len()).sum();
     crate::counters::composite(pairs, batch * u);
     let width: usize = request.channels.iter().map(Channel::width).sum::<usize>() + tensor_width;
-    let buffers = pass_buffers(
-        scene,
-        batch,
-        u,
-        pairs,
-        (&grid, width),
-        poses.is_require_grad(),
-    );
-    if let Some((buffer, max)) = first_oversized(&device, &buffers) {
+    let gradient = poses.is_require_grad();
+    let buffers = || pass_buffers(scene, batch, u, pairs, (&grid, width), gradient);
+    if let Some((buffer, max)) = first_oversized(&device, buffers) {
         return Err(RenderError::BufferTooLarge {
             what: buffer.what,
             bytes: buffer.bytes,
