@@ -15,6 +15,7 @@
 use burn::tensor::{Int, Tensor, TensorData};
 use splatraj_config::ConfigError;
 
+use crate::rows::PoseRows;
 use crate::tiles::{TILE_PIXELS, TILE_SIZE, TileGrid, TileWork};
 
 pub use crate::composite_rules::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
@@ -123,26 +124,28 @@ pub struct RenderStats {
     pub tiles: usize,
     /// Tile–Gaussian pairs over the batch (sum of list lengths); × 256 gives pixel–Gaussian pairs.
     pub pairs: usize,
-    /// Distinct Gaussians some tile uses.
+    /// Distinct Gaussians some tile uses (a render's count; the composite functions alone,
+    /// which see only rows, give the most rows one pose has).
     pub gaussians_used: usize,
 }
 
 /// Composites `work` (from [`crate::tiles::bin_tiles`]) into full images.
 ///
-/// `n` is the number of Gaussians per pose; tiles absent from `work` render as zero.
+/// The inputs hold one row per (pose, Gaussian) as `rows` lays them out; a list entry of pose
+/// b names row `rows.start(b) + entry`. Tiles absent from `work` render as zero.
 pub fn composite(
     inputs: &SplatInputs,
     work: &[TileWork],
-    n: usize,
-    batch: usize,
+    rows: &PoseRows,
     grid: &TileGrid,
     options: CompositeOptions,
 ) -> Composited {
+    let batch = rows.batch();
     let device = inputs.means_2d.device();
     let dtype = inputs.means_2d.dtype();
     let channels = inputs.values.dims()[1];
     let padded = pad_with_transparent_row(inputs);
-    let dummy = (batch * n) as i64;
+    let dummy = rows.total() as i64;
 
     // Longest lists first, so that a group's lists have similar lengths.
     let mut order: Vec<usize> = (0..work.len()).collect();
@@ -152,7 +155,7 @@ pub fn composite(
     let mut pieces = Vec::new();
     for group in order.chunks(options.tile_group.max(1)) {
         pieces.push(composite_group(
-            &padded, work, group, grid, n, dummy, options, channels,
+            &padded, work, group, grid, rows, dummy, options, channels,
         ));
     }
     // One zero tile for every (pose, tile) that has no work.
@@ -197,12 +200,12 @@ pub fn composite(
         stats: RenderStats {
             tiles: work.len(),
             pairs: work.iter().map(|w| w.gaussians.len()).sum(),
-            gaussians_used: n,
+            gaussians_used: rows.largest(),
         },
     }
 }
 
-/// The inputs with one extra, fully transparent row at index B·N, which padding points to.
+/// The inputs with one extra, fully transparent row at index R, which padding points to.
 fn pad_with_transparent_row(inputs: &SplatInputs) -> SplatInputs {
     let zero_row =
         |t: &Tensor<2>| Tensor::cat(vec![t.clone(), t.clone().narrow(0, 0, 1).zeros_like()], 0);
@@ -230,7 +233,7 @@ fn composite_group(
     work: &[TileWork],
     group: &[usize],
     grid: &TileGrid,
-    n: usize,
+    rows: &PoseRows,
     dummy: i64,
     options: CompositeOptions,
     channels: usize,
@@ -261,7 +264,7 @@ fn composite_group(
         let mut centres = Vec::with_capacity(2 * tiles);
         for &p in &active {
             let w = &work[group[p]];
-            let base = (w.batch * n) as i64;
+            let base = rows.start(w.batch) as i64;
             index.extend(
                 (start..start + k).map(|j| w.gaussians.get(j).map_or(dummy, |&g| base + g as i64)),
             );

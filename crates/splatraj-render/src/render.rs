@@ -19,11 +19,12 @@ use crate::fused::projection::{
 use crate::fused::{CompositePlan, composite_packed};
 use crate::host::{OnDevice, to_host, upload};
 use crate::pass_size::{PassBuffer, first_oversized};
-use crate::project::{NEAR_PLANE, Projected, SceneTensors, project_zoomed};
+use crate::project::{NEAR_PLANE, SceneTensors, project_zoomed};
 use crate::rasterize::{
     Approximations, CompositeOptions, Composited, RenderStats, SplatInputs, composite,
 };
-use crate::sh::{ShTensors, sh_colours};
+use crate::rows::{PoseRows, lay_out_rows};
+use crate::sh::{ShTensors, sh_colours_of_rows};
 use crate::stages::{self, Stage};
 use crate::tiles::{TileGrid, TileSelection, bin_tiles};
 
@@ -328,19 +329,19 @@ impl OnDevice for DeviceScene {
     }
 }
 
-/// The device buffers a pass of `batch` poses over `u` Gaussians and `pairs` tile–Gaussian
-/// pairs with `width` channel values a pixel needs (the slots of the backward when
+/// The device buffers a pass of `batch` poses laid out in `rows` with `pairs` tile–Gaussian
+/// pairs and `width` channel values a pixel needs (the slots of the backward when
 /// `gradient`), and the scene's largest ones, each in one buffer.
 fn pass_buffers(
     scene: &DeviceScene,
-    batch: usize,
-    u: usize,
+    (batch, rows): (usize, &PoseRows),
     pairs: usize,
     (grid, width): (&TileGrid, usize),
     gradient: bool,
 ) -> Vec<PassBuffer> {
     let float = scene.dtype().size() as u64;
     let n = scene.len();
+    let r = rows.total();
     let buffer = |what: String, values: usize, bytes: u64| PassBuffer {
         what,
         bytes: values as u64 * bytes,
@@ -357,15 +358,13 @@ fn pass_buffers(
             float,
         ),
         buffer(
-            format!(
-                "a pass's packed rows ({batch} poses × {u} Gaussians × {SPLAT_COLUMNS} values)"
-            ),
-            batch * u * SPLAT_COLUMNS,
+            format!("a pass's packed rows ({r} pose–Gaussian rows × {SPLAT_COLUMNS} values)"),
+            r * SPLAT_COLUMNS,
             float,
         ),
         buffer(
-            format!("a pass's channel values ({batch} poses × {u} Gaussians × {width})"),
-            batch * u * width,
+            format!("a pass's channel values ({r} pose–Gaussian rows × {width})"),
+            r * width,
             float,
         ),
         buffer(
@@ -573,20 +572,24 @@ pub fn render_at(
     let used: Vec<usize> = is_used.iter().collect();
     let compact_from_scene = is_used.ranks();
     let u = used.len();
-    // The rows b·U + u some list reads, marked while the lists are renumbered: the host
-    // projection kernels project only those (`ProjectionPlan::rows_read`).
-    let mut rows_read = GaussianBits::new(batch * u);
     for list in &mut work {
         for g in &mut list.gaussians {
             *g = compact_from_scene.rank(*g as usize);
-            rows_read.insert(list.batch * u + *g as usize);
         }
     }
+    // Each pose's rows: only the Gaussians its own lists read (crate::rows); the lists now
+    // name rows of their pose.
+    let (rows, row_gaussians) = lay_out_rows(&mut work, batch, u);
+    // Scene index of each row's Gaussian. `[R]`
+    let scene_of_row: Vec<u32> = row_gaussians
+        .iter()
+        .map(|&g| used[g as usize] as u32)
+        .collect();
     let pairs: usize = work.iter().map(|list| list.gaussians.len()).sum();
-    crate::counters::composite(pairs, batch * u);
+    crate::counters::composite(pairs, rows.total());
     let width: usize = request.channels.iter().map(Channel::width).sum::<usize>() + tensor_width;
     let gradient = poses.is_require_grad();
-    let buffers = || pass_buffers(scene, batch, u, pairs, (&grid, width), gradient);
+    let buffers = || pass_buffers(scene, (batch, &rows), pairs, (&grid, width), gradient);
     if let Some((buffer, max)) = first_oversized(&device, buffers) {
         return Err(RenderError::BufferTooLarge {
             what: buffer.what,
@@ -608,36 +611,48 @@ pub fn render_at(
             stats: RenderStats::default(),
         });
     }
-    // The scene indices used, uploaded once and only when a select needs them (the fused
-    // projection takes them as a plan; SH colours, per-Gaussian tensors and the tensor path
-    // select with them).
-    let uploaded_index = std::cell::OnceCell::new();
-    let index = || {
-        uploaded_index
-            .get_or_init(|| {
-                let index: Vec<i64> = used.iter().map(|&g| g as i64).collect();
-                crate::counters::upload(8 * u);
-                Tensor::<1, Int>::from_data(TensorData::new(index, [u]), &device)
-            })
+    // Index tensors `[R]`, uploaded once and only when a select needs them: each row's scene
+    // index (SH colours and per-Gaussian tensors select with it) and its pose (each row's
+    // camera centre for the SH colours).
+    let index_tensor = |values: Vec<i64>| {
+        crate::counters::upload(8 * values.len());
+        let len = values.len();
+        Tensor::<1, Int>::from_data(TensorData::new(values, [len]), &device)
+    };
+    let scene_index = std::cell::OnceCell::new();
+    let scene_index = || {
+        scene_index
+            .get_or_init(|| index_tensor(scene_of_row.iter().map(|&g| g as i64).collect()))
             .clone()
+    };
+    let pose_of_row = || {
+        let poses = (0..batch).flat_map(|b| std::iter::repeat_n(b as i64, rows.count(b)));
+        index_tensor(poses.collect())
     };
     // Screen space: the fused projection's packed rows, or the tensor projection's outputs.
     let (splats, depth) = match request.rasterizer {
         Rasterizer::Fused => {
             let plan = ProjectionPlan {
-                used: used.iter().map(|&g| g as u32).collect(),
+                gaussians: scene_of_row.clone(),
+                rows: rows.clone(),
                 camera: ProjectionCamera::new(&request.intrinsics, request.near),
-                rows_read: Some(Arc::new(rows_read)),
             };
-            let rows = project_packed_zoomed(&scene.geometry, poses.clone(), zoom, plan); // [B, U, 7]
-            let depth = rows.clone().narrow(2, PackedColumn::Depth as usize, 1); // [B, U, 1]
-            (
-                Splats::Packed(rows.reshape([batch * u, SPLAT_COLUMNS])),
-                depth,
-            )
+            let packed = project_packed_zoomed(&scene.geometry, poses.clone(), zoom, plan); // [R, 7]
+            let depth = packed.clone().narrow(1, PackedColumn::Depth as usize, 1); // [R, 1]
+            (Splats::Packed(packed), depth)
         }
         Rasterizer::Tensor => {
-            let geometry = scene.geometry.select(index());
+            // The tensor projection of every used Gaussian from every pose `[B, U]`, then the
+            // rows each pose reads (flat index b·U + u).
+            let index: Vec<i64> = (0..batch)
+                .flat_map(|b| {
+                    let own = &row_gaussians[rows.start(b)..rows.start(b) + rows.count(b)];
+                    own.iter().map(move |&g| (b * u + g as usize) as i64)
+                })
+                .collect();
+            let flat = index_tensor(index);
+            let compact: Vec<i64> = used.iter().map(|&g| g as i64).collect();
+            let geometry = scene.geometry.select(index_tensor(compact));
             let projected = project_zoomed(
                 &geometry,
                 poses.clone(),
@@ -645,86 +660,86 @@ pub fn render_at(
                 &request.intrinsics,
                 request.near,
             );
-            let depth = projected.depth.clone().unsqueeze_dim::<3>(2); // [B, U, 1]
+            let per_row = |t: Tensor<3>| {
+                let [_, _, width] = t.dims();
+                t.reshape([batch * u, width]).select(0, flat.clone())
+            };
+            let depth = per_row(projected.depth.clone().unsqueeze_dim::<3>(2)); // [R, 1]
             let opacities = geometry
                 .opacities
                 .unsqueeze_dim::<2>(0)
                 .repeat_dim(0, batch)
-                .reshape([batch * u]);
-            (Splats::Separate(Box::new(projected), opacities), depth)
+                .reshape([batch * u])
+                .select(0, flat.clone());
+            let splats = SplatInputs {
+                means_2d: per_row(projected.means_2d),
+                conics: per_row(projected.conics),
+                opacities,
+                values: depth.clone(), // replaced by the channel values below
+            };
+            (Splats::Separate(Box::new(splats)), depth)
         }
     };
 
+    let upload_rows = |dim: usize, values: Vec<f32>| {
+        upload::<2>(TensorData::new(values, [rows.total(), dim]), &device, dtype)
+    };
     let mut values = Vec::with_capacity(request.channels.len());
     for channel in &request.channels {
         values.push(match channel {
             Channel::Rgb => {
-                let index = index();
+                let index = scene_index();
                 let sh = ShTensors {
                     degree: scene.sh.degree,
                     coeffs: scene.sh.coeffs.clone().select(0, index.clone()),
                 };
                 let means = scene.geometry.means.clone().select(0, index);
-                sh_colours(&sh, means, poses.clone().narrow(1, 3, 3))
+                let centres = poses.clone().narrow(1, 3, 3).select(0, pose_of_row());
+                sh_colours_of_rows(&sh, means, centres)
             }
             Channel::Depth => depth.clone(),
-            Channel::Mask(mask) => {
-                let mask: Vec<f32> = used.iter().map(|&g| mask[g]).collect();
-                per_gaussian(&mask, u, 1, batch, &device, dtype)
-            }
-            Channel::ObjectMasks(objects) => {
-                // Each object's values at the used Gaussians go up once, and each pose picks
-                // its object's row on the device (one select): M·U values, not B·U.
-                let rows: Vec<f32> = objects
-                    .masks
-                    .iter()
-                    .flat_map(|mask| used.iter().map(|&g| mask[g]))
-                    .collect();
-                let masks = objects.masks.len();
-                let rows = upload::<2>(TensorData::new(rows, [masks, u]), &device, dtype);
-                let object: Vec<i64> = objects.views.iter().map(|v| v.object as i64).collect();
-                crate::counters::upload(8 * batch);
-                let object = Tensor::<1, Int>::from_data(TensorData::new(object, [batch]), &device);
-                rows.select(0, object).unsqueeze_dim::<3>(2) // [B, U, 1]
-            }
-            Channel::Features { dim, values } => {
-                let rows: Vec<f32> = used
-                    .iter()
-                    .flat_map(|&g| values[g * dim..(g + 1) * dim].iter().copied())
-                    .collect();
-                per_gaussian(&rows, u, *dim, batch, &device, dtype)
-            }
+            Channel::Mask(mask) => upload_rows(
+                1,
+                per_row_values(&rows, &scene_of_row, 1, &|_, g| {
+                    std::slice::from_ref(&mask[g])
+                }),
+            ),
+            Channel::ObjectMasks(objects) => upload_rows(
+                1,
+                per_row_values(&rows, &scene_of_row, 1, &|b, g| {
+                    std::slice::from_ref(&objects.masks[objects.views[b].object][g])
+                }),
+            ),
+            Channel::Features { dim, values } => upload_rows(
+                *dim,
+                per_row_values(&rows, &scene_of_row, *dim, &|_, g| {
+                    &values[g * dim..(g + 1) * dim]
+                }),
+            ),
         });
     }
     if let Some(tensor) = &request.gaussian_values {
-        // A differentiable select: the gradient of each used row reaches the caller's [N, C].
+        // A differentiable select: the gradient of each row reaches the caller's [N, C].
         let tensor = if tensor.dtype() == dtype {
             tensor.clone()
         } else {
             tensor.clone().cast(dtype)
         };
-        let rows = tensor.select(0, index()); // [U, C]
-        values.push(rows.unsqueeze_dim::<3>(0).repeat_dim(0, batch)); // [B, U, C]
+        values.push(tensor.select(0, scene_index())); // [R, C]
     }
-    let values = Tensor::cat(values, 2).reshape([batch * u, width]);
+    let values = Tensor::cat(values, 1); // [R, width]
     let prepared = started.elapsed();
     let stop_transmittance = request.approximations.stop_transmittance;
-    let composited = match splats {
-        Splats::Packed(rows) => composite_packed(
-            rows,
+    let mut composited = match splats {
+        Splats::Packed(packed) => composite_packed(
+            packed,
             values,
-            CompositePlan::new(&work, u, batch, grid).with_stop_transmittance(stop_transmittance),
+            CompositePlan::new(&work, &rows, grid).with_stop_transmittance(stop_transmittance),
         ),
-        Splats::Separate(projected, opacities) => composite(
-            &SplatInputs {
-                means_2d: projected.means_2d.reshape([batch * u, 2]),
-                conics: projected.conics.reshape([batch * u, 3]),
-                opacities,
-                values,
-            },
+        Splats::Separate(splats) => composite(
+            &SplatInputs { values, ..*splats },
             &work,
-            u,
-            batch,
+            &rows,
             &grid,
             CompositeOptions {
                 stop_transmittance,
@@ -732,6 +747,7 @@ pub fn render_at(
             },
         ),
     };
+    composited.stats.gaussians_used = u;
     let composited_at = started.elapsed();
     for (stage, elapsed) in [
         (Stage::Decide, decided),
@@ -854,22 +870,26 @@ fn pose_focus(
 
 /// A pass's Gaussians in screen space, as its rasterizer takes them.
 enum Splats {
-    /// The fused projection's rows `[B·U, 7]`.
+    /// The fused projection's rows `[R, 7]`.
     Packed(Tensor<2>),
-    /// The tensor projection's outputs and the opacities `[B·U]`.
-    Separate(Box<Projected>, Tensor<1>),
+    /// The tensor projection's outputs per row (their values still to be set).
+    Separate(Box<SplatInputs>),
 }
 
-/// A per-Gaussian constant channel repeated over the batch. `[B, N, dim]`
-fn per_gaussian(
-    values: &[f32],
-    n: usize,
+/// A constant channel per row, made on the host: `value(pose, scene index)` of every row of
+/// `rows` (`scene_of_row` `[R]`), `dim` values each. `[R · dim]`
+fn per_row_values<'a>(
+    rows: &PoseRows,
+    scene_of_row: &[u32],
     dim: usize,
-    batch: usize,
-    device: &Device,
-    dtype: DType,
-) -> Tensor<3> {
-    upload::<2>(TensorData::new(values.to_vec(), [n, dim]), device, dtype)
-        .unsqueeze_dim::<3>(0)
-        .repeat_dim(0, batch)
+    value: &dyn Fn(usize, usize) -> &'a [f32],
+) -> Vec<f32> {
+    let mut values = Vec::with_capacity(rows.total() * dim);
+    for b in 0..rows.batch() {
+        let own = &scene_of_row[rows.start(b)..rows.start(b) + rows.count(b)];
+        for &g in own {
+            values.extend_from_slice(value(b, g as usize));
+        }
+    }
+    values
 }

@@ -59,9 +59,25 @@ impl ShTensors {
 /// RGB of every Gaussian seen from every camera centre. `means` `[N, 3]`, `centres` `[B, 3]`
 /// → `[B, N, 3]`.
 pub fn sh_colours(sh: &ShTensors, means: Tensor<2>, centres: Tensor<2>) -> Tensor<3> {
+    colours_along(
+        sh,
+        means.unsqueeze_dim::<3>(0) - centres.unsqueeze_dim::<3>(1),
+    )
+}
+
+/// RGB of each row's Gaussian seen from its own camera centre: `sh` holds the rows'
+/// coefficients `[R, K, 3]`, `means` and `centres` are `[R, 3]` → `[R, 3]` (a pass whose poses
+/// each see their own Gaussians, [`crate::rows`]).
+pub fn sh_colours_of_rows(sh: &ShTensors, means: Tensor<2>, centres: Tensor<2>) -> Tensor<2> {
+    let [rows, _] = means.dims();
+    colours_along(sh, (means - centres).unsqueeze_dim::<3>(0)).reshape([rows, 3])
+}
+
+/// RGB of Gaussian n seen along `dir[b, n]` (camera centre to mean, any length) `[B, N, 3]`
+/// → `[B, N, 3]`.
+fn colours_along(sh: &ShTensors, dir: Tensor<3>) -> Tensor<3> {
     let [n, k, _] = sh.coeffs.dims();
-    let [batch, _] = centres.dims();
-    let dir = means.unsqueeze_dim::<3>(0) - centres.unsqueeze_dim::<3>(1); // [B, N, 3]
+    let [batch, _, _] = dir.dims();
     // The norm is floored so that a camera exactly at a mean gives a finite (arbitrary) colour.
     let norm = dir.clone().square().sum_dim(2).clamp_min(1e-24).sqrt();
     let dir = dir / norm;

@@ -335,7 +335,14 @@ fn assert_gpu_kernels_match_host_kernels(case: &KernelCase) {
             opacities: o.clone(),
             values: v.clone(),
         };
-        let out = composite_fused(&inputs, CompositePlan::new(&case.work, n, batch, grid));
+        let out = composite_fused(
+            &inputs,
+            CompositePlan::new(
+                &case.work,
+                &splatraj_render::rows::PoseRows::dense(batch, n),
+                grid,
+            ),
+        );
         let weights = |range: std::ops::Range<usize>| {
             let w: Vec<f64> = w_image
                 .chunks(channels + 1)
@@ -485,15 +492,13 @@ fn gpu_projection_matches_host_projection() {
         let pose_tensor =
             Tensor::<2>::from_data(TensorData::new(flat.clone(), [3, 6]), (&device, DType::F32))
                 .require_grad();
+        let camera = ProjectionCamera::new(&intrinsics, NEAR_PLANE);
         let rows = project_packed(
             &geometry,
             pose_tensor.clone(),
-            ProjectionPlan {
-                used: used.clone(),
-                camera: ProjectionCamera::new(&intrinsics, NEAR_PLANE),
-                rows_read: None,
-            },
-        );
+            ProjectionPlan::dense(&used, 3, camera),
+        )
+        .reshape([3, used.len(), SPLAT_COLUMNS]);
         let w = Tensor::<3>::from_data(
             TensorData::new(weights.to_vec(), [3, used.len(), SPLAT_COLUMNS]),
             (&device, DType::F32),
@@ -590,16 +595,14 @@ fn gpu_zoomed_projection_matches_host_projection() {
         let zoom_tensor =
             Tensor::<1>::from_data(TensorData::new(zoom.to_vec(), [3]), (&device, DType::F32))
                 .require_grad();
+        let camera = ProjectionCamera::new(&intrinsics, NEAR_PLANE);
         let rows = project_packed_zoomed(
             &geometry,
             pose_tensor.clone(),
             Some(zoom_tensor.clone()),
-            ProjectionPlan {
-                used: used.clone(),
-                camera: ProjectionCamera::new(&intrinsics, NEAR_PLANE),
-                rows_read: None,
-            },
-        );
+            ProjectionPlan::dense(&used, 3, camera),
+        )
+        .reshape([3, used.len(), SPLAT_COLUMNS]);
         let w = Tensor::<3>::from_data(
             TensorData::new(weights.to_vec(), [3, used.len(), SPLAT_COLUMNS]),
             (&device, DType::F32),

@@ -14,6 +14,7 @@ use splatraj_render::rasterize::{
     Approximations, CompositeOptions, MIN_ALPHA, MIN_TRANSMITTANCE, SplatInputs, composite,
 };
 use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
+use splatraj_render::rows::PoseRows;
 use splatraj_render::tiles::{TileGrid, TileWork};
 use splatraj_scene::Scene;
 
@@ -163,13 +164,13 @@ fn composite_and_gradients(
     let out = match rasterizer {
         Rasterizer::Fused => composite_fused(
             &inputs,
-            CompositePlan::new(&work, n, batch, grid).with_stop_transmittance(stop_transmittance),
+            CompositePlan::new(&work, &PoseRows::dense(batch, n), grid)
+                .with_stop_transmittance(stop_transmittance),
         ),
         Rasterizer::Tensor => composite(
             &inputs,
             &work,
-            n,
-            batch,
+            &PoseRows::dense(batch, n),
             &grid,
             CompositeOptions {
                 chunk,
@@ -268,7 +269,10 @@ fn rule_edges_are_decided_as_specified() {
         ),
         values: tensor(&s.values, vec![rows, 1], &device),
     };
-    let out = composite_fused(&inputs, CompositePlan::new(&work, n, batch, grid));
+    let out = composite_fused(
+        &inputs,
+        CompositePlan::new(&work, &PoseRows::dense(batch, n), grid),
+    );
     let image = host(out.images);
     let alpha = host(out.alpha);
     // Brute force over all n Gaussians of pose 0 in row order (the lists' order), one pixel.

@@ -14,6 +14,7 @@ use splatraj_render::fused::CompositePlan;
 use splatraj_render::fused::cpu::{
     ForwardState, HostGradients, HostSplats, Kernels, backward_with, forward_with,
 };
+use splatraj_render::rows::PoseRows;
 use splatraj_render::tiles::{TileGrid, TileWork};
 
 /// Gaussians per pose.
@@ -79,7 +80,7 @@ fn case(channels: usize, stop_transmittance: f64) -> (HostSplats<f64>, Composite
             });
         }
     }
-    let plan = CompositePlan::new(&work, GAUSSIANS, batch, grid)
+    let plan = CompositePlan::new(&work, &PoseRows::dense(batch, GAUSSIANS), grid)
         .with_stop_transmittance(stop_transmittance);
     (splats, plan)
 }

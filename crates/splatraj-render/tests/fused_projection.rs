@@ -14,6 +14,7 @@ use splatraj_render::fused::projection::{
     PackedColumn, ProjectionCamera, ProjectionPlan, SPLAT_COLUMNS, project_packed,
 };
 use splatraj_render::project::{NEAR_PLANE, SceneTensors, project_with_near};
+use splatraj_render::rows::PoseRows;
 use splatraj_scene::Scene;
 
 fn intrinsics() -> Intrinsics {
@@ -69,20 +70,25 @@ fn project(
     let geometry = SceneTensors::new(scene, None, &device, dtype);
     let intrinsics = intrinsics();
     let poses = pose_tensor(poses, &device, dtype).require_grad();
+    let (batch, count) = (poses.dims()[0], used.len());
     let rows = match projection {
-        Projection::Fused => project_packed(
-            &geometry,
-            poses.clone(),
-            ProjectionPlan {
-                used: used.to_vec(),
-                camera: ProjectionCamera::new(&intrinsics, NEAR_PLANE),
-                rows_read: None,
-            },
-        ),
-        Projection::Tensor => tensor_packed(&geometry, poses.clone(), &intrinsics, used),
+        Projection::Fused => {
+            let camera = ProjectionCamera::new(&intrinsics, NEAR_PLANE);
+            let plan = ProjectionPlan::dense(used, batch, camera);
+            project_packed(&geometry, poses.clone(), plan) // [B·U, 7]
+        }
+        Projection::Tensor => tensor_packed(&geometry, poses.clone(), &intrinsics, used)
+            .reshape([batch * count, SPLAT_COLUMNS]),
     };
-    let [batch, count, _] = rows.dims();
-    let loss = (rows.clone() * row_weights(batch, count, &device, dtype)).sum();
+    // burn 0.22 reads a 0 in a reshape's target as "keep that dimension": an empty pass is
+    // summed as it is.
+    let loss = if count == 0 {
+        rows.clone().sum()
+    } else {
+        let weights =
+            row_weights(batch, count, &device, dtype).reshape([batch * count, SPLAT_COLUMNS]);
+        (rows.clone() * weights).sum()
+    };
     let grads = loss.backward();
     let gradient = host(poses.grad(&grads).expect("the poses have a gradient"));
     (host(rows.detach()), gradient)
@@ -227,4 +233,69 @@ fn the_same_numbers_on_one_and_three_threads() {
     let (one, three) = (on(1), on(3));
     assert_eq!(one.0, three.0, "rows");
     assert_eq!(one.1, three.1, "pose gradient");
+}
+
+/// Rows laid out per pose (each pose only its own Gaussians, one pose none, as a render lays
+/// out a pass of several windows) are the tensor projection's rows of those (pose, Gaussian)
+/// pairs, and the pose gradient of a weighted sum of them is the tensor path's gradient of the
+/// same sum (weights on those pairs, zero elsewhere).
+#[test]
+fn rows_laid_out_per_pose_are_the_tensor_rows_they_name() {
+    let scene = projection_scene(11);
+    let poses = &projection_poses()[..3];
+    let own: [&[u32]; 3] = [&[3, 17, 41], &[], &[0, 3, 17, 59]];
+    let pairs: Vec<(usize, u32)> = (0..3)
+        .flat_map(|b| own[b].iter().map(move |&g| (b, g)))
+        .collect();
+    let mut rng = Rng(7);
+    let weights: Vec<f64> = (0..pairs.len() * SPLAT_COLUMNS)
+        .map(|_| rng.range(-1.0, 1.0))
+        .collect();
+    let device = Device::flex().autodiff();
+    let dtype = DType::F64;
+    let geometry = SceneTensors::new(&scene, None, &device, dtype);
+    let intrinsics = intrinsics();
+
+    let pose_rows = pose_tensor(poses, &device, dtype).require_grad();
+    let plan = ProjectionPlan {
+        gaussians: own.concat(),
+        rows: PoseRows::from_counts(own.map(<[u32]>::len)),
+        camera: ProjectionCamera::new(&intrinsics, NEAR_PLANE),
+    };
+    let rows = project_packed(&geometry, pose_rows.clone(), plan); // [R, 7]
+    let w = Tensor::<2>::from_data(
+        TensorData::new(weights.clone(), [pairs.len(), SPLAT_COLUMNS]),
+        (&device, dtype),
+    );
+    let grads = (rows.clone() * w).sum().backward();
+    let gradient = host(pose_rows.grad(&grads).unwrap());
+    let rows = host(rows.detach());
+
+    // The tensor path: every Gaussian from every pose, the weights placed on the named pairs.
+    let n = scene.len();
+    let all: Vec<u32> = (0..n as u32).collect();
+    let pose_dense = pose_tensor(poses, &device, dtype).require_grad();
+    let dense = tensor_packed(&geometry, pose_dense.clone(), &intrinsics, &all); // [B, N, 7]
+    let mut placed = vec![0.0; 3 * n * SPLAT_COLUMNS];
+    let mut expected = Vec::new();
+    let dense_host = host(dense.clone().detach());
+    for (i, &(b, g)) in pairs.iter().enumerate() {
+        let at = (b * n + g as usize) * SPLAT_COLUMNS;
+        placed[at..at + SPLAT_COLUMNS]
+            .copy_from_slice(&weights[i * SPLAT_COLUMNS..(i + 1) * SPLAT_COLUMNS]);
+        expected.extend_from_slice(&dense_host[at..at + SPLAT_COLUMNS]);
+    }
+    let w = Tensor::<3>::from_data(
+        TensorData::new(placed, [3, n, SPLAT_COLUMNS]),
+        (&device, dtype),
+    );
+    let grads = (dense * w).sum().backward();
+    let expected_gradient = host(pose_dense.grad(&grads).unwrap());
+    assert_close("rows", &rows, &expected, 1e-10);
+    assert_close("gradient", &gradient, &expected_gradient, 1e-9);
+    assert!(
+        gradient[6..12].iter().all(|&v| v == 0.0),
+        "the pose without rows has no gradient: {:?}",
+        &gradient[6..12]
+    );
 }

@@ -51,16 +51,13 @@ fn packed(
 ) -> Tensor<3> {
     let n = geometry.len();
     match projection {
-        Projection::Fused => project_packed_zoomed(
-            geometry,
-            poses,
-            zoom,
-            ProjectionPlan {
-                used: (0..n as u32).collect(),
-                camera: ProjectionCamera::new(intrinsics, NEAR_PLANE),
-                rows_read: None,
-            },
-        ),
+        Projection::Fused => {
+            let batch = poses.dims()[0];
+            let used: Vec<u32> = (0..n as u32).collect();
+            let plan =
+                ProjectionPlan::dense(&used, batch, ProjectionCamera::new(intrinsics, NEAR_PLANE));
+            project_packed_zoomed(geometry, poses, zoom, plan).reshape([batch, n, 7])
+        }
         Projection::Tensor => {
             let [batch, _] = poses.dims();
             let device = poses.device();

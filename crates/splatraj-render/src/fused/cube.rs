@@ -866,7 +866,7 @@ mod tests {
                 gaussians: vec![0, 1, 2],
             },
         ];
-        let plan = CompositePlan::new(&work, 3, 1, grid);
+        let plan = CompositePlan::new(&work, &crate::rows::PoseRows::dense(1, 3), grid);
         let (order, starts) = slots_by_row(&plan, 3);
         // Slots: 0→row 2, 1→row 0, 2→row 0, 3→row 1, 4→row 2.
         assert_eq!(starts, vec![0, 2, 3, 5]);

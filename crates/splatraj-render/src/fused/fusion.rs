@@ -193,8 +193,7 @@ impl ProjectionKernels for Cube {
     ) -> (FloatTensor<Self>, Self::Saved) {
         // The backward's outputs are the gradients of the poses and the zooms only.
         let saved = Deferred::new(&[&poses, &zoom]);
-        let batch = poses.shape().dims::<2>()[0];
-        let rows = Shape::from(vec![batch, plan.used.len(), SPLAT_COLUMNS]); // [B, U, 7]
+        let rows = Shape::from(vec![plan.rows.total(), SPLAT_COLUMNS]); // [R, 7]
         let dtype = components.dtype();
         let keep = saved.clone();
         let outputs = queue(

@@ -366,7 +366,7 @@ fn composite_shared_plan(
     let stats = RenderStats {
         tiles: plan.tiles.len(),
         pairs: plan.rows.len(),
-        gaussians_used: splats.dims()[0] / batch.max(1),
+        gaussians_used: plan.pose_rows.largest(),
     };
     let packed = Tensor::<4>::from_dispatch(<Dispatch as FusedComposite>::fused_composite(
         SplatPrimitives {

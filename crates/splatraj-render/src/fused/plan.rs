@@ -1,16 +1,19 @@
 //! The integer side of a fused compositing pass: which rows each (pose, tile) composites.
 
 use crate::rasterize::MIN_TRANSMITTANCE;
+use crate::rows::PoseRows;
 use crate::tiles::{TILE_SIZE, TileGrid, TileWork};
 
 /// Tile lists of a batch, flattened: work tile `w` composites rows
-/// `rows[starts[w]..starts[w + 1]]` (row = pose · U + Gaussian) front to back.
+/// `rows[starts[w]..starts[w + 1]]` front to back.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CompositePlan {
     /// The image tiling.
     pub grid: TileGrid,
     /// Poses in the batch.
     pub batch: usize,
+    /// Which input rows each pose owns.
+    pub pose_rows: PoseRows,
     /// Pose of each work tile. `[work]`
     pub batches: Vec<usize>,
     /// Tile index (row-major) of each work tile. `[work]`
@@ -24,23 +27,25 @@ pub struct CompositePlan {
 }
 
 impl CompositePlan {
-    /// Flattens `work` (lists of per-pose Gaussian indices `u < n`) into input rows b·n + u.
-    pub fn new(work: &[TileWork], n: usize, batch: usize, grid: TileGrid) -> Self {
+    /// Flattens `work`, whose entries are each pose's own rows, into input rows
+    /// `rows.start(pose) + entry` (every list keeps to its pose's rows).
+    pub fn new(work: &[TileWork], rows: &PoseRows, grid: TileGrid) -> Self {
         let mut starts = Vec::with_capacity(work.len() + 1);
-        let mut rows = Vec::with_capacity(work.iter().map(|w| w.gaussians.len()).sum());
+        let mut flat = Vec::with_capacity(work.iter().map(|w| w.gaussians.len()).sum());
         starts.push(0);
         for w in work {
-            let base = (w.batch * n) as u32;
-            rows.extend(w.gaussians.iter().map(|&g| base + g));
-            starts.push(rows.len());
+            let base = rows.start(w.batch) as u32;
+            flat.extend(w.gaussians.iter().map(|&g| base + g));
+            starts.push(flat.len());
         }
         CompositePlan {
             grid,
-            batch,
+            batch: rows.batch(),
+            pose_rows: rows.clone(),
             batches: work.iter().map(|w| w.batch).collect(),
             tiles: work.iter().map(|w| w.tile).collect(),
             starts,
-            rows,
+            rows: flat,
             stop_transmittance: MIN_TRANSMITTANCE,
         }
     }

@@ -2,10 +2,10 @@
 //! per-row gradients, in one fixed order (work tiles in plan order, list entries front to
 //! back), so the sums have the same bits on any number of threads.
 //!
-//! Where every list keeps to its own pose's rows (as `CompositePlan::new` makes them: rows
-//! b·n ..< (b + 1)·n for pose b), each pose's rows are summed by a task of their own from that
-//! pose's tiles, which visits each row's terms in the same order; on one thread this loop was
-//! a twentieth of an optimisation step while the other cores waited.
+//! Where every list keeps to its own pose's rows (as `CompositePlan::new` makes them: the
+//! plan's `pose_rows`), each pose's rows are summed by a task of their own from that pose's
+//! tiles, which visits each row's terms in the same order; on one thread this loop was a
+//! twentieth of an optimisation step while the other cores waited.
 
 use rayon::prelude::*;
 
@@ -29,33 +29,25 @@ pub(super) fn sum_slots<E: Real>(
     let sum = |rows: GradientRows<'_, E>, first: usize, tiles: &[usize]| {
         add_slots(rows, first, tiles, plan, slots, channels)
     };
-    match rows_per_pose(plan, rows, channels) {
-        Some(n) => {
-            let mut tiles_of_pose: Vec<Vec<usize>> = vec![Vec::new(); plan.batch];
-            for (w, &b) in plan.batches.iter().enumerate() {
-                tiles_of_pose[b].push(w);
-            }
-            v.means
-                .par_chunks_mut(2 * n)
-                .zip(v.conics.par_chunks_mut(3 * n))
-                .zip(v.opacities.par_chunks_mut(n))
-                .zip(v.values.par_chunks_mut(channels * n))
-                .zip(&tiles_of_pose)
-                .enumerate()
-                .for_each(|(b, ((((means, conics), opacities), values), tiles))| {
-                    let rows = GradientRows {
-                        means,
-                        conics,
-                        opacities,
-                        values,
-                    };
-                    sum(rows, b * n, tiles);
-                });
+    if lists_keep_to_their_poses(plan, rows, channels) {
+        let mut tiles_of_pose: Vec<Vec<usize>> = vec![Vec::new(); plan.batch];
+        for (w, &b) in plan.batches.iter().enumerate() {
+            tiles_of_pose[b].push(w);
         }
-        None => {
-            let all: Vec<usize> = (0..plan.tiles.len()).collect();
-            sum(GradientRows::of(&mut v), 0, &all);
+        // Each pose's block of gradient rows, split off in turn.
+        let mut blocks = Vec::with_capacity(plan.batch);
+        let mut rest = GradientRows::of(&mut v);
+        for b in 0..plan.batch {
+            let (own, tail) = rest.split_at(plan.pose_rows.count(b), channels);
+            blocks.push((b, own));
+            rest = tail;
         }
+        blocks.into_par_iter().for_each(|(b, rows)| {
+            sum(rows, plan.pose_rows.start(b), &tiles_of_pose[b]);
+        });
+    } else {
+        let all: Vec<usize> = (0..plan.tiles.len()).collect();
+        sum(GradientRows::of(&mut v), 0, &all);
     }
     v
 }
@@ -77,6 +69,28 @@ impl<'a, E> GradientRows<'a, E> {
             opacities: &mut v.opacities,
             values: &mut v.values,
         }
+    }
+
+    /// The first `rows` rows (of `channels` values each) and the rest.
+    fn split_at(self, rows: usize, channels: usize) -> (Self, Self) {
+        let (means, means_rest) = self.means.split_at_mut(2 * rows);
+        let (conics, conics_rest) = self.conics.split_at_mut(3 * rows);
+        let (opacities, opacities_rest) = self.opacities.split_at_mut(rows);
+        let (values, values_rest) = self.values.split_at_mut(channels * rows);
+        (
+            GradientRows {
+                means,
+                conics,
+                opacities,
+                values,
+            },
+            GradientRows {
+                means: means_rest,
+                conics: conics_rest,
+                opacities: opacities_rest,
+                values: values_rest,
+            },
+        )
     }
 }
 
@@ -108,24 +122,29 @@ fn add_slots<E: Real>(
     }
 }
 
-/// The rows of each pose, n, when the plan's `rows` input rows are its poses' blocks of n and
-/// every work tile lists only rows of its own pose; `None` otherwise (or without channels,
-/// whose empty gradient has no blocks to split).
-fn rows_per_pose(plan: &CompositePlan, rows: usize, channels: usize) -> Option<usize> {
-    if plan.batch == 0 || channels == 0 || rows == 0 || !rows.is_multiple_of(plan.batch) {
-        return None;
+/// True when the plan's `rows` input rows are its poses' blocks (`pose_rows`) and every work
+/// tile lists only rows of its own pose; false otherwise (or without channels, whose empty
+/// gradient has no blocks to split).
+fn lists_keep_to_their_poses(plan: &CompositePlan, rows: usize, channels: usize) -> bool {
+    let poses = &plan.pose_rows;
+    if plan.batch == 0 || channels == 0 || rows == 0 || poses.total() != rows {
+        return false;
     }
-    let n = rows / plan.batch;
-    let own = (0..plan.tiles.len()).into_par_iter().all(|w| {
+    (0..plan.tiles.len()).into_par_iter().all(|w| {
         let b = plan.batches[w];
-        b < plan.batch && plan.list(w).iter().all(|&row| row as usize / n == b)
-    });
-    own.then_some(n)
+        b < plan.batch && {
+            let own = poses.start(b)..poses.start(b) + poses.count(b);
+            plan.list(w)
+                .iter()
+                .all(|&row| own.contains(&(row as usize)))
+        }
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::rows::PoseRows;
     use crate::tile_grid::TileGrid;
     use crate::tiles::TileWork;
 
@@ -151,7 +170,7 @@ mod tests {
                 });
             }
         }
-        let plan = CompositePlan::new(&work, n, batch, grid);
+        let plan = CompositePlan::new(&work, &PoseRows::dense(batch, n), grid);
         let slots = (0..plan.tiles.len())
             .map(|w| {
                 (0..plan.list(w).len() * (6 + channels))
@@ -167,7 +186,7 @@ mod tests {
         for channels in [1, 3] {
             let (plan, slots) = case(channels);
             let rows = plan.batch * 40;
-            assert_eq!(rows_per_pose(&plan, rows, channels), Some(40));
+            assert!(lists_keep_to_their_poses(&plan, rows, channels));
             let apart = sum_slots(&plan, &slots, rows, channels);
             // The reference: every tile in plan order on one thread.
             let mut one = HostGradients {
@@ -192,7 +211,7 @@ mod tests {
         let rows = plan.batch * 40;
         // Tile 0 (pose 0) names a row of pose 2: the split would lose its term.
         plan.rows[plan.starts[0]] = 2 * 40 + 5;
-        assert_eq!(rows_per_pose(&plan, rows, 1), None);
+        assert!(!lists_keep_to_their_poses(&plan, rows, 1));
         let v = sum_slots(&plan, &slots, rows, 1);
         let total: f32 = slots
             .iter()

@@ -11,8 +11,7 @@
 
 use rayon::prelude::*;
 
-use super::{PackedColumn, ProjectionCamera, SPLAT_COLUMNS};
-use crate::bitset::GaussianBits;
+use super::{PackedColumn, ProjectionCamera, ProjectionPlan, SPLAT_COLUMNS};
 use crate::camera::SERIES_BELOW_THETA_SQ;
 use crate::fused::real::Real;
 use crate::project::{LOW_PASS, NORMALISED_DET_FLOOR};
@@ -421,67 +420,75 @@ fn lenses<E: Real>(camera: &ProjectionCamera, zoom: &[f64]) -> Vec<Lens<E>> {
     zoom.iter().map(|&s| Lens::new(camera, s)).collect()
 }
 
-/// The packed rows `[B, U, 7]` of the Gaussians `used` (scene indices) seen from `poses`
-/// (`[B, 6]`, Φ = ω, c) through `camera` zoomed by `zoom` (`[B]`, s > 0); with `rows_read`,
-/// only those rows (the rest zero).
+/// The packed rows `[R, 7]` of `plan`'s rows seen from `poses` (`[B, 6]`, Φ = ω, c) through
+/// the plan's camera zoomed by `zoom` (`[B]`, s > 0).
 pub fn forward<E: Real>(
     poses: &[f64],
     zoom: &[f64],
     scene: SceneRows<'_, E>,
-    used: &[u32],
-    camera: &ProjectionCamera,
-    rows_read: Option<&GaussianBits>,
+    plan: &ProjectionPlan,
 ) -> Vec<E> {
     let (_, frames) = frames::<E>(poses);
-    let lenses = lenses::<E>(camera, zoom);
-    let rows = frames.len() * used.len();
-    let mut out = vec![E::ZERO; rows * SPLAT_COLUMNS];
-    out.par_chunks_mut(ROWS_PER_CHUNK * SPLAT_COLUMNS)
-        .enumerate()
-        .for_each(|(chunk, out)| {
-            for (i, packed) in out.chunks_exact_mut(SPLAT_COLUMNS).enumerate() {
-                let r = chunk * ROWS_PER_CHUNK + i;
-                if rows_read.is_some_and(|read| !read.contains(r)) {
-                    continue;
-                }
-                let (b, g) = (r / used.len(), used[r % used.len()] as usize);
-                packed.copy_from_slice(&scene.project(g, &frames[b], &lenses[b]).out);
-            }
-        });
+    let lenses = lenses::<E>(&plan.camera, zoom);
+    let rows = &plan.rows;
+    let mut out = vec![E::ZERO; rows.total() * SPLAT_COLUMNS];
+    // One job per chunk of a pose's rows, each writing its own slice of the output.
+    let mut jobs = Vec::new();
+    let mut rest = out.as_mut_slice();
+    for b in 0..rows.batch() {
+        let (own, tail) = rest.split_at_mut(rows.count(b) * SPLAT_COLUMNS);
+        rest = tail;
+        let chunks = own.chunks_mut(ROWS_PER_CHUNK * SPLAT_COLUMNS).enumerate();
+        jobs.extend(chunks.map(|(c, out)| (b, rows.start(b) + c * ROWS_PER_CHUNK, out)));
+    }
+    jobs.into_par_iter().for_each(|(b, first, out)| {
+        for (i, packed) in out.chunks_exact_mut(SPLAT_COLUMNS).enumerate() {
+            let g = plan.gaussians[first + i] as usize;
+            packed.copy_from_slice(&scene.project(g, &frames[b], &lenses[b]).out);
+        }
+    });
     out
 }
 
-/// d L/dΦ `[B, 6]` and d L/ds `[B]` from the gradient of the packed rows `v_out` `[B, U, 7]`.
+/// d L/dΦ `[B, 6]` and d L/ds `[B]` from the gradient of the packed rows `v_out` `[R, 7]`.
 pub fn backward<E: Real>(
     poses: &[f64],
     zoom: &[f64],
     scene: SceneRows<'_, E>,
-    used: &[u32],
-    camera: &ProjectionCamera,
+    plan: &ProjectionPlan,
     v_out: &[E],
 ) -> (Vec<f64>, Vec<f64>) {
     let (rotations, frames) = frames::<E>(poses);
-    let lenses = lenses::<E>(camera, zoom);
+    let lenses = lenses::<E>(&plan.camera, zoom);
+    let rows = &plan.rows;
     let batch = frames.len();
-    let per_pose = used.len();
-    let chunks_per_pose = per_pose.div_ceil(ROWS_PER_CHUNK);
-    // Per (pose, chunk): Σ d L/d axes (9), d L/d centre (3) and d L/ds (1), in f64.
-    let partial: Vec<[f64; 13]> = (0..batch * chunks_per_pose)
+    // (pose, its rows' range) per job: each pose's rows in chunks, in order.
+    let jobs: Vec<(usize, std::ops::Range<usize>)> = (0..batch)
+        .flat_map(|b| {
+            let (start, count) = (rows.start(b), rows.count(b));
+            (0..count.div_ceil(ROWS_PER_CHUNK)).map(move |c| {
+                let first = c * ROWS_PER_CHUNK;
+                (
+                    b,
+                    start + first..start + (first + ROWS_PER_CHUNK).min(count),
+                )
+            })
+        })
+        .collect();
+    // Per job: Σ d L/d axes (9), d L/d centre (3) and d L/ds (1), in f64.
+    let partial: Vec<(usize, [f64; 13])> = jobs
         .into_par_iter()
-        .map(|job| {
-            let (b, chunk) = (job / chunks_per_pose, job % chunks_per_pose);
+        .map(|(b, range)| {
             let mut sums = [0.0f64; 13];
-            let first = chunk * ROWS_PER_CHUNK;
-            let last = (first + ROWS_PER_CHUNK).min(per_pose);
-            for (u, &g) in used.iter().enumerate().take(last).skip(first) {
-                let r = b * per_pose + u;
+            for r in range {
                 let v = &v_out[r * SPLAT_COLUMNS..(r + 1) * SPLAT_COLUMNS];
-                // Rows no pixel and no cost read (a Gaussian another pose of the batch uses)
+                // Rows no pixel and no cost read (behind where every pixel stopped)
                 // contribute nothing: skip their arithmetic.
                 if v.iter().all(|g| g.to_f64() == 0.0) {
                     continue;
                 }
-                let row = scene.project(g as usize, &frames[b], &lenses[b]);
+                let g = plan.gaussians[r] as usize;
+                let row = scene.project(g, &frames[b], &lenses[b]);
                 let (v_axes, v_centre, v_zoom) = backward_row(&row, v, &frames[b], &lenses[b]);
                 for k in 0..3 {
                     for e in 0..3 {
@@ -491,18 +498,19 @@ pub fn backward<E: Real>(
                 }
                 sums[12] += v_zoom.to_f64();
             }
-            sums
+            (b, sums)
         })
         .collect();
+    // Each pose's chunks summed in order (the same numbers on every thread count).
+    let mut totals = vec![[0.0f64; 13]; batch];
+    for (b, sums) in &partial {
+        for (t, s) in totals[*b].iter_mut().zip(sums) {
+            *t += s;
+        }
+    }
     let mut v_poses = vec![0.0; batch * 6];
     let mut v_zoom = vec![0.0; batch];
-    for (b, rotation) in rotations.iter().enumerate() {
-        let mut total = [0.0f64; 13];
-        for sums in &partial[b * chunks_per_pose..(b + 1) * chunks_per_pose] {
-            for (t, s) in total.iter_mut().zip(sums) {
-                *t += s;
-            }
-        }
+    for (b, (rotation, total)) in rotations.iter().zip(&totals).enumerate() {
         // Axis k is column k of R: d L/dR[e][k] = d L/d axes[k][e].
         let v_matrix: [[f64; 3]; 3] =
             std::array::from_fn(|e| std::array::from_fn(|k| total[3 * k + e]));

@@ -3,14 +3,15 @@
 //!
 //! - Forward: one unit per row (pose, Gaussian); each unit builds its pose's rotation from ω
 //!   (Rodrigues, the same two branches) and writes the packed row. The launch grid is
-//!   (chunks of 256 Gaussians, poses), so every cube serves one pose.
+//!   (chunks of 256 of a pose's rows, poses), so every cube serves one pose.
 //! - Backward: each unit computes its rows' gradient with respect to the camera's axes,
 //!   centre and zoom (13 values) and the cube sums them by a fixed tree in shared memory into one
 //!   partial per cube; a second kernel, one cube per pose, sums the partials in order and takes
 //!   them through Rodrigues' derivative. No atomics: the same numbers on every run.
 //!
-//! Two launches forward and backward together, whatever the batch; only the indices of the
-//! Gaussians used travel from the host (4 bytes each). f64 runs the host kernels.
+//! Two launches forward and backward together, whatever the batch; only the scene index of each
+//! row's Gaussian (4 bytes a row) and each pose's first row travel from the host. f64 runs the
+//! host kernels.
 
 use std::sync::Arc;
 
@@ -284,24 +285,27 @@ fn forward_kernel<F: Float, I: Int>(
     zoom: &Tensor<F>,       // [B]
     components: &Tensor<F>, // [9, N]
     opacities: &Tensor<F>,  // [N]
-    used: &Tensor<I>,       // [U]
-    rows: &mut Tensor<F>,   // [B, U, 7]
+    gaussians: &Tensor<I>,  // [R]: scene index of each row's Gaussian
+    starts: &Tensor<I>,     // [B + 1]: first row of each pose, then R
+    rows: &mut Tensor<F>,   // [R, 7]
     camera: &Tensor<F>,     // [7]: fx, fy, cx, cy, lim_x, lim_y, near
     n: u32,
-    count: u32,
     chunks: u32,
     #[define(F, I)] _dtypes: [ElemType; 2],
 ) {
     let pose = CUBE_POS_Y as usize;
     let lens = lens::<F>(camera, zoom, pose);
     let rot = rodrigues::<F>(poses[pose * 6], poses[pose * 6 + 1], poses[pose * 6 + 2]);
+    let first = u32::cast_from(starts[pose]) as usize;
+    let count = u32::cast_from(starts[pose + 1]) as usize - first;
     let mut chunk = CUBE_POS_X;
     while chunk < chunks {
-        let u = chunk as usize * 256 + UNIT_POS as usize;
-        if u < count as usize {
-            let g = u32::cast_from(used[u]) as usize;
+        let k = chunk as usize * 256 + UNIT_POS as usize;
+        if k < count {
+            let r = first + k;
+            let g = u32::cast_from(gaussians[r]) as usize;
             let row = project_row::<F>(poses, components, &rot, pose, g, n as usize, &lens);
-            let at = (pose * count as usize + u) * 7;
+            let at = r * 7;
             rows[at] = row.u;
             rows[at + 1] = row.v;
             rows[at + 2] = row.cn * row.scale;
@@ -337,12 +341,12 @@ fn backward_kernel<F: Float, I: Int>(
     poses: &Tensor<F>,       // [B, 6]
     zoom: &Tensor<F>,        // [B]
     components: &Tensor<F>,  // [9, N]
-    used: &Tensor<I>,        // [U]
-    v_rows: &Tensor<F>,      // [B, U, 7]
+    gaussians: &Tensor<I>,   // [R]
+    starts: &Tensor<I>,      // [B + 1]
+    v_rows: &Tensor<F>,      // [R, 7]
     partial: &mut Tensor<F>, // [B, cubes per pose, 13]
     camera: &Tensor<F>,      // [7]
     n: u32,
-    count: u32,
     chunks: u32,
     #[define(F, I)] _dtypes: [ElemType; 2],
 ) {
@@ -365,13 +369,16 @@ fn backward_kernel<F: Float, I: Int>(
     for k in 0..13usize {
         acc[k] = zero;
     }
+    let first = u32::cast_from(starts[pose]) as usize;
+    let count = u32::cast_from(starts[pose + 1]) as usize - first;
     let mut chunk = CUBE_POS_X;
     while chunk < chunks {
-        let u = chunk as usize * 256 + p;
-        if u < count as usize {
-            let g = u32::cast_from(used[u]) as usize;
+        let k = chunk as usize * 256 + p;
+        if k < count {
+            let r = first + k;
+            let g = u32::cast_from(gaussians[r]) as usize;
             let row = project_row::<F>(poses, components, &rot, pose, g, n as usize, &lens);
-            let at = (pose * count as usize + u) * 7;
+            let at = r * 7;
             let vu = v_rows[at];
             let vv = v_rows[at + 1];
             let va_out = v_rows[at + 2];
@@ -543,7 +550,8 @@ pub struct DeviceSaved {
     poses: CubeTensor,
     zoom: CubeTensor,
     components: CubeTensor,
-    used: CubeTensor,
+    gaussians: CubeTensor,
+    starts: CubeTensor,
     camera: CubeTensor,
     plan: Arc<ProjectionPlan>,
 }
@@ -557,9 +565,10 @@ pub enum CubeSaved {
     Host(Box<HostSaved<CubeBackend>>),
 }
 
-/// The launch grid: (cubes per pose, poses), and the chunks of 256 Gaussians each pose has.
-fn grid(batch: usize, count: usize) -> (CubeCount, u32, usize) {
-    let chunks = count.div_ceil(UNITS).max(1);
+/// The launch grid: (cubes per pose, poses), and the chunks of 256 rows the pose with the
+/// most rows has (a cube past a pose's rows only writes its zero partial).
+fn grid(batch: usize, largest: usize) -> (CubeCount, u32, usize) {
+    let chunks = largest.div_ceil(UNITS).max(1);
     let per_pose = chunks.min(MAX_PER_AXIS);
     (
         CubeCount::Static(per_pose as u32, batch as u32, 1),
@@ -595,12 +604,16 @@ fn device_forward(
     let dtype = poses.dtype;
     let batch = poses.shape().dims::<2>()[0];
     let n = components.shape().dims::<2>()[1];
-    let count = plan.used.len();
-    let used = int_tensor(plan.used.iter().map(|&g| g as i32).collect(), &device);
+    let largest = plan.rows.largest();
+    let gaussians = int_tensor(plan.gaussians.iter().map(|&g| g as i32).collect(), &device);
+    let starts = int_tensor(
+        plan.rows.starts().iter().map(|&s| s as i32).collect(),
+        &device,
+    );
     let camera = camera_tensor(&plan, &device, dtype);
-    let rows = empty(vec![batch, count, SPLAT_COLUMNS], &device, dtype);
-    let (cubes, chunks, _) = grid(batch, count);
-    if batch > 0 && count > 0 {
+    let rows = empty(vec![plan.rows.total(), SPLAT_COLUMNS], &device, dtype);
+    let (cubes, chunks, _) = grid(batch, largest);
+    if batch > 0 && largest > 0 {
         forward_kernel::launch(
             &client,
             cubes,
@@ -609,15 +622,15 @@ fn device_forward(
             zoom.clone().into_tensor_arg(),
             components.clone().into_tensor_arg(),
             opacities.into_tensor_arg(),
-            used.clone().into_tensor_arg(),
+            gaussians.clone().into_tensor_arg(),
+            starts.clone().into_tensor_arg(),
             rows.clone().into_tensor_arg(),
             camera.clone().into_tensor_arg(),
             n as u32,
-            count as u32,
             chunks,
             [
                 dtype_to_storage_type(dtype),
-                dtype_to_storage_type(used.dtype),
+                dtype_to_storage_type(gaussians.dtype),
             ],
         );
     }
@@ -625,7 +638,8 @@ fn device_forward(
         poses,
         zoom,
         components,
-        used,
+        gaussians,
+        starts,
         camera,
         plan,
     };
@@ -638,7 +652,8 @@ fn device_backward(saved: DeviceSaved, v_rows: CubeTensor) -> (CubeTensor, CubeT
         poses,
         zoom,
         components,
-        used,
+        gaussians,
+        starts,
         camera,
         plan,
     } = saved;
@@ -647,15 +662,14 @@ fn device_backward(saved: DeviceSaved, v_rows: CubeTensor) -> (CubeTensor, CubeT
     let dtype = poses.dtype;
     let batch = poses.shape().dims::<2>()[0];
     let n = components.shape().dims::<2>()[1];
-    let count = plan.used.len();
-    let (cubes, chunks, per_pose) = grid(batch, count);
+    let (cubes, chunks, per_pose) = grid(batch, plan.rows.largest());
     let partial = empty(vec![batch, per_pose, PARTIAL], &device, dtype);
     let v_poses = empty(vec![batch, 6], &device, dtype);
     let v_zoom = empty(vec![batch], &device, dtype);
     if batch == 0 {
         return (v_poses, v_zoom);
     }
-    let int_dtype = dtype_to_storage_type(used.dtype);
+    let int_dtype = dtype_to_storage_type(gaussians.dtype);
     // With nothing projected every cube still writes its (zero) partial.
     backward_kernel::launch(
         &client,
@@ -664,12 +678,12 @@ fn device_backward(saved: DeviceSaved, v_rows: CubeTensor) -> (CubeTensor, CubeT
         poses.clone().into_tensor_arg(),
         zoom.into_tensor_arg(),
         components.into_tensor_arg(),
-        used.into_tensor_arg(),
+        gaussians.into_tensor_arg(),
+        starts.into_tensor_arg(),
         v_rows.into_tensor_arg(),
         partial.clone().into_tensor_arg(),
         camera.into_tensor_arg(),
         n as u32,
-        count as u32,
         chunks,
         [dtype_to_storage_type(dtype), int_dtype],
     );

@@ -5,9 +5,10 @@
 //! in its autodiff backward, each a kernel launch and a graph node on a GPU, each a full pass
 //! over `[B, U]` values on the CPU. This node takes the poses Φ `[B, 6]` and the zoom s `[B]`
 //! (the differentiable inputs; pose b is seen with fx·s_b, fy·s_b), the scene's component
-//! rows `[9, N]` and opacities `[N]` (constants, uploaded once per scene) and the scene
-//! indices of the Gaussians the pass uses, and returns what compositing needs, packed per row
-//! b·U + u as `[B, U, 7]`: (u, v, conic a, b, c, opacity, camera z); see [`PackedColumn`]. Its
+//! rows `[9, N]` and opacities `[N]` (constants, uploaded once per scene) and a plan saying
+//! which Gaussian each row projects for which pose (pose after pose, [`crate::rows`]), and
+//! returns what compositing needs, packed per row as `[R, 7]`: (u, v, conic a, b, c, opacity,
+//! camera z); see [`PackedColumn`]. Its
 //! backward returns d L/dΦ `[B, 6]` and d L/ds `[B]` directly: per row the gradient through
 //! the camera's axes, centre and zoom, summed per pose, then through Rodrigues' derivative.
 //! The rules, order of operations and clamp conventions are the tensor projection's (f64:
@@ -34,9 +35,9 @@ use burn::backend::{Backend, Dispatch, TensorMetadata, backend_extension};
 use burn::tensor::{DType, Tensor, TensorData};
 
 use super::real::Real;
-use crate::bitset::GaussianBits;
 use crate::camera::Intrinsics;
 use crate::project::{FOV_CLAMP, SceneTensors};
+use crate::rows::PoseRows;
 
 /// Values per packed row.
 pub const SPLAT_COLUMNS: usize = 7;
@@ -100,18 +101,28 @@ impl ProjectionCamera {
     }
 }
 
-/// The integer side of a projection: which Gaussians, seen through which camera.
+/// The integer side of a projection: which Gaussian each row projects, for which pose, seen
+/// through which camera.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ProjectionPlan {
-    /// Scene index of each projected Gaussian u. `[U]`
-    pub used: Vec<u32>,
+    /// Scene index of the Gaussian each row projects. `[R]`
+    pub gaussians: Vec<u32>,
+    /// Which rows each pose owns ([`crate::rows`]: in a render, only the Gaussians its tile
+    /// lists read).
+    pub rows: PoseRows,
     /// The camera.
     pub camera: ProjectionCamera,
-    /// The rows b·U + u some tile list reads, when known: the host kernels project only
-    /// those (the others stay zero; nothing reads them). Poses of one pass that look at
-    /// different objects share U but each reads only its own part of it, so without this a
-    /// pass of several windows would project every pose's rows for every window. `[B·U] bits`
-    pub rows_read: Option<Arc<GaussianBits>>,
+}
+
+impl ProjectionPlan {
+    /// Every one of `batch` poses projects each of `used` (scene indices): row b·U + u.
+    pub fn dense(used: &[u32], batch: usize, camera: ProjectionCamera) -> Self {
+        ProjectionPlan {
+            gaussians: (0..batch).flat_map(|_| used.iter().copied()).collect(),
+            rows: PoseRows::dense(batch, used.len()),
+            camera,
+        }
+    }
 }
 
 /// The fused projection, dispatched to the backend a tensor lives on.
@@ -122,7 +133,7 @@ pub struct ProjectionPlan {
     Autodiff
 )]
 pub trait FusedProjection: Backend {
-    /// The packed rows `[B, U, 7]` of `plan.used` seen from `poses` `[B, 6]` through the plan's
+    /// The packed rows `[R, 7]` of the plan's rows seen from `poses` `[B, 6]` through the plan's
     /// camera zoomed by `zoom` `[B]`, reading the scene's `components` `[9, N]` and
     /// `opacities` `[N]`.
     fn fused_project(
@@ -139,7 +150,7 @@ pub trait ProjectionKernels: Backend {
     /// What the forward pass keeps for the backward pass.
     type Saved: Clone + Send + Sync + std::fmt::Debug + 'static;
 
-    /// The packed rows `[B, U, 7]` and the state the backward needs.
+    /// The packed rows `[R, 7]` and the state the backward needs.
     fn projection_forward(
         poses: FloatTensor<Self>,
         zoom: FloatTensor<Self>,
@@ -206,10 +217,9 @@ pub fn host_forward<B: HostView>(
 ) -> (FloatTensor<B>, HostSaved<B>) {
     let device = poses.device();
     let dtype = components.dtype();
-    let [batch, _] = poses.shape().dims::<2>();
     let host_poses = super::read::<B, f64>(poses);
     let host_zoom = super::read::<B, f64>(zoom);
-    let shape = vec![batch, plan.used.len(), SPLAT_COLUMNS];
+    let shape = vec![plan.rows.total(), SPLAT_COLUMNS];
     fn run<B: HostView, E: HostFloat>(
         poses: &[f64],
         zoom: &[f64],
@@ -223,8 +233,7 @@ pub fn host_forward<B: HostView>(
                     components,
                     opacities,
                 };
-                let rows_read = plan.rows_read.as_deref();
-                cpu::forward(poses, zoom, scene, &plan.used, &plan.camera, rows_read)
+                cpu::forward(poses, zoom, scene, plan)
             })
         })
     }
@@ -263,14 +272,7 @@ pub fn host_backward<B: HostView>(
                     components,
                     opacities,
                 };
-                cpu::backward(
-                    &saved.poses,
-                    &saved.zoom,
-                    scene,
-                    &saved.plan.used,
-                    &saved.plan.camera,
-                    &v_rows,
-                )
+                cpu::backward(&saved.poses, &saved.zoom, scene, &saved.plan, &v_rows)
             })
         })
     }
@@ -392,9 +394,10 @@ impl<B: ProjectionKernels, C: CheckpointStrategy> FusedProjection for Autodiff<B
     }
 }
 
-/// The packed rows `[B, U, 7]` of the Gaussians `plan.used` (indices into `scene`) seen from
-/// `poses` `[B, 6]`; differentiable in the poses. Columns: [`PackedColumn`].
-pub fn project_packed(scene: &SceneTensors, poses: Tensor<2>, plan: ProjectionPlan) -> Tensor<3> {
+/// The packed rows `[R, 7]` of the plan's rows (Gaussians by their index into `scene`, pose
+/// after pose) seen from `poses` `[B, 6]`; differentiable in the poses. Columns:
+/// [`PackedColumn`]. Panics when the plan's poses are not B (a caller's bug).
+pub fn project_packed(scene: &SceneTensors, poses: Tensor<2>, plan: ProjectionPlan) -> Tensor<2> {
     project_packed_zoomed(scene, poses, None, plan)
 }
 
@@ -406,8 +409,13 @@ pub fn project_packed_zoomed(
     poses: Tensor<2>,
     zoom: Option<Tensor<1>>,
     plan: ProjectionPlan,
-) -> Tensor<3> {
+) -> Tensor<2> {
     let [batch, _] = poses.dims();
+    assert_eq!(
+        plan.rows.batch(),
+        batch,
+        "a projection plan for another batch"
+    );
     // Without a zoom the kernels read ones: B values up, no launch, and no autodiff parent.
     let zoom = match zoom {
         Some(zoom) if zoom.dtype() == scene.components.dtype() => zoom,
@@ -420,7 +428,7 @@ pub fn project_packed_zoomed(
             )
         }
     };
-    Tensor::<3>::from_dispatch(<Dispatch as FusedProjection>::fused_project(
+    Tensor::<2>::from_dispatch(<Dispatch as FusedProjection>::fused_project(
         poses.into_dispatch(),
         zoom.into_dispatch(),
         scene.components.clone().into_dispatch(),
