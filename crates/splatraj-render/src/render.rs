@@ -639,7 +639,7 @@ pub fn render_at(
             };
             let packed = project_packed_zoomed(&scene.geometry, poses.clone(), zoom, plan); // [R, 7]
             let depth = packed.clone().narrow(1, PackedColumn::Depth as usize, 1); // [R, 1]
-            (Splats::Packed(packed), depth)
+            (Splats::Packed(Box::new(packed)), depth)
         }
         Rasterizer::Tensor => {
             // The tensor projection of every used Gaussian from every pose `[B, U]`, then the
@@ -732,7 +732,7 @@ pub fn render_at(
     let stop_transmittance = request.approximations.stop_transmittance;
     let mut composited = match splats {
         Splats::Packed(packed) => composite_packed(
-            packed,
+            *packed,
             values,
             CompositePlan::new(&work, &rows, grid).with_stop_transmittance(stop_transmittance),
         ),
@@ -871,7 +871,7 @@ fn pose_focus(
 /// A pass's Gaussians in screen space, as its rasterizer takes them.
 enum Splats {
     /// The fused projection's rows `[R, 7]`.
-    Packed(Tensor<2>),
+    Packed(Box<Tensor<2>>),
     /// The tensor projection's outputs per row (their values still to be set).
     Separate(Box<SplatInputs>),
 }
