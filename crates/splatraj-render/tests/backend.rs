@@ -748,7 +748,8 @@ fn a_pass_whose_rows_exceed_the_gpus_largest_buffer_is_an_error() {
         .expect_err("rows beyond the largest buffer are refused")
         .to_string();
     assert!(
-        message.contains("a pass's packed rows (50 poses × 100000 Gaussians")
+        // Every pose sees every Gaussian: 50 × 100 000 rows.
+        message.contains("a pass's packed rows (5000000 pose–Gaussian rows")
             && message.contains("largest buffer"),
         "{message}"
     );

@@ -1,8 +1,8 @@
-//! A shared optimisation step (`StepPasses::Shared`: every window in one render call) lays its
-//! packed rows out over the union of every window's Gaussians for every pose, the largest
-//! buffer of a run. On a device too small for it (lavapipe's largest buffer is 128 MiB) the
-//! render refuses the call by name, and the step renders a call per window instead, whose
-//! buffers are several times smaller: the same evaluation as `StepPasses::PerWindow`.
+//! A shared optimisation step (`StepPasses::Shared`: every window in one render call) holds
+//! every window's packed rows in one buffer (each pose its own Gaussians), the largest buffer
+//! of a run. On a device too small for it (lavapipe's largest buffer is 128 MiB) the render
+//! refuses the call by name, and the step renders a call per window instead, whose buffers
+//! are a window's share: the same evaluation as `StepPasses::PerWindow`.
 //!
 //! Runs on the wgpu backend (lavapipe in CI); its own test binary, as the render counters are
 //! process-wide.
@@ -24,7 +24,7 @@ use splatraj_traj::optimise::{Problem, StepPasses, WindowSamples, WindowTarget};
 
 /// Gaussians a wall, walls (one a window), samples a window.
 const WALL: usize = 150;
-const WINDOWS: usize = 3;
+const WINDOWS: usize = 6;
 const SAMPLES: usize = 64;
 
 /// Where wall `w` stands: 10 units apart, so a camera facing one sees no other.
@@ -32,7 +32,7 @@ fn wall_centre(w: usize) -> DVec3 {
     DVec3::new(10.0 * w as f64 - 10.0, 0.0, 3.0)
 }
 
-/// Three walls of WALL² large opaque Gaussians, each a window's object: a camera 0.5 in front
+/// WINDOWS walls of WALL² large opaque Gaussians, each a window's object: a camera 0.5 in front
 /// of its wall sees only that wall, wall to wall, so every pixel is covered after a few
 /// entries and the passes stay quick on lavapipe whatever their lists' lengths.
 fn walls() -> (Scene, Vec<WindowTarget>) {
@@ -89,14 +89,12 @@ fn samples(w: usize) -> Vec<Pose> {
 #[test]
 fn a_shared_step_too_large_for_the_device_renders_a_call_per_window() {
     let device = BackendKind::Wgpu.device().unwrap().autodiff();
-    let rows_bytes = |poses: usize, gaussians: usize| (poses * gaussians * 7 * 4) as u64;
+    let rows_bytes = |rows: u64| rows * 7 * 4;
     let max = max_buffer_bytes(&device).expect("a wgpu device reports its largest buffer");
-    // Each pose uses at most its own wall; the shared call, every wall for every pose.
-    let every_wall = rows_bytes(WINDOWS * SAMPLES, WINDOWS * WALL * WALL);
-    if every_wall / 2 <= max {
+    // Each pose uses at most its own wall.
+    if rows_bytes((WINDOWS * SAMPLES * WALL * WALL) as u64) <= max {
         return; // a device large enough for a shared step of these walls
     }
-    assert!(rows_bytes(SAMPLES, WALL * WALL) < max / 2);
 
     let (scene, targets) = walls();
     let intrinsics = Intrinsics::from_fov_x(60.0, 16, 16).unwrap();
@@ -124,25 +122,33 @@ fn a_shared_step_too_large_for_the_device_renders_a_call_per_window() {
             .with_step_passes(passes)
             .evaluate_windows(poses.clone(), windows, 0, None)
             .expect("the step evaluates");
-        let renders = counters::snapshot().since(&before).renders;
+        let counted = counters::snapshot().since(&before);
         // The loss and every window's term means; not the gradient: lavapipe takes tens of
         // seconds for the projection's backward over these rows, and the step is the same
         // code as a step per window from the render on.
         let passes = step.passes;
         let loss = to_host(step.loss).unwrap();
         let means = to_host(step.means).unwrap();
-        (renders, passes, loss, means)
+        (counted, passes, loss, means)
     };
-    let (shared_renders, shared_passes, shared_loss, shared_means) = evaluate(StepPasses::Shared);
-    let (per_window_renders, _, loss, means) = evaluate(StepPasses::PerWindow);
+    let (per_window, _, loss, means) = evaluate(StepPasses::PerWindow);
+    // The premise, from the rows the calls per window projected (the shared call's are the
+    // same rows in one buffer): together too large for the device, a window's share not.
+    assert!(
+        rows_bytes(per_window.rows) > max && rows_bytes(per_window.rows) / (WINDOWS as u64) < max,
+        "{} rows of {} bytes against a largest buffer of {max} bytes",
+        per_window.rows,
+        7 * 4
+    );
+    let (shared, shared_passes, shared_loss, shared_means) = evaluate(StepPasses::Shared);
     assert_eq!(
         shared_passes,
         StepPasses::PerWindow,
         "the step says it rendered a call per window, so a run's later steps keep to it"
     );
-    assert_eq!(per_window_renders, WINDOWS as u64);
+    assert_eq!(per_window.renders, WINDOWS as u64);
     assert_eq!(
-        shared_renders,
+        shared.renders,
         WINDOWS as u64 + 1,
         "the shared call is tried, refused, and each window rendered"
     );
