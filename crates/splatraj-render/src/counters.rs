@@ -46,8 +46,9 @@ pub struct Counts {
     /// Tile–Gaussian pairs composited: the compositing's work.
     #[serde(default)]
     pub pairs: u64,
-    /// Packed rows projected and handed to compositing (poses × Gaussians the call uses, B·U):
-    /// the host copies, footprints and gradients of a pass grow with it, read or not.
+    /// Packed rows projected and handed to compositing (each pose's Gaussians, summed over
+    /// the poses, [`crate::rows`]): the host copies, footprints and gradients of a pass grow
+    /// with it.
     #[serde(default)]
     pub rows: u64,
 }

@@ -70,7 +70,7 @@ fn cast<A: 'static, B: 'static>(value: A) -> Option<B> {
         .map(|b| *b)
 }
 
-/// Screen-space Gaussians on the host, rows b·U + u (as [`crate::rasterize::SplatInputs`]).
+/// Screen-space Gaussians on the host, one per row (as [`crate::rasterize::SplatInputs`]).
 #[derive(Debug, Clone)]
 pub struct HostSplats<E> {
     /// `[R, 2]`

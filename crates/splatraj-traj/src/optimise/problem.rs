@@ -58,12 +58,12 @@ pub struct Problem<'a> {
 /// How the windows of an optimisation step share render calls ([`Problem::evaluate_windows`]).
 ///
 /// One call for all windows makes a step's launches independent of the number of windows,
-/// which is what a GPU is bound by. But one call lays the packed rows out per pose over the
-/// union U of every window's Gaussians (`[B, U, 7]`, each pose reading only its own part),
-/// and on the CPU moving those dense rows costs more than the calls it saves: demo 1 M,
-/// 3 windows × 4 samples with each object alone, 128×72, flex on 2 cores: 1.27 s a step in
-/// one call, 0.64 s in one call per window (docs/gpu.md, "One pass a step"). Rows laid out
-/// only where a pose reads them would make one call the better choice everywhere.
+/// which is what a GPU is bound by. On the CPU the two take the same time since a pass's
+/// rows are each pose's own (first-try guitar, flex on 2 cores: 148 ms a step in one call,
+/// 144 ms in a call per window; before, one call carried the union of every window's
+/// Gaussians for every pose and took 179 ms), and a call per window keeps the digits CPU runs
+/// have always had: the batched costs sum in another order, which a run's f32 Adam steps
+/// amplify (docs/gpu.md, "One pass a step").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum StepPasses {
     /// One render call for every window of the step, each object alone included, and the
@@ -625,9 +625,9 @@ impl<'a> Problem<'a> {
             return self.evaluate_per_window(poses, windows, step, renders.get());
         }
         let pass = match self.render_pass(poses.clone(), &windows, renders.get()) {
-            // The union of every window's Gaussians for every pose is the largest buffer of a
-            // run; a device too small for it (lavapipe, a laptop's GPU) may hold each
-            // window's own, three or more times smaller.
+            // Every window's packed rows in one buffer are the largest buffer of a run; a
+            // device too small for them (lavapipe, a laptop's GPU) may hold each window's
+            // own, a window's share of them.
             Err(OptimiseError::Render(RenderError::BufferTooLarge { what, .. })) => {
                 tracing::info!(
                     "step {step}: {what} do not fit the device in one render call; the windows \
