@@ -7,6 +7,7 @@
 use std::sync::Arc;
 
 use burn::tensor::{DType, Device, Int, Tensor, TensorData};
+use rayon::prelude::*;
 use splatraj_scene::Scene;
 
 use crate::bitset::GaussianBits;
@@ -572,11 +573,11 @@ pub fn render_at(
     let used: Vec<usize> = is_used.iter().collect();
     let compact_from_scene = is_used.ranks();
     let u = used.len();
-    for list in &mut work {
+    work.par_iter_mut().for_each(|list| {
         for g in &mut list.gaussians {
             *g = compact_from_scene.rank(*g as usize);
         }
-    }
+    });
     // Each pose's rows: only the Gaussians its own lists read (crate::rows); the lists now
     // name rows of their pose.
     let (rows, row_gaussians) = lay_out_rows(&mut work, batch, u);
