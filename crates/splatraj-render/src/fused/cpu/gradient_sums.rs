@@ -148,9 +148,10 @@ mod tests {
     use crate::tile_grid::TileGrid;
     use crate::tiles::TileWork;
 
-    /// A plan of 3 poses × 40 rows over a 4×3 tile grid, random lists, and random slots.
-    fn case(channels: usize) -> (CompositePlan, Vec<Vec<f32>>) {
-        let (batch, n, grid) = (3, 40, TileGrid::new(64, 48));
+    /// A plan of poses with `counts` rows each over a 4×3 tile grid, random lists of each
+    /// pose's rows, and random slots.
+    fn case(channels: usize, counts: &[usize]) -> (CompositePlan, Vec<Vec<f32>>) {
+        let grid = TileGrid::new(64, 48);
         let mut state = 0x2545_f491_u64;
         let mut next = move |m: u64| {
             state = state
@@ -159,7 +160,7 @@ mod tests {
             (state >> 33) % m
         };
         let mut work = Vec::new();
-        for b in 0..batch {
+        for (b, &n) in counts.iter().enumerate() {
             for tile in 0..grid.len() {
                 let mut gaussians: Vec<u32> = (0..n as u32).filter(|_| next(3) == 0).collect();
                 gaussians.sort_by_key(|_| next(1000)); // any order: lists are depth-sorted
@@ -170,7 +171,8 @@ mod tests {
                 });
             }
         }
-        let plan = CompositePlan::new(&work, &PoseRows::dense(batch, n), grid);
+        let rows = PoseRows::from_counts(counts.iter().copied());
+        let plan = CompositePlan::new(&work, &rows, grid);
         let slots = (0..plan.tiles.len())
             .map(|w| {
                 (0..plan.list(w).len() * (6 + channels))
@@ -183,9 +185,11 @@ mod tests {
 
     #[test]
     fn poses_summed_apart_give_the_one_thread_sums_bit_for_bit() {
-        for channels in [1, 3] {
-            let (plan, slots) = case(channels);
-            let rows = plan.batch * 40;
+        // Every pose the same rows, and each its own number of rows (one none), as a pass
+        // laid out per pose has them.
+        for (channels, counts) in [(1, [40, 40, 40]), (3, [40, 40, 40]), (3, [40, 0, 25])] {
+            let (plan, slots) = case(channels, &counts);
+            let rows = plan.pose_rows.total();
             assert!(lists_keep_to_their_poses(&plan, rows, channels));
             let apart = sum_slots(&plan, &slots, rows, channels);
             // The reference: every tile in plan order on one thread.
@@ -207,7 +211,7 @@ mod tests {
 
     #[test]
     fn a_list_naming_another_pose_s_row_is_summed_on_one_thread() {
-        let (mut plan, slots) = case(1);
+        let (mut plan, slots) = case(1, &[40, 40, 40]);
         let rows = plan.batch * 40;
         // Tile 0 (pose 0) names a row of pose 2: the split would lose its term.
         plan.rows[plan.starts[0]] = 2 * 40 + 5;
