@@ -443,7 +443,8 @@ fn gpu_kernels_match_host_kernels_on_a_long_replay() {
 /// against the tensor projection in f64, `tests/fused_projection.rs`): 3000 Gaussians (a dozen
 /// cubes per pose, a partial last one), a subset out of order with a repeat, three poses on
 /// both of Rodrigues' branches (ω = 0 among them), rows behind the camera and beyond the
-/// Jacobian's clamp; the packed rows and the pose gradient of a weighted sum of them.
+/// Jacobian's clamp; the packed rows and the pose gradient of a weighted sum of them, with the
+/// rows laid out dense and per pose (uneven, one pose without rows).
 #[cfg(feature = "wgpu")]
 #[test]
 fn gpu_projection_matches_host_projection() {
@@ -483,65 +484,72 @@ fn gpu_projection_matches_host_projection() {
     let seen = |row: &[f64]| -> bool {
         row[6] > 0.1 && (row[0] - 80.0).abs() < 320.0 && (row[1] - 60.0).abs() < 240.0
     };
-    let mut weights: Vec<f64> = (0..poses.len() * used.len() * SPLAT_COLUMNS)
-        .map(|i| ((i * 7919) % 29) as f64 / 29.0 - 0.45)
-        .collect();
-    let run = |backend: BackendKind, weights: &[f64]| -> (Vec<f64>, Vec<f64>) {
-        let device = backend.device().unwrap().autodiff();
-        let geometry = SceneTensors::new(&scene, None, &device, DType::F32);
-        let pose_tensor =
-            Tensor::<2>::from_data(TensorData::new(flat.clone(), [3, 6]), (&device, DType::F32))
-                .require_grad();
-        let camera = ProjectionCamera::new(&intrinsics, NEAR_PLANE);
-        let rows = project_packed(
-            &geometry,
-            pose_tensor.clone(),
-            ProjectionPlan::dense(&used, 3, camera),
-        )
-        .reshape([3, used.len(), SPLAT_COLUMNS]);
-        let w = Tensor::<3>::from_data(
-            TensorData::new(weights.to_vec(), [3, used.len(), SPLAT_COLUMNS]),
-            (&device, DType::F32),
-        );
-        let grads = (rows.clone() * w).sum().backward();
-        (host(rows), host(pose_tensor.grad(&grads).unwrap()))
+    let camera = ProjectionCamera::new(&intrinsics, NEAR_PLANE);
+    // Every pose every Gaussian; and each pose its own rows (pose 1 none, pose 2 more cubes
+    // than pose 0), as a pass of several windows lays them out.
+    let per_pose = ProjectionPlan {
+        gaussians: [&used[..700], &used[1000..2900]].concat(),
+        rows: splatraj_render::rows::PoseRows::from_counts([700, 0, 1900]),
+        camera,
     };
-    let (rows_host, _) = run(BackendKind::Flex, &weights);
-    let in_view: Vec<bool> = rows_host.chunks_exact(SPLAT_COLUMNS).map(seen).collect();
-    assert!(
-        in_view.iter().filter(|&&s| s).count() > used.len(),
-        "most rows are in view"
-    );
-    for (w, &keep) in weights.chunks_exact_mut(SPLAT_COLUMNS).zip(&in_view) {
-        if !keep {
-            w.fill(0.0);
+    for plan in [ProjectionPlan::dense(&used, 3, camera), per_pose] {
+        let count = plan.rows.total();
+        let mut weights: Vec<f64> = (0..count * SPLAT_COLUMNS)
+            .map(|i| ((i * 7919) % 29) as f64 / 29.0 - 0.45)
+            .collect();
+        let run = |backend: BackendKind, weights: &[f64]| -> (Vec<f64>, Vec<f64>) {
+            let device = backend.device().unwrap().autodiff();
+            let geometry = SceneTensors::new(&scene, None, &device, DType::F32);
+            let pose_tensor = Tensor::<2>::from_data(
+                TensorData::new(flat.clone(), [3, 6]),
+                (&device, DType::F32),
+            )
+            .require_grad();
+            let rows = project_packed(&geometry, pose_tensor.clone(), plan.clone()); // [R, 7]
+            let w = Tensor::<2>::from_data(
+                TensorData::new(weights.to_vec(), [count, SPLAT_COLUMNS]),
+                (&device, DType::F32),
+            );
+            let grads = (rows.clone() * w).sum().backward();
+            (host(rows), host(pose_tensor.grad(&grads).unwrap()))
+        };
+        let (rows_host, _) = run(BackendKind::Flex, &weights);
+        let in_view: Vec<bool> = rows_host.chunks_exact(SPLAT_COLUMNS).map(seen).collect();
+        assert!(
+            in_view.iter().filter(|&&s| s).count() > count / 3,
+            "most rows are in view"
+        );
+        for (w, &keep) in weights.chunks_exact_mut(SPLAT_COLUMNS).zip(&in_view) {
+            if !keep {
+                w.fill(0.0);
+            }
         }
-    }
-    let (_, grad_host) = run(BackendKind::Flex, &weights);
-    let (rows_gpu, grad_gpu) = run(BackendKind::Wgpu, &weights);
-    for (i, (g, h)) in rows_gpu.iter().zip(&rows_host).enumerate() {
-        assert!(
-            !in_view[i / SPLAT_COLUMNS] || (g - h).abs() <= 1e-4 * (1.0 + h.abs()),
-            "row value {i} (row {}, column {}): GPU {g} vs host {h}",
-            i / SPLAT_COLUMNS,
-            i % SPLAT_COLUMNS
+        let (_, grad_host) = run(BackendKind::Flex, &weights);
+        let (rows_gpu, grad_gpu) = run(BackendKind::Wgpu, &weights);
+        for (i, (g, h)) in rows_gpu.iter().zip(&rows_host).enumerate() {
+            assert!(
+                !in_view[i / SPLAT_COLUMNS] || (g - h).abs() <= 1e-4 * (1.0 + h.abs()),
+                "row value {i} (row {}, column {}): GPU {g} vs host {h}",
+                i / SPLAT_COLUMNS,
+                i % SPLAT_COLUMNS
+            );
+        }
+        let norm = grad_host.iter().map(|g| g * g).sum::<f64>().sqrt();
+        assert!(norm > 1.0, "a gradient to compare");
+        for (k, (g, h)) in grad_gpu.iter().zip(&grad_host).enumerate() {
+            assert!(
+                (g - h).abs() <= 1e-3 * norm,
+                "dΦ[{}][{}]: GPU {g} vs host {h} (norm {norm})",
+                k / 6,
+                k % 6
+            );
+        }
+        assert_eq!(
+            run(BackendKind::Wgpu, &weights),
+            (rows_gpu, grad_gpu),
+            "the GPU kernels are deterministic"
         );
     }
-    let norm = grad_host.iter().map(|g| g * g).sum::<f64>().sqrt();
-    assert!(norm > 1.0, "a gradient to compare");
-    for (k, (g, h)) in grad_gpu.iter().zip(&grad_host).enumerate() {
-        assert!(
-            (g - h).abs() <= 1e-3 * norm,
-            "dΦ[{}][{}]: GPU {g} vs host {h} (norm {norm})",
-            k / 6,
-            k % 6
-        );
-    }
-    assert_eq!(
-        run(BackendKind::Wgpu, &weights),
-        (rows_gpu, grad_gpu),
-        "the GPU kernels are deterministic"
-    );
 }
 
 #[cfg(feature = "wgpu")]
