@@ -12,7 +12,7 @@
 //! The host backends have no buffer limit, but the same bound keeps a pass's images (and their
 //! f64 copies on the host) to a few hundred MB, so it applies there too.
 //!
-//! Besides the images, a pass holds its packed rows (poses × Gaussians used × 7), its channel
+//! Besides the images, a pass holds its packed rows (each pose's Gaussians, summed, × 7), its channel
 //! values, its tile lists and, with a gradient, a slot per tile–Gaussian pair; the scene holds
 //! its SH coefficients. [`first_oversized`] names the first of these a device cannot hold, so a
 //! render refuses such a pass before any work, naming the buffer, instead of failing on the
@@ -70,7 +70,7 @@ fn poses_within(
 /// A buffer a render pass needs: what it holds, and its bytes.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct PassBuffer {
-    /// What it holds, e.g. "a pass's packed rows (36 poses × 90000 Gaussians × 7 values)".
+    /// What it holds, e.g. "a pass's packed rows (3240000 pose–Gaussian rows × 7 values)".
     pub what: String,
     /// Its size.
     pub bytes: u64,

@@ -1,6 +1,6 @@
 //! Tile compositing as differentiable burn tensor ops.
 //!
-//! Input: screen-space Gaussians of a batch of poses (flattened to `[B·N, …]`), per-Gaussian
+//! Input: screen-space Gaussians of a batch of poses (a row per pose and Gaussian, `[R, …]`), per-row
 //! channel values, and the host-side tile lists of [`crate::tiles`]. Each tile's list is
 //! processed in depth chunks of at most `chunk` Gaussians, carrying each pixel's
 //! transmittance and stop state from chunk to chunk, so that long lists are exact and memory
@@ -20,16 +20,17 @@ use crate::tiles::{TILE_PIXELS, TILE_SIZE, TileGrid, TileWork};
 
 pub use crate::composite_rules::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
 
-/// Screen-space Gaussians of a batch, flat over (pose, Gaussian): row b·N + g.
+/// Screen-space Gaussians of a batch, one row per (pose, Gaussian), pose after pose as a
+/// [`PoseRows`] lays them out.
 #[derive(Debug, Clone)]
 pub struct SplatInputs {
-    /// Pixel coordinates of the means. `[B·N, 2]`
+    /// Pixel coordinates of the means. `[R, 2]`
     pub means_2d: Tensor<2>,
-    /// Inverse 2D covariances (a, b, c) of [[a, b], [b, c]]. `[B·N, 3]`
+    /// Inverse 2D covariances (a, b, c) of [[a, b], [b, c]]. `[R, 3]`
     pub conics: Tensor<2>,
-    /// Opacities. `[B·N]`
+    /// Opacities. `[R]`
     pub opacities: Tensor<1>,
-    /// Channel values to composite (mask, colour, depth, features). `[B·N, C]`
+    /// Channel values to composite (mask, colour, depth, features). `[R, C]`
     pub values: Tensor<2>,
 }
 

@@ -330,12 +330,14 @@ impl OnDevice for DeviceScene {
     }
 }
 
-/// The device buffers a pass of `batch` poses laid out in `rows` with `pairs` tile–Gaussian
-/// pairs and `width` channel values a pixel needs (the slots of the backward when
-/// `gradient`), and the scene's largest ones, each in one buffer.
+/// The device buffers a pass of `batch` poses over `u` Gaussians laid out in `rows` with
+/// `pairs` tile–Gaussian pairs and `width` channel values a pixel needs (the slots of the
+/// backward when `gradient`; the tensor projection's `[B, U]` outputs with `rasterizer`'s
+/// tensor path), and the scene's largest ones, each in one buffer.
 fn pass_buffers(
     scene: &DeviceScene,
-    (batch, rows): (usize, &PoseRows),
+    (batch, u, rows): (usize, usize, &PoseRows),
+    rasterizer: Rasterizer,
     pairs: usize,
     (grid, width): (&TileGrid, usize),
     gradient: bool,
@@ -380,6 +382,13 @@ fn pass_buffers(
         ),
         buffer(format!("a pass's tile lists ({pairs} pairs)"), pairs, 4),
     ];
+    if rasterizer == Rasterizer::Tensor {
+        buffers.push(buffer(
+            format!("the tensor projection's outputs ({batch} poses × {u} Gaussians × 7 values)"),
+            batch * u * SPLAT_COLUMNS,
+            float,
+        ));
+    }
     if gradient {
         buffers.push(buffer(
             format!(
@@ -590,7 +599,17 @@ pub fn render_at(
     crate::counters::composite(pairs, rows.total());
     let width: usize = request.channels.iter().map(Channel::width).sum::<usize>() + tensor_width;
     let gradient = poses.is_require_grad();
-    let buffers = || pass_buffers(scene, (batch, &rows), pairs, (&grid, width), gradient);
+    let buffers = || {
+        let layout = (batch, u, &rows);
+        pass_buffers(
+            scene,
+            layout,
+            request.rasterizer,
+            pairs,
+            (&grid, width),
+            gradient,
+        )
+    };
     if let Some((buffer, max)) = first_oversized(&device, buffers) {
         return Err(RenderError::BufferTooLarge {
             what: buffer.what,

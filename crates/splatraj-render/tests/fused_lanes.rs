@@ -99,7 +99,7 @@ fn to_f32(splats: &HostSplats<f64>) -> HostSplats<f32> {
 /// A random gradient of the packed image `[B, H, W, C + 1]`.
 fn output_gradient(plan: &CompositePlan, channels: usize) -> Vec<f64> {
     let mut rng = Rng(0xc0ffee);
-    let len = plan.batch * plan.grid.height * plan.grid.width * (channels + 1);
+    let len = plan.batch() * plan.grid.height * plan.grid.width * (channels + 1);
     (0..len).map(|_| rng.range(-1.0, 1.0)).collect()
 }
 

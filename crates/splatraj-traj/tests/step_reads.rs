@@ -108,13 +108,16 @@ fn a_step_reads_once_and_the_scene_is_uploaded_once() {
     let (shared, shared_counts) = counted_steps(StepPasses::Shared);
     let (per_window, per_window_counts) = counted_steps(StepPasses::PerWindow);
     // The same compositing work either way: one call composites the tile–Gaussian pairs the
-    // windows' calls do, no more (its packed rows, poses × Gaussians any window uses, may be more).
+    // windows' calls do, and projects their rows (each pose its own Gaussians), no more.
     assert!(shared_counts.pairs > 0, "{shared_counts:?}");
     assert_eq!(
         shared_counts.pairs, per_window_counts.pairs,
         "{shared_counts:?} vs {per_window_counts:?}"
     );
-    assert!(shared_counts.rows >= per_window_counts.rows);
+    assert_eq!(
+        shared_counts.rows, per_window_counts.rows,
+        "{shared_counts:?} vs {per_window_counts:?}"
+    );
     // The same images and costs either way (the shared pass evaluates the batching costs once
     // on every window's samples), so the same optimisation, term by term (to f32 rounding).
     assert_eq!(shared.len(), per_window.len());

@@ -516,11 +516,11 @@ fn assemble<E: Real>(plan: &CompositePlan, channels: usize, tiles: &[TileForward
     let grid = plan.grid;
     let stride = channels + 1;
     // Work tile of each (pose, tile), or usize::MAX where none. `[B · tiles]`
-    let mut work_of = vec![usize::MAX; plan.batch * grid.len()];
+    let mut work_of = vec![usize::MAX; plan.batch() * grid.len()];
     for (w, (&b, &tile)) in plan.batches.iter().zip(&plan.tiles).enumerate() {
         work_of[b * grid.len() + tile] = w;
     }
-    let mut image = vec![E::ZERO; plan.batch * grid.height * grid.width * stride];
+    let mut image = vec![E::ZERO; plan.batch() * grid.height * grid.width * stride];
     let row = grid.width * stride;
     if row == 0 || grid.height == 0 {
         return image;

@@ -676,7 +676,7 @@ fn device_forward(
     let work_count = plan.tiles.len();
     let lists = upload_plan(&plan, &device);
     let image = zeros(
-        vec![plan.batch, grid.height, grid.width, channels + 1],
+        vec![plan.batch(), grid.height, grid.width, channels + 1],
         &device,
         dtype,
     );

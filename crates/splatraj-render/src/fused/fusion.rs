@@ -133,7 +133,7 @@ impl CompositeKernels for Cube {
         let saved = Deferred::new(&[&inputs.splats, &inputs.values]);
         let channels = inputs.values.shape().dims::<2>()[1];
         let image = Shape::from(vec![
-            plan.batch,
+            plan.batch(),
             plan.grid.height,
             plan.grid.width,
             channels + 1,

@@ -153,7 +153,7 @@ pub fn host_forward<B: Backend>(
     let [rows, channels] = inputs.values.shape().dims::<2>();
     let columns = inputs.splats.shape().dims::<2>()[1];
     let grid = plan.grid;
-    let shape = vec![plan.batch, grid.height, grid.width, channels + 1];
+    let shape = vec![plan.batch(), grid.height, grid.width, channels + 1];
     let (image, host) = if dtype == DType::F64 {
         let splats = host_splats::<B, f64>(inputs, columns, channels);
         let (image, state) = cpu::forward(&splats, &plan);
@@ -362,7 +362,7 @@ fn composite_shared_plan(
     plan: Arc<CompositePlan>,
 ) -> Composited {
     let channels = values.dims()[1];
-    let (batch, grid) = (plan.batch, plan.grid);
+    let (batch, grid) = (plan.batch(), plan.grid);
     let stats = RenderStats {
         tiles: plan.tiles.len(),
         pairs: plan.rows.len(),

@@ -10,9 +10,7 @@ use crate::tiles::{TILE_SIZE, TileGrid, TileWork};
 pub struct CompositePlan {
     /// The image tiling.
     pub grid: TileGrid,
-    /// Poses in the batch.
-    pub batch: usize,
-    /// Which input rows each pose owns.
+    /// Which input rows each pose owns (and so the poses in the batch).
     pub pose_rows: PoseRows,
     /// Pose of each work tile. `[work]`
     pub batches: Vec<usize>,
@@ -40,7 +38,6 @@ impl CompositePlan {
         }
         CompositePlan {
             grid,
-            batch: rows.batch(),
             pose_rows: rows.clone(),
             batches: work.iter().map(|w| w.batch).collect(),
             tiles: work.iter().map(|w| w.tile).collect(),
@@ -56,6 +53,11 @@ impl CompositePlan {
             stop_transmittance,
             ..self
         }
+    }
+
+    /// Poses in the batch.
+    pub fn batch(&self) -> usize {
+        self.pose_rows.batch()
     }
 
     /// The rows work tile `w` composites, front to back.

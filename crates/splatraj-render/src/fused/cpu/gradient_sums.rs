@@ -30,14 +30,14 @@ pub(super) fn sum_slots<E: Real>(
         add_slots(rows, first, tiles, plan, slots, channels)
     };
     if lists_keep_to_their_poses(plan, rows, channels) {
-        let mut tiles_of_pose: Vec<Vec<usize>> = vec![Vec::new(); plan.batch];
+        let mut tiles_of_pose: Vec<Vec<usize>> = vec![Vec::new(); plan.batch()];
         for (w, &b) in plan.batches.iter().enumerate() {
             tiles_of_pose[b].push(w);
         }
         // Each pose's block of gradient rows, split off in turn.
-        let mut blocks = Vec::with_capacity(plan.batch);
+        let mut blocks = Vec::with_capacity(plan.batch());
         let mut rest = GradientRows::of(&mut v);
-        for b in 0..plan.batch {
+        for b in 0..plan.batch() {
             let (own, tail) = rest.split_at(plan.pose_rows.count(b), channels);
             blocks.push((b, own));
             rest = tail;
@@ -127,12 +127,12 @@ fn add_slots<E: Real>(
 /// gradient has no blocks to split).
 fn lists_keep_to_their_poses(plan: &CompositePlan, rows: usize, channels: usize) -> bool {
     let poses = &plan.pose_rows;
-    if plan.batch == 0 || channels == 0 || rows == 0 || poses.total() != rows {
+    if plan.batch() == 0 || channels == 0 || rows == 0 || poses.total() != rows {
         return false;
     }
     (0..plan.tiles.len()).into_par_iter().all(|w| {
         let b = plan.batches[w];
-        b < plan.batch && {
+        b < plan.batch() && {
             let own = poses.start(b)..poses.start(b) + poses.count(b);
             plan.list(w)
                 .iter()
@@ -212,7 +212,7 @@ mod tests {
     #[test]
     fn a_list_naming_another_pose_s_row_is_summed_on_one_thread() {
         let (mut plan, slots) = case(1, &[40, 40, 40]);
-        let rows = plan.batch * 40;
+        let rows = plan.batch() * 40;
         // Tile 0 (pose 0) names a row of pose 2: the split would lose its term.
         plan.rows[plan.starts[0]] = 2 * 40 + 5;
         assert!(!lists_keep_to_their_poses(&plan, rows, 1));

@@ -396,7 +396,8 @@ impl<B: ProjectionKernels, C: CheckpointStrategy> FusedProjection for Autodiff<B
 
 /// The packed rows `[R, 7]` of the plan's rows (Gaussians by their index into `scene`, pose
 /// after pose) seen from `poses` `[B, 6]`; differentiable in the poses. Columns:
-/// [`PackedColumn`]. Panics when the plan's poses are not B (a caller's bug).
+/// [`PackedColumn`]. Panics when the plan's poses are not B or it does not name a Gaussian for
+/// each of its rows (a caller's bug).
 pub fn project_packed(scene: &SceneTensors, poses: Tensor<2>, plan: ProjectionPlan) -> Tensor<2> {
     project_packed_zoomed(scene, poses, None, plan)
 }
@@ -415,6 +416,12 @@ pub fn project_packed_zoomed(
         plan.rows.batch(),
         batch,
         "a projection plan for another batch"
+    );
+    // The GPU kernels index the table by row without a bounds check.
+    assert_eq!(
+        plan.gaussians.len(),
+        plan.rows.total(),
+        "a projection plan names a Gaussian for each row"
     );
     // Without a zoom the kernels read ones: B values up, no launch, and no autodiff parent.
     let zoom = match zoom {
