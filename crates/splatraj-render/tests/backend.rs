@@ -439,6 +439,37 @@ fn gpu_kernels_match_host_kernels_on_a_long_replay() {
     });
 }
 
+/// The GPU's packed rows within f32 rounding of the host's where `in_view` (rows a pass can
+/// composite), and its pose gradient within 1e-3 of the host's norm, which it returns.
+#[cfg(feature = "wgpu")]
+fn assert_gpu_matches_host(
+    (rows_gpu, grad_gpu): (&[f64], &[f64]),
+    (rows_host, grad_host): (&[f64], &[f64]),
+    in_view: &[bool],
+) -> f64 {
+    use splatraj_render::fused::projection::SPLAT_COLUMNS;
+
+    for (i, (g, h)) in rows_gpu.iter().zip(rows_host).enumerate() {
+        assert!(
+            !in_view[i / SPLAT_COLUMNS] || (g - h).abs() <= 1e-4 * (1.0 + h.abs()),
+            "row value {i} (row {}, column {}): GPU {g} vs host {h}",
+            i / SPLAT_COLUMNS,
+            i % SPLAT_COLUMNS
+        );
+    }
+    let norm = grad_host.iter().map(|g| g * g).sum::<f64>().sqrt();
+    assert!(norm > 1.0, "a gradient to compare");
+    for (k, (g, h)) in grad_gpu.iter().zip(grad_host).enumerate() {
+        assert!(
+            (g - h).abs() <= 1e-3 * norm,
+            "dΦ[{}][{}]: GPU {g} vs host {h} (norm {norm})",
+            k / 6,
+            k % 6
+        );
+    }
+    norm
+}
+
 /// The GPU projection kernels against the host kernels, both f32 (the host kernels are checked
 /// against the tensor projection in f64, `tests/fused_projection.rs`): 3000 Gaussians (a dozen
 /// cubes per pose, a partial last one), a subset out of order with a repeat, three poses on
@@ -526,24 +557,8 @@ fn gpu_projection_matches_host_projection() {
         }
         let (_, grad_host) = run(BackendKind::Flex, &weights);
         let (rows_gpu, grad_gpu) = run(BackendKind::Wgpu, &weights);
-        for (i, (g, h)) in rows_gpu.iter().zip(&rows_host).enumerate() {
-            assert!(
-                !in_view[i / SPLAT_COLUMNS] || (g - h).abs() <= 1e-4 * (1.0 + h.abs()),
-                "row value {i} (row {}, column {}): GPU {g} vs host {h}",
-                i / SPLAT_COLUMNS,
-                i % SPLAT_COLUMNS
-            );
-        }
-        let norm = grad_host.iter().map(|g| g * g).sum::<f64>().sqrt();
-        assert!(norm > 1.0, "a gradient to compare");
-        for (k, (g, h)) in grad_gpu.iter().zip(&grad_host).enumerate() {
-            assert!(
-                (g - h).abs() <= 1e-3 * norm,
-                "dΦ[{}][{}]: GPU {g} vs host {h} (norm {norm})",
-                k / 6,
-                k % 6
-            );
-        }
+        let norm =
+            assert_gpu_matches_host((&rows_gpu, &grad_gpu), (&rows_host, &grad_host), &in_view);
         assert_eq!(
             run(BackendKind::Wgpu, &weights),
             (rows_gpu, grad_gpu),
@@ -635,24 +650,7 @@ fn gpu_zoomed_projection_matches_host_projection() {
     }
     let (_, grad_host, zoom_host) = run(BackendKind::Flex, &weights);
     let (rows_gpu, grad_gpu, zoom_gpu) = run(BackendKind::Wgpu, &weights);
-    for (i, (g, h)) in rows_gpu.iter().zip(&rows_host).enumerate() {
-        assert!(
-            !in_view[i / SPLAT_COLUMNS] || (g - h).abs() <= 1e-4 * (1.0 + h.abs()),
-            "row value {i} (row {}, column {}): GPU {g} vs host {h}",
-            i / SPLAT_COLUMNS,
-            i % SPLAT_COLUMNS
-        );
-    }
-    let norm = grad_host.iter().map(|g| g * g).sum::<f64>().sqrt();
-    assert!(norm > 1.0, "a gradient to compare");
-    for (k, (g, h)) in grad_gpu.iter().zip(&grad_host).enumerate() {
-        assert!(
-            (g - h).abs() <= 1e-3 * norm,
-            "dΦ[{}][{}]: GPU {g} vs host {h} (norm {norm})",
-            k / 6,
-            k % 6
-        );
-    }
+    let norm = assert_gpu_matches_host((&rows_gpu, &grad_gpu), (&rows_host, &grad_host), &in_view);
     let zoom_norm = zoom_host.iter().map(|g| g * g).sum::<f64>().sqrt();
     let worst = |a: &[f64], b: &[f64]| {
         a.iter()
