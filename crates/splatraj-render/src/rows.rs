@@ -72,13 +72,19 @@ impl PoseRows {
 }
 
 /// Lays out a pass's rows per pose from its tile lists, whose entries are compact Gaussian
-/// indices u < `used`: each pose gets one row per distinct u its lists read, in increasing u,
+/// indices u < `used`, every u read by some list (as a render numbers them): each pose gets
+/// one row per distinct u its lists read, in increasing u,
 /// and each list entry is renumbered to its row within its pose (the row is
 /// `rows.start(pose) + entry`). Returns the layout and each row's u. `[R]`
 ///
 /// The lists are grouped by pose first when they are not already (a stable sort by pose: the
 /// order of a pose's tiles is kept).
 pub fn lay_out_rows(work: &mut [TileWork], batch: usize, used: usize) -> (PoseRows, Vec<u32>) {
+    if batch == 1 {
+        // One pose reads every Gaussian of the pass (`used` counts what its lists read): its
+        // rows are 0..used as they stand, and no entry changes (an output frame's pass).
+        return (PoseRows::dense(1, used), (0..used as u32).collect());
+    }
     if !work.is_sorted_by_key(|list| list.batch) {
         work.sort_by_key(|list| list.batch);
     }
@@ -154,6 +160,17 @@ mod tests {
                 assert_eq!(gaussians[row], u);
             }
         }
+    }
+
+    /// One pose reads every u: its rows are 0..used and its entries stay as they are.
+    #[test]
+    fn one_pose_keeps_its_compact_numbering() {
+        let original = vec![list(0, 0, &[2, 0]), list(0, 3, &[1, 2, 3])];
+        let mut work = original.clone();
+        let (rows, gaussians) = lay_out_rows(&mut work, 1, 4);
+        assert_eq!(rows.starts(), &[0, 4]);
+        assert_eq!(gaussians, vec![0, 1, 2, 3]);
+        assert_eq!(work, original);
     }
 
     #[test]
