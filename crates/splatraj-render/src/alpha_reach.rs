@@ -158,13 +158,7 @@ mod tests {
 
     #[test]
     fn every_tile_where_alpha_reaches_1_255_is_kept_and_few_others() {
-        let mut state = 0x5eed_u64;
-        let mut random = move || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut random = crate::test_random::uniform(0x5eed_u64);
         let (mut kept, mut drawn, mut square) = (0usize, 0usize, 0usize);
         for _ in 0..400 {
             // Elongated, rotated ellipses of 1–60 px, opacities from below 1/255 to 1.

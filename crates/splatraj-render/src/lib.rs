@@ -33,5 +33,7 @@ pub mod render;
 pub mod rows;
 pub mod sh;
 pub mod stages;
+#[cfg(test)]
+mod test_random;
 pub mod tile_grid;
 pub mod tiles;

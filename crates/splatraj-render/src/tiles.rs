@@ -250,13 +250,7 @@ mod tests {
     #[test]
     fn lists_filled_by_bands_are_the_lists_of_one_loop() {
         let grid = TileGrid::new(320, 232); // 20 × 15 tiles, the last row partial
-        let mut state = 0x9e37_79b9_u64;
-        let mut next = move || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = crate::test_random::uniform(0x9e37_79b9_u64);
         let kept: Vec<Decided> = (0..3000u32)
             .map(|g| {
                 let (sx, sy) = (1.0 + 400.0 * next().powi(3), 1.0 + 400.0 * next().powi(3));
