@@ -590,11 +590,17 @@ pub fn render_at(
     // Each pose's rows: only the Gaussians its own lists read (crate::rows); the lists now
     // name rows of their pose.
     let (rows, row_gaussians) = lay_out_rows(&mut work, batch, u);
-    // Scene index of each row's Gaussian. `[R]`
-    let scene_of_row: Vec<u32> = row_gaussians
-        .iter()
-        .map(|&g| used[g as usize] as u32)
-        .collect();
+    // The projection's plan holds the scene index of each row's Gaussian `[R]`, which the
+    // channel values read too (shared, not copied).
+    let plan = Arc::new(ProjectionPlan {
+        gaussians: row_gaussians
+            .iter()
+            .map(|&g| used[g as usize] as u32)
+            .collect(),
+        rows: rows.clone(),
+        camera: ProjectionCamera::new(&request.intrinsics, request.near),
+    });
+    let scene_of_row = &plan.gaussians;
     let pairs: usize = work.iter().map(|list| list.gaussians.len()).sum();
     crate::counters::composite(pairs, rows.total());
     let width: usize = request.channels.iter().map(Channel::width).sum::<usize>() + tensor_width;
@@ -652,12 +658,7 @@ pub fn render_at(
     // Screen space: the fused projection's packed rows, or the tensor projection's outputs.
     let (splats, depth) = match request.rasterizer {
         Rasterizer::Fused => {
-            let plan = ProjectionPlan {
-                gaussians: scene_of_row.clone(),
-                rows: rows.clone(),
-                camera: ProjectionCamera::new(&request.intrinsics, request.near),
-            };
-            let packed = project_packed_zoomed(&scene.geometry, poses.clone(), zoom, plan); // [R, 7]
+            let packed = project_packed_zoomed(&scene.geometry, poses.clone(), zoom, plan.clone()); // [R, 7]
             let depth = packed.clone().narrow(1, PackedColumn::Depth as usize, 1); // [R, 1]
             (Splats::Packed(Box::new(packed)), depth)
         }
@@ -720,19 +721,19 @@ pub fn render_at(
             Channel::Depth => depth.clone(),
             Channel::Mask(mask) => upload_rows(
                 1,
-                per_row_values(&rows, &scene_of_row, 1, &|_, g| {
+                per_row_values(&rows, scene_of_row, 1, &|_, g| {
                     std::slice::from_ref(&mask[g])
                 }),
             ),
             Channel::ObjectMasks(objects) => upload_rows(
                 1,
-                per_row_values(&rows, &scene_of_row, 1, &|b, g| {
+                per_row_values(&rows, scene_of_row, 1, &|b, g| {
                     std::slice::from_ref(&objects.masks[objects.views[b].object][g])
                 }),
             ),
             Channel::Features { dim, values } => upload_rows(
                 *dim,
-                per_row_values(&rows, &scene_of_row, *dim, &|_, g| {
+                per_row_values(&rows, scene_of_row, *dim, &|_, g| {
                     &values[g * dim..(g + 1) * dim]
                 }),
             ),

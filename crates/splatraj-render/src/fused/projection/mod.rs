@@ -404,13 +404,15 @@ pub fn project_packed(scene: &SceneTensors, poses: Tensor<2>, plan: ProjectionPl
 
 /// [`project_packed`] through the plan's camera zoomed per pose by `zoom` `[B]` (s > 0: fx·s,
 /// fy·s about the fixed principal point; `None`: s = 1); differentiable in the poses and the
-/// zoom.
+/// zoom. The plan may come shared (`Arc`), so a caller keeps reading its row table without a
+/// copy.
 pub fn project_packed_zoomed(
     scene: &SceneTensors,
     poses: Tensor<2>,
     zoom: Option<Tensor<1>>,
-    plan: ProjectionPlan,
+    plan: impl Into<Arc<ProjectionPlan>>,
 ) -> Tensor<2> {
+    let plan = plan.into();
     let [batch, _] = poses.dims();
     assert_eq!(
         plan.rows.batch(),
@@ -440,6 +442,6 @@ pub fn project_packed_zoomed(
         zoom.into_dispatch(),
         scene.components.clone().into_dispatch(),
         scene.opacities.clone().into_dispatch(),
-        Arc::new(plan),
+        plan,
     ))
 }
