@@ -30,6 +30,7 @@ pub mod project;
 pub mod rasterize;
 pub mod reference;
 pub mod render;
+pub mod rodrigues;
 pub mod rows;
 pub mod sh;
 pub mod stages;

@@ -198,20 +198,11 @@ impl Cost for ClearanceCost {
         let poses = inputs.path_or_sample_poses();
         let [batch, _] = poses.dims();
         let centres = poses.narrow(1, 3, 3); // [ΣP, 3]
-        // Read once per optimisation step with everything else; read here only without it.
-        let host: Vec<f64> = match inputs.path_or_sample_host_poses() {
-            Some(poses) => poses.iter().flat_map(|p| p[3..].iter().copied()).collect(),
-            None => splatraj_render::host::to_host(centres.clone().detach()).map_err(|e| {
-                CostError::ReadBack {
-                    cost: self.name(),
-                    reason: e.to_string(),
-                }
-            })?,
-        };
+        let host = inputs.host_path_or_sample_poses(self.name())?;
         let mut points = Vec::with_capacity(3 * batch);
         let mut normals = Vec::with_capacity(3 * batch);
-        for c in host.chunks_exact(3) {
-            let c = DVec3::new(c[0], c[1], c[2]);
+        for pose in &host {
+            let c = DVec3::new(pose[3], pose[4], pose[5]);
             match occupancy.nearest_within(c, margin) {
                 Some(contact) if contact.surface.distance < margin => {
                     points.extend(contact.surface.point.to_array());

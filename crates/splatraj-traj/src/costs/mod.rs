@@ -46,9 +46,11 @@
 
 pub mod auto;
 pub mod clearance;
+pub mod expansion;
 pub mod iou;
 pub mod moments;
 pub mod motion;
+pub mod motion_rates;
 pub mod path;
 pub mod prior;
 pub mod registry;
@@ -69,6 +71,7 @@ pub use auto::OrAuto;
 pub use clearance::{
     ClearanceCost, DEFAULT_CLEARANCE_SIGMA, DEFAULT_MIN_OPACITY, auto_margin, clearance,
 };
+pub use expansion::expansion_at;
 pub use iou::{
     IOU_THRESHOLD, PixelBox, bbox_iou, bbox_iou_batch, box_from_hits, box_iou, mask_box, mask_hits,
 };
@@ -369,6 +372,29 @@ impl CostInputs {
             (Some(_), None) => None,
             (None, _) => Some(&host.samples),
         }
+    }
+
+    /// The host values of [`CostInputs::path_or_sample_poses`]: those the caller gave (read
+    /// once per optimisation step with everything else), else read from the device here, a
+    /// failure naming `cost`.
+    pub fn host_path_or_sample_poses(
+        &self,
+        cost: &'static str,
+    ) -> Result<Vec<[f64; 6]>, CostError> {
+        if let Some(poses) = self.path_or_sample_host_poses() {
+            return Ok(poses.to_vec());
+        }
+        let values =
+            splatraj_render::host::to_host(self.path_or_sample_poses().detach()).map_err(|e| {
+                CostError::ReadBack {
+                    cost,
+                    reason: e.to_string(),
+                }
+            })?;
+        Ok(values
+            .chunks_exact(6)
+            .map(|p| std::array::from_fn(|i| p[i]))
+            .collect())
     }
 
     /// Adds the object's mask rendered alone `[B, H, W]`.

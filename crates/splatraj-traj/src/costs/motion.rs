@@ -30,11 +30,18 @@
 //! object centre, its own mean speed for the even-speed ratio), so the differences that
 //! pair one window's last pose with the next window's first weigh nothing
 //! ([`super::path`]).
+//!
+//! It reads nothing but the poses, so it is computed on the host in f64, value and gradient by
+//! hand ([`super::motion_rates`]), from the poses a step reads back anyway, and joins the graph
+//! by its first-order expansion about them ([`super::expansion`]): as burn ops its slices,
+//! differences and Rodrigues were 139 of a first-try step's 349 GPU launches.
 
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostDomain, CostError, CostInputs, OrAuto, PathSamples, check_weight, invalid};
+use super::expansion::expansion_at;
+use super::motion_rates::{MotionLimits, Stretch, stretch_charge};
+use super::{Cost, CostDomain, CostError, CostInputs, OrAuto, check_weight, invalid};
 
 /// The motion-limit cost: table `[costs.motion]`, keys `weight` (default 1), `max_speed`
 /// (scene units per second), `max_acceleration` (scene units per second²),
@@ -128,6 +135,30 @@ impl MotionCost {
         }
     }
 
+    /// The limits in per-second units and radians, or why `max_speed` has no number yet.
+    fn limits(&self) -> Result<MotionLimits, CostError> {
+        let speed = match self.max_speed {
+            Some(OrAuto::Value(limit)) => Some(limit),
+            Some(OrAuto::Auto) => {
+                return Err(invalid(
+                    self.name(),
+                    "max_speed",
+                    "is \"auto\" but was never derived from a scene (prepare the experiment \
+                     first, or give a number)"
+                        .into(),
+                ));
+            }
+            None => None,
+        };
+        Ok(MotionLimits {
+            speed,
+            acceleration: self.max_acceleration,
+            turn: self.max_angular_speed.map(f64::to_radians),
+            orbit: self.max_orbit_speed.map(f64::to_radians),
+            even_speed: self.even_speed,
+        })
+    }
+
     /// Whether any limit needs the path's duration.
     pub fn needs_duration(&self) -> bool {
         self.max_speed.is_some()
@@ -135,24 +166,6 @@ impl MotionCost {
             || self.max_angular_speed.is_some()
             || self.max_orbit_speed.is_some()
     }
-}
-
-/// The camera centres `[P, 3]` of poses `[P, 6]`.
-fn centres_of(poses: &Tensor<2>) -> Tensor<2> {
-    poses.clone().narrow(1, 3, 3)
-}
-
-/// Fewest poses a stretch needs for its motion to be charged (an acceleration needs three).
-const MIN_POSES: usize = 3;
-
-/// max(0, x/limit² − 1), averaged per stretch `[W]`: the charge of squared rates `x`
-/// `[ΣP − lag]` (rows of lag `lag`) over `limit`.
-fn over_limit(path: &PathSamples, squared_rate: Tensor<1>, lag: usize, limit: f64) -> Tensor<1> {
-    let charge = squared_rate
-        .div_scalar(limit * limit)
-        .sub_scalar(1.0)
-        .clamp_min(0.0);
-    path.stretch_means(charge, lag, MIN_POSES)
 }
 
 impl Cost for MotionCost {
@@ -198,13 +211,6 @@ impl Cost for MotionCost {
                 .reshape([inputs.batch()])
                 * 0.0);
         };
-        let poses = path.poses.clone(); // [ΣP, 6]
-        let [count, _] = poses.dims();
-        // [W], in the graph
-        let zero = path.per_stretch(poses.clone().narrow(1, 0, 1).sum().mul_scalar(0.0));
-        if count < MIN_POSES {
-            return Ok(zero);
-        }
         let seconds = match (path.seconds, self.needs_duration()) {
             (Some(s), _) => s,
             (None, false) => 1.0,
@@ -215,70 +221,28 @@ impl Cost for MotionCost {
                 });
             }
         };
-        // f(Δt) per row of lag `lag`, Δt from the row's stretch's time step (a scalar when
-        // the stretches share it, as a window's own path does).
-        let of_dt = |lag: usize, f: fn(f64) -> f64| path.per_row(lag, |s| f(s.time_step * seconds));
-        let centres = centres_of(&poses); // [ΣP, 3]
-        let steps = centres.clone().narrow(0, 1, count - 1) - centres.narrow(0, 0, count - 1);
-        let squared_speed =
-            of_dt(1, |dt| dt * dt).divide(steps.clone().square().sum_dim(1).reshape([count - 1])); // [ΣP − 1]
-        let mut total = zero;
-        match self.max_speed {
-            Some(OrAuto::Value(limit)) => {
-                total = total + over_limit(path, squared_speed.clone(), 1, limit);
-            }
-            Some(OrAuto::Auto) => {
-                return Err(invalid(
-                    self.name(),
-                    "max_speed",
-                    "is \"auto\" but was never derived from a scene (prepare the experiment \
-                     first, or give a number)"
-                        .into(),
-                ));
-            }
-            None => {}
+        let limits = self.limits()?;
+        // On the host, each stretch on its own (docs/gpu.md, "Costs on the host").
+        let host = inputs.host_path_or_sample_poses(self.name())?; // [ΣP]
+        let count = host.len();
+        let windows = path.stretches().len();
+        let mut values = Vec::with_capacity(windows); // [W]
+        let mut gradients = vec![0.0; windows * count * 6]; // [W, ΣP·6]
+        let mut start = 0;
+        for (w, s) in path.stretches().iter().enumerate() {
+            let floor = 1e-6 * s.context.prior_radius;
+            let stretch = Stretch {
+                poses: &host[start..start + s.rows],
+                dt: s.time_step * seconds,
+                pivot: s.context.object_centre,
+                floor_sq: floor * floor,
+            };
+            let (value, gradient) = stretch_charge(&limits, &stretch);
+            values.push(value);
+            let row = &mut gradients[(w * count + start) * 6..(w * count + start + s.rows) * 6];
+            row.copy_from_slice(gradient.as_flattened());
+            start += s.rows;
         }
-        if let Some(limit) = self.max_acceleration {
-            let second = steps.clone().narrow(0, 1, count - 2) - steps.narrow(0, 0, count - 2);
-            let squared =
-                of_dt(2, |dt| dt.powi(4)).divide(second.square().sum_dim(1).reshape([count - 2])); // [ΣP − 2]
-            total = total + over_limit(path, squared, 2, limit);
-        }
-        if let Some(limit) = self.max_angular_speed {
-            let rotations =
-                splatraj_render::camera::rotation_matrices(poses.clone().narrow(1, 0, 3));
-            let turns =
-                rotations.clone().narrow(0, 1, count - 1) - rotations.narrow(0, 0, count - 1);
-            let squared_angle = of_dt(1, |dt| 2.0 * dt * dt)
-                .divide(turns.square().sum_dim(2).sum_dim(1).reshape([count - 1])); // θ²/Δt² [ΣP − 1]
-            total = total + over_limit(path, squared_angle, 1, limit.to_radians());
-        }
-        if let Some(limit) = self.max_orbit_speed {
-            // Each pose's own window's object centre and floor.
-            let floor_sq = path.per_row(0, |s| {
-                let floor = 1e-6 * s.context.prior_radius;
-                floor * floor
-            });
-            let offsets = centres_of(&poses) - path.context_rows(|c| c.object_centre); // [ΣP, 3]
-            // Floored before the square root (no NaN gradient at the object's centre).
-            let lengths = floor_sq.floor(offsets.clone().square().sum_dim(1)).sqrt(); // [ΣP, 1]
-            let directions = offsets / lengths.expand([count, 3]);
-            let chords =
-                directions.clone().narrow(0, 1, count - 1) - directions.narrow(0, 0, count - 1);
-            let squared_angle =
-                of_dt(1, |dt| dt * dt).divide(chords.square().sum_dim(1).reshape([count - 1])); // φ²/Δt² [ΣP − 1]
-            total = total + over_limit(path, squared_angle, 1, limit.to_radians());
-        }
-        if self.even_speed > 0.0 {
-            // Each window's ratio to its own mean: the mean per stretch [W], back on its rows.
-            // Floored so that a camera at rest (mean 0) gives a finite value and gradient.
-            let mean = path
-                .stretch_means(squared_speed.clone(), 1, MIN_POSES)
-                .add_scalar(1e-12);
-            let ratio = (squared_speed / path.spread(mean, 1)).sub_scalar(1.0); // [ΣP − 1]
-            let spread = path.stretch_means(ratio.square(), 1, MIN_POSES);
-            total = total + spread.mul_scalar(self.even_speed);
-        }
-        Ok(total)
+        Ok(expansion_at(&path.poses, &host, values, gradients))
     }
 }

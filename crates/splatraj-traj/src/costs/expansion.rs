@@ -1,0 +1,56 @@
+//! A cost of the poses alone, computed on the host, joined to the optimisation graph by its
+//! first-order expansion about the poses it was computed at.
+//!
+//! Some costs read nothing but the poses: their arithmetic is a few small loops over a few
+//! hundred poses (the motion limits' rates along the path). As burn ops each loop becomes
+//! slices, differences, reductions and their backward, each a kernel launch on a GPU: the
+//! motion cost alone was 139 of a first-try step's 349 launches on wgpu (docs/gpu.md, "Costs
+//! on the host"). An optimisation step reads its poses to the host anyway (the renderer
+//! decides and bins there), so such a cost is computed there in f64, value and gradient by
+//! hand, and enters the graph as
+//!
+//! ```text
+//! L_w(Φ) = L_w(Φ₀) + G_w · (Φ − Φ₀),   G_w = ∂L_w/∂Φ at Φ₀
+//! ```
+//!
+//! one difference and one matrix product (two launches forward, one backward), whatever the
+//! cost. At Φ = Φ₀, which is where a step evaluates it (Φ₀ are Φ's own values read back), this
+//! has the cost's value and the cost's gradient exactly, and that is all gradient descent
+//! reads; the expansion is never evaluated anywhere else.
+
+use burn::tensor::{Tensor, TensorData};
+
+/// `values` `[W]` (each computed on the host at the poses `at` `[P]`) as a graph value of
+/// `poses` `[P, 6]`: `values + G·(poses − at)` `[W]`, with `gradients` `[W, P·6]` (row w:
+/// ∂value_w/∂Φ, pose after pose, ω then c) as G. `at` must be the values of `poses` (read from
+/// them): then the result is `values` and its gradient in `poses` is G.
+pub fn expansion_at(
+    poses: &Tensor<2>,
+    at: &[[f64; 6]],
+    values: Vec<f64>,
+    gradients: Vec<f64>,
+) -> Tensor<1> {
+    let [count, _] = poses.dims();
+    let windows = values.len();
+    assert_eq!(
+        at.len(),
+        count,
+        "the host values of another number of poses"
+    );
+    assert_eq!(
+        gradients.len(),
+        windows * count * 6,
+        "a gradient row per value, six numbers per pose"
+    );
+    let device = (&poses.device(), poses.dtype());
+    let at = Tensor::<2>::from_data(
+        TensorData::new(at.iter().flatten().copied().collect(), [count, 6]),
+        device,
+    );
+    let gradients =
+        Tensor::<2>::from_data(TensorData::new(gradients, [windows, count * 6]), device);
+    let values = Tensor::<1>::from_data(TensorData::new(values, [windows]), device);
+    // [P·6, 1]: zero in the forward (the poses are `at`), G's weights in the backward.
+    let shift = (poses.clone() - at).reshape([count * 6, 1]);
+    values + gradients.matmul(shift).reshape([windows])
+}
