@@ -1,6 +1,7 @@
 //! The cost terms behind the `Cost` trait: upright (both modes) and prior against hand-computed
 //! values and f64 finite differences, the prior's decay and default radius, IoU, config parsing
-//! and validation, and the weighted sum.
+//! and validation, and the weighted sum; the host forms the costs evaluate against the tensor
+//! forms (autodiff, f64).
 
 use burn::tensor::{DType, Device, Tensor, TensorData};
 use glam::{DMat3, DVec3};
@@ -8,7 +9,8 @@ use splatraj_render::camera::Pose;
 use splatraj_traj::costs::{
     Cost, CostError, CostInputs, CostsConfig, PriorCost, QueryContext, TceCost, TreCost,
     UprightCost, UprightMode, WeightedCosts, bbox_iou, bbox_iou_batch, box_from_hits,
-    default_prior_radius, mask_box, mask_hits, tce, tre,
+    default_prior_radius, mask_box, mask_hits, prior, prior_on_host, tce, tre, upright,
+    upright_on_host,
 };
 
 const Z_UP: [f64; 3] = [0.0, 0.0, 1.0];
@@ -268,6 +270,74 @@ fn upright_and_prior_gradients_match_finite_differences() {
         check_gradient(&UprightCost { weight: 1.0, mode }, &poses, query);
     }
     check_gradient(&PriorCost::default(), &poses, query);
+}
+
+/// Values `[B]` of a tensor form `f(rotations, centres)` at `poses` and the gradient of their
+/// sum in the poses, by autodiff in f64 (Rodrigues as tensor ops).
+fn tensor_form(
+    poses: &[[f64; 6]],
+    f: impl Fn(Tensor<3>, Tensor<2>) -> Tensor<1>,
+) -> (Vec<f64>, Vec<f64>) {
+    let ad = Device::flex().autodiff();
+    let x = poses_tensor(poses, &ad).require_grad();
+    let rotations = splatraj_render::camera::rotation_matrices(x.clone().narrow(1, 0, 3));
+    let values = f(rotations, x.clone().narrow(1, 3, 3));
+    let grads = values.clone().sum().backward();
+    (host(values), host(x.grad(&grads).unwrap()))
+}
+
+#[test]
+fn host_forms_of_upright_and_prior_match_their_tensor_forms() {
+    let mut rng = Rng(0x7e57);
+    let o = [0.4, -0.3, 1.1];
+    let radius = 1.0;
+    let epsilon = 0.1; // large, so the guard's terms count in the comparison
+    let mut poses = Vec::new();
+    for b in 0..8 {
+        // Both branches of Rodrigues: |ω| ≈ 0.05 for the first two samples, up to ≈ 2.5 after.
+        let scale = if b < 2 { 0.03 } else { 1.4 };
+        poses.push(std::array::from_fn(|k| {
+            rng.next() * if k < 3 { scale } else { 3.0 }
+        }));
+    }
+    poses.push([0.2, 1.0, -0.4, o[0] + 0.2, o[1] - 0.2, o[2] + 0.1]); // inside the radius
+    let up = {
+        let u = DVec3::new(0.2, -0.9, 0.3).normalize();
+        [u.x, u.y, u.z]
+    };
+    let device = Device::flex().autodiff();
+    let row =
+        |v: [f64; 3]| poses_tensor(&[[v[0], v[1], v[2], 0.0, 0.0, 0.0]], &device).narrow(1, 0, 3);
+    let compare = |name: &str,
+                   host_form: &dyn Fn(&[f64; 6]) -> (f64, [f64; 6]),
+                   want: (Vec<f64>, Vec<f64>)| {
+        for (b, pose) in poses.iter().enumerate() {
+            let (value, gradient) = host_form(pose);
+            assert!(
+                (value - want.0[b]).abs() <= 1e-12 * want.0[b].abs().max(1.0),
+                "{name}, sample {b}: value {value} vs {}",
+                want.0[b]
+            );
+            for k in 0..6 {
+                let w = want.1[b * 6 + k];
+                assert!(
+                    (gradient[k] - w).abs() <= 1e-10 * w.abs().max(1.0),
+                    "{name}, sample {b}, Φ[{k}]: {} vs {w}",
+                    gradient[k]
+                );
+            }
+        }
+    };
+    for mode in [UprightMode::UpVector, UprightMode::Roll] {
+        let want = tensor_form(&poses, |r, _| upright(r, row(up), mode));
+        compare(
+            &format!("upright {mode:?}"),
+            &|p| upright_on_host(p, up, mode),
+            want,
+        );
+    }
+    let want = tensor_form(&poses, |r, c| prior(r, c, row(o), radius, epsilon));
+    compare("prior", &|p| prior_on_host(p, o, radius, epsilon), want);
 }
 
 /// Row-major H×W mask with 1 inside columns `xs` and rows `ys`.

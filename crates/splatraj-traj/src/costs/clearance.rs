@@ -22,10 +22,11 @@
 //! poses) it sees the sampled poses. It batches windows: on a joined path (every window's
 //! stretch, [`super::PathSamples::joined`]) it returns each stretch's mean `[W]`.
 
-use burn::tensor::{Tensor, TensorData};
+use burn::tensor::Tensor;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
+use super::expansion::{PoseGradients, expansion_at};
 use super::{Cost, CostDomain, CostError, CostInputs, OrAuto, check_weight, invalid};
 use crate::clearance::OccupancySpec;
 
@@ -54,6 +55,24 @@ pub fn clearance(
         .clamp_min(0.0)
         .div_scalar(margin)
         .square()
+}
+
+/// [`clearance`] of one camera centre `c` on the host in f64, with its gradient in `c`: what
+/// the cost evaluates; the tensor form is its specification.
+pub fn clearance_on_host(
+    c: DVec3,
+    surface_point: DVec3,
+    normal: DVec3,
+    margin: f64,
+) -> (f64, [f64; 3]) {
+    let gap = margin - (c - surface_point).dot(normal);
+    // The clamp passes the gradient on its bound too (burn's clamp_min).
+    if gap < 0.0 {
+        return (0.0, [0.0; 3]);
+    }
+    let value = (gap / margin).powi(2);
+    let gradient = normal * (-2.0 * gap / (margin * margin));
+    (value, gradient.to_array())
 }
 
 /// The clearance cost: table `[costs.clearance]`, keys `weight` (default 1), `margin` (scene
@@ -195,41 +214,54 @@ impl Cost for ClearanceCost {
     fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
         let occupancy = inputs.require_occupancy(self.name())?;
         let margin = self.margin()?;
-        let poses = inputs.path_or_sample_poses();
-        let [batch, _] = poses.dims();
-        let centres = poses.narrow(1, 3, 3); // [ΣP, 3]
+        // On the host (the nearest surface is found there anyway; docs/gpu.md, "Costs on the
+        // host"): each pose's value and its gradient in the camera centre [ΣP] or [B].
         let host = inputs.host_path_or_sample_poses(self.name())?;
-        let mut points = Vec::with_capacity(3 * batch);
-        let mut normals = Vec::with_capacity(3 * batch);
-        for pose in &host {
-            let c = DVec3::new(pose[3], pose[4], pose[5]);
-            match occupancy.nearest_within(c, margin) {
-                Some(contact) if contact.surface.distance < margin => {
-                    points.extend(contact.surface.point.to_array());
-                    normals.extend(contact.surface.normal.to_array());
+        let rows: Vec<(f64, [f64; 3])> = host
+            .iter()
+            .map(|pose| {
+                let c = DVec3::new(pose[3], pose[4], pose[5]);
+                match occupancy.nearest_within(c, margin) {
+                    Some(contact) if contact.surface.distance < margin => {
+                        clearance_on_host(c, contact.surface.point, contact.surface.normal, margin)
+                    }
+                    // Clear of everything: 0 and no gradient.
+                    _ => (0.0, [0.0; 3]),
                 }
-                // Clear of everything: a zero normal and a point at the margin give 0 and no
-                // gradient.
-                _ => {
-                    points.extend([0.0; 3]);
-                    normals.extend([0.0; 3]);
-                }
-            }
-        }
-        let device = (&centres.device(), centres.dtype());
-        let tensor = |v: Vec<f64>| Tensor::<2>::from_data(TensorData::new(v, [batch, 3]), device);
-        // With a zero normal d = 0 < m: shift those rows' distance to the margin instead.
-        let value = clearance(centres, tensor(points), tensor(normals.clone()), margin);
-        let clear: Vec<f64> = normals
-            .chunks_exact(3)
-            .map(|n| if n == [0.0; 3] { 0.0 } else { 1.0 })
+            })
             .collect();
-        let keep = Tensor::<1>::from_data(TensorData::new(clear, [batch]), device);
-        let value = value * keep; // [ΣP], or per sample [B] without a path
-        Ok(match inputs.path() {
+        let with_centre =
+            |g: [f64; 3], scale: f64| [0.0, 0.0, 0.0, g[0] * scale, g[1] * scale, g[2] * scale];
+        let (values, gradients) = match inputs.path() {
             // Its mean per window's stretch [W] (the mean of a window's own path [1]).
-            Some(path) => path.stretch_means(value, 0, 1),
-            None => value,
-        })
+            Some(path) => {
+                let count = rows.len();
+                let windows = path.stretches().len();
+                let mut values = Vec::with_capacity(windows);
+                let mut gradients = vec![0.0; windows * count * 6]; // [W, ΣP·6]
+                let mut start = 0;
+                for (w, s) in path.stretches().iter().enumerate() {
+                    let own = &rows[start..start + s.rows];
+                    let share = 1.0 / s.rows.max(1) as f64;
+                    values.push(own.iter().map(|r| r.0).sum::<f64>() * share);
+                    for (k, (_, g)) in own.iter().enumerate() {
+                        let at = (w * count + start + k) * 6;
+                        gradients[at..at + 6].copy_from_slice(&with_centre(*g, share));
+                    }
+                    start += s.rows;
+                }
+                (values, PoseGradients::AllPoses(gradients))
+            }
+            None => (
+                rows.iter().map(|r| r.0).collect(),
+                PoseGradients::OwnPose(rows.iter().flat_map(|r| with_centre(r.1, 1.0)).collect()),
+            ),
+        };
+        Ok(expansion_at(
+            &inputs.path_or_sample_poses(),
+            &host,
+            values,
+            gradients,
+        ))
     }
 }

@@ -20,15 +20,25 @@
 
 use burn::tensor::{Tensor, TensorData};
 
+/// The gradients of host values in the poses, by which poses each value reads.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PoseGradients {
+    /// Value b reads pose b alone (a cost per sample): its gradient `[B, 6]`.
+    OwnPose(Vec<f64>),
+    /// Each value may read every pose (a cost per window's stretch of path): value w's
+    /// gradient in all of them `[W, P·6]`, pose after pose.
+    AllPoses(Vec<f64>),
+}
+
 /// `values` `[W]` (each computed on the host at the poses `at` `[P]`) as a graph value of
-/// `poses` `[P, 6]`: `values + G·(poses − at)` `[W]`, with `gradients` `[W, P·6]` (row w:
-/// ∂value_w/∂Φ, pose after pose, ω then c) as G. `at` must be the values of `poses` (read from
-/// them): then the result is `values` and its gradient in `poses` is G.
+/// `poses` `[P, 6]`: `values + G·(poses − at)` `[W]`, G the `gradients` (ω then c in each
+/// pose's six). `at` must be the values of `poses` (read from them): then the result is
+/// `values` and its gradient in `poses` is G.
 pub fn expansion_at(
     poses: &Tensor<2>,
     at: &[[f64; 6]],
     values: Vec<f64>,
-    gradients: Vec<f64>,
+    gradients: PoseGradients,
 ) -> Tensor<1> {
     let [count, _] = poses.dims();
     let windows = values.len();
@@ -37,20 +47,33 @@ pub fn expansion_at(
         count,
         "the host values of another number of poses"
     );
-    assert_eq!(
-        gradients.len(),
-        windows * count * 6,
-        "a gradient row per value, six numbers per pose"
-    );
     let device = (&poses.device(), poses.dtype());
     let at = Tensor::<2>::from_data(
         TensorData::new(at.iter().flatten().copied().collect(), [count, 6]),
         device,
     );
-    let gradients =
-        Tensor::<2>::from_data(TensorData::new(gradients, [windows, count * 6]), device);
     let values = Tensor::<1>::from_data(TensorData::new(values, [windows]), device);
-    // [P·6, 1]: zero in the forward (the poses are `at`), G's weights in the backward.
-    let shift = (poses.clone() - at).reshape([count * 6, 1]);
-    values + gradients.matmul(shift).reshape([windows])
+    // Zero in the forward (the poses are `at`); G's weights in the backward.
+    let shift = poses.clone() - at; // [P, 6]
+    match gradients {
+        PoseGradients::OwnPose(gradients) => {
+            assert_eq!(windows, count, "a value per pose");
+            assert_eq!(gradients.len(), count * 6, "six numbers per pose");
+            let gradients = Tensor::<2>::from_data(TensorData::new(gradients, [count, 6]), device);
+            values + (shift * gradients).sum_dim(1).reshape([count])
+        }
+        PoseGradients::AllPoses(gradients) => {
+            assert_eq!(
+                gradients.len(),
+                windows * count * 6,
+                "a gradient row per value, six numbers per pose"
+            );
+            let gradients =
+                Tensor::<2>::from_data(TensorData::new(gradients, [windows, count * 6]), device);
+            values
+                + gradients
+                    .matmul(shift.reshape([count * 6, 1]))
+                    .reshape([windows])
+        }
+    }
 }

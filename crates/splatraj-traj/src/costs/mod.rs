@@ -71,21 +71,21 @@ pub use auto::OrAuto;
 pub use clearance::{
     ClearanceCost, DEFAULT_CLEARANCE_SIGMA, DEFAULT_MIN_OPACITY, auto_margin, clearance,
 };
-pub use expansion::expansion_at;
+pub use expansion::{PoseGradients, expansion_at};
 pub use iou::{
     IOU_THRESHOLD, PixelBox, bbox_iou, bbox_iou_batch, box_from_hits, box_iou, mask_box, mask_hits,
 };
 pub use moments::MaskMoments;
 pub use motion::{MotionCost, auto_max_speed};
 pub use path::{PathSamples, PathStretch, PerRow};
-pub use prior::{PRIOR_EPSILON_FRACTION, PriorCost, default_prior_radius, prior};
+pub use prior::{PRIOR_EPSILON_FRACTION, PriorCost, default_prior_radius, prior, prior_on_host};
 pub use registry::{CostConfig, CostRegistry};
 pub use shot::ShotCost;
 pub use tce::{
     MASS_FLOOR, NORM_EPSILON, TceCost, centroid_offset, centroid_offset_of, tce, tce_of,
 };
 pub use tre::{DEFAULT_TARGET_RATIO, TreCost, coverage, tre, tre_of};
-pub use upright::{UprightCost, UprightMode, upright};
+pub use upright::{UprightCost, UprightMode, upright, upright_on_host};
 pub use visibility::{VisibilityCost, hidden_share, hidden_share_of};
 
 /// Prefix of every config key named in errors: the costs live in the config's `[costs]` table.
@@ -223,6 +223,19 @@ pub struct CostInputs {
     contexts: Option<std::sync::Arc<[QueryContext]>>,
 }
 
+/// The values of poses `[P, 6]` read from the device, a failure naming `cost`.
+fn read_poses(poses: Tensor<2>, cost: &'static str) -> Result<Vec<[f64; 6]>, CostError> {
+    let values =
+        splatraj_render::host::to_host(poses.detach()).map_err(|e| CostError::ReadBack {
+            cost,
+            reason: e.to_string(),
+        })?;
+    Ok(values
+        .chunks_exact(6)
+        .map(|p| std::array::from_fn(|i| p[i]))
+        .collect())
+}
+
 /// The values of the poses a cost reads, already on the host (read once per optimisation
 /// step), so that a cost that needs them there (clearance looks the camera up in the scene's
 /// geometry) does not read them back again.
@@ -344,6 +357,14 @@ impl CostInputs {
         }
     }
 
+    /// Sample b's context (the query's, unless the batch spans several windows).
+    pub fn sample_context(&self, b: usize) -> &QueryContext {
+        match &self.contexts {
+            None => &self.query,
+            Some(each) => &each[b],
+        }
+    }
+
     /// `f` of each sample's context as rows on the poses' device: `[1, K]` when every sample
     /// shares one context (it broadcasts), else `[B, K]` (one upload either way).
     pub fn context_rows<const K: usize>(&self, f: impl Fn(&QueryContext) -> [f64; K]) -> Tensor<2> {
@@ -381,20 +402,19 @@ impl CostInputs {
         &self,
         cost: &'static str,
     ) -> Result<Vec<[f64; 6]>, CostError> {
-        if let Some(poses) = self.path_or_sample_host_poses() {
-            return Ok(poses.to_vec());
+        match self.path_or_sample_host_poses() {
+            Some(poses) => Ok(poses.to_vec()),
+            None => read_poses(self.path_or_sample_poses(), cost),
         }
-        let values =
-            splatraj_render::host::to_host(self.path_or_sample_poses().detach()).map_err(|e| {
-                CostError::ReadBack {
-                    cost,
-                    reason: e.to_string(),
-                }
-            })?;
-        Ok(values
-            .chunks_exact(6)
-            .map(|p| std::array::from_fn(|i| p[i]))
-            .collect())
+    }
+
+    /// The host values of the sampled poses [`CostInputs::poses`], as
+    /// [`CostInputs::host_path_or_sample_poses`] gets them.
+    pub fn host_sample_poses(&self, cost: &'static str) -> Result<Vec<[f64; 6]>, CostError> {
+        match &self.host_poses {
+            Some(host) => Ok(host.samples.clone()),
+            None => read_poses(self.poses.clone(), cost),
+        }
     }
 
     /// Adds the object's mask rendered alone `[B, H, W]`.

@@ -39,7 +39,7 @@
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::expansion::expansion_at;
+use super::expansion::{PoseGradients, expansion_at};
 use super::motion_rates::{MotionLimits, Stretch, stretch_charge};
 use super::{Cost, CostDomain, CostError, CostInputs, OrAuto, check_weight, invalid};
 
@@ -243,6 +243,11 @@ impl Cost for MotionCost {
             row.copy_from_slice(gradient.as_flattened());
             start += s.rows;
         }
-        Ok(expansion_at(&path.poses, &host, values, gradients))
+        Ok(expansion_at(
+            &path.poses,
+            &host,
+            values,
+            PoseGradients::AllPoses(gradients),
+        ))
     }
 }

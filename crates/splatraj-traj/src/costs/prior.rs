@@ -25,6 +25,9 @@
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
+use splatraj_render::rodrigues::Rotation;
+
+use super::expansion::{PoseGradients, expansion_at};
 use super::{Cost, CostError, CostInputs, ImageChannel, check_weight, invalid};
 
 /// ε of the guarded distance √(‖o − c‖² + ε²), as a fraction of the prior radius r.
@@ -62,6 +65,45 @@ pub fn prior_per_sample(rotations: Tensor<3>, centres: Tensor<2>, rows: Tensor<2
     let distance = (to_object.clone().square().sum_dim(1) + rows.narrow(1, 4, 1)).sqrt();
     let alignment = (forward * to_object).sum_dim(1) / distance.clone();
     (distance.max_pair(radius) - alignment + 1.0).reshape([batch])
+}
+
+/// [`prior`] of one pose on the host in f64, with its gradient in the pose (ω then c): what
+/// the cost evaluates; the tensor forms above are its specification (`tests/cost_terms.rs`).
+pub fn prior_on_host(
+    pose: &[f64; 6],
+    object_centre: [f64; 3],
+    radius: f64,
+    epsilon: f64,
+) -> (f64, [f64; 6]) {
+    let rotation = Rotation::new([pose[0], pose[1], pose[2]]);
+    let forward: [f64; 3] = std::array::from_fn(|i| rotation.matrix[i][2]); // z_cam
+    let to_object: [f64; 3] = std::array::from_fn(|i| object_centre[i] - pose[3 + i]); // o − c
+    let dot = |a: [f64; 3], b: [f64; 3]| (0..3).map(|i| a[i] * b[i]).sum::<f64>();
+    let distance = (dot(to_object, to_object) + epsilon * epsilon).sqrt();
+    let aim = dot(forward, to_object);
+    let alignment = aim / distance;
+    // The clamp passes the gradient on its bound too (burn's clamp_min).
+    let pulls = distance >= radius;
+    let value = distance.max(radius) - alignment + 1.0;
+    // d/d(o − c): the distance term t/d where it pulls, minus the alignment's z/d − (z·t)t/d³.
+    let v_to_object: [f64; 3] = std::array::from_fn(|i| {
+        let pull = if pulls { to_object[i] / distance } else { 0.0 };
+        pull - forward[i] / distance + aim * to_object[i] / distance.powi(3)
+    });
+    let mut v_matrix = [[0.0; 3]; 3];
+    for (i, row) in v_matrix.iter_mut().enumerate() {
+        row[2] = -to_object[i] / distance;
+    }
+    let v_omega = rotation.omega_gradient(&v_matrix);
+    let gradient = [
+        v_omega[0],
+        v_omega[1],
+        v_omega[2],
+        -v_to_object[0],
+        -v_to_object[1],
+        -v_to_object[2],
+    ];
+    (value, gradient)
 }
 
 /// Default prior radius: the distance at which an object of axis-aligned extent `extent`
@@ -193,26 +235,27 @@ impl Cost for PriorCost {
         Ok(())
     }
     fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
-        if let Some(query) = inputs.single_query() {
+        // On the host, per sample (docs/gpu.md, "Costs on the host").
+        let host = inputs.host_sample_poses(self.name())?;
+        let mut values = Vec::with_capacity(host.len());
+        let mut gradients = Vec::with_capacity(6 * host.len());
+        for (b, pose) in host.iter().enumerate() {
+            let query = inputs.sample_context(b);
             let radius = self.radius.unwrap_or(query.prior_radius);
-            return Ok(prior(
-                inputs.rotations().clone(),
-                inputs.centres(),
-                inputs.row(query.object_centre),
+            let (value, gradient) = prior_on_host(
+                pose,
+                query.object_centre,
                 radius,
                 PRIOR_EPSILON_FRACTION * radius,
-            ));
+            );
+            values.push(value);
+            gradients.extend(gradient);
         }
-        // Several windows: each sample's object, radius and ε² as a row (one upload).
-        let rows = inputs.context_rows(|q| {
-            let radius = self.radius.unwrap_or(q.prior_radius);
-            let [x, y, z] = q.object_centre;
-            [x, y, z, radius, (PRIOR_EPSILON_FRACTION * radius).powi(2)]
-        }); // [B, 5]
-        Ok(prior_per_sample(
-            inputs.rotations().clone(),
-            inputs.centres(),
-            rows,
+        Ok(expansion_at(
+            inputs.poses(),
+            &host,
+            values,
+            PoseGradients::OwnPose(gradients),
         ))
     }
 }

@@ -18,7 +18,10 @@
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostError, CostInputs, ImageChannel, QueryContext, check_weight};
+use splatraj_render::rodrigues::Rotation;
+
+use super::expansion::{PoseGradients, expansion_at};
+use super::{Cost, CostError, CostInputs, ImageChannel, check_weight};
 
 /// Which uprightness cost (config `mode`, kebab-case).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -43,6 +46,29 @@ pub fn upright(rotations: Tensor<3>, unit_up: Tensor<2>, mode: UprightMode) -> T
             .add_scalar(1.0),
         UprightMode::Roll => (column(0) * unit_up).sum_dim(1).reshape([batch]).square(),
     }
+}
+
+/// [`upright`] of one pose on the host in f64, with its gradient in the pose (ω then c, the
+/// centre's 0): what the cost evaluates; the tensor form is its specification
+/// (`tests/cost_terms.rs`).
+pub fn upright_on_host(pose: &[f64; 6], unit_up: [f64; 3], mode: UprightMode) -> (f64, [f64; 6]) {
+    let rotation = Rotation::new([pose[0], pose[1], pose[2]]);
+    let along = |axis: usize| {
+        (0..3)
+            .map(|i| rotation.matrix[i][axis] * unit_up[i])
+            .sum::<f64>()
+    };
+    // d value/d(camera axis) = scale · up, on that axis's column of R.
+    let (value, axis, scale) = match mode {
+        UprightMode::UpVector => (along(1) + 1.0, 1, 1.0),
+        UprightMode::Roll => (along(0).powi(2), 0, 2.0 * along(0)),
+    };
+    let mut v_matrix = [[0.0; 3]; 3];
+    for (i, row) in v_matrix.iter_mut().enumerate() {
+        row[axis] = scale * unit_up[i];
+    }
+    let v_omega = rotation.omega_gradient(&v_matrix);
+    (value, [v_omega[0], v_omega[1], v_omega[2], 0.0, 0.0, 0.0])
 }
 
 /// Uprightness as a [`Cost`]: table `[costs.upright]`, keys `weight` (default 1) and `mode`
@@ -83,7 +109,21 @@ impl Cost for UprightCost {
         check_weight(self.name(), "weight", self.weight)
     }
     fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
-        let up = inputs.context_rows(QueryContext::unit_up); // [1 or B, 3]
-        Ok(upright(inputs.rotations().clone(), up, self.mode))
+        // On the host, per sample (docs/gpu.md, "Costs on the host").
+        let host = inputs.host_sample_poses(self.name())?;
+        let mut values = Vec::with_capacity(host.len());
+        let mut gradients = Vec::with_capacity(6 * host.len());
+        for (b, pose) in host.iter().enumerate() {
+            let up = inputs.sample_context(b).unit_up();
+            let (value, gradient) = upright_on_host(pose, up, self.mode);
+            values.push(value);
+            gradients.extend(gradient);
+        }
+        Ok(expansion_at(
+            inputs.poses(),
+            &host,
+            values,
+            PoseGradients::OwnPose(gradients),
+        ))
     }
 }

@@ -655,6 +655,13 @@ impl<'a> Problem<'a> {
         if let Some(o) = self.occupancy {
             inputs = inputs.with_occupancy(o.clone());
         }
+        // The costs computed on the host read the samples' values from here, not the device.
+        if let Some(hosts) = windows.iter().map(|w| w.host).collect::<Option<Vec<_>>>() {
+            inputs = inputs.with_host_poses(HostPoses {
+                samples: hosts.iter().flat_map(|h| h.samples.clone()).collect(),
+                path: None,
+            });
+        }
         let batched = self.costs.evaluate_where(&inputs, batched_cost)?;
         // The path costs that batch: once, on every window's stretch of path joined.
         let path = self.joined_path(poses.clone(), &windows, step)?;
