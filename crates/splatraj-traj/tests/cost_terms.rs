@@ -272,6 +272,9 @@ fn upright_and_prior_gradients_match_finite_differences() {
     check_gradient(&PriorCost::default(), &poses, query);
 }
 
+/// A host form: one pose's value and its gradient in the pose.
+type HostForm<'a> = &'a dyn Fn(&[f64; 6]) -> (f64, [f64; 6]);
+
 /// Values `[B]` of a tensor form `f(rotations, centres)` at `poses` and the gradient of their
 /// sum in the poses, by autodiff in f64 (Rodrigues as tensor ops).
 fn tensor_form(
@@ -308,9 +311,7 @@ fn host_forms_of_upright_and_prior_match_their_tensor_forms() {
     let device = Device::flex().autodiff();
     let row =
         |v: [f64; 3]| poses_tensor(&[[v[0], v[1], v[2], 0.0, 0.0, 0.0]], &device).narrow(1, 0, 3);
-    let compare = |name: &str,
-                   host_form: &dyn Fn(&[f64; 6]) -> (f64, [f64; 6]),
-                   want: (Vec<f64>, Vec<f64>)| {
+    let compare = |name: &str, host_form: HostForm, want: (Vec<f64>, Vec<f64>)| {
         for (b, pose) in poses.iter().enumerate() {
             let (value, gradient) = host_form(pose);
             assert!(
@@ -318,12 +319,10 @@ fn host_forms_of_upright_and_prior_match_their_tensor_forms() {
                 "{name}, sample {b}: value {value} vs {}",
                 want.0[b]
             );
-            for k in 0..6 {
-                let w = want.1[b * 6 + k];
+            for (k, (g, w)) in gradient.iter().zip(&want.1[b * 6..b * 6 + 6]).enumerate() {
                 assert!(
-                    (gradient[k] - w).abs() <= 1e-10 * w.abs().max(1.0),
-                    "{name}, sample {b}, Φ[{k}]: {} vs {w}",
-                    gradient[k]
+                    (g - w).abs() <= 1e-10 * w.abs().max(1.0),
+                    "{name}, sample {b}, Φ[{k}]: {g} vs {w}"
                 );
             }
         }
