@@ -582,7 +582,9 @@ impl<'a> Problem<'a> {
 
     /// Renders what the costs read for the samples of several windows and evaluates their
     /// costs at step `step`: `poses` `[ΣS, 6]` holds the windows' samples one window after
-    /// the other, as `windows` lists them; the result is the step's loss (the mean over the
+    /// the other, as `windows` lists them, optionally followed by every window's path in the
+    /// same order `[ΣS + ΣP, 6]` (the rows the windows' `path` tensors are slices of: the
+    /// joined path is then one slice); the result is the step's loss (the mean over the
     /// windows of each window's mean weighted total) and each window's term means.
     ///
     /// With [`StepPasses::Shared`] one render call serves the whole step (each window's
@@ -603,12 +605,31 @@ impl<'a> Problem<'a> {
     ) -> Result<StepEvaluation, OptimiseError> {
         let [rows, _] = poses.dims();
         let total: usize = windows.iter().map(|w| w.count).sum();
-        if total != rows {
-            return Err(OptimiseError::InvalidOptions {
-                field: "windows",
-                reason: format!("the windows' samples add up to {total}, the poses to {rows}"),
-            });
-        }
+        let path_rows: Option<usize> = windows
+            .iter()
+            .map(|w| w.path.as_ref().map(|(p, _)| p.dims()[0]))
+            .sum();
+        // The samples alone, or the samples then every window's path: the joined path is
+        // then one slice of the caller's rows, not the windows' paths cut out and joined
+        // again (on a GPU ~12 launches a step less, most of them in the backward).
+        let (poses, joined) = match path_rows {
+            _ if rows == total => (poses, None),
+            Some(path_rows) if rows == total + path_rows => (
+                poses.clone().narrow(0, 0, total),
+                Some(poses.narrow(0, total, path_rows)),
+            ),
+            _ => {
+                return Err(OptimiseError::InvalidOptions {
+                    field: "windows",
+                    reason: format!(
+                        "the windows' samples add up to {total} (and their paths to {}), the \
+                         poses to {rows}",
+                        path_rows.unwrap_or(0)
+                    ),
+                });
+            }
+        };
+        let rows = total;
         if let Some(w) = windows.iter().find(|w| w.window >= self.windows.len()) {
             return Err(OptimiseError::InvalidOptions {
                 field: "window",
@@ -664,7 +685,7 @@ impl<'a> Problem<'a> {
         }
         let batched = self.costs.evaluate_where(&inputs, batched_cost)?;
         // The path costs that batch: once, on every window's stretch of path joined.
-        let path = self.joined_path(poses.clone(), &windows, step)?;
+        let path = self.joined_path(poses.clone(), joined, &windows, step)?;
         let batched_path =
             |c: &dyn Cost| path.is_some() && c.batches_windows() && c.domain() == CostDomain::Path;
         let path_terms = match &path {
@@ -702,12 +723,13 @@ impl<'a> Problem<'a> {
     }
 
     /// The inputs of the path costs that batch in a shared step: the samples `poses` and every
-    /// window's stretch of path joined `[ΣP, 6]` (each with its context and time step), their
+    /// window's stretch of path joined `[ΣP, 6]` (`joined`, when the caller's rows hold it) (each with its context and time step), their
     /// host values when every window has them; None when a window has no path (the path
     /// costs then judge each window's samples, per window).
     fn joined_path(
         &self,
         poses: Tensor<2>,
+        joined: Option<Tensor<2>>,
         windows: &[WindowSamples<'_>],
         step: usize,
     ) -> Result<Option<CostInputs>, OptimiseError> {
@@ -731,7 +753,8 @@ impl<'a> Problem<'a> {
                 context: self.windows[w.window].context,
             })
             .collect();
-        let joined = Tensor::cat(paths.into_iter().map(|(p, _)| p).collect(), 0); // [ΣP, 6]
+        let joined =
+            joined.unwrap_or_else(|| Tensor::cat(paths.into_iter().map(|(p, _)| p).collect(), 0)); // [ΣP, 6]
         let first = self.windows[windows[0].window].context;
         let mut inputs = CostInputs::new(poses, None, step, first)?.with_path(PathSamples::joined(
             joined,

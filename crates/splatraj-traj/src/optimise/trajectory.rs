@@ -355,7 +355,6 @@ pub fn optimise_trajectory(
         }
 
         // Every window's samples together: one render call a step on a GPU (`StepPasses`).
-        let samples: usize = host.windows.iter().map(|w| w.samples.1).sum();
         let window_samples: Vec<WindowSamples> = host
             .windows
             .iter()
@@ -377,14 +376,9 @@ pub fn optimise_trajectory(
                 }),
             })
             .collect();
-        let [rows, _] = poses.dims();
-        let sample_poses = if samples == rows {
-            poses.clone()
-        } else {
-            poses.clone().narrow(0, 0, samples)
-        };
+        // The samples, then the paths: the joined path is one slice of these rows.
         let evaluated =
-            problem.evaluate_windows(sample_poses, window_samples, step, renders.as_ref())?;
+            problem.evaluate_windows(poses.clone(), window_samples, step, renders.as_ref())?;
         // A shared call the device could not hold is not tried again.
         problem = problem.with_step_passes(evaluated.passes);
         let StepEvaluation {
