@@ -3,7 +3,11 @@
 //! cost's orbit limit on a circle too) against closed forms and f64 finite differences, a camera inside geometry pushed out, and a speed
 //! limit that holds on the densely sampled path.
 
-use burn::tensor::{DType, Device, Tensor, TensorData};
+mod common;
+
+use common::{host, poses_tensor};
+
+use burn::tensor::{DType, Device, Tensor};
 use glam::{DMat3, DQuat, DVec3};
 use splatraj_render::camera::Pose;
 use splatraj_render::render::DeviceScene;
@@ -205,18 +209,6 @@ fn the_index_finds_the_same_nearest_surface_as_a_scan_and_the_same_clear_points(
             }
         }
     }
-}
-
-fn poses_tensor(poses: &[[f64; 6]], device: &Device) -> Tensor<2> {
-    let flat: Vec<f64> = poses.iter().flatten().copied().collect();
-    Tensor::from_data(
-        TensorData::new(flat, [poses.len(), 6]),
-        (device, DType::F64),
-    )
-}
-
-fn host<const D: usize>(t: Tensor<D>) -> Vec<f64> {
-    t.into_data().convert::<f64>().try_to_vec::<f64>().unwrap()
 }
 
 /// Σ of the cost's values and its gradient in the poses, f64 on flex.

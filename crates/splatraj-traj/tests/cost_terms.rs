@@ -3,6 +3,10 @@
 //! and validation, and the weighted sum; the host forms the costs evaluate against the tensor
 //! forms (autodiff, f64).
 
+mod common;
+
+use common::{host, poses_tensor};
+
 use burn::tensor::{DType, Device, Tensor, TensorData};
 use glam::{DMat3, DVec3};
 use splatraj_render::camera::Pose;
@@ -22,18 +26,6 @@ fn context(object_centre: [f64; 3], prior_radius: f64, world_up: [f64; 3]) -> Qu
         world_up,
         target_ratio: 0.15,
     }
-}
-
-fn poses_tensor(poses: &[[f64; 6]], device: &Device) -> Tensor<2> {
-    let flat: Vec<f64> = poses.iter().flatten().copied().collect();
-    Tensor::from_data(
-        TensorData::new(flat, [poses.len(), 6]),
-        (device, DType::F64),
-    )
-}
-
-fn host<const D: usize>(t: Tensor<D>) -> Vec<f64> {
-    t.into_data().convert::<f64>().try_to_vec::<f64>().unwrap()
 }
 
 /// Unweighted cost values `[B]` of `cost` at `poses`, no masks, step 0, f64 on flex.

@@ -4,6 +4,10 @@
 //! flex, several stretches with their own time steps and object centres, one too short to be
 //! charged, every limit active somewhere.
 
+mod common;
+
+use common::{host, poses_tensor};
+
 use burn::tensor::{DType, Device, Tensor, TensorData};
 use splatraj_traj::costs::{
     Cost, CostInputs, HostPoses, MotionCost, PathSamples, PathStretch, QueryContext,
@@ -137,18 +141,6 @@ fn joined_path() -> (Vec<[f64; 6]>, Vec<PathStretch>) {
     (poses, stretches)
 }
 
-fn tensor_of(poses: &[[f64; 6]], device: &Device) -> Tensor<2> {
-    let flat: Vec<f64> = poses.iter().flatten().copied().collect();
-    Tensor::from_data(
-        TensorData::new(flat, [poses.len(), 6]),
-        (device, DType::F64),
-    )
-}
-
-fn host<const D: usize>(t: Tensor<D>) -> Vec<f64> {
-    t.into_data().convert::<f64>().try_to_vec::<f64>().unwrap()
-}
-
 /// Per-window values and the gradient of Σ_w (w + 1)·value_w in the poses (distinct weights,
 /// so a gradient landing in the wrong window shows).
 fn value_and_gradient(
@@ -156,7 +148,7 @@ fn value_and_gradient(
     evaluate: impl Fn(Tensor<2>) -> Tensor<1>,
 ) -> (Vec<f64>, Vec<f64>) {
     let device = Device::flex().autodiff();
-    let tensor = tensor_of(poses, &device).require_grad();
+    let tensor = poses_tensor(poses, &device).require_grad();
     let values = evaluate(tensor.clone());
     let [windows] = values.dims();
     let weights = Tensor::<1>::from_data(
@@ -239,7 +231,7 @@ fn host_motion_cost_carries_its_gradient_back_through_what_made_the_poses() {
     };
     let device = Device::flex().autodiff();
     let parameters: Vec<[f64; 6]> = poses.iter().map(|p| p.map(|v| (v - 1.0) / 2.0)).collect();
-    let theta = tensor_of(&parameters, &device).require_grad();
+    let theta = poses_tensor(&parameters, &device).require_grad();
     let made = theta.clone().mul_scalar(2.0).add_scalar(1.0);
     let path = PathSamples::joined(made.clone(), stretches.clone(), Some(4.0)).unwrap();
     let inputs = CostInputs::new(made, None, 0, stretches[0].context)

@@ -20,6 +20,8 @@
 
 use burn::tensor::{Tensor, TensorData};
 
+use super::{CostError, CostInputs, QueryContext};
+
 /// The gradients of host values in the poses, by which poses each value reads.
 #[derive(Debug, Clone, PartialEq)]
 pub enum PoseGradients {
@@ -76,4 +78,28 @@ pub fn expansion_at(
                     .reshape([windows])
         }
     }
+}
+
+/// A cost per sample computed on the host: `form(pose, context)` gives one sample's value and
+/// its gradient in its own pose (ω then c); the samples' host values come with `inputs` (read
+/// here when the caller has not, a failure naming `cost`). `[B]`, as [`expansion_at`] joins it.
+pub fn per_sample_on_host(
+    inputs: &CostInputs,
+    cost: &'static str,
+    form: impl Fn(&[f64; 6], &QueryContext) -> (f64, [f64; 6]),
+) -> Result<Tensor<1>, CostError> {
+    let host = inputs.host_sample_poses(cost)?;
+    let mut values = Vec::with_capacity(host.len());
+    let mut gradients = Vec::with_capacity(6 * host.len());
+    for (b, pose) in host.iter().enumerate() {
+        let (value, gradient) = form(pose, inputs.sample_context(b));
+        values.push(value);
+        gradients.extend(gradient);
+    }
+    Ok(expansion_at(
+        inputs.poses(),
+        &host,
+        values,
+        PoseGradients::OwnPose(gradients),
+    ))
 }

@@ -71,7 +71,7 @@ pub use auto::OrAuto;
 pub use clearance::{
     ClearanceCost, DEFAULT_CLEARANCE_SIGMA, DEFAULT_MIN_OPACITY, auto_margin, clearance,
 };
-pub use expansion::{PoseGradients, expansion_at};
+pub use expansion::{PoseGradients, expansion_at, per_sample_on_host};
 pub use iou::{
     IOU_THRESHOLD, PixelBox, bbox_iou, bbox_iou_batch, box_from_hits, box_iou, mask_box, mask_hits,
 };

@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 
 use splatraj_render::rodrigues::Rotation;
 
-use super::expansion::{PoseGradients, expansion_at};
+use super::expansion::per_sample_on_host;
 use super::{Cost, CostError, CostInputs, ImageChannel, check_weight, invalid};
 
 /// ε of the guarded distance √(‖o − c‖² + ε²), as a fraction of the prior radius r.
@@ -235,27 +235,15 @@ impl Cost for PriorCost {
         Ok(())
     }
     fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
-        // On the host, per sample (docs/gpu.md, "Costs on the host").
-        let host = inputs.host_sample_poses(self.name())?;
-        let mut values = Vec::with_capacity(host.len());
-        let mut gradients = Vec::with_capacity(6 * host.len());
-        for (b, pose) in host.iter().enumerate() {
-            let query = inputs.sample_context(b);
+        // On the host (docs/gpu.md, "Costs on the host").
+        per_sample_on_host(inputs, self.name(), |pose, query| {
             let radius = self.radius.unwrap_or(query.prior_radius);
-            let (value, gradient) = prior_on_host(
+            prior_on_host(
                 pose,
                 query.object_centre,
                 radius,
                 PRIOR_EPSILON_FRACTION * radius,
-            );
-            values.push(value);
-            gradients.extend(gradient);
-        }
-        Ok(expansion_at(
-            inputs.poses(),
-            &host,
-            values,
-            PoseGradients::OwnPose(gradients),
-        ))
+            )
+        })
     }
 }

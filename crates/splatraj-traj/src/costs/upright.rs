@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 
 use splatraj_render::rodrigues::Rotation;
 
-use super::expansion::{PoseGradients, expansion_at};
+use super::expansion::per_sample_on_host;
 use super::{Cost, CostError, CostInputs, ImageChannel, check_weight};
 
 /// Which uprightness cost (config `mode`, kebab-case).
@@ -109,21 +109,9 @@ impl Cost for UprightCost {
         check_weight(self.name(), "weight", self.weight)
     }
     fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
-        // On the host, per sample (docs/gpu.md, "Costs on the host").
-        let host = inputs.host_sample_poses(self.name())?;
-        let mut values = Vec::with_capacity(host.len());
-        let mut gradients = Vec::with_capacity(6 * host.len());
-        for (b, pose) in host.iter().enumerate() {
-            let up = inputs.sample_context(b).unit_up();
-            let (value, gradient) = upright_on_host(pose, up, self.mode);
-            values.push(value);
-            gradients.extend(gradient);
-        }
-        Ok(expansion_at(
-            inputs.poses(),
-            &host,
-            values,
-            PoseGradients::OwnPose(gradients),
-        ))
+        // On the host (docs/gpu.md, "Costs on the host").
+        per_sample_on_host(inputs, self.name(), |pose, query| {
+            upright_on_host(pose, query.unit_up(), self.mode)
+        })
     }
 }

@@ -125,3 +125,17 @@ pub fn host_samples(
         })
         .collect()
 }
+
+/// Poses `[P, 6]` as an f64 tensor on `device`.
+pub fn poses_tensor(poses: &[[f64; 6]], device: &burn::tensor::Device) -> burn::tensor::Tensor<2> {
+    let flat: Vec<f64> = poses.iter().flatten().copied().collect();
+    burn::tensor::Tensor::from_data(
+        burn::tensor::TensorData::new(flat, [poses.len(), 6]),
+        (device, burn::tensor::DType::F64),
+    )
+}
+
+/// A tensor's values on the host, as f64.
+pub fn host<const D: usize>(t: burn::tensor::Tensor<D>) -> Vec<f64> {
+    t.into_data().convert::<f64>().try_to_vec::<f64>().unwrap()
+}
