@@ -2,7 +2,8 @@
 //! the tensor version ([`crate::camera::rotation_matrices`]: a series in θ² below
 //! [`SERIES_BELOW_THETA_SQ`], sin and cos above), so that a hand-written backward agrees with
 //! autodiff of the tensor path to rounding. The fused projection's host kernels and the costs
-//! evaluated on the host (the motion limits' turning rate) take their gradients through it.
+//! computed on the host (the motion limits' turning rate, the prior, uprightness) take their
+//! gradients through it.
 
 use crate::camera::SERIES_BELOW_THETA_SQ;
 

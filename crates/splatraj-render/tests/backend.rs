@@ -557,8 +557,7 @@ fn gpu_projection_matches_host_projection() {
         }
         let (_, grad_host) = run(BackendKind::Flex, &weights);
         let (rows_gpu, grad_gpu) = run(BackendKind::Wgpu, &weights);
-        let norm =
-            assert_gpu_matches_host((&rows_gpu, &grad_gpu), (&rows_host, &grad_host), &in_view);
+        assert_gpu_matches_host((&rows_gpu, &grad_gpu), (&rows_host, &grad_host), &in_view);
         assert_eq!(
             run(BackendKind::Wgpu, &weights),
             (rows_gpu, grad_gpu),

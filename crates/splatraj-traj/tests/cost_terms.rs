@@ -12,9 +12,9 @@ use glam::{DMat3, DVec3};
 use splatraj_render::camera::Pose;
 use splatraj_traj::costs::{
     Cost, CostError, CostInputs, CostsConfig, PriorCost, QueryContext, TceCost, TreCost,
-    UprightCost, UprightMode, WeightedCosts, bbox_iou, bbox_iou_batch, box_from_hits,
-    default_prior_radius, mask_box, mask_hits, prior, prior_on_host, tce, tre, upright,
-    upright_on_host,
+    UprightCost, UprightMode, WeightedCosts, bbox_iou, bbox_iou_batch, box_from_hits, clearance,
+    clearance_on_host, default_prior_radius, mask_box, mask_hits, prior, prior_on_host, tce, tre,
+    upright, upright_on_host,
 };
 
 const Z_UP: [f64; 3] = [0.0, 0.0, 1.0];
@@ -329,6 +329,51 @@ fn host_forms_of_upright_and_prior_match_their_tensor_forms() {
     }
     let want = tensor_form(&poses, |r, c| prior(r, c, row(o), radius, epsilon));
     compare("prior", &|p| prior_on_host(p, o, radius, epsilon), want);
+}
+
+#[test]
+fn host_form_of_clearance_matches_its_tensor_form() {
+    let mut rng = Rng(0xc1ea);
+    let margin = 0.4;
+    let mut centres = Vec::new();
+    let (mut points, mut normals) = (Vec::new(), Vec::new());
+    for b in 0..12 {
+        let c = DVec3::new(rng.next(), rng.next(), rng.next()) * 2.0;
+        let n = DVec3::new(rng.next(), rng.next(), rng.next()).normalize();
+        // Distances from inside the geometry (−0.3) to beyond the margin (0.6).
+        let d = -0.3 + 0.9 * b as f64 / 11.0;
+        centres.push(c);
+        points.push(c - n * d);
+        normals.push(n);
+    }
+    let poses: Vec<[f64; 6]> = centres
+        .iter()
+        .map(|c| [0.1, 0.2, 0.3, c.x, c.y, c.z])
+        .collect();
+    let device = Device::flex().autodiff();
+    let rows = |v: &[DVec3]| {
+        let rows: Vec<[f64; 6]> = v.iter().map(|p| [p.x, p.y, p.z, 0.0, 0.0, 0.0]).collect();
+        poses_tensor(&rows, &device).narrow(1, 0, 3)
+    };
+    let want = tensor_form(&poses, |_, c| {
+        clearance(c, rows(&points), rows(&normals), margin)
+    });
+    for b in 0..poses.len() {
+        let (value, gradient) = clearance_on_host(centres[b], points[b], normals[b], margin);
+        assert!(
+            (value - want.0[b]).abs() <= 1e-12,
+            "sample {b}: {value} vs {}",
+            want.0[b]
+        );
+        for (k, g) in gradient.iter().enumerate() {
+            let w = want.1[b * 6 + 3 + k];
+            assert!(
+                (g - w).abs() <= 1e-10 * w.abs().max(1.0),
+                "sample {b}, c[{k}]: {g} vs {w}"
+            );
+        }
+    }
+    assert!(want.0.iter().any(|&v| v > 0.5) && want.0.contains(&0.0));
 }
 
 /// Row-major H×W mask with 1 inside columns `xs` and rows `ys`.

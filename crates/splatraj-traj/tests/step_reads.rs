@@ -551,49 +551,53 @@ fn path_costs_together_equal_windows_one_at_a_time() {
         "clearance charges some window: {means:?}"
     );
 
+    // The samples alone (the joined path cut out of the windows' paths and joined again), and
+    // the samples then the paths as the optimiser passes them (the joined path one slice).
     let poses = on_device.poses(&rows).require_grad();
-    let samples = shape
-        .iter()
-        .zip(&firsts)
-        .enumerate()
-        .map(|(i, (&(count, path, time_step), &(_, p0)))| WindowSamples {
-            window: i,
-            count,
-            times: None,
-            path: Some((poses.clone().narrow(0, p0, path), time_step)),
-            host: Some(&hosts[i]),
-            zoom: None,
-        })
-        .collect();
-    let together = problem
-        .with_step_passes(StepPasses::Shared)
-        .evaluate_windows(poses.clone().narrow(0, 0, sample_rows), samples, 0, None)
-        .unwrap();
-    let close = |a: f64, b: f64| (a - b).abs() <= 1e-10 * b.abs().max(1.0);
-    let got = to_host(together.means).unwrap();
-    assert_eq!(got.len(), means.len());
-    for (k, (a, b)) in got.iter().zip(&means).enumerate() {
-        assert!(
-            close(*a, *b),
-            "mean {k} ({}): {a} vs {b}",
-            names[k % names.len()]
-        );
-    }
-    let labels: Vec<Vec<&str>> = together
-        .labels
-        .iter()
-        .map(|w| w.iter().map(|l| l.0).collect())
-        .collect();
-    assert!(labels.iter().all(|w| *w == names), "{labels:?}");
-    let v = to_host(poses.grad(&together.loss.clone().backward()).unwrap()).unwrap();
-    let together_loss = to_host(together.loss).unwrap()[0];
-    assert!(close(together_loss, loss), "{together_loss} vs {loss}");
-    let largest = gradient.iter().fold(0.0f64, |m, g| m.max(g.abs()));
-    for (k, (a, b)) in v.iter().zip(&gradient).enumerate() {
-        assert!(
-            (a - b).abs() <= 1e-10 * largest,
-            "gradient {k} (pose {}): {a} vs {b}",
-            k / 6
-        );
+    for given in [poses.clone().narrow(0, 0, sample_rows), poses.clone()] {
+        let samples = shape
+            .iter()
+            .zip(&firsts)
+            .enumerate()
+            .map(|(i, (&(count, path, time_step), &(_, p0)))| WindowSamples {
+                window: i,
+                count,
+                times: None,
+                path: Some((poses.clone().narrow(0, p0, path), time_step)),
+                host: Some(&hosts[i]),
+                zoom: None,
+            })
+            .collect();
+        let together = problem
+            .with_step_passes(StepPasses::Shared)
+            .evaluate_windows(given, samples, 0, None)
+            .unwrap();
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-10 * b.abs().max(1.0);
+        let got = to_host(together.means).unwrap();
+        assert_eq!(got.len(), means.len());
+        for (k, (a, b)) in got.iter().zip(&means).enumerate() {
+            assert!(
+                close(*a, *b),
+                "mean {k} ({}): {a} vs {b}",
+                names[k % names.len()]
+            );
+        }
+        let labels: Vec<Vec<&str>> = together
+            .labels
+            .iter()
+            .map(|w| w.iter().map(|l| l.0).collect())
+            .collect();
+        assert!(labels.iter().all(|w| *w == names), "{labels:?}");
+        let v = to_host(poses.grad(&together.loss.clone().backward()).unwrap()).unwrap();
+        let together_loss = to_host(together.loss).unwrap()[0];
+        assert!(close(together_loss, loss), "{together_loss} vs {loss}");
+        let largest = gradient.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+        for (k, (a, b)) in v.iter().zip(&gradient).enumerate() {
+            assert!(
+                (a - b).abs() <= 1e-10 * largest,
+                "gradient {k} (pose {}): {a} vs {b}",
+                k / 6
+            );
+        }
     }
 }

@@ -10,10 +10,12 @@
 //! Dividing by m² makes the weight independent of the scene's units.
 //!
 //! **Differentiable in the pose.** The nearest surface point x* and its outward normal n are
-//! found on the host (exactly: [`crate::clearance::ellipsoid`]) and held fixed; in the graph
-//! d(c) = n·(c − x*). That is the signed distance itself (c − x* is along n outside, against
-//! it inside) and its exact gradient n (the envelope theorem: moving c moves x* only along
-//! the surface, to first order), with no square root to blow up on the surface.
+//! found on the host (exactly: [`crate::clearance::ellipsoid`]) and held fixed: d(c) =
+//! n·(c − x*). That is the signed distance itself (c − x* is along n outside, against it
+//! inside) and its exact gradient n (the envelope theorem: moving c moves x* only along the
+//! surface, to first order), with no square root to blow up on the surface. The cost is
+//! computed there too, value and gradient ([`clearance_on_host`]), and joins the graph by its
+//! first-order expansion ([`super::expansion`]); [`clearance`] is the same as tensor ops.
 //!
 //! **Where it is evaluated.** It is a path cost ([`CostDomain::Path`]): in a trajectory
 //! optimisation it sees the window's densely sampled path (a fine, randomly shifted time grid
@@ -26,7 +28,7 @@ use burn::tensor::Tensor;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use super::expansion::{PoseGradients, expansion_at};
+use super::expansion::{per_sample_on_host, per_stretch_on_host};
 use super::{Cost, CostDomain, CostError, CostInputs, OrAuto, check_weight, invalid};
 use crate::clearance::OccupancySpec;
 
@@ -214,54 +216,28 @@ impl Cost for ClearanceCost {
     fn evaluate(&self, inputs: &CostInputs) -> Result<Tensor<1>, CostError> {
         let occupancy = inputs.require_occupancy(self.name())?;
         let margin = self.margin()?;
-        // On the host (the nearest surface is found there anyway; docs/gpu.md, "Costs on the
-        // host"): each pose's value and its gradient in the camera centre [ΣP] or [B].
-        let host = inputs.host_path_or_sample_poses(self.name())?;
-        let rows: Vec<(f64, [f64; 3])> = host
-            .iter()
-            .map(|pose| {
-                let c = DVec3::new(pose[3], pose[4], pose[5]);
-                match occupancy.nearest_within(c, margin) {
-                    Some(contact) if contact.surface.distance < margin => {
-                        clearance_on_host(c, contact.surface.point, contact.surface.normal, margin)
-                    }
-                    // Clear of everything: 0 and no gradient.
-                    _ => (0.0, [0.0; 3]),
+        // On the host (docs/gpu.md, "Costs on the host"): a pose's value and its gradient.
+        let at = |pose: &[f64; 6]| -> (f64, [f64; 6]) {
+            let c = DVec3::new(pose[3], pose[4], pose[5]);
+            match occupancy.nearest_within(c, margin) {
+                Some(contact) if contact.surface.distance < margin => {
+                    let surface = contact.surface;
+                    let (value, g) = clearance_on_host(c, surface.point, surface.normal, margin);
+                    (value, [0.0, 0.0, 0.0, g[0], g[1], g[2]])
                 }
-            })
-            .collect();
-        let with_centre =
-            |g: [f64; 3], scale: f64| [0.0, 0.0, 0.0, g[0] * scale, g[1] * scale, g[2] * scale];
-        let (values, gradients) = match inputs.path() {
-            // Its mean per window's stretch [W] (the mean of a window's own path [1]).
-            Some(path) => {
-                let count = rows.len();
-                let windows = path.stretches().len();
-                let mut values = Vec::with_capacity(windows);
-                let mut gradients = vec![0.0; windows * count * 6]; // [W, ΣP·6]
-                let mut start = 0;
-                for (w, s) in path.stretches().iter().enumerate() {
-                    let own = &rows[start..start + s.rows];
-                    let share = 1.0 / s.rows.max(1) as f64;
-                    values.push(own.iter().map(|r| r.0).sum::<f64>() * share);
-                    for (k, (_, g)) in own.iter().enumerate() {
-                        let at = (w * count + start + k) * 6;
-                        gradients[at..at + 6].copy_from_slice(&with_centre(*g, share));
-                    }
-                    start += s.rows;
-                }
-                (values, PoseGradients::AllPoses(gradients))
+                // Clear of everything: 0 and no gradient.
+                _ => (0.0, [0.0; 6]),
             }
-            None => (
-                rows.iter().map(|r| r.0).collect(),
-                PoseGradients::OwnPose(rows.iter().flat_map(|r| with_centre(r.1, 1.0)).collect()),
-            ),
         };
-        Ok(expansion_at(
-            &inputs.path_or_sample_poses(),
-            &host,
-            values,
-            gradients,
-        ))
+        match inputs.path() {
+            // Its mean per window's stretch [W] (the mean of a window's own path [1]).
+            Some(path) => per_stretch_on_host(inputs, path, self.name(), |_, poses| {
+                let share = 1.0 / poses.len().max(1) as f64;
+                let rows: Vec<(f64, [f64; 6])> = poses.iter().map(at).collect();
+                let value = rows.iter().map(|r| r.0).sum::<f64>() * share;
+                (value, rows.iter().map(|r| r.1.map(|g| g * share)).collect())
+            }),
+            None => per_sample_on_host(inputs, self.name(), |pose, _| at(pose)),
+        }
     }
 }

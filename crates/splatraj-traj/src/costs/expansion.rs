@@ -13,14 +13,14 @@
 //! L_w(Φ) = L_w(Φ₀) + G_w · (Φ − Φ₀),   G_w = ∂L_w/∂Φ at Φ₀
 //! ```
 //!
-//! one difference and one matrix product (two launches forward, one backward), whatever the
-//! cost. At Φ = Φ₀, which is where a step evaluates it (Φ₀ are Φ's own values read back), this
-//! has the cost's value and the cost's gradient exactly, and that is all gradient descent
-//! reads; the expansion is never evaluated anywhere else.
+//! a difference, a product and a sum (a handful of launches forward and backward, three small
+//! uploads), whatever the cost computes. At Φ = Φ₀, which is where a step evaluates it (Φ₀ are
+//! Φ's own values read back), this has the cost's value and the cost's gradient exactly, and
+//! that is all gradient descent reads; the expansion is never evaluated anywhere else.
 
 use burn::tensor::{Tensor, TensorData};
 
-use super::{CostError, CostInputs, QueryContext};
+use super::{CostError, CostInputs, PathSamples, PathStretch, QueryContext};
 
 /// The gradients of host values in the poses, by which poses each value reads.
 #[derive(Debug, Clone, PartialEq)]
@@ -35,20 +35,25 @@ pub enum PoseGradients {
 /// `values` `[W]` (each computed on the host at the poses `at` `[P]`) as a graph value of
 /// `poses` `[P, 6]`: `values + G·(poses − at)` `[W]`, G the `gradients` (ω then c in each
 /// pose's six). `at` must be the values of `poses` (read from them): then the result is
-/// `values` and its gradient in `poses` is G.
+/// `values` and its gradient in `poses` is G. Mismatched lengths are a [`CostError::Shape`].
 pub fn expansion_at(
     poses: &Tensor<2>,
     at: &[[f64; 6]],
     values: Vec<f64>,
     gradients: PoseGradients,
-) -> Tensor<1> {
+) -> Result<Tensor<1>, CostError> {
     let [count, _] = poses.dims();
     let windows = values.len();
-    assert_eq!(
-        at.len(),
-        count,
-        "the host values of another number of poses"
-    );
+    let expected = match &gradients {
+        PoseGradients::OwnPose(g) => (windows == count).then_some(g.len() == count * 6),
+        PoseGradients::AllPoses(g) => Some(g.len() == windows * count * 6),
+    };
+    if at.len() != count || expected != Some(true) {
+        return Err(CostError::Shape(format!(
+            "an expansion of {windows} values about {} host poses for {count} poses",
+            at.len()
+        )));
+    }
     let device = (&poses.device(), poses.dtype());
     let at = Tensor::<2>::from_data(
         TensorData::new(at.iter().flatten().copied().collect(), [count, 6]),
@@ -57,19 +62,12 @@ pub fn expansion_at(
     let values = Tensor::<1>::from_data(TensorData::new(values, [windows]), device);
     // Zero in the forward (the poses are `at`); G's weights in the backward.
     let shift = poses.clone() - at; // [P, 6]
-    match gradients {
+    Ok(match gradients {
         PoseGradients::OwnPose(gradients) => {
-            assert_eq!(windows, count, "a value per pose");
-            assert_eq!(gradients.len(), count * 6, "six numbers per pose");
             let gradients = Tensor::<2>::from_data(TensorData::new(gradients, [count, 6]), device);
             values + (shift * gradients).sum_dim(1).reshape([count])
         }
         PoseGradients::AllPoses(gradients) => {
-            assert_eq!(
-                gradients.len(),
-                windows * count * 6,
-                "a gradient row per value, six numbers per pose"
-            );
             let gradients =
                 Tensor::<2>::from_data(TensorData::new(gradients, [windows, count * 6]), device);
             values
@@ -77,7 +75,7 @@ pub fn expansion_at(
                     .matmul(shift.reshape([count * 6, 1]))
                     .reshape([windows])
         }
-    }
+    })
 }
 
 /// A cost per sample computed on the host: `form(pose, context)` gives one sample's value and
@@ -96,10 +94,51 @@ pub fn per_sample_on_host(
         values.push(value);
         gradients.extend(gradient);
     }
-    Ok(expansion_at(
+    expansion_at(
         inputs.poses(),
         &host,
         values,
         PoseGradients::OwnPose(gradients),
-    ))
+    )
+}
+
+/// A cost per window's stretch of path computed on the host: `form(stretch, poses)` gives a
+/// stretch's value and its gradient in each of its poses; the path's host values come with
+/// `inputs` (read here when the caller has not, a failure naming `cost`). `[W]`, one value per
+/// stretch, as [`expansion_at`] joins it.
+pub fn per_stretch_on_host(
+    inputs: &CostInputs,
+    path: &PathSamples,
+    cost: &'static str,
+    form: impl Fn(&PathStretch, &[[f64; 6]]) -> (f64, Vec<[f64; 6]>),
+) -> Result<Tensor<1>, CostError> {
+    let host = inputs.host_path_or_sample_poses(cost)?; // [ΣP]
+    let count = host.len();
+    let stretches = path.stretches();
+    let mut values = Vec::with_capacity(stretches.len()); // [W]
+    let mut gradients = vec![0.0; stretches.len() * count * 6]; // [W, ΣP·6]
+    let mut start = 0;
+    for (w, stretch) in stretches.iter().enumerate() {
+        let own = host.get(start..start + stretch.rows).ok_or_else(|| {
+            CostError::Shape(format!("path stretches beyond its {count} host poses"))
+        })?;
+        let (value, gradient) = form(stretch, own);
+        if gradient.len() != stretch.rows {
+            return Err(CostError::Shape(format!(
+                "{} pose gradients for a stretch of {} poses",
+                gradient.len(),
+                stretch.rows
+            )));
+        }
+        values.push(value);
+        let at = (w * count + start) * 6;
+        gradients[at..at + 6 * stretch.rows].copy_from_slice(gradient.as_flattened());
+        start += stretch.rows;
+    }
+    expansion_at(
+        &path.poses,
+        &host,
+        values,
+        PoseGradients::AllPoses(gradients),
+    )
 }

@@ -70,8 +70,9 @@ use crate::clearance::{Occupancy, OccupancySpec};
 pub use auto::OrAuto;
 pub use clearance::{
     ClearanceCost, DEFAULT_CLEARANCE_SIGMA, DEFAULT_MIN_OPACITY, auto_margin, clearance,
+    clearance_on_host,
 };
-pub use expansion::{PoseGradients, expansion_at, per_sample_on_host};
+pub use expansion::{PoseGradients, expansion_at, per_sample_on_host, per_stretch_on_host};
 pub use iou::{
     IOU_THRESHOLD, PixelBox, bbox_iou, bbox_iou_batch, box_from_hits, box_iou, mask_box, mask_hits,
 };
@@ -216,6 +217,10 @@ pub struct CostInputs {
     occupancy: Option<Occupancy>,
     times: Option<SampleTimes>,
     host_poses: Option<HostPoses>,
+    /// The samples' and the path's values when no caller gave them and a cost read them:
+    /// read once for all the costs computed on the host (each read waits for the device).
+    read_samples: std::sync::OnceLock<Vec<[f64; 6]>>,
+    read_path: std::sync::OnceLock<Vec<[f64; 6]>>,
     step: usize,
     query: QueryContext,
     /// One context per sample when the batch spans several windows (None: every sample has
@@ -223,22 +228,33 @@ pub struct CostInputs {
     contexts: Option<std::sync::Arc<[QueryContext]>>,
 }
 
-/// The values of poses `[P, 6]` read from the device, a failure naming `cost`.
-fn read_poses(poses: Tensor<2>, cost: &'static str) -> Result<Vec<[f64; 6]>, CostError> {
-    let values =
-        splatraj_render::host::to_host(poses.detach()).map_err(|e| CostError::ReadBack {
+/// The values of `poses` `[P, 6]`: those in `cache`, else read from the device (a failure
+/// naming `cost`) and kept there.
+fn read_once(
+    cache: &std::sync::OnceLock<Vec<[f64; 6]>>,
+    poses: &Tensor<2>,
+    cost: &'static str,
+) -> Result<Vec<[f64; 6]>, CostError> {
+    if let Some(values) = cache.get() {
+        return Ok(values.clone());
+    }
+    let values = splatraj_render::host::to_host(poses.clone().detach()).map_err(|e| {
+        CostError::ReadBack {
             cost,
             reason: e.to_string(),
-        })?;
-    Ok(values
+        }
+    })?;
+    let values: Vec<[f64; 6]> = values
         .chunks_exact(6)
         .map(|p| std::array::from_fn(|i| p[i]))
-        .collect())
+        .collect();
+    Ok(cache.get_or_init(|| values).clone())
 }
 
 /// The values of the poses a cost reads, already on the host (read once per optimisation
-/// step), so that a cost that needs them there (clearance looks the camera up in the scene's
-/// geometry) does not read them back again.
+/// step), so that the costs computed there (motion, clearance, prior, upright: docs/gpu.md,
+/// "Costs on the host") do not read them back again. They must be the tensors' own values:
+/// those costs expand about them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct HostPoses {
     /// The sampled poses `[B][6]`.
@@ -326,6 +342,8 @@ impl CostInputs {
             occupancy: None,
             times: None,
             host_poses: None,
+            read_samples: std::sync::OnceLock::new(),
+            read_path: std::sync::OnceLock::new(),
             step,
             query,
             contexts: None,
@@ -402,9 +420,10 @@ impl CostInputs {
         &self,
         cost: &'static str,
     ) -> Result<Vec<[f64; 6]>, CostError> {
-        match self.path_or_sample_host_poses() {
-            Some(poses) => Ok(poses.to_vec()),
-            None => read_poses(self.path_or_sample_poses(), cost),
+        match (self.path_or_sample_host_poses(), &self.path) {
+            (Some(poses), _) => Ok(poses.to_vec()),
+            (None, Some(path)) => read_once(&self.read_path, &path.poses, cost),
+            (None, None) => read_once(&self.read_samples, &self.poses, cost),
         }
     }
 
@@ -413,7 +432,7 @@ impl CostInputs {
     pub fn host_sample_poses(&self, cost: &'static str) -> Result<Vec<[f64; 6]>, CostError> {
         match &self.host_poses {
             Some(host) => Ok(host.samples.clone()),
-            None => read_poses(self.poses.clone(), cost),
+            None => read_once(&self.read_samples, &self.poses, cost),
         }
     }
 
@@ -557,7 +576,8 @@ impl CostInputs {
     }
 
     /// The query's context (of the first sample, when the batch spans several windows: a
-    /// cost that [`Cost::batches_windows`] reads [`CostInputs::context_rows`] instead).
+    /// cost that [`Cost::batches_windows`] reads [`CostInputs::context_rows`] or
+    /// [`CostInputs::sample_context`] instead).
     pub fn query(&self) -> &QueryContext {
         &self.query
     }
@@ -602,8 +622,10 @@ pub trait Cost: std::fmt::Debug + Send + Sync {
 
     /// Whether one evaluation may serve several windows (an optimisation step's whole batch,
     /// so its launches do not grow with the windows). A sample cost ([`CostDomain::Samples`])
-    /// then reads the query context only through [`CostInputs::context_rows`] (or
-    /// [`CostInputs::single_query`]) and reads no times, path, host poses or geometry. A path
+    /// then reads the query context only through [`CostInputs::context_rows`],
+    /// [`CostInputs::sample_context`] (or [`CostInputs::single_query`]) and reads no times,
+    /// path or geometry (the samples' host values it may read: they come for the whole
+    /// batch). A path
     /// cost ([`CostDomain::Path`]) then takes a path of several stretches ([`PathSamples`],
     /// each with its window's context and time step) and returns each stretch's mean `[W]`,
     /// no term pairing one stretch's poses with the next's. Default false: evaluated per

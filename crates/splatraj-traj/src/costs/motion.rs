@@ -39,8 +39,8 @@
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::expansion::{PoseGradients, expansion_at};
-use super::motion_rates::{MotionLimits, Stretch, stretch_charge};
+use super::expansion::per_stretch_on_host;
+use super::motion_rates::{MIN_POSES, MotionLimits, Stretch, stretch_charge};
 use super::{Cost, CostDomain, CostError, CostInputs, OrAuto, check_weight, invalid};
 
 /// The motion-limit cost: table `[costs.motion]`, keys `weight` (default 1), `max_speed`
@@ -211,6 +211,11 @@ impl Cost for MotionCost {
                 .reshape([inputs.batch()])
                 * 0.0);
         };
+        if path.rows() < MIN_POSES {
+            // Nothing to charge (and nothing the duration or the limits are needed for).
+            let zero = path.poses.clone().narrow(1, 0, 1).sum().mul_scalar(0.0); // [1]
+            return Ok(zero.expand([path.stretches().len()]));
+        }
         let seconds = match (path.seconds, self.needs_duration()) {
             (Some(s), _) => s,
             (None, false) => 1.0,
@@ -223,31 +228,17 @@ impl Cost for MotionCost {
         };
         let limits = self.limits()?;
         // On the host, each stretch on its own (docs/gpu.md, "Costs on the host").
-        let host = inputs.host_path_or_sample_poses(self.name())?; // [ΣP]
-        let count = host.len();
-        let windows = path.stretches().len();
-        let mut values = Vec::with_capacity(windows); // [W]
-        let mut gradients = vec![0.0; windows * count * 6]; // [W, ΣP·6]
-        let mut start = 0;
-        for (w, s) in path.stretches().iter().enumerate() {
-            let floor = 1e-6 * s.context.prior_radius;
-            let stretch = Stretch {
-                poses: &host[start..start + s.rows],
-                dt: s.time_step * seconds,
-                pivot: s.context.object_centre,
-                floor_sq: floor * floor,
-            };
-            let (value, gradient) = stretch_charge(&limits, &stretch);
-            values.push(value);
-            let row = &mut gradients[(w * count + start) * 6..(w * count + start + s.rows) * 6];
-            row.copy_from_slice(gradient.as_flattened());
-            start += s.rows;
-        }
-        Ok(expansion_at(
-            &path.poses,
-            &host,
-            values,
-            PoseGradients::AllPoses(gradients),
-        ))
+        per_stretch_on_host(inputs, path, self.name(), |stretch, poses| {
+            let floor = 1e-6 * stretch.context.prior_radius;
+            stretch_charge(
+                &limits,
+                &Stretch {
+                    poses,
+                    dt: stretch.time_step * seconds,
+                    pivot: stretch.context.object_centre,
+                    floor_sq: floor * floor,
+                },
+            )
+        })
     }
 }

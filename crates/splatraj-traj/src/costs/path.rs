@@ -2,7 +2,12 @@
 //! stretch, or every window's stretches joined so that a shared optimisation step evaluates
 //! a path cost once for all windows (docs/gpu.md, "One pass a step").
 //!
-//! A path cost works on rows of the joined poses `[ΣP, 6]`: per pose (lag 0), per pair of
+//! The built-in path costs (motion, clearance) are computed on the host, a stretch at a time
+//! ([`super::expansion::per_stretch_on_host`]). The helpers below are for a path cost written
+//! as tensor ops (a custom one, or the motion cost's tensor formulation that
+//! `tests/motion_host.rs` keeps as its yardstick).
+//!
+//! Such a cost works on rows of the joined poses `[ΣP, 6]`: per pose (lag 0), per pair of
 //! consecutive poses (lag 1: velocities, turns) or per triple (lag 2: accelerations). Row k
 //! of lag `l` reads poses k ..= k + l; a row whose poses lie in two stretches pairs the end
 //! of one window's path with the start of the next, which no window's cost has: it is

@@ -55,18 +55,6 @@ pub fn prior(
     (distance.clamp_min(radius) - alignment + 1.0).reshape([batch])
 }
 
-/// [`prior`] with each sample's object centre, radius and ε² in `rows` `[B, 5]`
-/// (x, y, z, r, ε²): the samples of several windows in one evaluation.
-pub fn prior_per_sample(rotations: Tensor<3>, centres: Tensor<2>, rows: Tensor<2>) -> Tensor<1> {
-    let [batch, _] = centres.dims();
-    let forward = rotations.narrow(2, 2, 1).reshape([batch, 3]); // z_cam [B, 3]
-    let to_object = rows.clone().narrow(1, 0, 3) - centres; // o − c [B, 3]
-    let radius = rows.clone().narrow(1, 3, 1); // [B, 1]
-    let distance = (to_object.clone().square().sum_dim(1) + rows.narrow(1, 4, 1)).sqrt();
-    let alignment = (forward * to_object).sum_dim(1) / distance.clone();
-    (distance.max_pair(radius) - alignment + 1.0).reshape([batch])
-}
-
 /// [`prior`] of one pose on the host in f64, with its gradient in the pose (ω then c): what
 /// the cost evaluates; the tensor forms above are its specification (`tests/cost_terms.rs`).
 pub fn prior_on_host(

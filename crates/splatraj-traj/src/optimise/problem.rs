@@ -583,8 +583,8 @@ impl<'a> Problem<'a> {
     /// Renders what the costs read for the samples of several windows and evaluates their
     /// costs at step `step`: `poses` `[ΣS, 6]` holds the windows' samples one window after
     /// the other, as `windows` lists them, optionally followed by every window's path in the
-    /// same order `[ΣS + ΣP, 6]` (the rows the windows' `path` tensors are slices of: the
-    /// joined path is then one slice); the result is the step's loss (the mean over the
+    /// same order `[ΣS + ΣP, 6]`: the very rows the windows' `path` tensors are slices of (the
+    /// joined path is then one slice; only the counts are checked); the result is the step's loss (the mean over the
     /// windows of each window's mean weighted total) and each window's term means.
     ///
     /// With [`StepPasses::Shared`] one render call serves the whole step (each window's
@@ -592,8 +592,9 @@ impl<'a> Problem<'a> {
     /// whole batch with each sample's own context, and the path costs that batch run once on
     /// every window's stretch of path joined (each window's mean over its own stretch), so
     /// neither the render's launches nor those costs' grow with the number of windows; the
-    /// other costs (time-dependent ones, custom ones) run per window. With [`StepPasses::PerWindow`] each window has its
-    /// own render call and costs (docs/gpu.md, "One pass a step").
+    /// other costs (time-dependent ones, custom ones) run per window. With
+    /// [`StepPasses::PerWindow`] each window has its own render call and costs (docs/gpu.md,
+    /// "One pass a step").
     ///
     /// [`Cost::batches_windows`]: crate::costs::Cost::batches_windows
     pub fn evaluate_windows(
@@ -619,12 +620,14 @@ impl<'a> Problem<'a> {
                 Some(poses.narrow(0, total, path_rows)),
             ),
             _ => {
+                let paths = match path_rows {
+                    Some(p) => format!(" and their paths to {p}"),
+                    None => String::new(),
+                };
                 return Err(OptimiseError::InvalidOptions {
                     field: "windows",
                     reason: format!(
-                        "the windows' samples add up to {total} (and their paths to {}), the \
-                         poses to {rows}",
-                        path_rows.unwrap_or(0)
+                        "the windows' samples add up to {total}{paths}, the poses to {rows}"
                     ),
                 });
             }
@@ -723,9 +726,10 @@ impl<'a> Problem<'a> {
     }
 
     /// The inputs of the path costs that batch in a shared step: the samples `poses` and every
-    /// window's stretch of path joined `[ΣP, 6]` (`joined`, when the caller's rows hold it) (each with its context and time step), their
-    /// host values when every window has them; None when a window has no path (the path
-    /// costs then judge each window's samples, per window).
+    /// window's stretch of path joined `[ΣP, 6]` (each with its context and time step; given
+    /// as `joined` when the caller's rows hold it), their host values when every window has
+    /// them; None when a window has no path (the path costs then judge each window's samples,
+    /// per window).
     fn joined_path(
         &self,
         poses: Tensor<2>,
@@ -753,8 +757,9 @@ impl<'a> Problem<'a> {
                 context: self.windows[w.window].context,
             })
             .collect();
+        // [ΣP, 6]
         let joined =
-            joined.unwrap_or_else(|| Tensor::cat(paths.into_iter().map(|(p, _)| p).collect(), 0)); // [ΣP, 6]
+            joined.unwrap_or_else(|| Tensor::cat(paths.into_iter().map(|(p, _)| p).collect(), 0));
         let first = self.windows[windows[0].window].context;
         let mut inputs = CostInputs::new(poses, None, step, first)?.with_path(PathSamples::joined(
             joined,
@@ -998,8 +1003,13 @@ impl<'a> Problem<'a> {
         if gradient {
             poses = poses.require_grad();
         }
+        // The tensor's own values (the costs computed on the host expand about them).
+        let rounded = match self.scene.dtype() {
+            burn::tensor::DType::F32 => pose.0.map(|v| f64::from(v as f32)),
+            _ => pose.0,
+        };
         let host = HostPoses {
-            samples: vec![pose.0],
+            samples: vec![rounded],
             path: None,
         };
         let evaluated =

@@ -143,7 +143,7 @@ pub fn sample_poses_sgld(
         // The chains live on the host, so the render takes their poses from there and the
         // step reads once: totals and gradient together.
         let host = HostPoses {
-            samples: theta.iter().map(|t| units.denormalise(t)).collect(),
+            samples: theta.iter().map(|t| units.to_scene_as(t, dtype)).collect(),
             path: None,
         };
         let terms = problem

@@ -68,6 +68,17 @@ impl PoseUnits {
         std::array::from_fn(|i| pose[i] / f[i])
     }
 
+    /// A normalised pose to scene units on the host as [`PoseUnits::to_scene`] computes it in
+    /// `dtype` (in f32: value, factor and product each rounded to f32), so that the host
+    /// values are the tensor's own (the costs computed on the host expand about them).
+    pub fn to_scene_as(&self, normalised: &Pose, dtype: burn::tensor::DType) -> Pose {
+        let f = self.factors();
+        std::array::from_fn(|i| match dtype {
+            burn::tensor::DType::F32 => f64::from(normalised[i] as f32 * f[i] as f32),
+            _ => normalised[i] * f[i],
+        })
+    }
+
     /// A normalised pose (or weight row) to scene units, on the host.
     pub fn denormalise(&self, pose: &Pose) -> Pose {
         let f = self.factors();
