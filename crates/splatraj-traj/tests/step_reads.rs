@@ -24,8 +24,8 @@ use splatraj_traj::costs::{
     DEFAULT_MIN_OPACITY, HostPoses, MotionCost, OrAuto, VisibilityCost, WeightedCosts,
 };
 use splatraj_traj::optimise::{
-    Flow, ObjectView, Problem, StepPasses, TrajectoryOptions, WindowSamples, WindowTarget,
-    object_start_poses, optimise_trajectory, window_start_trajectory,
+    Flow, ObjectView, Problem, StepPasses, TrajectoryOptions, WindowPath, WindowSamples,
+    WindowTarget, object_start_poses, optimise_trajectory, window_start_trajectory,
 };
 use splatraj_traj::trajectory::{Polynomial, Rbf, Trajectory, TrajectoryModel};
 
@@ -563,7 +563,10 @@ fn path_costs_together_equal_windows_one_at_a_time() {
                 window: i,
                 count,
                 times: None,
-                path: Some((poses.clone().narrow(0, p0, path), time_step)),
+                path: Some(WindowPath::Poses(
+                    Box::new(poses.clone().narrow(0, p0, path)),
+                    time_step,
+                )),
                 host: Some(&hosts[i]),
                 zoom: None,
             })

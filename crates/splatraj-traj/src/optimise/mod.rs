@@ -32,7 +32,8 @@ use crate::trajectory::TrajectoryError;
 
 pub use pans::{PanLimits, pan_shares};
 pub use problem::{
-    Evaluated, PoseLoss, Problem, StepEvaluation, StepPasses, WindowRenders, WindowSamples,
+    Evaluated, PoseLoss, Problem, StepEvaluation, StepPasses, WindowPath, WindowRenders,
+    WindowSamples,
 };
 pub use route::{Route, RouteKind, RoutePlanner, Transition, plan_transitions};
 pub use sgld::{SgldOptions, SgldResult, SgldSample, sample_poses_sgld};

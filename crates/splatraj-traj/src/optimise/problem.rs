@@ -94,6 +94,49 @@ pub struct WindowRenders {
     alone: Option<Vec<usize>>,
 }
 
+/// A window's densely sampled path (evenly spaced in time) for the path costs.
+#[derive(Debug, Clone)]
+pub enum WindowPath {
+    /// Its poses `[P, 6]` (boxed: a tensor handle is large) and their time step.
+    Poses(Box<Tensor<2>>, f64),
+    /// Its P poses are the window's share of the rows after the samples in the poses given to
+    /// [`Problem::evaluate_windows`] (every window's path, in window order), `time_step`
+    /// apart: cut out only where a cost reads this window's path alone (on a GPU a slice is
+    /// a launch, whether anything reads it or not).
+    Rows(usize, f64),
+}
+
+impl WindowPath {
+    /// Its number of poses P.
+    pub fn rows(&self) -> usize {
+        match self {
+            WindowPath::Poses(poses, _) => poses.dims()[0],
+            WindowPath::Rows(rows, _) => *rows,
+        }
+    }
+
+    /// Its poses `[P, 6]` and time step; `joined` holds every window's path, this one from
+    /// row `first` on (needed for [`WindowPath::Rows`]).
+    fn poses(
+        &self,
+        joined: Option<&Tensor<2>>,
+        first: usize,
+    ) -> Result<(Tensor<2>, f64), OptimiseError> {
+        match (self, joined) {
+            (WindowPath::Poses(poses, time_step), _) => Ok((*poses.clone(), *time_step)),
+            (WindowPath::Rows(rows, time_step), Some(joined)) => {
+                Ok((joined.clone().narrow(0, first, *rows), *time_step))
+            }
+            (WindowPath::Rows(..), None) => Err(OptimiseError::InvalidOptions {
+                field: "windows",
+                reason: "a window's path is given as rows of the poses, but the poses hold only \
+                         the samples"
+                    .into(),
+            }),
+        }
+    }
+}
+
 /// One window's samples in a pass of several windows ([`Problem::evaluate_windows`]).
 #[derive(Debug, Clone)]
 pub struct WindowSamples<'s> {
@@ -103,12 +146,28 @@ pub struct WindowSamples<'s> {
     pub count: usize,
     /// Their times t ∈ [0, 1] of the whole trajectory, for costs that depend on time.
     pub times: Option<&'s [f64]>,
-    /// The window's densely sampled path `[P, 6]` and its time step, for the path costs.
-    pub path: Option<(Tensor<2>, f64)>,
+    /// The window's densely sampled path, for the path costs.
+    pub path: Option<WindowPath>,
     /// The host values of the samples and the path, when the caller has them.
     pub host: Option<&'s HostPoses>,
     /// The samples' zoom `[count]` when the lens zooms (None: the configured focal length).
     pub zoom: Option<Zoom>,
+}
+
+impl WindowSamples<'_> {
+    /// These samples with their path as its own poses ([`WindowPath::Poses`]), cut out of
+    /// `joined` from row `first` when given as rows.
+    fn with_own_path(
+        mut self,
+        joined: Option<&Tensor<2>>,
+        first: usize,
+    ) -> Result<Self, OptimiseError> {
+        if let Some(path) = &self.path {
+            let (poses, time_step) = path.poses(joined, first)?;
+            self.path = Some(WindowPath::Poses(Box::new(poses), time_step));
+        }
+        Ok(self)
+    }
 }
 
 /// What [`Problem::evaluate_windows`] found: the step's loss, each window's term means, the
@@ -567,7 +626,7 @@ impl<'a> Problem<'a> {
             window: index,
             count,
             times,
-            path,
+            path: path.map(|(poses, time_step)| WindowPath::Poses(Box::new(poses), time_step)),
             host,
             zoom: None,
         };
@@ -608,7 +667,7 @@ impl<'a> Problem<'a> {
         let total: usize = windows.iter().map(|w| w.count).sum();
         let path_rows: Option<usize> = windows
             .iter()
-            .map(|w| w.path.as_ref().map(|(p, _)| p.dims()[0]))
+            .map(|w| w.path.as_ref().map(WindowPath::rows))
             .sum();
         // The samples alone, or the samples then every window's path: the joined path is
         // then one slice of the caller's rows, not the windows' paths cut out and joined
@@ -646,7 +705,7 @@ impl<'a> Problem<'a> {
         let renders = self.renders_or(renders);
         let counts: Vec<usize> = windows.iter().map(|w| w.count).collect();
         if self.step_passes == StepPasses::PerWindow || windows.len() == 1 {
-            return self.evaluate_per_window(poses, windows, step, renders.get());
+            return self.evaluate_per_window(poses, joined, windows, step, renders.get());
         }
         let pass = match self.render_pass(poses.clone(), &windows, renders.get()) {
             // Every window's packed rows in one buffer are the largest buffer of a run; a
@@ -657,7 +716,7 @@ impl<'a> Problem<'a> {
                     "step {step}: {what} do not fit the device in one render call; the windows \
                      render one call each"
                 );
-                return self.evaluate_per_window(poses, windows, step, renders.get());
+                return self.evaluate_per_window(poses, joined, windows, step, renders.get());
             }
             pass => pass?,
         };
@@ -688,7 +747,8 @@ impl<'a> Problem<'a> {
         }
         let batched = self.costs.evaluate_where(&inputs, batched_cost)?;
         // The path costs that batch: once, on every window's stretch of path joined.
-        let path = self.joined_path(poses.clone(), joined, &windows, step)?;
+        let path = self.joined_path(poses.clone(), joined.clone(), &windows, step)?;
+        let joined_rows = joined;
         let batched_path =
             |c: &dyn Cost| path.is_some() && c.batches_windows() && c.domain() == CostDomain::Path;
         let path_terms = match &path {
@@ -702,17 +762,30 @@ impl<'a> Problem<'a> {
             .costs()
             .iter()
             .any(|c| per_window_cost(c.as_ref()) && !c.channels().is_empty());
+        // Nothing is cut out for a window no cost reads alone (a slice is a launch).
+        let others = self
+            .costs
+            .costs()
+            .iter()
+            .any(|c| per_window_cost(c.as_ref()));
         let mut per_window = Vec::with_capacity(windows.len());
-        let mut offset = 0;
+        let (mut offset, mut first_path_row) = (0, 0);
         for w in windows {
             let count = w.count;
-            let own = poses.clone().narrow(0, offset, count);
-            let images = match (&pass, others_read_images) {
-                (Some(pass), true) => pass.window(offset, count),
-                _ => Images::default(),
-            };
+            let path_rows = w.path.as_ref().map_or(0, WindowPath::rows);
+            if others {
+                let own = poses.clone().narrow(0, offset, count);
+                let images = match (&pass, others_read_images) {
+                    (Some(pass), true) => pass.window(offset, count),
+                    _ => Images::default(),
+                };
+                let w = w.with_own_path(joined_rows.as_ref(), first_path_row)?;
+                per_window.push(self.window_terms_where(w, own, images, step, per_window_cost)?);
+            } else {
+                per_window.push(None);
+            }
             offset += count;
-            per_window.push(self.window_terms_where(w, own, images, step, per_window_cost)?);
+            first_path_row += path_rows;
         }
         Ok(StepEvaluation::of_batch(
             self.costs,
@@ -751,15 +824,25 @@ impl<'a> Problem<'a> {
         let stretches: Vec<PathStretch> = windows
             .iter()
             .zip(&paths)
-            .map(|(w, (path, time_step))| PathStretch {
-                rows: path.dims()[0],
-                time_step: *time_step,
+            .map(|(w, path)| PathStretch {
+                rows: path.rows(),
+                time_step: match path {
+                    WindowPath::Poses(_, time_step) | WindowPath::Rows(_, time_step) => *time_step,
+                },
                 context: self.windows[w.window].context,
             })
             .collect();
         // [ΣP, 6]
-        let joined =
-            joined.unwrap_or_else(|| Tensor::cat(paths.into_iter().map(|(p, _)| p).collect(), 0));
+        let joined = match joined {
+            Some(joined) => joined,
+            None => {
+                let each = paths
+                    .iter()
+                    .map(|path| path.poses(None, 0).map(|(poses, _)| poses))
+                    .collect::<Result<Vec<_>, _>>()?;
+                Tensor::cat(each, 0)
+            }
+        };
         let first = self.windows[windows[0].window].context;
         let mut inputs = CostInputs::new(poses, None, step, first)?.with_path(PathSamples::joined(
             joined,
@@ -815,6 +898,7 @@ impl<'a> Problem<'a> {
     fn evaluate_per_window(
         &self,
         poses: Tensor<2>,
+        joined: Option<Tensor<2>>,
         windows: Vec<WindowSamples<'_>>,
         step: usize,
         renders: Option<&WindowRenders>,
@@ -825,10 +909,13 @@ impl<'a> Problem<'a> {
         let mut terms = Vec::with_capacity(windows.len());
         let mut masks = Vec::with_capacity(windows.len());
         let mut stats: Option<RenderStats> = None;
-        let mut offset = 0;
+        let (mut offset, mut first_path_row) = (0, 0);
         for w in windows {
             let own = poses.clone().narrow(0, offset, w.count);
             offset += w.count;
+            let path_rows = w.path.as_ref().map_or(0, WindowPath::rows);
+            let w = w.with_own_path(joined.as_ref(), first_path_row)?;
+            first_path_row += path_rows;
             let (window_terms, pass) = self.evaluate_one(w, own, step, renders)?;
             terms.push(window_terms);
             if let Some(pass) = pass {
@@ -970,7 +1057,8 @@ impl<'a> Problem<'a> {
                 within: ts.iter().map(|t| (t - start) / (end - start)).collect(),
             });
         }
-        if let Some((poses, time_step)) = samples.path {
+        if let Some(path) = samples.path {
+            let (poses, time_step) = path.poses(None, 0)?;
             inputs = inputs.with_path(PathSamples::new(
                 poses,
                 time_step,

@@ -38,7 +38,8 @@ use std::time::{Duration, Instant};
 
 use super::units::PoseUnits;
 use super::{
-    OptimiseError, Problem, StepEvaluation, WindowSamples, check_adam, host_values, sampling,
+    OptimiseError, Problem, StepEvaluation, WindowPath, WindowSamples, check_adam, host_values,
+    sampling,
 };
 use crate::costs::{HostPoses, QueryContext};
 use crate::trajectory::{LensPath, POSE_DIM, Trajectory, TrajectoryModel, TrajectoryRecord};
@@ -363,9 +364,10 @@ pub fn optimise_trajectory(
                 window: i,
                 count: segment.samples.1,
                 times: Some(&times[i].samples),
-                path: segment.path.map(|(offset, count, time_step)| {
-                    (poses.clone().narrow(0, offset, count), time_step)
-                }),
+                // Rows of `poses` after the samples: cut out only where a cost reads it alone.
+                path: segment
+                    .path
+                    .map(|(_, count, time_step)| WindowPath::Rows(count, time_step)),
                 host: Some(&segment.poses),
                 zoom: host.zoom.as_ref().map(|(zoom, values)| {
                     let (offset, count) = segment.samples;
