@@ -36,38 +36,12 @@ fn wall_centre(w: usize) -> DVec3 {
 /// of its wall sees only that wall, wall to wall, so every pixel is covered after a few
 /// entries and the passes stay quick on lavapipe whatever their lists' lengths.
 fn walls() -> (Scene, Vec<WindowTarget>) {
-    let mut scene = Scene::default();
-    let mut targets = Vec::new();
-    for w in 0..WINDOWS {
-        let centre = wall_centre(w);
-        let first = scene.len();
-        for i in 0..WALL * WALL {
-            let (gx, gy) = ((i % WALL) as f64, (i / WALL) as f64);
-            let step = 0.7 / WALL as f64;
-            scene.means.push([
-                (centre.x + (gx - WALL as f64 / 2.0) * step) as f32,
-                (centre.y + (gy - WALL as f64 / 2.0) * step) as f32,
-                centre.z as f32,
-            ]);
-            scene.scales.push([0.02, 0.02, 0.005]);
-            scene.rotations.push([1.0, 0.0, 0.0, 0.0]);
-            scene.opacities.push(0.95);
-            scene.sh.extend([0.5, 0.4, 0.3]);
-        }
-        let mut mask = vec![0.0; WINDOWS * WALL * WALL];
-        mask[first..first + WALL * WALL].fill(1.0);
-        targets.push(WindowTarget {
-            name: format!("wall {w}"),
-            mask,
-            context: QueryContext {
-                object_centre: centre.to_array(),
-                prior_radius: 0.5,
-                world_up: [0.0, -1.0, 0.0],
-                target_ratio: 0.5,
-            },
-        });
-    }
-    (scene, targets)
+    common::walls(WINDOWS, WALL, wall_centre, |centre| QueryContext {
+        object_centre: centre.to_array(),
+        prior_radius: 0.5,
+        world_up: [0.0, -1.0, 0.0],
+        target_ratio: 0.5,
+    })
 }
 
 /// Window `w`'s samples: 0.5 in front of its wall, shifted a little sample to sample.

@@ -10,6 +10,8 @@
 //! process-wide.
 #![cfg(feature = "wgpu")]
 
+mod common;
+
 use burn::tensor::DType;
 use glam::DVec3;
 use splatraj_render::backend::BackendKind;
@@ -37,38 +39,12 @@ fn wall_centre(w: usize) -> DVec3 {
 
 /// `windows` walls of opaque Gaussians, each a window's object.
 fn walls(windows: usize) -> (Scene, Vec<WindowTarget>) {
-    let mut scene = Scene::default();
-    let mut targets = Vec::new();
-    for w in 0..windows {
-        let centre = wall_centre(w);
-        let first = scene.len();
-        for i in 0..SIDE * SIDE {
-            let (gx, gy) = ((i % SIDE) as f64, (i / SIDE) as f64);
-            let step = 0.6 / SIDE as f64;
-            scene.means.push([
-                (centre.x + (gx - SIDE as f64 / 2.0) * step) as f32,
-                (centre.y + (gy - SIDE as f64 / 2.0) * step) as f32,
-                centre.z as f32,
-            ]);
-            scene.scales.push([0.03, 0.03, 0.01]);
-            scene.rotations.push([1.0, 0.0, 0.0, 0.0]);
-            scene.opacities.push(0.9);
-            scene.sh.extend([0.5, 0.4, 0.3]);
-        }
-        let mut mask = vec![0.0; windows * SIDE * SIDE];
-        mask[first..first + SIDE * SIDE].fill(1.0);
-        targets.push(WindowTarget {
-            name: format!("wall {w}"),
-            mask,
-            context: QueryContext {
-                object_centre: centre.to_array(),
-                prior_radius: 0.8,
-                world_up: [0.0, -1.0, 0.0],
-                target_ratio: 0.3,
-            },
-        });
-    }
-    (scene, targets)
+    common::walls(windows, SIDE, wall_centre, |centre| QueryContext {
+        object_centre: centre.to_array(),
+        prior_radius: 0.8,
+        world_up: [0.0, -1.0, 0.0],
+        target_ratio: 0.3,
+    })
 }
 
 /// `count` poses of window `w`, in front of its wall, sweeping sideways and turning.

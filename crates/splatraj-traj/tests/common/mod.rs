@@ -139,3 +139,41 @@ pub fn poses_tensor(poses: &[[f64; 6]], device: &burn::tensor::Device) -> burn::
 pub fn host<const D: usize>(t: burn::tensor::Tensor<D>) -> Vec<f64> {
     t.into_data().convert::<f64>().try_to_vec::<f64>().unwrap()
 }
+
+/// `windows` square walls of `side`² opaque Gaussians, 0.7 units across, each a window's
+/// object: wall w at `centre(w)` in the plane z = its centre's, facing −z, its window's
+/// context `context(centre)`. A camera close in front of one sees no other.
+pub fn walls(
+    windows: usize,
+    side: usize,
+    centre: impl Fn(usize) -> glam::DVec3,
+    context: impl Fn(glam::DVec3) -> splatraj_traj::costs::QueryContext,
+) -> (Scene, Vec<splatraj_traj::optimise::WindowTarget>) {
+    let mut scene = Scene::default();
+    let mut targets = Vec::new();
+    for w in 0..windows {
+        let centre = centre(w);
+        let first = scene.len();
+        let step = 0.7 / side as f64;
+        for i in 0..side * side {
+            let (gx, gy) = ((i % side) as f64, (i / side) as f64);
+            scene.means.push([
+                (centre.x + (gx - side as f64 / 2.0) * step) as f32,
+                (centre.y + (gy - side as f64 / 2.0) * step) as f32,
+                centre.z as f32,
+            ]);
+            scene.scales.push([0.02, 0.02, 0.005]);
+            scene.rotations.push([1.0, 0.0, 0.0, 0.0]);
+            scene.opacities.push(0.95);
+            scene.sh.extend([0.5, 0.4, 0.3]);
+        }
+        let mut mask = vec![0.0; windows * side * side];
+        mask[first..first + side * side].fill(1.0);
+        targets.push(splatraj_traj::optimise::WindowTarget {
+            name: format!("wall {w}"),
+            mask,
+            context: context(centre),
+        });
+    }
+    (scene, targets)
+}
