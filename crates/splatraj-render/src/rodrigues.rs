@@ -1,6 +1,6 @@
 //! Rodrigues' rotation on the host in f64 with its exact derivative ∂R/∂ω, in the branches of
 //! the tensor version ([`crate::camera::rotation_matrices`]: a series in θ² below
-//! [`SERIES_BELOW_THETA_SQ`], sin and cos above), so that a hand-written backward agrees with
+//! `SERIES_BELOW_THETA_SQ`, sin and cos above), so that a hand-written backward agrees with
 //! autodiff of the tensor path to rounding. The fused projection's host kernels and the costs
 //! computed on the host (the motion limits' turning rate, the prior, uprightness) take their
 //! gradients through it.
@@ -8,7 +8,7 @@
 use crate::camera::SERIES_BELOW_THETA_SQ;
 
 /// Rodrigues' rotation R(ω) and its derivative, with the tensor path's branches (a series in
-/// θ² below [`SERIES_BELOW_THETA_SQ`], sin and cos above).
+/// θ² below `SERIES_BELOW_THETA_SQ`, sin and cos above).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Rotation {
     /// R_wc, row-major: `matrix[i][j]`; column k is camera axis k in world coordinates.
@@ -27,8 +27,8 @@ fn matmul(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
 }
 
 impl Rotation {
-    /// R(ω) = I + A(θ²)·K + B(θ²)·K² with K = [ω]ₓ, A = sin θ/θ, B = (1 − cos θ)/θ², and
-    /// ∂R/∂ω_m = 2ω_m (A'·K + B'·K²) + A·E_m + B·(E_m K + K E_m), E_m = [e_m]ₓ.
+    /// R(ω) = I + A(θ²)·K + B(θ²)·K² with K = \[ω\]ₓ, A = sin θ/θ, B = (1 − cos θ)/θ², and
+    /// ∂R/∂ω_m = 2ω_m (A'·K + B'·K²) + A·E_m + B·(E_m K + K E_m), E_m = \[e_m\]ₓ.
     pub fn new(omega: [f64; 3]) -> Self {
         let s = omega.iter().map(|w| w * w).sum::<f64>();
         let (a, b, da, db) = if s < SERIES_BELOW_THETA_SQ {

@@ -16,7 +16,8 @@
 //! - [`mod@upright`]: camera up against world up (`up-vector`, the paper's) or horizon tilt (`roll`);
 //! - [`mod@prior`]: the decaying warm-start prior (attracting form; the paper's signs are a typo);
 //! - [`mod@clearance`]: keeps the camera a margin away from the scene's geometry (path cost);
-//! - [`mod@motion`]: speed, acceleration and turning-rate limits, even speed (path cost);
+//! - [`mod@motion`]: speed, acceleration, turning- and orbit-rate limits, even speed (path cost;
+//!   its terms and their gradients in [`mod@motion_rates`]);
 //! - [`mod@shot`]: keeps a window's camera on its shot preset (orbit, dolly; [`crate::shots`]);
 //! - [`iou`]: bounding-box IoU, a metric only (see that module for why it is not a [`Cost`]).
 //!
@@ -40,7 +41,12 @@
 //!
 //! The image costs are also plain tensor functions ([`tce()`], [`tre()`]; of the mask's
 //! [`MaskMoments`], which the inputs make once for all costs): they run on the mask's
-//! device and dtype and differentiate through burn's autodiff. None of the costs is ever NaN,
+//! device and dtype and differentiate through burn's autodiff. The costs of the poses alone
+//! (upright, prior, clearance, motion) are computed on the host in f64, value and gradient,
+//! and join the graph by their first-order expansion about the poses ([`mod@expansion`]:
+//! on a GPU a handful of launches instead of one per tensor op); their tensor forms
+//! ([`upright()`], [`prior()`], [`clearance()`]) stay as the specification the tests hold
+//! them to. None of the costs is ever NaN,
 //! and for an empty mask (object out of view) TCE has a zero gradient and TRE a constant one,
 //! so that nothing but the prior moves a camera that sees nothing (see each function's docs).
 

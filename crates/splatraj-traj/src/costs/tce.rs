@@ -33,7 +33,7 @@ pub fn centroid_offset(mask: Tensor<3>) -> Tensor<2> {
     centroid_offset_of(&MaskMoments::of(mask))
 }
 
-/// [`centroid_offset`] of a mask's moments (what a cost reads: [`CostInputs::mask_moments`]).
+/// [`centroid_offset`] of a mask's moments (what a cost reads: [`CostInputs::require_mask_moments`]).
 pub fn centroid_offset_of(moments: &MaskMoments) -> Tensor<2> {
     // [B, 2] / [B, 1]: the mass broadcasts over both coordinates.
     moments.first() / moments.mass().clamp_min(MASS_FLOOR)

@@ -25,7 +25,7 @@ pub fn tre(mask: Tensor<3>, target: f64) -> Tensor<1> {
     tre_of(&MaskMoments::of(mask), target)
 }
 
-/// [`tre`] of a mask's moments (what a cost reads: [`CostInputs::mask_moments`]).
+/// [`tre`] of a mask's moments (what a cost reads: [`CostInputs::require_mask_moments`]).
 pub fn tre_of(moments: &MaskMoments, target: f64) -> Tensor<1> {
     moments.coverage().sub_scalar(target).abs()
 }
