@@ -115,6 +115,13 @@ impl WindowPath {
         }
     }
 
+    /// The normalised time between its consecutive poses.
+    pub fn time_step(&self) -> f64 {
+        match self {
+            WindowPath::Poses(_, time_step) | WindowPath::Rows(_, time_step) => *time_step,
+        }
+    }
+
     /// Its poses `[P, 6]` and time step; `joined` holds every window's path, this one from
     /// row `first` on (needed for [`WindowPath::Rows`]).
     fn poses(
@@ -826,9 +833,7 @@ impl<'a> Problem<'a> {
             .zip(&paths)
             .map(|(w, path)| PathStretch {
                 rows: path.rows(),
-                time_step: match path {
-                    WindowPath::Poses(_, time_step) | WindowPath::Rows(_, time_step) => *time_step,
-                },
+                time_step: path.time_step(),
                 context: self.windows[w.window].context,
             })
             .collect();
