@@ -28,7 +28,7 @@ pub(crate) const SERIES_BELOW_THETA_SQ: f64 = 1e-2;
 
 /// Differentiable Rodrigues: rotation vectors `[B, 3]` → rotation matrices `[B, 3, 3]`.
 ///
-/// Neither value nor gradient is NaN at ω = 0: below [`SERIES_BELOW_THETA_SQ`] the
+/// Neither value nor gradient is NaN at ω = 0: below `SERIES_BELOW_THETA_SQ` the
 /// coefficients are series in θ² (no sqrt, no division), and the trigonometric branch takes
 /// sqrt of θ² clamped away from 0, so the branch that is masked out stays finite too (a NaN in
 /// an unused branch would still poison the gradient through the select).

@@ -7,7 +7,7 @@
 //!
 //! That weight is the gradient of the composited image with respect to the Gaussian's channel
 //! value: with a per-Gaussian value tensor V `[N, C]` composited into image I `[B, H, W, C]`,
-//! `∂(Σ_p f(p)·I(p))/∂V_i = Σ_p w_i(p)·f(p)`. So a lift is one [`render`] with V as
+//! `∂(Σ_p f(p)·I(p))/∂V_i = Σ_p w_i(p)·f(p)`. So a lift is one [`crate::render`] with V as
 //! [`RenderRequest::gaussian_values`] (zeros: the image does not matter, only its derivative)
 //! and one backward of `Σ I·F`, where F holds the `dim` pixel values and one extra channel of
 //! ones whose gradient is the denominator `Σ_p w_i(p)`. The same code renders and lifts, on

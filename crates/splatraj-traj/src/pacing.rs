@@ -16,7 +16,7 @@
 //! are stated per second at the default 30 fps and kept at other frame rates (a faster rate
 //! judders less, a slower one more: at 24 fps 45°/s is 1.9° a frame).
 //!
-//! The verdict holds every window to these limits ([`crate::metrics::verdict`]); the motion
+//! The verdict holds every window to these limits ([`mod@crate::metrics::verdict`]); the motion
 //! cost of a config without `[costs]` aims a little below them
 //! ([`crate::costs::motion::FIRST_TRY_MAX_ANGULAR_SPEED`]).
 

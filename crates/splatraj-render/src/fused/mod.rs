@@ -11,7 +11,7 @@
 //! Backends: on Flex and ndarray the compositing kernels ([`cpu`]) run in plain Rust on the
 //! host, in parallel over (pose, tile), reading the inputs into host vectors (a copy in
 //! memory). The GPU backend (`Cube`, i.e. wgpu) runs the same rules as CubeCL kernels
-//! ([`cube`], one workgroup per tile); only the tile lists travel from the host.
+//! (`cube`, one workgroup per tile); only the tile lists travel from the host.
 
 pub mod cpu;
 #[cfg(feature = "wgpu")]

@@ -7,7 +7,7 @@
 //! 3. render the window's object mask at all S poses, object-pruned; on a GPU every window's
 //!    samples (and each object alone, when a cost reads it) share one render call
 //!    ([`Problem::evaluate_windows`], [`super::StepPasses`]);
-//! 4. evaluate the [`WeightedCosts`] at step k and average over the S samples.
+//! 4. evaluate the [`crate::costs::WeightedCosts`] at step k and average over the S samples.
 //!
 //! The loss is the mean over windows of those averages, the Monte Carlo estimate of
 //! (1/n)·Σ_i n·∫_{T_i} L dt; one backward pass gives ∂loss/∂W, and burn's Adam steps W.

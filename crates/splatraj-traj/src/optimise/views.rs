@@ -302,7 +302,7 @@ const CALIBRATION_VIEWS: [(f64, f64); 10] = [
 ];
 
 /// The working distance at which the object alone covers `target_ratio` of the frame on
-/// average over [`CALIBRATION_VIEWS`], measured: from `radius` (an estimate from the object's
+/// average over `CALIBRATION_VIEWS`, measured: from `radius` (an estimate from the object's
 /// box), twice scaled by √(mean coverage / target) (coverage falls as 1/d² far from the
 /// object). The box estimate is off by a factor 1.3–1.6 on real parts (a sphere cut from a
 /// surface is thinner than its box; the first-try biker's jacket covered 0.45 of the frame at
