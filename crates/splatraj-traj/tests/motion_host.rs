@@ -141,8 +141,16 @@ fn joined_path() -> (Vec<[f64; 6]>, Vec<PathStretch>) {
     (poses, stretches)
 }
 
-/// Per-window values and the gradient of Σ_w (w + 1)·value_w in the poses (distinct weights,
-/// so a gradient landing in the wrong window shows).
+/// Distinct weights w + 1 of the windows' values `[W]`, so a gradient landing in the wrong
+/// window shows.
+fn window_weights(windows: usize, device: &Device) -> Tensor<1> {
+    Tensor::<1>::from_data(
+        TensorData::new((1..=windows).map(|w| w as f64).collect(), [windows]),
+        (device, DType::F64),
+    )
+}
+
+/// Per-window values and the gradient of Σ_w (w + 1)·value_w in the poses.
 fn value_and_gradient(
     poses: &[[f64; 6]],
     evaluate: impl Fn(Tensor<2>) -> Tensor<1>,
@@ -151,11 +159,9 @@ fn value_and_gradient(
     let tensor = poses_tensor(poses, &device).require_grad();
     let values = evaluate(tensor.clone());
     let [windows] = values.dims();
-    let weights = Tensor::<1>::from_data(
-        TensorData::new((1..=windows).map(|w| w as f64).collect(), [windows]),
-        (&device, DType::F64),
-    );
-    let grads = (values.clone() * weights).sum().backward();
+    let grads = (values.clone() * window_weights(windows, &device))
+        .sum()
+        .backward();
     (host(values), host(tensor.grad(&grads).unwrap()))
 }
 
@@ -237,21 +243,16 @@ fn host_motion_cost_carries_its_gradient_back_through_what_made_the_poses() {
     let inputs = CostInputs::new(made, None, 0, stretches[0].context)
         .unwrap()
         .with_path(path);
-    let grads = cost.evaluate(&inputs).unwrap().sum().backward();
+    let values = cost.evaluate(&inputs).unwrap();
+    let [windows] = values.dims();
+    let grads = (values * window_weights(windows, &device)).sum().backward();
     let via_theta = host(theta.grad(&grads).unwrap());
     let (_, direct) = value_and_gradient(&poses, |t| {
         let path = PathSamples::joined(t.clone(), stretches.clone(), Some(4.0)).unwrap();
         let inputs = CostInputs::new(t, None, 0, stretches[0].context)
             .unwrap()
             .with_path(path);
-        let values = cost.evaluate(&inputs).unwrap();
-        // Undo value_and_gradient's window weights: every window weighs 1 here.
-        let [windows] = values.dims();
-        let inverse = Tensor::<1>::from_data(
-            TensorData::new((1..=windows).map(|w| 1.0 / w as f64).collect(), [windows]),
-            (&values.device(), DType::F64),
-        );
-        values * inverse
+        cost.evaluate(&inputs).unwrap()
     });
     let doubled: Vec<f64> = direct.iter().map(|g| 2.0 * g).collect();
     assert!(doubled.iter().any(|g| g.abs() > 1e-3));

@@ -231,7 +231,7 @@ impl Cost for ClearanceCost {
         };
         match inputs.path() {
             // Its mean per window's stretch [W] (the mean of a window's own path [1]).
-            Some(path) => per_stretch_on_host(inputs, path, self.name(), |_, poses| {
+            Some(_) => per_stretch_on_host(inputs, self.name(), |_, poses| {
                 let share = 1.0 / poses.len().max(1) as f64;
                 let rows: Vec<(f64, [f64; 6])> = poses.iter().map(at).collect();
                 let value = rows.iter().map(|r| r.0).sum::<f64>() * share;

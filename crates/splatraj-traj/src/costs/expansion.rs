@@ -19,8 +19,9 @@
 //! that is all gradient descent reads; the expansion is never evaluated anywhere else.
 
 use burn::tensor::{Tensor, TensorData};
+use splatraj_render::host::upload;
 
-use super::{CostError, CostInputs, PathSamples, PathStretch, QueryContext};
+use super::{CostError, CostInputs, PathStretch, QueryContext};
 
 /// The gradients of host values in the poses, by which poses each value reads.
 #[derive(Debug, Clone, PartialEq)]
@@ -54,22 +55,21 @@ pub fn expansion_at(
             at.len()
         )));
     }
-    let device = (&poses.device(), poses.dtype());
-    let at = Tensor::<2>::from_data(
-        TensorData::new(at.iter().flatten().copied().collect(), [count, 6]),
-        device,
-    );
-    let values = Tensor::<1>::from_data(TensorData::new(values, [windows]), device);
+    // Counted uploads, like every other the step makes.
+    let (device, dtype) = (poses.device(), poses.dtype());
+    let flat: Vec<f64> = at.iter().flatten().copied().collect();
+    let at = upload::<2>(TensorData::new(flat, [count, 6]), &device, dtype);
+    let values = upload::<1>(TensorData::new(values, [windows]), &device, dtype);
     // Zero in the forward (the poses are `at`); G's weights in the backward.
     let shift = poses.clone() - at; // [P, 6]
     Ok(match gradients {
         PoseGradients::OwnPose(gradients) => {
-            let gradients = Tensor::<2>::from_data(TensorData::new(gradients, [count, 6]), device);
+            let gradients = upload::<2>(TensorData::new(gradients, [count, 6]), &device, dtype);
             values + (shift * gradients).sum_dim(1).reshape([count])
         }
         PoseGradients::AllPoses(gradients) => {
-            let gradients =
-                Tensor::<2>::from_data(TensorData::new(gradients, [windows, count * 6]), device);
+            let data = TensorData::new(gradients, [windows, count * 6]);
+            let gradients = upload::<2>(data, &device, dtype);
             values
                 + gradients
                     .matmul(shift.reshape([count * 6, 1]))
@@ -102,16 +102,19 @@ pub fn per_sample_on_host(
     )
 }
 
-/// A cost per window's stretch of path computed on the host: `form(stretch, poses)` gives a
-/// stretch's value and its gradient in each of its poses; the path's host values come with
-/// `inputs` (read here when the caller has not, a failure naming `cost`). `[W]`, one value per
-/// stretch, as [`expansion_at`] joins it.
+/// A cost per window's stretch of the path of `inputs` computed on the host: `form(stretch,
+/// poses)` gives a stretch's value and its gradient in each of its poses; the path's host
+/// values come with `inputs` (read here when the caller has not, a failure naming `cost`).
+/// `[W]`, one value per stretch, as [`expansion_at`] joins it; a [`CostError::Shape`] without
+/// a path.
 pub fn per_stretch_on_host(
     inputs: &CostInputs,
-    path: &PathSamples,
     cost: &'static str,
     form: impl Fn(&PathStretch, &[[f64; 6]]) -> (f64, Vec<[f64; 6]>),
 ) -> Result<Tensor<1>, CostError> {
+    let path = inputs.path().ok_or_else(|| {
+        CostError::Shape(format!("{cost}: a cost per stretch of path without a path"))
+    })?;
     let host = inputs.host_path_or_sample_poses(cost)?; // [ΣP]
     let count = host.len();
     let stretches = path.stretches();

@@ -228,7 +228,7 @@ impl Cost for MotionCost {
         };
         let limits = self.limits()?;
         // On the host, each stretch on its own (docs/gpu.md, "Costs on the host").
-        per_stretch_on_host(inputs, path, self.name(), |stretch, poses| {
+        per_stretch_on_host(inputs, self.name(), |stretch, poses| {
             let floor = 1e-6 * stretch.context.prior_radius;
             stretch_charge(
                 &limits,

@@ -13,7 +13,7 @@ use burn::tensor::{DType, Device, Int, Tensor, TensorData};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::focus::Surroundings;
-use splatraj_render::host::OnDevice;
+use splatraj_render::host::{OnDevice, as_stored};
 use splatraj_render::rasterize::{Approximations, RenderStats};
 use splatraj_render::render::{
     Channel, DeviceScene, ObjectMasks, ObjectView, Pruning, Rasterizer, RenderError, RenderRequest,
@@ -159,6 +159,18 @@ pub struct WindowSamples<'s> {
     pub host: Option<&'s HostPoses>,
     /// The samples' zoom `[count]` when the lens zooms (None: the configured focal length).
     pub zoom: Option<Zoom>,
+}
+
+/// Each window's first row in the joined path (every window's path, in window order).
+fn path_starts(windows: &[WindowSamples<'_>]) -> Vec<usize> {
+    windows
+        .iter()
+        .scan(0, |next, w| {
+            let first = *next;
+            *next += w.path.as_ref().map_or(0, WindowPath::rows);
+            Some(first)
+        })
+        .collect()
 }
 
 impl WindowSamples<'_> {
@@ -649,9 +661,10 @@ impl<'a> Problem<'a> {
     /// Renders what the costs read for the samples of several windows and evaluates their
     /// costs at step `step`: `poses` `[ΣS, 6]` holds the windows' samples one window after
     /// the other, as `windows` lists them, optionally followed by every window's path in the
-    /// same order `[ΣS + ΣP, 6]`: the very rows the windows' `path` tensors are slices of (the
-    /// joined path is then one slice; only the counts are checked); the result is the step's loss (the mean over the
-    /// windows of each window's mean weighted total) and each window's term means.
+    /// same order `[ΣS + ΣP, 6]` (then the joined path is one slice of them, and a
+    /// [`WindowPath::Rows`] path is cut out of them; a [`WindowPath::Poses`] path must be those
+    /// very rows: only the counts are checked). The result is the step's loss (the mean over
+    /// the windows of each window's mean weighted total) and each window's term means.
     ///
     /// With [`StepPasses::Shared`] one render call serves the whole step (each window's
     /// object alone included), and the costs that [`Cost::batches_windows`] run once on the
@@ -776,10 +789,10 @@ impl<'a> Problem<'a> {
             .iter()
             .any(|c| per_window_cost(c.as_ref()));
         let mut per_window = Vec::with_capacity(windows.len());
-        let (mut offset, mut first_path_row) = (0, 0);
-        for w in windows {
+        let starts = path_starts(&windows);
+        let mut offset = 0;
+        for (w, first_path_row) in windows.into_iter().zip(starts) {
             let count = w.count;
-            let path_rows = w.path.as_ref().map_or(0, WindowPath::rows);
             if others {
                 let own = poses.clone().narrow(0, offset, count);
                 let images = match (&pass, others_read_images) {
@@ -792,7 +805,6 @@ impl<'a> Problem<'a> {
                 per_window.push(None);
             }
             offset += count;
-            first_path_row += path_rows;
         }
         Ok(StepEvaluation::of_batch(
             self.costs,
@@ -914,13 +926,12 @@ impl<'a> Problem<'a> {
         let mut terms = Vec::with_capacity(windows.len());
         let mut masks = Vec::with_capacity(windows.len());
         let mut stats: Option<RenderStats> = None;
-        let (mut offset, mut first_path_row) = (0, 0);
-        for w in windows {
+        let starts = path_starts(&windows);
+        let mut offset = 0;
+        for (w, first_path_row) in windows.into_iter().zip(starts) {
             let own = poses.clone().narrow(0, offset, w.count);
             offset += w.count;
-            let path_rows = w.path.as_ref().map_or(0, WindowPath::rows);
             let w = w.with_own_path(joined.as_ref(), first_path_row)?;
-            first_path_row += path_rows;
             let (window_terms, pass) = self.evaluate_one(w, own, step, renders)?;
             terms.push(window_terms);
             if let Some(pass) = pass {
@@ -1096,17 +1107,15 @@ impl<'a> Problem<'a> {
         if gradient {
             poses = poses.require_grad();
         }
-        // The tensor's own values (the costs computed on the host expand about them).
-        let rounded = match self.scene.dtype() {
-            burn::tensor::DType::F32 => pose.0.map(|v| f64::from(v as f32)),
-            _ => pose.0,
-        };
-        let host = HostPoses {
-            samples: vec![rounded],
-            path: None,
-        };
+        // The tensor's own values (the costs computed on the host expand about them); for a
+        // dtype whose rounding the host does not know, they read them back.
+        let host =
+            as_stored(std::slice::from_ref(pose), self.scene.dtype()).map(|stored| HostPoses {
+                samples: vec![stored[0].0],
+                path: None,
+            });
         let evaluated =
-            self.evaluate_along(index, poses.clone(), None, None, Some(&host), 0, None)?;
+            self.evaluate_along(index, poses.clone(), None, None, host.as_ref(), 0, None)?;
         let terms = &evaluated.terms;
         // Everything the host wants in one read (one wait for the device on a GPU): the total,
         // each term, the coverage and the gradient.

@@ -20,12 +20,13 @@
 //! whose straight segment keeps the margin (checked every m/4; a segment from an end that is
 //! already inside the margin may keep that end's clearance instead) is kept next.
 //!
-//! **Start.** [`super::start::routed_start_trajectory`] moves the start's camera centres along the route over the
-//! transition around each join of windows: the last share of the earlier window and the first
-//! of the later one (at least [`ROUTE_TRANSITION`], more where the pacing limits ask for it:
-//! [`crate::optimise::pans`]; none inside a window with a shot, whose path is the shot's), by arc length along the smoothstep 3x² − 2x³ of time (at rest at both ends of the
-//! transition). Orientations stay those of the start. Joins whose straight segment already
-//! keeps the margin are left alone.
+//! **Start.** [`super::start::routed_start_trajectory`] moves the start's camera centres along the
+//! route over the transition around each join of windows: the last share of the earlier window and
+//! the first of the later one (at least [`ROUTE_TRANSITION`], more where the pacing limits ask for
+//! it: [`crate::optimise::pans`]; none inside a window with a shot, whose path is the shot's), by
+//! arc length along the smoothstep 3x² − 2x³ of time (at rest at both ends of the transition).
+//! Orientations stay those of the start. Joins whose straight segment already keeps the margin are
+//! left alone.
 
 use glam::DVec3;
 use rayon::prelude::*;

@@ -1,11 +1,11 @@
 //! Single-pose optimisation: Φ = (ω, c) itself is the parameter (the paper's Table I ablation).
 //!
 //! Each step k renders the object's mask at Φ (only if some cost reads it), evaluates the
-//! [`crate::costs::WeightedCosts`] at step k (so the prior's weight α_k decays), backpropagates the total to
-//! Φ and moves Φ with burn's Adam. Several starts run at once as one batch `[B, 6]` (the
-//! restarts): the loss is the sum of their totals, so each start gets exactly its own gradient,
-//! and Adam works element by element, so the starts do not interact. The best pose of each
-//! start (lowest total) is returned, with its history.
+//! [`crate::costs::WeightedCosts`] at step k (so the prior's weight α_k decays), backpropagates the
+//! total to Φ and moves Φ with burn's Adam. Several starts run at once as one batch `[B, 6]` (the
+//! restarts): the loss is the sum of their totals, so each start gets exactly its own gradient, and
+//! Adam works element by element, so the starts do not interact. The best pose of each start
+//! (lowest total) is returned, with its history.
 //!
 //! **Units.** Φ mixes radians and scene units, which want separate step sizes
 //! ([`SinglePoseOptions::lr_rotation`], [`SinglePoseOptions::lr_position`]); burn's Adam takes
