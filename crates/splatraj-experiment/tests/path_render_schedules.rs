@@ -1,7 +1,8 @@
 //! The fast output path writes the same files as the plain one: a path rendered one frame at a
-//! time ([`FrameSchedule::Sequential`]) and pipelined (encoding on its own thread, frames in
-//! passes of 1 and of 3 poses) gives byte-identical frames, keyframes, `frame_metrics.csv` and
-//! `video.mp4`, with both rasterizers and both overlays.
+//! time ([`FrameSchedule::Sequential`]) and pipelined (encoding on its own threads, frames in
+//! passes of 1, 2 and 3 poses, the video's groups of pictures encoded one, two or three at a
+//! time with their frames rendered interleaved) gives byte-identical frames, keyframes,
+//! `frame_metrics.csv` and `video.mp4`, with both rasterizers and both overlays.
 
 use std::path::Path;
 
@@ -72,7 +73,8 @@ fn pipelined_and_batched_frames_are_the_sequential_frames_byte_for_byte() {
             })
             .collect(),
         cameras: vec![k; count],
-        fps: 10.0,
+        // Groups of pictures of 3 frames (a keyframe every 2 s): 0–2, 3–5 and 6.
+        fps: 1.5,
     };
     let objects: Vec<PathObject> = masks
         .iter()
@@ -114,9 +116,16 @@ fn pipelined_and_batched_frames_are_the_sequential_frames_byte_for_byte() {
                 names.iter().any(|n| n.starts_with("keyframes/")),
                 overlay == MaskOverlay::None
             );
-            for batch in [1, 3] {
-                let (fast, fast_metrics) = render(FrameSchedule::Pipelined { batch });
-                let case = format!("{rasterizer:?} {overlay:?} pipelined:{batch}");
+            for (batch, groups) in [
+                (1, None),
+                (3, None),
+                (1, Some(3)),
+                (3, Some(2)),
+                (2, Some(1)),
+            ] {
+                let schedule = FrameSchedule::Pipelined { batch, groups };
+                let (fast, fast_metrics) = render(schedule);
+                let case = format!("{rasterizer:?} {overlay:?} {}", schedule.name());
                 assert_eq!(fast_metrics, metrics, "{case}");
                 assert_eq!(fast.len(), reference.len(), "{case}");
                 for ((name, bytes), (fast_name, fast_bytes)) in reference.iter().zip(&fast) {
@@ -130,7 +139,7 @@ fn pipelined_and_batched_frames_are_the_sequential_frames_byte_for_byte() {
 
 #[test]
 fn schedules_parse_and_name_themselves() {
-    for text in ["sequential", "pipelined:1", "pipelined:4"] {
+    for text in ["sequential", "pipelined:1", "pipelined:4", "pipelined:2:3"] {
         let schedule: FrameSchedule = text.parse().unwrap();
         assert_eq!(schedule.name(), text);
     }
@@ -138,7 +147,15 @@ fn schedules_parse_and_name_themselves() {
         "pipelined".parse::<FrameSchedule>().unwrap(),
         FrameSchedule::default()
     );
-    for bad in ["pipelined:0", "pipelined:x", "fast", ""] {
+    for bad in [
+        "pipelined:0",
+        "pipelined:x",
+        "pipelined:2:0",
+        "pipelined:2:3:4",
+        "sequential:2",
+        "fast",
+        "",
+    ] {
         assert!(bad.parse::<FrameSchedule>().is_err(), "{bad}");
     }
 }
@@ -177,7 +194,10 @@ fn a_failing_writer_stops_the_render_with_its_error() {
         &job,
         dir.path(),
         &mut |_| {},
-        FrameSchedule::Pipelined { batch: 2 },
+        FrameSchedule::Pipelined {
+            batch: 2,
+            groups: None,
+        },
     )
     .unwrap_err();
     assert!(format!("{error:#}").contains("frame_0000.png"), "{error:#}");

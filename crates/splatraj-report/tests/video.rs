@@ -2,7 +2,7 @@
 //! crate) and decoded by OpenH264: one H.264 Constrained Baseline track of the right size, frame
 //! count and duration, and frames within codec error of what went in.
 
-use splatraj_report::video::{decode_mp4, encode_mp4};
+use splatraj_report::video::{VideoEncoder, VideoError, decode_mp4, encode_mp4};
 
 /// A smooth picture (rendered frames are smooth too).
 fn gradient(width: usize, height: usize) -> Vec<u8> {
@@ -88,4 +88,81 @@ fn odd_sizes_are_padded_to_even() {
         .flat_map(|row| row[..width * 3].to_vec())
         .collect();
     assert!(psnr(&frames[0], &crop) > 30.0);
+}
+
+/// The frames of `count` moving-square frames given to an encoder of `parallel` groups at
+/// once, in the order of `runs` (or frame order), as an MP4.
+fn encoded(count: usize, fps: f64, parallel: usize, run: Option<usize>) -> Vec<u8> {
+    let (width, height) = (64, 48);
+    let mut encoder = VideoEncoder::with_parallel(width, height, fps, parallel).unwrap();
+    let order: Vec<usize> = match run {
+        Some(run) => encoder
+            .encoding_runs(count, run)
+            .into_iter()
+            .flatten()
+            .collect(),
+        None => (0..count).collect(),
+    };
+    let mut sorted = order.clone();
+    sorted.sort();
+    assert_eq!(sorted, (0..count).collect::<Vec<_>>(), "every frame once");
+    for index in order {
+        encoder.push(index, &frame(width, height, index)).unwrap();
+    }
+    encoder.finish().unwrap()
+}
+
+#[test]
+fn groups_encoded_at_once_and_interleaved_make_the_same_mp4() {
+    // 6 fps: a keyframe every 12 frames, so 30 frames are groups of 12, 12 and 6.
+    let reference = encoded(30, 6.0, 1, None);
+    for (parallel, run) in [(3, Some(1)), (2, Some(5)), (8, Some(2)), (3, None)] {
+        assert!(
+            encoded(30, 6.0, parallel, run) == reference,
+            "{parallel} groups at once, runs of {run:?}"
+        );
+    }
+    // And it is a video of those frames, in order: each decodes near itself (the square's sharp
+    // edges cost a few dB late in a group) and farther from the frame 3 later.
+    let video = decode_mp4(&reference).unwrap();
+    assert_eq!(video.frames.len(), 30);
+    for (k, back) in video.frames.iter().enumerate() {
+        let db = psnr(&frame(64, 48, k), back);
+        assert!(db > 25.0, "frame {k}: PSNR {db:.1} dB");
+        assert!(db > psnr(&frame(64, 48, k + 3), back) + 3.0, "frame {k}");
+    }
+}
+
+#[test]
+fn encoding_runs_take_the_groups_in_turn() {
+    // 1.5 fps: groups of 3 frames, 0–2, 3–5 and 6.
+    let encoder = VideoEncoder::with_parallel(8, 8, 1.5, 3).unwrap();
+    assert_eq!(
+        encoder.encoding_runs(7, 1),
+        [0..1, 3..4, 6..7, 1..2, 4..5, 2..3, 5..6]
+    );
+    let encoder = VideoEncoder::with_parallel(8, 8, 1.5, 2).unwrap();
+    assert_eq!(encoder.encoding_runs(7, 2), [0..2, 3..5, 2..3, 5..6, 6..7]);
+    let encoder = VideoEncoder::with_parallel(8, 8, 1.5, 1).unwrap();
+    assert_eq!(encoder.encoding_runs(7, 5), [0..3, 3..6, 6..7]);
+}
+
+#[test]
+fn frames_out_of_their_group_order_or_missing_are_errors() {
+    let (width, height) = (24, 24);
+    let picture = frame(width, height, 0);
+    // Groups of 3 frames.
+    let mut encoder = VideoEncoder::with_parallel(width, height, 1.5, 2).unwrap();
+    let error = encoder.push(1, &picture).unwrap_err();
+    assert!(matches!(error, VideoError::Order(_)), "{error}");
+    encoder.push(0, &picture).unwrap();
+    let error = encoder.push(2, &picture).unwrap_err();
+    assert!(error.to_string().contains("frame 1 was next"), "{error}");
+    let error = encoder.push(0, &picture).unwrap_err();
+    assert!(error.to_string().contains("twice"), "{error}");
+    // Frames 0 and 6–7 given, 1–5 never: the video names the gap.
+    encoder.push(6, &picture).unwrap();
+    encoder.push(7, &picture).unwrap();
+    let error = encoder.finish().unwrap_err();
+    assert!(error.to_string().contains("missing"), "{error}");
 }

@@ -36,8 +36,9 @@ pub struct BenchFramesArgs {
     /// Frames per second of the video.
     #[arg(long, default_value_t = 30.0)]
     fps: f64,
-    /// Schedules to time: sequential (one frame at a time, the reference), pipelined or
-    /// pipelined:BATCH.
+    /// Schedules to time: sequential (one frame at a time, the reference), pipelined,
+    /// pipelined:BATCH (poses a pass) or pipelined:BATCH:GROUPS (and the video's groups of
+    /// pictures encoded at once; default: half the cores).
     #[arg(long, value_delimiter = ',', default_values = ["sequential", "pipelined"], value_parser = FrameSchedule::from_str)]
     schedule: Vec<FrameSchedule>,
     /// Compositing: fused or tensor.

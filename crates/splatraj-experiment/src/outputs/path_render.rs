@@ -10,6 +10,7 @@
 //! talk shows); the report's keyframes ([`keyframe_indices`]) are also written tinted and
 //! small into `keyframes/`, so the report still shows which part each window is about.
 
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -117,9 +118,11 @@ pub struct PathTimings {
     pub metrics: Duration,
     /// Reading the images back and making 8-bit pixels (tint included).
     pub read_back: Duration,
-    /// PNG encoding (frames and keyframes); at the same time as the video's.
+    /// PNG encoding (frames and keyframes), summed over the frames encoded at once; at the
+    /// same time as the video's.
     pub png: Duration,
-    /// H.264 encoding and muxing; at the same time as the PNGs'.
+    /// H.264: the groups' encoding (summed over their threads, which run at once and beside
+    /// the PNGs), handing the frames over and muxing.
     pub video: Duration,
     /// Writing files.
     pub write: Duration,
@@ -130,28 +133,44 @@ pub struct PathTimings {
 /// How [`render_path_with`] orders its work; every schedule writes the same files.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FrameSchedule {
-    /// One frame at a time: render, read back, encode, write, then the next (the reference).
+    /// One frame at a time, in order: render, read back, encode, write, then the next (the
+    /// reference).
     Sequential,
     /// Up to `batch` frames rendered per pass, the next pass queued on the device before this
-    /// one is read back, while one thread encodes and writes the frames before them.
+    /// one is read back, while a thread encodes and writes the frames before them: the PNGs
+    /// of several frames at once, and the video's groups of pictures `groups` at a time (their
+    /// frames rendered interleaved, [`VideoEncoder::encoding_runs`]).
     Pipelined {
         /// Poses per render pass.
         batch: usize,
+        /// Video groups encoded at once; `None`: as many as [`VideoEncoder::new`] chooses for
+        /// this machine.
+        groups: Option<usize>,
     },
 }
 
 impl Default for FrameSchedule {
     fn default() -> Self {
-        FrameSchedule::Pipelined { batch: 1 }
+        FrameSchedule::Pipelined {
+            batch: 1,
+            groups: None,
+        }
     }
 }
 
 impl FrameSchedule {
-    /// `sequential` or `pipelined:BATCH`.
+    /// `sequential`, `pipelined:BATCH` or `pipelined:BATCH:GROUPS`.
     pub fn name(&self) -> String {
         match self {
             FrameSchedule::Sequential => "sequential".into(),
-            FrameSchedule::Pipelined { batch } => format!("pipelined:{batch}"),
+            FrameSchedule::Pipelined {
+                batch,
+                groups: None,
+            } => format!("pipelined:{batch}"),
+            FrameSchedule::Pipelined {
+                batch,
+                groups: Some(groups),
+            } => format!("pipelined:{batch}:{groups}"),
         }
     }
 }
@@ -160,15 +179,24 @@ impl std::str::FromStr for FrameSchedule {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let bad =
-            || format!("unknown schedule {s:?}: expected sequential, pipelined or pipelined:N");
-        match s.split_once(':') {
-            None if s == "sequential" => Ok(FrameSchedule::Sequential),
-            None if s == "pipelined" => Ok(FrameSchedule::default()),
-            Some(("pipelined", n)) => match n.parse() {
-                Ok(batch) if batch > 0 => Ok(FrameSchedule::Pipelined { batch }),
-                _ => Err(bad()),
-            },
+        let bad = || {
+            format!(
+                "unknown schedule {s:?}: expected sequential, pipelined, pipelined:BATCH or \
+                 pipelined:BATCH:GROUPS (counts above 0)"
+            )
+        };
+        let count = |n: &str| match n.parse::<usize>() {
+            Ok(n) if n > 0 => Ok(n),
+            _ => Err(bad()),
+        };
+        let mut parts = s.split(':');
+        match (parts.next(), parts.next(), parts.next(), parts.next()) {
+            (Some("sequential"), None, ..) => Ok(FrameSchedule::Sequential),
+            (Some("pipelined"), None, ..) => Ok(FrameSchedule::default()),
+            (Some("pipelined"), Some(batch), groups, None) => Ok(FrameSchedule::Pipelined {
+                batch: count(batch)?,
+                groups: groups.map(count).transpose()?,
+            }),
             _ => Err(bad()),
         }
     }
@@ -248,9 +276,25 @@ pub fn render_path_with(
                     size.1
                 );
             }
-            Some(VideoEncoder::new(size.0, size.1, frames.fps)?)
+            Some(match schedule {
+                FrameSchedule::Pipelined {
+                    groups: Some(groups),
+                    ..
+                } => VideoEncoder::with_parallel(size.0, size.1, frames.fps, groups)?,
+                _ => VideoEncoder::new(size.0, size.1, frames.fps)?,
+            })
         }
         Video::None => None,
+    };
+    // The order frames are rendered in: the video's groups interleaved when they are encoded
+    // several at once; the reference in frame order.
+    let count = frames.poses.len();
+    let runs = match (schedule, &encoder) {
+        (FrameSchedule::Pipelined { batch, .. }, Some(encoder)) => {
+            encoder.encoding_runs(count, batch)
+        }
+        // One run of every frame (a one-element list, not the frames' indices).
+        _ => std::iter::once(0..count).collect(),
     };
     std::fs::create_dir_all(dir)
         .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
@@ -277,6 +321,12 @@ pub fn render_path_with(
         keyframes_dir,
         encoder,
         timings: PathTimings::default(),
+        pending: Vec::new(),
+        // PNGs are independent files: as many at once as threads (at most 8 frames held).
+        png_batch: match schedule {
+            FrameSchedule::Sequential => 1,
+            FrameSchedule::Pipelined { .. } => rayon::current_num_threads().clamp(1, 8),
+        },
     };
     let mut timings = PathTimings::default();
     let (metrics, mut writer) = match schedule {
@@ -285,11 +335,12 @@ pub fn render_path_with(
                 scene,
                 job,
                 (schedule, since),
-                &keyframes,
+                (&runs, &keyframes),
                 &mut timings,
                 progress,
                 &mut |frame| writer.write(frame),
             )?;
+            writer.flush()?;
             (metrics, writer)
         }
         FrameSchedule::Pipelined { .. } => std::thread::scope(|threads| {
@@ -300,13 +351,14 @@ pub fn render_path_with(
                 for frame in frames_in {
                     writer.write(frame)?;
                 }
+                writer.flush()?;
                 Ok(writer)
             });
             let rendered = render_frames(
                 scene,
                 job,
                 (schedule, since),
-                &keyframes,
+                (&runs, &keyframes),
                 &mut timings,
                 progress,
                 &mut |frame| {
@@ -343,9 +395,12 @@ pub fn render_path_with(
         write_csv(&dir.join(FRAME_METRICS_FILE), &header, &rows)?;
     }
     let video = match writer.encoder.take() {
-        Some(encoder) => {
+        Some(mut encoder) => {
             let path = dir.join(VIDEO_FILE);
             let clock = Instant::now();
+            encoder.wait_for_groups()?;
+            // The groups' own encoding, beside the time frames took to hand over and mux.
+            writer.timings.video += encoder.encoding_time();
             let bytes = encoder.finish()?;
             writer.timings.video += clock.elapsed();
             write_bytes(&path, &bytes)?;
@@ -381,7 +436,7 @@ fn check_path_render(
     // A pipelined pass is queued while the one before it is still held.
     let at_once = match schedule {
         FrameSchedule::Sequential => 1,
-        FrameSchedule::Pipelined { batch } => 2 * batch.max(1),
+        FrameSchedule::Pipelined { batch, .. } => 2 * batch.max(1),
     };
     RenderWork {
         what: format!(
@@ -412,56 +467,73 @@ struct Frame {
     keyframe: Option<Vec<u8>>,
 }
 
-/// Encodes and writes frames, in the order it is given them.
+/// Encodes and writes frames: each frame's video frame when given, the PNGs a batch at a time.
 struct FrameWriter {
     frames_dir: PathBuf,
     keyframes_dir: PathBuf,
     encoder: Option<VideoEncoder>,
     /// PNG, video and write times.
     timings: PathTimings,
+    /// Frames whose PNGs are not written yet.
+    pending: Vec<Frame>,
+    /// Frames whose PNGs are encoded at once (rayon's pool).
+    png_batch: usize,
 }
 
 impl FrameWriter {
-    /// Writes `frame`'s PNG (and keyframe) and appends it to the video. The PNGs and the
-    /// video frame are encoded at the same time (rayon's pool): on a GPU the device renders a
-    /// frame faster than one thread encodes it both ways, so this thread sets the pace.
+    /// Gives `frame` to the video (its group's encoder runs on a thread of its own) and writes
+    /// its PNG (and keyframe) with the batch it completes. On a GPU the device renders a frame
+    /// faster than one thread encodes it, so this thread would set the pace.
     fn write(&mut self, frame: Frame) -> Result<()> {
-        let (pngs, video) = rayon::join(
-            || -> Result<_> {
-                let clock = Instant::now();
-                let png = png_rgb8(&frame.rgb, frame.width, frame.height)?;
-                let keyframe = match &frame.keyframe {
-                    Some(tinted) => Some(shrunk_png(
-                        tinted,
-                        frame.width,
-                        frame.height,
-                        KEYFRAME_WIDTH,
-                    )?),
-                    None => None,
-                };
-                Ok((png, keyframe, clock.elapsed()))
-            },
-            || -> Result<Duration> {
-                let clock = Instant::now();
-                if let Some(encoder) = &mut self.encoder {
-                    // PNG is lossless: these are the bytes the PNG holds, so the video shows
-                    // exactly the frames.
-                    encoder.push(&frame.rgb)?;
-                }
-                Ok(clock.elapsed())
-            },
-        );
-        let (png, keyframe, png_time) = pngs?;
-        self.timings.png += png_time;
-        self.timings.video += video?;
+        if let Some(encoder) = &mut self.encoder {
+            let clock = Instant::now();
+            // PNG is lossless: these are the bytes the PNG holds, so the video shows exactly
+            // the frames.
+            encoder.push(frame.index, &frame.rgb)?;
+            self.timings.video += clock.elapsed();
+        }
+        self.pending.push(frame);
+        if self.pending.len() >= self.png_batch {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    /// Writes the PNGs of the frames given and not written yet.
+    fn flush(&mut self) -> Result<()> {
+        let frames = std::mem::take(&mut self.pending);
+        let written: Vec<(Duration, Duration)> = frames
+            .par_iter()
+            .map(|frame| self.write_png(frame))
+            .collect::<Result<_>>()?;
+        for (png, write) in written {
+            self.timings.png += png;
+            self.timings.write += write;
+        }
+        Ok(())
+    }
+
+    /// `frame`'s PNG and keyframe encoded and written: (encoding time, writing time).
+    fn write_png(&self, frame: &Frame) -> Result<(Duration, Duration)> {
+        let clock = Instant::now();
+        let png = png_rgb8(&frame.rgb, frame.width, frame.height)?;
+        let keyframe = match &frame.keyframe {
+            Some(tinted) => Some(shrunk_png(
+                tinted,
+                frame.width,
+                frame.height,
+                KEYFRAME_WIDTH,
+            )?),
+            None => None,
+        };
+        let encoded = clock.elapsed();
         let clock = Instant::now();
         let name = frame_name(frame.index);
         if let Some(keyframe) = keyframe {
             write_bytes(&self.keyframes_dir.join(&name), &keyframe)?;
         }
         write_bytes(&self.frames_dir.join(&name), &png)?;
-        self.timings.write += clock.elapsed();
-        Ok(())
+        Ok((encoded, clock.elapsed()))
     }
 }
 
@@ -478,7 +550,7 @@ fn render_frames(
     scene: &DeviceScene,
     job: &PathRender<'_>,
     (schedule, since): (FrameSchedule, splatraj_scene::stop::Since),
-    keyframes: &[usize],
+    (runs, keyframes): (&[Range<usize>], &[usize]),
     timings: &mut PathTimings,
     progress: &mut dyn FnMut(usize),
     deliver: &mut dyn FnMut(Frame) -> Result<()>,
@@ -492,28 +564,46 @@ fn render_frames(
             .map(|&t| window_of(t, job.objects.len()))
             .collect(),
         keyframes,
-        since,
     };
     let (batch, ahead) = match schedule {
         FrameSchedule::Sequential => (1, 0),
-        FrameSchedule::Pipelined { batch } => (batch, 1),
+        FrameSchedule::Pipelined { batch, .. } => (batch, 1),
+    };
+    let total = frames.poses.len();
+    let mut delivered = 0;
+    // Each frame handed on, counted, told, and the boundary where a stop takes effect.
+    let mut deliver_one = |frame: Frame| -> Result<()> {
+        deliver(frame)?;
+        delivered += 1;
+        progress(delivered);
+        if since.stopped() && delivered < total {
+            return Err(splatraj_scene::stop::Stopped {
+                what: format!("{delivered} of {total} frames are written, no video"),
+            }
+            .into());
+        }
+        Ok(())
     };
     let mut metrics = Vec::new();
     let mut in_flight: std::collections::VecDeque<QueuedFrames> = Default::default();
-    let mut first = 0;
-    while first < frames.poses.len() {
-        let queued = context.queue(scene, first, batch, timings)?;
-        first = queued.frames.end;
-        in_flight.push_back(queued);
-        if in_flight.len() > ahead
-            && let Some(done) = in_flight.pop_front()
-        {
-            context.finish(done, timings, &mut metrics, progress, deliver)?;
+    for run in runs {
+        let mut first = run.start;
+        while first < run.end {
+            let queued = context.queue(scene, first, batch.min(run.end - first), timings)?;
+            first = queued.frames.end;
+            in_flight.push_back(queued);
+            if in_flight.len() > ahead
+                && let Some(done) = in_flight.pop_front()
+            {
+                context.finish(done, timings, &mut metrics, &mut deliver_one)?;
+            }
         }
     }
     for done in in_flight {
-        context.finish(done, timings, &mut metrics, progress, deliver)?;
+        context.finish(done, timings, &mut metrics, &mut deliver_one)?;
     }
+    // Runs of several groups come interleaved: the metrics go in frame order.
+    metrics.sort_by_key(|m| m.frame);
     Ok(metrics)
 }
 
@@ -523,7 +613,6 @@ struct FrameContext<'a> {
     /// The window each frame shows.
     windows: Vec<usize>,
     keyframes: &'a [usize],
-    since: splatraj_scene::stop::Since,
 }
 
 /// A pass of frames queued on the device, not read back yet.
@@ -609,7 +698,6 @@ impl FrameContext<'_> {
         done: QueuedFrames,
         timings: &mut PathTimings,
         metrics: &mut Vec<FrameMetrics>,
-        progress: &mut dyn FnMut(usize),
         deliver: &mut dyn FnMut(Frame) -> Result<()>,
     ) -> Result<()> {
         let frames = self.job.frames;
@@ -659,6 +747,7 @@ impl FrameContext<'_> {
                 .contains(&index)
                 .then(|| pixels.rgb8(range, c, Some(TINT_ALPHA)));
             timings.read_back += clock.elapsed();
+            // A whole frame is the boundary: what was delivered gets written whole.
             deliver(Frame {
                 index,
                 width: w,
@@ -666,18 +755,6 @@ impl FrameContext<'_> {
                 rgb,
                 keyframe,
             })?;
-            progress(index + 1);
-            // A whole frame is the boundary: what was delivered gets written whole.
-            if self.since.stopped() && index + 1 < frames.poses.len() {
-                return Err(splatraj_scene::stop::Stopped {
-                    what: format!(
-                        "the first {} of {} frames are written, no video",
-                        index + 1,
-                        frames.poses.len()
-                    ),
-                }
-                .into());
-            }
         }
         Ok(())
     }
