@@ -226,6 +226,36 @@ fn render_path_renders_a_trajectory_on_a_bare_scene_at_any_size() {
     let video = decode_mp4(&std::fs::read(colmap.join("video.mp4")).unwrap()).unwrap();
     assert_eq!(video.frames.len(), 6);
     assert!((video.fps - 30.0).abs() < 1e-2, "{}", video.fps);
+
+    // On one rayon thread (RAYON_NUM_THREADS=1, or one core) the render loop is the pool's
+    // only thread: the frame writer once handed work to the pool and both waited for ever.
+    let one_thread = dir.path().join("one_thread");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_splatraj"))
+        .args([
+            "render-path",
+            s(&scene),
+            s(&run.join("exports/colmap/images.txt")),
+            "--out",
+            s(&one_thread),
+            "--quiet",
+        ])
+        .env("RAYON_NUM_THREADS", "1")
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if started.elapsed() > std::time::Duration::from_secs(120) {
+            child.kill().unwrap();
+            panic!("render-path on one rayon thread hung");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    };
+    assert!(status.success());
+    let again = decode_mp4(&std::fs::read(one_thread.join("video.mp4")).unwrap()).unwrap();
+    assert_eq!(again.frames, video.frames);
 }
 
 #[test]

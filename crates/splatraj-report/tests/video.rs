@@ -154,15 +154,61 @@ fn frames_out_of_their_group_order_or_missing_are_errors() {
     // Groups of 3 frames.
     let mut encoder = VideoEncoder::with_parallel(width, height, 1.5, 2).unwrap();
     let error = encoder.push(1, &picture).unwrap_err();
-    assert!(matches!(error, VideoError::Order(_)), "{error}");
+    assert!(
+        matches!(
+            error,
+            VideoError::OutOfOrder {
+                index: 1,
+                expected: 0
+            }
+        ),
+        "{error}"
+    );
     encoder.push(0, &picture).unwrap();
     let error = encoder.push(2, &picture).unwrap_err();
-    assert!(error.to_string().contains("frame 1 was next"), "{error}");
+    assert!(
+        matches!(
+            error,
+            VideoError::OutOfOrder {
+                index: 2,
+                expected: 1
+            }
+        ),
+        "{error}"
+    );
     let error = encoder.push(0, &picture).unwrap_err();
-    assert!(error.to_string().contains("twice"), "{error}");
-    // Frames 0 and 6–7 given, 1–5 never: the video names the gap.
+    assert!(matches!(error, VideoError::Twice(0)), "{error}");
+    // Two groups open (0 and 6), the most at once: a third may not begin.
     encoder.push(6, &picture).unwrap();
+    let error = encoder.push(3, &picture).unwrap_err();
+    assert!(
+        matches!(error, VideoError::TooManyGroups { index: 3, open: 2 }),
+        "{error}"
+    );
+    // Frames 0 and 6–7 given, 1–5 never: group 0 is short by frames 1 and 2 (and frames 3–5
+    // never came).
     encoder.push(7, &picture).unwrap();
     let error = encoder.finish().unwrap_err();
-    assert!(error.to_string().contains("missing"), "{error}");
+    assert!(
+        matches!(error, VideoError::Missing { from: 1, to: 3 }),
+        "{error}"
+    );
+    // A whole group missing between two others.
+    let mut encoder = VideoEncoder::with_parallel(width, height, 1.5, 2).unwrap();
+    for index in [0, 1, 2, 6] {
+        encoder.push(index, &picture).unwrap();
+    }
+    let error = encoder.finish().unwrap_err();
+    assert!(
+        matches!(error, VideoError::Missing { from: 3, to: 6 }),
+        "{error}"
+    );
+}
+
+#[test]
+fn a_frame_rate_below_one_keyframe_a_frame_still_groups_two_frames() {
+    // At 0.25 fps a keyframe every 2 s would be every frame: consecutive IDR pictures from
+    // fresh encoders would share an id. Groups of two frames instead: 0–1, 2–3, 4.
+    let encoder = VideoEncoder::with_parallel(8, 8, 0.25, 8).unwrap();
+    assert_eq!(encoder.encoding_runs(5, 1), [0..1, 2..3, 4..5, 1..2, 3..4]);
 }

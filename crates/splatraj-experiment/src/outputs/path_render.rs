@@ -121,10 +121,10 @@ pub struct PathTimings {
     /// PNG encoding (frames and keyframes), summed over the frames encoded at once; at the
     /// same time as the video's.
     pub png: Duration,
-    /// H.264: the groups' encoding (summed over their threads, which run at once and beside
-    /// the PNGs), handing the frames over and muxing.
+    /// H.264: the groups' conversion and encoding, summed over their threads (which run at
+    /// once and beside the PNGs), and the muxing.
     pub video: Duration,
-    /// Writing files.
+    /// Writing files, summed over the frames written at once.
     pub write: Duration,
     /// The whole call, wall clock.
     pub wall: Duration,
@@ -133,8 +133,8 @@ pub struct PathTimings {
 /// How [`render_path_with`] orders its work; every schedule writes the same files.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FrameSchedule {
-    /// One frame at a time, in order: render, read back, encode, write, then the next (the
-    /// reference).
+    /// One frame at a time, in order: render, read back, write the PNG and hand the frame to
+    /// the video's encoder (its group's thread), then the next (the reference).
     Sequential,
     /// Up to `batch` frames rendered per pass, the next pass queued on the device before this
     /// one is read back, while a thread encodes and writes the frames before them: the PNGs
@@ -237,10 +237,12 @@ pub fn render_path_to(
 
 /// [`render_path`] with the given schedule.
 ///
-/// One loop renders the frames (in passes of up to `batch` poses of one window and size),
-/// computes their metrics and turns them into 8-bit pixels; a [`FrameWriter`] encodes each
-/// frame to PNG and H.264 and writes it, inline ([`FrameSchedule::Sequential`]) or on a thread
-/// of its own fed through a bounded queue, in frame order. The first error stops both.
+/// One loop renders the frames (in passes of up to `batch` poses of one window and size, in
+/// the order of the video's groups of pictures, [`VideoEncoder::encoding_runs`]), computes
+/// their metrics and turns them into 8-bit pixels; a [`FrameWriter`] hands each frame to the
+/// video's encoders (threads of their own) and writes its PNG, inline
+/// ([`FrameSchedule::Sequential`], in frame order) or on a thread of its own fed through a
+/// bounded queue. The first error stops both.
 pub fn render_path_with(
     scene: &DeviceScene,
     job: &PathRender<'_>,
@@ -322,11 +324,7 @@ pub fn render_path_with(
         encoder,
         timings: PathTimings::default(),
         pending: Vec::new(),
-        // PNGs are independent files: as many at once as threads (at most 8 frames held).
-        png_batch: match schedule {
-            FrameSchedule::Sequential => 1,
-            FrameSchedule::Pipelined { .. } => rayon::current_num_threads().clamp(1, 8),
-        },
+        png_batch: png_batch(schedule, size),
     };
     let mut timings = PathTimings::default();
     let (metrics, mut writer) = match schedule {
@@ -397,10 +395,15 @@ pub fn render_path_with(
     let video = match writer.encoder.take() {
         Some(mut encoder) => {
             let path = dir.join(VIDEO_FILE);
-            let clock = Instant::now();
+            if encoder.frames() != count {
+                bail!(
+                    "the video was given {} of its {count} frames",
+                    encoder.frames()
+                );
+            }
             encoder.wait_for_groups()?;
-            // The groups' own encoding, beside the time frames took to hand over and mux.
             writer.timings.video += encoder.encoding_time();
+            let clock = Instant::now();
             let bytes = encoder.finish()?;
             writer.timings.video += clock.elapsed();
             write_bytes(&path, &bytes)?;
@@ -454,6 +457,50 @@ fn check_path_render(
     .check(MemoryLimit::new(None)?, "")
 }
 
+/// `frame`'s PNG (into `frames_dir`) and keyframe (into `keyframes_dir`) encoded and written:
+/// (encoding time, writing time).
+fn write_png(
+    (frames_dir, keyframes_dir): (&Path, &Path),
+    frame: &Frame,
+) -> Result<(Duration, Duration)> {
+    let clock = Instant::now();
+    let png = png_rgb8(&frame.rgb, frame.width, frame.height)?;
+    let keyframe = match &frame.keyframe {
+        Some(tinted) => Some(shrunk_png(
+            tinted,
+            frame.width,
+            frame.height,
+            KEYFRAME_WIDTH,
+        )?),
+        None => None,
+    };
+    let encoded = clock.elapsed();
+    let clock = Instant::now();
+    let name = frame_name(frame.index);
+    if let Some(keyframe) = keyframe {
+        write_bytes(&keyframes_dir.join(&name), &keyframe)?;
+    }
+    write_bytes(&frames_dir.join(&name), &png)?;
+    Ok((encoded, clock.elapsed()))
+}
+
+/// Frames whose PNGs are written at once: one in the sequential reference; else as many as
+/// threads (rayon's count, which `RAYON_NUM_THREADS` sets), at most 8 and at most 128 MB of
+/// frames (with their keyframes) held.
+fn png_batch(schedule: FrameSchedule, (width, height): (usize, usize)) -> usize {
+    const HELD_BYTES: usize = 128 << 20;
+    match schedule {
+        FrameSchedule::Sequential => 1,
+        FrameSchedule::Pipelined { .. } => {
+            let frame_bytes = (2 * width * height * 3).max(1);
+            rayon::current_num_threads()
+                .min(8)
+                .min(HELD_BYTES / frame_bytes)
+                .max(1)
+        }
+    }
+}
+
 /// One rendered frame on its way to the files.
 struct Frame {
     /// Frame index.
@@ -476,7 +523,7 @@ struct FrameWriter {
     timings: PathTimings,
     /// Frames whose PNGs are not written yet.
     pending: Vec<Frame>,
-    /// Frames whose PNGs are encoded at once (rayon's pool).
+    /// Frames whose PNGs are encoded at once, each on a thread of its own.
     png_batch: usize,
 }
 
@@ -486,11 +533,9 @@ impl FrameWriter {
     /// faster than one thread encodes it, so this thread would set the pace.
     fn write(&mut self, frame: Frame) -> Result<()> {
         if let Some(encoder) = &mut self.encoder {
-            let clock = Instant::now();
             // PNG is lossless: these are the bytes the PNG holds, so the video shows exactly
-            // the frames.
+            // the frames. The encoding's time is its threads' (`encoding_time`).
             encoder.push(frame.index, &frame.rgb)?;
-            self.timings.video += clock.elapsed();
         }
         self.pending.push(frame);
         if self.pending.len() >= self.png_batch {
@@ -499,48 +544,44 @@ impl FrameWriter {
         Ok(())
     }
 
-    /// Writes the PNGs of the frames given and not written yet.
+    /// Writes the PNGs of the frames given and not written yet, each on a thread of its own.
+    ///
+    /// Not on rayon's pool: the writer is not one of its threads, and the render loop, which
+    /// is, may be its only one (`RAYON_NUM_THREADS=1`) and wait for this writer, so a job
+    /// handed to the pool would never run.
     fn flush(&mut self) -> Result<()> {
         let frames = std::mem::take(&mut self.pending);
-        let written: Vec<(Duration, Duration)> = frames
-            .par_iter()
-            .map(|frame| self.write_png(frame))
-            .collect::<Result<_>>()?;
+        let dirs = (self.frames_dir.as_path(), self.keyframes_dir.as_path());
+        let written: Vec<(Duration, Duration)> = match frames.as_slice() {
+            [frame] => vec![write_png(dirs, frame)?],
+            _ => std::thread::scope(|threads| {
+                let handles: Vec<_> = frames
+                    .iter()
+                    .map(|frame| threads.spawn(move || write_png(dirs, frame)))
+                    .collect();
+                handles
+                    .into_iter()
+                    .map(|handle| {
+                        handle
+                            .join()
+                            .map_err(|_| anyhow!("a PNG writer panicked"))?
+                    })
+                    .collect::<Result<_>>()
+            })?,
+        };
         for (png, write) in written {
             self.timings.png += png;
             self.timings.write += write;
         }
         Ok(())
     }
-
-    /// `frame`'s PNG and keyframe encoded and written: (encoding time, writing time).
-    fn write_png(&self, frame: &Frame) -> Result<(Duration, Duration)> {
-        let clock = Instant::now();
-        let png = png_rgb8(&frame.rgb, frame.width, frame.height)?;
-        let keyframe = match &frame.keyframe {
-            Some(tinted) => Some(shrunk_png(
-                tinted,
-                frame.width,
-                frame.height,
-                KEYFRAME_WIDTH,
-            )?),
-            None => None,
-        };
-        let encoded = clock.elapsed();
-        let clock = Instant::now();
-        let name = frame_name(frame.index);
-        if let Some(keyframe) = keyframe {
-            write_bytes(&self.keyframes_dir.join(&name), &keyframe)?;
-        }
-        write_bytes(&self.frames_dir.join(&name), &png)?;
-        Ok((encoded, clock.elapsed()))
-    }
 }
 
-/// Renders every frame of `job` in passes of up to `batch` consecutive frames that share a
-/// window and a size, hands each frame's pixels to `deliver` in order and tells `progress`;
-/// returns the frames' metrics (empty without objects) and adds render, metrics and read-back
-/// times to `timings`.
+/// Renders every frame of `job`, run after run of `runs`, in passes of up to `batch`
+/// consecutive frames that share a window and a size, hands each frame's pixels to `deliver`
+/// in that order and tells `progress` how many are delivered; returns the frames' metrics in
+/// frame order (empty without objects) and adds render, metrics and read-back times to
+/// `timings`.
 ///
 /// [`FrameSchedule::Pipelined`] keeps one pass in flight while the one before it is read back:
 /// on a GPU the host decides and bins the next frames while the device composites these (the
@@ -576,11 +617,8 @@ fn render_frames(
         deliver(frame)?;
         delivered += 1;
         progress(delivered);
-        if since.stopped() && delivered < total {
-            return Err(splatraj_scene::stop::Stopped {
-                what: format!("{delivered} of {total} frames are written, no video"),
-            }
-            .into());
+        if delivered < total {
+            since.stop_point(|| format!("{delivered} of {total} frames are written, no video"))?;
         }
         Ok(())
     };

@@ -11,10 +11,10 @@
 //! **Groups of pictures in parallel.** Each group of pictures (a keyframe and the frames up to
 //! the next, [`KEYFRAME_SECONDS`]) is encoded by an encoder of its own, on a thread of its own:
 //! a group starts from a keyframe and refers to nothing before it, so the groups are
-//! independent. One OpenH264 encoder is one thread (a frame is one slice) and took 4–7 ms a 720p
-//! frame, more than a GPU takes to render it; several groups encoded at once keep up, when their
-//! frames come interleaved ([`VideoEncoder::encoding_runs`]). The bytes do not depend on how
-//! many run at once: every group has a fresh encoder whatever the machine.
+//! independent. One OpenH264 encoder encodes a frame as one slice, mostly on one thread, and
+//! took 4–7 ms a 720p frame, more than a GPU takes to render it; several groups encoded at once
+//! keep up, when their frames come interleaved ([`VideoEncoder::encoding_runs`]). The bytes do
+//! not depend on how many run at once: every group has a fresh encoder whatever the machine.
 
 mod decode;
 mod gop;
@@ -27,7 +27,7 @@ use muxide::api::{Muxer, MuxerBuilder, VideoCodec};
 use openh264::encoder::{EncoderConfig, FrameRate, IntraFramePeriod, RateControlMode, VuiConfig};
 
 pub use decode::{DecodedVideo, decode_mp4};
-use gop::{EncodedFrame, GopWorker};
+use gop::{EncodedFrame, GopWorker, Spare};
 
 /// Highest frame rate accepted, frames per second: the MP4's 90 kHz clock needs distinct
 /// ticks per frame, and no player shows more.
@@ -84,9 +84,36 @@ pub enum VideoError {
     /// The MP4 muxer refused.
     #[error("video: MP4 muxer: {0}")]
     Mux(String),
-    /// Frames given out of their group's order, or a group left unfinished.
-    #[error("video: {0}")]
-    Order(String),
+    /// A frame was given twice.
+    #[error("video: frame {0} was given twice")]
+    Twice(usize),
+    /// A frame came before the one its group needs next.
+    #[error("video: frame {index} came when frame {expected} was next in its group")]
+    OutOfOrder {
+        /// The frame given.
+        index: usize,
+        /// The frame its group needs next.
+        expected: usize,
+    },
+    /// A frame began a group while as many groups as may run at once were still open.
+    #[error(
+        "video: frame {index} begins a group while {open} groups are still open (at most \
+         {open} at once: give the frames in `VideoEncoder::encoding_runs` order)"
+    )]
+    TooManyGroups {
+        /// The frame given.
+        index: usize,
+        /// Groups open, the most at once.
+        open: usize,
+    },
+    /// Frames never given.
+    #[error("video: frames {from}..{to} are missing")]
+    Missing {
+        /// The first frame missing.
+        from: usize,
+        /// The frame after the last missing one.
+        to: usize,
+    },
 }
 
 /// A keyframe every this many seconds, so players can seek; also the length of the groups
@@ -124,6 +151,9 @@ pub struct VideoEncoder {
     frames: usize,
     /// The groups' conversion and encoding time, summed over the groups finished.
     encoding: Duration,
+    /// Frame buffers the groups have finished with, to be filled again (a 720p frame's fresh
+    /// allocation and copy cost about a millisecond).
+    spare: Spare,
 }
 
 impl VideoEncoder {
@@ -151,7 +181,9 @@ impl VideoEncoder {
             return Err(VideoError::Size { width, height });
         }
         let padded = (width.next_multiple_of(2), height.next_multiple_of(2));
-        let group_frames = (KEYFRAME_SECONDS * fps).round().max(1.0) as usize;
+        // At least two frames a group: consecutive keyframes from fresh encoders would share
+        // an IDR picture id, which H.264 forbids for IDR pictures next to each other.
+        let group_frames = (KEYFRAME_SECONDS * fps).round().max(2.0) as usize;
         let config = EncoderConfig::new()
             .max_frame_rate(FrameRate::from_hz(fps as f32))
             // Constant quality, no rate control: rendered frames come back within a few levels
@@ -161,12 +193,12 @@ impl VideoEncoder {
             // Every frame is kept: a skipped frame would leave the video shorter than the PNGs.
             .skip_frames(false)
             .intra_frame_period(IntraFramePeriod::from_num_frames(group_frames as u32))
-            // One slice a frame uses one thread; the groups are the parallelism.
-            .num_threads(1)
+            // OpenH264 chooses its own threads: with one slice a frame it still gains from them
+            // (guitar 720p, one group at a time: 4.6 ms a frame against 5.7 ms with one thread;
+            // the same bytes). The groups are the rest of the parallelism.
+            .num_threads(0)
             // openh264's RGB → YUV conversion is BT.601 limited range: say so in the stream.
             .vui(VuiConfig::bt601());
-        // Refused settings show here, not on a group's thread.
-        gop::encoder(config)?;
         let muxer = MuxerBuilder::new(Vec::new())
             .video(VideoCodec::H264, padded.0 as u32, padded.1 as u32, fps)
             .build()
@@ -184,6 +216,7 @@ impl VideoEncoder {
             next_to_mux: 0,
             frames: 0,
             encoding: Duration::ZERO,
+            spare: Spare::new(),
         })
     }
 
@@ -214,7 +247,9 @@ impl VideoEncoder {
     }
 
     /// Gives frame `index` (RGB8, row-major, width × height × 3 bytes). Each group's frames
-    /// must come in order; the groups may be interleaved ([`VideoEncoder::encoding_runs`]).
+    /// must come in order. Up to as many groups as run at once may be open, their frames
+    /// interleaved ([`VideoEncoder::encoding_runs`]); a group begins only once the oldest open
+    /// one has all its frames, if that many are open.
     pub fn push(&mut self, index: usize, rgb: &[u8]) -> Result<(), VideoError> {
         let (width, height) = self.size;
         if rgb.len() != width * height * 3 {
@@ -227,33 +262,41 @@ impl VideoEncoder {
             });
         }
         let (group, position) = (index / self.group_frames, index % self.group_frames);
+        if group < self.next_to_mux || self.encoded.contains_key(&group) {
+            return Err(VideoError::Twice(index));
+        }
         if position == 0 {
-            if group < self.next_to_mux
-                || self.running.contains_key(&group)
-                || self.encoded.contains_key(&group)
-            {
-                return Err(VideoError::Order(format!("frame {index} was given twice")));
+            if self.running.contains_key(&group) {
+                return Err(VideoError::Twice(index));
             }
-            // The oldest group makes room (given in `encoding_runs`' order, it is complete).
-            while self.running.len() >= self.parallel {
+            // The oldest group makes room, once it has all its frames.
+            if self.running.len() >= self.parallel {
+                let complete = self
+                    .running
+                    .first_key_value()
+                    .is_some_and(|(_, oldest)| oldest.given() == self.group_frames);
+                if !complete {
+                    return Err(VideoError::TooManyGroups {
+                        index,
+                        open: self.running.len(),
+                    });
+                }
                 self.finish_oldest()?;
             }
-            let worker = GopWorker::spawn(self.config, self.padded, index)?;
+            let worker = GopWorker::spawn(self.config, self.padded, index, self.spare.giver())?;
             self.running.insert(group, worker);
         }
-        let worker = self.running.get_mut(&group).ok_or_else(|| {
-            VideoError::Order(format!(
-                "frame {index} came before frame {} began its group",
-                group * self.group_frames
-            ))
-        })?;
+        let Some(worker) = self.running.get_mut(&group) else {
+            return Err(VideoError::OutOfOrder {
+                index,
+                expected: group * self.group_frames,
+            });
+        };
         let expected = group * self.group_frames + worker.given();
         if index != expected {
-            return Err(VideoError::Order(format!(
-                "frame {index} came when frame {expected} was next in its group"
-            )));
+            return Err(VideoError::OutOfOrder { index, expected });
         }
-        let mut padded = Vec::new();
+        let mut padded = self.spare.take();
         pad_to(rgb, self.size, self.padded, &mut padded);
         if let Err(stopped) = worker.send(index, padded) {
             // The group's thread ended early: its own error says why.
@@ -291,12 +334,17 @@ impl VideoEncoder {
         self.mux_in_order(Stage::End)?;
         // Every group muxed: no frame is missing.
         if let Some((&group, frames)) = self.encoded.iter().next() {
-            return Err(VideoError::Order(format!(
-                "frames {}..{} are missing (group {group} has {} of its frames)",
-                self.next_to_mux * self.group_frames,
-                group * self.group_frames,
-                frames.len()
-            )));
+            let gap = if group == self.next_to_mux {
+                // The group itself is short, and later ones were given.
+                let start = group * self.group_frames + frames.len();
+                start..(group + 1) * self.group_frames
+            } else {
+                self.next_to_mux * self.group_frames..group * self.group_frames
+            };
+            return Err(VideoError::Missing {
+                from: gap.start,
+                to: gap.end,
+            });
         }
         self.muxer
             .finish_in_place()
@@ -316,10 +364,7 @@ impl VideoEncoder {
     /// Waits for the oldest running group and keeps its frames.
     fn finish_oldest(&mut self) -> Result<(), VideoError> {
         if let Some((group, worker)) = self.running.pop_first() {
-            let done = worker.join()?;
-            self.encoding += done.time;
-            self.encoded.insert(group, done.frames);
-            self.mux_in_order(Stage::Giving)?;
+            self.keep(group, worker)?;
         }
         Ok(())
     }
@@ -334,11 +379,17 @@ impl VideoEncoder {
             .collect();
         for group in done {
             if let Some(worker) = self.running.remove(&group) {
-                let done = worker.join()?;
-                self.encoding += done.time;
-                self.encoded.insert(group, done.frames);
+                self.keep(group, worker)?;
             }
         }
+        Ok(())
+    }
+
+    /// Waits for `group`'s `worker`, keeps its frames and muxes what now follows in order.
+    fn keep(&mut self, group: usize, worker: GopWorker) -> Result<(), VideoError> {
+        let done = worker.join()?;
+        self.encoding += done.time;
+        self.encoded.insert(group, done.frames);
         self.mux_in_order(Stage::Giving)
     }
 
