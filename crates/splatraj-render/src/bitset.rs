@@ -51,6 +51,14 @@ impl GaussianBits {
         self.words[i / WORD] |= 1 << (i % WORD);
     }
 
+    /// Adds every member of `other` (a subset of the same universe).
+    pub fn union_with(&mut self, other: &GaussianBits) {
+        debug_assert_eq!(self.len, other.len, "subsets of one universe");
+        for (word, other) in self.words.iter_mut().zip(&other.words) {
+            *word |= other;
+        }
+    }
+
     /// True when `i` is in the set.
     #[inline]
     pub fn contains(&self, i: usize) -> bool {
@@ -128,5 +136,16 @@ mod tests {
             assert_eq!(ranks.rank(i) as usize, position);
         }
         assert!((0..len).filter(|&i| !member(i)).all(|i| !bits.contains(i)));
+    }
+
+    #[test]
+    fn a_union_holds_the_members_of_both() {
+        let len = 300;
+        let a = GaussianBits::from_fn(len, |i| i % 5 == 0);
+        let b = GaussianBits::from_fn(len, |i| i % 7 == 0 || i == len - 1);
+        let mut union = a.clone();
+        union.union_with(&b);
+        let either = GaussianBits::from_fn(len, |i| i % 5 == 0 || i % 7 == 0 || i == len - 1);
+        assert_eq!(union, either);
     }
 }

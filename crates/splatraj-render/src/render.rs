@@ -573,12 +573,25 @@ pub fn render_at(
 
     // used[u] = scene index of the u-th Gaussian some tile needs (increasing); lists are
     // renumbered to u. A bit set, not [N] arrays: O(N / 64) beside the lists' length.
-    let mut is_used = GaussianBits::new(n);
-    for list in &work {
-        for &g in &list.gaussians {
-            is_used.insert(g as usize);
-        }
-    }
+    // Gathered in parallel: a step's lists hold about a million entries, and one thread
+    // took 0.65 ms a first-try guitar step over them (a GPU host waits for it).
+    let is_used = work
+        .par_iter()
+        .with_min_len(64)
+        .fold(
+            || GaussianBits::new(n),
+            |mut used, list| {
+                for &g in &list.gaussians {
+                    used.insert(g as usize);
+                }
+                used
+            },
+        )
+        .reduce_with(|mut a, b| {
+            a.union_with(&b);
+            a
+        })
+        .unwrap_or_else(|| GaussianBits::new(n));
     let used: Vec<usize> = is_used.iter().collect();
     let compact_from_scene = is_used.ranks();
     let u = used.len();

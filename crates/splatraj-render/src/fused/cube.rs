@@ -19,6 +19,8 @@
 
 use std::sync::Arc;
 
+use rayon::iter::{IntoParallelRefIterator, ParallelIterator};
+
 use burn::backend::TensorMetadata;
 use burn::backend::tensor::FloatTensor;
 use burn::tensor::{DType, IntDType, TensorData};
@@ -629,7 +631,8 @@ fn upload_plan(plan: &CompositePlan, device: &CubeDevice) -> PlanTensors {
     PlanTensors {
         work: int_tensor(work, device),
         starts: int_tensor(plan.starts.iter().map(|&s| s as i32).collect(), device),
-        rows: int_tensor(plan.rows.iter().map(|&r| r as i32).collect(), device),
+        // A step's lists hold about a million entries: converted on every core.
+        rows: int_tensor(plan.rows.par_iter().map(|&r| r as i32).collect(), device),
     }
 }
 
@@ -645,23 +648,6 @@ fn zeros(shape: Vec<usize>, device: &CubeDevice, dtype: DType) -> CubeTensor {
 }
 
 /// Rows grouped by the slots (list entries) that hold their gradients, in plan order.
-fn slots_by_row(plan: &CompositePlan, rows: usize) -> (Vec<i32>, Vec<i32>) {
-    let mut starts = vec![0i32; rows + 1];
-    for &r in &plan.rows {
-        starts[r as usize + 1] += 1;
-    }
-    for r in 0..rows {
-        starts[r + 1] += starts[r];
-    }
-    let mut next = starts.clone();
-    let mut order = vec![0i32; plan.rows.len()];
-    for (slot, &r) in plan.rows.iter().enumerate() {
-        order[next[r as usize] as usize] = slot as i32;
-        next[r as usize] += 1;
-    }
-    (order, starts)
-}
-
 fn device_forward(
     inputs: SplatPrimitives<CubeBackend>,
     plan: Arc<CompositePlan>,
@@ -781,7 +767,7 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
     let v_splats = CubeBackend::float_empty(vec![rows, columns].into(), &device, dtype.into());
     let v_values = CubeBackend::float_empty(vec![rows, channels].into(), &device, dtype.into());
     if rows > 0 {
-        let (order, starts) = slots_by_row(&plan, rows);
+        let (order, starts) = plan.slots_by_row();
         let order = int_tensor(order, &device);
         let starts = int_tensor(starts, &device);
         let cube_dim = CubeDim::new_1d(256);
@@ -835,7 +821,6 @@ impl CompositeKernels for CubeBackend {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tiles::{TileGrid, TileWork};
 
     #[test]
     fn channels_a_composite_may_take_follow_the_workgroup_memory() {
@@ -852,25 +837,7 @@ mod tests {
     }
 
     #[test]
-    fn slots_are_grouped_by_row_in_plan_order() {
-        let grid = TileGrid::new(32, 16);
-        let work = [
-            TileWork {
-                batch: 0,
-                tile: 0,
-                gaussians: vec![2, 0],
-            },
-            TileWork {
-                batch: 0,
-                tile: 1,
-                gaussians: vec![0, 1, 2],
-            },
-        ];
-        let plan = CompositePlan::new(&work, &crate::rows::PoseRows::dense(1, 3), grid);
-        let (order, starts) = slots_by_row(&plan, 3);
-        // Slots: 0→row 2, 1→row 0, 2→row 0, 3→row 1, 4→row 2.
-        assert_eq!(starts, vec![0, 2, 3, 5]);
-        assert_eq!(order, vec![1, 2, 3, 0, 4]);
+    fn the_kernels_tile_rows_are_the_binnings() {
         assert_eq!(
             crate::tiles::TILE_SIZE,
             16,
