@@ -607,7 +607,7 @@ pub fn render_at(
     // channel values read too (shared, not copied).
     let plan = Arc::new(ProjectionPlan {
         gaussians: row_gaussians
-            .iter()
+            .par_iter()
             .map(|&g| used[g as usize] as u32)
             .collect(),
         rows: rows.clone(),
@@ -916,14 +916,23 @@ fn per_row_values<'a>(
     rows: &PoseRows,
     scene_of_row: &[u32],
     dim: usize,
-    value: &dyn Fn(usize, usize) -> &'a [f32],
+    value: &(dyn Fn(usize, usize) -> &'a [f32] + Sync),
 ) -> Vec<f32> {
-    let mut values = Vec::with_capacity(rows.total() * dim);
+    // Poses in parallel, each into its own part: a step's half a million rows, made before
+    // every pass.
+    let mut values = vec![0.0; rows.total() * dim];
+    let mut parts = Vec::with_capacity(rows.batch());
+    let mut rest = values.as_mut_slice();
     for b in 0..rows.batch() {
-        let own = &scene_of_row[rows.start(b)..rows.start(b) + rows.count(b)];
-        for &g in own {
-            values.extend_from_slice(value(b, g as usize));
-        }
+        let (part, after) = std::mem::take(&mut rest).split_at_mut(rows.count(b) * dim);
+        rest = after;
+        parts.push((b, part));
     }
+    parts.into_par_iter().for_each(|(b, part)| {
+        let own = &scene_of_row[rows.start(b)..rows.start(b) + rows.count(b)];
+        for (out, &g) in part.chunks_exact_mut(dim).zip(own) {
+            out.copy_from_slice(value(b, g as usize));
+        }
+    });
     values
 }

@@ -15,6 +15,8 @@
 
 use std::sync::Arc;
 
+use rayon::iter::{IntoParallelRefIterator, ParallelIterator};
+
 use burn::backend::TensorMetadata;
 use burn::backend::tensor::FloatTensor;
 use burn::tensor::{DType, TensorData};
@@ -605,7 +607,10 @@ fn device_forward(
     let batch = poses.shape().dims::<2>()[0];
     let n = components.shape().dims::<2>()[1];
     let largest = plan.rows.largest();
-    let gaussians = int_tensor(plan.gaussians.iter().map(|&g| g as i32).collect(), &device);
+    let gaussians = int_tensor(
+        plan.gaussians.par_iter().map(|&g| g as i32).collect(),
+        &device,
+    );
     let starts = int_tensor(
         plan.rows.starts().iter().map(|&s| s as i32).collect(),
         &device,
