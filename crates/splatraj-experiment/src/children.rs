@@ -4,7 +4,7 @@
 //! The parent waits on a child in steps ([`output_until_stopped`]): a stop request (Ctrl-C,
 //! SIGTERM: [`splatraj_scene::stop`]) kills and reaps the child and ends the parent's loop with
 //! [`splatraj_scene::stop::Stopped`]. A parent killed outright (SIGKILL) cannot do that: on
-//! Linux the kernel kills the child with it ([`die_with_parent`]); elsewhere each child watches
+//! Linux the kernel kills the child with it (`die_with_parent`); elsewhere each child watches
 //! its parent ([`exit_with_parent`]) and exits once it is gone.
 
 use std::io::Read;

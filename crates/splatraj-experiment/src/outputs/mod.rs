@@ -34,7 +34,7 @@ use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::images::{highlight, png_rgb};
 use splatraj_render::render::{Channel, DeviceScene, Rasterizer, RenderRequest, render};
 
-/// A CSV table: header and rows ([`write_csv`]).
+/// A CSV table: header and rows ([`crate::write::write_csv`]).
 pub type Csv = (Vec<String>, Vec<Vec<String>>);
 
 /// Creates a fresh `<runs_dir>/<name>/<UTC timestamp>/` folder.

@@ -239,7 +239,7 @@ pub fn render_path_to(
 ///
 /// One loop renders the frames (in passes of up to `batch` poses of one window and size, in
 /// the order of the video's groups of pictures, [`VideoEncoder::encoding_runs`]), computes
-/// their metrics and turns them into 8-bit pixels; a [`FrameWriter`] hands each frame to the
+/// their metrics and turns them into 8-bit pixels; a frame writer hands each frame to the
 /// video's encoders (threads of their own) and writes its PNG, inline
 /// ([`FrameSchedule::Sequential`], in frame order) or on a thread of its own fed through a
 /// bounded queue. The first error stops both.

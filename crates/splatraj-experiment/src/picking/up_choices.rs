@@ -147,7 +147,7 @@ pub fn up_line(up: [f64; 3]) -> String {
 }
 
 /// A square camera of `size` pixels that sees `scene`'s robust box whole, upright for `up`:
-/// from [`ELEVATION_DEGREES`] above the horizon, looking across `sideways` (a direction the
+/// from `ELEVATION_DEGREES` above the horizon, looking across `sideways` (a direction the
 /// picture shows running left to right) or, without one or along `up`, at the box's broadest
 /// face; from the side nearer the world origin (where capture cameras stand or look from).
 pub fn upright_view(

@@ -1,5 +1,5 @@
 //! World up for a config's scene, one rule for `run` and `query`: `[scene] up` when given (and
-//! the demo room's own), else the capture's cameras ([`splatraj_scene::cameras_up`]): the file
+//! the demo room's own), else the capture's cameras ([`splatraj_scene::cameras_up()`]): the file
 //! `[scene] cameras` names, or one found beside the scene file under its usual name
 //! ([`camera_files_beside`]), else the guess from the geometry ([`splatraj_scene::resolve_up`]).
 //!

@@ -158,8 +158,8 @@ pub struct VideoEncoder {
 
 impl VideoEncoder {
     /// An encoder for `width` × `height` frames shown at `fps` frames per second, encoding as
-    /// many groups at once as half the cores (at most [`MAX_PARALLEL_GROUPS`], and within
-    /// [`PARALLEL_BYTES`] of frames).
+    /// many groups at once as half the cores (at most 8, and within
+    /// 256 MB of frames).
     pub fn new(width: usize, height: usize, fps: f64) -> Result<Self, VideoError> {
         let cores = std::thread::available_parallelism().map_or(1, usize::from);
         let frame_bytes = width.next_multiple_of(2) * height.next_multiple_of(2) * 3;
