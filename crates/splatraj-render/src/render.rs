@@ -921,14 +921,9 @@ fn per_row_values<'a>(
     // Poses in parallel, each into its own part: a step's half a million rows, made before
     // every pass.
     let mut values = vec![0.0; rows.total() * dim];
-    let mut parts = Vec::with_capacity(rows.batch());
-    let mut rest = values.as_mut_slice();
-    for b in 0..rows.batch() {
-        let (part, after) = std::mem::take(&mut rest).split_at_mut(rows.count(b) * dim);
-        rest = after;
-        parts.push((b, part));
-    }
-    parts.into_par_iter().for_each(|(b, part)| {
+    let lengths = (0..rows.batch()).map(|b| rows.count(b) * dim);
+    let parts = crate::rows::parts_mut(&mut values, lengths);
+    parts.into_par_iter().enumerate().for_each(|(b, part)| {
         let own = &scene_of_row[rows.start(b)..rows.start(b) + rows.count(b)];
         for (out, &g) in part.chunks_exact_mut(dim).zip(own) {
             out.copy_from_slice(value(b, g as usize));

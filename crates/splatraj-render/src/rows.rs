@@ -71,6 +71,23 @@ impl PoseRows {
     }
 }
 
+/// `values` cut into consecutive parts of `lengths` (which must not add up to more), so that
+/// each pose's part can be filled on its own thread.
+pub(crate) fn parts_mut<T>(
+    values: &mut [T],
+    lengths: impl IntoIterator<Item = usize>,
+) -> Vec<&mut [T]> {
+    let mut rest = values;
+    lengths
+        .into_iter()
+        .map(|length| {
+            let (part, after) = std::mem::take(&mut rest).split_at_mut(length);
+            rest = after;
+            part
+        })
+        .collect()
+}
+
 /// Lays out a pass's rows per pose from its tile lists, whose entries are compact Gaussian
 /// indices u < `used`, every u read by some list (as a render numbers them): each pose gets
 /// one row per distinct u its lists read, in increasing u,

@@ -647,7 +647,6 @@ fn zeros(shape: Vec<usize>, device: &CubeDevice, dtype: DType) -> CubeTensor {
     CubeBackend::float_zeros(shape.into(), device, dtype.into())
 }
 
-/// Rows grouped by the slots (list entries) that hold their gradients, in plan order.
 fn device_forward(
     inputs: SplatPrimitives<CubeBackend>,
     plan: Arc<CompositePlan>,

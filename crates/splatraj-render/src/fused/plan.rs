@@ -3,7 +3,7 @@
 use rayon::prelude::*;
 
 use crate::rasterize::MIN_TRANSMITTANCE;
-use crate::rows::PoseRows;
+use crate::rows::{PoseRows, parts_mut};
 use crate::tiles::{TILE_SIZE, TileGrid, TileWork};
 
 /// Tile lists of a batch, flattened: work tile `w` composites rows
@@ -86,22 +86,21 @@ impl CompositePlan {
         let mut starts = vec![0i32; total_rows + 1];
         starts[total_rows] = self.rows.len() as i32;
         // Pose after pose: its slots' part of `order` and its rows' part of `starts`.
-        let mut parts = Vec::with_capacity(poses);
-        let (mut order_rest, mut starts_rest) = (order.as_mut_slice(), &mut starts[..total_rows]);
-        let mut first_slot = 0;
-        for (b, pose_items) in items.iter().enumerate() {
-            let slots: usize = pose_items.iter().map(|&w| self.list(w).len()).sum();
-            let (pose_order, rest) = std::mem::take(&mut order_rest).split_at_mut(slots);
-            order_rest = rest;
-            let (pose_starts, rest) =
-                std::mem::take(&mut starts_rest).split_at_mut(self.pose_rows.count(b));
-            starts_rest = rest;
-            parts.push((b, first_slot, pose_order, pose_starts));
-            first_slot += slots;
-        }
-        parts
-            .into_par_iter()
-            .for_each(|(b, first_slot, pose_order, pose_starts)| {
+        let slots: Vec<usize> = items
+            .iter()
+            .map(|pose_items| pose_items.iter().map(|&w| self.list(w).len()).sum())
+            .collect();
+        let first_slots = slots.iter().scan(0, |next, &count| {
+            let first = *next;
+            *next += count;
+            Some(first)
+        });
+        let row_counts = (0..poses).map(|b| self.pose_rows.count(b));
+        let order_parts = parts_mut(&mut order, slots.iter().copied());
+        let starts_parts = parts_mut(&mut starts[..total_rows], row_counts);
+        let parts: Vec<_> = first_slots.zip(order_parts).zip(starts_parts).collect();
+        parts.into_par_iter().enumerate().for_each(
+            |(b, ((first_slot, pose_order), pose_starts))| {
                 let first_row = self.pose_rows.start(b);
                 // Slots of each row, then where each row's slots begin.
                 let mut next = vec![0usize; pose_starts.len()];
@@ -124,7 +123,8 @@ impl CompositePlan {
                         *next += 1;
                     }
                 }
-            });
+            },
+        );
         (order, starts)
     }
 

@@ -72,11 +72,13 @@ impl PoseUnits {
     /// `dtype` (in f32: value, factor and product each rounded to f32), so that the host
     /// values are the tensor's own (the costs computed on the host expand about them).
     pub fn to_scene_as(&self, normalised: &Pose, dtype: burn::tensor::DType) -> Pose {
-        let f = self.factors();
-        std::array::from_fn(|i| match dtype {
-            burn::tensor::DType::F32 => f64::from(normalised[i] as f32 * f[i] as f32),
-            _ => normalised[i] * f[i],
-        })
+        match dtype {
+            burn::tensor::DType::F32 => {
+                let f = self.factors();
+                std::array::from_fn(|i| f64::from(normalised[i] as f32 * f[i] as f32))
+            }
+            _ => self.denormalise(normalised),
+        }
     }
 
     /// A normalised pose (or weight row) to scene units, on the host.
