@@ -25,7 +25,7 @@
 #      default, against one entry at a time: SPLATRAJ_ENTRY_SUMS): the mask passes of 1. on
 #      wgpu both ways, time and parity;
 #   7. where a wgpu optimisation step spends its time: `bench step` on the guitar config with
-#      each kernel waited for, by render stage, beside the step's median time (the stages'
+#      each kernel waited for, by render stage, beside the time a step (the stages'
 #      totals also hold the run's closing evaluation, so read them as shares, not a sum);
 #   0. first of all, what compiling a run's ~300 kernels costs a process: one guitar step on
 #      wgpu in a fresh process, twice (the first on this machine may also fill the driver's
@@ -173,7 +173,7 @@ for b in ("wgpu", "flex"):
               f"{c.get('renders', '-')} | {r['best_total']:.6f} |")
 profiled_steps = load("step_wgpu_profiled.json")
 names = [n for n, _ in profiled_steps[0]["stages_ms"]] if profiled_steps else []
-print("\n| wgpu step, ms, each kernel waited for | " + " | ".join(names) + " | step (median) |")
+print("\n| wgpu step, ms, each kernel waited for | " + " | ".join(names) + " | ms a step |")
 print("|---|" + "---:|" * (len(names) + 1))
 for r in profiled_steps:
     stages = dict(r["stages_ms"])
