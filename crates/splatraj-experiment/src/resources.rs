@@ -456,7 +456,24 @@ impl RenderWork {
     /// Errors when the renders do not fit `limit` (raised by `raise`) or would take more than
     /// [`MAX_SECONDS`]; warns when long.
     pub fn check(&self, limit: MemoryLimit, raise: &str) -> Result<()> {
-        let (memory, time) = self.plans();
+        self.check_beside(None, limit, raise)
+    }
+
+    /// [`RenderWork::check`] with buffers held beside the renders all along: `(what they
+    /// are, bytes)`, such as an output frame writer's queues.
+    pub fn check_beside(
+        &self,
+        held: Option<(&str, f64)>,
+        limit: MemoryLimit,
+        raise: &str,
+    ) -> Result<()> {
+        let (mut memory, time) = self.plans();
+        if let Some((what, bytes)) = held {
+            for stage in &mut memory.stages {
+                stage.what = format!("{} with {what} ({})", stage.what, show_bytes(bytes));
+                stage.bytes += bytes;
+            }
+        }
         memory.check(limit, raise)?;
         time.check(TimeBound::Unbounded)?;
         Ok(())
@@ -535,6 +552,39 @@ mod tests {
         let mut small = MemoryPlan::default();
         small.stage("render", render_bytes(1, 320.0 * 240.0, 100_000, true, 4));
         small.check(limit, "--max-memory").unwrap();
+    }
+
+    #[test]
+    fn buffers_held_beside_renders_count_against_the_limit() {
+        let work = RenderWork {
+            what: "270 frames".into(),
+            renders: 270.0,
+            at_once: 2,
+            size: (1280, 720),
+            gaussians: 100_000,
+            gradient: false,
+            float_bytes: 4,
+        };
+        let (memory, _) = work.plans();
+        let renders = memory.peak().unwrap().bytes;
+        // A limit between the renders alone and the renders with the writer's buffers.
+        let held = 400e6;
+        let limit = MemoryLimit {
+            bytes: renders + held / 2.0,
+            source: LimitSource::Given,
+        };
+        work.check(limit, "").unwrap();
+        work.check_beside(Some(("the writer's queues", held / 4.0)), limit, "")
+            .unwrap();
+        let message = work
+            .check_beside(Some(("the writer's queues", held)), limit, "")
+            .unwrap_err()
+            .to_string();
+        assert!(message.contains("270 frames"), "{message}");
+        assert!(
+            message.contains("the writer's queues (400.0 MB)"),
+            "{message}"
+        );
     }
 
     #[test]

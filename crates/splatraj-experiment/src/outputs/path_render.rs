@@ -259,7 +259,6 @@ pub fn render_path_with(
     // optimised still renders the frames of its best trajectory).
     let since = splatraj_scene::stop::Since::now();
     splatraj_scene::stop::honour();
-    check_path_render(scene.len(), job, schedule)?;
     let size = (frames.cameras[0].width, frames.cameras[0].height);
     let encoder = match job.video {
         Video::Mp4 => {
@@ -288,6 +287,12 @@ pub fn render_path_with(
         }
         Video::None => None,
     };
+    let png_batch = png_batch(schedule, size);
+    // The writer's buffers sit beside the renders all along: a batch of PNG frames with their
+    // keyframes, and the video's groups (up to 128 MB and 256 MB).
+    let writer_bytes =
+        png_batch * 2 * size.0 * size.1 * 3 + encoder.as_ref().map_or(0, VideoEncoder::held_bytes);
+    check_path_render(scene.len(), job, schedule, writer_bytes)?;
     // The order frames are rendered in: the video's groups interleaved when they are encoded
     // several at once; the reference in frame order.
     let count = frames.poses.len();
@@ -324,7 +329,7 @@ pub fn render_path_with(
         encoder,
         timings: PathTimings::default(),
         pending: Vec::new(),
-        png_batch: png_batch(schedule, size),
+        png_batch,
     };
     let mut timings = PathTimings::default();
     let (metrics, mut writer) = match schedule {
@@ -428,6 +433,7 @@ fn check_path_render(
     gaussians: usize,
     job: &PathRender<'_>,
     schedule: FrameSchedule,
+    writer_bytes: usize,
 ) -> Result<()> {
     let frames = job.frames;
     let size = frames
@@ -454,7 +460,11 @@ fn check_path_render(
         gradient: false,
         float_bytes: 4,
     }
-    .check(MemoryLimit::new(None)?, "")
+    .check_beside(
+        Some(("the frame writer's buffers", writer_bytes as f64)),
+        MemoryLimit::new(None)?,
+        "",
+    )
 }
 
 /// `frame`'s PNG (into `frames_dir`) and keyframe (into `keyframes_dir`) encoded and written:

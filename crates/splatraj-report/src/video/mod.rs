@@ -168,6 +168,12 @@ impl VideoEncoder {
         Self::with_parallel(width, height, fps, parallel)
     }
 
+    /// Host memory the groups may hold at once, bytes: their queued and in-progress frames
+    /// (what an up-front memory check adds beside the renders).
+    pub fn held_bytes(&self) -> usize {
+        self.parallel * gop::FRAMES_HELD * self.padded.0 * self.padded.1 * 3
+    }
+
     /// [`VideoEncoder::new`] encoding at most `parallel` groups at once (the bytes are the
     /// same for any `parallel`).
     pub fn with_parallel(
