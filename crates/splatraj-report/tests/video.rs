@@ -215,18 +215,16 @@ fn a_frame_rate_below_one_keyframe_a_frame_still_groups_two_frames() {
 
 #[test]
 fn the_frames_the_groups_hold_scale_with_the_groups_and_stay_within_their_bound() {
-    let held = |w, h, parallel| {
-        VideoEncoder::with_parallel(w, h, 30.0, parallel)
-            .unwrap()
-            .held_bytes()
-    };
+    let held = VideoEncoder::held_bytes_for;
     // Each group holds the same frames, of the padded (even) size.
     assert_eq!(held(1280, 720, 3), 3 * held(1280, 720, 1));
     assert_eq!(held(1281, 721, 1), held(1282, 722, 1));
     let one_frame = 1282 * 722 * 3;
     assert_eq!(held(1282, 722, 1) % one_frame, 0);
-    // The encoder `new` makes keeps 4K frames within 256 MB, however many cores.
-    let uhd = VideoEncoder::new(3840, 2160, 30.0).unwrap();
-    assert!(uhd.held_bytes() <= 256 << 20, "{}", uhd.held_bytes());
-    assert!(uhd.held_bytes() >= 3840 * 2160 * 3);
+    // The groups `new` encodes at once keep 4K frames within 256 MB, however many cores.
+    let groups = VideoEncoder::parallel_for(3840, 2160);
+    assert!(groups >= 1);
+    let uhd = held(3840, 2160, groups);
+    assert!(uhd <= 256 << 20, "{uhd}");
+    assert!(uhd >= 3840 * 2160 * 3);
 }

@@ -260,6 +260,23 @@ pub fn render_path_with(
     let since = splatraj_scene::stop::Since::now();
     splatraj_scene::stop::honour();
     let size = (frames.cameras[0].width, frames.cameras[0].height);
+    let groups = match schedule {
+        FrameSchedule::Pipelined {
+            groups: Some(groups),
+            ..
+        } => groups,
+        _ => VideoEncoder::parallel_for(size.0, size.1),
+    };
+    let png_batch = png_batch(schedule, size);
+    // The writer's buffers sit beside the renders all along: a batch of PNG frames with their
+    // keyframes, and the video's groups (up to 128 MB and 256 MB). Checked before the encoder
+    // is made: it refuses frames too large for H.264 in words that name no option.
+    let video_bytes = match job.video {
+        Video::Mp4 => VideoEncoder::held_bytes_for(size.0, size.1, groups),
+        Video::None => 0,
+    };
+    let writer_bytes = png_batch as f64 * 6.0 * size.0 as f64 * size.1 as f64 + video_bytes as f64;
+    check_path_render(scene.len(), job, schedule, writer_bytes)?;
     let encoder = match job.video {
         Video::Mp4 => {
             if let Some((i, k)) = frames
@@ -277,22 +294,12 @@ pub fn render_path_with(
                     size.1
                 );
             }
-            Some(match schedule {
-                FrameSchedule::Pipelined {
-                    groups: Some(groups),
-                    ..
-                } => VideoEncoder::with_parallel(size.0, size.1, frames.fps, groups)?,
-                _ => VideoEncoder::new(size.0, size.1, frames.fps)?,
-            })
+            Some(VideoEncoder::with_parallel(
+                size.0, size.1, frames.fps, groups,
+            )?)
         }
         Video::None => None,
     };
-    let png_batch = png_batch(schedule, size);
-    // The writer's buffers sit beside the renders all along: a batch of PNG frames with their
-    // keyframes, and the video's groups (up to 128 MB and 256 MB).
-    let writer_bytes =
-        png_batch * 2 * size.0 * size.1 * 3 + encoder.as_ref().map_or(0, VideoEncoder::held_bytes);
-    check_path_render(scene.len(), job, schedule, writer_bytes)?;
     // The order frames are rendered in: the video's groups interleaved when they are encoded
     // several at once; the reference in frame order.
     let count = frames.poses.len();
@@ -433,7 +440,7 @@ fn check_path_render(
     gaussians: usize,
     job: &PathRender<'_>,
     schedule: FrameSchedule,
-    writer_bytes: usize,
+    writer_bytes: f64,
 ) -> Result<()> {
     let frames = job.frames;
     let size = frames
@@ -461,7 +468,7 @@ fn check_path_render(
         float_bytes: 4,
     }
     .check_beside(
-        Some(("the frame writer's buffers", writer_bytes as f64)),
+        Some(("the frame writer's buffers", writer_bytes)),
         MemoryLimit::new(None)?,
         "",
     )
@@ -502,7 +509,10 @@ fn png_batch(schedule: FrameSchedule, (width, height): (usize, usize)) -> usize 
     match schedule {
         FrameSchedule::Sequential => 1,
         FrameSchedule::Pipelined { .. } => {
-            let frame_bytes = (2 * width * height * 3).max(1);
+            let frame_bytes = [width, height, 3]
+                .into_iter()
+                .fold(2usize, usize::saturating_mul)
+                .max(1);
             rayon::current_num_threads()
                 .min(8)
                 .min(HELD_BYTES / frame_bytes)

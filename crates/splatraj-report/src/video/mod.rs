@@ -158,20 +158,32 @@ pub struct VideoEncoder {
 
 impl VideoEncoder {
     /// An encoder for `width` × `height` frames shown at `fps` frames per second, encoding as
-    /// many groups at once as half the cores (at most 8, and within
-    /// 256 MB of frames).
+    /// many groups at once as [`VideoEncoder::parallel_for`] says.
     pub fn new(width: usize, height: usize, fps: f64) -> Result<Self, VideoError> {
-        let cores = std::thread::available_parallelism().map_or(1, usize::from);
-        let frame_bytes = width.next_multiple_of(2) * height.next_multiple_of(2) * 3;
-        let by_memory = PARALLEL_BYTES / (gop::FRAMES_HELD * frame_bytes.max(1));
-        let parallel = (cores / 2).min(MAX_PARALLEL_GROUPS).min(by_memory).max(1);
-        Self::with_parallel(width, height, fps, parallel)
+        Self::with_parallel(width, height, fps, Self::parallel_for(width, height))
     }
 
-    /// Host memory the groups may hold at once, bytes: their queued and in-progress frames
-    /// (what an up-front memory check adds beside the renders).
-    pub fn held_bytes(&self) -> usize {
-        self.parallel * gop::FRAMES_HELD * self.padded.0 * self.padded.1 * 3
+    /// Groups [`VideoEncoder::new`] encodes at once for `width` × `height` frames: half the
+    /// cores, at most 8, and within 256 MB of frames.
+    pub fn parallel_for(width: usize, height: usize) -> usize {
+        let cores = std::thread::available_parallelism().map_or(1, usize::from);
+        let by_memory = PARALLEL_BYTES / Self::held_bytes_for(width, height, 1).max(1);
+        (cores / 2).min(MAX_PARALLEL_GROUPS).min(by_memory).max(1)
+    }
+
+    /// Host memory `parallel` groups of `width` × `height` frames may hold at once, bytes: their
+    /// queued and in-progress frames (what an up-front memory check adds beside the renders,
+    /// before any encoder is made).
+    pub fn held_bytes_for(width: usize, height: usize, parallel: usize) -> usize {
+        // Saturating: sizes come from files, and a refusal must not overflow first.
+        [
+            gop::FRAMES_HELD,
+            width.next_multiple_of(2),
+            height.next_multiple_of(2),
+            3,
+        ]
+        .into_iter()
+        .fold(parallel, usize::saturating_mul)
     }
 
     /// [`VideoEncoder::new`] encoding at most `parallel` groups at once (the bytes are the
