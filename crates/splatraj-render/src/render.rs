@@ -805,6 +805,9 @@ pub fn render_at(
         gaussians_used = u,
         tiles = work.len(),
         pairs = composited.stats.pairs,
+        // A GPU composites a tile in one workgroup, entry after entry: the longest list, not
+        // the pairs, may set a kernel's time (docs/gpu.md, "Open").
+        longest_list = work.iter().map(|w| w.gaussians.len()).max().unwrap_or(0),
         "render"
     );
     Ok(composited)
