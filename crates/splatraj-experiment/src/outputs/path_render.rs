@@ -275,7 +275,7 @@ pub fn render_path_with(
         Video::Mp4 => VideoEncoder::held_bytes_for(size.0, size.1, groups),
         Video::None => 0,
     };
-    let writer_bytes = png_batch as f64 * 6.0 * size.0 as f64 * size.1 as f64 + video_bytes as f64;
+    let writer_bytes = png_batch as f64 * png_frame_bytes(size) as f64 + video_bytes as f64;
     check_path_render(scene.len(), job, schedule, writer_bytes)?;
     let encoder = match job.video {
         Video::Mp4 => {
@@ -504,21 +504,23 @@ fn write_png(
 /// Frames whose PNGs are written at once: one in the sequential reference; else as many as
 /// threads (rayon's count, which `RAYON_NUM_THREADS` sets), at most 8 and at most 128 MB of
 /// frames (with their keyframes) held.
-fn png_batch(schedule: FrameSchedule, (width, height): (usize, usize)) -> usize {
+fn png_batch(schedule: FrameSchedule, size: (usize, usize)) -> usize {
     const HELD_BYTES: usize = 128 << 20;
     match schedule {
         FrameSchedule::Sequential => 1,
-        FrameSchedule::Pipelined { .. } => {
-            let frame_bytes = [width, height, 3]
-                .into_iter()
-                .fold(2usize, usize::saturating_mul)
-                .max(1);
-            rayon::current_num_threads()
-                .min(8)
-                .min(HELD_BYTES / frame_bytes)
-                .max(1)
-        }
+        FrameSchedule::Pipelined { .. } => rayon::current_num_threads()
+            .min(8)
+            .min(HELD_BYTES / png_frame_bytes(size).max(1))
+            .max(1),
     }
+}
+
+/// Bytes a frame waiting for its PNG holds: its RGB and its keyframe's (saturating: sizes
+/// come from files, and the memory check must not overflow before it refuses them).
+fn png_frame_bytes((width, height): (usize, usize)) -> usize {
+    [width, height, 3]
+        .into_iter()
+        .fold(2usize, usize::saturating_mul)
 }
 
 /// One rendered frame on its way to the files.
