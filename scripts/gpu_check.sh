@@ -27,6 +27,9 @@
 #   7. where a wgpu optimisation step spends its time: `bench step` on the guitar config with
 #      each kernel waited for, by render stage, beside the time a step (the stages'
 #      totals also hold the run's closing evaluation, so read them as shares, not a sum);
+#   8. the compositing backward with long tile lists cut into segments replayed in parallel
+#      (the default) against whole lists, one workgroup each (SPLATRAJ_SEGMENT_ENTRIES=0):
+#      the mask passes of 1. and the guitar step of 4. on wgpu both ways, time and parity;
 #   0. first of all, what compiling a run's ~300 kernels costs a process: one guitar step on
 #      wgpu in a fresh process, twice (the first on this machine may also fill the driver's
 #      shader cache; the second pays only what every process pays).
@@ -92,6 +95,13 @@ echo "== wgpu: bench render, the backward summing one entry at a time" >&2
 SPLATRAJ_ENTRY_SUMS=one-at-a-time "$bin" bench render --backend wgpu --sizes "$sizes" \
   --resolutions 128 --rasterizer fused --repeats "$repeats" --scene "$data/biker.compressed.ply" \
   --json >"$out/render_wgpu_one_at_a_time.json"
+echo "== wgpu: bench render and bench step, lists whole" >&2
+SPLATRAJ_SEGMENT_ENTRIES=0 "$bin" bench render --backend wgpu --sizes "$sizes" \
+  --resolutions 128 --rasterizer fused --repeats "$repeats" --scene "$data/biker.compressed.ply" \
+  --json >"$out/render_wgpu_whole_lists.json"
+SPLATRAJ_SEGMENT_ENTRIES=0 "$bin" bench step --config configs/first-try/guitar.toml \
+  --steps "$steps" --set 'backend="wgpu"' --set "scene.path=\"$data/guitar.compressed.ply\"" --json \
+  >"$out/step_wgpu_whole_lists.json"
 echo "== wgpu: bench step (guitar), each kernel waited for" >&2
 CUBECL_DEBUG_OPTION=profile-medium "$bin" bench step --config configs/first-try/guitar.toml \
   --steps "$steps" --set 'backend="wgpu"' --set "scene.path=\"$data/guitar.compressed.ply\"" --json \
@@ -134,18 +144,22 @@ for r in render["wgpu"]["rows"]:
           f"{f['forward_backward_ms']:.2f} | {r['forward_backward_ms'] / f['forward_backward_ms']:.2f} | "
           f"{c.get('launches', '-')} | {c.get('reads', '-')} | {c.get('bytes_up', 0) / 1024:.1f} | "
           f"{r['tce']:.6f} / {f['tce']:.6f} | {diff:.1e} |")
-one = {key(r): r for r in load("render_wgpu_one_at_a_time.json")["rows"] if not r.get("skipped")}
-print("\n| backward's entry sums, fwd+bwd ms | pipelined | one at a time | |dΦ| diff / |dΦ|, one at a time |")
-print("|---|---:|---:|---:|")
-for r in render["wgpu"]["rows"]:
-    o, f = one.get(key(r)), flex_rows.get(key(r))
-    if r.get("skipped") or o is None or f is None:
-        continue
-    diff = grad_diff(o, f)
-    if not diff <= 1e-3:
-        failed.append(f"{key(r)} one entry at a time: gradient {diff:.2e}")
-    print(f"| {r['scene']} {r['gaussians']} {r['resolution']}² {r['pruning']} | "
-          f"{r['forward_backward_ms']:.2f} | {o['forward_backward_ms']:.2f} | {diff:.1e} |")
+def variant_table(title, default, variant, name):
+    """The wgpu mask passes against the same passes run another way (`name`), and its parity."""
+    other = {key(r): r for r in load(name)["rows"] if not r.get("skipped")}
+    print(f"\n| {title}, fwd+bwd ms | {default} | {variant} | |dΦ| diff / |dΦ|, {variant} |")
+    print("|---|---:|---:|---:|")
+    for r in render["wgpu"]["rows"]:
+        o, f = other.get(key(r)), flex_rows.get(key(r))
+        if r.get("skipped") or o is None or f is None:
+            continue
+        diff = grad_diff(o, f)
+        if not diff <= 1e-3:
+            failed.append(f"{key(r)} {variant}: gradient {diff:.2e}")
+        print(f"| {r['scene']} {r['gaussians']} {r['resolution']}² {r['pruning']} | "
+              f"{r['forward_backward_ms']:.2f} | {o['forward_backward_ms']:.2f} | {diff:.1e} |")
+variant_table("backward's entry sums", "pipelined", "one at a time", "render_wgpu_one_at_a_time.json")
+variant_table("tile lists in the backward", "cut", "whole", "render_wgpu_whole_lists.json")
 profiled = load("render_wgpu_profiled.json")
 names = [n for n, _ in profiled["rows"][0]["stages_ms"]] if profiled["rows"] else []
 print("\n| wgpu stages, ms, each kernel waited for | " + " | ".join(names) + " |")
@@ -171,6 +185,10 @@ for b in ("wgpu", "flex"):
         c = r["counts"]
         print(f"| {b}, {r['passes']} | {r['ms_per_step']:.1f} | {c['launches']} | {c['reads']} | "
               f"{c.get('renders', '-')} | {r['best_total']:.6f} |")
+for r in load("step_wgpu_whole_lists.json"):
+    c = r["counts"]
+    print(f"| wgpu, {r['passes']}, lists whole | {r['ms_per_step']:.1f} | {c['launches']} | {c['reads']} | "
+          f"{c.get('renders', '-')} | {r['best_total']:.6f} |")
 profiled_steps = load("step_wgpu_profiled.json")
 names = [n for n, _ in profiled_steps[0]["stages_ms"]] if profiled_steps else []
 print("\n| wgpu step, ms, each kernel waited for | " + " | ".join(names) + " | ms a step |")

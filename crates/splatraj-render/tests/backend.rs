@@ -164,8 +164,9 @@ fn f64_is_really_f64() {
 
 /// The GPU kernels against the host kernels, both f32, on a batch that stresses the kernels'
 /// own structure: lists longer than one shared-memory stage (256), opaque stacks that stop
-/// pixels and whole tiles early, partial tiles, an empty tile, two channels, two poses. The
-/// host kernels are themselves checked against the tensor path in f64 (`tests/fused.rs`).
+/// pixels and whole tiles early, partial tiles, an empty tile, two channels, two poses; each
+/// list composited whole by one workgroup. The host kernels are themselves checked against the
+/// tensor path in f64 (`tests/fused.rs`).
 #[cfg(feature = "wgpu")]
 #[test]
 fn gpu_kernels_match_host_kernels() {
@@ -175,12 +176,22 @@ fn gpu_kernels_match_host_kernels() {
         Some(splatraj_render::fused::cube::EntrySums::Pipelined),
         "lavapipe's workgroup memory holds the pipelined backward of two channels"
     );
-    gpu_kernels_match_host_kernels_with(600, 2);
+    gpu_kernels_match_host_kernels_with(600, 2, WHOLE_LISTS);
+}
+
+/// The same with the lists cut into the shortest segments, one forward stage (256 entries):
+/// lists of up to ~600 entries in two or three segments, pixels that stop inside a segment
+/// (the later segments of their tile composite nothing), whole tiles that stop early, each
+/// segment replaying alone with the colour the later ones put behind it.
+#[cfg(feature = "wgpu")]
+#[test]
+fn gpu_kernels_match_host_kernels_on_lists_cut_into_segments() {
+    gpu_kernels_match_host_kernels_with(600, 2, STAGE_ENTRIES);
 }
 
 /// The same with as many channels as it takes for the pipelined backward (two buffers of
 /// per-entry sums) not to fit the device's workgroup memory: the backward then sums one entry
-/// at a time, and agrees too.
+/// at a time, and agrees too (lists cut into segments, as above).
 #[cfg(feature = "wgpu")]
 #[test]
 fn gpu_kernels_match_host_kernels_one_entry_at_a_time() {
@@ -190,22 +201,34 @@ fn gpu_kernels_match_host_kernels_one_entry_at_a_time() {
     let channels = (1..=16)
         .find(|&c| entry_sums_on(&device, c) == Some(EntrySums::OneAtATime))
         .expect("a channel count whose pipelined backward does not fit");
-    gpu_kernels_match_host_kernels_with(600, channels);
+    gpu_kernels_match_host_kernels_with(600, channels, STAGE_ENTRIES);
 }
+
+/// A plan's longest segment that leaves every list whole.
+#[cfg(feature = "wgpu")]
+const WHOLE_LISTS: usize = 0;
+
+#[cfg(feature = "wgpu")]
+use splatraj_render::fused::segments::STAGE_ENTRIES;
 
 /// The same with 50 000 Gaussians a pose: the second pose crowds them all into one column of
 /// tiles, lists of ~50 000 entries with pixels replaying tens of thousands of them. The
 /// backward's per-entry binary tree over the tile's pixels (ten barriers an entry) gave v_means
 /// 22 % off there on lavapipe, and biker's pose gradient 90 % off; the two-level sum that
-/// replaced it agrees.
+/// replaced it agrees. The lists are cut as a plan cuts them unless asked otherwise (tens of
+/// segments a tile).
 #[cfg(feature = "wgpu")]
 #[test]
 fn gpu_kernels_match_host_kernels_on_crowded_lists() {
-    gpu_kernels_match_host_kernels_with(50_000, 2);
+    gpu_kernels_match_host_kernels_with(
+        50_000,
+        2,
+        splatraj_render::fused::segments::DEFAULT_SEGMENT_ENTRIES,
+    );
 }
 
 #[cfg(feature = "wgpu")]
-fn gpu_kernels_match_host_kernels_with(n: usize, channels: usize) {
+fn gpu_kernels_match_host_kernels_with(n: usize, channels: usize, segment_entries: usize) {
     use splatraj_render::tiles::{TILE_SIZE, TileGrid, TileWork};
 
     let (width, height, batch) = (45, 37, 2);
@@ -277,6 +300,7 @@ fn gpu_kernels_match_host_kernels_with(n: usize, channels: usize) {
         batch,
         grid,
         channels,
+        segment_entries,
     });
 }
 
@@ -293,6 +317,8 @@ struct KernelCase {
     batch: usize,
     grid: splatraj_render::tiles::TileGrid,
     channels: usize,
+    /// The plan's longest segment on the GPU ([`WHOLE_LISTS`]: none cut).
+    segment_entries: usize,
 }
 
 /// The GPU compositing kernels against the host kernels on `case`, forward and backward, and
@@ -341,7 +367,8 @@ fn assert_gpu_kernels_match_host_kernels(case: &KernelCase) {
                 &case.work,
                 &splatraj_render::rows::PoseRows::dense(batch, n),
                 grid,
-            ),
+            )
+            .with_segment_entries(case.segment_entries),
         );
         let weights = |range: std::ops::Range<usize>| {
             let w: Vec<f64> = w_image
@@ -436,6 +463,8 @@ fn gpu_kernels_match_host_kernels_on_a_long_replay() {
         batch: 1,
         grid,
         channels,
+        // Whole: one pixel's replay of the whole list is what meets lavapipe's loop budget.
+        segment_entries: WHOLE_LISTS,
     });
 }
 

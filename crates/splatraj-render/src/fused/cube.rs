@@ -8,10 +8,13 @@
 //!   last contributor. A tile stops once none of its pixels is open.
 //! - Backward: every unit replays its pixel back to front from the saved state, the list's rows
 //!   staged through shared memory 64 entries at a time; per list entry the tile's 256
-//!   contributions are summed in a fixed order in shared memory (two levels, two barriers per
-//!   entry) into that entry's gradient slot, and a second kernel sums each Gaussian's slots in
-//!   plan order (the host built the map from Gaussian to its slots). No atomics, so the result
-//!   is the same on every run.
+//!   contributions are summed in a fixed order in shared memory (two levels, one or two
+//!   barriers per entry: [`EntrySums`]) into that entry's gradient slot, and a second kernel
+//!   sums each Gaussian's slots in plan order (the host built the map from Gaussian to its
+//!   slots). No atomics, so the result is the same on every run.
+//! - Long lists are cut into segments ([`super::segments`]), one cube each: the forward still
+//!   composites a tile's whole list in the cube of its first segment and saves each segment's
+//!   state on the way; the backward replays the segments in parallel.
 //!
 //! The tile lists are built on the host (binning is cheapest there: it is a per-pose sort the
 //! host already does for its decisions) and uploaded each pass as three integer tensors. f64 is
@@ -33,6 +36,7 @@ use burn_cubecl::tensor::CubeTensor;
 use burn_cubecl::{CubeDevice, cubecl};
 
 use super::plan::CompositePlan;
+use super::segments::{SEGMENT_COLUMNS, Segments};
 use super::{CompositeKernels, HostSaved, SplatPrimitives, host_backward};
 use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
 use crate::tiles::TILE_PIXELS;
@@ -193,12 +197,12 @@ fn tile_pixel<F: Float, I: Int>(
     width: u32,
     height: u32,
 ) -> TilePixel<F> {
-    let x0 = u32::cast_from(work[3 * w + 1]);
-    let y0 = u32::cast_from(work[3 * w + 2]);
+    let x0 = u32::cast_from(work[SEGMENT_COLUMNS * w + 1]);
+    let y0 = u32::cast_from(work[SEGMENT_COLUMNS * w + 2]);
     let x = x0 + (p % 16) as u32;
     let y = y0 + (p / 16) as u32;
     TilePixel::<F> {
-        pose: u32::cast_from(work[3 * w]),
+        pose: u32::cast_from(work[SEGMENT_COLUMNS * w]),
         x,
         y,
         inside: x < width && y < height,
@@ -214,22 +218,32 @@ fn tile_pixel<F: Float, I: Int>(
 fn forward_kernel<F: Float, I: Int>(
     splats: &Tensor<F>,      // [R, S]: u, v, conic a, b, c, opacity, …
     values: &Tensor<F>,      // [R, C]
-    work: &Tensor<I>,        // [work, 3]: pose, tile corner x, tile corner y
-    starts: &Tensor<I>,      // [work + 1]
+    work: &Tensor<I>,        // [segments, 5]: pose, tile corner x, y, tile's first segment, count
+    starts: &Tensor<I>,      // [segments + 1]
     rows: &Tensor<I>,        // [pairs]
     image: &mut Tensor<F>,   // [B, H, W, C + 1]
-    final_t: &mut Tensor<F>, // [work, 256]
-    last: &mut Tensor<I>,    // [work, 256]
+    final_t: &mut Tensor<F>, // [segments, 256]: T at each segment's end
+    last: &mut Tensor<I>,    // [segments, 256]: entries up to the last contributor, per segment
+    partial: &mut Tensor<F>, // [segments, 256, C] where tiles are cut, else [1]
     stop_t: f32,
     work_count: u32,
     width: u32,
     height: u32,
     columns: u32,
+    segment_entries: u32,
     #[comptime] channels: usize,
     #[define(F, I)] _dtypes: [ElemType; 2],
 ) {
+    // One cube per segment, but a tile's list is composited whole, front to back, by the cube
+    // of its first segment: the forward is cheap per entry, and what its segments' backwards
+    // need (T at each segment's end, its last contributor, its sums) falls out on the way.
     let w = work_index();
     if w >= work_count as usize {
+        terminate!();
+    }
+    let first_segment = u32::cast_from(work[SEGMENT_COLUMNS * w + 3]) as usize;
+    let segment_count = u32::cast_from(work[SEGMENT_COLUMNS * w + 4]) as usize;
+    if w != first_segment {
         terminate!();
     }
     let p = UNIT_POS as usize;
@@ -239,14 +253,18 @@ fn forward_kernel<F: Float, I: Int>(
 
     let mut open = inside;
     let mut t = F::new(1.0);
+    // Per segment: entries up to its last contributor, and its sums; `totals` the tile's.
     let mut last_entry = 0u32;
     let mut sums = Array::<F>::new(channels);
+    let mut totals = Array::<F>::new(channels);
     for k in 0..channels {
         sums[k] = F::new(0.0);
+        totals[k] = F::new(0.0);
     }
-
     let start = u32::cast_from(starts[w]) as usize;
-    let end = u32::cast_from(starts[w + 1]) as usize;
+    let end = u32::cast_from(starts[w + segment_count]) as usize;
+    let mut segment = 0usize;
+    let mut segment_start = start;
     let mut sh_mx = Shared::<[F]>::new_slice(256usize);
     let mut sh_my = Shared::<[F]>::new_slice(256usize);
     let mut sh_a = Shared::<[F]>::new_slice(256usize);
@@ -307,21 +325,46 @@ fn forward_kernel<F: Float, I: Int>(
                             sums[k] += sh_values[k * 256 + i] * weight;
                         }
                         t = t_next;
-                        last_entry = (first - start + i + 1) as u32;
+                        last_entry = (first - segment_start + i + 1) as u32;
                     }
                 }
             }
         }
         sync_cube();
         first += 256;
+        // A segment ends between stages (its length is whole stages, [`Segments::of`]).
+        if first < end && first == segment_start + segment_entries as usize {
+            let at = first_segment + segment;
+            final_t[at * 256 + p] = t;
+            last[at * 256 + p] = I::cast_from(last_entry);
+            for k in 0..channels {
+                partial[(at * 256 + p) * channels + k] = sums[k];
+                totals[k] += sums[k];
+                sums[k] = F::new(0.0);
+            }
+            last_entry = 0u32;
+            segment += 1;
+            segment_start = first;
+        }
     }
 
-    final_t[w * 256 + p] = t;
-    last[w * 256 + p] = I::cast_from(last_entry);
+    // The segment the loop ended in, and those after it (a tile whose pixels all stopped
+    // ends early): they composited nothing past here, and T stays where it stopped.
+    for j in segment..segment_count {
+        let at = first_segment + j;
+        final_t[at * 256 + p] = t;
+        let mine = j == segment;
+        last[at * 256 + p] = I::cast_from(if mine { last_entry } else { 0u32 });
+        if segment_count > 1 {
+            for k in 0..channels {
+                partial[(at * 256 + p) * channels + k] = if mine { sums[k] } else { F::new(0.0) };
+            }
+        }
+    }
     if inside {
         let pixel = ((pose * height + y) * width + x) as usize;
         for k in 0..channels {
-            image[pixel * (channels + 1) + k] = sums[k];
+            image[pixel * (channels + 1) + k] = totals[k] + sums[k];
         }
         image[pixel * (channels + 1) + channels] = F::new(1.0) - t;
     }
@@ -332,11 +375,12 @@ fn forward_kernel<F: Float, I: Int>(
 fn backward_kernel<F: Float, I: Int>(
     splats: &Tensor<F>,    // [R, S]
     values: &Tensor<F>,    // [R, C]
-    work: &Tensor<I>,      // [work, 3]
-    starts: &Tensor<I>,    // [work + 1]
+    work: &Tensor<I>,      // [segments, 5]
+    starts: &Tensor<I>,    // [segments + 1]
     rows: &Tensor<I>,      // [pairs]
-    final_t: &Tensor<F>,   // [work, 256]
-    last: &Tensor<I>,      // [work, 256]
+    final_t: &Tensor<F>,   // [segments, 256]
+    last: &Tensor<I>,      // [segments, 256]
+    partial: &Tensor<F>,   // [segments, 256, C] where tiles are cut, else [1]
     v_image: &Tensor<F>,   // [B, H, W, C + 1]
     slots: &mut Tensor<F>, // [pairs, 6 + C]
     work_count: u32,
@@ -372,8 +416,17 @@ fn backward_kernel<F: Float, I: Int>(
             v_out[k] = v_image[pixel * (channels + 1) + k];
         }
     }
-    let t_final = final_t[w * 256 + p];
-    let mut t = t_final;
+    // A segment replays from the transmittance at its own end, with the colour the later
+    // segments of its tile composited behind it; alpha's gradient needs the pixel's final T.
+    let first_segment = u32::cast_from(work[SEGMENT_COLUMNS * w + 3]) as usize;
+    let segment_count = u32::cast_from(work[SEGMENT_COLUMNS * w + 4]) as usize;
+    for j in w - first_segment + 1..segment_count {
+        for k in 0..channels {
+            behind[k] += partial[((first_segment + j) * 256 + p) * channels + k];
+        }
+    }
+    let t_final = final_t[(first_segment + segment_count - 1) * 256 + p];
+    let mut t = final_t[w * 256 + p];
     let my_last = u32::cast_from(last[w * 256 + p]) as usize;
 
     // The tile replays from its deepest last contributor: a max over the cube.
@@ -594,6 +647,8 @@ pub struct DeviceSaved {
     lists: PlanTensors,
     final_t: CubeTensor,
     last: CubeTensor,
+    /// Each segment's sums where tiles were cut (else a placeholder).
+    partial: CubeTensor,
 }
 
 /// The backward state: on the device, or on the host for f64 passes.
@@ -605,12 +660,18 @@ pub enum CubeSaved {
     Host(HostSaved),
 }
 
-/// The tile lists of a plan as device tensors.
+/// The tile lists of a plan, cut into segments, as device tensors.
 #[derive(Debug, Clone)]
 struct PlanTensors {
     work: CubeTensor,
     starts: CubeTensor,
     rows: CubeTensor,
+    /// Segments ([`Segments::len`]).
+    count: usize,
+    /// Whether any tile was cut.
+    cut: bool,
+    /// Entries of a segment (its tile's last may hold fewer).
+    segment_entries: usize,
 }
 
 /// An i32 device tensor (never empty: a kernel argument needs a buffer).
@@ -622,17 +683,16 @@ pub(crate) fn int_tensor(values: Vec<i32>, device: &CubeDevice) -> CubeTensor {
 }
 
 fn upload_plan(plan: &CompositePlan, device: &CubeDevice) -> PlanTensors {
-    let work = (0..plan.tiles.len())
-        .flat_map(|w| {
-            let (x0, y0) = plan.tile_origin(plan.tiles[w]);
-            [plan.batches[w] as i32, x0 as i32, y0 as i32]
-        })
-        .collect();
+    let segments = Segments::of(plan);
+    let (count, cut, segment_entries) = (segments.len(), segments.cut, segments.entries);
     PlanTensors {
-        work: int_tensor(work, device),
-        starts: int_tensor(plan.starts.iter().map(|&s| s as i32).collect(), device),
+        work: int_tensor(segments.work, device),
+        starts: int_tensor(segments.starts, device),
         // A step's lists hold about a million entries: converted on every core.
         rows: int_tensor(plan.rows.par_iter().map(|&r| r as i32).collect(), device),
+        count,
+        cut,
+        segment_entries,
     }
 }
 
@@ -658,8 +718,8 @@ fn device_forward(
     let columns = inputs[0].shape().dims::<2>()[1];
     let channels = inputs[1].shape().dims::<2>()[1];
     let grid = plan.grid;
-    let work_count = plan.tiles.len();
     let lists = upload_plan(&plan, &device);
+    let work_count = lists.count;
     let image = zeros(
         vec![plan.batch(), grid.height, grid.width, channels + 1],
         &device,
@@ -677,6 +737,20 @@ fn device_forward(
         &device,
         IntDType::I32,
     );
+    // Where tiles are cut: each segment's sums, written by the forward for every pixel.
+    let partial = CubeBackend::float_empty(
+        vec![
+            if lists.cut {
+                work_count * TILE_PIXELS * channels
+            } else {
+                1
+            }
+            .max(1),
+        ]
+        .into(),
+        &device,
+        dtype.into(),
+    );
     if work_count > 0 {
         forward_kernel::launch(
             &client,
@@ -690,11 +764,13 @@ fn device_forward(
             image.clone().into_tensor_arg(),
             final_t.clone().into_tensor_arg(),
             last.clone().into_tensor_arg(),
+            partial.clone().into_tensor_arg(),
             plan.stop_transmittance as f32,
             work_count as u32,
             grid.width as u32,
             grid.height as u32,
             columns as u32,
+            lists.segment_entries as u32,
             channels,
             [
                 dtype_to_storage_type(dtype),
@@ -708,6 +784,7 @@ fn device_forward(
         lists,
         final_t,
         last,
+        partial,
     };
     (image, saved)
 }
@@ -720,6 +797,7 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
         lists,
         final_t,
         last,
+        partial,
     } = saved;
     let device = inputs[0].device.clone();
     let client = inputs[0].client.clone();
@@ -727,7 +805,7 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
     let [rows, columns] = inputs[0].shape().dims::<2>();
     let channels = inputs[1].shape().dims::<2>()[1];
     let grid = plan.grid;
-    let work_count = plan.tiles.len();
+    let work_count = lists.count;
     let pairs = plan.rows.len();
     // Written whole by the backward kernel (every list entry's slot, replayed or not).
     let slots = CubeBackend::float_empty(
@@ -748,6 +826,7 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
             lists.rows.into_tensor_arg(),
             final_t.into_tensor_arg(),
             last.into_tensor_arg(),
+            partial.into_tensor_arg(),
             v_image.into_tensor_arg(),
             slots.clone().into_tensor_arg(),
             work_count as u32,

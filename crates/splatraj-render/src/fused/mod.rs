@@ -21,6 +21,7 @@ pub mod fusion;
 pub mod plan;
 pub mod projection;
 pub mod real;
+pub mod segments;
 
 use std::sync::Arc;
 

@@ -2,6 +2,7 @@
 
 use rayon::prelude::*;
 
+use super::segments::asked_segment_entries;
 use crate::rasterize::MIN_TRANSMITTANCE;
 use crate::rows::{PoseRows, parts_mut};
 use crate::tiles::{TILE_SIZE, TileGrid, TileWork};
@@ -24,6 +25,10 @@ pub struct CompositePlan {
     pub rows: Vec<u32>,
     /// A pixel stops before T would fall below this (the exact rule: [`MIN_TRANSMITTANCE`]).
     pub stop_transmittance: f64,
+    /// The longest run of a list one GPU workgroup composites: longer lists are cut into
+    /// segments composited in parallel ([`super::segments`]; 0: never cut). The host kernels
+    /// take whole lists.
+    pub segment_entries: usize,
 }
 
 impl CompositePlan {
@@ -46,6 +51,7 @@ impl CompositePlan {
             starts,
             rows: flat,
             stop_transmittance: MIN_TRANSMITTANCE,
+            segment_entries: asked_segment_entries(),
         }
     }
 
@@ -53,6 +59,14 @@ impl CompositePlan {
     pub fn with_stop_transmittance(self, stop_transmittance: f64) -> Self {
         CompositePlan {
             stop_transmittance,
+            ..self
+        }
+    }
+
+    /// The same plan with another longest segment for the GPU kernels (0: lists stay whole).
+    pub fn with_segment_entries(self, segment_entries: usize) -> Self {
+        CompositePlan {
+            segment_entries,
             ..self
         }
     }
