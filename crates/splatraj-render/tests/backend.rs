@@ -204,12 +204,8 @@ fn gpu_kernels_match_host_kernels_one_entry_at_a_time() {
     gpu_kernels_match_host_kernels_with(600, channels, STAGE_ENTRIES);
 }
 
-/// A plan's longest segment that leaves every list whole.
 #[cfg(feature = "wgpu")]
-const WHOLE_LISTS: usize = 0;
-
-#[cfg(feature = "wgpu")]
-use splatraj_render::fused::segments::STAGE_ENTRIES;
+use splatraj_render::fused::segments::{STAGE_ENTRIES, WHOLE_LISTS};
 
 /// The same with 50 000 Gaussians a pose: the second pose crowds them all into one column of
 /// tiles, lists of ~50 000 entries with pixels replaying tens of thousands of them. The

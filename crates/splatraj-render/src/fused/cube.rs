@@ -36,8 +36,8 @@ use burn_cubecl::tensor::CubeTensor;
 use burn_cubecl::{CubeDevice, cubecl};
 
 use super::plan::CompositePlan;
-use super::segments::{SEGMENT_COLUMNS, Segments};
-use super::{CompositeKernels, HostSaved, SplatPrimitives, host_backward};
+use super::segments::{SEGMENT_COLUMNS, Segments, WHOLE_LISTS};
+use super::{CompositeKernels, ForwardUse, HostSaved, SplatPrimitives, host_backward};
 use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
 use crate::tiles::TILE_PIXELS;
 
@@ -682,8 +682,8 @@ pub(crate) fn int_tensor(values: Vec<i32>, device: &CubeDevice) -> CubeTensor {
     CubeBackend::int_from_data(TensorData::new(values, [len]), device)
 }
 
-fn upload_plan(plan: &CompositePlan, device: &CubeDevice) -> PlanTensors {
-    let segments = Segments::of(plan);
+fn upload_plan(plan: &CompositePlan, segment_entries: usize, device: &CubeDevice) -> PlanTensors {
+    let segments = Segments::of(plan, segment_entries);
     let (count, cut, segment_entries) = (segments.len(), segments.cut, segments.entries);
     PlanTensors {
         work: int_tensor(segments.work, device),
@@ -710,6 +710,7 @@ fn zeros(shape: Vec<usize>, device: &CubeDevice, dtype: DType) -> CubeTensor {
 fn device_forward(
     inputs: SplatPrimitives<CubeBackend>,
     plan: Arc<CompositePlan>,
+    used: ForwardUse,
 ) -> (CubeTensor, DeviceSaved) {
     let inputs = [inputs.splats, inputs.values].map(into_contiguous);
     let device = inputs[0].device.clone();
@@ -718,7 +719,12 @@ fn device_forward(
     let columns = inputs[0].shape().dims::<2>()[1];
     let channels = inputs[1].shape().dims::<2>()[1];
     let grid = plan.grid;
-    let lists = upload_plan(&plan, &device);
+    // Only a backward gains from cut lists; a forward alone would only save more.
+    let segment_entries = match used {
+        ForwardUse::ForBackward => plan.segment_entries,
+        ForwardUse::ImageOnly => WHOLE_LISTS,
+    };
+    let lists = upload_plan(&plan, segment_entries, &device);
     let work_count = lists.count;
     let image = zeros(
         vec![plan.batch(), grid.height, grid.width, channels + 1],
@@ -879,12 +885,13 @@ impl CompositeKernels for CubeBackend {
     fn composite_forward(
         inputs: SplatPrimitives<Self>,
         plan: Arc<CompositePlan>,
+        used: ForwardUse,
     ) -> (FloatTensor<Self>, CubeSaved) {
         if inputs.splats.dtype() == DType::F64 {
             let (image, saved) = super::host_forward::<Self>(inputs, plan);
             return (image, CubeSaved::Host(saved));
         }
-        let (image, saved) = device_forward(inputs, plan);
+        let (image, saved) = device_forward(inputs, plan, used);
         (image, CubeSaved::Device(Box::new(saved)))
     }
 

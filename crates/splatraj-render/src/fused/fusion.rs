@@ -24,7 +24,7 @@ use burn_cubecl::tensor::CubeTensor;
 
 use super::plan::CompositePlan;
 use super::projection::{FusedProjection, ProjectionKernels, ProjectionPlan, SPLAT_COLUMNS};
-use super::{CompositeKernels, FusedComposite, SplatPrimitives};
+use super::{CompositeKernels, ForwardUse, FusedComposite, SplatPrimitives};
 use crate::stages::Stage;
 
 type Runtime = <CubeBackend as FusionBackend>::FusionRuntime;
@@ -129,6 +129,7 @@ impl CompositeKernels for Cube {
     fn composite_forward(
         inputs: SplatPrimitives<Self>,
         plan: Arc<CompositePlan>,
+        used: ForwardUse,
     ) -> (FloatTensor<Self>, Self::Saved) {
         let saved = Deferred::new(&[&inputs.splats, &inputs.values]);
         let channels = inputs.values.shape().dims::<2>()[1];
@@ -149,6 +150,7 @@ impl CompositeKernels for Cube {
                 let (image, state) = CubeBackend::composite_forward(
                     SplatPrimitives { splats, values },
                     plan.clone(),
+                    used,
                 );
                 keep.put(state);
                 vec![image]
@@ -177,7 +179,7 @@ impl FusedComposite for Cube {
         inputs: SplatPrimitives<Self>,
         plan: Arc<CompositePlan>,
     ) -> FloatTensor<Self> {
-        Self::composite_forward(inputs, plan).0
+        Self::composite_forward(inputs, plan, ForwardUse::ImageOnly).0
     }
 }
 

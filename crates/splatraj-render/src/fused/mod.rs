@@ -66,15 +66,26 @@ pub trait FusedComposite: Backend {
     ) -> FloatTensor<Self>;
 }
 
+/// What a compositing forward's result is for: the GPU kernels save more for a backward.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ForwardUse {
+    /// The image alone (frames, metrics, renders without a gradient).
+    ImageOnly,
+    /// The image and a backward after it.
+    ForBackward,
+}
+
 /// Forward and backward kernels of a base (non-autodiff) backend.
 pub trait CompositeKernels: Backend {
     /// What the forward pass keeps for the backward pass.
     type Saved: Clone + Send + Sync + std::fmt::Debug + 'static;
 
-    /// The packed image `[B, H, W, C + 1]` and the state its backward needs.
+    /// The packed image `[B, H, W, C + 1]` and the state its backward needs (complete only
+    /// where `used` is [`ForwardUse::ForBackward`]).
     fn composite_forward(
         inputs: SplatPrimitives<Self>,
         plan: Arc<CompositePlan>,
+        used: ForwardUse,
     ) -> (FloatTensor<Self>, Self::Saved);
 
     /// Gradients of the two inputs from the gradient of the packed image.
@@ -229,6 +240,7 @@ macro_rules! host_backend {
             fn composite_forward(
                 inputs: SplatPrimitives<Self>,
                 plan: Arc<CompositePlan>,
+                _: ForwardUse,
             ) -> (FloatTensor<Self>, HostSaved) {
                 host_forward::<Self>(inputs, plan)
             }
@@ -246,7 +258,7 @@ macro_rules! host_backend {
                 inputs: SplatPrimitives<Self>,
                 plan: Arc<CompositePlan>,
             ) -> FloatTensor<Self> {
-                Self::composite_forward(inputs, plan).0
+                Self::composite_forward(inputs, plan, ForwardUse::ImageOnly).0
             }
         }
     };
@@ -298,10 +310,13 @@ impl<B: CompositeKernels, C: CheckpointStrategy> FusedComposite for Autodiff<B, 
             .stateful()
         {
             OpsKind::Tracked(prep) => {
-                let (image, saved) = B::composite_forward(primitives, plan);
+                let (image, saved) =
+                    B::composite_forward(primitives, plan, ForwardUse::ForBackward);
                 prep.finish(saved, image)
             }
-            OpsKind::UnTracked(prep) => prep.finish(B::composite_forward(primitives, plan).0),
+            OpsKind::UnTracked(prep) => {
+                prep.finish(B::composite_forward(primitives, plan, ForwardUse::ImageOnly).0)
+            }
         }
     }
 }

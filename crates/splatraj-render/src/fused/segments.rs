@@ -23,6 +23,9 @@ use super::plan::CompositePlan;
 /// the colour behind it, its saved state) stay small beside its entries.
 pub const DEFAULT_SEGMENT_ENTRIES: usize = 1024;
 
+/// The longest segment that leaves every list whole.
+pub const WHOLE_LISTS: usize = 0;
+
 /// Entries the forward kernel stages at once: segments are whole stages.
 pub const STAGE_ENTRIES: usize = 256;
 
@@ -69,14 +72,14 @@ pub const SEGMENT_COLUMNS: usize = 5;
 
 impl Segments {
     /// Cuts each list of `plan` into segments of `segment_entries` rounded up to whole
-    /// stages, the last holding the rest (0: lists stay whole).
-    pub fn of(plan: &CompositePlan) -> Self {
+    /// stages, the last holding the rest ([`WHOLE_LISTS`]: lists stay whole).
+    pub fn of(plan: &CompositePlan, segment_entries: usize) -> Self {
         let longest_list = (0..plan.tiles.len())
             .map(|w| plan.starts[w + 1] - plan.starts[w])
             .max()
             .unwrap_or(0);
-        let asked = match plan.segment_entries {
-            0 => longest_list,
+        let asked = match segment_entries {
+            WHOLE_LISTS => longest_list,
             asked => asked,
         };
         let entries = asked.max(1).next_multiple_of(STAGE_ENTRIES);
@@ -145,7 +148,7 @@ mod tests {
     fn long_lists_are_cut_into_whole_stages_in_order() {
         // 300 entries a segment, rounded up to two stages: 512.
         let plan = plan(&[3, 1100, 0, 1024], 300);
-        let segments = Segments::of(&plan);
+        let segments = Segments::of(&plan, plan.segment_entries);
         assert_eq!(segments.entries, 512);
         // Tile 0: 3 entries, one segment. Tile 1: 1100 → 512, 512, 76. Tile 2: an empty list
         // stays one (empty) segment. Tile 3: 1024 → two full segments.
@@ -175,9 +178,9 @@ mod tests {
 
     #[test]
     fn lists_within_the_length_or_a_zero_length_stay_whole() {
-        for (lengths, longest) in [(&[3usize, 256, 1][..], 4), (&[300, 5000][..], 0)] {
+        for (lengths, longest) in [(&[3usize, 256, 1][..], 4), (&[300, 5000][..], WHOLE_LISTS)] {
             let plan = plan(lengths, longest);
-            let segments = Segments::of(&plan);
+            let segments = Segments::of(&plan, plan.segment_entries);
             assert!(!segments.cut);
             assert!(segments.entries >= lengths.iter().copied().max().unwrap());
             let offsets: Vec<i32> = plan.starts.iter().map(|&s| s as i32).collect();
