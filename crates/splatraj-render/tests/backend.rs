@@ -189,6 +189,62 @@ fn gpu_kernels_match_host_kernels_on_lists_cut_into_segments() {
     gpu_kernels_match_host_kernels_with(600, 2, STAGE_ENTRIES);
 }
 
+/// Segments at their edges, one pose of five tiles cut into two-stage segments: a list of
+/// exactly one segment, of exactly two (the boundary at its end saves nothing), of one segment
+/// and one entry (a one-entry last segment), an empty list, and a list of four segments whose
+/// first entries are opaque so that every pixel stops in the first stage: the tile ends early
+/// inside its first segment, which is written with its contributors, and its three later
+/// segments as it stopped, with none. The other lists are faint enough that T stays above the
+/// stop across segments.
+#[cfg(feature = "wgpu")]
+#[test]
+fn gpu_kernels_match_host_kernels_at_segment_edges() {
+    use splatraj_render::tiles::{TILE_SIZE, TileGrid, TileWork};
+
+    let segment = 2 * STAGE_ENTRIES;
+    let lengths = [segment, 2 * segment, segment + 1, 0, 4 * segment];
+    let opaque_front = 40;
+    let channels = 2;
+    let grid = TileGrid::new(lengths.len() * TILE_SIZE, TILE_SIZE);
+    let mut rng = common::Rng(0x51ab);
+    let (mut means, mut conics, mut opacities, mut values) = (vec![], vec![], vec![], vec![]);
+    let mut work = Vec::new();
+    let mut next = 0u32;
+    for (tile, &length) in lengths.iter().enumerate() {
+        let centre = (tile * TILE_SIZE) as f64 + 8.0;
+        for k in 0..length {
+            means.extend([centre + rng.range(-3.0, 3.0), 8.0 + rng.range(-3.0, 3.0)]);
+            // σ ≈ 10 px: every pixel of the tile within reach.
+            conics.extend([0.01, rng.range(-0.002, 0.002), 0.01]);
+            let stopper = tile == lengths.len() - 1 && k < opaque_front;
+            opacities.push(if stopper {
+                0.99
+            } else {
+                rng.range(0.004, 0.012)
+            });
+            values.extend((0..channels).map(|_| rng.range(-1.0, 1.0)));
+        }
+        work.push(TileWork {
+            batch: 0,
+            tile,
+            gaussians: (next..next + length as u32).collect(),
+        });
+        next += length as u32;
+    }
+    assert_gpu_kernels_match_host_kernels(&KernelCase {
+        means,
+        conics,
+        opacities,
+        values,
+        work,
+        gaussians: next as usize,
+        batch: 1,
+        grid,
+        channels,
+        segment_entries: segment,
+    });
+}
+
 /// The same with as many channels as it takes for the pipelined backward (two buffers of
 /// per-entry sums) not to fit the device's workgroup memory: the backward then sums one entry
 /// at a time, and agrees too (lists cut into segments, as above).

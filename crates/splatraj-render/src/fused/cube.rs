@@ -36,7 +36,7 @@ use burn_cubecl::tensor::CubeTensor;
 use burn_cubecl::{CubeDevice, cubecl};
 
 use super::plan::CompositePlan;
-use super::segments::{SEGMENT_COLUMNS, Segments, WHOLE_LISTS};
+use super::segments::{SEGMENT_COLUMNS, Segments};
 use super::{CompositeKernels, ForwardUse, HostSaved, SplatPrimitives, host_backward};
 use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
 use crate::tiles::TILE_PIXELS;
@@ -682,8 +682,8 @@ pub(crate) fn int_tensor(values: Vec<i32>, device: &CubeDevice) -> CubeTensor {
     CubeBackend::int_from_data(TensorData::new(values, [len]), device)
 }
 
-fn upload_plan(plan: &CompositePlan, segment_entries: usize, device: &CubeDevice) -> PlanTensors {
-    let segments = Segments::of(plan, segment_entries);
+fn upload_plan(plan: &CompositePlan, used: ForwardUse, device: &CubeDevice) -> PlanTensors {
+    let segments = Segments::for_forward(plan, used);
     let (count, cut, segment_entries) = (segments.len(), segments.cut, segments.entries);
     PlanTensors {
         work: int_tensor(segments.work, device),
@@ -719,12 +719,7 @@ fn device_forward(
     let columns = inputs[0].shape().dims::<2>()[1];
     let channels = inputs[1].shape().dims::<2>()[1];
     let grid = plan.grid;
-    // Only a backward gains from cut lists; a forward alone would only save more.
-    let segment_entries = match used {
-        ForwardUse::ForBackward => plan.segment_entries,
-        ForwardUse::ImageOnly => WHOLE_LISTS,
-    };
-    let lists = upload_plan(&plan, segment_entries, &device);
+    let lists = upload_plan(&plan, used, &device);
     let work_count = lists.count;
     let image = zeros(
         vec![plan.batch(), grid.height, grid.width, channels + 1],

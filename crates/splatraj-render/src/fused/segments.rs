@@ -16,6 +16,7 @@
 //! segments are whole 256-entry stages of the forward, so a segment ends between two stages.
 //! The host kernels take whole lists and do not use segments.
 
+use super::ForwardUse;
 use super::plan::CompositePlan;
 
 /// The longest segment when nothing else is asked: ~20× shorter than a guitar step's longest
@@ -78,9 +79,11 @@ impl Segments {
             .map(|w| plan.starts[w + 1] - plan.starts[w])
             .max()
             .unwrap_or(0);
+        // Never longer than the longest list: a segment as long cuts nothing, and the kernels
+        // take the length as a u32.
         let asked = match segment_entries {
             WHOLE_LISTS => longest_list,
-            asked => asked,
+            asked => asked.min(longest_list),
         };
         let entries = asked.max(1).next_multiple_of(STAGE_ENTRIES);
         let mut work = Vec::with_capacity(SEGMENT_COLUMNS * plan.tiles.len());
@@ -108,6 +111,15 @@ impl Segments {
             starts,
             cut,
             entries,
+        }
+    }
+
+    /// The segments a compositing forward of `plan` works in: cut only where a backward
+    /// follows (it alone gains; a forward alone would only save more).
+    pub fn for_forward(plan: &CompositePlan, used: ForwardUse) -> Self {
+        match used {
+            ForwardUse::ForBackward => Segments::of(plan, plan.segment_entries),
+            ForwardUse::ImageOnly => Segments::of(plan, WHOLE_LISTS),
         }
     }
 
@@ -174,6 +186,22 @@ mod tests {
             .take(3)
             .collect();
         assert!(tile_1.iter().all(|s| s[..3] == [1, 16, 0]));
+    }
+
+    #[test]
+    fn only_a_forward_a_backward_follows_is_cut() {
+        let plan = plan(&[3, 1100], 256);
+        assert!(Segments::for_forward(&plan, ForwardUse::ForBackward).cut);
+        let whole = Segments::for_forward(&plan, ForwardUse::ImageOnly);
+        assert!(!whole.cut);
+        assert_eq!(whole.len(), 2);
+    }
+
+    #[test]
+    fn an_absurd_length_is_held_to_the_longest_list() {
+        let segments = Segments::of(&plan(&[3, 1100], usize::MAX), usize::MAX);
+        assert!(!segments.cut);
+        assert_eq!(segments.entries, 1280);
     }
 
     #[test]
