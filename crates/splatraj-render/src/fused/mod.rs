@@ -80,8 +80,8 @@ pub trait CompositeKernels: Backend {
     /// What the forward pass keeps for the backward pass.
     type Saved: Clone + Send + Sync + std::fmt::Debug + 'static;
 
-    /// The packed image `[B, H, W, C + 1]` and the state its backward needs (complete only
-    /// where `used` is [`ForwardUse::ForBackward`]).
+    /// The packed image `[B, H, W, C + 1]` and the state its backward needs; `used` lets the
+    /// GPU kernels cut long lists only where a backward follows ([`segments`]).
     fn composite_forward(
         inputs: SplatPrimitives<Self>,
         plan: Arc<CompositePlan>,
