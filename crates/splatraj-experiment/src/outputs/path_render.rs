@@ -357,13 +357,24 @@ pub fn render_path_with(
             // Two frames queued: enough to keep the writer busy, and a 1080p frame with its
             // keyframe is ~12 MB, so the queue stays small.
             let (queue, frames_in) = std::sync::mpsc::sync_channel::<Frame>(2);
-            let encoding = threads.spawn(move || -> Result<FrameWriter> {
-                for frame in frames_in {
-                    writer.write(frame)?;
-                }
-                writer.flush()?;
-                Ok(writer)
-            });
+            // Started with a Builder: `scope.spawn` panics where the system refuses a thread
+            // (as under an address-space limit, which every thread's stack counts against).
+            let encoding = std::thread::Builder::new()
+                .name("frame writer".into())
+                .spawn_scoped(threads, move || -> Result<FrameWriter> {
+                    for frame in frames_in {
+                        writer.write(frame)?;
+                    }
+                    writer.flush()?;
+                    Ok(writer)
+                })
+                .map_err(|e| {
+                    anyhow!(
+                        "could not start the frame writer's thread ({e}): the process is short \
+                         of memory or threads; under an address-space limit (`ulimit -v`) every \
+                         thread's stack counts, so raise it or render smaller frames"
+                    )
+                })?;
             let rendered = render_frames(
                 scene,
                 job,
@@ -577,16 +588,24 @@ impl FrameWriter {
         let written: Vec<(Duration, Duration)> = match frames.as_slice() {
             [frame] => vec![write_png(dirs, frame)?],
             _ => std::thread::scope(|threads| {
+                // A frame whose thread the system refuses (short of memory or threads, as under
+                // `ulimit -v`) is written on this thread instead: slower, not a failure.
                 let handles: Vec<_> = frames
                     .iter()
-                    .map(|frame| threads.spawn(move || write_png(dirs, frame)))
+                    .map(|frame| {
+                        std::thread::Builder::new()
+                            .name("png writer".into())
+                            .spawn_scoped(threads, move || write_png(dirs, frame))
+                            .map_err(|_| frame)
+                    })
                     .collect();
                 handles
                     .into_iter()
-                    .map(|handle| {
-                        handle
+                    .map(|handle| match handle {
+                        Ok(handle) => handle
                             .join()
-                            .map_err(|_| anyhow!("a PNG writer panicked"))?
+                            .map_err(|_| anyhow!("a PNG writer panicked"))?,
+                        Err(frame) => write_png(dirs, frame),
                     })
                     .collect::<Result<_>>()
             })?,

@@ -80,8 +80,13 @@ impl GopWorker {
         first: usize,
         spare: Sender<Vec<u8>>,
     ) -> Result<Self, VideoError> {
-        let encoder = Encoder::with_api_config(OpenH264API::from_source(), config)
-            .map_err(|e| VideoError::Encoder(e.to_string()))?;
+        let encoder =
+            Encoder::with_api_config(OpenH264API::from_source(), config).map_err(|e| {
+                VideoError::Encoder(format!(
+                    "starting an encoder for {}×{} frames from frame {first}: {e}",
+                    padded.0, padded.1
+                ))
+            })?;
         let (frames, queue) = sync_channel(QUEUED);
         let group = Group {
             padded,
@@ -93,7 +98,11 @@ impl GopWorker {
             .name(format!("h264 from frame {first}"))
             .spawn(move || encode_group(encoder, group))
             .map_err(|e| {
-                VideoError::Encoder(format!("starting a thread for frame {first}: {e}"))
+                VideoError::Encoder(format!(
+                    "starting the thread that encodes the frames from {first} ({e}): the \
+                     process is short of memory or threads; under an address-space limit \
+                     (`ulimit -v`) every thread's stack counts"
+                ))
             })?;
         Ok(Self {
             frames: Some(frames),
@@ -179,9 +188,18 @@ fn encode_group(mut encoder: Encoder, group: Group) -> Result<EncodedGroup, Vide
         let yuv = YUVBuffer::from_rgb8_source(RgbSliceU8::new(&rgb, group.padded));
         // Handed back for a later frame; nobody taking it back is no error.
         let _ = group.spare.send(rgb);
-        let encoded = encoder
-            .encode(&yuv)
-            .map_err(|e| VideoError::Encoder(format!("frame {}: {e}", group.first + k)))?;
+        let encoded = encoder.encode(&yuv).map_err(|e| {
+            // OpenH264 sets itself up on a group's first frame: what fails there is most often
+            // the memory for its buffers, which its own message does not say.
+            let cause = if k == 0 {
+                " (the encoder sets itself up on this frame: most often the process is short \
+                 of memory; under an address-space limit (`ulimit -v`) raise it or render \
+                 smaller frames)"
+            } else {
+                ""
+            };
+            VideoError::Encoder(format!("frame {}: {e}{cause}", group.first + k))
+        })?;
         encoded_group.frames.push(EncodedFrame {
             keyframe: matches!(encoded.frame_type(), FrameType::IDR | FrameType::I),
             bytes: encoded.to_vec(),
