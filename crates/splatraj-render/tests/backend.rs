@@ -275,7 +275,7 @@ fn gpu_kernels_match_host_kernels_on_crowded_lists() {
     gpu_kernels_match_host_kernels_with(
         50_000,
         2,
-        splatraj_render::fused::segments::DEFAULT_SEGMENT_ENTRIES,
+        splatraj_render::fused::plan::DEFAULT_SEGMENT_ENTRIES,
     );
 }
 

@@ -19,37 +19,11 @@
 use super::ForwardUse;
 use super::plan::CompositePlan;
 
-/// The longest segment when nothing else is asked: ~20× shorter than a guitar step's longest
-/// list, and long enough that a segment's fixed costs (the replay's maximum over the tile,
-/// the colour behind it, its saved state) stay small beside its entries.
-pub const DEFAULT_SEGMENT_ENTRIES: usize = 1024;
-
 /// The longest segment that leaves every list whole.
 pub const WHOLE_LISTS: usize = 0;
 
 /// Entries the forward kernel stages at once: segments are whole stages.
 pub const STAGE_ENTRIES: usize = 256;
-
-/// Environment variable that sets the longest segment (0: lists are never cut), for measuring
-/// on a GPU (`scripts/gpu_check.sh`), not for runs.
-pub const SEGMENT_ENTRIES_VARIABLE: &str = "SPLATRAJ_SEGMENT_ENTRIES";
-
-static ASKED_SEGMENT_ENTRIES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
-
-/// The longest segment a plan asks for: [`SEGMENT_ENTRIES_VARIABLE`] where set to a number,
-/// else [`DEFAULT_SEGMENT_ENTRIES`].
-pub fn asked_segment_entries() -> usize {
-    *ASKED_SEGMENT_ENTRIES.get_or_init(|| match std::env::var(SEGMENT_ENTRIES_VARIABLE) {
-        Err(_) => DEFAULT_SEGMENT_ENTRIES,
-        Ok(text) => text.trim().parse().unwrap_or_else(|_| {
-            tracing::warn!(
-                "{SEGMENT_ENTRIES_VARIABLE}={text:?} is not a number of entries; segments \
-                 stay at {DEFAULT_SEGMENT_ENTRIES}"
-            );
-            DEFAULT_SEGMENT_ENTRIES
-        }),
-    })
-}
 
 /// A plan's work tiles cut into segments, in the layout the GPU kernels read.
 #[derive(Debug, Clone, PartialEq)]
