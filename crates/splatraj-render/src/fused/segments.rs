@@ -18,12 +18,14 @@
 
 use super::ForwardUse;
 use super::plan::CompositePlan;
+use crate::tiles::TILE_PIXELS;
 
 /// The longest segment that leaves every list whole.
 pub const WHOLE_LISTS: usize = 0;
 
-/// Entries the forward kernel stages at once: segments are whole stages.
-pub const STAGE_ENTRIES: usize = 256;
+/// Entries the forward kernel stages at once, one a unit of its workgroup (a unit a tile
+/// pixel): segments are whole stages.
+pub const STAGE_ENTRIES: usize = TILE_PIXELS;
 
 /// A plan's work tiles cut into segments, in the layout the GPU kernels read.
 #[derive(Debug, Clone, PartialEq)]
