@@ -30,6 +30,9 @@
 #   8. the compositing backward with long tile lists cut into segments replayed in parallel
 #      (the default) against whole lists, one workgroup each (SPLATRAJ_SEGMENT_ENTRIES=0):
 #      the mask passes of 1. and the guitar step of 4. on wgpu both ways, time and parity;
+#   9. what a launch, a read back and an upload cost on each backend, apart from arithmetic
+#      (`bench launches`): the floor of a step's ~120 launches and one read, which decides
+#      whether fewer launches or less host work is the next lever (docs/gpu.md);
 #   0. first of all, what compiling a run's ~300 kernels costs a process: one guitar step on
 #      wgpu in a fresh process, twice (the first on this machine may also fill the driver's
 #      shader cache; the second pays only what every process pays).
@@ -54,9 +57,9 @@ export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
 export CUBECL_AUTOTUNE_LEVEL="${CUBECL_AUTOTUNE_LEVEL:-minimal}"
 cd "$repo"
 
-sizes=100000,1000000 repeats=5 frame_size=1080p demo=1000000 steps=10 quick=()
+sizes=100000,1000000 repeats=5 frame_size=1080p demo=1000000 steps=10 launch_iterations=2000 quick=()
 if [ "${GPU_CHECK_QUICK:-0}" = 1 ]; then
-  sizes=10000 repeats=1 frame_size=160x90 demo=10000 steps=2
+  sizes=10000 repeats=1 frame_size=160x90 demo=10000 steps=2 launch_iterations=50
   quick=(--set optimiser.iterations=3 --set output.frames=3 --set output.width=160
     --set output.height=90 --set output.metric_samples=8)
 fi
@@ -69,6 +72,11 @@ for attempt in first again; do
   compile_s+=("$(python3 -c "print(f'{$(date +%s.%N) - $started:.1f}')")")
 done
 echo "{\"first_s\": ${compile_s[0]}, \"again_s\": ${compile_s[1]}}" >"$out/process_start.json"
+for backend in wgpu flex; do
+  echo "== $backend: bench launches" >&2
+  "$bin" bench launches --backend "$backend" --iterations "$launch_iterations" --json \
+    >"$out/launches_$backend.json"
+done
 for backend in wgpu flex; do
   echo "== $backend: bench render" >&2
   "$bin" bench render --backend "$backend" --sizes "$sizes" --resolutions 128 \
@@ -120,6 +128,11 @@ print(f"machine: {gpu}, {os.cpu_count()} CPU cores, {platform.platform()}")
 start = load("process_start.json")
 print(f"\na fresh process, four guitar steps (two step variants, one untimed step and one timed "
       f"each, kernels compiled on the way): {start['first_s']} s the first time, {start['again_s']} s again")
+launches = {b: load(f"launches_{b}.json") for b in ("wgpu", "flex")}
+print("\n| µs each (a launch of the chain, a read, an upload) | wgpu | wgpu launches an iteration | wgpu queued, µs an iteration | flex |")
+print("|---|---:|---:|---:|---:|")
+for w, f in zip(launches["wgpu"], launches["flex"]):
+    print(f"| {w['probe']} | {w['us_each']:.1f} | {w['launches'] / w['iterations']:.1f} | {w['queued_us']:.1f} | {f['us_each']:.1f} |")
 render = {b: load(f"render_{b}.json") for b in ("wgpu", "flex")}
 key = lambda r: (r["scene"], r["gaussians"], r["resolution"], r["pruning"])
 flex_rows = {key(r): r for r in render["flex"]["rows"] if not r.get("skipped")}

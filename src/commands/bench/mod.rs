@@ -1,7 +1,8 @@
 //! `splatraj bench render`: time the object-mask pass, forward and forward + backward, with
 //! each rasterizer; `bench first-try` runs the first-try configs; `bench frames` times a run's
 //! output frames; `bench scale` runs a config whole at several demo scene sizes; `bench step`
-//! measures one optimisation step with its windows in one render call and in one each.
+//! measures one optimisation step with its windows in one render call and in one each; `bench
+//! launches` times what a launch, a read and an upload cost on a backend.
 //!
 //! Each configuration (scene, resolution, pruning, rasterizer) runs in a fresh child process
 //! of this binary (hidden `--one` flag), so that the peak memory it reports (VmHWM of
@@ -18,6 +19,7 @@ mod runs;
 
 use anyhow::Result;
 use clap::{Args, Subcommand};
+use splatraj_render::backend::BackendKind;
 use splatraj_traj::costs::DEFAULT_TARGET_RATIO;
 
 pub use frames::BenchFramesArgs;
@@ -45,6 +47,23 @@ pub enum BenchCommand {
     /// render call and in a call per window, with the kernel launches, reads, uploads and
     /// render calls of a step.
     Step(BenchStepArgs),
+    /// Time what one kernel launch, one read back and one upload cost on a backend, apart
+    /// from any arithmetic (on a GPU: the floor of a step's ~120 launches and its read).
+    Launches(BenchLaunchesArgs),
+}
+
+/// Arguments of `splatraj bench launches`.
+#[derive(Debug, Args)]
+pub struct BenchLaunchesArgs {
+    /// Tensor backend, among those compiled in.
+    #[arg(long, default_value = "flex")]
+    backend: BackendKind,
+    /// Iterations of each probe (after as many untimed).
+    #[arg(long, default_value_t = 1000)]
+    iterations: usize,
+    /// Print one JSON array instead of a table.
+    #[arg(long)]
+    json: bool,
 }
 
 /// How the benches' camera frames the demo object (`bench frames`, `bench render`).
@@ -69,5 +88,19 @@ pub fn run(command: BenchCommand) -> Result<()> {
         BenchCommand::Scale(args) => runs::scale(&args),
         BenchCommand::Render(args) => render::run(&args),
         BenchCommand::Step(args) => runs::step(&args),
+        BenchCommand::Launches(args) => launches(&args),
     }
+}
+
+/// `splatraj bench launches`: the probes are the library's
+/// (`splatraj::experiment::bench::launches`); this prints them.
+fn launches(args: &BenchLaunchesArgs) -> Result<()> {
+    use splatraj::experiment::bench::launches::{launch_table, run_launch_bench};
+    let rows = run_launch_bench(args.backend, args.iterations)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+    } else {
+        print!("{}", launch_table(args.backend, &rows));
+    }
+    Ok(())
 }

@@ -7,9 +7,11 @@
 //!
 //! **This folder** is the benchmarks: the mask pass (here), output frames ([`frames`]), scale
 //! ([`scale`], on the demo scenes of [`scenes`]), an optimisation step's render calls
-//! ([`step`]) and the first-try quality figures ([`quality`]).
+//! ([`step`]), what a launch, a read and an upload cost ([`launches`]) and the first-try
+//! quality figures ([`quality`]).
 
 pub mod frames;
+pub mod launches;
 pub mod quality;
 pub mod scale;
 pub mod scenes;
