@@ -29,7 +29,9 @@
 #      totals also hold the run's closing evaluation, so read them as shares, not a sum);
 #   8. the compositing backward with long tile lists cut into segments replayed in parallel
 #      (the default) against whole lists, one workgroup each (SPLATRAJ_SEGMENT_ENTRIES=0):
-#      the mask passes of 1. and the guitar step of 4. on wgpu both ways, time and parity;
+#      the mask passes of 1. and the guitar step of 4. on wgpu both ways, time and parity,
+#      and the guitar step with segments of 256, 512 and 2048 entries (the step table's
+#      "compositing workgroups" is the forwards' work tiles or segments a step);
 #   9. what a launch, a read back and an upload cost on each backend, apart from arithmetic
 #      (`bench launches`): the floor of a step's ~120 launches and one read, which decides
 #      whether fewer launches or less host work is the next lever (docs/gpu.md);
@@ -110,6 +112,12 @@ SPLATRAJ_SEGMENT_ENTRIES=0 "$bin" bench render --backend wgpu --sizes "$sizes" \
 SPLATRAJ_SEGMENT_ENTRIES=0 "$bin" bench step --config configs/first-try/guitar.toml \
   --steps "$steps" --set 'backend="wgpu"' --set "scene.path=\"$data/guitar.compressed.ply\"" --json \
   >"$out/step_wgpu_whole_lists.json"
+echo "== wgpu: bench step, lists cut at other lengths" >&2
+for entries in 256 512 2048; do
+  SPLATRAJ_SEGMENT_ENTRIES=$entries "$bin" bench step --config configs/first-try/guitar.toml \
+    --steps "$steps" --set 'backend="wgpu"' --set "scene.path=\"$data/guitar.compressed.ply\"" --json \
+    >"$out/step_wgpu_segments_$entries.json"
+done
 echo "== wgpu: bench step (guitar), each kernel waited for" >&2
 CUBECL_DEBUG_OPTION=profile-medium "$bin" bench step --config configs/first-try/guitar.toml \
   --steps "$steps" --set 'backend="wgpu"' --set "scene.path=\"$data/guitar.compressed.ply\"" --json \
@@ -191,17 +199,20 @@ for r in frames["wgpu"]["rows"]:
     if f:
         print(f"| {r['scene']} {r['gaussians']} {r['schedule']} | {r['frame_ms']:.0f} | {f['frame_ms']:.0f} |")
 steps = {b: load(f"step_{b}.json") for b in ("wgpu", "flex")}
-print("\n| optimisation step, guitar | ms | launches | reads | render calls | best loss |")
-print("|---|---:|---:|---:|---:|---:|")
+print("\n| optimisation step, guitar | ms | launches | reads | render calls | compositing workgroups | best loss |")
+print("|---|---:|---:|---:|---:|---:|---:|")
+def step_row(label, r):
+    c = r["counts"]
+    print(f"| {label}, {r['passes']} | {r['ms_per_step']:.1f} | {c['launches']} | {c['reads']} | "
+          f"{c.get('renders', '-')} | {c.get('segments', '-')} | {r['best_total']:.6f} |")
 for b in ("wgpu", "flex"):
     for r in steps[b]:
-        c = r["counts"]
-        print(f"| {b}, {r['passes']} | {r['ms_per_step']:.1f} | {c['launches']} | {c['reads']} | "
-              f"{c.get('renders', '-')} | {r['best_total']:.6f} |")
+        step_row(f"{b}" + (", lists cut at 1024" if b == "wgpu" else ""), r)
 for r in load("step_wgpu_whole_lists.json"):
-    c = r["counts"]
-    print(f"| wgpu, {r['passes']}, lists whole | {r['ms_per_step']:.1f} | {c['launches']} | {c['reads']} | "
-          f"{c.get('renders', '-')} | {r['best_total']:.6f} |")
+    step_row("wgpu, lists whole", r)
+for entries in (256, 512, 2048):
+    for r in load(f"step_wgpu_segments_{entries}.json"):
+        step_row(f"wgpu, lists cut at {entries}", r)
 profiled_steps = load("step_wgpu_profiled.json")
 names = [n for n, _ in profiled_steps[0]["stages_ms"]] if profiled_steps else []
 print("\n| wgpu step, ms, each kernel waited for | " + " | ".join(names) + " | ms a step |")

@@ -51,6 +51,11 @@ pub struct Counts {
     /// with it.
     #[serde(default)]
     pub rows: u64,
+    /// Work items of the GPU compositing forwards (a workgroup each): a work tile, or a
+    /// segment of a long tile list where a backward follows (`fused/segments.rs`); 0 on the
+    /// CPU backends, whose host kernels take whole lists.
+    #[serde(default)]
+    pub segments: u64,
 }
 
 impl Counts {
@@ -67,6 +72,7 @@ impl Counts {
             renders: self.renders / p,
             pairs: self.pairs / p,
             rows: self.rows / p,
+            segments: self.segments / p,
         }
     }
 
@@ -82,6 +88,7 @@ impl Counts {
             renders: self.renders - earlier.renders,
             pairs: self.pairs - earlier.pairs,
             rows: self.rows - earlier.rows,
+            segments: self.segments - earlier.segments,
         }
     }
 }
@@ -95,6 +102,7 @@ static SCENE_UPLOADS: AtomicU64 = AtomicU64::new(0);
 static RENDERS: AtomicU64 = AtomicU64::new(0);
 static PAIRS: AtomicU64 = AtomicU64::new(0);
 static ROWS: AtomicU64 = AtomicU64::new(0);
+static SEGMENTS: AtomicU64 = AtomicU64::new(0);
 
 /// The counts so far.
 pub fn snapshot() -> Counts {
@@ -109,6 +117,7 @@ pub fn snapshot() -> Counts {
         renders: load(&RENDERS),
         pairs: load(&PAIRS),
         rows: load(&ROWS),
+        segments: load(&SEGMENTS),
     }
 }
 
@@ -133,6 +142,11 @@ pub fn render() {
 pub fn composite(pairs: usize, rows: usize) {
     PAIRS.fetch_add(pairs as u64, Ordering::Relaxed);
     ROWS.fetch_add(rows as u64, Ordering::Relaxed);
+}
+
+/// A GPU compositing forward working in `segments` workgroups.
+pub fn segments(segments: usize) {
+    SEGMENTS.fetch_add(segments as u64, Ordering::Relaxed);
 }
 
 /// A whole scene of `bytes` uploaded.

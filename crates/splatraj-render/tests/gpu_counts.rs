@@ -3,8 +3,8 @@
 //! with the number of poses, a pass whose poses the caller holds reads nothing back before its
 //! gradient, and the scene is not uploaded again; the same with a zoom per pose whose values
 //! the caller holds; and a pass of several objects (an optimisation step's windows, each
-//! object alone) launches what one object's pass does; and burn's fusion merges a chain of
-//! elementwise ops.
+//! object alone) launches what one object's pass does; a long tile list is cut into segments
+//! for a tracked pass only; and burn's fusion merges a chain of elementwise ops.
 //!
 //! Its own test binary with one test: the counters are process-wide and the harness runs the
 //! tests of one binary side by side.
@@ -45,6 +45,29 @@ fn scene() -> (Scene, Vec<f32>) {
         mask.push(if i < 200 { 1.0 } else { 0.0 });
     }
     (scene, mask)
+}
+
+/// `n` small Gaussians spread over the view of a camera at the origin looking down +z, all in
+/// the object: at 16×16 pixels one tile holds them all.
+fn crowded_scene(n: usize) -> (Scene, Vec<f32>) {
+    let mut rng = common::Rng(0xc0ffee);
+    let mut scene = Scene::default();
+    for _ in 0..n {
+        scene.means.push([
+            rng.range(-0.8, 0.8) as f32,
+            rng.range(-0.8, 0.8) as f32,
+            rng.range(2.5, 3.5) as f32,
+        ]);
+        scene
+            .scales
+            .push(std::array::from_fn(|_| rng.range(0.03, 0.06) as f32));
+        scene
+            .rotations
+            .push(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
+        scene.opacities.push(rng.range(0.02, 0.1) as f32);
+        scene.sh.extend([0.1, 0.2, 0.3]);
+    }
+    (scene, vec![1.0; n])
 }
 
 /// Counts of one forward + backward mask pass (pruned to the object) at `poses`, the pose
@@ -198,6 +221,47 @@ fn launches_do_not_grow_with_the_batch_and_reads_stay_at_one() {
     assert_eq!(step_forward.reads, 0, "{step_forward:?}");
     assert_eq!(step.reads, 1, "{step:?}");
     assert_eq!(step.renders, 1, "{step:?}");
+
+    // Long lists are cut into segments only where a backward follows (fused/segments.rs):
+    // burn's autodiff must hand a tracked pass's forward `ForwardUse::ForBackward` through the
+    // fusion backend to the CubeCL kernels, and an untracked pass `ImageOnly`.
+    let (crowd, crowd_mask) = crowded_scene(1300);
+    let crowd = DeviceScene::new(&crowd, &device, DType::F32);
+    let one_tile = Intrinsics::from_fov_x(60.0, 16, 16).unwrap();
+    let request = RenderRequest::new(one_tile, vec![Channel::Mask(crowd_mask)]);
+    let centre = Pose::look_at(DVec3::ZERO, DVec3::new(0.0, 0.0, 3.0), up).unwrap();
+    let segments_of = |tracked: bool| {
+        let poses = Tensor::<2>::from_data(
+            TensorData::new(centre.0.to_vec(), [1, 6]),
+            (&device, DType::F32),
+        );
+        let poses = if tracked { poses.require_grad() } else { poses };
+        let before = counters::snapshot();
+        let out = render_at(&crowd, poses.clone(), Some(&[centre]), &request).unwrap();
+        if tracked {
+            let grads = out.images.sum().backward();
+            splatraj_render::host::to_host(poses.grad(&grads).unwrap()).unwrap();
+        } else {
+            splatraj_render::host::to_host(out.images.sum()).unwrap();
+        }
+        let counts = counters::snapshot().since(&before);
+        assert_eq!(counts.renders, 1);
+        assert!(
+            counts.pairs > 1024,
+            "one tile holds every Gaussian: {counts:?}"
+        );
+        counts.segments
+    };
+    assert_eq!(
+        segments_of(false),
+        1,
+        "a forward alone composites the list whole"
+    );
+    assert_eq!(
+        segments_of(true),
+        2,
+        "a tracked pass's 1 300-entry list is cut into segments of 1 024"
+    );
 
     // burn's fusion is on (docs/gpu.md, "Kernel fusion"): a chain of eight elementwise ops, the
     // kind the costs and Adam are made of, runs as fewer kernels than ops (one each without it).

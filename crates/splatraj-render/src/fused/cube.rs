@@ -685,6 +685,7 @@ pub(crate) fn int_tensor(values: Vec<i32>, device: &CubeDevice) -> CubeTensor {
 fn upload_plan(plan: &CompositePlan, used: ForwardUse, device: &CubeDevice) -> PlanTensors {
     let segments = Segments::for_forward(plan, used);
     let (count, cut, segment_entries) = (segments.len(), segments.cut, segments.entries);
+    crate::counters::segments(count);
     PlanTensors {
         work: int_tensor(segments.work, device),
         starts: int_tensor(segments.starts, device),
