@@ -32,9 +32,11 @@
 #      the mask passes of 1. and the guitar step of 4. on wgpu both ways, time and parity,
 #      and the guitar step with segments of 256, 512 and 2048 entries (the step table's
 #      "compositing workgroups" is the forwards' work tiles or segments a step);
-#   9. what a launch, a read back and an upload cost on each backend, apart from arithmetic
-#      (`bench launches`): the floor of a step's ~120 launches and one read, which decides
-#      whether fewer launches or less host work is the next lever (docs/gpu.md);
+#   9. what a launch, a read back and an upload cost on each backend, apart from arithmetic,
+#      and the bandwidth each way for 16 MiB (`bench launches`): the floor of a step's ~120
+#      launches and one read, and what uploading host-made tile lists costs, which decide
+#      whether fewer launches, less host work or binning on the device is the next lever
+#      (docs/gpu.md);
 #   0. first of all, what compiling a run's ~300 kernels costs a process: one guitar step on
 #      wgpu in a fresh process, twice (the first on this machine may also fill the driver's
 #      shader cache; the second pays only what every process pays).
@@ -137,10 +139,12 @@ start = load("process_start.json")
 print(f"\na fresh process, four guitar steps (two step variants, one untimed step and one timed "
       f"each, kernels compiled on the way): {start['first_s']} s the first time, {start['again_s']} s again")
 launches = {b: load(f"launches_{b}.json") for b in ("wgpu", "flex")}
-print("\n| µs each (a launch of the chain, a read, an upload) | wgpu | wgpu launches an iteration | wgpu queued, µs an iteration | flex |")
-print("|---|---:|---:|---:|---:|")
+print("\n| µs each (a launch of the chain, a read, an upload) | wgpu | wgpu GB/s | wgpu launches an iteration | wgpu queued, µs an iteration | flex | flex GB/s |")
+print("|---|---:|---:|---:|---:|---:|---:|")
+rate = lambda r: f"{r['gb_per_s']:.2f}" if r.get("gb_per_s") else "-"
 for w, f in zip(launches["wgpu"], launches["flex"]):
-    print(f"| {w['probe']} | {w['us_each']:.1f} | {w['launches'] / w['iterations']:.1f} | {w['queued_us']:.1f} | {f['us_each']:.1f} |")
+    print(f"| {w['probe']} | {w['us_each']:.1f} | {rate(w)} | {w['launches'] / w['iterations']:.1f} | "
+          f"{w['queued_us']:.1f} | {f['us_each']:.1f} | {rate(f)} |")
 render = {b: load(f"render_{b}.json") for b in ("wgpu", "flex")}
 key = lambda r: (r["scene"], r["gaussians"], r["resolution"], r["pruning"])
 flex_rows = {key(r): r for r in render["flex"]["rows"] if not r.get("skipped")}

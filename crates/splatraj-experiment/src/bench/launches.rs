@@ -1,12 +1,13 @@
 //! `splatraj bench launches`: what one kernel launch, one read back and one upload cost on a
-//! backend, apart from any arithmetic (docs/gpu.md, "What a launch costs").
+//! backend, apart from any arithmetic, and the bandwidth each way (docs/gpu.md, "What a
+//! launch costs").
 //!
 //! An optimisation step launches about 120 kernels, reads once and uploads a few dozen times
 //! (`bench step`); a 128² mask pass launches about 50. Whether that, or the host's decisions,
-//! or the device's arithmetic sets a GPU step's floor depends on these three figures, which
-//! no CPU machine can give: lavapipe's "device" is the host's own cores, and on two of them a
+//! or the device's arithmetic sets a GPU step's floor depends on these figures, which no CPU
+//! machine can give: lavapipe's "device" is the host's own cores, and on two of them a
 //! launch's hand-over between threads costs what it costs there, not on a GPU host. So this
-//! times them on the machine itself, each on tensors too small for their arithmetic to count:
+//! times them on the machine itself, with arithmetic too slight to count:
 //!
 //! - **chain**: a chain of dependent small reductions (`[64, 4]`, each summed and broadcast
 //!   back, then scaled): no fusion can merge one reduction into the next, so each is at least
@@ -16,10 +17,13 @@
 //!   the device, so this is the round trip a step pays once.
 //! - **upload**: a fresh 1 KB host array uploaded and added to a running sum (as a pass
 //!   uploads its poses, lists and values), read once at the end.
+//! - **upload 16 MiB**, **read 16 MiB**: the bandwidth each way, at about the size of a
+//!   step's upload (13 MB on the first-try guitar) and a 720p output frame's read back
+//!   (14.7 MB): whether uploading host-made tile lists is cheap (issue 35, item 3).
 //!
-//! Launches are counted ([`splatraj_render::counters`]), not assumed: "µs a launch" divides by
-//! what the backend actually issued (zero on the CPU backends, which launch nothing: there the
-//! per-op time is the figure).
+//! Launches are counted ([`splatraj_render::counters`]), not assumed: the chain's "µs each"
+//! divides by what the backend actually issued (zero on the CPU backends, which launch
+//! nothing: there the per-iteration time is the figure).
 
 use std::fmt::Write as _;
 use std::time::Instant;
@@ -31,14 +35,55 @@ use splatraj_render::backend::BackendKind;
 use splatraj_render::counters;
 use splatraj_render::host;
 
-/// Rows and columns of the probes' tensors: far too small for arithmetic to show.
+/// Rows and columns of the small probes' tensors: far too small for arithmetic to show.
 const SHAPE: [usize; 2] = [64, 4];
+
+/// Floats of the large probes' tensors: 16 MiB, about what a step uploads (13 MB on the
+/// first-try guitar) and a 720p frame's RGB, mask and alpha read back (14.7 MB).
+const LARGE: usize = 4 << 20;
+
+/// What a probe prices.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Probe {
+    /// A launch: dependent small reductions.
+    Chain,
+    /// A read back of one value: the device's round trip.
+    Read,
+    /// An upload of 1 KB.
+    Upload,
+    /// An upload of 16 MiB: the bandwidth up.
+    UploadLarge,
+    /// A read back of 16 MiB: the bandwidth down.
+    ReadLarge,
+}
+
+impl Probe {
+    /// The probe's name in the table.
+    pub fn name(self) -> &'static str {
+        match self {
+            Probe::Chain => "chain",
+            Probe::Read => "read",
+            Probe::Upload => "upload",
+            Probe::UploadLarge => "upload 16 MiB",
+            Probe::ReadLarge => "read 16 MiB",
+        }
+    }
+
+    /// Bytes an iteration moves between host and device (0: the small probes).
+    pub fn bytes(self) -> usize {
+        match self {
+            Probe::UploadLarge | Probe::ReadLarge => 4 * LARGE,
+            Probe::Chain | Probe::Read | Probe::Upload => 0,
+        }
+    }
+}
 
 /// One probe's figures.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct LaunchRow {
-    /// `chain`, `read` or `upload`.
-    pub probe: &'static str,
+    /// What it prices.
+    pub probe: Probe,
     /// Iterations timed (after as many untimed ones, for compiling).
     pub iterations: usize,
     /// Kernel launches counted over the timed iterations (0 on the CPU backends).
@@ -51,15 +96,17 @@ pub struct LaunchRow {
     pub done_us: f64,
     /// What the probe prices, µs ([`LaunchRow::us_each`]).
     pub us_each: f64,
+    /// Bytes moved a second, GB/s, for the large probes (0 for the others).
+    pub gb_per_s: f64,
 }
 
 impl LaunchRow {
-    /// What the probe prices, µs: a launch for `chain` (done time over the launches counted,
-    /// or over the iterations where nothing was launched), a read or an upload (done time per
-    /// iteration: fusion merges the uploads' additions, so their launches say nothing).
+    /// What the probe prices, µs: a launch for [`Probe::Chain`] (done time over the launches
+    /// counted, or over the iterations where nothing was launched), else an iteration (a read,
+    /// an upload: fusion merges the uploads' additions, so their launches say nothing).
     pub fn us_each(&self) -> f64 {
         let launches_each = self.launches as f64 / self.iterations.max(1) as f64;
-        if self.probe == "chain" && launches_each > 0.0 {
+        if self.probe == Probe::Chain && launches_each > 0.0 {
             self.done_us / launches_each
         } else {
             self.done_us
@@ -67,24 +114,27 @@ impl LaunchRow {
     }
 }
 
-/// Times the three probes on `backend`, `iterations` each (after as many untimed).
+/// Times the probes on `backend`: the small ones `iterations` times each, the large ones a
+/// fiftieth of that (3 to 50), each after as many untimed.
 pub fn run_launch_bench(backend: BackendKind, iterations: usize) -> Result<Vec<LaunchRow>> {
     let device = backend.device()?;
     let iterations = iterations.max(1);
+    let large_iterations = (iterations / 50).clamp(3, 50);
     let constant: Tensor<2> = Tensor::ones(SHAPE, (&device, DType::F32));
+    let large: Tensor<1> = Tensor::ones([LARGE], (&device, DType::F32));
     let chain = |n: usize| {
         let mut x: Tensor<2> = Tensor::ones(SHAPE, (&device, DType::F32));
         for _ in 0..n {
             // [64, 1] broadcast back to [64, 4]: the next sum reads this one's result.
             x = x.sum_dim(1).mul_scalar(0.25) + constant.clone();
         }
-        x
+        x.sum()
     };
-    let reads = |n: usize| -> Result<()> {
+    let reads = |n: usize| -> Result<Tensor<1>> {
         for k in 0..n {
             host::to_host(constant.clone().mul_scalar(k as f64).sum())?;
         }
-        Ok(())
+        Ok(constant.clone().sum())
     };
     let uploads = |n: usize| {
         let mut total = constant.clone();
@@ -92,47 +142,62 @@ pub fn run_launch_bench(backend: BackendKind, iterations: usize) -> Result<Vec<L
             let values = vec![k as f32; SHAPE[0] * SHAPE[1]];
             total = total + host::upload::<2>(TensorData::new(values, SHAPE), &device, DType::F32);
         }
+        total.sum()
+    };
+    let large_uploads = |n: usize| {
+        let mut total = large.clone().sum();
+        for k in 0..n {
+            let values = vec![k as f32; LARGE];
+            total = total
+                + host::upload::<1>(TensorData::new(values, [LARGE]), &device, DType::F32).sum();
+        }
         total
     };
+    let large_reads = |n: usize| -> Result<Tensor<1>> {
+        for _ in 0..n {
+            // The bytes as stored (no conversion to f64): the transfer, not our copy.
+            host::read_data(large.clone())?;
+        }
+        Ok(constant.clone().sum())
+    };
 
+    // Each untimed first: kernels compile and tune on first use.
     let mut rows = Vec::new();
-    // Untimed first: kernels compile and tune on first use.
-    host::to_host(chain(iterations).sum())?;
-    rows.push(timed("chain", iterations, || {
-        let x = chain(iterations);
-        let queued = Instant::now();
-        Ok((x.sum(), queued))
+    host::to_host(chain(iterations))?;
+    rows.push(timed(Probe::Chain, iterations, || Ok(chain(iterations)))?);
+    host::to_host(reads(iterations)?)?;
+    rows.push(timed(Probe::Read, iterations, || reads(iterations))?);
+    host::to_host(uploads(iterations))?;
+    rows.push(timed(Probe::Upload, iterations, || {
+        Ok(uploads(iterations))
     })?);
-    reads(iterations)?;
-    rows.push(timed("read", iterations, || {
-        reads(iterations)?;
-        Ok((constant.clone().sum(), Instant::now()))
+    host::to_host(large_uploads(large_iterations))?;
+    rows.push(timed(Probe::UploadLarge, large_iterations, || {
+        Ok(large_uploads(large_iterations))
     })?);
-    host::to_host(uploads(iterations).sum())?;
-    rows.push(timed("upload", iterations, || {
-        let total = uploads(iterations);
-        let queued = Instant::now();
-        Ok((total.sum(), queued))
+    host::to_host(large_reads(large_iterations)?)?;
+    rows.push(timed(Probe::ReadLarge, large_iterations, || {
+        large_reads(large_iterations)
     })?);
     Ok(rows)
 }
 
-/// Times `issue` (which returns the value to wait for and when it finished issuing), then the
-/// wait for that value, with the counters' difference.
+/// Times `issue` (which returns the value to wait for), then the wait for that value, with the
+/// counters' difference.
 fn timed(
-    probe: &'static str,
+    probe: Probe,
     iterations: usize,
-    issue: impl FnOnce() -> Result<(Tensor<1>, Instant)>,
+    issue: impl FnOnce() -> Result<Tensor<1>>,
 ) -> Result<LaunchRow> {
     let before = counters::snapshot();
     let started = Instant::now();
-    let (last, issued) = issue()?;
+    let last = issue()?;
+    let queued = started.elapsed().as_secs_f64();
     host::to_host(last)?;
     let done = started.elapsed().as_secs_f64();
     // Counted after the wait: burn's fusion queues ops and launches them when a read flushes
     // the queue. The final read (and its one reduction) is not the probe's.
     let counted = counters::snapshot().since(&before);
-    let queued = issued.duration_since(started).as_secs_f64();
     let n = iterations as f64;
     let mut row = LaunchRow {
         probe,
@@ -142,28 +207,38 @@ fn timed(
         queued_us: queued * 1e6 / n,
         done_us: done * 1e6 / n,
         us_each: 0.0,
+        gb_per_s: 0.0,
     };
     row.us_each = row.us_each();
+    if probe.bytes() > 0 {
+        row.gb_per_s = probe.bytes() as f64 / (row.done_us * 1e3);
+    }
     Ok(row)
 }
 
 /// The rows as a table.
 pub fn launch_table(backend: BackendKind, rows: &[LaunchRow]) -> String {
     let mut out = format!(
-        "backend {backend}; µs per iteration; each: a launch (chain), a read, an upload\n{:<8} {:>10} {:>9} {:>6} {:>10} {:>10} {:>9}\n",
-        "probe", "iterations", "launches", "reads", "queued µs", "done µs", "µs each"
+        "backend {backend}; µs per iteration; each: a launch (chain), a read, an upload\n{:<14} {:>10} {:>9} {:>6} {:>10} {:>10} {:>9} {:>6}\n",
+        "probe", "iterations", "launches", "reads", "queued µs", "done µs", "µs each", "GB/s"
     );
     for r in rows {
+        let rate = if r.gb_per_s > 0.0 {
+            format!("{:.2}", r.gb_per_s)
+        } else {
+            "-".into()
+        };
         let _ = writeln!(
             out,
-            "{:<8} {:>10} {:>9} {:>6} {:>10.1} {:>10.1} {:>9.1}",
-            r.probe,
+            "{:<14} {:>10} {:>9} {:>6} {:>10.1} {:>10.1} {:>9.1} {:>6}",
+            r.probe.name(),
             r.iterations,
             r.launches,
             r.reads,
             r.queued_us,
             r.done_us,
-            r.us_each()
+            r.us_each,
+            rate
         );
     }
     out
@@ -173,20 +248,34 @@ pub fn launch_table(backend: BackendKind, rows: &[LaunchRow]) -> String {
 mod tests {
     use super::*;
 
-    /// On the CPU backend every probe runs, reads once per `read` iteration and launches
-    /// nothing; the chain's price falls back to the per-iteration time.
+    /// On the CPU backend every probe runs, each read probe reads once an iteration, nothing
+    /// is launched, the chain's price falls back to the per-iteration time and the large
+    /// probes' rate is their bytes over their time.
     #[test]
     fn probes_count_what_they_do_on_flex() {
         let rows = run_launch_bench(BackendKind::Flex, 5).unwrap();
         let probes: Vec<_> = rows.iter().map(|r| r.probe).collect();
-        assert_eq!(probes, ["chain", "read", "upload"]);
+        assert_eq!(
+            probes,
+            [
+                Probe::Chain,
+                Probe::Read,
+                Probe::Upload,
+                Probe::UploadLarge,
+                Probe::ReadLarge
+            ]
+        );
+        let reads: Vec<_> = rows.iter().map(|r| r.reads).collect();
+        assert_eq!(reads, [0, 5, 0, 0, 3], "a read an iteration, 3 large ones");
         assert!(rows.iter().all(|r| r.launches == 0));
-        assert_eq!(rows[1].reads, 5, "one read an iteration");
-        assert_eq!(rows[0].reads, 0);
-        assert_eq!(rows[2].reads, 0);
         for r in &rows {
             assert!(r.done_us >= r.queued_us && r.queued_us >= 0.0, "{r:?}");
-            assert_eq!(r.us_each(), r.done_us);
+            assert_eq!(r.us_each, r.done_us);
+            let expected = r.probe.bytes() as f64 / (r.done_us * 1e3);
+            assert!(
+                (r.gb_per_s - expected).abs() <= 1e-9 * expected.max(1.0),
+                "{r:?}"
+            );
         }
     }
 }
