@@ -15,8 +15,9 @@
 //!   last one's value: per launch, the GPU step's cost of a launch is between the two.
 //! - **read**: one small op and a read of its one value, again and again: a read waits for
 //!   the device, so this is the round trip a step pays once.
-//! - **upload**: a fresh 1 KB host array uploaded and added to a running sum (as a pass
-//!   uploads its poses, lists and values), read once at the end.
+//! - **upload**: a fresh 1 KB host array uploaded (as a pass uploads its poses, lists and
+//!   values), again and again, and a small value read once at the end (which waits for every
+//!   write queued before it); nothing computes on the uploads.
 //! - **upload 16 MiB**, **read 16 MiB**: the bandwidth each way, at about the size of a
 //!   step's upload (13 MB on the first-try guitar) and a 720p output frame's read back
 //!   (14.7 MB): whether uploading host-made tile lists is cheap (issue 35, item 3).
@@ -103,7 +104,7 @@ pub struct LaunchRow {
 impl LaunchRow {
     /// What the probe prices, µs: a launch for [`Probe::Chain`] (done time over the launches
     /// counted, or over the iterations where nothing was launched), else an iteration (a read,
-    /// an upload: fusion merges the uploads' additions, so their launches say nothing).
+    /// an upload).
     pub fn us_each(&self) -> f64 {
         let launches_each = self.launches as f64 / self.iterations.max(1) as f64;
         if self.probe == Probe::Chain && launches_each > 0.0 {
@@ -115,11 +116,12 @@ impl LaunchRow {
 }
 
 /// Times the probes on `backend`: the small ones `iterations` times each, the large ones a
-/// fiftieth of that (3 to 50), each after as many untimed.
+/// fiftieth of that (3 to 20), each after as many untimed.
 pub fn run_launch_bench(backend: BackendKind, iterations: usize) -> Result<Vec<LaunchRow>> {
     let device = backend.device()?;
     let iterations = iterations.max(1);
-    let large_iterations = (iterations / 50).clamp(3, 50);
+    // At most 20: the large uploads are all kept until the wait (320 MiB).
+    let large_iterations = (iterations / 50).clamp(3, 20);
     let constant: Tensor<2> = Tensor::ones(SHAPE, (&device, DType::F32));
     let large: Tensor<1> = Tensor::ones([LARGE], (&device, DType::F32));
     let chain = |n: usize| {
@@ -136,22 +138,17 @@ pub fn run_launch_bench(backend: BackendKind, iterations: usize) -> Result<Vec<L
         }
         Ok(constant.clone().sum())
     };
-    let uploads = |n: usize| {
-        let mut total = constant.clone();
-        for k in 0..n {
-            let values = vec![k as f32; SHAPE[0] * SHAPE[1]];
-            total = total + host::upload::<2>(TensorData::new(values, SHAPE), &device, DType::F32);
-        }
-        total.sum()
-    };
-    let large_uploads = |n: usize| {
-        let mut total = large.clone().sum();
-        for k in 0..n {
-            let values = vec![k as f32; LARGE];
-            total = total
-                + host::upload::<1>(TensorData::new(values, [LARGE]), &device, DType::F32).sum();
-        }
-        total
+    // The uploaded tensors are kept, not computed on: the wait for a small value at the end
+    // waits for every write queued before it, and no arithmetic on the data is timed.
+    let uploads = |n: usize, len: usize| {
+        let shape = [len];
+        let kept: Vec<Tensor<1>> = (0..n)
+            .map(|k| {
+                let values = vec![k as f32; len];
+                host::upload::<1>(TensorData::new(values, shape), &device, DType::F32)
+            })
+            .collect();
+        (kept, constant.clone().sum())
     };
     let large_reads = |n: usize| -> Result<Tensor<1>> {
         for _ in 0..n {
@@ -164,37 +161,43 @@ pub fn run_launch_bench(backend: BackendKind, iterations: usize) -> Result<Vec<L
     // Each untimed first: kernels compile and tune on first use.
     let mut rows = Vec::new();
     host::to_host(chain(iterations))?;
-    rows.push(timed(Probe::Chain, iterations, || Ok(chain(iterations)))?);
-    host::to_host(reads(iterations)?)?;
-    rows.push(timed(Probe::Read, iterations, || reads(iterations))?);
-    host::to_host(uploads(iterations))?;
-    rows.push(timed(Probe::Upload, iterations, || {
-        Ok(uploads(iterations))
+    rows.push(timed(Probe::Chain, iterations, || {
+        Ok(((), chain(iterations)))
     })?);
-    host::to_host(large_uploads(large_iterations))?;
+    host::to_host(reads(iterations)?)?;
+    rows.push(timed(Probe::Read, iterations, || {
+        Ok(((), reads(iterations)?))
+    })?);
+    let small = SHAPE[0] * SHAPE[1];
+    host::to_host(uploads(iterations, small).1)?;
+    rows.push(timed(Probe::Upload, iterations, || {
+        Ok(uploads(iterations, small))
+    })?);
+    host::to_host(uploads(large_iterations, LARGE).1)?;
     rows.push(timed(Probe::UploadLarge, large_iterations, || {
-        Ok(large_uploads(large_iterations))
+        Ok(uploads(large_iterations, LARGE))
     })?);
     host::to_host(large_reads(large_iterations)?)?;
     rows.push(timed(Probe::ReadLarge, large_iterations, || {
-        large_reads(large_iterations)
+        Ok(((), large_reads(large_iterations)?))
     })?);
     Ok(rows)
 }
 
-/// Times `issue` (which returns the value to wait for), then the wait for that value, with the
-/// counters' difference.
-fn timed(
+/// Times `issue` (which returns what it made, kept until the wait is over, and the value to
+/// wait for), then the wait for that value, with the counters' difference.
+fn timed<T>(
     probe: Probe,
     iterations: usize,
-    issue: impl FnOnce() -> Result<Tensor<1>>,
+    issue: impl FnOnce() -> Result<(T, Tensor<1>)>,
 ) -> Result<LaunchRow> {
     let before = counters::snapshot();
     let started = Instant::now();
-    let last = issue()?;
+    let (made, last) = issue()?;
     let queued = started.elapsed().as_secs_f64();
     host::to_host(last)?;
     let done = started.elapsed().as_secs_f64();
+    drop(made);
     // Counted after the wait: burn's fusion queues ops and launches them when a read flushes
     // the queue. The final read (and its one reduction) is not the probe's.
     let counted = counters::snapshot().since(&before);
