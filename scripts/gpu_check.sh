@@ -125,7 +125,7 @@ CUBECL_DEBUG_OPTION=profile-medium "$bin" bench step --config configs/first-try/
   --steps "$steps" --set 'backend="wgpu"' --set "scene.path=\"$data/guitar.compressed.ply\"" --json \
   >"$out/step_wgpu_profiled.json"
 
-python3 - "$out" <<'PY'
+python3 - "$out" "$SECONDS" <<'PY'
 import json, math, os, platform, subprocess, sys
 out = sys.argv[1]
 load = lambda name: json.load(open(os.path.join(out, name)))
@@ -244,6 +244,7 @@ for a, b in zip(w["windows"], f["windows"]):
     if a["pass"] != b["pass"]:
         failed.append(f"guitar {a['name']}: verdicts differ")
 print(f"\nspeed-up of the whole run: {f['total_s'] / w['total_s']:.2f}x (JSON in {out})")
+print(f"the check's measurements took {int(sys.argv[2]) / 60:.1f} minutes")
 if failed:
     print("PARITY FAILED:\n  " + "\n  ".join(failed))
     sys.exit(1)
