@@ -10,8 +10,10 @@
 #
 #   bash .gpu/run.sh                               # GPU_CHECK_QUICK=1 for a smoke test
 #
-# which writes $OUT/gpu_check.txt (the table and the log) and $OUT/gpu_check_json.tar.xz (every
-# measurement's JSON). BINARY defaults to $CARGO_TARGET_DIR/release/splatraj (else
+# which writes $OUT/gpu_check.txt (the table and the log) and $OUT/gpu_check_json/ (every
+# measurement's JSON, written as it finishes). The check stops after GPU_CHECK_SECONDS (500)
+# and then tabulates what it measured; `python3 scripts/gpu_check_table.py DIR` does the same
+# here on the JSON that came back. BINARY defaults to $CARGO_TARGET_DIR/release/splatraj (else
 # target/release/splatraj), DATA_DIR to ../shared/data. Everything travels within the tool's
 # 64 MiB. The loader packages follow the device notes of this workplace (Debian's libvulkan1,
 # unpacked over / on the machine; the NVIDIA ICD is the machine's own).
@@ -51,16 +53,21 @@ fi
 icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
 [ -f "$icd" ] && export VK_DRIVER_FILES="${VK_DRIVER_FILES:-$icd}"
 xz -dkf .gpu/splatraj.xz && chmod +x .gpu/splatraj
-json=/tmp/gpu_check_json
-rm -rf "$json" && mkdir -p "$json"
+# Every measurement's JSON straight under OUT: what finished comes back even when the device
+# tool's time limit stops the check (give `run` a timeout_s above GPU_CHECK_SECONDS).
+json="$out/gpu_check_json"
+mkdir -p "$json"
 {
   nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader || true
   git log -1 --format='commit %h %s' 2>/dev/null || true
-  scripts/gpu_check.sh .gpu/splatraj .gpu/data "$json"
-  echo "gpu_check exit status $?"
+  timeout "${GPU_CHECK_SECONDS:-500}" scripts/gpu_check.sh .gpu/splatraj .gpu/data "$json"
+  status=$?
+  echo "gpu_check exit status $status"
+  if [ "$status" -eq 124 ]; then
+    echo "gpu_check stopped after ${GPU_CHECK_SECONDS:-500} s; the table of what it measured:"
+    python3 scripts/gpu_check_table.py "$json"
+  fi
 } >"$out/gpu_check.txt" 2>&1
-# The run folders are large and many; the JSON holds every figure.
-(cd "$json" && tar -cJf "$out/gpu_check_json.tar.xz" --exclude='runs_*' .)
 tail -60 "$out/gpu_check.txt"
 grep -q '^gpu_check exit status 0$' "$out/gpu_check.txt"
 RUN
