@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The GPU check anyone can run: on a machine with a GPU, without building (it prints how long it took).
+# The GPU check anyone can run on a machine with a GPU, without building; it prints its length.
 #
 #   scripts/gpu_check.sh BINARY [DATA_DIR] [OUT_DIR]
 #
