@@ -23,51 +23,69 @@ use splatraj_render::render::{
 };
 use splatraj_scene::Scene;
 
-/// 400 Gaussians in a slab in front of the cameras; the first half is the object.
-fn scene() -> (Scene, Vec<f32>) {
-    let mut rng = common::Rng(0x5eed);
-    let mut scene = Scene::default();
-    let mut mask = Vec::new();
-    for i in 0..400 {
-        scene.means.push([
-            rng.range(-1.0, 1.0) as f32,
-            rng.range(-0.8, 0.8) as f32,
-            rng.range(2.5, 3.5) as f32,
-        ]);
-        scene
-            .scales
-            .push(std::array::from_fn(|_| rng.range(0.03, 0.1) as f32));
-        scene
-            .rotations
-            .push(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
-        scene.opacities.push(rng.range(0.2, 0.9) as f32);
-        scene.sh.extend([0.1, 0.2, 0.3]);
-        mask.push(if i < 200 { 1.0 } else { 0.0 });
-    }
-    (scene, mask)
+/// Random Gaussians in a slab 2.5–3.5 in front of a camera at the origin looking down +z.
+struct Slab {
+    gaussians: usize,
+    seed: u64,
+    /// Half the slab's extent in x and in y.
+    half_width: [f64; 2],
+    /// Range of each axis's scale.
+    scales: (f64, f64),
+    /// Range of the opacities.
+    opacities: (f64, f64),
 }
 
-/// `n` small Gaussians spread over the view of a camera at the origin looking down +z, all in
-/// the object: at 16×16 pixels one tile holds them all.
-fn crowded_scene(n: usize) -> (Scene, Vec<f32>) {
-    let mut rng = common::Rng(0xc0ffee);
-    let mut scene = Scene::default();
-    for _ in 0..n {
-        scene.means.push([
-            rng.range(-0.8, 0.8) as f32,
-            rng.range(-0.8, 0.8) as f32,
-            rng.range(2.5, 3.5) as f32,
-        ]);
+impl Slab {
+    fn scene(&self) -> Scene {
+        let mut rng = common::Rng(self.seed);
+        let mut scene = Scene::default();
+        let [wx, wy] = self.half_width;
+        for _ in 0..self.gaussians {
+            scene.means.push([
+                rng.range(-wx, wx) as f32,
+                rng.range(-wy, wy) as f32,
+                rng.range(2.5, 3.5) as f32,
+            ]);
+            let (lo, hi) = self.scales;
+            scene
+                .scales
+                .push(std::array::from_fn(|_| rng.range(lo, hi) as f32));
+            scene
+                .rotations
+                .push(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
+            scene
+                .opacities
+                .push(rng.range(self.opacities.0, self.opacities.1) as f32);
+            scene.sh.extend([0.1, 0.2, 0.3]);
+        }
         scene
-            .scales
-            .push(std::array::from_fn(|_| rng.range(0.03, 0.06) as f32));
-        scene
-            .rotations
-            .push(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
-        scene.opacities.push(rng.range(0.02, 0.1) as f32);
-        scene.sh.extend([0.1, 0.2, 0.3]);
     }
-    (scene, vec![1.0; n])
+}
+
+/// 400 Gaussians in a slab in front of the cameras; the first half is the object.
+fn scene() -> (Scene, Vec<f32>) {
+    let slab = Slab {
+        gaussians: 400,
+        seed: 0x5eed,
+        half_width: [1.0, 0.8],
+        scales: (0.03, 0.1),
+        opacities: (0.2, 0.9),
+    };
+    let mask = (0..400).map(|i| if i < 200 { 1.0 } else { 0.0 }).collect();
+    (slab.scene(), mask)
+}
+
+/// `n` small faint Gaussians spread over the view, all in the object: at 16×16 pixels one
+/// tile holds them all.
+fn crowded_scene(n: usize) -> (Scene, Vec<f32>) {
+    let slab = Slab {
+        gaussians: n,
+        seed: 0xc0ffee,
+        half_width: [0.8, 0.8],
+        scales: (0.03, 0.06),
+        opacities: (0.02, 0.1),
+    };
+    (slab.scene(), vec![1.0; n])
 }
 
 /// Counts of one forward + backward mask pass (pruned to the object) at `poses`, the pose
