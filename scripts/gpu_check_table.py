@@ -181,6 +181,16 @@ def steps():
         raise KeyError("no step was measured")
 
 
+def host_share():
+    """The unprofiled step's stages: decide and bin are the host's own work a step, the rest
+    only queues device work (the device is waited for by the step's one read)."""
+    rows = [r for b in ("wgpu", "flex") for r in load(f"step_{b}.json")]
+    backend = lambda r: "wgpu" if r["counts"].get("launches") else "flex"
+    stage_table("step, ms by stage as the host saw it (wgpu: decide and bin are the host's "
+                "share; the other stages only queue)", rows,
+                lambda r: f"{backend(r)}, {r['passes']}", ("ms a step", lambda r: r["ms_per_step"]))
+
+
 def profiled_steps():
     rows = load("step_wgpu_profiled.json")
     stage_table("wgpu step, ms, each kernel waited for", rows, lambda r: f"guitar, {r['passes']}",
@@ -221,6 +231,7 @@ section("tile lists in the backward", variant_table(
 section("mask passes, each kernel waited for", profiled_passes)
 section("output frames", output_frames)
 section("optimisation steps", steps)
+section("the host's share of a step", host_share)
 section("optimisation step, each kernel waited for", profiled_steps)
 section("first-try guitar", first_try)
 print(f"\nJSON in {out}")
