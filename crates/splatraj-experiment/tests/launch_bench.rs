@@ -1,9 +1,9 @@
 //! `bench launches` on the CPU backend: every probe runs, counted as it should be.
 //!
-//! Its own test binary with one test: the read counter is process-wide, and the library's unit
-//! tests that render read beside each other.
+//! Its own test binary: the read counter is process-wide, and the library's unit tests that
+//! render read beside each other (the other test here reads nothing).
 
-use splatraj_experiment::bench::launches::{Probe, run_launch_bench};
+use splatraj_experiment::bench::launches::{MAX_ITERATIONS, Probe, run_launch_bench};
 use splatraj_render::backend::BackendKind;
 
 /// On the CPU backend every probe runs, each read probe reads once an iteration, nothing
@@ -33,6 +33,20 @@ fn probes_count_what_they_do_on_flex() {
         assert!(
             (r.gb_per_s - expected).abs() <= 1e-9 * expected.max(1.0),
             "{r:?}"
+        );
+    }
+}
+
+/// No iterations, or more than the kept uploads are bounded to, is an error naming the range,
+/// before any work.
+#[test]
+fn iterations_out_of_range_are_refused() {
+    for iterations in [0, MAX_ITERATIONS + 1] {
+        let error = run_launch_bench(BackendKind::Flex, iterations).unwrap_err();
+        let message = error.to_string();
+        assert!(
+            message.contains(&format!("1 to {MAX_ITERATIONS}")),
+            "{message}"
         );
     }
 }

@@ -17,7 +17,7 @@ mod frames;
 mod render;
 mod runs;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 use splatraj_render::backend::BackendKind;
 use splatraj_traj::costs::DEFAULT_TARGET_RATIO;
@@ -96,7 +96,8 @@ pub fn run(command: BenchCommand) -> Result<()> {
 /// (`splatraj::experiment::bench::launches`); this prints them.
 fn launches(args: &BenchLaunchesArgs) -> Result<()> {
     use splatraj::experiment::bench::launches::{launch_table, run_launch_bench};
-    let rows = run_launch_bench(args.backend, args.iterations)?;
+    let rows =
+        run_launch_bench(args.backend, args.iterations).context("`bench launches --iterations`")?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&rows)?);
     } else {

@@ -29,7 +29,7 @@
 use std::fmt::Write as _;
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Result, bail};
 use burn::tensor::{DType, Tensor, TensorData};
 use serde::Serialize;
 use splatraj_render::backend::BackendKind;
@@ -95,31 +95,39 @@ pub struct LaunchRow {
     pub queued_us: f64,
     /// Wall time of one iteration with the final wait for the device shared out, µs.
     pub done_us: f64,
-    /// What the probe prices, µs ([`LaunchRow::us_each`]).
+    /// What the probe prices, µs: a launch (chain), a read, an upload.
     pub us_each: f64,
     /// Bytes moved a second, GB/s, for the large probes (0 for the others).
     pub gb_per_s: f64,
 }
 
-impl LaunchRow {
-    /// What the probe prices, µs: a launch for [`Probe::Chain`] (done time over the launches
-    /// counted, or over the iterations where nothing was launched), else an iteration (a read,
-    /// an upload).
-    pub fn us_each(&self) -> f64 {
-        let launches_each = self.launches as f64 / self.iterations.max(1) as f64;
-        if self.probe == Probe::Chain && launches_each > 0.0 {
-            self.done_us / launches_each
-        } else {
-            self.done_us
-        }
+/// What a probe prices, µs: a launch for [`Probe::Chain`] (done time over the launches
+/// counted, or over the iterations where nothing was launched), else an iteration (a read, an
+/// upload).
+fn price(probe: Probe, iterations: usize, launches: u64, done_us: f64) -> f64 {
+    let launches_each = launches as f64 / iterations.max(1) as f64;
+    if probe == Probe::Chain && launches_each > 0.0 {
+        done_us / launches_each
+    } else {
+        done_us
     }
 }
 
+/// The most iterations a probe runs: every small upload (1 KB) is kept until the wait, so this
+/// bounds them to 100 MB.
+pub const MAX_ITERATIONS: usize = 100_000;
+
 /// Times the probes on `backend`: the small ones `iterations` times each, the large ones a
 /// fiftieth of that (3 to 20), each after as many untimed.
+/// More than [`MAX_ITERATIONS`], or none, is an error.
 pub fn run_launch_bench(backend: BackendKind, iterations: usize) -> Result<Vec<LaunchRow>> {
+    if !(1..=MAX_ITERATIONS).contains(&iterations) {
+        bail!(
+            "{iterations} iterations: a probe runs 1 to {MAX_ITERATIONS} (each small upload is \
+             kept on the device until the probe's end)"
+        );
+    }
     let device = backend.device()?;
-    let iterations = iterations.max(1);
     // At most 20: the large uploads are all kept until the wait (320 MiB).
     let large_iterations = (iterations / 50).clamp(3, 20);
     let constant: Tensor<2> = Tensor::ones(SHAPE, (&device, DType::F32));
@@ -202,21 +210,18 @@ fn timed<T>(
     // the queue. The final read (and its one reduction) is not the probe's.
     let counted = counters::snapshot().since(&before);
     let n = iterations as f64;
-    let mut row = LaunchRow {
+    let done_us = done * 1e6 / n;
+    Ok(LaunchRow {
         probe,
         iterations,
         launches: counted.launches,
         reads: counted.reads.saturating_sub(1),
         queued_us: queued * 1e6 / n,
-        done_us: done * 1e6 / n,
-        us_each: 0.0,
-        gb_per_s: 0.0,
-    };
-    row.us_each = row.us_each();
-    if probe.bytes() > 0 {
-        row.gb_per_s = probe.bytes() as f64 / (row.done_us * 1e3);
-    }
-    Ok(row)
+        done_us,
+        us_each: price(probe, iterations, counted.launches, done_us),
+        // 0 for the small probes, which move no bytes worth a rate.
+        gb_per_s: probe.bytes() as f64 / (done_us * 1e3),
+    })
 }
 
 /// The rows as a table.
