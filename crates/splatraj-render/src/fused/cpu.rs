@@ -187,8 +187,19 @@ impl<E: Real> Footprint<E> {
         }
     }
 
-    /// The box of the ellipse ½dᵀ·conic·d ≤ t with t = ln(255·o): its half-widths are
-    /// sqrt(2t·Σ_xx), sqrt(2t·Σ_yy) with Σ = conic⁻¹ (Σ_xx = c/det, Σ_yy = a/det).
+    /// The box outside which the kernels' α is below 1/255 for sure, from the ellipse
+    /// q(d) = ½dᵀ·conic·d ≤ t with t = ln(255·o): half-widths sqrt(2t·Σ_xx), sqrt(2t·Σ_yy)
+    /// with Σ = conic⁻¹ (Σ_xx = c/det, Σ_yy = a/det), since q ≥ dx²/(2Σ_xx) on a column dx
+    /// away from the mean (and likewise for rows).
+    ///
+    /// Only t grows, by what the kernels' rounding can hide (docs/rasterizer.md, "The box"):
+    /// α ≥ 1/255 in E needs q_E ≤ t + 16u, and q_E is within 16u/(1 − ρ) of q relative to it
+    /// (u: E's unit roundoff, ρ = |b|/sqrt(ac) < 1 the conic's correlation: the terms of q
+    /// can be 2/(1 − ρ) times q itself). So q > (t + 16u)/(1 − 16u/(1 − ρ)) leaves α < 1/255.
+    /// The box used to carry a pixel of margin instead, which on a mask pass of 96×54 doubled
+    /// the half rows the kernels visited (most splats there are a few pixels wide); a needle
+    /// (1 − ρ of 10⁻⁵) needs far less than a pixel of it, and a conic too close to degenerate
+    /// for the bound to hold (1 − ρ ≤ 32u) is tested on the whole tile.
     fn extent([mx, my, a, b, c]: [f64; 5], t: f64) -> Extent<E> {
         if t.is_nan() || t < 0.0 {
             return Extent::Nowhere;
@@ -197,25 +208,35 @@ impl<E: Real> Footprint<E> {
         if det.is_nan() || det <= 0.0 {
             return Extent::Anywhere;
         }
-        let half_x = (2.0 * t * c / det).sqrt();
-        let half_y = (2.0 * t * a / det).sqrt();
+        let u = E::UNIT_ROUNDOFF;
+        let root_ac = (a * c).sqrt();
+        // 1 − ρ without the cancellation of 1 − |b|/sqrt(ac) near 1.
+        let loose = det / (root_ac * (root_ac + b.abs()));
+        let relative = 16.0 * u / loose;
+        if !(relative < 0.5) {
+            return Extent::Anywhere;
+        }
+        let reach = (t + 16.0 * u) / (1.0 - relative);
+        // The f64 arithmetic here and the rounding of the half-widths to E (≤ u relative) are
+        // covered by a millionth, relative and in pixels.
+        let half = |variance: f64| (2.0 * reach * variance / det).sqrt() * (1.0 + 1e-6) + 1e-6;
+        let (half_x, half_y) = (half(c), half(a));
         if !(half_x.is_finite() && half_y.is_finite() && mx.is_finite() && my.is_finite()) {
             return Extent::Anywhere;
         }
-        // Rounding the half-widths to E moves the box by far less than its pixel of margin.
         Extent::Ellipse {
             half_x: E::of(half_x),
             half_y: E::of(half_y),
         }
     }
 
-    /// This row on the tile with corner (x0, y0), and the tile pixels `(xs, ys)` whose centre
-    /// can reach α ≥ 1/255, with a pixel of margin; `None` if there are none. The rest of the
-    /// tile is skipped: the 1/255 rule would skip it anyway, so this changes no value and no
-    /// decision.
+    /// This row on the tile with corner (x0, y0), and the tile pixels `(xs, ys)` of its box
+    /// ([`Self::extent`]); `None` if there are none. The rest of the tile is skipped: its α is
+    /// below 1/255, so this changes no value and no decision.
     fn on_tile(&self, x0: E, y0: E) -> Option<(Splat<E>, Range<usize>, Range<usize>)> {
         // Coordinates relative to the tile's corner keep dx, dy small (as the tensor path does
-        // with its tile centre), so f32 loses nothing to cancellation.
+        // with its tile centre), so f32 loses nothing to cancellation. The box is centred on
+        // this same rounded mean, the one the kernels' dx and dy are taken from.
         let splat = Splat {
             mx: self.splat.mx - x0,
             my: self.splat.my - y0,
@@ -226,13 +247,13 @@ impl<E: Real> Footprint<E> {
             Extent::Anywhere => return Some((splat, 0..TILE_SIZE, 0..TILE_SIZE)),
             Extent::Ellipse { half_x, half_y } => (half_x.to_f64(), half_y.to_f64()),
         };
-        // Pixel i's centre is i + 0.5: keep i with |i + 0.5 − m| ≤ half + 1. Clamping to the
+        // Pixel i's centre is i + 0.5: keep i with |i + 0.5 − m| ≤ half. Clamping to the
         // tile first (integer bounds commute with floor and ceil) keeps the values small, so
         // the rounding is a cast: the baseline x86-64 target has no rounding instruction and
         // calls into libm for f64::floor/ceil, once per tile–Gaussian pair.
         let span = |m: f64, half: f64| {
-            let lo = ceil_small((m - half - 1.5).clamp(0.0, TILE_SIZE as f64)) as usize;
-            let hi = floor_small((m + half + 0.5).clamp(-1.0, TILE_SIZE as f64 - 1.0)) + 1;
+            let lo = ceil_small((m - half - 0.5).clamp(0.0, TILE_SIZE as f64)) as usize;
+            let hi = floor_small((m + half - 0.5).clamp(-1.0, TILE_SIZE as f64 - 1.0)) + 1;
             lo..(hi.max(lo as i64) as usize)
         };
         let xs = span(splat.mx.to_f64(), half_x);
@@ -758,4 +779,112 @@ pub fn backward_with<E: Real>(
                 .collect()
         });
     gradient_sums::sum_slots(plan, &slots, splats.opacities.len(), channels)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_random::uniform;
+
+    /// What the kernels decide at a tile pixel: whether α ≥ 1/255 there (the forward's test).
+    fn live<E: Real>(splat: &Splat<E>, p: usize) -> bool {
+        splat
+            .at(p)
+            .is_some_and(|(_, _, _, e)| clamp_alpha(splat.opacity * e) >= E::of(MIN_ALPHA))
+    }
+
+    /// Splats whose α ellipse has a pixel centre right at the edge of its box (the extreme
+    /// point in x or y, moved by a few millionths of the distance either way), needles to
+    /// discs, opacities from just above 1/255 to 1, on tiles far from the origin. Returns how
+    /// many live pixels lay beyond the box of the exact ellipse (kept only by the rounding
+    /// allowance) and how many live pixels were checked.
+    fn boxes_hold_every_live_pixel<E: Real>(cases: usize) -> (usize, usize) {
+        let mut next = uniform(0x5eed_0b0c);
+        let (mut beyond, mut checked) = (0, 0);
+        for case in 0..cases {
+            // Σ = R diag(λ1, λ2) Rᵀ, the smaller at the low-pass floor (needles up to 1 : 10⁶).
+            let big = 0.3 * 10f64.powf(6.0 * next());
+            let small = 0.3 * 10f64.powf(next());
+            let angle = std::f64::consts::PI * next();
+            let (s, c) = angle.sin_cos();
+            let sigma = [
+                big * c * c + small * s * s,
+                (big - small) * s * c,
+                big * s * s + small * c * c,
+            ];
+            let det = sigma[0] * sigma[2] - sigma[1] * sigma[1];
+            let conic = [sigma[2] / det, -sigma[1] / det, sigma[0] / det].map(E::of);
+            let opacity = E::of(MIN_ALPHA * 255f64.powf(next().powi(3)) * (1.0 + 1e-7));
+            // The ellipse of the stored values, exactly (f64 of the E numbers).
+            let [a, b, c] = conic.map(E::to_f64);
+            let t = (255.0 * opacity.to_f64()).ln();
+            let det = a * c - b * b;
+            let (sxx, sxy, syy) = (c / det, -b / det, a / det);
+            let extreme = if case % 2 == 0 {
+                [sxx, sxy].map(|v| v * (2.0 * t / sxx).sqrt())
+            } else {
+                [sxy, syy].map(|v| v * (2.0 * t / syy).sqrt())
+            };
+            let sign = if next() < 0.5 { -1.0 } else { 1.0 };
+            let scale = sign * (1.0 + 4e-6 * (next() - 0.5));
+            let pixel = [(next() * 16.0).floor() + 0.5, (next() * 16.0).floor() + 0.5];
+            let corner = [
+                16.0 * (next() * 120.0).floor(),
+                16.0 * (next() * 70.0).floor(),
+            ];
+            let mean = [0, 1].map(|i| E::of(corner[i] + pixel[i] - scale * extreme[i]));
+            let splats = HostSplats {
+                means: mean.to_vec(),
+                conics: conic.to_vec(),
+                opacities: vec![opacity],
+                values: vec![E::ONE],
+                channels: 1,
+            };
+            let footprint = Footprint::new(&splats, 0);
+            let [x0, y0] = corner.map(E::of);
+            let placed = footprint.on_tile(x0, y0);
+            let splat = Splat {
+                mx: mean[0] - x0,
+                my: mean[1] - y0,
+                ..footprint.splat
+            };
+            for p in (0..TILE_PIXELS).filter(|&p| live(&splat, p)) {
+                checked += 1;
+                let (x, y) = (p % TILE_SIZE, p / TILE_SIZE);
+                let Some((_, xs, ys)) = &placed else {
+                    panic!("case {case}: pixel {p} is live, the splat has no box on the tile");
+                };
+                assert!(
+                    xs.contains(&x) && ys.contains(&y),
+                    "case {case}: live pixel ({x}, {y}) outside the box {xs:?} × {ys:?} \
+                     (conic {conic:?}, opacity {opacity:?}, mean {mean:?})"
+                );
+                let d = [x, y].map(|v| v as f64 + 0.5);
+                let [dx, dy] = [0, 1].map(|i| d[i] - splat_mean(&splat)[i]);
+                if dx * dx > 2.0 * t * sxx || dy * dy > 2.0 * t * syy {
+                    beyond += 1;
+                }
+            }
+        }
+        (beyond, checked)
+    }
+
+    fn splat_mean<E: Real>(splat: &Splat<E>) -> [f64; 2] {
+        [splat.mx.to_f64(), splat.my.to_f64()]
+    }
+
+    /// The box skips no pixel the kernels would find α ≥ 1/255 at, in f32 (where rounding
+    /// makes some pixels just outside the exact ellipse live, and the box must hold them) and
+    /// in f64.
+    #[test]
+    fn the_box_holds_every_pixel_the_kernels_find_live() {
+        let (beyond, checked) = boxes_hold_every_live_pixel::<f32>(200_000);
+        assert!(checked > 100_000, "{checked} live pixels checked");
+        assert!(
+            beyond > 0,
+            "no live pixel beyond the exact ellipse's box: the cases miss the edge"
+        );
+        let (_, checked) = boxes_hold_every_live_pixel::<f64>(50_000);
+        assert!(checked > 20_000, "{checked} live pixels checked in f64");
+    }
 }

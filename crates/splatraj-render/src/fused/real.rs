@@ -20,6 +20,8 @@ pub trait Real:
     const ZERO: Self;
     /// 1.
     const ONE: Self;
+    /// The largest relative error of one rounded operation (half an ulp of 1).
+    const UNIT_ROUNDOFF: f64;
     /// The nearest value to `x`.
     fn of(x: f64) -> Self;
     /// e^self.
@@ -31,6 +33,7 @@ pub trait Real:
 impl Real for f32 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
+    const UNIT_ROUNDOFF: f64 = f32::EPSILON as f64 / 2.0;
     fn of(x: f64) -> Self {
         x as f32
     }
@@ -45,6 +48,7 @@ impl Real for f32 {
 impl Real for f64 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
+    const UNIT_ROUNDOFF: f64 = f64::EPSILON / 2.0;
     fn of(x: f64) -> Self {
         x
     }
