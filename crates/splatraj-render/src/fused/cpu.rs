@@ -213,7 +213,7 @@ impl<E: Real> Footprint<E> {
         // 1 − ρ without the cancellation of 1 − |b|/sqrt(ac) near 1.
         let loose = det / (root_ac * (root_ac + b.abs()));
         let relative = 16.0 * u / loose;
-        if !(relative < 0.5) {
+        if relative.is_nan() || relative >= 0.5 {
             return Extent::Anywhere;
         }
         let reach = (t + 16.0 * u) / (1.0 - relative);
