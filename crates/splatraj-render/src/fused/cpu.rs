@@ -265,23 +265,36 @@ impl<E: Real> Footprint<E> {
 /// List entries whose footprints are read in one go.
 const GATHER: usize = 32;
 
+/// Which way a kernel walks a tile's list.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Walk {
+    /// The forward: nearest entry first.
+    FrontToBack,
+    /// The backward's replay: deepest entry first.
+    BackToFront,
+}
+
 /// The footprints of a tile's list entries, read [`GATHER`] at a time. Lists are in depth
 /// order, so their rows are scattered over memory: read one by one between the pixel loops,
 /// each stalled the kernel on a cache miss (a sixth of a real capture's pass), while a tight
-/// loop of independent reads has the processor fetch them all at once.
+/// loop of independent reads has the processor fetch them all at once. The block after it (in
+/// the walk's direction) is prefetched while this one is composited: without it, the gather's
+/// misses were still 3–6 % of the kernels' samples (perf, first-try guitar run).
 struct Gathered<'a, E> {
     footprints: &'a [Footprint<E>],
     list: &'a [u32],
+    walk: Walk,
     /// First list entry of `block` (`usize::MAX` before the first read).
     start: usize,
     block: Vec<Footprint<E>>,
 }
 
 impl<'a, E: Real> Gathered<'a, E> {
-    fn new(footprints: &'a [Footprint<E>], list: &'a [u32]) -> Self {
+    fn new(footprints: &'a [Footprint<E>], list: &'a [u32], walk: Walk) -> Self {
         Gathered {
             footprints,
             list,
+            walk,
             start: usize::MAX,
             block: Vec::with_capacity(GATHER),
         }
@@ -297,9 +310,34 @@ impl<'a, E: Real> Gathered<'a, E> {
             self.block.clear();
             self.block
                 .extend(rows.iter().map(|&row| self.footprints[row as usize]));
+            let next = match self.walk {
+                Walk::FrontToBack => start + GATHER..(start + 2 * GATHER).min(self.list.len()),
+                Walk::BackToFront => start.saturating_sub(GATHER)..start,
+            };
+            for &row in self.list.get(next).unwrap_or_default() {
+                prefetch(&self.footprints[row as usize]);
+            }
         }
         &self.block[j - start]
     }
+}
+
+/// Asks the processor to bring `value`'s cache lines in (a hint: nothing else happens).
+#[inline(always)]
+fn prefetch<T>(value: &T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let first = std::ptr::from_ref(value).cast::<i8>();
+        let last = first.wrapping_add(std::mem::size_of::<T>() - 1);
+        // SAFETY: a prefetch reads nothing and faults on no address; SSE is in every x86-64.
+        unsafe {
+            _mm_prefetch::<_MM_HINT_T0>(first);
+            _mm_prefetch::<_MM_HINT_T0>(last);
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = value;
 }
 
 /// Work tiles per rayon task at most. A tile's cost varies a hundredfold (an empty corner, the
@@ -425,7 +463,7 @@ fn forward_tile<E: Real>(
     let mut last = vec![0u32; TILE_PIXELS];
     let mut planes = vec![E::ZERO; (channels + 1) * TILE_PIXELS];
     let list = plan.list(w);
-    let mut gathered = Gathered::new(footprints, list);
+    let mut gathered = Gathered::new(footprints, list, Walk::FrontToBack);
     for (j, &row) in list.iter().enumerate() {
         if open_count == 0 {
             break;
@@ -664,7 +702,7 @@ fn backward_tile<E: Real>(
     let mut slots = vec![E::ZERO; list.len() * stride];
     let mut t = final_t.to_vec();
     let mut behind = vec![E::ZERO; channels * TILE_PIXELS]; // Σ over later contributors of f·α·T
-    let mut gathered = Gathered::new(&state.footprints, list);
+    let mut gathered = Gathered::new(&state.footprints, list, Walk::BackToFront);
     let (mut replay, entries) = Replay::new(last);
     for j in (0..entries).rev() {
         let replaying = replay.at(j);

@@ -22,7 +22,8 @@ use std::ops::Range;
 
 use super::lanes_exp::exp;
 use super::{
-    Footprint, Gathered, HostSplats, Replay, RowBits, Splat, TileForward, column_bits, valid_bits,
+    Footprint, Gathered, HostSplats, Replay, RowBits, Splat, TileForward, Walk, column_bits,
+    valid_bits,
 };
 use crate::fused::plan::CompositePlan;
 use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
@@ -255,7 +256,7 @@ fn forward_tile(
     let mut last = vec![0u32; TILE_PIXELS];
     let mut planes = vec![0.0f32; (channels + 1) * TILE_PIXELS];
     let list = plan.list(w);
-    let mut gathered = Gathered::new(footprints, list);
+    let mut gathered = Gathered::new(footprints, list, Walk::FrontToBack);
     for (j, &row) in list.iter().enumerate() {
         if open_count == 0 {
             break;
@@ -398,7 +399,7 @@ fn backward_tile(
         geometry: [[0.0; LANES]; 6],
         values: vec![0.0; channels * LANES],
     };
-    let mut gathered = Gathered::new(&state.footprints, list);
+    let mut gathered = Gathered::new(&state.footprints, list, Walk::BackToFront);
     let (mut replay, entries) = Replay::new(last);
     for j in (0..entries).rev() {
         let replaying = replay.at(j);
