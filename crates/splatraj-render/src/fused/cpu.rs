@@ -897,18 +897,14 @@ mod tests {
                     "case {case}: live pixel ({x}, {y}) outside the box {xs:?} × {ys:?} \
                      (conic {conic:?}, opacity {opacity:?}, mean {mean:?})"
                 );
-                let d = [x, y].map(|v| v as f64 + 0.5);
-                let [dx, dy] = [0, 1].map(|i| d[i] - splat_mean(&splat)[i]);
+                let [dx, dy] =
+                    [(x, splat.mx), (y, splat.my)].map(|(p, m)| p as f64 + 0.5 - m.to_f64());
                 if dx * dx > 2.0 * t * sxx || dy * dy > 2.0 * t * syy {
                     beyond += 1;
                 }
             }
         }
         (beyond, checked)
-    }
-
-    fn splat_mean<E: Real>(splat: &Splat<E>) -> [f64; 2] {
-        [splat.mx.to_f64(), splat.my.to_f64()]
     }
 
     /// The box skips no pixel the kernels would find α ≥ 1/255 at, in f32 (where rounding

@@ -94,7 +94,8 @@ fn store(values: &mut [f32], at: usize, v: __m256) {
 /// The lanes outside `mask` add +0, which leaves every value as it was (no sum here is −0:
 /// they start at +0). Blending the stored value with the loaded one instead has LLVM turn the
 /// store into a masked store (`vmaskmovps`), from which AMD processors cannot forward to the
-/// next entry's load of the same pixels: that stall was a fifth of the forward's time.
+/// next entry's load of the same pixels: that stall was about a third of a 720p frame's
+/// forward (66–72 → 41–45 ms, `docs/results.md`).
 #[target_feature(enable = "avx2,fma")]
 #[inline]
 fn add_where(values: &mut [f32], at: usize, old: __m256, addend: __m256, mask: __m256) {
