@@ -152,18 +152,44 @@ pub struct HostGradients<E> {
 pub struct Footprint<E> {
     /// The Gaussian in image coordinates.
     splat: Splat<E>,
-    extent: Extent<E>,
+    /// The image columns and rows (first and last, inclusive; none where first > last) of the
+    /// pixels whose α can reach 1/255 ([`Footprint::extent`]), so that placing the footprint
+    /// on a tile is integer clamps: in f64 per list entry it was 6 % of a run's CPU time.
+    columns: [i32; 2],
+    rows: [i32; 2],
 }
 
 /// Where a row can reach α ≥ 1/255.
 #[derive(Debug, Clone, Copy)]
-enum Extent<E> {
+enum Extent {
     /// Nowhere: o < 1/255 (or NaN).
     Nowhere,
     /// Anywhere, as far as the bound can tell (it is not finite): test every pixel of a tile.
     Anywhere,
-    /// Within these half-widths, in pixels, of the centre.
-    Ellipse { half_x: E, half_y: E },
+    /// Within these half-widths, in pixels, of the mean.
+    Ellipse { half_x: f64, half_y: f64 },
+}
+
+/// Pixel bounds that hold no pixel.
+const NO_PIXELS: [i32; 2] = [1, 0];
+
+/// Pixel bounds beyond every image: every pixel of every tile.
+const ALL_PIXELS: [i32; 2] = [-(1 << 30), 1 << 30];
+
+/// A tile's corner, in pixels and in the kernels' float type (computed once per tile).
+#[derive(Debug, Clone, Copy)]
+struct Corner<E> {
+    pixels: [i64; 2],
+    at: [E; 2],
+}
+
+impl<E: Real> Corner<E> {
+    fn new((x0, y0): (usize, usize)) -> Self {
+        Corner {
+            pixels: [x0 as i64, y0 as i64],
+            at: [E::of(x0 as f64), E::of(y0 as f64)],
+        }
+    }
 }
 
 impl<E: Real> Footprint<E> {
@@ -173,6 +199,14 @@ impl<E: Real> Footprint<E> {
         let opacity = splats.opacities[row];
         // In f64 like the bound it feeds: α at exactly 1/255 must not round out of the box.
         let reach = (255.0 * opacity.to_f64()).ln();
+        let (columns, rows) = match Self::extent([mx, my, a, b, c].map(E::to_f64), reach) {
+            Extent::Nowhere => (NO_PIXELS, NO_PIXELS),
+            Extent::Anywhere => (ALL_PIXELS, ALL_PIXELS),
+            Extent::Ellipse { half_x, half_y } => (
+                Self::pixel_span(mx.to_f64(), half_x),
+                Self::pixel_span(my.to_f64(), half_y),
+            ),
+        };
         Footprint {
             splat: Splat {
                 mx,
@@ -183,8 +217,23 @@ impl<E: Real> Footprint<E> {
                 opacity,
                 skip_below: E::of(-reach) - E::of(1e-3),
             },
-            extent: Self::extent([mx, my, a, b, c].map(E::to_f64), reach),
+            columns,
+            rows,
         }
+    }
+
+    /// The image pixels X (columns or rows) with |X + 0.5 − m| ≤ half + δ, as first and last.
+    ///
+    /// The kernels measure a pixel's offset from the mean relative to its tile's corner, as
+    /// that corner's f32 (or f64) difference m − x0, which lies within u·|m − x0| of the exact
+    /// one; on a tile the box reaches |m − x0| ≤ half + 17, so δ = 2u·(half + 17) keeps
+    /// every pixel that the box about the rounded mean would keep.
+    fn pixel_span(m: f64, half: f64) -> [i32; 2] {
+        let reach = half + 2.0 * E::UNIT_ROUNDOFF * (half + 17.0);
+        let limit = f64::from(1 << 30);
+        let first = ceil_small((m - reach - 0.5).clamp(-limit, limit));
+        let last = floor_small((m + reach - 0.5).clamp(-limit, limit));
+        [first as i32, last as i32]
     }
 
     /// The box outside which the kernels' α is below 1/255 for sure, from the ellipse
@@ -200,7 +249,7 @@ impl<E: Real> Footprint<E> {
     /// the half rows the kernels visited (most splats there are a few pixels wide); a needle
     /// (1 − ρ of 10⁻⁵) needs far less than a pixel of it, and a conic too close to degenerate
     /// for the bound to hold (1 − ρ ≤ 32u) is tested on the whole tile.
-    fn extent([mx, my, a, b, c]: [f64; 5], t: f64) -> Extent<E> {
+    fn extent([mx, my, a, b, c]: [f64; 5], t: f64) -> Extent {
         if t.is_nan() || t < 0.0 {
             return Extent::Nowhere;
         }
@@ -217,48 +266,39 @@ impl<E: Real> Footprint<E> {
             return Extent::Anywhere;
         }
         let reach = (t + 16.0 * u) / (1.0 - relative);
-        // The f64 arithmetic here and the rounding of the half-widths to E (≤ u relative) are
-        // covered by a millionth, relative and in pixels.
+        // The f64 arithmetic here and of the pixel bounds is covered by a millionth, relative
+        // and in pixels.
         let half = |variance: f64| (2.0 * reach * variance / det).sqrt() * (1.0 + 1e-6) + 1e-6;
         let (half_x, half_y) = (half(c), half(a));
         if !(half_x.is_finite() && half_y.is_finite() && mx.is_finite() && my.is_finite()) {
             return Extent::Anywhere;
         }
-        Extent::Ellipse {
-            half_x: E::of(half_x),
-            half_y: E::of(half_y),
-        }
+        Extent::Ellipse { half_x, half_y }
     }
 
-    /// This row on the tile with corner (x0, y0), and the tile pixels `(xs, ys)` of its box
+    /// This row on the tile with corner `corner`, and the tile pixels `(xs, ys)` of its box
     /// ([`Self::extent`]); `None` if there are none. The rest of the tile is skipped: its α is
     /// below 1/255, so this changes no value and no decision.
-    fn on_tile(&self, x0: E, y0: E) -> Option<(Splat<E>, Range<usize>, Range<usize>)> {
+    fn on_tile(&self, corner: Corner<E>) -> Option<(Splat<E>, Range<usize>, Range<usize>)> {
+        let span = |[first, last]: [i32; 2], origin: i64| {
+            let tile = TILE_SIZE as i64;
+            let lo = (i64::from(first) - origin).clamp(0, tile);
+            let hi = (i64::from(last) + 1 - origin).clamp(lo, tile);
+            lo as usize..hi as usize
+        };
+        let xs = span(self.columns, corner.pixels[0]);
+        let ys = span(self.rows, corner.pixels[1]);
+        if xs.is_empty() || ys.is_empty() {
+            return None;
+        }
         // Coordinates relative to the tile's corner keep dx, dy small (as the tensor path does
-        // with its tile centre), so f32 loses nothing to cancellation. The box is centred on
-        // this same rounded mean, the one the kernels' dx and dy are taken from.
+        // with its tile centre), so f32 loses nothing to cancellation.
         let splat = Splat {
-            mx: self.splat.mx - x0,
-            my: self.splat.my - y0,
+            mx: self.splat.mx - corner.at[0],
+            my: self.splat.my - corner.at[1],
             ..self.splat
         };
-        let (half_x, half_y) = match self.extent {
-            Extent::Nowhere => return None,
-            Extent::Anywhere => return Some((splat, 0..TILE_SIZE, 0..TILE_SIZE)),
-            Extent::Ellipse { half_x, half_y } => (half_x.to_f64(), half_y.to_f64()),
-        };
-        // Pixel i's centre is i + 0.5: keep i with |i + 0.5 − m| ≤ half. Clamping to the
-        // tile first (integer bounds commute with floor and ceil) keeps the values small, so
-        // the rounding is a cast: the baseline x86-64 target has no rounding instruction and
-        // calls into libm for f64::floor/ceil, once per tile–Gaussian pair.
-        let span = |m: f64, half: f64| {
-            let lo = ceil_small((m - half - 0.5).clamp(0.0, TILE_SIZE as f64)) as usize;
-            let hi = floor_small((m + half - 0.5).clamp(-1.0, TILE_SIZE as f64 - 1.0)) + 1;
-            lo..(hi.max(lo as i64) as usize)
-        };
-        let xs = span(splat.mx.to_f64(), half_x);
-        let ys = span(splat.my.to_f64(), half_y);
-        (!xs.is_empty() && !ys.is_empty()).then_some((splat, xs, ys))
+        Some((splat, xs, ys))
     }
 }
 
@@ -453,8 +493,7 @@ fn forward_tile<E: Real>(
     w: usize,
 ) -> TileForward<E> {
     let channels = splats.channels;
-    let (x0, y0) = plan.tile_origin(plan.tiles[w]);
-    let (x0, y0) = (E::of(x0 as f64), E::of(y0 as f64));
+    let corner = Corner::new(plan.tile_origin(plan.tiles[w]));
     let min_alpha = E::of(MIN_ALPHA);
     let min_t = E::of(plan.stop_transmittance);
 
@@ -469,7 +508,7 @@ fn forward_tile<E: Real>(
             break;
         }
         let row = row as usize;
-        let Some((splat, xs, ys)) = gathered.get(j).on_tile(x0, y0) else {
+        let Some((splat, xs, ys)) = gathered.get(j).on_tile(corner) else {
             continue;
         };
         let values = &splats.values[row * channels..(row + 1) * channels];
@@ -689,8 +728,7 @@ fn backward_tile<E: Real>(
 ) -> Vec<E> {
     let channels = splats.channels;
     let stride = 6 + channels;
-    let (tx0, ty0) = plan.tile_origin(plan.tiles[w]);
-    let (x0, y0) = (E::of(tx0 as f64), E::of(ty0 as f64));
+    let corner = Corner::new(plan.tile_origin(plan.tiles[w]));
     let min_alpha = E::of(MIN_ALPHA);
     let max_alpha = E::of(MAX_ALPHA);
     let half = E::of(0.5);
@@ -707,7 +745,7 @@ fn backward_tile<E: Real>(
     for j in (0..entries).rev() {
         let replaying = replay.at(j);
         let row = list[j] as usize;
-        let Some((splat, xs, ys)) = gathered.get(j).on_tile(x0, y0) else {
+        let Some((splat, xs, ys)) = gathered.get(j).on_tile(corner) else {
             continue;
         };
         let values = &splats.values[row * channels..(row + 1) * channels];
@@ -879,11 +917,11 @@ mod tests {
                 channels: 1,
             };
             let footprint = Footprint::new(&splats, 0);
-            let [x0, y0] = corner.map(E::of);
-            let placed = footprint.on_tile(x0, y0);
+            let corner = Corner::new((corner[0] as usize, corner[1] as usize));
+            let placed = footprint.on_tile(corner);
             let splat = Splat {
-                mx: mean[0] - x0,
-                my: mean[1] - y0,
+                mx: mean[0] - corner.at[0],
+                my: mean[1] - corner.at[1],
                 ..footprint.splat
             };
             for p in (0..TILE_PIXELS).filter(|&p| live(&splat, p)) {

@@ -22,8 +22,8 @@ use std::ops::Range;
 
 use super::lanes_exp::exp;
 use super::{
-    Footprint, Gathered, HostSplats, Replay, RowBits, Splat, TileForward, Walk, column_bits,
-    valid_bits,
+    Corner, Footprint, Gathered, HostSplats, Replay, RowBits, Splat, TileForward, Walk,
+    column_bits, valid_bits,
 };
 use crate::fused::plan::CompositePlan;
 use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
@@ -247,8 +247,7 @@ fn forward_tile(
     w: usize,
 ) -> TileForward<f32> {
     let channels = splats.channels;
-    let (x0, y0) = plan.tile_origin(plan.tiles[w]);
-    let (x0, y0) = (x0 as f32, y0 as f32);
+    let corner = Corner::new(plan.tile_origin(plan.tiles[w]));
     let one = _mm256_set1_ps(1.0);
     let min_t = _mm256_set1_ps(plan.stop_transmittance as f32);
 
@@ -263,7 +262,7 @@ fn forward_tile(
             break;
         }
         let row = row as usize;
-        let Some((splat, xs, ys)) = gathered.get(j).on_tile(x0, y0) else {
+        let Some((splat, xs, ys)) = gathered.get(j).on_tile(corner) else {
             continue;
         };
         let values = &splats.values[row * channels..(row + 1) * channels];
@@ -384,8 +383,7 @@ fn backward_tile(
 ) -> Vec<f32> {
     let channels = splats.channels;
     let stride = 6 + channels;
-    let (x0, y0) = plan.tile_origin(plan.tiles[w]);
-    let (x0, y0) = (x0 as f32, y0 as f32);
+    let corner = Corner::new(plan.tile_origin(plan.tiles[w]));
     let one = _mm256_set1_ps(1.0);
     let zero = _mm256_setzero_ps();
     let half_one = _mm256_set1_ps(0.5);
@@ -405,7 +403,7 @@ fn backward_tile(
     for j in (0..entries).rev() {
         let replaying = replay.at(j);
         let row = list[j] as usize;
-        let Some((splat, xs, ys)) = gathered.get(j).on_tile(x0, y0) else {
+        let Some((splat, xs, ys)) = gathered.get(j).on_tile(corner) else {
             continue;
         };
         let values = &splats.values[row * channels..(row + 1) * channels];
