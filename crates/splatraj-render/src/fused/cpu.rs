@@ -342,23 +342,32 @@ impl<'a, E: Real> Gathered<'a, E> {
 
     /// The footprint of list entry `j`; blocks are aligned, so walking the list either way
     /// reads each block once.
+    #[inline(always)]
     fn get(&mut self, j: usize) -> &Footprint<E> {
         let start = j / GATHER * GATHER;
         if start != self.start {
-            self.start = start;
-            let rows = &self.list[start..(start + GATHER).min(self.list.len())];
-            self.block.clear();
-            self.block
-                .extend(rows.iter().map(|&row| self.footprints[row as usize]));
-            let next = match self.walk {
-                Walk::FrontToBack => start + GATHER..(start + 2 * GATHER).min(self.list.len()),
-                Walk::BackToFront => start.saturating_sub(GATHER)..start,
-            };
-            for &row in self.list.get(next).unwrap_or_default() {
-                prefetch(&self.footprints[row as usize]);
-            }
+            self.load(start);
         }
         &self.block[j - start]
+    }
+
+    /// Reads the block of entries from `start` and prefetches the next one. Kept out of line:
+    /// it runs once every [`GATHER`] entries, and inlined with `get` the whole of it had the
+    /// kernels call `get` for every entry (perf: 2.7 % of a run).
+    #[inline(never)]
+    fn load(&mut self, start: usize) {
+        self.start = start;
+        let rows = &self.list[start..(start + GATHER).min(self.list.len())];
+        self.block.clear();
+        self.block
+            .extend(rows.iter().map(|&row| self.footprints[row as usize]));
+        let next = match self.walk {
+            Walk::FrontToBack => start + GATHER..(start + 2 * GATHER).min(self.list.len()),
+            Walk::BackToFront => start.saturating_sub(GATHER)..start,
+        };
+        for &row in self.list.get(next).unwrap_or_default() {
+            prefetch(&self.footprints[row as usize]);
+        }
     }
 }
 
