@@ -244,11 +244,12 @@ impl<E: Real> Footprint<E> {
     /// Only t grows, by what the kernels' rounding can hide (docs/rasterizer.md, "The box"):
     /// α ≥ 1/255 in E needs q_E ≤ t + 16u, and q_E is within 16u/(1 − ρ) of q relative to it
     /// (u: E's unit roundoff, ρ = |b|/sqrt(ac) < 1 the conic's correlation: the terms of q
-    /// can be 2/(1 − ρ) times q itself). So q > (t + 16u)/(1 − 16u/(1 − ρ)) leaves α < 1/255.
+    /// can be 2/(1 − ρ) times q itself). So q > (t + 16u)/(1 − 16u/(1 − ρ)) leaves α < 1/255,
+    /// and so does q > (t + 16u)/(1 − 32u·ac/det), which is what is computed.
     /// The box used to carry a pixel of margin instead, which on a mask pass of 96×54 doubled
     /// the half rows the kernels visited (most splats there are a few pixels wide); a needle
     /// (1 − ρ of 10⁻⁵) needs far less than a pixel of it, and a conic too close to degenerate
-    /// for the bound to hold (1 − ρ ≤ 32u) is tested on the whole tile.
+    /// for the bound to hold (ac/det ≥ 1/(64u)) is tested on the whole tile.
     fn extent([mx, my, a, b, c]: [f64; 5], t: f64) -> Extent {
         if t.is_nan() || t < 0.0 {
             return Extent::Nowhere;
@@ -258,17 +259,17 @@ impl<E: Real> Footprint<E> {
             return Extent::Anywhere;
         }
         let u = E::UNIT_ROUNDOFF;
-        let root_ac = (a * c).sqrt();
-        // 1 − ρ without the cancellation of 1 − |b|/sqrt(ac) near 1.
-        let loose = det / (root_ac * (root_ac + b.abs()));
-        let relative = 16.0 * u / loose;
+        let inverse = 1.0 / det;
+        // 1/(1 − ρ) ≤ 2/(1 − ρ²) = 2ac/det: a bound at most twice as loose, without the square
+        // root and the divisions that made this a long chain per row and pass.
+        let relative = 32.0 * u * a * c * inverse;
         if relative.is_nan() || relative >= 0.5 {
             return Extent::Anywhere;
         }
         let reach = (t + 16.0 * u) / (1.0 - relative);
         // The f64 arithmetic here and of the pixel bounds is covered by a millionth, relative
         // and in pixels.
-        let half = |variance: f64| (2.0 * reach * variance / det).sqrt() * (1.0 + 1e-6) + 1e-6;
+        let half = |variance: f64| (2.0 * reach * variance * inverse).sqrt() * (1.0 + 1e-6) + 1e-6;
         let (half_x, half_y) = (half(c), half(a));
         if !(half_x.is_finite() && half_y.is_finite() && mx.is_finite() && my.is_finite()) {
             return Extent::Anywhere;
