@@ -120,11 +120,17 @@ fn bin_one_pose(pose: PoseToBin<'_>, grid: &TileGrid) -> Vec<TileWork> {
             (key, k as u32)
         })
         .collect();
-    // A radix sort (radsort, Bevy's; LSB by byte, skipping the bytes all keys share): a
-    // step's poses keep 10 000–30 000 Gaussians each, where the comparison sort was a quarter
-    // of the binning (perf, first-try guitar step). The keys are unique, so any sort gives
-    // this order.
-    radsort::sort_by_key(&mut order, |&(key, _)| key);
+    // The keys are unique, so either sort gives this order. Where the poses share the cores
+    // (an optimisation step's tens of poses of 10 000–30 000 Gaussians each), each pose's
+    // sort runs on one thread, and a radix sort (radsort, Bevy's; LSB by byte, skipping the
+    // bytes all keys share) took the quarter of the binning the comparison sort was (perf,
+    // first-try guitar step). A pose with the cores to itself (a frame, possibly of millions
+    // of Gaussians) keeps the parallel sort, which a single-threaded one cannot match there.
+    if bands <= 1 {
+        radsort::sort_by_key(&mut order, |&(key, _)| key);
+    } else {
+        order.par_sort_unstable_by_key(|&(key, _)| key);
+    }
     let bands = if order.len() < BANDED_ENTRIES {
         1
     } else {

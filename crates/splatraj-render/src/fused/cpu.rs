@@ -155,8 +155,8 @@ pub struct Footprint<E> {
     /// The image columns and rows (first and last, inclusive; none where first > last) of the
     /// pixels whose α can reach 1/255 ([`Footprint::extent`]), so that placing the footprint
     /// on a tile is integer clamps: in f64 per list entry it was 6 % of a run's CPU time.
-    columns: [i32; 2],
-    rows: [i32; 2],
+    pixel_columns: [i32; 2],
+    pixel_rows: [i32; 2],
 }
 
 /// Where a row can reach α ≥ 1/255.
@@ -199,14 +199,15 @@ impl<E: Real> Footprint<E> {
         let opacity = splats.opacities[row];
         // In f64 like the bound it feeds: α at exactly 1/255 must not round out of the box.
         let reach = (255.0 * opacity.to_f64()).ln();
-        let (columns, rows) = match Self::extent([mx, my, a, b, c].map(E::to_f64), reach) {
-            Extent::Nowhere => (NO_PIXELS, NO_PIXELS),
-            Extent::Anywhere => (ALL_PIXELS, ALL_PIXELS),
-            Extent::Ellipse { half_x, half_y } => (
-                Self::pixel_span(mx.to_f64(), half_x),
-                Self::pixel_span(my.to_f64(), half_y),
-            ),
-        };
+        let (pixel_columns, pixel_rows) =
+            match Self::extent([mx, my, a, b, c].map(E::to_f64), reach) {
+                Extent::Nowhere => (NO_PIXELS, NO_PIXELS),
+                Extent::Anywhere => (ALL_PIXELS, ALL_PIXELS),
+                Extent::Ellipse { half_x, half_y } => (
+                    Self::pixel_span(mx.to_f64(), half_x),
+                    Self::pixel_span(my.to_f64(), half_y),
+                ),
+            };
         Footprint {
             splat: Splat {
                 mx,
@@ -217,8 +218,8 @@ impl<E: Real> Footprint<E> {
                 opacity,
                 skip_below: E::of(-reach) - E::of(1e-3),
             },
-            columns,
-            rows,
+            pixel_columns,
+            pixel_rows,
         }
     }
 
@@ -287,8 +288,8 @@ impl<E: Real> Footprint<E> {
             let hi = (i64::from(last) + 1 - origin).clamp(lo, tile);
             lo as usize..hi as usize
         };
-        let xs = span(self.columns, corner.pixels[0]);
-        let ys = span(self.rows, corner.pixels[1]);
+        let xs = span(self.pixel_columns, corner.pixels[0]);
+        let ys = span(self.pixel_rows, corner.pixels[1]);
         if xs.is_empty() || ys.is_empty() {
             return None;
         }
