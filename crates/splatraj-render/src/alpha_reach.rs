@@ -42,16 +42,25 @@ impl AlphaReach {
     /// The region of a Gaussian of opacity `opacity` whose screen covariance (low-pass
     /// included) is `covariance` = (xx, xy, yy).
     pub fn new(covariance: [f64; 3], opacity: f64) -> Self {
-        if opacity.is_finite() && opacity < MIN_ALPHA {
-            return AlphaReach { ellipse: [0.0; 3] };
+        Self::scaled(covariance, SquaredReach::of_opacity(opacity))
+    }
+
+    /// [`AlphaReach::new`] from the opacity's [`SquaredReach`], computed once per Gaussian:
+    /// a pass decides the same Gaussian from many poses, and the logarithm was a tenth of a
+    /// decision.
+    pub fn scaled(covariance: [f64; 3], reach: SquaredReach) -> Self {
+        match reach.0 {
+            Some(r2) => AlphaReach {
+                ellipse: covariance.map(|v| (r2 * v) as f32),
+            },
+            None => AlphaReach { ellipse: [0.0; 3] },
         }
-        // At o = 1/255 exactly the mean itself still draws: r² = 0 would be a point, so a tiny
-        // one is kept (with the margin, the mean's tile). NaN stays NaN and keeps the square.
-        let r2 = (2.0 * (opacity / MIN_ALPHA).ln()).max(1e-6) * (1.0 + SLACK);
-        let r2 = if opacity.is_nan() { f64::NAN } else { r2 };
-        AlphaReach {
-            ellipse: covariance.map(|v| (r2 * v) as f32),
-        }
+    }
+
+    /// E's entries (xx, xy, yy), for tests that compare bits.
+    #[cfg(test)]
+    pub(crate) fn ellipse_for_tests(&self) -> [f32; 3] {
+        self.ellipse
     }
 
     /// For each tile row of `rows`, the tile columns that the region about the mean `(u, v)`
@@ -112,6 +121,24 @@ impl AlphaReach {
                 start..end.max(start)
             }
         })
+    }
+}
+
+/// r²·(1 + [`SLACK`]) of a Gaussian's opacity, which [`AlphaReach`] scales Σ_2D by; `None`
+/// where α cannot reach 1/255 (o < 1/255). Pose-independent, so kept per Gaussian.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SquaredReach(Option<f64>);
+
+impl SquaredReach {
+    /// The squared reach of opacity `opacity` (NaN stays NaN: the square is kept).
+    pub fn of_opacity(opacity: f64) -> Self {
+        if opacity.is_finite() && opacity < MIN_ALPHA {
+            return SquaredReach(None);
+        }
+        // At o = 1/255 exactly the mean itself still draws: r² = 0 would be a point, so a tiny
+        // one is kept (with the margin, the mean's tile).
+        let r2 = (2.0 * (opacity / MIN_ALPHA).ln()).max(1e-6) * (1.0 + SLACK);
+        SquaredReach(Some(if opacity.is_nan() { f64::NAN } else { r2 }))
     }
 }
 

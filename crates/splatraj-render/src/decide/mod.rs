@@ -10,7 +10,10 @@
 use rayon::prelude::*;
 use splatraj_scene::Scene;
 
-use crate::alpha_reach::AlphaReach;
+#[cfg(target_arch = "x86_64")]
+mod lanes;
+
+use crate::alpha_reach::{AlphaReach, SquaredReach};
 use crate::camera::{Intrinsics, Pose, zoomed_intrinsics};
 use glam::DVec3;
 
@@ -38,6 +41,9 @@ pub struct HostGeometry {
     pub max_variance: Vec<f32>,
     /// Opacities in scene order (for the `min_opacity` approximation). `[N]`
     pub opacities: Vec<f32>,
+    /// Each Gaussian's [`SquaredReach`], sorted: read beside its covariance, where the scene
+    /// order's opacity was a scattered read and a logarithm per pose. `[N]`
+    pub squared_reach: Vec<SquaredReach>,
     /// Gaussians grouped by place, so a pose can skip the groups it cannot see.
     pub blocks: Vec<Block>,
     /// Scene index of the Gaussian at each sorted position. `[N]`
@@ -156,6 +162,10 @@ impl HostGeometry {
                 .map(|&g| max_variance[g as usize])
                 .collect(),
             opacities: scene.opacities.clone(),
+            squared_reach: scene_from_sorted
+                .par_iter()
+                .map(|&g| SquaredReach::of_opacity(f64::from(scene.opacities[g as usize])))
+                .collect(),
             blocks,
             scene_from_sorted,
             focus: FocusCache::default(),
@@ -296,10 +306,8 @@ pub fn decide_zoomed(
                 .sorted_list
                 .par_chunks(CHUNK)
                 .flat_map_iter(|chunk| {
-                    let (camera, reach) = (&camera, Reach::everywhere(whole_grid));
-                    chunk
-                        .iter()
-                        .filter_map(move |&k| camera.kept(geometry, k, reach))
+                    let positions = chunk.iter().map(|&k| k as usize);
+                    camera.kept_of(geometry, positions, Reach::everywhere(whole_grid))
                 })
                 .collect();
             if focus.surroundings == Surroundings::Nothing {
@@ -389,11 +397,28 @@ impl Camera {
             .filter(|(_, block)| self.may_reach(block, reach))
             .flat_map_iter(|(b, _)| {
                 let members = b * BLOCK_MEMBERS..((b + 1) * BLOCK_MEMBERS).min(n);
-                members
-                    .filter(|&k| select(k))
-                    .filter_map(move |k| self.kept(geometry, k as u32, reach))
+                self.kept_of(geometry, members.filter(|&k| select(k)), reach)
             })
             .collect()
+    }
+
+    /// The decisions on the Gaussians at sorted positions `positions` that this pose keeps,
+    /// in their order: four at a time in lanes where the processor can ([`lanes`]), the same
+    /// bits as one by one.
+    fn kept_of(
+        &self,
+        geometry: &HostGeometry,
+        positions: impl Iterator<Item = usize>,
+        reach: Reach,
+    ) -> Vec<Decided> {
+        let mut kept = Vec::new();
+        #[cfg(target_arch = "x86_64")]
+        if let Some(lanes) = lanes::Lanes::new() {
+            lanes.decide(self, geometry, positions, reach, &mut kept);
+            return kept;
+        }
+        kept.extend(positions.filter_map(|k| self.kept(geometry, k as u32, reach)));
+        kept
     }
 
     /// The decision on the Gaussian at sorted position `k`, if this pose keeps it
@@ -401,14 +426,12 @@ impl Camera {
     fn kept(&self, geometry: &HostGeometry, k: u32, reach: Reach) -> Option<Decided> {
         let (uv, z, screen) = self.decide(geometry, k as usize, reach);
         let (radius, covariance) = screen?;
-        let gaussian = geometry.scene_from_sorted[k as usize];
-        let opacity = f64::from(geometry.opacities[gaussian as usize]);
         Some(Decided {
-            gaussian,
+            gaussian: geometry.scene_from_sorted[k as usize],
             means_2d: uv.map(|c| c as f32),
             depth: z as f32,
             radius,
-            reach: AlphaReach::new(covariance, opacity),
+            reach: AlphaReach::scaled(covariance, geometry.squared_reach[k as usize]),
         })
     }
 
