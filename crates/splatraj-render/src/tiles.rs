@@ -8,6 +8,8 @@
 //! behind the object's last one cannot change the mask or its gradient (they only add terms whose
 //! mask value is 0, after every term that carries the object).
 
+use std::ops::Range;
+
 use rayon::prelude::*;
 
 use crate::bitset::GaussianBits;
@@ -100,7 +102,7 @@ fn bin_one_pose(pose: PoseToBin<'_>, grid: &TileGrid) -> Vec<TileWork> {
         TileSelection::Object(in_object) => {
             let mut wanted = vec![false; grid.len()];
             for k in (0..kept.len()).filter(|&k| in_object.contains(kept[k].gaussian as usize)) {
-                tiles_until(&kept[k], rects[k], grid.tiles_x, |tile| {
+                tiles_until(&kept[k], rects[k], ALL_ROWS, grid.tiles_x, |tile| {
                     wanted[tile] = true;
                     false
                 });
@@ -113,7 +115,11 @@ fn bin_one_pose(pose: PoseToBin<'_>, grid: &TileGrid) -> Vec<TileWork> {
     // u64, unique within a pose; the position in `kept` rides along to find the rectangle.
     let mut order: Vec<(u64, u32)> = (0..kept.len())
         .into_par_iter()
-        .filter(|&k| tiles_until(&kept[k], rects[k], grid.tiles_x, |tile| wanted[tile]))
+        .filter(|&k| {
+            tiles_until(&kept[k], rects[k], ALL_ROWS, grid.tiles_x, |tile| {
+                wanted[tile]
+            })
+        })
         .map(|k| {
             let decided = &kept[k];
             let key = (u64::from(ordered_bits(decided.depth)) << 32) | u64::from(decided.gaussian);
@@ -177,7 +183,7 @@ fn fill_lists(
         for &(key, k) in order {
             let g = key as u32; // the low 32 bits
             let k = k as usize;
-            tiles_until(&kept[k], rects[k], grid.tiles_x, |tile| {
+            tiles_until(&kept[k], rects[k], ALL_ROWS, grid.tiles_x, |tile| {
                 if wanted[tile] {
                     lists[tile].push(g);
                 }
@@ -200,8 +206,11 @@ fn fill_lists(
                     continue;
                 }
                 let g = key as u32; // the low 32 bits
-                tiles_until(&kept[k], rects[k], grid.tiles_x, |tile| {
-                    if rows.contains(&(tile / grid.tiles_x)) && wanted[tile] {
+                // Only the band's rows: a square across bands was walked whole by each, and
+                // every tile paid a division to find its row (a 720p frame's binning, where a
+                // pose has the cores and its lists are filled by bands).
+                tiles_until(&kept[k], rects[k], rows.clone(), grid.tiles_x, |tile| {
+                    if wanted[tile] {
                         lists[tile - first].push(g);
                     }
                     false
@@ -220,23 +229,31 @@ const BANDED_ENTRIES: usize = 20_000;
 /// 16 → 20 ms a step, compositing 49 → 47 ms, when every square was tested).
 const SMALL_SQUARE_TILES: usize = 4;
 
+/// Every tile row, for [`tiles_until`].
+const ALL_ROWS: Range<usize> = 0..usize::MAX;
+
 /// Visits the tiles of a kept Gaussian's square `rect` ([x0, x1, y0, y1] in tiles) where its
 /// α can reach 1/255 (`alpha_reach`: the same images and gradients from far shorter lists in
-/// close-ups), row by row, until `visit` returns true; whether it did.
+/// close-ups), row by row within the tile rows `rows`, until `visit` returns true; whether it
+/// did. Whether the square is tested against the ellipse depends on the whole square, so a
+/// row's tiles are the same whatever `rows` is.
 fn tiles_until(
     decided: &Decided,
     rect: [u16; 4],
+    rows: Range<usize>,
     tiles_x: usize,
     mut visit: impl FnMut(usize) -> bool,
 ) -> bool {
     let [x0, x1, y0, y1] = rect.map(usize::from);
+    let mut visited = y0.max(rows.start)..y1.min(rows.end);
     if (x1 - x0) * (y1 - y0) <= SMALL_SQUARE_TILES {
         // The square whole, without the ellipse's set-up (most Gaussians at a step's size).
-        return (y0..y1).any(|ty| (x0..x1).any(|tx| visit(ty * tiles_x + tx)));
+        return visited.any(|ty| (x0..x1).any(|tx| visit(ty * tiles_x + tx)));
     }
     let mean = decided.means_2d.map(f64::from);
-    (y0..y1)
-        .zip(decided.reach.row_columns(mean, y0..y1, x0..x1))
+    visited
+        .clone()
+        .zip(decided.reach.row_columns(mean, visited, x0..x1))
         .any(|(ty, columns)| columns.map(|tx| ty * tiles_x + tx).any(&mut visit))
 }
 
