@@ -90,29 +90,18 @@ fn values(v: __m256d) -> [f64; LANES] {
     out
 }
 
-/// `a·b`, `a + b`, `a − b`, `a / b`, lane by lane.
+/// `a·b` lane by lane (short, for the formulas below).
 #[target_feature(enable = "avx")]
 #[inline]
 fn mul(a: __m256d, b: __m256d) -> __m256d {
     _mm256_mul_pd(a, b)
 }
 
+/// `a + b` lane by lane.
 #[target_feature(enable = "avx")]
 #[inline]
 fn add(a: __m256d, b: __m256d) -> __m256d {
     _mm256_add_pd(a, b)
-}
-
-#[target_feature(enable = "avx")]
-#[inline]
-fn sub(a: __m256d, b: __m256d) -> __m256d {
-    _mm256_sub_pd(a, b)
-}
-
-#[target_feature(enable = "avx")]
-#[inline]
-fn div(a: __m256d, b: __m256d) -> __m256d {
-    _mm256_div_pd(a, b)
 }
 
 /// `(x0·y0) + (x1·y1) + (x2·y2)`, glam's dot product.
@@ -215,13 +204,13 @@ fn decide_four(
     let centre = camera.centre;
     // d = mean − centre, per axis.
     let d = [
-        sub(column(&means, 0), _mm256_set1_pd(centre.x)),
-        sub(column(&means, 1), _mm256_set1_pd(centre.y)),
-        sub(column(&means, 2), _mm256_set1_pd(centre.z)),
+        _mm256_sub_pd(column(&means, 0), _mm256_set1_pd(centre.x)),
+        _mm256_sub_pd(column(&means, 1), _mm256_set1_pd(centre.y)),
+        _mm256_sub_pd(column(&means, 2), _mm256_set1_pd(centre.z)),
     ];
     let (x, y, z) = (dot(d, r0), dot(d, r1), dot(d, r2));
     let z_safe = _mm256_max_pd(z, near);
-    let (xz, yz) = (div(x, z_safe), div(y, z_safe));
+    let (xz, yz) = (_mm256_div_pd(x, z_safe), _mm256_div_pd(y, z_safe));
     let u = add(mul(_mm256_set1_pd(fx), xz), _mm256_set1_pd(intrinsics.cx));
     let v = add(mul(_mm256_set1_pd(fy), yz), _mm256_set1_pd(intrinsics.cy));
     let (tx, ty) = (
@@ -229,7 +218,7 @@ fn decide_four(
         clamp(yz, -camera.limits.1, camera.limits.1),
     );
     let one = _mm256_set1_pd(1.0);
-    let j_norm2 = div(
+    let j_norm2 = _mm256_div_pd(
         add(
             mul(_mm256_set1_pd(fx * fx), add(one, mul(tx, tx))),
             mul(_mm256_set1_pd(fy * fy), add(one, mul(ty, ty))),
@@ -257,8 +246,8 @@ fn decide_four(
         _mm256_cmp_pd::<_CMP_GT_OQ>(stored_depth, _mm256_set1_pd(f64::from(reach.max_depth))),
         _mm256_cmp_pd::<_CMP_LT_OQ>(add(u, bound), _mm256_set1_pd(bounds[0])),
         _mm256_cmp_pd::<_CMP_LT_OQ>(add(v, bound), _mm256_set1_pd(bounds[1])),
-        _mm256_cmp_pd::<_CMP_GT_OQ>(sub(u, bound), _mm256_set1_pd(bounds[2])),
-        _mm256_cmp_pd::<_CMP_GT_OQ>(sub(v, bound), _mm256_set1_pd(bounds[3])),
+        _mm256_cmp_pd::<_CMP_GT_OQ>(_mm256_sub_pd(u, bound), _mm256_set1_pd(bounds[2])),
+        _mm256_cmp_pd::<_CMP_GT_OQ>(_mm256_sub_pd(v, bound), _mm256_set1_pd(bounds[3])),
     ]);
     if _mm256_movemask_pd(rejected) == 0b1111 {
         return;
@@ -266,15 +255,15 @@ fn decide_four(
     // t1 = r0·(fx/z) + r2·(−fx·tx/z), t2 = r1·(fy/z) + r2·(−fy·ty/z).
     let t1 = combine(
         r0,
-        div(_mm256_set1_pd(fx), z_safe),
+        _mm256_div_pd(_mm256_set1_pd(fx), z_safe),
         r2,
-        div(mul(_mm256_set1_pd(-fx), tx), z_safe),
+        _mm256_div_pd(mul(_mm256_set1_pd(-fx), tx), z_safe),
     );
     let t2 = combine(
         r1,
-        div(_mm256_set1_pd(fy), z_safe),
+        _mm256_div_pd(_mm256_set1_pd(fy), z_safe),
         r2,
-        div(mul(_mm256_set1_pd(-fy), ty), z_safe),
+        _mm256_div_pd(mul(_mm256_set1_pd(-fy), ty), z_safe),
     );
     let covariances = rows_of(&geometry.covariances, ks);
     let sigma = [
@@ -293,14 +282,14 @@ fn decide_four(
     let c = add(dot(t2, s_t2), low_pass);
     // `project::cull_and_radius`.
     let trace = add(a, c);
-    let det = sub(mul(a, c), mul(b, b));
+    let det = _mm256_sub_pd(mul(a, c), mul(b, b));
     let ok = all([
         _mm256_cmp_pd::<_CMP_GT_OQ>(z, near),
         finite(trace),
         finite(b),
         _mm256_cmp_pd::<_CMP_GT_OQ>(trace, _mm256_setzero_pd()),
         _mm256_cmp_pd::<_CMP_GT_OQ>(
-            div(det, mul(trace, trace)),
+            _mm256_div_pd(det, mul(trace, trace)),
             _mm256_set1_pd(NORMALISED_DET_FLOOR),
         ),
     ]);
@@ -311,7 +300,10 @@ fn decide_four(
     let mid = mul(_mm256_set1_pd(0.5), trace);
     let lambda_max = add(
         mid,
-        _mm256_sqrt_pd(_mm256_max_pd(sub(mul(mid, mid), det), _mm256_setzero_pd())),
+        _mm256_sqrt_pd(_mm256_max_pd(
+            _mm256_sub_pd(mul(mid, mid), det),
+            _mm256_setzero_pd(),
+        )),
     );
     let radius = _mm256_round_pd::<{ _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC }>(mul(
         _mm256_set1_pd(3.0),
