@@ -28,6 +28,10 @@ pub trait Real:
     fn exp(self) -> Self;
     /// The value as f64.
     fn to_f64(self) -> f64;
+    /// `values` as f32 where Self is f32 (the 8-lane kernels run in f32 only), else `None`.
+    fn as_f32(values: &[Self]) -> Option<&[f32]>;
+    /// [`Real::as_f32`] for writing.
+    fn as_f32_mut(values: &mut [Self]) -> Option<&mut [f32]>;
 }
 
 impl Real for f32 {
@@ -43,6 +47,12 @@ impl Real for f32 {
     fn to_f64(self) -> f64 {
         self as f64
     }
+    fn as_f32(values: &[Self]) -> Option<&[f32]> {
+        Some(values)
+    }
+    fn as_f32_mut(values: &mut [Self]) -> Option<&mut [f32]> {
+        Some(values)
+    }
 }
 
 impl Real for f64 {
@@ -57,5 +67,11 @@ impl Real for f64 {
     }
     fn to_f64(self) -> f64 {
         self
+    }
+    fn as_f32(_: &[Self]) -> Option<&[f32]> {
+        None
+    }
+    fn as_f32_mut(_: &mut [Self]) -> Option<&mut [f32]> {
+        None
     }
 }

@@ -9,6 +9,9 @@
 //! camera centre, and the per-pose sums are taken in f64 in a fixed chunk order (the same
 //! numbers on every thread count), then through Rodrigues' derivative once per pose.
 
+#[cfg(target_arch = "x86_64")]
+mod simd;
+
 use rayon::prelude::*;
 
 use super::{PackedColumn, ProjectionCamera, ProjectionPlan, SPLAT_COLUMNS};
@@ -32,6 +35,16 @@ impl<E: Real> Frame<E> {
         Frame {
             axes: std::array::from_fn(|k| std::array::from_fn(|e| E::of(rotation.matrix[e][k]))),
             centre: std::array::from_fn(|e| E::of(pose[3 + e])),
+        }
+    }
+
+    /// The same frame in f32 (exact where E is f32, the only case that asks).
+    #[cfg(target_arch = "x86_64")]
+    fn as_f32(&self) -> Frame<f32> {
+        let f32_of = |v: E| v.to_f64() as f32;
+        Frame {
+            axes: self.axes.map(|axis| axis.map(f32_of)),
+            centre: self.centre.map(f32_of),
         }
     }
 }
@@ -70,6 +83,24 @@ impl<E: Real> Lens<E> {
             lim_x: E::of(lim_x),
             lim_y: E::of(lim_y),
             near: E::of(camera.near),
+        }
+    }
+
+    /// The same lens in f32 (exact where E is f32, the only case that asks).
+    #[cfg(target_arch = "x86_64")]
+    fn as_f32(&self) -> Lens<f32> {
+        let f32_of = |v: E| v.to_f64() as f32;
+        Lens {
+            zoom: f32_of(self.zoom),
+            fx0: f32_of(self.fx0),
+            fy0: f32_of(self.fy0),
+            fx: f32_of(self.fx),
+            fy: f32_of(self.fy),
+            cx: f32_of(self.cx),
+            cy: f32_of(self.cy),
+            lim_x: f32_of(self.lim_x),
+            lim_y: f32_of(self.lim_y),
+            near: f32_of(self.near),
         }
     }
 }
@@ -367,12 +398,48 @@ pub fn forward<E: Real>(
         jobs.extend(chunks.map(|(c, out)| (b, rows.start(b) + c * ROWS_PER_CHUNK, out)));
     }
     jobs.into_par_iter().for_each(|(b, first, out)| {
-        for (i, packed) in out.chunks_exact_mut(SPLAT_COLUMNS).enumerate() {
-            let g = plan.gaussians[first + i] as usize;
-            packed.copy_from_slice(&scene.project(g, &frames[b], &lenses[b]).out);
-        }
+        let gaussians = &plan.gaussians[first..first + out.len() / SPLAT_COLUMNS];
+        project_rows(scene, gaussians, &frames[b], &lenses[b], out);
     });
     out
+}
+
+/// The packed rows `[rows, 7]` of `gaussians` seen from one pose, into `out`: eight at a time
+/// in lanes where E is f32 and the processor has AVX ([`simd`], the same bits), the rest one
+/// by one.
+fn project_rows<E: Real>(
+    scene: SceneRows<'_, E>,
+    gaussians: &[u32],
+    frame: &Frame<E>,
+    lens: &Lens<E>,
+    out: &mut [E],
+) {
+    let mut done = 0;
+    #[cfg(target_arch = "x86_64")]
+    if let (Some(lanes), Some(components), Some(opacities), Some(out)) = (
+        simd::Lanes::new(),
+        E::as_f32(scene.components),
+        E::as_f32(scene.opacities),
+        E::as_f32_mut(out),
+    ) {
+        let scene = SceneRows {
+            components,
+            opacities,
+        };
+        let (frame, lens) = (frame.as_f32(), lens.as_f32());
+        let groups = gaussians.chunks_exact(simd::LANES);
+        let packed = out.chunks_exact_mut(simd::LANES * SPLAT_COLUMNS);
+        for (group, packed) in groups.zip(packed) {
+            let group = std::array::from_fn(|i| group[i] as usize);
+            let packed = packed.try_into().expect("8 packed rows");
+            lanes.project(scene, group, &frame, &lens, packed);
+            done += simd::LANES;
+        }
+    }
+    let rest = out[done * SPLAT_COLUMNS..].chunks_exact_mut(SPLAT_COLUMNS);
+    for (packed, &g) in rest.zip(&gaussians[done..]) {
+        packed.copy_from_slice(&scene.project(g as usize, frame, lens).out);
+    }
 }
 
 /// d L/dΦ `[B, 6]` and d L/ds `[B]` from the gradient of the packed rows `v_out` `[R, 7]`.
