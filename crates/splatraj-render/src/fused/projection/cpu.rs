@@ -358,6 +358,74 @@ fn backward_row<E: Real>(
     (v_axes, v_centre, v_zoom)
 }
 
+/// Σ over the rows `rows` (in order) of their gradients d L/d axes (9), d L/d centre (3) and
+/// d L/ds (1), each added in f64 row after row: eight rows' gradients at a time in lanes where
+/// E is f32 and the processor has AVX ([`simd`], the same bits), the rest one by one.
+fn row_gradients<E: Real>(
+    scene: SceneRows<'_, E>,
+    plan: &ProjectionPlan,
+    v_out: &[E],
+    rows: impl Iterator<Item = usize>,
+    frame: &Frame<E>,
+    lens: &Lens<E>,
+) -> [f64; 13] {
+    let mut sums = [0.0f64; 13];
+    let one_row = |r: usize, sums: &mut [f64; 13]| {
+        let v = &v_out[r * SPLAT_COLUMNS..(r + 1) * SPLAT_COLUMNS];
+        let row = scene.project(plan.gaussians[r] as usize, frame, lens);
+        let (v_axes, v_centre, v_zoom) = backward_row(&row, v, frame, lens);
+        for k in 0..3 {
+            for e in 0..3 {
+                sums[3 * k + e] += v_axes[k][e].to_f64();
+            }
+            sums[9 + k] += v_centre[k].to_f64();
+        }
+        sums[12] += v_zoom.to_f64();
+    };
+    #[cfg(target_arch = "x86_64")]
+    if let (Some(lanes), Some(components), Some(opacities), Some(v_out)) = (
+        simd::Lanes::new(),
+        E::as_f32(scene.components),
+        E::as_f32(scene.opacities),
+        E::as_f32(v_out),
+    ) {
+        let scene = SceneRows {
+            components,
+            opacities,
+        };
+        let (frame, lens) = (frame.as_f32(), lens.as_f32());
+        let mut group = [0usize; simd::LANES];
+        let mut filled = 0;
+        for r in rows {
+            group[filled] = r;
+            filled += 1;
+            if filled < simd::LANES {
+                continue;
+            }
+            filled = 0;
+            let gaussians = group.map(|r| plan.gaussians[r] as usize);
+            let v_rows = group.map(|r| {
+                let v = &v_out[r * SPLAT_COLUMNS..(r + 1) * SPLAT_COLUMNS];
+                <[f32; SPLAT_COLUMNS]>::try_from(v).expect("7 columns")
+            });
+            let terms = lanes.backward(scene, gaussians, &v_rows, &frame, &lens);
+            for lane in 0..simd::LANES {
+                for (sum, term) in sums.iter_mut().zip(&terms) {
+                    *sum += f64::from(term[lane]);
+                }
+            }
+        }
+        for &r in &group[..filled] {
+            one_row(r, &mut sums);
+        }
+        return sums;
+    }
+    for r in rows {
+        one_row(r, &mut sums);
+    }
+    sums
+}
+
 fn frames<E: Real>(poses: &[f64]) -> (Vec<Rotation>, Vec<Frame<E>>) {
     let rotations: Vec<Rotation> = poses
         .chunks_exact(6)
@@ -471,26 +539,16 @@ pub fn backward<E: Real>(
     let partial: Vec<(usize, [f64; 13])> = jobs
         .into_par_iter()
         .map(|(b, range)| {
-            let mut sums = [0.0f64; 13];
-            for r in range {
+            // Rows no pixel and no cost read (behind where every pixel stopped) contribute
+            // nothing: skip their arithmetic.
+            let read = range.filter(|&r| {
                 let v = &v_out[r * SPLAT_COLUMNS..(r + 1) * SPLAT_COLUMNS];
-                // Rows no pixel and no cost read (behind where every pixel stopped)
-                // contribute nothing: skip their arithmetic.
-                if v.iter().all(|g| g.to_f64() == 0.0) {
-                    continue;
-                }
-                let g = plan.gaussians[r] as usize;
-                let row = scene.project(g, &frames[b], &lenses[b]);
-                let (v_axes, v_centre, v_zoom) = backward_row(&row, v, &frames[b], &lenses[b]);
-                for k in 0..3 {
-                    for e in 0..3 {
-                        sums[3 * k + e] += v_axes[k][e].to_f64();
-                    }
-                    sums[9 + k] += v_centre[k].to_f64();
-                }
-                sums[12] += v_zoom.to_f64();
-            }
-            (b, sums)
+                !v.iter().all(|g| g.to_f64() == 0.0)
+            });
+            (
+                b,
+                row_gradients(scene, plan, v_out, read, &frames[b], &lenses[b]),
+            )
         })
         .collect();
     // Each pose's chunks summed in order (the same numbers on every thread count).

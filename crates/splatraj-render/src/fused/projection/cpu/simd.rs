@@ -15,7 +15,7 @@
 use std::arch::x86_64::*;
 
 use super::{Frame, Lens, SceneRows};
-use crate::fused::projection::SPLAT_COLUMNS;
+use crate::fused::projection::{PackedColumn, SPLAT_COLUMNS};
 use crate::project::{LOW_PASS, NORMALISED_DET_FLOOR};
 
 /// Rows projected side by side.
@@ -43,6 +43,20 @@ impl Lanes {
     ) {
         // SAFETY: `self` exists only where the processor has AVX.
         unsafe { project_eight(scene, gaussians, frame, lens, out) }
+    }
+
+    /// The gradient terms `[13][8]` (d L/d axes, d L/d centre, d L/ds; term, lane) of the
+    /// rows of Gaussians `gaussians` whose output gradients are `v_rows` `[8, 7]`.
+    pub(super) fn backward(
+        self,
+        scene: SceneRows<'_, f32>,
+        gaussians: [usize; LANES],
+        v_rows: &[[f32; SPLAT_COLUMNS]; LANES],
+        frame: &Frame<f32>,
+        lens: &Lens<f32>,
+    ) -> [[f32; LANES]; TERMS] {
+        // SAFETY: as above.
+        unsafe { backward_eight(scene, gaussians, v_rows, frame, lens) }
     }
 }
 
@@ -124,29 +138,61 @@ fn gather(components: &[f32], n: usize, k: usize, g: &[usize; LANES]) -> __m256 
     )
 }
 
-/// `cpu::project_row`'s packed output for eight Gaussians.
+/// Every intermediate of eight rows' projection that the output and the backward read
+/// (`cpu::Row` in lanes).
+struct RowLanes {
+    d: [__m256; 3],
+    x: __m256,
+    y: __m256,
+    z: __m256,
+    inv_z: __m256,
+    x_over_z: __m256,
+    y_over_z: __m256,
+    tx: __m256,
+    ty: __m256,
+    j00: __m256,
+    j11: __m256,
+    j02: __m256,
+    j12: __m256,
+    sigma_t1: [__m256; 3],
+    sigma_t2: [__m256; 3],
+    a: __m256,
+    b: __m256,
+    c: __m256,
+    inv_trace: __m256,
+    trace: __m256,
+    an: __m256,
+    bn: __m256,
+    cn: __m256,
+    det_n: __m256,
+    det_kept: __m256,
+    scale: __m256,
+    u: __m256,
+    v: __m256,
+}
+
+/// `cpu::project_row` for eight Gaussians `g`, step by step in the same order.
 #[target_feature(enable = "avx")]
-fn project_eight(
+fn row_eight(
     scene: SceneRows<'_, f32>,
-    g: [usize; LANES],
+    g: &[usize; LANES],
     frame: &Frame<f32>,
     lens: &Lens<f32>,
-    out: &mut [f32; LANES * SPLAT_COLUMNS],
-) {
+) -> RowLanes {
     let n = scene.opacities.len();
     let [r0, r1, r2] = frame.axes;
     let (r0, r1, r2) = (splat(r0), splat(r1), splat(r2));
     let d = [
         _mm256_sub_ps(
-            gather(scene.components, n, 0, &g),
+            gather(scene.components, n, 0, g),
             _mm256_set1_ps(frame.centre[0]),
         ),
         _mm256_sub_ps(
-            gather(scene.components, n, 1, &g),
+            gather(scene.components, n, 1, g),
             _mm256_set1_ps(frame.centre[1]),
         ),
         _mm256_sub_ps(
-            gather(scene.components, n, 2, &g),
+            gather(scene.components, n, 2, g),
             _mm256_set1_ps(frame.centre[2]),
         ),
     ];
@@ -175,12 +221,12 @@ fn project_eight(
     let t1 = combine(j00, r0, j02, r2);
     let t2 = combine(j11, r1, j12, r2);
     let s = [
-        gather(scene.components, n, 3, &g),
-        gather(scene.components, n, 4, &g),
-        gather(scene.components, n, 5, &g),
-        gather(scene.components, n, 6, &g),
-        gather(scene.components, n, 7, &g),
-        gather(scene.components, n, 8, &g),
+        gather(scene.components, n, 3, g),
+        gather(scene.components, n, 4, g),
+        gather(scene.components, n, 5, g),
+        gather(scene.components, n, 6, g),
+        gather(scene.components, n, 7, g),
+        gather(scene.components, n, 8, g),
     ];
     let sigma_t1 = sigma_times(&s, t1);
     let sigma_t2 = sigma_times(&s, t2);
@@ -194,6 +240,55 @@ fn project_eight(
     let det_n = _mm256_sub_ps(mul(an, cn), mul(bn, bn));
     let det_kept = max(det_n, _mm256_set1_ps(NORMALISED_DET_FLOOR as f32));
     let scale = _mm256_div_ps(one, mul(det_kept, trace));
+    RowLanes {
+        d,
+        x,
+        y,
+        z,
+        inv_z,
+        x_over_z,
+        y_over_z,
+        tx,
+        ty,
+        j00,
+        j11,
+        j02,
+        j12,
+        sigma_t1,
+        sigma_t2,
+        a,
+        b,
+        c,
+        inv_trace,
+        trace,
+        an,
+        bn,
+        cn,
+        det_n,
+        det_kept,
+        scale,
+        u,
+        v,
+    }
+}
+
+/// −v.
+#[target_feature(enable = "avx")]
+#[inline]
+fn negate(v: __m256) -> __m256 {
+    _mm256_xor_ps(v, _mm256_set1_ps(-0.0))
+}
+
+/// `cpu::project_row`'s packed output for eight Gaussians.
+#[target_feature(enable = "avx")]
+fn project_eight(
+    scene: SceneRows<'_, f32>,
+    g: [usize; LANES],
+    frame: &Frame<f32>,
+    lens: &Lens<f32>,
+    out: &mut [f32; LANES * SPLAT_COLUMNS],
+) {
+    let row = row_eight(scene, &g, frame, lens);
     let opacity = _mm256_setr_ps(
         scene.opacities[g[0]],
         scene.opacities[g[1]],
@@ -205,13 +300,13 @@ fn project_eight(
         scene.opacities[g[7]],
     );
     let columns = [
-        u,
-        v,
-        mul(cn, scale),
-        _mm256_xor_ps(mul(bn, scale), _mm256_set1_ps(-0.0)),
-        mul(an, scale),
+        row.u,
+        row.v,
+        mul(row.cn, row.scale),
+        negate(mul(row.bn, row.scale)),
+        mul(row.an, row.scale),
         opacity,
-        z,
+        row.z,
     ];
     // Column-major lanes to row-major rows.
     let mut lanes = [[0.0f32; LANES]; SPLAT_COLUMNS];
@@ -226,6 +321,207 @@ fn project_eight(
     }
 }
 
+/// Eight values as lanes.
+#[target_feature(enable = "avx")]
+#[inline]
+fn load(values: &[f32; LANES]) -> __m256 {
+    // SAFETY: `values` is 8 readable f32.
+    unsafe { _mm256_loadu_ps(values.as_ptr()) }
+}
+
+/// `b` where `mask`, else `a`.
+#[target_feature(enable = "avx")]
+#[inline]
+fn select(mask: __m256, a: __m256, b: __m256) -> __m256 {
+    _mm256_blendv_ps(a, b, mask)
+}
+
+/// `cpu::backward_row` for eight rows: their gradients d L/d axes `[k][e]` (9), d L/d centre
+/// (3) and d L/ds (1), as terms `[13][8]` (term, lane), from the rows' output gradients
+/// `v_rows` `[8, 7]` (row-major).
+#[target_feature(enable = "avx")]
+fn backward_eight(
+    scene: SceneRows<'_, f32>,
+    g: [usize; LANES],
+    v_rows: &[[f32; SPLAT_COLUMNS]; LANES],
+    frame: &Frame<f32>,
+    lens: &Lens<f32>,
+) -> [[f32; LANES]; TERMS] {
+    let row = row_eight(scene, &g, frame, lens);
+    let [r0, r1, r2] = frame.axes;
+    let (r0, r1, r2) = (splat(r0), splat(r1), splat(r2));
+    let zero = _mm256_setzero_ps();
+    let two = _mm256_set1_ps(2.0);
+    let column = |k: usize| -> [f32; LANES] { std::array::from_fn(|i| v_rows[i][k]) };
+    let (vu, vv) = (load(&column(0)), load(&column(1)));
+    let (va_out, vb_out, vc_out) = (load(&column(2)), load(&column(3)), load(&column(4)));
+    let v_depth = load(&column(PackedColumn::Depth as usize));
+
+    // conic = (cn, −bn, an) · scale, scale = 1 / (max(det_n, floor) · trace)
+    let v_scale = add(
+        _mm256_sub_ps(mul(va_out, row.cn), mul(vb_out, row.bn)),
+        mul(vc_out, row.an),
+    );
+    let mut v_cn = mul(va_out, row.scale);
+    let mut v_bn = negate(mul(vb_out, row.scale));
+    let mut v_an = mul(vc_out, row.scale);
+    let q = mul(row.det_kept, row.trace);
+    let v_q = negate(_mm256_div_ps(v_scale, mul(q, q)));
+    let v_det_kept = mul(v_q, row.trace);
+    let mut v_trace = mul(v_q, row.det_kept);
+    let floor = _mm256_set1_ps(NORMALISED_DET_FLOOR as f32);
+    let v_det = select(
+        _mm256_cmp_ps::<_CMP_LT_OQ>(row.det_n, floor),
+        v_det_kept,
+        zero,
+    );
+    v_an = add(v_an, mul(v_det, row.cn));
+    v_cn = add(v_cn, mul(v_det, row.an));
+    v_bn = add(v_bn, negate(mul(mul(two, row.bn), v_det)));
+    let v_inv_trace = add(add(mul(v_an, row.a), mul(v_bn, row.b)), mul(v_cn, row.c));
+    v_trace = add(
+        v_trace,
+        negate(mul(mul(v_inv_trace, row.inv_trace), row.inv_trace)),
+    );
+    let v_a = add(mul(v_an, row.inv_trace), v_trace);
+    let v_b = mul(v_bn, row.inv_trace);
+    let v_c = add(mul(v_cn, row.inv_trace), v_trace);
+
+    // a = t1ᵀΣt1, b = t2ᵀΣt1, c = t2ᵀΣt2 (Σ symmetric)
+    let (two_v_a, two_v_c) = (mul(two, v_a), mul(two, v_c));
+    let v_t1 = combine_pairs(two_v_a, row.sigma_t1, v_b, row.sigma_t2);
+    let v_t2 = combine_pairs(v_b, row.sigma_t1, two_v_c, row.sigma_t2);
+
+    // t1 = j00·r0 + j02·r2, t2 = j11·r1 + j12·r2
+    let v_j00 = dot(v_t1, r0);
+    let v_j02 = dot(v_t1, r2);
+    let v_j11 = dot(v_t2, r1);
+    let v_j12 = dot(v_t2, r2);
+    let mut v_axes = [
+        [
+            mul(row.j00, v_t1[0]),
+            mul(row.j00, v_t1[1]),
+            mul(row.j00, v_t1[2]),
+        ],
+        [
+            mul(row.j11, v_t2[0]),
+            mul(row.j11, v_t2[1]),
+            mul(row.j11, v_t2[2]),
+        ],
+        combine_pairs(row.j02, v_t1, row.j12, v_t2),
+    ];
+
+    // j00 = fx/z, j11 = fy/z, j02 = −fx·tx/z, j12 = −fy·ty/z; tx = clamp(s·x/z, ±lim)/s
+    let (fx, fy) = (_mm256_set1_ps(lens.fx), _mm256_set1_ps(lens.fy));
+    let mut v_inv_z = _mm256_sub_ps(
+        _mm256_sub_ps(
+            add(mul(fx, v_j00), mul(fy, v_j11)),
+            mul(mul(fx, row.tx), v_j02),
+        ),
+        mul(mul(fy, row.ty), v_j12),
+    );
+    let v_tx = negate(mul(mul(fx, row.inv_z), v_j02));
+    let v_ty = negate(mul(mul(fy, row.inv_z), v_j12));
+    let v_fx = _mm256_sub_ps(
+        add(mul(vu, row.x_over_z), mul(v_j00, row.inv_z)),
+        mul(mul(v_j02, row.tx), row.inv_z),
+    );
+    let v_fy = _mm256_sub_ps(
+        add(mul(vv, row.y_over_z), mul(v_j11, row.inv_z)),
+        mul(mul(v_j12, row.ty), row.inv_z),
+    );
+    let mut v_zoom = add(
+        mul(v_fx, _mm256_set1_ps(lens.fx0)),
+        mul(v_fy, _mm256_set1_ps(lens.fy0)),
+    );
+    let s = _mm256_set1_ps(lens.zoom);
+    let v_kx = _mm256_div_ps(v_tx, s);
+    let v_ky = _mm256_div_ps(v_ty, s);
+    v_zoom = add(
+        v_zoom,
+        _mm256_sub_ps(
+            negate(_mm256_div_ps(mul(v_tx, row.tx), s)),
+            _mm256_div_ps(mul(v_ty, row.ty), s),
+        ),
+    );
+    let mut v_x_over_z = mul(fx, vu);
+    let inside_x = inside(mul(row.x_over_z, s), lens.lim_x);
+    v_x_over_z = select(inside_x, v_x_over_z, add(v_x_over_z, mul(v_kx, s)));
+    v_zoom = select(inside_x, v_zoom, add(v_zoom, mul(v_kx, row.x_over_z)));
+    let mut v_y_over_z = mul(fy, vv);
+    let inside_y = inside(mul(row.y_over_z, s), lens.lim_y);
+    v_y_over_z = select(inside_y, v_y_over_z, add(v_y_over_z, mul(v_ky, s)));
+    v_zoom = select(inside_y, v_zoom, add(v_zoom, mul(v_ky, row.y_over_z)));
+    let v_x = mul(v_x_over_z, row.inv_z);
+    let v_y = mul(v_y_over_z, row.inv_z);
+    v_inv_z = add(v_inv_z, add(mul(v_x_over_z, row.x), mul(v_y_over_z, row.y)));
+    let in_front = _mm256_cmp_ps::<_CMP_GE_OQ>(row.z, _mm256_set1_ps(lens.near));
+    let v_z = select(
+        in_front,
+        v_depth,
+        add(v_depth, negate(mul(mul(v_inv_z, row.inv_z), row.inv_z))),
+    );
+
+    // (x, y, z) = (r0·d, r1·d, r2·d), d = p − c
+    for (v_axis, v_coordinate) in v_axes.iter_mut().zip([v_x, v_y, v_z]) {
+        for (v, d) in v_axis.iter_mut().zip(row.d) {
+            *v = add(*v, mul(v_coordinate, d));
+        }
+    }
+    let v_centre = [
+        negate(add(add(mul(v_x, r0[0]), mul(v_y, r1[0])), mul(v_z, r2[0]))),
+        negate(add(add(mul(v_x, r0[1]), mul(v_y, r1[1])), mul(v_z, r2[1]))),
+        negate(add(add(mul(v_x, r0[2]), mul(v_y, r1[2])), mul(v_z, r2[2]))),
+    ];
+    let [[a0, a1, a2], [a3, a4, a5], [a6, a7, a8]] = v_axes;
+    let terms = [
+        a0,
+        a1,
+        a2,
+        a3,
+        a4,
+        a5,
+        a6,
+        a7,
+        a8,
+        v_centre[0],
+        v_centre[1],
+        v_centre[2],
+        v_zoom,
+    ];
+    let mut out = [[0.0f32; LANES]; TERMS];
+    for (lane, term) in out.iter_mut().zip(terms) {
+        // SAFETY: `lane` is 8 writable f32.
+        unsafe { _mm256_storeu_ps(lane.as_mut_ptr(), term) };
+    }
+    out
+}
+
+/// Terms of a row's gradient: d L/d axes (9), d L/d centre (3), d L/ds (1).
+pub(super) const TERMS: usize = 13;
+
+/// `p·s[e] + q·t[e]` per axis (`cpu::backward_row`'s v_t1, v_t2 and v_axes[2]).
+#[target_feature(enable = "avx")]
+#[inline]
+fn combine_pairs(p: __m256, s: [__m256; 3], q: __m256, t: [__m256; 3]) -> [__m256; 3] {
+    [
+        add(mul(p, s[0]), mul(q, t[0])),
+        add(mul(p, s[1]), mul(q, t[1])),
+        add(mul(p, s[2]), mul(q, t[2])),
+    ]
+}
+
+/// Lanes where `!(t > lim || t < −lim)` (`cpu::backward_row`'s `inside`: NaN is inside).
+#[target_feature(enable = "avx")]
+#[inline]
+fn inside(t: __m256, lim: f32) -> __m256 {
+    let outside = _mm256_or_ps(
+        _mm256_cmp_ps::<_CMP_GT_OQ>(t, _mm256_set1_ps(lim)),
+        _mm256_cmp_ps::<_CMP_LT_OQ>(t, _mm256_set1_ps(-lim)),
+    );
+    _mm256_andnot_ps(outside, _mm256_castsi256_ps(_mm256_set1_epi32(-1)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -233,7 +529,17 @@ mod tests {
     use crate::fused::projection::ProjectionCamera;
     use crate::rodrigues::Rotation;
 
-    /// Eight rows in lanes give `project_row`'s packed output bit for bit, on rows built to
+    /// The bits of `values`, every NaN as one value: a NaN's sign and payload are not kept by
+    /// LLVM either (it may swap the operands of a product), and nothing reads them.
+    fn nan_as_one(values: &[f32]) -> Vec<u32> {
+        values
+            .iter()
+            .map(|x| if x.is_nan() { u32::MAX } else { x.to_bits() })
+            .collect()
+    }
+
+    /// Eight rows in lanes give `project_row`'s packed output, and `backward_row`'s gradient
+    /// terms, bit for bit, on rows built to
     /// reach every branch: in front of, straddling and behind the near plane, inside and beyond
     /// the clamp of x/z and y/z, needles and discs from 10⁻⁶ to 10³ across, zoomed and not,
     /// and non-finite centres, covariances and opacities.
@@ -290,8 +596,35 @@ mod tests {
         let pose = [0.1, -0.2, 0.05, 0.3, -0.1, -5.0];
         let rotation = Rotation::new([pose[0], pose[1], pose[2]]);
         let frame = Frame::<f32>::new(&pose, &rotation);
+        let v_rows: Vec<[f32; SPLAT_COLUMNS]> = (0..n)
+            .map(|_| std::array::from_fn(|_| ((next() - 0.5) * 4.0) as f32))
+            .collect();
         for zoom in [1.0, 2.5] {
             let lens = Lens::<f32>::new(&camera, zoom);
+            // The backward's terms, lane by lane against `backward_row`.
+            for first in (0..n - LANES).step_by(LANES + 3) {
+                let group: [usize; LANES] = std::array::from_fn(|i| first + i);
+                let v = group.map(|g| v_rows[g]);
+                let terms = lanes.backward(scene, group, &v, &frame, &lens);
+                for (i, &g) in group.iter().enumerate() {
+                    let row = scene.project(g, &frame, &lens);
+                    let (v_axes, v_centre, v_zoom) =
+                        super::super::backward_row(&row, &v_rows[g], &frame, &lens);
+                    let want: Vec<f32> = v_axes
+                        .iter()
+                        .flatten()
+                        .chain(&v_centre)
+                        .chain([&v_zoom])
+                        .copied()
+                        .collect();
+                    let got: Vec<f32> = terms.iter().map(|term| term[i]).collect();
+                    assert_eq!(
+                        nan_as_one(&got),
+                        nan_as_one(&want),
+                        "backward row {g}, zoom {zoom}: {got:?} against {want:?}"
+                    );
+                }
+            }
             for first in (0..n - LANES).step_by(LANES + 1) {
                 let group: [usize; LANES] = std::array::from_fn(|i| first + i);
                 let mut packed = [0.0f32; LANES * SPLAT_COLUMNS];
@@ -299,16 +632,9 @@ mod tests {
                 for (i, &g) in group.iter().enumerate() {
                     let want = scene.project(g, &frame, &lens).out;
                     let got = &packed[i * SPLAT_COLUMNS..(i + 1) * SPLAT_COLUMNS];
-                    // A NaN's sign and payload are not kept by LLVM either (it may swap the
-                    // operands of a product), and nothing reads them: any NaN is one value.
-                    let bits = |v: &[f32]| {
-                        v.iter()
-                            .map(|x| if x.is_nan() { u32::MAX } else { x.to_bits() })
-                            .collect::<Vec<_>>()
-                    };
                     assert_eq!(
-                        bits(got),
-                        bits(&want),
+                        nan_as_one(got),
+                        nan_as_one(&want),
                         "row {g}, zoom {zoom}: {got:?} against {want:?}"
                     );
                 }
