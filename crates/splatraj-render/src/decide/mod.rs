@@ -3,7 +3,8 @@
 //! integer data decided off the autodiff graph).
 //!
 //! The same formulas as the differentiable projection ([`crate::project`]), evaluated in f64
-//! per Gaussian in parallel from a per-scene host copy of the means and world covariances
+//! per Gaussian in parallel (four at a time in lanes where the processor has AVX, the same
+//! bits: `decide/lanes.rs`) from a per-scene host copy of the means and world covariances
 //! ([`HostGeometry`], built once). Only the cull test, the tile lists and the depth order come
 //! from here; values and gradients come from the tensor projection of the Gaussians kept.
 

@@ -1,5 +1,6 @@
 //! The fused projection's kernels in plain Rust: one row (pose, Gaussian) at a time, in
-//! parallel over fixed chunks of rows with rayon, generic over f32 and f64.
+//! parallel over fixed chunks of rows with rayon, generic over f32 and f64; in f32 eight rows
+//! at a time in lanes where the processor has AVX (`cpu/simd.rs`, the same bits).
 //!
 //! Every operation mirrors the tensor projection (`project.rs`) in the same order, with the same
 //! clamps and the same gradient conventions at them (a clamp passes the gradient where the value
