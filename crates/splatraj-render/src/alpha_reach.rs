@@ -49,7 +49,7 @@ impl AlphaReach {
     /// a pass decides the same Gaussian from many poses, and the logarithm was a tenth of a
     /// decision.
     pub fn scaled(covariance: [f64; 3], reach: SquaredReach) -> Self {
-        match reach.0 {
+        match reach.r2() {
             Some(r2) => AlphaReach {
                 ellipse: covariance.map(|v| (r2 * v) as f32),
             },
@@ -124,21 +124,27 @@ impl AlphaReach {
     }
 }
 
-/// r²·(1 + [`SLACK`]) of a Gaussian's opacity, which [`AlphaReach`] scales Σ_2D by; `None`
-/// where α cannot reach 1/255 (o < 1/255). Pose-independent, so kept per Gaussian.
+/// r²·(1 + [`SLACK`]) of a Gaussian's opacity, which [`AlphaReach`] scales Σ_2D by, or
+/// nowhere (o < 1/255). Pose-independent, so kept per Gaussian: 8 bytes, the nowhere case a
+/// negative value (every r² is positive or NaN), since a scene holds millions of them.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SquaredReach(Option<f64>);
+pub struct SquaredReach(f64);
 
 impl SquaredReach {
     /// The squared reach of opacity `opacity` (NaN stays NaN: the square is kept).
     pub fn of_opacity(opacity: f64) -> Self {
         if opacity.is_finite() && opacity < MIN_ALPHA {
-            return SquaredReach(None);
+            return SquaredReach(-1.0);
         }
         // At o = 1/255 exactly the mean itself still draws: r² = 0 would be a point, so a tiny
         // one is kept (with the margin, the mean's tile).
         let r2 = (2.0 * (opacity / MIN_ALPHA).ln()).max(1e-6) * (1.0 + SLACK);
-        SquaredReach(Some(if opacity.is_nan() { f64::NAN } else { r2 }))
+        SquaredReach(if opacity.is_nan() { f64::NAN } else { r2 })
+    }
+
+    /// r², or `None` where α reaches 1/255 nowhere.
+    fn r2(self) -> Option<f64> {
+        (self.0 >= 0.0 || self.0.is_nan()).then_some(self.0)
     }
 }
 
