@@ -384,17 +384,9 @@ fn row_gradients<E: Real>(
         sums[12] += v_zoom.to_f64();
     };
     #[cfg(target_arch = "x86_64")]
-    if let (Some(lanes), Some(components), Some(opacities), Some(v_out)) = (
-        simd::Lanes::new(),
-        E::as_f32(scene.components),
-        E::as_f32(scene.opacities),
-        E::as_f32(v_out),
-    ) {
-        let scene = SceneRows {
-            components,
-            opacities,
-        };
-        let (frame, lens) = (frame.as_f32(), lens.as_f32());
+    if let (Some((lanes, scene, frame, lens)), Some(v_out)) =
+        (in_lanes(scene, frame, lens), E::as_f32(v_out))
+    {
         let mut group = [0usize; simd::LANES];
         let mut filled = 0;
         for r in rows {
@@ -473,6 +465,24 @@ pub fn forward<E: Real>(
     out
 }
 
+/// The lanes with what they read: the scene's rows, one pose's frame and its lens, in f32.
+#[cfg(target_arch = "x86_64")]
+type InLanes<'a> = (simd::Lanes, SceneRows<'a, f32>, Frame<f32>, Lens<f32>);
+
+/// [`InLanes`] where E is f32 and the processor has AVX.
+#[cfg(target_arch = "x86_64")]
+fn in_lanes<'a, E: Real>(
+    scene: SceneRows<'a, E>,
+    frame: &Frame<E>,
+    lens: &Lens<E>,
+) -> Option<InLanes<'a>> {
+    let scene = SceneRows {
+        components: E::as_f32(scene.components)?,
+        opacities: E::as_f32(scene.opacities)?,
+    };
+    Some((simd::Lanes::new()?, scene, frame.as_f32(), lens.as_f32()))
+}
+
 /// The packed rows `[rows, 7]` of `gaussians` seen from one pose, into `out`: eight at a time
 /// in lanes where E is f32 and the processor has AVX ([`simd`], the same bits), the rest one
 /// by one.
@@ -485,17 +495,9 @@ fn project_rows<E: Real>(
 ) {
     let mut done = 0;
     #[cfg(target_arch = "x86_64")]
-    if let (Some(lanes), Some(components), Some(opacities), Some(out)) = (
-        simd::Lanes::new(),
-        E::as_f32(scene.components),
-        E::as_f32(scene.opacities),
-        E::as_f32_mut(out),
-    ) {
-        let scene = SceneRows {
-            components,
-            opacities,
-        };
-        let (frame, lens) = (frame.as_f32(), lens.as_f32());
+    if let (Some((lanes, scene, frame, lens)), Some(out)) =
+        (in_lanes(scene, frame, lens), E::as_f32_mut(out))
+    {
         let groups = gaussians.chunks_exact(simd::LANES);
         let packed = out.chunks_exact_mut(simd::LANES * SPLAT_COLUMNS);
         for (group, packed) in groups.zip(packed) {
