@@ -106,7 +106,8 @@ fn splat(axis: [f32; 3]) -> [__m256; 3] {
     ]
 }
 
-/// `j·p + k·q` per axis (`cpu::project_row`'s t1, t2).
+/// `j·p + k·q` per axis (`cpu::project_row`'s t1, t2; `cpu::backward_row`'s v_t1, v_t2 and
+/// v_axes[2]).
 #[target_feature(enable = "avx")]
 #[inline]
 fn combine(j: __m256, p: [__m256; 3], k: __m256, q: [__m256; 3]) -> [__m256; 3] {
@@ -389,8 +390,8 @@ fn backward_eight(
 
     // a = t1ᵀΣt1, b = t2ᵀΣt1, c = t2ᵀΣt2 (Σ symmetric)
     let (two_v_a, two_v_c) = (mul(two, v_a), mul(two, v_c));
-    let v_t1 = combine_pairs(two_v_a, row.sigma_t1, v_b, row.sigma_t2);
-    let v_t2 = combine_pairs(v_b, row.sigma_t1, two_v_c, row.sigma_t2);
+    let v_t1 = combine(two_v_a, row.sigma_t1, v_b, row.sigma_t2);
+    let v_t2 = combine(v_b, row.sigma_t1, two_v_c, row.sigma_t2);
 
     // t1 = j00·r0 + j02·r2, t2 = j11·r1 + j12·r2
     let v_j00 = dot(v_t1, r0);
@@ -408,7 +409,7 @@ fn backward_eight(
             mul(row.j11, v_t2[1]),
             mul(row.j11, v_t2[2]),
         ],
-        combine_pairs(row.j02, v_t1, row.j12, v_t2),
+        combine(row.j02, v_t1, row.j12, v_t2),
     ];
 
     // j00 = fx/z, j11 = fy/z, j02 = −fx·tx/z, j12 = −fy·ty/z; tx = clamp(s·x/z, ±lim)/s
@@ -499,17 +500,6 @@ fn backward_eight(
 
 /// Terms of a row's gradient: d L/d axes (9), d L/d centre (3), d L/ds (1).
 pub(super) const TERMS: usize = 13;
-
-/// `p·s[e] + q·t[e]` per axis (`cpu::backward_row`'s v_t1, v_t2 and v_axes[2]).
-#[target_feature(enable = "avx")]
-#[inline]
-fn combine_pairs(p: __m256, s: [__m256; 3], q: __m256, t: [__m256; 3]) -> [__m256; 3] {
-    [
-        add(mul(p, s[0]), mul(q, t[0])),
-        add(mul(p, s[1]), mul(q, t[1])),
-        add(mul(p, s[2]), mul(q, t[2])),
-    ]
-}
 
 /// Lanes where `!(t > lim || t < −lim)` (`cpu::backward_row`'s `inside`: NaN is inside).
 #[target_feature(enable = "avx")]
