@@ -1,14 +1,16 @@
-//! The f32 projection of eight rows at once (AVX, chosen at run time), for the forward.
+//! The f32 projection of eight rows at once (AVX, chosen at run time), forward and backward.
 //!
 //! A row's projection is a chain of about 60 operations with two divisions and two
 //! reciprocals; one row after another it was 5–6 % of an optimisation step's time on one
-//! thread. In lanes the same chain runs on eight rows of a pose side by side.
+//! thread, and its backward (which recomputes the row) another 5 %. In lanes the same chains
+//! run on eight rows of a pose side by side.
 //!
-//! The lanes compute `project_row`'s packed output bit for bit: every value is the same IEEE
-//! operation in the same order (no fused multiply–add; Rust does not contract the scalar code
-//! either), and its `max` / `min` (`if a < b { b } else { a }`, which keeps a NaN first operand)
-//! are an ordered compare and a blend. The backward keeps the scalar rows: it skips the rows no
-//! pixel read, one by one.
+//! The lanes compute `project_row`'s packed output and `backward_row`'s gradient terms bit for
+//! bit: every value is the same IEEE operation in the same order (no fused multiply–add; Rust
+//! does not contract the scalar code either), its `max` / `min` (`if a < b { b } else { a }`,
+//! which keeps a NaN first operand) are an ordered compare and a blend, and the backward's
+//! conditional steps (the clamps' gradients, the near plane) are blends on the same
+//! comparisons. The caller adds the terms to the pose's sums row after row, as before.
 //!
 //! Written with `std::arch`, like the compositing kernels (`fused/cpu/simd.rs`).
 
@@ -20,6 +22,9 @@ use crate::project::{LOW_PASS, NORMALISED_DET_FLOOR};
 
 /// Rows projected side by side.
 pub(super) const LANES: usize = 8;
+
+/// Terms of a row's gradient: d L/d axes (9), d L/d centre (3), d L/ds (1).
+pub(super) const TERMS: usize = 13;
 
 /// Proof that the processor has AVX: only [`Lanes::new`] makes one.
 #[derive(Debug, Clone, Copy)]
@@ -129,7 +134,8 @@ fn sigma_times(s: &[__m256; 6], t: [__m256; 3]) -> [__m256; 3] {
     ]
 }
 
-/// Component `k` of `components` `[9, N]` for the eight Gaussians `g`.
+/// Component `k` of `components` `[K, N]` (the scene's `[9, N]` rows, or its `[1, N]`
+/// opacities) for the eight Gaussians `g`.
 #[target_feature(enable = "avx")]
 #[inline]
 fn gather(components: &[f32], n: usize, k: usize, g: &[usize; LANES]) -> __m256 {
@@ -290,16 +296,7 @@ fn project_eight(
     out: &mut [f32; LANES * SPLAT_COLUMNS],
 ) {
     let row = row_eight(scene, &g, frame, lens);
-    let opacity = _mm256_setr_ps(
-        scene.opacities[g[0]],
-        scene.opacities[g[1]],
-        scene.opacities[g[2]],
-        scene.opacities[g[3]],
-        scene.opacities[g[4]],
-        scene.opacities[g[5]],
-        scene.opacities[g[6]],
-        scene.opacities[g[7]],
-    );
+    let opacity = gather(scene.opacities, scene.opacities.len(), 0, &g);
     let columns = [
         row.u,
         row.v,
@@ -497,9 +494,6 @@ fn backward_eight(
     }
     out
 }
-
-/// Terms of a row's gradient: d L/d axes (9), d L/d centre (3), d L/ds (1).
-pub(super) const TERMS: usize = 13;
 
 /// Lanes where `!(t > lim || t < −lim)` (`cpu::backward_row`'s `inside`: NaN is inside).
 #[target_feature(enable = "avx")]
