@@ -354,13 +354,16 @@ mod tests {
 
     /// Every list holds the Gaussians that reach its tile front to back, equal depths by scene
     /// index, whatever order `kept` has them in (the positions follow spatial blocks, not the
-    /// scene), on one thread (the radix sort) and on several (the parallel sort).
+    /// scene), on one thread (the radix sort, one loop) and on several (the parallel sort, the
+    /// rectangles in chunks); and a mask pass keeps the tiles its object reaches, each list cut
+    /// after the object's last Gaussian.
     #[test]
     fn lists_run_front_to_back_with_ties_by_scene_index() {
         let grid = TileGrid::new(160, 96);
         let mut next = crate::test_random::uniform(0x5eed_0042_u64);
-        let count = 2000u32;
-        // Scene indices shuffled against the positions, depths from eight values: many ties.
+        // More than two chunks of rectangles; scene indices shuffled against the positions,
+        // depths from eight values: many ties.
+        let count = 2 * RECT_CHUNK as u32 + 800;
         let mut scene: Vec<u32> = (0..count).collect();
         for i in (1..scene.len()).rev() {
             scene.swap(i, (next() * (i + 1) as f64) as usize);
@@ -378,38 +381,74 @@ mod tests {
                 }
             })
             .collect();
-        // The reference: each tile's Gaussians, sorted by (depth, scene index).
-        let mut expected: Vec<Vec<(f32, u32)>> = vec![Vec::new(); grid.len()];
+        // The object: a small cluster of scene indices, so that some tiles are not wanted.
+        let mut position_of = vec![0; scene.len()];
+        for (k, &g) in scene.iter().enumerate() {
+            position_of[g as usize] = k;
+        }
+        let in_object = GaussianBits::from_fn(count as usize, |g| {
+            let [u, v] = kept[position_of[g]].means_2d;
+            g % 3 == 0 && u < 60.0 && v < 40.0
+        });
+        // The references: each tile's Gaussians, sorted by (depth, scene index); for the mask
+        // pass only the tiles an object Gaussian reaches, each cut after its last one.
+        let mut all: Vec<Vec<(f32, u32)>> = vec![Vec::new(); grid.len()];
         for d in &kept {
             tiles_until(d, rect_of(d, &grid), ALL_ROWS, grid.tiles_x, |tile| {
-                expected[tile].push((d.depth, d.gaussian));
+                all[tile].push((d.depth, d.gaussian));
                 false
             });
         }
-        for list in &mut expected {
+        for list in &mut all {
             list.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         }
-        let ties = expected
+        let ties = all
             .iter()
             .flat_map(|list| list.windows(2))
             .filter(|pair| pair[0].0 == pair[1].0)
             .count();
         assert!(ties > 1000, "{ties} ties");
+        let object: Vec<Vec<(f32, u32)>> = all
+            .iter()
+            .map(|list| {
+                match list
+                    .iter()
+                    .rposition(|&(_, g)| in_object.contains(g as usize))
+                {
+                    Some(last) => list[..=last].to_vec(),
+                    None => Vec::new(),
+                }
+            })
+            .collect();
+        let object_tiles = object.iter().filter(|l| !l.is_empty()).count();
+        assert!(
+            object_tiles > 4 && object_tiles < grid.len() / 2,
+            "{object_tiles} object tiles"
+        );
         let decisions = Decisions { kept: vec![kept] };
-        for threads in [1, 4] {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .expect("a pool");
-            let work = pool.install(|| bin_tiles(&decisions, &grid, &[TileSelection::All]));
-            let listed: Vec<usize> = work.iter().map(|w| w.tile).collect();
-            let non_empty: Vec<usize> = (0..grid.len())
-                .filter(|&t| !expected[t].is_empty())
-                .collect();
-            assert_eq!(listed, non_empty, "{threads} threads");
-            for w in &work {
-                let want: Vec<u32> = expected[w.tile].iter().map(|&(_, g)| g).collect();
-                assert_eq!(w.gaussians, want, "tile {}, {threads} threads", w.tile);
+        for (pass, selection, expected) in [
+            ("all tiles", TileSelection::All, &all),
+            ("mask pass", TileSelection::Object(&in_object), &object),
+        ] {
+            for threads in [1, 4] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .expect("a pool");
+                let work = pool.install(|| bin_tiles(&decisions, &grid, &[selection]));
+                let listed: Vec<usize> = work.iter().map(|w| w.tile).collect();
+                let non_empty: Vec<usize> = (0..grid.len())
+                    .filter(|&t| !expected[t].is_empty())
+                    .collect();
+                assert_eq!(listed, non_empty, "{pass}, {threads} threads");
+                for w in &work {
+                    let want: Vec<u32> = expected[w.tile].iter().map(|&(_, g)| g).collect();
+                    assert_eq!(
+                        w.gaussians, want,
+                        "tile {}, {pass}, {threads} threads",
+                        w.tile
+                    );
+                }
             }
         }
     }
