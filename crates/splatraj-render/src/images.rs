@@ -70,9 +70,9 @@ pub fn rgb8<E: Copy + Into<f64>>(
     let mut out = vec![0; pixels.len() / channels * 3];
     // The channel counts of renders spelled out, so that each loop knows its stride. Written
     // into place with a known stride rather than pushed, a tinted 720p frame's conversion took
-    // 6.0 ms of one thread instead of 7.9 (untinted 5.7 against 5.9); written into place by
-    // one loop for any count, 8.2 ms (untinted 6.5): the known stride is the gain. The levels' rounding
-    // (`to_u8`) is the rest and is not in lanes: about 1 % of a first-try run.
+    // 6.0 ms of one thread instead of 7.9 (untinted 5.7 against 5.9); written into place by one
+    // loop for any count, 8.2 ms (untinted 6.5): the known stride is the gain. The levels'
+    // rounding (`to_u8`) is the rest and is not in lanes: about 1 % of a first-try run.
     match channels {
         3 => rgb8_into(pixels, 3, tint_strength, &mut out),
         4 => rgb8_into(pixels, 4, tint_strength, &mut out),
