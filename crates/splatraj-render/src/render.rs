@@ -10,7 +10,6 @@ use burn::tensor::{DType, Device, Int, Tensor, TensorData};
 use rayon::prelude::*;
 use splatraj_scene::Scene;
 
-use crate::bitset::GaussianBits;
 use crate::camera::{Intrinsics, Pose};
 use crate::decide::{HostGeometry, decide_zoomed};
 use crate::focus::{ObjectFocus, PoseFocus, Surroundings};
@@ -24,7 +23,7 @@ use crate::project::{NEAR_PLANE, SceneTensors, project_zoomed};
 use crate::rasterize::{
     Approximations, CompositeOptions, Composited, RenderStats, SplatInputs, composite,
 };
-use crate::rows::{PoseRows, lay_out_rows};
+use crate::rows::{LaidOutRows, PoseRows, lay_out_rows};
 use crate::sh::{ShTensors, sh_colours_of_rows};
 use crate::stages::{self, Stage};
 use crate::tiles::{TileGrid, TileSelection, bin_tiles};
@@ -571,45 +570,19 @@ pub fn render_at(
     let mut work = bin_tiles(&decisions, &grid, &selection);
     let binned = started.elapsed();
 
-    // used[u] = scene index of the u-th Gaussian some tile needs (increasing); lists are
-    // renumbered to u. A bit set, not [N] arrays: O(N / 64) beside the lists' length.
-    // Gathered in parallel: a step's lists hold about a million entries, and one thread
-    // took 0.65 ms a first-try guitar step over them (a GPU host waits for it).
-    let is_used = work
-        .par_iter()
-        .with_min_len(64)
-        .fold(
-            || GaussianBits::new(n),
-            |mut used, list| {
-                for &g in &list.gaussians {
-                    used.insert(g as usize);
-                }
-                used
-            },
-        )
-        .reduce_with(|mut a, b| {
-            a.union_with(&b);
-            a
-        })
-        .unwrap_or_else(|| GaussianBits::new(n));
-    let used: Vec<usize> = is_used.iter().collect();
-    let compact_from_scene = is_used.ranks();
-    let u = used.len();
-    work.par_iter_mut().for_each(|list| {
-        for g in &mut list.gaussians {
-            *g = compact_from_scene.rank(*g as usize);
-        }
-    });
-    // Each pose's rows: only the Gaussians its own lists read (crate::rows); the lists now
-    // name rows of their pose.
-    let (rows, row_gaussians) = lay_out_rows(&mut work, batch, u);
+    // Each pose's rows: only the Gaussians its own lists read, in increasing scene index
+    // (crate::rows); the lists now name rows of their pose. Bit sets, not [N] arrays:
+    // O(N / 64) a pose beside the lists' length.
+    let LaidOutRows {
+        rows,
+        scene_of_row,
+        used,
+    } = lay_out_rows(&mut work, batch, n);
+    let u = used.count();
     // The projection's plan holds the scene index of each row's Gaussian `[R]`, which the
     // channel values read too (shared, not copied).
     let plan = Arc::new(ProjectionPlan {
-        gaussians: row_gaussians
-            .par_iter()
-            .map(|&g| used[g as usize] as u32)
-            .collect(),
+        gaussians: scene_of_row,
         rows: rows.clone(),
         camera: ProjectionCamera::new(&request.intrinsics, request.near),
     });
@@ -636,7 +609,7 @@ pub fn render_at(
             max,
         });
     }
-    if used.is_empty() {
+    if u == 0 {
         // Nothing to draw: zeros that still hang off the pose graph, so a gradient exists (0).
         let mut zero = poses.sum().mul_scalar(0.0);
         if let Some(zoom) = &zoom {
@@ -677,15 +650,19 @@ pub fn render_at(
         }
         Rasterizer::Tensor => {
             // The tensor projection of every used Gaussian from every pose `[B, U]`, then the
-            // rows each pose reads (flat index b·U + u).
+            // rows each pose reads (flat index b·U + u, u the Gaussian's rank among the used).
+            let compact_from_scene = used.ranks();
             let index: Vec<i64> = (0..batch)
                 .flat_map(|b| {
-                    let own = &row_gaussians[rows.start(b)..rows.start(b) + rows.count(b)];
-                    own.iter().map(move |&g| (b * u + g as usize) as i64)
+                    let own = &scene_of_row[rows.start(b)..rows.start(b) + rows.count(b)];
+                    let compact_from_scene = &compact_from_scene;
+                    own.iter().map(move |&g| {
+                        (b * u) as i64 + i64::from(compact_from_scene.rank(g as usize))
+                    })
                 })
                 .collect();
             let flat = index_tensor(index);
-            let compact: Vec<i64> = used.iter().map(|&g| g as i64).collect();
+            let compact: Vec<i64> = used.iter().map(|g| g as i64).collect();
             let geometry = scene.geometry.select(index_tensor(compact));
             let projected = project_zoomed(
                 &geometry,
