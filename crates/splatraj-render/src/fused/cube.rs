@@ -12,11 +12,9 @@
 //!   barriers per entry: [`EntrySums`]) into that entry's gradient slot, and a second kernel
 //!   sums each Gaussian's slots in plan order (the host built the map from Gaussian to its
 //!   slots). No atomics, so the result is the same on every run.
-//! - Long lists are cut into segments ([`super::segments`]), one cube each, in both
-//!   directions. The forward takes three launches there: each segment's product of 1 − α,
-//!   then each segment composited from the product of those before it, then each tile's
-//!   segments combined (the sums added, the T at which a pixel stopped handed on); the
-//!   backward replays the segments in parallel from the state that leaves.
+//! - Long lists are cut into segments ([`super::segments`]), one cube each: the forward still
+//!   composites a tile's whole list in the cube of its first segment and saves each segment's
+//!   state on the way; the backward replays the segments in parallel.
 //!
 //! The tile lists are built on the host (binning is cheapest there: it is a per-pose sort the
 //! host already does for its decisions) and uploaded each pass as three integer tensors. f64 is
@@ -215,58 +213,37 @@ fn tile_pixel<F: Float, I: Int>(
     }
 }
 
-/// What a launch of [`forward_kernel`] computes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum ForwardPass {
-    /// Per pixel, the product of 1 − α over a segment's entries from T = 1, taken only until
-    /// it falls below the stopping transmittance (a cut tile's segments but its last: the
-    /// transmittance the later segments enter with).
-    Products,
-    /// Each segment composited from the transmittance it enters with: the image of a tile
-    /// that is not cut, else the segment's sums, its T and its last contributor for
-    /// [`combine_kernel`].
-    Composite,
-}
-
-/// Marks in `last` a segment in which (or before which) the pixel stopped, for
-/// [`combine_kernel`], which clears it: a segment holds far fewer entries.
-const STOPPED_HERE: u32 = 1 << 30;
-
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 fn forward_kernel<F: Float, I: Int>(
-    splats: &Tensor<F>,       // [R, S]: u, v, conic a, b, c, opacity, …
-    values: &Tensor<F>,       // [R, C]
-    work: &Tensor<I>,         // [segments, 5]: pose, tile corner x, y, tile's first segment, count
-    starts: &Tensor<I>,       // [segments + 1]
-    rows: &Tensor<I>,         // [pairs]
-    products: &mut Tensor<F>, // [segments, 256] where tiles are cut, else [1]
-    image: &mut Tensor<F>,    // [B, H, W, C + 1]
-    final_t: &mut Tensor<F>,  // [segments, 256]: T at each segment's end
-    last: &mut Tensor<I>,     // [segments, 256]: entries up to the last contributor, per segment
-    partial: &mut Tensor<F>,  // [segments, 256, C] where tiles are cut, else [1]
+    splats: &Tensor<F>,      // [R, S]: u, v, conic a, b, c, opacity, …
+    values: &Tensor<F>,      // [R, C]
+    work: &Tensor<I>,        // [segments, 5]: pose, tile corner x, y, tile's first segment, count
+    starts: &Tensor<I>,      // [segments + 1]
+    rows: &Tensor<I>,        // [pairs]
+    image: &mut Tensor<F>,   // [B, H, W, C + 1]
+    final_t: &mut Tensor<F>, // [segments, 256]: T at each segment's end
+    last: &mut Tensor<I>,    // [segments, 256]: entries up to the last contributor, per segment
+    partial: &mut Tensor<F>, // [segments, 256, C] where tiles are cut, else [1]
     stop_t: f32,
     work_count: u32,
     width: u32,
     height: u32,
     columns: u32,
+    segment_entries: u32,
     #[comptime] channels: usize,
-    #[comptime] pass: ForwardPass,
     #[define(F, I)] _dtypes: [ElemType; 2],
 ) {
-    // One cube per segment (a whole tile where lists are not cut). A cut tile's segments run
-    // side by side: each enters with the product of its earlier segments' transmittances,
-    // which a launch of `Products` computed, instead of one cube walking the whole list (on a
-    // GPU the longest list's chain, ~20 000 entries in a guitar step, bounded the forward).
+    // One cube per segment, but a tile's list is composited whole, front to back, by the cube
+    // of its first segment: the forward is cheap per entry, and what its segments' backwards
+    // need (T at each segment's end, its last contributor, its sums) falls out on the way.
     let w = work_index();
     if w >= work_count as usize {
         terminate!();
     }
     let first_segment = u32::cast_from(work[SEGMENT_COLUMNS * w + 3]) as usize;
     let segment_count = u32::cast_from(work[SEGMENT_COLUMNS * w + 4]) as usize;
-    let products_pass = comptime!(pass == ForwardPass::Products);
-    // No segment enters with the last segment's product.
-    if products_pass && w + 1 == first_segment + segment_count {
+    if w != first_segment {
         terminate!();
     }
     let p = UNIT_POS as usize;
@@ -274,24 +251,20 @@ fn forward_kernel<F: Float, I: Int>(
     let (pose, x, y, inside) = (at.pose, at.x, at.y, at.inside);
     let (px, py, x0f, y0f) = (at.px, at.py, at.x0, at.y0);
 
-    // T entering the segment. Below the stopping transmittance exactly where the pixel
-    // stopped in an earlier segment: until it stops, T never falls below it, and once it has,
-    // the product of everything before is below the T at which it stopped.
+    let mut open = inside;
     let mut t = F::new(1.0);
-    if !products_pass {
-        for j in first_segment..w {
-            t *= products[j * 256 + p];
-        }
-    }
-    let mut open = inside && t >= F::cast_from(stop_t);
-    let mut stopped = inside && !open;
+    // Per segment: entries up to its last contributor, and its sums; `totals` the tile's.
     let mut last_entry = 0u32;
     let mut sums = Array::<F>::new(channels);
+    let mut totals = Array::<F>::new(channels);
     for k in 0..channels {
         sums[k] = F::new(0.0);
+        totals[k] = F::new(0.0);
     }
     let start = u32::cast_from(starts[w]) as usize;
-    let end = u32::cast_from(starts[w + 1]) as usize;
+    let end = u32::cast_from(starts[w + segment_count]) as usize;
+    let mut segment = 0usize;
+    let mut segment_start = start;
     let mut sh_mx = Shared::<[F]>::new_slice(256usize);
     let mut sh_my = Shared::<[F]>::new_slice(256usize);
     let mut sh_a = Shared::<[F]>::new_slice(256usize);
@@ -303,8 +276,7 @@ fn forward_kernel<F: Float, I: Int>(
 
     let mut first = start;
     while first < end {
-        // Stop the segment once no pixel is open (uniform across the cube: read after a
-        // barrier).
+        // Stop the tile once no pixel is open (uniform across the cube: read after a barrier).
         if p == 0 {
             sh_open[0] = 0u32;
         }
@@ -326,10 +298,8 @@ fn forward_kernel<F: Float, I: Int>(
             sh_b[p] = splats[at + 3];
             sh_c[p] = splats[at + 4];
             sh_o[p] = splats[at + 5];
-            if !products_pass {
-                for k in 0..channels {
-                    sh_values[k * 256 + p] = values[row * channels + k];
-                }
+            for k in 0..channels {
+                sh_values[k * 256 + p] = values[row * channels + k];
             }
         }
         sync_cube();
@@ -349,109 +319,52 @@ fn forward_kernel<F: Float, I: Int>(
                     let t_next = t * (F::new(1.0) - alpha);
                     if t_next < F::cast_from(stop_t) {
                         open = false;
-                        stopped = true;
-                        // A product goes below the stop: that is all a later segment needs.
-                        if products_pass {
-                            t = t_next;
-                        }
                     } else {
-                        if !products_pass {
-                            let weight = alpha * t;
-                            for k in 0..channels {
-                                sums[k] += sh_values[k * 256 + i] * weight;
-                            }
-                            last_entry = (first - start + i + 1) as u32;
+                        let weight = alpha * t;
+                        for k in 0..channels {
+                            sums[k] += sh_values[k * 256 + i] * weight;
                         }
                         t = t_next;
+                        last_entry = (first - segment_start + i + 1) as u32;
                     }
                 }
             }
         }
         sync_cube();
         first += 256;
+        // A segment ends between stages (its length is whole stages, [`Segments::of`]).
+        if first < end && first == segment_start + segment_entries as usize {
+            let at = first_segment + segment;
+            final_t[at * 256 + p] = t;
+            last[at * 256 + p] = I::cast_from(last_entry);
+            for k in 0..channels {
+                partial[(at * 256 + p) * channels + k] = sums[k];
+                totals[k] += sums[k];
+                sums[k] = F::new(0.0);
+            }
+            last_entry = 0u32;
+            segment += 1;
+            segment_start = first;
+        }
     }
 
-    if products_pass {
-        products[w * 256 + p] = t;
-    } else {
-        final_t[w * 256 + p] = t;
-        if segment_count == 1 {
-            last[w * 256 + p] = I::cast_from(last_entry);
-            if inside {
-                let pixel = ((pose * height + y) * width + x) as usize;
-                for k in 0..channels {
-                    image[pixel * (channels + 1) + k] = sums[k];
-                }
-                image[pixel * (channels + 1) + channels] = F::new(1.0) - t;
-            }
-        } else {
-            let mark = if stopped { STOPPED_HERE } else { 0u32 };
-            last[w * 256 + p] = I::cast_from(last_entry + mark);
+    // The segment the loop ended in, and those after it (a tile whose pixels all stopped
+    // ends early): they composited nothing past here, and T stays where it stopped.
+    for j in segment..segment_count {
+        let at = first_segment + j;
+        final_t[at * 256 + p] = t;
+        let mine = j == segment;
+        last[at * 256 + p] = I::cast_from(if mine { last_entry } else { 0u32 });
+        if segment_count > 1 {
             for k in 0..channels {
-                partial[(w * 256 + p) * channels + k] = sums[k];
+                partial[(at * 256 + p) * channels + k] = if mine { sums[k] } else { F::new(0.0) };
             }
         }
     }
-}
-
-/// A cut tile's image from its segments, in the cube of its first segment: the sums added
-/// front to back and 1 − T where the pixel stopped or the list ended. The segments after the
-/// one in which the pixel stopped composited nothing in the whole list's order: they get the
-/// T at which it stopped, no contributor and no sums, as the backward replays them.
-#[cube(launch)]
-#[allow(clippy::too_many_arguments)]
-fn combine_kernel<F: Float, I: Int>(
-    work: &Tensor<I>,        // [segments, 5]
-    image: &mut Tensor<F>,   // [B, H, W, C + 1]
-    final_t: &mut Tensor<F>, // [segments, 256]
-    last: &mut Tensor<I>,    // [segments, 256]
-    partial: &mut Tensor<F>, // [segments, 256, C]
-    work_count: u32,
-    width: u32,
-    height: u32,
-    #[comptime] channels: usize,
-    #[define(F, I)] _dtypes: [ElemType; 2],
-) {
-    let w = work_index();
-    if w >= work_count as usize {
-        terminate!();
-    }
-    let first_segment = u32::cast_from(work[SEGMENT_COLUMNS * w + 3]) as usize;
-    let segment_count = u32::cast_from(work[SEGMENT_COLUMNS * w + 4]) as usize;
-    if w != first_segment || segment_count == 1 {
-        terminate!();
-    }
-    let p = UNIT_POS as usize;
-    let at = tile_pixel::<F, I>(work, w, p, width, height);
-    let mut totals = Array::<F>::new(channels);
-    for k in 0..channels {
-        totals[k] = F::new(0.0);
-    }
-    let mut t = F::new(1.0);
-    let mut stopped = false;
-    for s in first_segment..first_segment + segment_count {
-        if stopped {
-            final_t[s * 256 + p] = t;
-            last[s * 256 + p] = I::cast_from(0u32);
-            for k in 0..channels {
-                partial[(s * 256 + p) * channels + k] = F::new(0.0);
-            }
-        } else {
-            t = final_t[s * 256 + p];
-            let marked = u32::cast_from(last[s * 256 + p]);
-            if marked >= STOPPED_HERE {
-                stopped = true;
-                last[s * 256 + p] = I::cast_from(marked - STOPPED_HERE);
-            }
-            for k in 0..channels {
-                totals[k] += partial[(s * 256 + p) * channels + k];
-            }
-        }
-    }
-    if at.inside {
-        let pixel = ((at.pose * height + at.y) * width + at.x) as usize;
+    if inside {
+        let pixel = ((pose * height + y) * width + x) as usize;
         for k in 0..channels {
-            image[pixel * (channels + 1) + k] = totals[k];
+            image[pixel * (channels + 1) + k] = totals[k] + sums[k];
         }
         image[pixel * (channels + 1) + channels] = F::new(1.0) - t;
     }
@@ -757,6 +670,8 @@ struct PlanTensors {
     count: usize,
     /// Whether any tile was cut.
     cut: bool,
+    /// Entries of a segment (its tile's last may hold fewer).
+    segment_entries: usize,
 }
 
 /// An i32 device tensor (never empty: a kernel argument needs a buffer).
@@ -769,7 +684,7 @@ pub(crate) fn int_tensor(values: Vec<i32>, device: &CubeDevice) -> CubeTensor {
 
 fn upload_plan(plan: &CompositePlan, used: ForwardUse, device: &CubeDevice) -> PlanTensors {
     let segments = Segments::for_forward(plan, used);
-    let (count, cut) = (segments.len(), segments.cut);
+    let (count, cut, segment_entries) = (segments.len(), segments.cut, segments.entries);
     crate::counters::segments(count);
     PlanTensors {
         work: int_tensor(segments.work, device),
@@ -778,6 +693,7 @@ fn upload_plan(plan: &CompositePlan, used: ForwardUse, device: &CubeDevice) -> P
         rows: int_tensor(plan.rows.par_iter().map(|&r| r as i32).collect(), device),
         count,
         cut,
+        segment_entries,
     }
 }
 
@@ -837,31 +753,7 @@ fn device_forward(
         &device,
         dtype.into(),
     );
-    // Where tiles are cut: the product of 1 − α over each segment, which the later segments
-    // of its tile enter with.
-    let products = CubeBackend::float_empty(
-        vec![
-            if lists.cut {
-                work_count * TILE_PIXELS
-            } else {
-                1
-            }
-            .max(1),
-        ]
-        .into(),
-        &device,
-        dtype.into(),
-    );
-    let dtypes = [
-        dtype_to_storage_type(dtype),
-        dtype_to_storage_type(last.dtype),
-    ];
-    let passes: &[ForwardPass] = match (work_count, lists.cut) {
-        (0, _) => &[],
-        (_, false) => &[ForwardPass::Composite],
-        (_, true) => &[ForwardPass::Products, ForwardPass::Composite],
-    };
-    for &pass in passes {
+    if work_count > 0 {
         forward_kernel::launch(
             &client,
             tile_grid(work_count),
@@ -871,7 +763,6 @@ fn device_forward(
             lists.work.clone().into_tensor_arg(),
             lists.starts.clone().into_tensor_arg(),
             lists.rows.clone().into_tensor_arg(),
-            products.clone().into_tensor_arg(),
             image.clone().into_tensor_arg(),
             final_t.clone().into_tensor_arg(),
             last.clone().into_tensor_arg(),
@@ -881,26 +772,12 @@ fn device_forward(
             grid.width as u32,
             grid.height as u32,
             columns as u32,
+            lists.segment_entries as u32,
             channels,
-            pass,
-            dtypes,
-        );
-    }
-    if work_count > 0 && lists.cut {
-        combine_kernel::launch(
-            &client,
-            tile_grid(work_count),
-            CubeDim::new_1d(TILE_PIXELS as u32),
-            lists.work.clone().into_tensor_arg(),
-            image.clone().into_tensor_arg(),
-            final_t.clone().into_tensor_arg(),
-            last.clone().into_tensor_arg(),
-            partial.clone().into_tensor_arg(),
-            work_count as u32,
-            grid.width as u32,
-            grid.height as u32,
-            channels,
-            dtypes,
+            [
+                dtype_to_storage_type(dtype),
+                dtype_to_storage_type(last.dtype),
+            ],
         );
     }
     let saved = DeviceSaved {
