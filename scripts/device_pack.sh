@@ -4,7 +4,8 @@
 # scenes the check reads, the Vulkan loader's Debian packages, and the script the machine runs.
 #
 #   cargo build --release --features wgpu          # here, about 30 minutes on 2 cores
-#   scripts/device_pack.sh [BINARY] [DATA_DIR]     # here: fills .gpu/ (git ignores it)
+#   scripts/device_pack.sh [BINARY] [DATA_DIR] [BRANCH_BINARY]
+#                                                  # here: fills .gpu/ (git ignores it)
 #
 # then, on the machine (the workplace's device tool: `run` with carry [".gpu"]):
 #
@@ -13,7 +14,10 @@
 # which writes $OUT/gpu_check.txt (the table and the log) and $OUT/gpu_check_json/ (every
 # measurement's JSON, written as it finishes). The check stops after GPU_CHECK_SECONDS (500)
 # and then tabulates what it measured; `python3 scripts/gpu_check_table.py DIR` does the same
-# here on the JSON that came back. BINARY defaults to $CARGO_TARGET_DIR/release/splatraj (else
+# here on the JSON that came back. BRANCH_BINARY (optional) is a wgpu build of a branch to
+# compare, such as gpu-forward-cut: after the check, the machine times one profiled guitar step
+# with it (GPU_CHECK_BRANCH_SECONDS, 80) and prints that step's stage table below the check's,
+# to read beside the check's own "wgpu step, ms, each kernel waited for". BINARY defaults to $CARGO_TARGET_DIR/release/splatraj (else
 # target/release/splatraj), DATA_DIR to ../shared/data. Everything travels within the tool's
 # 64 MiB. The loader packages follow the device notes of this workplace (Debian's libvulkan1,
 # unpacked over / on the machine; the NVIDIA ICD is the machine's own).
@@ -22,7 +26,12 @@ cd "$(dirname "$0")/.."
 
 bin="${1:-${CARGO_TARGET_DIR:-target}/release/splatraj}"
 data="${2:-../shared/data}"
+branch_bin="${3:-}"
 [ -x "$bin" ] || { echo "device_pack: no binary at $bin (build with --features wgpu)" >&2; exit 2; }
+if [ -n "$branch_bin" ] && [ ! -x "$branch_bin" ]; then
+  echo "device_pack: no branch binary at $branch_bin" >&2
+  exit 2
+fi
 for f in biker.compressed.ply guitar.compressed.ply; do
   [ -f "$data/$f" ] || { echo "device_pack: $data/$f is missing (give DATA_DIR)" >&2; exit 2; }
 done
@@ -33,6 +42,10 @@ cp "$data/biker.compressed.ply" "$data/guitar.compressed.ply" .gpu/data/
 # Debug info is most of a release binary's 600 MB; the machine needs none of it.
 strip -o .gpu/splatraj "$bin"
 xz -T0 -6 .gpu/splatraj
+if [ -n "$branch_bin" ]; then
+  strip -o .gpu/splatraj-branch "$branch_bin"
+  xz -T0 -6 .gpu/splatraj-branch
+fi
 # The loader for the machine's amd64 Debian, whatever this machine runs.
 lists=/tmp/device_pack_apt
 mkdir -p "$lists/partial"
@@ -66,6 +79,14 @@ mkdir -p "$json"
   if [ "$status" -eq 124 ]; then
     echo "gpu_check stopped after ${GPU_CHECK_SECONDS:-500} s; the table of what it measured:"
     python3 scripts/gpu_check_table.py "$json"
+  fi
+  if [ -f .gpu/splatraj-branch.xz ]; then
+    xz -dkf .gpu/splatraj-branch.xz && chmod +x .gpu/splatraj-branch
+    echo "== the branch's binary: bench step, 4 guitar steps, each kernel waited for"
+    CUBECL_DEBUG_OPTION=profile-medium timeout "${GPU_CHECK_BRANCH_SECONDS:-80}" \
+      .gpu/splatraj-branch bench step --config configs/first-try/guitar.toml --steps 4 \
+      --set 'backend="wgpu"' --set "scene.path=\"$PWD/.gpu/data/guitar.compressed.ply\"" \
+      || echo "the branch's step exited with status $?"
   fi
 } >"$out/gpu_check.txt" 2>&1
 tail -60 "$out/gpu_check.txt"
