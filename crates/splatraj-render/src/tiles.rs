@@ -90,18 +90,32 @@ fn bin_one_pose(pose: PoseToBin<'_>, grid: &TileGrid) -> Vec<TileWork> {
     let wanted: Vec<bool> = match selection {
         TileSelection::All => vec![true; grid.len()],
         TileSelection::Object(in_object) => {
-            let mut wanted = vec![false; grid.len()];
-            for decided in kept
-                .iter()
-                .filter(|decided| in_object.contains(decided.gaussian as usize))
-            {
-                let rect = rect_of(decided, grid);
-                tiles_until(decided, rect, ALL_ROWS, grid.tiles_x, |tile| {
-                    wanted[tile] = true;
-                    false
-                });
+            let mark = |mut wanted: Vec<bool>, kept: &[Decided]| {
+                for decided in kept
+                    .iter()
+                    .filter(|decided| in_object.contains(decided.gaussian as usize))
+                {
+                    let rect = rect_of(decided, grid);
+                    tiles_until(decided, rect, ALL_ROWS, grid.tiles_x, |tile| {
+                        wanted[tile] = true;
+                        false
+                    });
+                }
+                wanted
+            };
+            let none = || vec![false; grid.len()];
+            if bands <= 1 {
+                mark(none(), kept)
+            } else {
+                // A pose with the cores to itself (a frame's mask, a single mask pass): this
+                // loop was a serial quarter of its binning (biker at 128²: 1.9 of 7.5 ms).
+                kept.par_chunks(RECT_CHUNK)
+                    .fold(none, mark)
+                    .reduce(none, |mut wanted, more| {
+                        wanted.iter_mut().zip(more).for_each(|(w, m)| *w |= m);
+                        wanted
+                    })
             }
-            wanted
         }
     };
     // Tile rectangle [x0, x1) × [y0, y1) of every kept Gaussian's square, computed once
