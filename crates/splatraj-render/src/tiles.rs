@@ -86,50 +86,60 @@ fn bin_one_pose(pose: PoseToBin<'_>, grid: &TileGrid) -> Vec<TileWork> {
         selection,
         bands,
     } = pose;
+    // Tile rectangle [x0, x1) × [y0, y1) of every kept Gaussian's square, computed once
+    // `[kept]`: here for a mask pass, whose object's rectangles mark its tiles, else beside
+    // the filter below.
+    let mut rects: Vec<[u16; 4]> = vec![[0; 4]; kept.len()];
     // A mask pass needs only the tiles its object touches.
-    let wanted: Vec<bool> = match selection {
-        TileSelection::All => vec![true; grid.len()],
+    let (wanted, rects_found): (Vec<bool>, RectsFound) = match selection {
+        TileSelection::All => (vec![true; grid.len()], RectsFound::NotYet),
         TileSelection::Object(in_object) => {
-            let mark = |mut wanted: Vec<bool>, kept: &[Decided]| {
-                for decided in kept
-                    .iter()
-                    .filter(|decided| in_object.contains(decided.gaussian as usize))
-                {
-                    let rect = rect_of(decided, grid);
-                    tiles_until(decided, rect, ALL_ROWS, grid.tiles_x, |tile| {
-                        wanted[tile] = true;
-                        false
-                    });
+            let mark = |mut wanted: Vec<bool>, (kept, rects): (&[Decided], &mut [[u16; 4]])| {
+                for (decided, rect) in kept.iter().zip(rects.iter_mut()) {
+                    *rect = rect_of(decided, grid);
+                    if in_object.contains(decided.gaussian as usize) {
+                        tiles_until(decided, *rect, ALL_ROWS, grid.tiles_x, |tile| {
+                            wanted[tile] = true;
+                            false
+                        });
+                    }
                 }
                 wanted
             };
             let none = || vec![false; grid.len()];
-            if bands <= 1 {
-                mark(none(), kept)
+            let wanted = if bands <= 1 {
+                mark(none(), (kept, &mut rects))
             } else {
                 // A pose with the cores to itself (a frame's mask, a single mask pass): this
                 // loop was a serial quarter of its binning (biker at 128²: 1.9 of 7.5 ms).
                 kept.par_chunks(RECT_CHUNK)
+                    .zip(rects.par_chunks_mut(RECT_CHUNK))
                     .fold(none, mark)
                     .reduce(none, |mut wanted, more| {
                         wanted.iter_mut().zip(more).for_each(|(w, m)| *w |= m);
                         wanted
                     })
-            }
+            };
+            (wanted, RectsFound::Already)
         }
     };
-    // Tile rectangle [x0, x1) × [y0, y1) of every kept Gaussian's square, computed once
-    // `[kept]`; and the Gaussians that touch a wanted tile as (key, position in `kept`), where
-    // (depth, index) as one u64 is unique within a pose and sorts them front to back, ties by
-    // scene index: pushing them in that order leaves every list sorted.
-    let mut rects: Vec<[u16; 4]> = vec![[0; 4]; kept.len()];
+    // The Gaussians that touch a wanted tile as (key, position in `kept`), where (depth,
+    // index) as one u64 is unique within a pose and sorts them front to back, ties by scene
+    // index: pushing them in that order leaves every list sorted.
     let mut order: Vec<(u64, u32)> = if bands <= 1 {
         // The pose has one core (the poses of a step share them): one loop, no tasks. With
         // the rectangles and the filter in one pass instead of two parallel ones, a first-try
         // guitar step's binning went 33.8 → 28.2 ms on one thread (a 720p frame's, banded,
         // 11.5 → 9.5 ms on 2 cores).
         let mut order = Vec::with_capacity(kept.len());
-        rects_and_order(kept, 0, grid, &wanted, &mut rects, &mut order);
+        rects_and_order(
+            kept,
+            0,
+            grid,
+            (&wanted, rects_found),
+            &mut rects,
+            &mut order,
+        );
         order
     } else {
         let parts: Vec<Vec<(u64, u32)>> = kept
@@ -138,7 +148,14 @@ fn bin_one_pose(pose: PoseToBin<'_>, grid: &TileGrid) -> Vec<TileWork> {
             .enumerate()
             .map(|(c, (kept, rects))| {
                 let mut order = Vec::with_capacity(kept.len());
-                rects_and_order(kept, c * RECT_CHUNK, grid, &wanted, rects, &mut order);
+                rects_and_order(
+                    kept,
+                    c * RECT_CHUNK,
+                    grid,
+                    (&wanted, rects_found),
+                    rects,
+                    &mut order,
+                );
                 order
             })
             .collect();
@@ -251,18 +268,30 @@ fn rect_of(decided: &Decided, grid: &TileGrid) -> [u16; 4] {
     [xs.start, xs.end, ys.start, ys.end].map(|t| t as u16)
 }
 
-/// Writes the rectangles of `kept` (positions `first..` of the pose's) into `rects`, and pushes
-/// onto `order` the (key, position) of those that touch a `wanted` tile, in `kept`'s order.
+/// Whether a pose's tile rectangles are already in its `rects`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum RectsFound {
+    /// Found with the wanted tiles (a mask pass).
+    Already,
+    /// To be found with the filter ([`rects_and_order`]).
+    NotYet,
+}
+
+/// Writes the rectangles of `kept` (positions `first..` of the pose's) into `rects` unless
+/// they are found already, and pushes onto `order` the (key, position) of those that touch a
+/// `wanted` tile, in `kept`'s order.
 fn rects_and_order(
     kept: &[Decided],
     first: usize,
     grid: &TileGrid,
-    wanted: &[bool],
+    (wanted, found): (&[bool], RectsFound),
     rects: &mut [[u16; 4]],
     order: &mut Vec<(u64, u32)>,
 ) {
     for (k, (decided, rect)) in kept.iter().zip(rects.iter_mut()).enumerate() {
-        *rect = rect_of(decided, grid);
+        if found == RectsFound::NotYet {
+            *rect = rect_of(decided, grid);
+        }
         if tiles_until(decided, *rect, ALL_ROWS, grid.tiles_x, |tile| wanted[tile]) {
             let key = (u64::from(ordered_bits(decided.depth)) << 32) | u64::from(decided.gaussian);
             order.push((key, (first + k) as u32));
