@@ -645,7 +645,11 @@ pub fn render_at(
     let (splats, depth) = match request.rasterizer {
         Rasterizer::Fused => {
             let packed = project_packed_zoomed(&scene.geometry, poses.clone(), zoom, plan.clone()); // [R, 7]
-            let depth = packed.clone().narrow(1, PackedColumn::Depth as usize, 1); // [R, 1]
+            // Cut out only for a depth channel: on a GPU a slice is a launch even when
+            // nothing reads it.
+            let column = packed.clone();
+            let depth: DepthOfRows =
+                Box::new(move || column.clone().narrow(1, PackedColumn::Depth as usize, 1)); // [R, 1]
             (Splats::Packed(Box::new(packed)), depth)
         }
         Rasterizer::Tensor => {
@@ -688,6 +692,7 @@ pub fn render_at(
                 opacities,
                 values: depth.clone(), // replaced by the channel values below
             };
+            let depth: DepthOfRows = Box::new(move || depth.clone());
             (Splats::Separate(Box::new(splats)), depth)
         }
     };
@@ -708,7 +713,7 @@ pub fn render_at(
                 let centres = poses.clone().narrow(1, 3, 3).select(0, pose_of_row());
                 sh_colours_of_rows(&sh, means, centres)
             }
-            Channel::Depth => depth.clone(),
+            Channel::Depth => depth(),
             Channel::Mask(mask) => upload_rows(
                 1,
                 per_row_values(&rows, scene_of_row, 1, &|_, g| {
@@ -738,7 +743,11 @@ pub fn render_at(
         };
         values.push(tensor.select(0, scene_index())); // [R, C]
     }
-    let values = Tensor::cat(values, 1); // [R, width]
+    // One channel as it is: a concatenation of one tensor is still a copy (a GPU launch).
+    let values = match values.len() {
+        1 => values.remove(0),
+        _ => Tensor::cat(values, 1),
+    }; // [R, width]
     let prepared = started.elapsed();
     let stop_transmittance = request.approximations.stop_transmittance;
     let mut composited = match splats {
@@ -889,6 +898,9 @@ enum Splats {
     /// The tensor projection's outputs per row (their values still to be set).
     Separate(Box<SplatInputs>),
 }
+
+/// Each row's depth `[R, 1]`, made when a depth channel asks for it.
+type DepthOfRows = Box<dyn Fn() -> Tensor<2>>;
 
 /// A constant channel per row, made on the host: `value(pose, scene index)` of every row of
 /// `rows` (`scene_of_row` `[R]`), `dim` values each. `[R · dim]`
