@@ -17,8 +17,9 @@
 # here on the JSON that came back. BRANCH_BINARY (optional) is a wgpu build of a branch to
 # compare, such as gpu-forward-cut: after the check, the machine times one profiled guitar step
 # with it (GPU_CHECK_BRANCH_SECONDS, 80) and prints that step's stage table below the check's,
-# to read beside the check's own "wgpu step, ms, each kernel waited for". BINARY defaults to $CARGO_TARGET_DIR/release/splatraj (else
-# target/release/splatraj), DATA_DIR to ../shared/data. Everything travels within the tool's
+# to read beside the check's own "wgpu step, ms, each kernel waited for". BINARY defaults to
+# $CARGO_TARGET_DIR/release/splatraj (else target/release/splatraj), DATA_DIR to
+# ../shared/data. Everything travels within the tool's
 # 64 MiB. The loader packages follow the device notes of this workplace (Debian's libvulkan1,
 # unpacked over / on the machine; the NVIDIA ICD is the machine's own).
 set -euo pipefail
@@ -40,11 +41,10 @@ grep -qx '/.gpu/' .git/info/exclude 2>/dev/null || echo '/.gpu/' >>.git/info/exc
 rm -rf .gpu && mkdir -p .gpu/data .gpu/deb
 cp "$data/biker.compressed.ply" "$data/guitar.compressed.ply" .gpu/data/
 # Debug info is most of a release binary's 600 MB; the machine needs none of it.
-strip -o .gpu/splatraj "$bin"
-xz -T0 -6 .gpu/splatraj
+pack_binary() { strip -o ".gpu/$2" "$1" && xz -T0 -6 ".gpu/$2"; }
+pack_binary "$bin" splatraj
 if [ -n "$branch_bin" ]; then
-  strip -o .gpu/splatraj-branch "$branch_bin"
-  xz -T0 -6 .gpu/splatraj-branch
+  pack_binary "$branch_bin" splatraj-branch
 fi
 # The loader for the machine's amd64 Debian, whatever this machine runs.
 lists=/tmp/device_pack_apt

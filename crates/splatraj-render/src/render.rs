@@ -642,15 +642,10 @@ pub fn render_at(
         index_tensor(poses.collect())
     };
     // Screen space: the fused projection's packed rows, or the tensor projection's outputs.
-    let (splats, depth) = match request.rasterizer {
+    let splats = match request.rasterizer {
         Rasterizer::Fused => {
             let packed = project_packed_zoomed(&scene.geometry, poses.clone(), zoom, plan.clone()); // [R, 7]
-            // Cut out only for a depth channel: on a GPU a slice is a launch even when
-            // nothing reads it.
-            let column = packed.clone();
-            let depth: DepthOfRows =
-                Box::new(move || column.clone().narrow(1, PackedColumn::Depth as usize, 1)); // [R, 1]
-            (Splats::Packed(Box::new(packed)), depth)
+            Splats::Packed(Box::new(packed))
         }
         Rasterizer::Tensor => {
             // The tensor projection of every used Gaussian from every pose `[B, U]`, then the
@@ -690,10 +685,9 @@ pub fn render_at(
                 means_2d: per_row(projected.means_2d),
                 conics: per_row(projected.conics),
                 opacities,
-                values: depth.clone(), // replaced by the channel values below
+                values: depth, // the depth (`Splats::depth`) until the channel values replace it
             };
-            let depth: DepthOfRows = Box::new(move || depth.clone());
-            (Splats::Separate(Box::new(splats)), depth)
+            Splats::Separate(Box::new(splats))
         }
     };
 
@@ -713,7 +707,7 @@ pub fn render_at(
                 let centres = poses.clone().narrow(1, 3, 3).select(0, pose_of_row());
                 sh_colours_of_rows(&sh, means, centres)
             }
-            Channel::Depth => depth(),
+            Channel::Depth => splats.depth(),
             Channel::Mask(mask) => upload_rows(
                 1,
                 per_row_values(&rows, scene_of_row, 1, &|_, g| {
@@ -899,8 +893,19 @@ enum Splats {
     Separate(Box<SplatInputs>),
 }
 
-/// Each row's depth `[R, 1]`, made when a depth channel asks for it.
-type DepthOfRows = Box<dyn Fn() -> Tensor<2>>;
+impl Splats {
+    /// Each row's depth `[R, 1]`. Cut out of the packed rows only when a depth channel asks:
+    /// on a GPU a slice is a launch even when nothing reads it.
+    fn depth(&self) -> Tensor<2> {
+        match self {
+            Splats::Packed(packed) => (**packed)
+                .clone()
+                .narrow(1, PackedColumn::Depth as usize, 1),
+            // The values stand in for the channels until these are set: the depth.
+            Splats::Separate(splats) => splats.values.clone(),
+        }
+    }
+}
 
 /// A constant channel per row, made on the host: `value(pose, scene index)` of every row of
 /// `rows` (`scene_of_row` `[R]`), `dim` values each. `[R · dim]`

@@ -129,20 +129,7 @@ pub fn lay_out_rows(work: &mut [TileWork], batch: usize, n: usize) -> LaidOutRow
         .iter()
         .flat_map(|(_, bits)| bits.iter().map(|g| g as u32))
         .collect();
-    let used = read
-        .par_iter()
-        .fold(
-            || GaussianBits::new(n),
-            |mut used, (_, bits)| {
-                used.union_with(bits);
-                used
-            },
-        )
-        .reduce_with(|mut a, b| {
-            a.union_with(&b);
-            a
-        })
-        .unwrap_or_else(|| GaussianBits::new(n));
+    let used = union_in_parallel(&read, n, 1, |used, (_, bits)| used.union_with(bits));
     LaidOutRows {
         rows: PoseRows::from_counts(counts),
         scene_of_row,
@@ -155,23 +142,11 @@ pub fn lay_out_rows(work: &mut [TileWork], batch: usize, n: usize) -> LaidOutRow
 /// Folded and renumbered in parallel over the lists: an output frame's one pose has thousands
 /// of lists and every core, while a step's poses (tens of lists each) run beside each other.
 fn lay_out_pose(lists: &mut [TileWork], n: usize) -> GaussianBits {
-    let bits = lists
-        .par_iter()
-        .with_min_len(LISTS_PER_TASK)
-        .fold(
-            || GaussianBits::new(n),
-            |mut bits, list| {
-                for &g in &list.gaussians {
-                    bits.insert(g as usize);
-                }
-                bits
-            },
-        )
-        .reduce_with(|mut a, b| {
-            a.union_with(&b);
-            a
-        })
-        .unwrap_or_else(|| GaussianBits::new(n));
+    let bits = union_in_parallel(lists, n, LISTS_PER_TASK, |bits, list| {
+        for &g in &list.gaussians {
+            bits.insert(g as usize);
+        }
+    });
     let ranks = bits.ranks();
     lists
         .par_iter_mut()
@@ -186,6 +161,31 @@ fn lay_out_pose(lists: &mut [TileWork], n: usize) -> GaussianBits {
 
 /// Tile lists per rayon task where a pose's lists are read or renumbered.
 const LISTS_PER_TASK: usize = 64;
+
+/// The Gaussians `insert` puts in a set from each of `items` (scene indices below `n`), the
+/// items shared among rayon tasks of at least `min_len` each and the tasks' sets joined.
+fn union_in_parallel<T: Sync>(
+    items: &[T],
+    n: usize,
+    min_len: usize,
+    insert: impl Fn(&mut GaussianBits, &T) + Sync + Send,
+) -> GaussianBits {
+    items
+        .par_iter()
+        .with_min_len(min_len)
+        .fold(
+            || GaussianBits::new(n),
+            |mut bits, item| {
+                insert(&mut bits, item);
+                bits
+            },
+        )
+        .reduce_with(|mut a, b| {
+            a.union_with(&b);
+            a
+        })
+        .unwrap_or_else(|| GaussianBits::new(n))
+}
 
 #[cfg(test)]
 mod tests {
