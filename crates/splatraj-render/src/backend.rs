@@ -109,6 +109,30 @@ impl BackendKind {
     }
 }
 
+/// How `device` runs tensor ops: as kernel launches on a GPU (each op a launch, queued and
+/// fused by burn-fusion) or on the host. Code whose best formulation differs between the two
+/// asks here (e.g. `splatraj_traj::costs::MaskMoments`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Execution {
+    /// On the host (flex, ndarray): an op costs its arithmetic.
+    Host,
+    /// Kernel launches on a GPU (wgpu): an op costs a launch unless fusion merges it.
+    Kernels,
+}
+
+impl Execution {
+    /// How `device` runs ops.
+    pub fn of(device: &Device) -> Self {
+        #[cfg(feature = "wgpu")]
+        if let burn_dispatch::DispatchDevice::Cube(_) = device.as_dispatch().clone().inner() {
+            return Execution::Kernels;
+        }
+        #[cfg(not(feature = "wgpu"))]
+        let _ = device;
+        Execution::Host
+    }
+}
+
 impl fmt::Display for BackendKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.feature())

@@ -2,7 +2,9 @@
 //! against central finite differences in f64.
 
 use burn::tensor::{DType, Device, Tensor, TensorData};
-use splatraj_traj::costs::{MaskMoments, NORM_EPSILON, centroid_offset, coverage, tce, tre};
+use splatraj_traj::costs::{
+    MaskMoments, MomentSums, NORM_EPSILON, centroid_offset, coverage, tce, tce_of, tre, tre_of,
+};
 
 /// A mask `[B, H, W]` from host values in `dtype` on `device`.
 fn mask(values: Vec<f64>, shape: [usize; 3], device: &Device, dtype: DType) -> Tensor<3> {
@@ -194,8 +196,9 @@ fn gradients_match_finite_differences_in_f64() {
     }
 }
 
-/// The moments of a random non-square mask batch (two matrix products) equal a brute-force f64
-/// double loop over the pixels, in both precisions; an all-ones 1280×720 frame keeps its mass
+/// The moments of a random non-square mask batch, summed both ways (the host's two matrix
+/// products and the GPU's three reductions), equal a brute-force f64 double loop over the
+/// pixels, in both precisions; an all-ones 1280×720 frame keeps its mass
 /// (921 600 pixels) in f32.
 #[test]
 fn mask_moments_match_brute_force_sums() {
@@ -203,9 +206,18 @@ fn mask_moments_match_brute_force_sums() {
     let (b, h, w) = (2, 91, 160);
     let mut rng = Rng(0xa11ce);
     let values: Vec<f64> = (0..b * h * w).map(|_| rng.next()).collect();
-    for (dtype, tolerance) in [(DType::F64, 1e-12), (DType::F32, 1e-5)] {
-        let moments = MaskMoments::of(mask(values.clone(), [b, h, w], &device, dtype));
-        let (mass, first) = (host(moments.mass()), host(moments.first()));
+    let ways = [MomentSums::Products, MomentSums::Reductions];
+    for (dtype, tolerance, sums) in [DType::F64, DType::F32]
+        .into_iter()
+        .zip([1e-12, 1e-5])
+        .flat_map(|(d, t)| ways.map(|s| (d, t, s)))
+    {
+        let moments = MaskMoments::summed(mask(values.clone(), [b, h, w], &device, dtype), sums);
+        let (mass, first_x, first_y) = (
+            host(moments.mass()),
+            host(moments.first_x()),
+            host(moments.first_y()),
+        );
         for s in 0..b {
             let (mut m, mut mx, mut my) = (0.0, 0.0, 0.0);
             for j in 0..h {
@@ -217,21 +229,57 @@ fn mask_moments_match_brute_force_sums() {
                 }
             }
             let close = |got: f64, want: f64| (got - want).abs() <= tolerance * m;
-            assert!(close(mass[s], m), "{dtype:?} mass {} vs {m}", mass[s]);
             assert!(
-                close(first[2 * s], mx),
-                "{dtype:?} Σm·x {} vs {mx}",
-                first[2 * s]
+                close(mass[s], m),
+                "{dtype:?} {sums:?} mass {} vs {m}",
+                mass[s]
             );
             assert!(
-                close(first[2 * s + 1], my),
-                "{dtype:?} Σm·y {} vs {my}",
-                first[2 * s + 1]
+                close(first_x[s], mx),
+                "{dtype:?} {sums:?} Σm·x {} vs {mx}",
+                first_x[s]
+            );
+            assert!(
+                close(first_y[s], my),
+                "{dtype:?} {sums:?} Σm·y {} vs {my}",
+                first_y[s]
             );
         }
     }
-    let ones = Tensor::<3>::ones([1, 720, 1280], (&device, DType::F32));
-    let moments = MaskMoments::of(ones);
-    assert_eq!(host(moments.mass()), vec![921_600.0]);
-    assert_eq!(host(moments.coverage()), vec![1.0]);
+    for sums in ways {
+        let ones = Tensor::<3>::ones([1, 720, 1280], (&device, DType::F32));
+        let moments = MaskMoments::summed(ones, sums);
+        assert_eq!(host(moments.mass()), vec![921_600.0], "{sums:?}");
+        assert_eq!(host(moments.coverage()), vec![1.0], "{sums:?}");
+    }
+}
+
+/// TCE, TRE and their gradients in the mask (f64) are the same whichever way the moments are
+/// summed: the GPU's reductions against the host's products, on a random mask batch.
+#[test]
+fn both_moment_sums_give_the_same_costs_and_gradients() {
+    let device = Device::flex().autodiff();
+    let (b, h, w) = (3, 27, 48);
+    let mut rng = Rng(0x5eed);
+    let values: Vec<f64> = (0..b * h * w).map(|_| rng.next()).collect();
+    let run = |sums: MomentSums| {
+        let x = mask(values.clone(), [b, h, w], &device, DType::F64).require_grad();
+        let moments = MaskMoments::summed(x.clone(), sums);
+        let costs = tce_of(&moments) + tre_of(&moments, 0.2);
+        let grads = costs.clone().sum().backward();
+        (
+            host(costs.without_autodiff()),
+            host(x.grad(&grads).unwrap()),
+        )
+    };
+    let (costs, gradient) = run(MomentSums::Products);
+    let (costs_r, gradient_r) = run(MomentSums::Reductions);
+    let largest = gradient.iter().fold(0.0f64, |a, g| a.max(g.abs()));
+    assert!(largest > 1e-6, "a gradient to compare");
+    for (a, r) in costs.iter().zip(&costs_r) {
+        assert!((a - r).abs() <= 1e-12, "costs {a} vs {r}");
+    }
+    for (a, r) in gradient.iter().zip(&gradient_r) {
+        assert!((a - r).abs() <= 1e-10 * largest, "gradient {a} vs {r}");
+    }
 }

@@ -25,7 +25,9 @@ use splatraj_traj::costs::{
     ClearanceCost, CostsConfig, HostPoses, MotionCost, QueryContext, UprightCost, UprightMode,
     VisibilityCost,
 };
-use splatraj_traj::optimise::{Problem, StepPasses, WindowPath, WindowSamples, WindowTarget};
+use splatraj_traj::optimise::{
+    Problem, StepPasses, WindowPath, WindowSamples, WindowTarget, backward,
+};
 
 /// Gaussians along a wall's side, samples and path poses a window.
 const SIDE: usize = 12;
@@ -140,7 +142,8 @@ fn step(windows: usize, pose_costs: bool) -> (u64, u64, f64) {
         let evaluated = problem
             .evaluate_windows(tensor.clone(), windows_samples, 0, None)
             .expect("the step evaluates");
-        let gradient = tensor.grad(&evaluated.loss.clone().backward()).unwrap();
+        let grads = backward(&evaluated.loss).expect("the step's backward");
+        let gradient = tensor.grad(&grads).unwrap();
         let loss = to_host(evaluated.loss.without_autodiff()).unwrap()[0];
         let values = to_host(gradient).unwrap();
         assert!(values.iter().all(|v| v.is_finite()));

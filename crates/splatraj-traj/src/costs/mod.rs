@@ -82,7 +82,7 @@ pub use expansion::{PoseGradients, expansion_at, per_sample_on_host, per_stretch
 pub use iou::{
     IOU_THRESHOLD, PixelBox, bbox_iou, bbox_iou_batch, box_from_hits, box_iou, mask_box, mask_hits,
 };
-pub use moments::MaskMoments;
+pub use moments::{MaskMoments, MomentSums, mask_mass};
 pub use motion::{MotionCost, auto_max_speed};
 pub use path::{PathSamples, PathStretch, PerRow};
 pub use prior::{PRIOR_EPSILON_FRACTION, PriorCost, default_prior_radius, prior, prior_on_host};

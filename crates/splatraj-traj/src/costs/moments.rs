@@ -1,71 +1,150 @@
 //! The moments of a mask image: its mass Σm and first moments Σm·x, Σm·y per sample, which is
-//! all that TCE, TRE, the coverage and the visibility cost read of the seen mask.
+//! all that TCE, TRE, the coverage and the visibility cost read of the seen mask. Each is its
+//! own `[B]` tensor, so that every cost after them is an elementwise chain on `[B]`.
 //!
-//! **Why two matrix products.** On a GPU every tensor op is a kernel launch and an autodiff
-//! node. Reducing the mask once per quantity (a sum over columns, then rows, for the mass and
-//! for each weighted moment, plus the products, their constants and a concatenation) made TCE
-//! and TRE about 80 of the 117 launches of a mask pass (docs/gpu.md). Written as
+//! **Two ways to the same sums, chosen by where the ops run** ([`MomentSums`]):
 //!
-//! ```text
-//! A = M · X        X = [1 | x]  (W × 2): A[b, j] = (Σ_i m_bji, Σ_i m_bji·x_i)     [B, H, 2]
-//! S = Y · A        Y = [1 ; y]  (2 × H): S[b] = [[Σm, Σm·x], [Σm·y, Σm·x·y]]      [B, 2, 2]
-//! ```
+//! - On the host (flex, ndarray), two matrix products give all four moments at once,
 //!
-//! the four moments are two launches forward and two backward (a matrix product's backward is
-//! a matrix product), whatever the image size, and [`super::CostInputs`] makes them once for
-//! every cost that reads them. The weights X and Y are 2·(W + H) numbers, uploaded each time.
+//!   ```text
+//!   A = M · X        X = [1 | x]  (W × 2): A[b, j] = (Σ_i m_bji, Σ_i m_bji·x_i)     [B, H, 2]
+//!   S = Y · A        Y = [1 ; y]  (2 × H): S[b] = [[Σm, Σm·x], [Σm·y, Σm·x·y]]      [B, 2, 2]
+//!   ```
+//!
+//!   and the three are cut out of S: on a CPU a cut costs a copy of B numbers. This is faster
+//!   on the host than three reductions of the whole mask (a first-try guitar step 126–129 against
+//!   132–134 ms on 2 cores) and gives the digits every earlier run gave.
+//! - On a GPU every op is a kernel launch unless burn-fusion merges it, and a cut is a launch
+//!   forward and two backward (a zero fill and a slice assignment). Chains that started from
+//!   those cuts were mostly left unfused, so there the three are three reductions (Σm, Σm·x,
+//!   Σm·y) and nothing is cut (docs/gpu.md, "Three moments, three tensors"): counted on
+//!   lavapipe, a 128² mask pass 50 → 33 launches and a first-try guitar step 120 → 94 (with the
+//!   loss's forward handed to the device before its backward, [`crate::optimise::backward`]).
+//!
+//! [`super::CostInputs`] makes the moments once for every cost that reads them; a quantity
+//! that needs only the mass ([`mask_mass`]: the coverage, the object alone's pixels) takes
+//! only that on a GPU, where every queued op is a launch whether it is read or not.
 //!
 //! x and y are pixel centres relative to the image centre in image fractions,
 //! x_i = (i + ½)/W − ½ and y_j = (j + ½)/H − ½ (docs/conventions.md), so Σm·x/Σm is the
 //! centroid's offset from the centre directly.
 
 use burn::tensor::{Tensor, TensorData};
+use splatraj_render::backend::Execution;
+
+/// How [`MaskMoments`] sums the mask (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MomentSums {
+    /// Two matrix products and three cuts of their result: the host's way.
+    Products,
+    /// Three reductions of the mask, nothing cut: the GPU's way.
+    Reductions,
+}
+
+impl MomentSums {
+    /// The faster way where `mask` lives.
+    pub fn for_mask(mask: &Tensor<3>) -> Self {
+        match Execution::of(&mask.device()) {
+            Execution::Host => MomentSums::Products,
+            Execution::Kernels => MomentSums::Reductions,
+        }
+    }
+}
 
 /// Mass and first moments of masks `[B, H, W]`, differentiable in the masks.
 #[derive(Debug, Clone)]
 pub struct MaskMoments {
-    /// `[B, 4]`: Σm, Σm·x, Σm·y, Σm·x·y (the moment matrix of the module docs, row by row).
-    sums: Tensor<2>,
+    /// Σm per sample, in pixels. `[B]`
+    mass: Tensor<1>,
+    /// Σm·x per sample. `[B]`
+    first_x: Tensor<1>,
+    /// Σm·y per sample. `[B]`
+    first_y: Tensor<1>,
     /// W·H, the pixels of one image.
     pixels: usize,
 }
 
 impl MaskMoments {
-    /// The moments of `mask` `[B, H, W]` (two matrix products; see the module docs).
+    /// The moments of `mask` `[B, H, W]`, summed the faster way where it lives.
     pub fn of(mask: Tensor<3>) -> Self {
+        let sums = MomentSums::for_mask(&mask);
+        Self::summed(mask, sums)
+    }
+
+    /// The moments of `mask` `[B, H, W]`, summed by `sums`.
+    pub fn summed(mask: Tensor<3>, sums: MomentSums) -> Self {
         let [batch, height, width] = mask.dims();
-        let device = mask.device();
-        let dtype = mask.dtype();
+        let (device, dtype) = (mask.device(), mask.dtype());
         let centres = |n: usize| (0..n).map(move |i| (i as f64 + 0.5) / n as f64 - 0.5);
-        // X = [1 | x]: row i is (1, x_i).
-        let x: Vec<f64> = centres(width).flat_map(|x| [1.0, x]).collect();
-        // Y = [1 ; y]: row 0 all ones, row 1 the y_j.
-        let y: Vec<f64> = std::iter::repeat_n(1.0, height)
-            .chain(centres(height))
-            .collect();
-        let x = Tensor::<3>::from_data(TensorData::new(x, [1, width, 2]), (&device, dtype));
-        let y = Tensor::<3>::from_data(TensorData::new(y, [1, 2, height]), (&device, dtype));
-        let rows = mask.matmul(x); // [B, H, 2]
-        Self {
-            sums: y.matmul(rows).reshape([batch, 4]),
-            pixels: width * height,
+        let upload = |values: Vec<f64>, shape: [usize; 3]| {
+            Tensor::<3>::from_data(TensorData::new(values, shape), (&device, dtype))
+        };
+        let pixels = width * height;
+        match sums {
+            MomentSums::Products => {
+                // X = [1 | x]: row i is (1, x_i). Y = [1 ; y]: row 0 all ones, row 1 the y_j.
+                let x = centres(width).flat_map(|x| [1.0, x]).collect();
+                let y = std::iter::repeat_n(1.0, height).chain(centres(height));
+                let x = upload(x, [1, width, 2]);
+                let y = upload(y.collect(), [1, 2, height]);
+                let rows = mask.matmul(x); // [B, H, 2]
+                let sums = y.matmul(rows).reshape([batch, 4]); // Σm, Σm·x, Σm·y, Σm·x·y
+                let column = |k: usize| sums.clone().narrow(1, k, 1).reshape([batch]);
+                Self {
+                    mass: column(0),
+                    first_x: column(1),
+                    first_y: column(2),
+                    pixels,
+                }
+            }
+            MomentSums::Reductions => {
+                // Broadcast over the batch and the other image axis: W + H numbers uploaded.
+                let x = upload(centres(width).collect(), [1, 1, width]);
+                let y = upload(centres(height).collect(), [1, height, 1]);
+                Self {
+                    mass: reduced_mass(mask.clone()),
+                    first_x: reduced_mass(mask.clone() * x),
+                    first_y: reduced_mass(mask * y),
+                    pixels,
+                }
+            }
         }
     }
 
-    /// Σm per sample `[B, 1]`, in pixels.
-    pub fn mass(&self) -> Tensor<2> {
-        self.sums.clone().narrow(1, 0, 1)
+    /// Σm per sample `[B]`, in pixels.
+    pub fn mass(&self) -> Tensor<1> {
+        self.mass.clone()
     }
 
     /// Share of the frame the mask covers, Σm / (W·H), per sample `[B]`.
     pub fn coverage(&self) -> Tensor<1> {
-        let [batch, _] = self.sums.dims();
-        self.mass().reshape([batch]).div_scalar(self.pixels as f64)
+        self.mass().div_scalar(self.pixels as f64)
     }
 
-    /// (Σm·x, Σm·y) per sample `[B, 2]`, x and y in image fractions from the centre (adjacent
-    /// in the row-by-row moment matrix, so one slice).
-    pub fn first(&self) -> Tensor<2> {
-        self.sums.clone().narrow(1, 1, 2)
+    /// Σm·x per sample `[B]`, x in image fractions from the centre.
+    pub fn first_x(&self) -> Tensor<1> {
+        self.first_x.clone()
     }
+
+    /// Σm·y per sample `[B]`, y in image fractions from the centre.
+    pub fn first_y(&self) -> Tensor<1> {
+        self.first_y.clone()
+    }
+}
+
+/// Σm per sample of masks `[B, H, W]`, in pixels, `[B]`: [`MaskMoments::mass`], and on a GPU
+/// only that reduction.
+pub fn mask_mass(mask: Tensor<3>) -> Tensor<1> {
+    match MomentSums::for_mask(&mask) {
+        MomentSums::Products => MaskMoments::summed(mask, MomentSums::Products).mass(),
+        MomentSums::Reductions => reduced_mass(mask),
+    }
+}
+
+/// Σm per sample of `mask` `[B, H, W]` by one reduction: `[B]`.
+fn reduced_mass(mask: Tensor<3>) -> Tensor<1> {
+    let [batch, height, width] = mask.dims();
+    mask.reshape([batch, height * width])
+        .sum_dim(1) // [B, 1]
+        .reshape([batch])
 }

@@ -30,13 +30,15 @@ pub const NORM_EPSILON: f64 = 1.0 / 1_048_576.0;
 /// (c_x/W − ½, c_y/H − ½) per sample, with the mass floor of the module docs (0 for an empty
 /// mask). `mask` is `[B, H, W]`.
 pub fn centroid_offset(mask: Tensor<3>) -> Tensor<2> {
-    centroid_offset_of(&MaskMoments::of(mask))
+    let [dx, dy] = centroid_offset_of(&MaskMoments::of(mask));
+    Tensor::stack(vec![dx, dy], 1)
 }
 
-/// [`centroid_offset`] of a mask's moments (what a cost reads: [`CostInputs::require_mask_moments`]).
-pub fn centroid_offset_of(moments: &MaskMoments) -> Tensor<2> {
-    // [B, 2] / [B, 1]: the mass broadcasts over both coordinates.
-    moments.first() / moments.mass().clamp_min(MASS_FLOOR)
+/// [`centroid_offset`] of a mask's moments (what a cost reads: [`CostInputs::require_mask_moments`]),
+/// as its two columns `[B]` (x, y): every op after the moments elementwise on `[B]`.
+pub fn centroid_offset_of(moments: &MaskMoments) -> [Tensor<1>; 2] {
+    let mass = moments.mass().clamp_min(MASS_FLOOR);
+    [moments.first_x() / mass.clone(), moments.first_y() / mass]
 }
 
 /// Target centring error per sample, `[B]`, of mask images `[B, H, W]` (see module docs).
@@ -46,15 +48,11 @@ pub fn tce(mask: Tensor<3>) -> Tensor<1> {
 
 /// [`tce`] of a mask's moments.
 pub fn tce_of(moments: &MaskMoments) -> Tensor<1> {
-    let offset = centroid_offset_of(moments);
-    let [batch, _] = offset.dims();
-    offset
-        .square()
-        .sum_dim(1)
+    let [dx, dy] = centroid_offset_of(moments);
+    (dx.square() + dy.square())
         .add_scalar(NORM_EPSILON * NORM_EPSILON)
         .sqrt()
         .sub_scalar(NORM_EPSILON)
-        .reshape([batch])
 }
 
 /// TCE as a [`Cost`]: config table `[costs.tce]`, key `weight` (default 1).

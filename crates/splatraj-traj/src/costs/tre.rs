@@ -10,14 +10,15 @@
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostError, CostInputs, ImageChannel, MaskMoments, check_weight};
+use super::{Cost, CostError, CostInputs, ImageChannel, MaskMoments, check_weight, mask_mass};
 
 /// Target ratio of the frame the object should cover when none is configured.
 pub const DEFAULT_TARGET_RATIO: f64 = 0.15;
 
 /// Share of the frame the mask covers, Σ I_b / (W·H), per sample: `[B]` of `[B, H, W]`.
 pub fn coverage(mask: Tensor<3>) -> Tensor<1> {
-    MaskMoments::of(mask).coverage()
+    let [_, height, width] = mask.dims();
+    mask_mass(mask).div_scalar((height * width) as f64)
 }
 
 /// Target ratio error per sample, `[B]`, of mask images `[B, H, W]` for target ratio `target`.

@@ -28,7 +28,9 @@
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostError, CostInputs, ImageChannel, MaskMoments, check_weight, invalid};
+use super::{
+    Cost, CostError, CostInputs, ImageChannel, MaskMoments, check_weight, invalid, mask_mass,
+};
 
 /// Mask mass (pixels' worth) of the object alone below which it counts as out of frame.
 pub const MIN_ALONE_PIXELS: f64 = 1.0;
@@ -43,9 +45,8 @@ pub fn hidden_share(seen: Tensor<3>, alone: Tensor<3>) -> Tensor<1> {
 
 /// [`hidden_share`] with the seen mask's moments (shared with TCE and TRE in a cost pass).
 pub fn hidden_share_of(seen: &MaskMoments, alone: Tensor<3>) -> Tensor<1> {
-    let [batch, _, _] = alone.dims();
-    let mass = |m: &MaskMoments| m.mass().reshape([batch]);
-    let whole = mass(&MaskMoments::of(alone));
+    // The object alone's pixels: its mass only (its first moments are not read).
+    let whole = mask_mass(alone);
     // 1 where the object alone is in frame, else 0 (off the graph: a switch, not a slope);
     // in the masks' float type (a bool tensor becomes the default float, f32).
     let in_frame = whole
@@ -54,7 +55,7 @@ pub fn hidden_share_of(seen: &MaskMoments, alone: Tensor<3>) -> Tensor<1> {
         .greater_equal_elem(MIN_ALONE_PIXELS)
         .float()
         .cast(whole.dtype());
-    let ratio = mass(seen) / whole.clamp_min(MIN_ALONE_PIXELS);
+    let ratio = seen.mass() / whole.clamp_min(MIN_ALONE_PIXELS);
     ratio.neg().add_scalar(1.0).clamp_min(0.0) * in_frame
 }
 

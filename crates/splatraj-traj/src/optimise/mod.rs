@@ -9,9 +9,11 @@
 //! - [`start`]: starting poses (seeded random ones, or ones that look at each object);
 //! - [`route`]: planned starts that go around the scene's geometry between windows;
 //! - [`views`]: the search for each window's starting viewpoint, where its object shows;
+//! - [`backward`]: a loss's gradient, its forward handed to the device first;
 //! - [`sampling`] and [`units`]: the stratified times and the normalised parameter units the
 //!   loops share.
 
+pub mod backward;
 pub mod pans;
 pub mod problem;
 pub mod route;
@@ -30,6 +32,7 @@ use splatraj_render::render::RenderError;
 use crate::costs::{CostError, CostTerms};
 use crate::trajectory::TrajectoryError;
 
+pub use backward::backward;
 pub use pans::{PanLimits, pan_shares};
 pub use problem::{
     Evaluated, PoseLoss, Problem, StepEvaluation, StepPasses, WindowPath, WindowRenders,

@@ -21,7 +21,7 @@ use splatraj_render::render::{
 };
 
 use super::sampling::window_bounds;
-use super::{OptimiseError, WindowTarget, host_values};
+use super::{OptimiseError, WindowTarget, backward, host_values};
 use crate::clearance::Occupancy;
 use crate::costs::{
     Cost, CostDomain, CostError, CostInputs, CostTerms, HostPoses, ImageChannel, PathSamples,
@@ -1130,7 +1130,7 @@ impl<'a> Problem<'a> {
             parts.push(coverage(m.clone()).without_autodiff());
         }
         if gradient {
-            let grads = terms.total.clone().sum().backward();
+            let grads = backward(&terms.total.clone().sum())?;
             // No gradient at all means nothing in the graph depended on the pose.
             parts.push(match poses.grad(&grads) {
                 Some(g) => g.reshape([6]),

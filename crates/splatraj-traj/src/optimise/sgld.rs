@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 use splatraj_render::camera::Pose;
 
 use super::units::PoseUnits;
-use super::{OptimiseError, Problem, check_starts, per_sample};
+use super::{OptimiseError, Problem, backward, check_starts, per_sample};
 use crate::costs::HostPoses;
 
 /// Settings of [`sample_poses_sgld`] (the config's `[sgld]` table).
@@ -149,7 +149,7 @@ pub fn sample_poses_sgld(
         let terms = problem
             .evaluate_along(0, poses, None, None, Some(&host), step, renders.as_ref())?
             .terms;
-        let grads = terms.total.clone().sum().backward();
+        let grads = backward(&terms.total.clone().sum())?;
         let grad = normalised.grad(&grads).map(|g| g.reshape([chains * 6]));
         let (rows, grad) = per_sample(&terms, grad)?;
         let totals: Vec<f64> = rows.into_iter().map(|(t, _)| t).collect();

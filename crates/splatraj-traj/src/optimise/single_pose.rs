@@ -37,7 +37,7 @@ use splatraj_render::camera::Pose;
 
 use super::trajectory::{Flow, StopReason};
 use super::units::PoseUnits;
-use super::{OptimiseError, Problem, check_adam, check_starts, host_values, per_sample};
+use super::{OptimiseError, Problem, backward, check_adam, check_starts, host_values, per_sample};
 use crate::costs::HostPoses;
 
 /// Settings of [`optimise_single_pose`]; the defaults suit scenes in metres.
@@ -242,7 +242,7 @@ pub fn optimise_poses_observed(
             let (samples, _) = per_sample(&terms, None)?;
             (samples, None, None)
         } else {
-            let grads = terms.total.clone().sum().backward();
+            let grads = backward(&terms.total.clone().sum())?;
             let grad = normalised
                 .grad(&grads)
                 .map(|g| g.reshape([starts.len() * 6]));

@@ -38,8 +38,8 @@ use std::time::{Duration, Instant};
 
 use super::units::PoseUnits;
 use super::{
-    OptimiseError, Problem, StepEvaluation, WindowPath, WindowSamples, check_adam, host_values,
-    sampling,
+    OptimiseError, Problem, StepEvaluation, WindowPath, WindowSamples, backward, check_adam,
+    host_values, sampling,
 };
 use crate::costs::{HostPoses, QueryContext};
 use crate::trajectory::{LensPath, POSE_DIM, Trajectory, TrajectoryModel, TrajectoryRecord};
@@ -394,7 +394,7 @@ pub fn optimise_trajectory(
         let evaluated = module.weights.val().without_autodiff();
         let evaluated_lens = module.lens.as_ref().map(|l| l.val().without_autodiff());
         let backward_started = Instant::now();
-        let grads = loss.backward();
+        let grads = backward(&loss)?;
         let finite = match module.weights.val().grad(&grads) {
             Some(g) => g.is_finite().all().float().cast(evaluated.dtype()),
             None => Tensor::<1>::ones([1], (&evaluated.device(), evaluated.dtype())),
