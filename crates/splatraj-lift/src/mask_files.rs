@@ -440,8 +440,9 @@ pub fn render_label_mask(
             .try_into_vec::<f32>()
             .map_err(|e| RenderError::ReadBack(format!("{e:?}")).into())
     };
+    let alpha = out.alpha().unsqueeze_dim(3);
     let image = read(out.images)?;
-    let alpha = read(out.alpha.unsqueeze_dim(3))?;
+    let alpha = read(alpha)?;
     Ok(image
         .chunks_exact(dim)
         .zip(&alpha)

@@ -112,10 +112,62 @@ impl Approximations {
 pub struct Composited {
     /// Channel images. `[B, H, W, C]`
     pub images: Tensor<4>,
-    /// Accumulated opacity 1 − T_final. `[B, H, W]`
-    pub alpha: Tensor<3>,
+    /// The accumulated opacity, read with [`Composited::alpha`].
+    alpha: Alpha,
     /// How much work the pass had (the same for both rasterizers).
     pub stats: RenderStats,
+}
+
+/// Where a render's accumulated opacity is. It is cut out of the packed image only when read:
+/// on a GPU every queued cut is a launch whether anything reads it or not, and most passes
+/// (the optimisation's, the metrics', the frames') never read it.
+#[derive(Debug, Clone)]
+enum Alpha {
+    /// The last channel of the packed image. `[B, H, W, C + 1]`
+    Packed(Tensor<4>),
+    /// On its own. `[B, H, W]`
+    Alone(Tensor<3>),
+}
+
+impl Composited {
+    /// The render in a packed image `[B, H, W, C + 1]`: the channels, then alpha.
+    pub(crate) fn from_packed(packed: Tensor<4>, stats: RenderStats) -> Self {
+        let channels = packed.dims()[3] - 1;
+        Composited {
+            images: packed.clone().narrow(3, 0, channels),
+            alpha: Alpha::Packed(packed),
+            stats,
+        }
+    }
+
+    /// A render whose images `[B, H, W, C]` and alpha `[B, H, W]` are apart.
+    pub(crate) fn from_parts(images: Tensor<4>, alpha: Tensor<3>, stats: RenderStats) -> Self {
+        Composited {
+            images,
+            alpha: Alpha::Alone(alpha),
+            stats,
+        }
+    }
+
+    /// This render's alpha and work with other channel images `[B, H, W, C']`.
+    #[cfg_attr(not(feature = "wgpu"), allow(dead_code))] // channel groups: GPU only
+    pub(crate) fn with_images(self, images: Tensor<4>) -> Self {
+        Composited { images, ..self }
+    }
+
+    /// Accumulated opacity 1 − T_final. `[B, H, W]`
+    pub fn alpha(&self) -> Tensor<3> {
+        match &self.alpha {
+            Alpha::Packed(packed) => {
+                let [batch, height, width, channels] = packed.dims();
+                packed
+                    .clone()
+                    .narrow(3, channels - 1, 1)
+                    .reshape([batch, height, width])
+            }
+            Alpha::Alone(alpha) => alpha.clone(),
+        }
+    }
 }
 
 /// Size of a render's compositing work, for benchmarks (ns per pixel–Gaussian pair).
@@ -191,19 +243,12 @@ pub fn composite(
         ])
         .narrow(1, 0, grid.height)
         .narrow(2, 0, grid.width);
-    let alpha = image
-        .clone()
-        .narrow(3, channels, 1)
-        .reshape([batch, grid.height, grid.width]);
-    Composited {
-        images: image.narrow(3, 0, channels),
-        alpha,
-        stats: RenderStats {
-            tiles: work.len(),
-            pairs: work.iter().map(|w| w.gaussians.len()).sum(),
-            gaussians_used: rows.largest(),
-        },
-    }
+    let stats = RenderStats {
+        tiles: work.len(),
+        pairs: work.iter().map(|w| w.gaussians.len()).sum(),
+        gaussians_used: rows.largest(),
+    };
+    Composited::from_packed(image, stats)
 }
 
 /// The inputs with one extra, fully transparent row at index R, which padding points to.

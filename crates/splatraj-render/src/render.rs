@@ -617,11 +617,11 @@ pub fn render_at(
         }
         let images = Tensor::<4>::zeros([batch, grid.height, grid.width, width], (&device, dtype));
         let alpha = Tensor::<3>::zeros([batch, grid.height, grid.width], (&device, dtype));
-        return Ok(Composited {
-            images: images + zero.clone().reshape([1, 1, 1, 1]),
-            alpha: alpha + zero.reshape([1, 1, 1]),
-            stats: RenderStats::default(),
-        });
+        return Ok(Composited::from_parts(
+            images + zero.clone().reshape([1, 1, 1, 1]),
+            alpha + zero.reshape([1, 1, 1]),
+            RenderStats::default(),
+        ));
     }
     // Index tensors `[R]`, uploaded once and only when a select needs them: each row's scene
     // index (SH colours and per-Gaussian tensors select with it) and its pose (each row's

@@ -437,11 +437,11 @@ fn assert_gpu_kernels_match_host_kernels(case: &KernelCase) {
             TensorData::new(weights(channels..channels + 1), [batch, height, width]),
             (&device, DType::F32),
         );
-        let loss = (out.images.clone() * w_values).sum() + (out.alpha.clone() * w_alpha).sum();
+        let loss = (out.images.clone() * w_values).sum() + (out.alpha() * w_alpha).sum();
         let grads = loss.backward();
         vec![
-            host(out.images),
-            host(out.alpha),
+            host(out.images.clone()),
+            host(out.alpha()),
             host(m.grad(&grads).unwrap()),
             host(c.grad(&grads).unwrap()),
             host(o.grad(&grads).unwrap()),
@@ -882,9 +882,9 @@ fn many_channels_are_composited_in_groups_that_fit_the_device() {
             TensorData::new(weights, [1, h, w, c]),
             (&device, DType::F32),
         );
-        let loss = (out.images.clone() * weights).sum() + out.alpha.clone().sum();
+        let loss = (out.images.clone() * weights).sum() + out.alpha().sum();
         let gradient = poses.grad(&loss.backward()).unwrap();
-        vec![host(out.images), host(out.alpha), host(gradient)]
+        vec![host(out.images.clone()), host(out.alpha()), host(gradient)]
     };
     let (got, want) = (run(BackendKind::Wgpu), run(BackendKind::Flex));
     for ((name, got), want) in ["images", "alpha", "pose gradient"]

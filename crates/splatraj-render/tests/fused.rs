@@ -194,11 +194,11 @@ fn composite_and_gradients(
         TensorData::new(w_alpha, [batch, grid.height, grid.width]),
         (&device, DType::F64),
     );
-    let loss = (out.images.clone() * w_image).sum() + (out.alpha.clone() * w_alpha).sum();
+    let loss = (out.images.clone() * w_image).sum() + (out.alpha() * w_alpha).sum();
     let grads = loss.backward();
     vec![
-        host(out.images),
-        host(out.alpha),
+        host(out.images.clone()),
+        host(out.alpha()),
         host(means.grad(&grads).unwrap()),
         host(conics.grad(&grads).unwrap()),
         host(opacities.grad(&grads).unwrap()),
@@ -273,8 +273,8 @@ fn rule_edges_are_decided_as_specified() {
         &inputs,
         CompositePlan::new(&work, &PoseRows::dense(batch, n), grid),
     );
+    let alpha = host(out.alpha());
     let image = host(out.images);
-    let alpha = host(out.alpha);
     // Brute force over all n Gaussians of pose 0 in row order (the lists' order), one pixel.
     let brute = |x: usize, y: usize| -> (f64, f64) {
         let (mut t, mut value) = (1.0f64, 0.0);
@@ -406,7 +406,7 @@ fn render_scene_loss(
         TensorData::new(weights, [b, h, w, c]),
         (&device, DType::F64),
     );
-    let grads = ((out.images.clone() * weights).sum() + out.alpha.sum()).backward();
+    let grads = ((out.images.clone() * weights).sum() + out.alpha().sum()).backward();
     (host(out.images), host(poses.grad(&grads).unwrap()))
 }
 

@@ -118,10 +118,10 @@ fn run_with(
     request.pruning = pruning;
     request.rasterizer = rasterizer;
     let out = render(&uploaded, poses.clone(), &request).unwrap();
-    let grads = (out.images.clone().sum() + out.alpha.clone().sum()).backward();
+    let grads = (out.images.clone().sum() + out.alpha().sum()).backward();
     Output {
+        alpha: host(out.alpha()),
         images: host(out.images),
-        alpha: host(out.alpha),
         grad: host(poses.grad(&grads).expect("a gradient, even if zero")),
     }
 }

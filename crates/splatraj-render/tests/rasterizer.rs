@@ -121,7 +121,7 @@ fn compare_with_reference_on(dtype: DType, tolerance: f64, rasterizer: Rasterize
     );
     request.rasterizer = rasterizer;
     let out = render(&uploaded, pose_tensor(&[pose()], &device, dtype), &request).unwrap();
-    let got = host(out.images); // [1, H, W, 5]
+    let got = host(out.images.clone()); // [1, H, W, 5]
     let reference = render_reference(
         &scene,
         &ref_camera(&pose(), &k),
@@ -142,7 +142,7 @@ fn compare_with_reference_on(dtype: DType, tolerance: f64, rasterizer: Rasterize
         error <= tolerance,
         "{dtype:?} {rasterizer:?}: max abs difference {error}"
     );
-    let alpha: Vec<f64> = host(out.alpha);
+    let alpha: Vec<f64> = host(out.alpha());
     assert!(max_diff(&alpha, &reference.alpha) <= tolerance);
     // The scene must exercise early termination: some pixel saturated near 1 − 1e-4.
     assert!(
@@ -200,7 +200,7 @@ fn mask_and_gradient(
     );
     let grads = (out.images.clone() * weights).sum().backward();
     let grad = host(poses.grad(&grads).unwrap());
-    (host(out.images), grad)
+    (host(out.images.clone()), grad)
 }
 
 #[test]
@@ -324,8 +324,8 @@ fn feature_channels_composite_like_masks() {
             &request,
         )
         .unwrap();
-        let image = host(out.images);
-        let alpha: Vec<f64> = host(out.alpha);
+        let image = host(out.images.clone());
+        let alpha: Vec<f64> = host(out.alpha());
         for (p, px) in image.chunks(3).enumerate() {
             assert!(
                 (px[0] - px[2]).abs() < 1e-12,

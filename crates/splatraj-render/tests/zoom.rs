@@ -359,8 +359,8 @@ fn a_zoomed_render_is_the_render_with_scaled_focal_lengths() {
             &request,
         )
         .unwrap();
+        let alpha = host(zoomed.alpha());
         let images = host(zoomed.images);
-        let alpha = host(zoomed.alpha);
         let pixels = k.width * k.height;
         for (b, (pose, s)) in poses.iter().zip(RENDER_ZOOMS).enumerate() {
             let scaled_k = zoomed_intrinsics(&k, s);

@@ -21,8 +21,9 @@ pub(crate) fn render_view(
     let k = view.intrinsics;
     let request = RenderRequest::new(k, vec![Channel::Rgb, Channel::Depth]);
     let rendered = render_poses(uploaded, &[view.pose], &request)?;
+    let alpha = rendered.alpha();
     let pixels = to_host(rendered.images)?;
-    let alpha = to_host(rendered.alpha)?;
+    let alpha = to_host(alpha)?;
     let png = png_rgb8(&rgb8(&pixels, 4, None), k.width, k.height)?;
     let depth = pixels
         .chunks_exact(4)

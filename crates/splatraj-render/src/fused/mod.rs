@@ -360,13 +360,11 @@ pub fn composite_packed(splats: Tensor<2>, values: Tensor<2>, plan: CompositePla
                 )
             })
             .collect();
-        let alpha = parts[0].alpha.clone();
-        let stats = parts[0].stats;
-        return Composited {
-            images: Tensor::cat(parts.into_iter().map(|p| p.images).collect(), 3),
-            alpha,
-            stats,
-        };
+        let first = parts[0].clone();
+        return first.with_images(Tensor::cat(
+            parts.into_iter().map(|p| p.images).collect(),
+            3,
+        ));
     }
     composite_shared_plan(splats, values, Arc::new(plan))
 }
@@ -377,8 +375,6 @@ fn composite_shared_plan(
     values: Tensor<2>,
     plan: Arc<CompositePlan>,
 ) -> Composited {
-    let channels = values.dims()[1];
-    let (batch, grid) = (plan.batch(), plan.grid);
     let stats = RenderStats {
         tiles: plan.tiles.len(),
         pairs: plan.rows.len(),
@@ -391,13 +387,5 @@ fn composite_shared_plan(
         },
         plan,
     )); // [B, H, W, C + 1]
-    let alpha = packed
-        .clone()
-        .narrow(3, channels, 1)
-        .reshape([batch, grid.height, grid.width]);
-    Composited {
-        images: packed.narrow(3, 0, channels),
-        alpha,
-        stats,
-    }
+    Composited::from_packed(packed, stats)
 }
