@@ -57,7 +57,7 @@ fn a_mask_pass_with_its_gradient_launches_few_kernels() {
         spent.reads, 1,
         "the terms, coverage and gradient in one read"
     );
-    // 33 on lavapipe with burn 0.22.1: the projection and compositing forward and backward (7),
+    // 32 on lavapipe with burn 0.22.1: the projection and compositing forward and backward (7),
     // the moments (three reductions and two products), the costs' fused chains and the image
     // slices' backward. Unfused cost chains make it 50 or more.
     assert!(
