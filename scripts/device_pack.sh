@@ -19,9 +19,9 @@
 # with it (GPU_CHECK_BRANCH_SECONDS, 80) and prints that step's stage table below the check's,
 # to read beside the check's own "wgpu step, ms, each kernel waited for". BINARY defaults to
 # $CARGO_TARGET_DIR/release/splatraj (else target/release/splatraj), DATA_DIR to
-# ../shared/data. Everything travels within the tool's
-# 64 MiB. The loader packages follow the device notes of this workplace (Debian's libvulkan1,
-# unpacked over / on the machine; the NVIDIA ICD is the machine's own).
+# ../shared/data. Everything travels within the tool's 64 MiB. The loader packages follow the
+# device notes of this workplace (Debian's libvulkan1, unpacked over / on the machine; the
+# NVIDIA ICD is the machine's own).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
