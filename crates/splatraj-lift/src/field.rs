@@ -16,7 +16,9 @@
 
 use splatraj_render::camera::Intrinsics;
 use splatraj_render::lift::{LiftSums, lift_views};
-use splatraj_render::render::{Channel, DeviceScene, Rasterizer, RenderRequest, render_poses};
+use splatraj_render::render::{
+    AlphaChannel, Channel, DeviceScene, Rasterizer, RenderRequest, render_poses,
+};
 use splatraj_semantic::image_encoder::{DenseFeatures, ImageEncoder, RgbImage};
 
 use crate::MIN_WEIGHT;
@@ -365,7 +367,10 @@ pub fn render_rgb(scene: &DeviceScene, view: &View, size: usize) -> Result<RgbIm
 /// An RGB render of `view`'s pose through `intrinsics`, clamped to [0, 1]. Rendered on the
 /// scene's device without a gradient (the image is only read).
 fn render_rgb_with(scene: &DeviceScene, view: &View, intrinsics: &Intrinsics) -> Result<RgbImage> {
-    let request = RenderRequest::new(*intrinsics, vec![Channel::Rgb]);
+    let request = RenderRequest {
+        alpha: AlphaChannel::Dropped,
+        ..RenderRequest::new(*intrinsics, vec![Channel::Rgb])
+    };
     let out = render_poses(scene, &[view.pose], &request)?;
     let pixels: Vec<f32> = out
         .images

@@ -440,7 +440,10 @@ pub fn render_label_mask(
             .try_into_vec::<f32>()
             .map_err(|e| RenderError::ReadBack(format!("{e:?}")).into())
     };
-    let alpha = out.alpha().unsqueeze_dim(3);
+    let alpha = out
+        .alpha()
+        .ok_or(RenderError::AlphaDropped)?
+        .unsqueeze_dim(3);
     let image = read(out.images)?;
     let alpha = read(alpha)?;
     Ok(image

@@ -205,6 +205,9 @@ static NAMES: std::sync::Mutex<Option<std::collections::HashMap<&'static str, u6
 #[cfg_attr(not(feature = "wgpu"), allow(dead_code))]
 fn launched(kernel: &'static str) {
     LAUNCHES.fetch_add(1, Ordering::Relaxed);
+    // Each launch in order (`RUST_LOG=splatraj_render::counters=trace`): where a pass's
+    // launches come from, which the tallies by name do not say (docs/gpu.md).
+    tracing::trace!(kernel = short_kernel_name(kernel), "launch");
     if !TALLYING.load(Ordering::Relaxed) {
         return;
     }

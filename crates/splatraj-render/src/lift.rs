@@ -17,7 +17,9 @@ use burn::tensor::{Tensor, TensorData};
 
 use crate::camera::{Intrinsics, Pose};
 use crate::host::{OnDevice, to_host};
-use crate::render::{DeviceScene, Rasterizer, RenderError, RenderRequest, render_poses};
+use crate::render::{
+    AlphaChannel, DeviceScene, Rasterizer, RenderError, RenderRequest, render_poses,
+};
 
 /// Views rendered together in one lifting pass (bounds the memory of a pass).
 const VIEWS_PER_PASS: usize = 4;
@@ -128,6 +130,7 @@ pub fn lift_views(
         let request = RenderRequest {
             rasterizer,
             gaussian_values: Some(values.clone()),
+            alpha: AlphaChannel::Dropped,
             ..RenderRequest::new(*intrinsics, Vec::new())
         };
         let rendered = render_poses(scene, views, &request)?;

@@ -107,6 +107,31 @@ impl Approximations {
     }
 }
 
+/// Whether a render returns its accumulated opacity (alpha) beside its channel images.
+///
+/// Most passes (the optimisation's, the metrics', the frames') never read it. On a GPU a
+/// packed image `[B, H, W, C + 1]` must be cut to give the channels alone, and the cut's
+/// backward fills a zero gradient of the whole packed image and copies the channels' into it:
+/// three launches and an image-sized buffer a pass, for a value nobody reads (docs/gpu.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum AlphaChannel {
+    /// Alpha is returned ([`Composited::alpha`] is `Some`).
+    #[default]
+    Returned,
+    /// Only the channel images are made.
+    Dropped,
+}
+
+impl AlphaChannel {
+    /// Values per pixel of a compositing output with `channels` channel values.
+    pub fn image_width(self, channels: usize) -> usize {
+        match self {
+            AlphaChannel::Returned => channels + 1,
+            AlphaChannel::Dropped => channels,
+        }
+    }
+}
+
 /// Rendered images of a batch.
 #[derive(Debug, Clone)]
 pub struct Composited {
@@ -119,14 +144,15 @@ pub struct Composited {
 }
 
 /// Where a render's accumulated opacity is. It is cut out of the packed image only when read:
-/// on a GPU every queued cut is a launch whether anything reads it or not, and most passes
-/// (the optimisation's, the metrics', the frames') never read it.
+/// on a GPU every queued cut is a launch whether anything reads it or not.
 #[derive(Debug, Clone)]
 enum Alpha {
     /// The last channel of the packed image. `[B, H, W, C + 1]`
     Packed(Tensor<4>),
     /// On its own. `[B, H, W]`
     Alone(Tensor<3>),
+    /// Not made ([`AlphaChannel::Dropped`]).
+    Dropped,
 }
 
 impl Composited {
@@ -149,23 +175,47 @@ impl Composited {
         }
     }
 
+    /// A render of channel images `[B, H, W, C]` alone ([`AlphaChannel::Dropped`]).
+    pub(crate) fn without_alpha(images: Tensor<4>, stats: RenderStats) -> Self {
+        Composited {
+            images,
+            alpha: Alpha::Dropped,
+            stats,
+        }
+    }
+
+    /// This render, keeping its alpha only where `alpha` asks for it.
+    pub(crate) fn keeping(self, alpha: AlphaChannel) -> Self {
+        match alpha {
+            AlphaChannel::Returned => self,
+            AlphaChannel::Dropped => Composited {
+                alpha: Alpha::Dropped,
+                ..self
+            },
+        }
+    }
+
     /// This render's alpha and work with other channel images `[B, H, W, C']`.
     #[cfg_attr(not(feature = "wgpu"), allow(dead_code))] // channel groups: GPU only
     pub(crate) fn with_images(self, images: Tensor<4>) -> Self {
         Composited { images, ..self }
     }
 
-    /// Accumulated opacity 1 − T_final. `[B, H, W]`
-    pub fn alpha(&self) -> Tensor<3> {
+    /// Accumulated opacity 1 − T_final `[B, H, W]`; `None` where the render was asked to drop
+    /// it ([`AlphaChannel::Dropped`]).
+    pub fn alpha(&self) -> Option<Tensor<3>> {
         match &self.alpha {
             Alpha::Packed(packed) => {
                 let [batch, height, width, channels] = packed.dims();
-                packed
-                    .clone()
-                    .narrow(3, channels - 1, 1)
-                    .reshape([batch, height, width])
+                Some(
+                    packed
+                        .clone()
+                        .narrow(3, channels - 1, 1)
+                        .reshape([batch, height, width]),
+                )
             }
-            Alpha::Alone(alpha) => alpha.clone(),
+            Alpha::Alone(alpha) => Some(alpha.clone()),
+            Alpha::Dropped => None,
         }
     }
 }

@@ -20,6 +20,7 @@ use crate::fused::{CompositePlan, composite_packed};
 use crate::host::{OnDevice, to_host, upload};
 use crate::pass_size::{PassBuffer, first_oversized};
 use crate::project::{NEAR_PLANE, SceneTensors, project_zoomed};
+pub use crate::rasterize::AlphaChannel;
 use crate::rasterize::{
     Approximations, CompositeOptions, Composited, RenderStats, SplatInputs, composite,
 };
@@ -142,6 +143,9 @@ pub struct RenderRequest {
     /// A zoom per pose (focal lengths fx·s, fy·s about the fixed principal point); the render
     /// is differentiable in it. `None`: s = 1 for every pose.
     pub zoom: Option<Zoom>,
+    /// Whether the render returns alpha beside the channels (default: returned). Passes that
+    /// never read it drop it: on a GPU that saves launches and an image-sized buffer a pass.
+    pub alpha: AlphaChannel,
 }
 
 /// A zoom s_b > 0 per pose: the tensor `[B]` the render is differentiable in, and optionally
@@ -182,6 +186,7 @@ impl RenderRequest {
             approximations: Approximations::default(),
             gaussian_values: None,
             zoom: None,
+            alpha: AlphaChannel::Returned,
         }
     }
 }
@@ -267,6 +272,9 @@ pub enum RenderError {
         /// The device's largest buffer, bytes.
         max: u64,
     },
+    /// Alpha was read from a render whose request dropped it ([`RenderRequest::alpha`]).
+    #[error("the render's request dropped alpha (`RenderRequest::alpha`)")]
+    AlphaDropped,
     /// The zoom (tensor or host values) is not one value per pose.
     #[error("{got} zoom values for a batch of {batch} poses")]
     ZoomCount {
@@ -621,7 +629,8 @@ pub fn render_at(
             images + zero.clone().reshape([1, 1, 1, 1]),
             alpha + zero.reshape([1, 1, 1]),
             RenderStats::default(),
-        ));
+        )
+        .keeping(request.alpha));
     }
     // Index tensors `[R]`, uploaded once and only when a select needs them: each row's scene
     // index (SH colours and per-Gaussian tensors select with it) and its pose (each row's
@@ -748,7 +757,9 @@ pub fn render_at(
         Splats::Packed(packed) => composite_packed(
             *packed,
             values,
-            CompositePlan::new(&work, &rows, grid).with_stop_transmittance(stop_transmittance),
+            CompositePlan::new(&work, &rows, grid)
+                .with_stop_transmittance(stop_transmittance)
+                .with_alpha(request.alpha),
         ),
         Splats::Separate(splats) => composite(
             &SplatInputs { values, ..*splats },
@@ -759,7 +770,8 @@ pub fn render_at(
                 stop_transmittance,
                 ..request.composite
             },
-        ),
+        )
+        .keeping(request.alpha),
     };
     composited.stats.gaussians_used = u;
     let composited_at = started.elapsed();

@@ -10,7 +10,9 @@ use glam::DVec3;
 use splatraj_render::backend::{BackendKind, Precision};
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::reference::{RefChannels, render_reference};
-use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
+use splatraj_render::render::{
+    AlphaChannel, Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render,
+};
 use splatraj_scene::Scene;
 
 /// A 5×4 grid of overlapping Gaussians at depth ~3 in front of a camera looking along +z;
@@ -47,11 +49,12 @@ fn setup() -> (Scene, Vec<f32>, Intrinsics, Pose) {
     (scene, mask, intrinsics, pose)
 }
 
-/// Mask image and d(Σ mask)/dΦ on a backend with a rasterizer.
+/// Mask image and d(Σ mask)/dΦ on a backend with a rasterizer, alpha returned or dropped.
 fn mask_and_gradient(
     backend: BackendKind,
     precision: Precision,
     rasterizer: Rasterizer,
+    alpha: AlphaChannel,
 ) -> (Vec<f64>, Vec<f64>) {
     let (scene, mask, intrinsics, pose) = setup();
     let device = backend.device().expect("compiled backend").autodiff();
@@ -62,7 +65,10 @@ fn mask_and_gradient(
     let mut request = RenderRequest::new(intrinsics, vec![Channel::Mask(mask)]);
     request.pruning = Pruning::ObjectOnly;
     request.rasterizer = rasterizer;
+    request.alpha = alpha;
     let out = render(&uploaded, poses.clone(), &request).unwrap();
+    assert_eq!(out.images.dims()[3], 1, "one mask channel");
+    assert_eq!(out.alpha().is_some(), alpha == AlphaChannel::Returned);
     let grads = out.images.clone().sum().backward();
     let image = host(out.images);
     let grad = host(poses.grad(&grads).unwrap());
@@ -94,7 +100,12 @@ fn compiled_backends_agree_on_image_and_gradient() {
     );
     let reference = reference_mask();
     assert!(reference.iter().any(|&v| v > 0.2), "the object is in view");
-    let (_, flex_grad) = mask_and_gradient(BackendKind::Flex, Precision::F64, Rasterizer::Tensor);
+    let (_, flex_grad) = mask_and_gradient(
+        BackendKind::Flex,
+        Precision::F64,
+        Rasterizer::Tensor,
+        AlphaChannel::Returned,
+    );
     assert!(
         flex_grad.iter().any(|g| g.abs() > 1e-3),
         "a gradient to compare"
@@ -105,11 +116,16 @@ fn compiled_backends_agree_on_image_and_gradient() {
         } else {
             &[Precision::F32, Precision::F64]
         };
-        for (&precision, rasterizer) in precisions
-            .iter()
-            .flat_map(|p| [(p, Rasterizer::Fused), (p, Rasterizer::Tensor)])
-        {
-            let (image, grad) = mask_and_gradient(backend, precision, rasterizer);
+        // Dropping alpha changes the fused op's output and its backward's input (no alpha
+        // column): the same mask and gradient either way.
+        for (&precision, rasterizer, alpha) in precisions.iter().flat_map(|p| {
+            [Rasterizer::Fused, Rasterizer::Tensor]
+                .into_iter()
+                .flat_map(move |r| {
+                    [AlphaChannel::Returned, AlphaChannel::Dropped].map(|a| (p, r, a))
+                })
+        }) {
+            let (image, grad) = mask_and_gradient(backend, precision, rasterizer, alpha);
             let tolerance = if precision == Precision::F64 {
                 1e-9
             } else {
@@ -121,13 +137,13 @@ fn compiled_backends_agree_on_image_and_gradient() {
                 .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
             assert!(
                 image_error <= tolerance,
-                "{backend} {precision:?} {rasterizer:?}: image differs by {image_error}"
+                "{backend} {precision:?} {rasterizer:?} {alpha:?}: image differs by {image_error}"
             );
             for (k, (got, want)) in grad.iter().zip(&flex_grad).enumerate() {
                 let relative = (got - want).abs() / want.abs().max(1.0);
                 assert!(
                     relative <= 1e-3,
-                    "{backend} {precision:?} {rasterizer:?}: dΦ[{k}] = {got}, flex f64 tensor says {want}"
+                    "{backend} {precision:?} {rasterizer:?} {alpha:?}: dΦ[{k}] = {got}, flex f64 tensor says {want}"
                 );
             }
         }
@@ -437,11 +453,11 @@ fn assert_gpu_kernels_match_host_kernels(case: &KernelCase) {
             TensorData::new(weights(channels..channels + 1), [batch, height, width]),
             (&device, DType::F32),
         );
-        let loss = (out.images.clone() * w_values).sum() + (out.alpha() * w_alpha).sum();
+        let loss = (out.images.clone() * w_values).sum() + (out.alpha().unwrap() * w_alpha).sum();
         let grads = loss.backward();
         vec![
             host(out.images.clone()),
-            host(out.alpha()),
+            host(out.alpha().unwrap()),
             host(m.grad(&grads).unwrap()),
             host(c.grad(&grads).unwrap()),
             host(o.grad(&grads).unwrap()),
@@ -882,9 +898,13 @@ fn many_channels_are_composited_in_groups_that_fit_the_device() {
             TensorData::new(weights, [1, h, w, c]),
             (&device, DType::F32),
         );
-        let loss = (out.images.clone() * weights).sum() + out.alpha().sum();
+        let loss = (out.images.clone() * weights).sum() + out.alpha().unwrap().sum();
         let gradient = poses.grad(&loss.backward()).unwrap();
-        vec![host(out.images.clone()), host(out.alpha()), host(gradient)]
+        vec![
+            host(out.images.clone()),
+            host(out.alpha().unwrap()),
+            host(gradient),
+        ]
     };
     let (got, want) = (run(BackendKind::Wgpu), run(BackendKind::Flex));
     for ((name, got), want) in ["images", "alpha", "pose gradient"]

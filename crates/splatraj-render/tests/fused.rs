@@ -13,7 +13,9 @@ use splatraj_render::fused::{CompositePlan, composite_fused};
 use splatraj_render::rasterize::{
     Approximations, CompositeOptions, MIN_ALPHA, MIN_TRANSMITTANCE, SplatInputs, composite,
 };
-use splatraj_render::render::{Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render};
+use splatraj_render::render::{
+    AlphaChannel, Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render,
+};
 use splatraj_render::rows::PoseRows;
 use splatraj_render::tiles::{TileGrid, TileWork};
 use splatraj_scene::Scene;
@@ -194,11 +196,11 @@ fn composite_and_gradients(
         TensorData::new(w_alpha, [batch, grid.height, grid.width]),
         (&device, DType::F64),
     );
-    let loss = (out.images.clone() * w_image).sum() + (out.alpha() * w_alpha).sum();
+    let loss = (out.images.clone() * w_image).sum() + (out.alpha().unwrap() * w_alpha).sum();
     let grads = loss.backward();
     vec![
         host(out.images.clone()),
-        host(out.alpha()),
+        host(out.alpha().unwrap()),
         host(means.grad(&grads).unwrap()),
         host(conics.grad(&grads).unwrap()),
         host(opacities.grad(&grads).unwrap()),
@@ -273,7 +275,7 @@ fn rule_edges_are_decided_as_specified() {
         &inputs,
         CompositePlan::new(&work, &PoseRows::dense(batch, n), grid),
     );
-    let alpha = host(out.alpha());
+    let alpha = host(out.alpha().unwrap());
     let image = host(out.images);
     // Brute force over all n Gaussians of pose 0 in row order (the lists' order), one pixel.
     let brute = |x: usize, y: usize| -> (f64, f64) {
@@ -378,16 +380,19 @@ fn render_loss(
         pruning,
         channels,
         Approximations::default(),
+        AlphaChannel::Returned,
     )
 }
 
-/// [`render_loss`] of any scene, with rendering approximations.
+/// [`render_loss`] of any scene, with rendering approximations; Σ alpha is in the loss where
+/// `alpha` is returned.
 fn render_scene_loss(
     scene: &Scene,
     rasterizer: Rasterizer,
     pruning: Pruning,
     channels: Vec<Channel>,
     approximations: Approximations,
+    alpha: AlphaChannel,
 ) -> (Vec<f64>, Vec<f64>) {
     let k = Intrinsics::new(30.0, 32.0, 21.0, 13.5, 40, 28).unwrap();
     let device = Device::flex().autodiff();
@@ -397,6 +402,7 @@ fn render_scene_loss(
     request.rasterizer = rasterizer;
     request.pruning = pruning;
     request.approximations = approximations;
+    request.alpha = alpha;
     let out = render(&uploaded, poses.clone(), &request).unwrap();
     let [b, h, w, c] = out.images.dims();
     let weights: Vec<f64> = (0..b * h * w * c)
@@ -406,7 +412,12 @@ fn render_scene_loss(
         TensorData::new(weights, [b, h, w, c]),
         (&device, DType::F64),
     );
-    let grads = ((out.images.clone() * weights).sum() + out.alpha().sum()).backward();
+    let mut loss = (out.images.clone() * weights).sum();
+    match alpha {
+        AlphaChannel::Returned => loss = loss + out.alpha().unwrap().sum(),
+        AlphaChannel::Dropped => assert!(out.alpha().is_none(), "{rasterizer:?}: alpha dropped"),
+    }
+    let grads = loss.backward();
     (host(out.images), host(poses.grad(&grads).unwrap()))
 }
 
@@ -431,6 +442,49 @@ fn pose_gradients_of_fused_and_tensor_renders_agree() {
             "{pruning:?}: pose gradients {grad_f:?} vs {grad_t:?}"
         );
         assert!(grad_f.iter().any(|g| g.abs() > 1e-4));
+    }
+}
+
+#[test]
+fn dropping_alpha_keeps_the_channels_and_their_gradient() {
+    // Without alpha the fused op writes C values a pixel instead of C + 1, and its backward
+    // reads them so (alpha's gradient zero): checked against the tensor path, which composites
+    // alpha and drops it after, on five channels (RGB, depth, mask) and on a mask alone.
+    let (scene, mask) = scene();
+    for (pruning, channels) in [
+        (
+            Pruning::None,
+            vec![Channel::Rgb, Channel::Depth, Channel::Mask(mask.clone())],
+        ),
+        (Pruning::ObjectOnly, vec![Channel::Mask(mask.clone())]),
+    ] {
+        let run = |rasterizer: Rasterizer| {
+            render_scene_loss(
+                &scene,
+                rasterizer,
+                pruning,
+                channels.clone(),
+                Approximations::default(),
+                AlphaChannel::Dropped,
+            )
+        };
+        let (image, grad) = run(Rasterizer::Fused);
+        let (want_image, want_grad) = run(Rasterizer::Tensor);
+        assert!(
+            relative_error(&image, &want_image) < 1e-10,
+            "{pruning:?}: images"
+        );
+        assert!(
+            relative_error(&grad, &want_grad) < 1e-8,
+            "{pruning:?}: pose gradients {grad:?} vs {want_grad:?}"
+        );
+        assert!(grad.iter().any(|g| g.abs() > 1e-4), "a gradient to compare");
+        // The same channel images as a render that returns alpha.
+        let (returned, _) = render_loss(Rasterizer::Fused, pruning, channels.clone());
+        assert_eq!(
+            image, returned,
+            "{pruning:?}: the channels do not depend on alpha"
+        );
     }
 }
 
@@ -502,6 +556,7 @@ fn min_opacity_renders_as_if_the_faint_gaussians_were_absent() {
             Pruning::None,
             channels(&mask),
             approximate,
+            AlphaChannel::Returned,
         );
         let (want_image, want_grad) = render_scene_loss(
             &kept,
@@ -509,6 +564,7 @@ fn min_opacity_renders_as_if_the_faint_gaussians_were_absent() {
             Pruning::None,
             channels(&kept_mask),
             Approximations::default(),
+            AlphaChannel::Returned,
         );
         assert!(
             relative_error(&image, &want_image) < 1e-12,
@@ -524,6 +580,7 @@ fn min_opacity_renders_as_if_the_faint_gaussians_were_absent() {
             Pruning::None,
             channels(&mask),
             Approximations::default(),
+            AlphaChannel::Returned,
         );
         assert!(
             relative_error(&image, &exact) > 1e-3,

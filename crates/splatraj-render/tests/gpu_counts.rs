@@ -129,7 +129,7 @@ fn pass_of(
         request.zoom = Some(Zoom::at(zoom_tensor.clone(), zoom));
     }
     let out = render_at(scene, tensor.clone(), Some(poses), &request).unwrap();
-    let loss = out.images.clone().sum() + out.alpha().mean();
+    let loss = out.images.clone().sum() + out.alpha().unwrap().mean();
     let forward = counters::snapshot().since(&before);
     let grads = loss.backward();
     let gradient = tensor.grad(&grads).expect("the poses have a gradient");

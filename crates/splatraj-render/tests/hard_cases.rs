@@ -118,9 +118,9 @@ fn run_with(
     request.pruning = pruning;
     request.rasterizer = rasterizer;
     let out = render(&uploaded, poses.clone(), &request).unwrap();
-    let grads = (out.images.clone().sum() + out.alpha().sum()).backward();
+    let grads = (out.images.clone().sum() + out.alpha().unwrap().sum()).backward();
     Output {
-        alpha: host(out.alpha()),
+        alpha: host(out.alpha().unwrap()),
         images: host(out.images),
         grad: host(poses.grad(&grads).expect("a gradient, even if zero")),
     }

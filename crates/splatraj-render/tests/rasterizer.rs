@@ -142,7 +142,7 @@ fn compare_with_reference_on(dtype: DType, tolerance: f64, rasterizer: Rasterize
         error <= tolerance,
         "{dtype:?} {rasterizer:?}: max abs difference {error}"
     );
-    let alpha: Vec<f64> = host(out.alpha());
+    let alpha: Vec<f64> = host(out.alpha().unwrap());
     assert!(max_diff(&alpha, &reference.alpha) <= tolerance);
     // The scene must exercise early termination: some pixel saturated near 1 − 1e-4.
     assert!(
@@ -325,7 +325,7 @@ fn feature_channels_composite_like_masks() {
         )
         .unwrap();
         let image = host(out.images.clone());
-        let alpha: Vec<f64> = host(out.alpha());
+        let alpha: Vec<f64> = host(out.alpha().unwrap());
         for (p, px) in image.chunks(3).enumerate() {
             assert!(
                 (px[0] - px[2]).abs() < 1e-12,

@@ -359,7 +359,7 @@ fn a_zoomed_render_is_the_render_with_scaled_focal_lengths() {
             &request,
         )
         .unwrap();
-        let alpha = host(zoomed.alpha());
+        let alpha = host(zoomed.alpha().unwrap());
         let images = host(zoomed.images);
         let pixels = k.width * k.height;
         for (b, (pose, s)) in poses.iter().zip(RENDER_ZOOMS).enumerate() {

@@ -57,11 +57,12 @@ fn a_mask_pass_with_its_gradient_launches_few_kernels() {
         spent.reads, 1,
         "the terms, coverage and gradient in one read"
     );
-    // 32 on lavapipe with burn 0.22.1: the projection and compositing forward and backward (7),
-    // the moments (three reductions and two products), the costs' fused chains and the image
-    // slices' backward. Unfused cost chains make it 50 or more.
+    // 29 on lavapipe with burn 0.22.1: the projection and compositing forward and backward (7),
+    // the moments (three reductions and two products), the costs' fused chains and the mask
+    // slices' backward. 32 while the pass also made alpha, which nothing reads; unfused cost
+    // chains make it 50 or more.
     assert!(
-        spent.launches <= 40,
+        spent.launches <= 34,
         "a mask pass launched {} kernels",
         spent.launches
     );

@@ -13,7 +13,7 @@ use glam::DVec3;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::host::{OnDevice, scalar};
 use splatraj_render::orbit::Orbit;
-use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, render};
+use splatraj_render::render::{AlphaChannel, Channel, DeviceScene, Pruning, RenderRequest, render};
 use splatraj_scene::demo::{DEMO_VIEWPOINT, DemoConfig, demo_layout, demo_scene};
 use splatraj_scene::{ReadOptions, Scene, read_scene, resolve_up};
 
@@ -41,6 +41,7 @@ fn measure_coverage(
     let uploaded = DeviceScene::new(scene, device, DType::F32);
     let request = RenderRequest {
         pruning: Pruning::ObjectOnly,
+        alpha: AlphaChannel::Dropped,
         ..RenderRequest::new(*intrinsics, vec![Channel::Mask(mask.to_vec())])
     };
     let out = render(&uploaded, uploaded.poses(&[*pose]), &request)?;

@@ -16,7 +16,7 @@ use splatraj_render::camera_file::resize;
 use splatraj_render::host::to_host;
 use splatraj_render::images::{png_gray, png_rgb};
 use splatraj_render::render::{
-    Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render_poses,
+    AlphaChannel, Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render_poses,
 };
 use splatraj_scene::ReadOptions;
 use splatraj_semantic::{label_mask, read_mask_file};
@@ -181,6 +181,7 @@ pub fn render_camera(
     let image = |render_request: RenderRequest| -> Result<Vec<f64>> {
         let render_request = RenderRequest {
             rasterizer: request.rasterizer,
+            alpha: AlphaChannel::Dropped,
             ..render_request
         };
         Ok(to_host(

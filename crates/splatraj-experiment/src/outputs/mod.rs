@@ -32,7 +32,9 @@ use anyhow::{Context, Result};
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::images::{highlight, png_rgb};
-use splatraj_render::render::{Channel, DeviceScene, Rasterizer, RenderRequest, render};
+use splatraj_render::render::{
+    AlphaChannel, Channel, DeviceScene, Rasterizer, RenderRequest, render,
+};
 
 /// A CSV table: header and rows ([`crate::write::write_csv`]).
 pub type Csv = (Vec<String>, Vec<Vec<String>>);
@@ -111,6 +113,7 @@ pub fn frame_png(
     let pose = scene.poses(&[Pose(frame.pose)]);
     let request = RenderRequest {
         rasterizer,
+        alpha: AlphaChannel::Dropped,
         ..RenderRequest::new(*intrinsics, channels)
     };
     let images = render(scene, pose, &request)?.images;

@@ -21,7 +21,9 @@ use splatraj_render::camera::Pose;
 use splatraj_render::host::{OnDevice, read_data, to_host};
 use splatraj_render::images::{png_rgb8, rgb8};
 use splatraj_render::pass_size::poses_per_pass;
-use splatraj_render::render::{Channel, DeviceScene, Rasterizer, RenderRequest, render_poses};
+use splatraj_render::render::{
+    AlphaChannel, Channel, DeviceScene, Rasterizer, RenderRequest, render_poses,
+};
 use splatraj_report::video::VideoEncoder;
 use splatraj_traj::costs::{coverage, tce, tre};
 use splatraj_traj::optimise::sampling::window_of;
@@ -737,6 +739,7 @@ impl FrameContext<'_> {
         }
         let request = RenderRequest {
             rasterizer: self.job.rasterizer,
+            alpha: AlphaChannel::Dropped,
             ..RenderRequest::new(intrinsics, channels)
         };
         let poses: Vec<Pose> = frames.poses[first..end].iter().map(|&p| Pose(p)).collect();

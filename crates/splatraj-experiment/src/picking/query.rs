@@ -16,7 +16,7 @@ use serde::Serialize;
 use splatraj_render::backend::{BackendKind, Precision};
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::host::to_host;
-use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render_poses};
+use splatraj_render::render::{AlphaChannel, Channel, DeviceScene, RenderRequest, render_poses};
 use splatraj_scene::{Scene, UpSource};
 use splatraj_semantic::{
     Cluster, ClusteringSummary, Explanation, RegionSpec, SelectionOptions, SourceKind, Spread,
@@ -522,14 +522,17 @@ pub fn picture_with_rejected(
     pose: &Pose,
     k: &Intrinsics,
 ) -> Result<(Vec<u8>, f64)> {
-    let request = RenderRequest::new(
-        *k,
-        vec![
-            Channel::Rgb,
-            Channel::Mask(target.mask.clone()),
-            Channel::Mask(target.rejected_mask()),
-        ],
-    );
+    let request = RenderRequest {
+        alpha: AlphaChannel::Dropped,
+        ..RenderRequest::new(
+            *k,
+            vec![
+                Channel::Rgb,
+                Channel::Mask(target.mask.clone()),
+                Channel::Mask(target.rejected_mask()),
+            ],
+        )
+    };
     let pixels = to_host(render_poses(scene, &[*pose], &request)?.images)?;
     // [H·W·5] (R, G, B, selected, rejected) → [H·W·4] with the rejected tint blended in.
     let tinted: Vec<f64> = pixels

@@ -5,7 +5,7 @@ use anyhow::Result;
 use splatraj_lift::View;
 use splatraj_render::host::to_host;
 use splatraj_render::images::{png_rgb8, rgb8};
-use splatraj_render::render::{Channel, DeviceScene, RenderRequest, render_poses};
+use splatraj_render::render::{Channel, DeviceScene, RenderError, RenderRequest, render_poses};
 use splatraj_report::views_page::PickView;
 
 /// A pixel's depth is kept where the render covers at least this share of it; elsewhere the
@@ -21,7 +21,7 @@ pub(crate) fn render_view(
     let k = view.intrinsics;
     let request = RenderRequest::new(k, vec![Channel::Rgb, Channel::Depth]);
     let rendered = render_poses(uploaded, &[view.pose], &request)?;
-    let alpha = rendered.alpha();
+    let alpha = rendered.alpha().ok_or(RenderError::AlphaDropped)?;
     let pixels = to_host(rendered.images)?;
     let alpha = to_host(alpha)?;
     let png = png_rgb8(&rgb8(&pixels, 4, None), k.width, k.height)?;

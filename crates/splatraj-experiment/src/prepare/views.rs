@@ -7,7 +7,9 @@ use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::host::to_host;
 use splatraj_render::images::{highlight, png_rgb};
 use splatraj_render::orbit::Orbit;
-use splatraj_render::render::{Channel, DeviceScene, Pruning, RenderRequest, render_poses};
+use splatraj_render::render::{
+    AlphaChannel, Channel, DeviceScene, Pruning, RenderRequest, render_poses,
+};
 use splatraj_scene::{Scene, resolve_up};
 use splatraj_semantic::Target;
 
@@ -121,6 +123,7 @@ pub fn diagnostic_camera(
         let small = Intrinsics::from_fov_x(FOV_X_DEGREES, SEARCH_WIDTH, height)?;
         let request = RenderRequest {
             pruning: Pruning::ObjectOnly,
+            alpha: AlphaChannel::Dropped,
             ..RenderRequest::new(small, vec![Channel::Mask(target.mask.clone())])
         };
         let images = to_host(render_poses(uploaded, &poses, &request)?.images)?;

@@ -618,12 +618,13 @@ fn forward_tiles_in_lanes<E: Real>(
     None
 }
 
-/// The packed image `[B, H, W, C + 1]` of the work tiles' planes (zero where no tile drew),
-/// one band of 16 image rows per task: a 1080p frame is 10 M values to place, and placed
-/// tile by tile on one thread that was a tenth of its compositing.
+/// The packed image `[B, H, W, C + 1]` (or `[B, H, W, C]` where the plan drops alpha) of the
+/// work tiles' planes (zero where no tile drew), one band of 16 image rows per task: a 1080p
+/// frame is 10 M values to place, and placed tile by tile on one thread that was a tenth of its
+/// compositing.
 fn assemble<E: Real>(plan: &CompositePlan, channels: usize, tiles: &[TileForward<E>]) -> Vec<E> {
     let grid = plan.grid;
-    let stride = channels + 1;
+    let stride = plan.image_width(channels);
     // Work tile of each (pose, tile), or usize::MAX where none. `[B · tiles]`
     let mut work_of = vec![usize::MAX; plan.batch() * grid.len()];
     for (w, (&b, &tile)) in plan.batches.iter().zip(&plan.tiles).enumerate() {
@@ -665,7 +666,8 @@ fn assemble<E: Real>(plan: &CompositePlan, channels: usize, tiles: &[TileForward
 }
 
 /// The output gradients of work tile `w`'s pixels, planar `[C + 1, 256]` (zero outside the
-/// image), from the gradient of the packed image `[B, H, W, C + 1]`.
+/// image, and alpha's zero where the plan drops it), from the gradient of the packed image
+/// `[B, H, W, C + 1]` (or `[B, H, W, C]`).
 fn tile_output_gradients<E: Real>(
     plan: &CompositePlan,
     channels: usize,
@@ -676,14 +678,15 @@ fn tile_output_gradients<E: Real>(
     let (tx0, ty0) = plan.tile_origin(plan.tiles[w]);
     let valid = valid_pixels(plan, plan.tiles[w]);
     let mut v_planes = vec![E::ZERO; (channels + 1) * TILE_PIXELS];
+    let stride = plan.image_width(channels);
     for p in 0..TILE_PIXELS {
         if !valid[p] {
             continue;
         }
         let (x, y) = (tx0 + p % TILE_SIZE, ty0 + p / TILE_SIZE);
         let pixel = (plan.batches[w] * grid.height + y) * grid.width + x;
-        for k in 0..=channels {
-            v_planes[k * TILE_PIXELS + p] = v_image[pixel * (channels + 1) + k];
+        for k in 0..stride {
+            v_planes[k * TILE_PIXELS + p] = v_image[pixel * stride + k];
         }
     }
     v_planes

@@ -38,7 +38,7 @@ use burn_cubecl::{CubeDevice, cubecl};
 use super::plan::CompositePlan;
 use super::segments::{SEGMENT_COLUMNS, Segments};
 use super::{CompositeKernels, ForwardUse, HostSaved, SplatPrimitives, host_backward};
-use crate::rasterize::{MAX_ALPHA, MIN_ALPHA};
+use crate::rasterize::{AlphaChannel, MAX_ALPHA, MIN_ALPHA};
 use crate::tiles::TILE_PIXELS;
 
 /// Gradient slot width of one list entry: [v_mx, v_my, v_a, v_b, v_c, v_o, v_values…].
@@ -221,7 +221,7 @@ fn forward_kernel<F: Float, I: Int>(
     work: &Tensor<I>,        // [segments, 5]: pose, tile corner x, y, tile's first segment, count
     starts: &Tensor<I>,      // [segments + 1]
     rows: &Tensor<I>,        // [pairs]
-    image: &mut Tensor<F>,   // [B, H, W, C + 1]
+    image: &mut Tensor<F>,   // [B, H, W, C + 1], or [B, H, W, C] where alpha is dropped
     final_t: &mut Tensor<F>, // [segments, 256]: T at each segment's end
     last: &mut Tensor<I>,    // [segments, 256]: entries up to the last contributor, per segment
     partial: &mut Tensor<F>, // [segments, 256, C] where tiles are cut, else [1]
@@ -232,6 +232,7 @@ fn forward_kernel<F: Float, I: Int>(
     columns: u32,
     segment_entries: u32,
     #[comptime] channels: usize,
+    #[comptime] alpha: AlphaChannel,
     #[define(F, I)] _dtypes: [ElemType; 2],
 ) {
     // One cube per segment, but a tile's list is composited whole, front to back, by the cube
@@ -363,10 +364,13 @@ fn forward_kernel<F: Float, I: Int>(
     }
     if inside {
         let pixel = ((pose * height + y) * width + x) as usize;
+        let image_width = comptime!(alpha.image_width(channels));
         for k in 0..channels {
-            image[pixel * (channels + 1) + k] = totals[k] + sums[k];
+            image[pixel * image_width + k] = totals[k] + sums[k];
         }
-        image[pixel * (channels + 1) + channels] = F::new(1.0) - t;
+        if comptime!(alpha == AlphaChannel::Returned) {
+            image[pixel * image_width + channels] = F::new(1.0) - t;
+        }
     }
 }
 
@@ -381,13 +385,14 @@ fn backward_kernel<F: Float, I: Int>(
     final_t: &Tensor<F>,   // [segments, 256]
     last: &Tensor<I>,      // [segments, 256]
     partial: &Tensor<F>,   // [segments, 256, C] where tiles are cut, else [1]
-    v_image: &Tensor<F>,   // [B, H, W, C + 1]
+    v_image: &Tensor<F>,   // [B, H, W, C + 1], or [B, H, W, C] where alpha is dropped
     slots: &mut Tensor<F>, // [pairs, 6 + C]
     work_count: u32,
     width: u32,
     height: u32,
     columns: u32,
     #[comptime] channels: usize,
+    #[comptime] alpha: AlphaChannel,
     #[comptime] schedule: EntrySums,
     #[define(F, I)] _dtypes: [ElemType; 2],
 ) {
@@ -410,10 +415,12 @@ fn backward_kernel<F: Float, I: Int>(
     for k in 0..channels {
         behind[k] = F::new(0.0);
     }
+    // Alpha's gradient stays zero where the output has no alpha.
     if inside {
         let pixel = ((pose * height + y) * width + x) as usize;
-        for k in 0..comptime!(channels + 1) {
-            v_out[k] = v_image[pixel * (channels + 1) + k];
+        let image_width = comptime!(alpha.image_width(channels));
+        for k in 0..image_width {
+            v_out[k] = v_image[pixel * image_width + k];
         }
     }
     // A segment replays from the transmittance at its own end, with the colour the later
@@ -723,7 +730,12 @@ fn device_forward(
     let lists = upload_plan(&plan, used, &device);
     let work_count = lists.count;
     let image = zeros(
-        vec![plan.batch(), grid.height, grid.width, channels + 1],
+        vec![
+            plan.batch(),
+            grid.height,
+            grid.width,
+            plan.image_width(channels),
+        ],
         &device,
         dtype,
     );
@@ -774,6 +786,7 @@ fn device_forward(
             columns as u32,
             lists.segment_entries as u32,
             channels,
+            plan.alpha,
             [
                 dtype_to_storage_type(dtype),
                 dtype_to_storage_type(last.dtype),
@@ -836,6 +849,7 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
             grid.height as u32,
             columns as u32,
             channels,
+            plan.alpha,
             EntrySums::fitting(
                 channels,
                 client.properties().hardware.max_shared_memory_size,

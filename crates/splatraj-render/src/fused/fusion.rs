@@ -137,8 +137,8 @@ impl CompositeKernels for Cube {
             plan.batch(),
             plan.grid.height,
             plan.grid.width,
-            channels + 1,
-        ]); // [B, H, W, C + 1]
+            plan.image_width(channels),
+        ]); // [B, H, W, C + 1], or [B, H, W, C] where alpha is dropped
         let dtype = inputs.splats.dtype();
         let keep = saved.clone();
         let outputs = queue(

@@ -4,7 +4,8 @@
 //! what [`projection`], the fused projection, returns) and their channel values, both
 //! differentiable, and the host-side tile lists, and returns the channel images and alpha
 //! packed in one tensor `[B, H, W, C + 1]`, which [`composite_packed`] splits with
-//! differentiable slicing. Its backward is registered in burn's autodiff graph through the
+//! differentiable slicing, or the channel images alone `[B, H, W, C]` where the plan drops
+//! alpha ([`crate::rasterize::AlphaChannel`]). Its backward is registered in burn's autodiff graph through the
 //! backend extension (`#[backend_extension]`), so the pose gradient is still assembled by
 //! burn from end to end.
 //!
@@ -38,7 +39,7 @@ use burn::tensor::{DType, Tensor, TensorData, try_read_sync};
 
 pub use plan::CompositePlan;
 
-use crate::rasterize::{Composited, RenderStats, SplatInputs};
+use crate::rasterize::{AlphaChannel, Composited, RenderStats, SplatInputs};
 use cpu::{ForwardState, HostGradients, HostSplats, Real};
 
 /// The two differentiable inputs of a compositing pass, as backend primitives.
@@ -59,7 +60,8 @@ pub struct SplatPrimitives<B: Backend> {
     Autodiff
 )]
 pub trait FusedComposite: Backend {
-    /// Composites `plan` into the packed image `[B, H, W, C + 1]` (channels, then alpha).
+    /// Composites `plan` into the packed image `[B, H, W, C + 1]` (channels, then alpha), or
+    /// `[B, H, W, C]` where the plan drops alpha.
     fn fused_composite(
         #[extension_type] inputs: SplatPrimitives<Self>,
         plan: Arc<CompositePlan>,
@@ -80,7 +82,8 @@ pub trait CompositeKernels: Backend {
     /// What the forward pass keeps for the backward pass.
     type Saved: Clone + Send + Sync + std::fmt::Debug + 'static;
 
-    /// The packed image `[B, H, W, C + 1]` and the state its backward needs; `used` lets the
+    /// The packed image `[B, H, W, C + 1]` (`[B, H, W, C]` where the plan drops alpha) and the
+    /// state its backward needs; `used` lets the
     /// GPU kernels cut long lists only where a backward follows ([`segments`]).
     fn composite_forward(
         inputs: SplatPrimitives<Self>,
@@ -165,7 +168,12 @@ pub fn host_forward<B: Backend>(
     let [rows, channels] = inputs.values.shape().dims::<2>();
     let columns = inputs.splats.shape().dims::<2>()[1];
     let grid = plan.grid;
-    let shape = vec![plan.batch(), grid.height, grid.width, channels + 1];
+    let shape = vec![
+        plan.batch(),
+        grid.height,
+        grid.width,
+        plan.image_width(channels),
+    ];
     let (image, host) = if dtype == DType::F64 {
         let splats = host_splats::<B, f64>(inputs, columns, channels);
         let (image, state) = cpu::forward(&splats, &plan);
@@ -339,29 +347,34 @@ pub fn composite_fused(inputs: &SplatInputs, plan: CompositePlan) -> Composited 
 ///
 /// A GPU kernel stages every channel of 256 entries in workgroup memory, so a device holds
 /// only so many channels a composite (lavapipe 16, a 48 KiB GPU 28; feature renders of mask
-/// files have a channel per label): more are composited in groups that fit, on the same plan,
-/// and joined; the alpha is the first group's (every group's is the same), and autodiff sums
-/// each group's gradient of the rows.
+/// files have a channel per label): more are composited in groups that fit, on the same lists,
+/// and joined; the alpha is the first group's (every group's is the same, so the others drop
+/// theirs), and autodiff sums each group's gradient of the rows.
 pub fn composite_packed(splats: Tensor<2>, values: Tensor<2>, plan: CompositePlan) -> Composited {
     #[cfg(feature = "wgpu")]
     if let Some(group) = cube::channels_per_composite(&splats.device())
         && let channels = values.dims()[1]
         && channels > group
     {
-        let plan = Arc::new(plan);
+        let rest = Arc::new(plan.clone().with_alpha(AlphaChannel::Dropped));
+        let first = Arc::new(plan);
         let parts: Vec<Composited> = (0..channels)
             .step_by(group)
-            .map(|first| {
-                let count = group.min(channels - first);
+            .map(|start| {
+                let count = group.min(channels - start);
                 composite_shared_plan(
                     splats.clone(),
-                    values.clone().narrow(1, first, count),
-                    plan.clone(),
+                    values.clone().narrow(1, start, count),
+                    if start == 0 {
+                        first.clone()
+                    } else {
+                        rest.clone()
+                    },
                 )
             })
             .collect();
-        let first = parts[0].clone();
-        return first.with_images(Tensor::cat(
+        let head = parts[0].clone();
+        return head.with_images(Tensor::cat(
             parts.into_iter().map(|p| p.images).collect(),
             3,
         ));
@@ -380,12 +393,16 @@ fn composite_shared_plan(
         pairs: plan.rows.len(),
         gaussians_used: plan.pose_rows.largest(),
     };
-    let packed = Tensor::<4>::from_dispatch(<Dispatch as FusedComposite>::fused_composite(
+    let alpha = plan.alpha;
+    let image = Tensor::<4>::from_dispatch(<Dispatch as FusedComposite>::fused_composite(
         SplatPrimitives {
             splats: splats.into_dispatch(),
             values: values.into_dispatch(),
         },
         plan,
-    )); // [B, H, W, C + 1]
-    Composited::from_packed(packed, stats)
+    )); // [B, H, W, C + 1], or [B, H, W, C] where alpha is dropped
+    match alpha {
+        AlphaChannel::Returned => Composited::from_packed(image, stats),
+        AlphaChannel::Dropped => Composited::without_alpha(image, stats),
+    }
 }

@@ -2,7 +2,7 @@
 
 use rayon::prelude::*;
 
-use crate::rasterize::MIN_TRANSMITTANCE;
+use crate::rasterize::{AlphaChannel, MIN_TRANSMITTANCE};
 use crate::rows::{PoseRows, parts_mut};
 use crate::tiles::{TILE_SIZE, TileGrid, TileWork};
 
@@ -50,6 +50,9 @@ pub struct CompositePlan {
     pub rows: Vec<u32>,
     /// A pixel stops before T would fall below this (the exact rule: [`MIN_TRANSMITTANCE`]).
     pub stop_transmittance: f64,
+    /// Whether the output holds alpha after the channels (`[B, H, W, C + 1]`) or the channels
+    /// alone (`[B, H, W, C]`, whose backward takes alpha's gradient as zero).
+    pub alpha: AlphaChannel,
     /// The longest run of a list one GPU workgroup composites: longer lists are cut into
     /// segments composited in parallel ([`super::segments`]; 0: never cut). The host kernels
     /// take whole lists.
@@ -76,6 +79,7 @@ impl CompositePlan {
             starts,
             rows: flat,
             stop_transmittance: MIN_TRANSMITTANCE,
+            alpha: AlphaChannel::Returned,
             segment_entries: asked_segment_entries(),
         }
     }
@@ -86,6 +90,16 @@ impl CompositePlan {
             stop_transmittance,
             ..self
         }
+    }
+
+    /// The same plan with alpha returned or dropped.
+    pub fn with_alpha(self, alpha: AlphaChannel) -> Self {
+        CompositePlan { alpha, ..self }
+    }
+
+    /// Values per pixel of the output for `channels` channel values.
+    pub fn image_width(&self, channels: usize) -> usize {
+        self.alpha.image_width(channels)
     }
 
     /// The same plan with another longest segment for the GPU kernels (0: lists stay whole).

@@ -38,7 +38,8 @@ use splatraj_render::camera::{Intrinsics, Pose as CameraPose};
 use splatraj_render::host::{OnDevice, to_host};
 use splatraj_render::pass_size::{passes, poses_per_pass};
 use splatraj_render::render::{
-    Channel, DeviceScene, Pruning, Rasterizer, RenderError, RenderRequest, Zoom, render_poses,
+    AlphaChannel, Channel, DeviceScene, Pruning, Rasterizer, RenderError, RenderRequest, Zoom,
+    render_poses,
 };
 
 use crate::costs::{IOU_THRESHOLD, MaskMoments, box_from_hits, box_iou, mask_hits, tce_of, tre_of};
@@ -383,6 +384,7 @@ fn queue_samples(
             pruning: Pruning::ObjectOnly,
             rasterizer: object.rasterizer,
             zoom: zoom.clone(),
+            alpha: AlphaChannel::Dropped,
             ..RenderRequest::new(*intrinsics, vec![Channel::Mask(mask)])
         };
         let images = render_poses(scene, poses, &request)?.images;

@@ -16,8 +16,8 @@ use splatraj_render::focus::Surroundings;
 use splatraj_render::host::{OnDevice, as_stored};
 use splatraj_render::rasterize::{Approximations, RenderStats};
 use splatraj_render::render::{
-    Channel, DeviceScene, ObjectMasks, ObjectView, Pruning, Rasterizer, RenderError, RenderRequest,
-    Zoom, render_at,
+    AlphaChannel, Channel, DeviceScene, ObjectMasks, ObjectView, Pruning, Rasterizer, RenderError,
+    RenderRequest, Zoom, render_at,
 };
 
 use super::sampling::window_bounds;
@@ -590,6 +590,7 @@ impl<'a> Problem<'a> {
         }
         request.rasterizer = self.rasterizer;
         request.approximations = self.approximations;
+        request.alpha = AlphaChannel::Dropped;
         Some(WindowRenders { request, alone })
     }
 

@@ -34,7 +34,7 @@ use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::host::OnDevice;
 use splatraj_render::orbit::Orbit;
 use splatraj_render::render::{
-    Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render_poses,
+    AlphaChannel, Channel, DeviceScene, Pruning, Rasterizer, RenderRequest, render_poses,
 };
 
 use super::{OptimiseError, host_values};
@@ -206,6 +206,7 @@ fn mask_sums(
     let request = RenderRequest {
         pruning: Pruning::ObjectOnly,
         rasterizer,
+        alpha: AlphaChannel::Dropped,
         ..RenderRequest::new(*intrinsics, vec![Channel::Mask(mask.to_vec())])
     };
     let per_view = intrinsics.width * intrinsics.height;
