@@ -144,14 +144,18 @@ def profiled_passes():
 
 def output_frames():
     frames = {b: load(f"frames_{b}.json") for b in ("wgpu", "flex")}
-    print("\n| 1080p output frame | wgpu ms | flex ms |")
-    print("|---|---:|---:|")
+    print("\n| 1080p output frame | wgpu ms | flex ms | wgpu launches | wgpu MB down |")
+    print("|---|---:|---:|---:|---:|")
     same = lambda r: (r["scene"], r["gaussians"], r["width"], r["schedule"])
     for r in frames["wgpu"]["rows"]:
         f = next((x for x in frames["flex"]["rows"] if same(x) == same(r)), None)
+        # A frame's counts (absent from binaries older than 30 November's fifteenth session).
+        c = r.get("counts")
+        per = lambda key: f"{c[key] / max(r['frames'], 1):.1f}" if c else "-"
+        down = f"{c['bytes_down'] / max(r['frames'], 1) / 1e6:.1f}" if c else "-"
         if f:
             print(f"| {r['scene']} {r['gaussians']} {r['schedule']} | {r['frame_ms']:.0f} | "
-                  f"{f['frame_ms']:.0f} |")
+                  f"{f['frame_ms']:.0f} | {per('launches')} | {down} |")
 
 
 def step_row(title, r):

@@ -18,6 +18,7 @@ use glam::DVec3;
 use serde::Serialize;
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera::Intrinsics;
+use splatraj_render::counters::{self, Counts};
 use splatraj_render::orbit::Orbit;
 use splatraj_render::render::{DeviceScene, Rasterizer};
 use splatraj_render::stages::{self, Stage};
@@ -98,6 +99,10 @@ pub struct FramesRow {
     pub cpu_per_wall: Option<f64>,
     /// Seconds to build or read the scene, place the camera and upload it (once per scene).
     pub setup_s: f64,
+    /// What the frames launched, read back and uploaded, summed over the frames timed (on a
+    /// GPU a frame's read-back is its size in floats, or 4 bytes a pixel where the levels are
+    /// made on the device: docs/gpu.md).
+    pub counts: Counts,
 }
 
 /// Everything `bench frames` reports.
@@ -208,10 +213,12 @@ fn time_frames(
     ));
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     stages::reset();
+    let counted = counters::snapshot();
     let cpu_before = cpu_seconds();
     let wall = Instant::now();
     let rendered = render_path_with(uploaded, &job, &dir, &mut |_| {}, schedule);
     let wall = wall.elapsed();
+    let counts = counters::snapshot().since(&counted);
     // The frames were only written to be timed.
     let _ = std::fs::remove_dir_all(&dir);
     let rendered = rendered?;
@@ -254,6 +261,7 @@ fn time_frames(
         measured,
         cpu_per_wall,
         setup_s,
+        counts,
     })
 }
 
@@ -374,7 +382,10 @@ impl FramesReport {
         for (name, _) in &first.parts_ms {
             out += &format!(" {:>9}", name);
         }
-        out += &format!(" {:>9} {:>9} {:>6}\n", "frame ms", "video s", "cpu/w");
+        out += &format!(
+            " {:>9} {:>9} {:>6} {:>8} {:>10}\n",
+            "frame ms", "video s", "cpu/w", "launches", "KB down"
+        );
         for row in &self.rows {
             out += &format!(
                 "{:<20} {:>9} {:>9} {:>11} {:>6}",
@@ -387,12 +398,15 @@ impl FramesReport {
             for (_, ms) in &row.parts_ms {
                 out += &format!(" {ms:>9.1}");
             }
+            let per_frame = |total: u64| total as f64 / row.frames.max(1) as f64;
             out += &format!(
-                " {:>9.1} {:>8.1}{} {:>6}\n",
+                " {:>9.1} {:>8.1}{} {:>6} {:>8.1} {:>10.1}\n",
                 row.frame_ms,
                 row.video_s,
                 if row.measured { " " } else { "~" },
-                row.cpu_per_wall.map_or("-".into(), |v| format!("{v:.2}"))
+                row.cpu_per_wall.map_or("-".into(), |v| format!("{v:.2}")),
+                per_frame(row.counts.launches),
+                per_frame(row.counts.bytes_down) / 1e3
             );
         }
         out

@@ -17,9 +17,10 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, anyhow, bail};
 use burn::tensor::{DType, Tensor};
 use rayon::prelude::*;
+use splatraj_render::backend::Execution;
 use splatraj_render::camera::Pose;
 use splatraj_render::host::{OnDevice, read_data, to_host};
-use splatraj_render::images::{png_rgb8, rgb8};
+use splatraj_render::images::{packed_rgb8, png_rgb8, rgb8, unpack_rgb8};
 use splatraj_render::pass_size::poses_per_pass;
 use splatraj_render::render::{
     AlphaChannel, Channel, DeviceScene, Rasterizer, RenderRequest, render_poses,
@@ -700,10 +701,21 @@ struct FrameContext<'a> {
 struct QueuedFrames {
     /// Which frames.
     frames: std::ops::Range<usize>,
-    /// Their images `[B, H, W, 3 or 4]`.
-    images: Tensor<4>,
+    /// Their images, as they will be read back.
+    images: QueuedImages,
     /// Their TCE, TRE and coverage `[3B]`, when the window has an object.
     framing: Option<Tensor<1>>,
+}
+
+/// What a pass's frames read back.
+enum QueuedImages {
+    /// The channels as rendered `[B, H, W, 3 or 4]`; the host makes the 8-bit levels (and the
+    /// tint). On the host backends always: their values are in memory already.
+    Values(Tensor<4>),
+    /// The 8-bit RGB levels made and packed on the GPU `[B, H, W]` (`images::packed_rgb8`):
+    /// 4 bytes a pixel read back instead of 4 a channel. For a GPU's passes in which no frame
+    /// is tinted or a keyframe, the two pictures that need the mask on the host.
+    PackedRgb8(Tensor<3>),
 }
 
 impl FrameContext<'_> {
@@ -762,6 +774,13 @@ impl FrameContext<'_> {
                 0,
             ) // [3B]
         });
+        let mask_on_host = object.is_some()
+            && (self.job.overlay == MaskOverlay::Tint
+                || (first..end).any(|i| self.keyframes.contains(&i)));
+        let images = match Execution::of(&scene.device()) {
+            Execution::Kernels if !mask_on_host => QueuedImages::PackedRgb8(packed_rgb8(images)),
+            _ => QueuedImages::Values(images),
+        };
         scene
             .device()
             .flush()
@@ -784,7 +803,7 @@ impl FrameContext<'_> {
     ) -> Result<()> {
         let frames = self.job.frames;
         let first = done.frames.start;
-        let [b, h, w, c] = done.images.dims();
+        let b = done.frames.len();
         // The frames of a window with an object have framing figures, and may be tinted.
         let tinted = done.framing.is_some() && self.job.overlay == MaskOverlay::Tint;
         if let Some(framing) = done.framing {
@@ -806,10 +825,17 @@ impl FrameContext<'_> {
             }
             timings.metrics += clock.elapsed();
         }
+        let images = match done.images {
+            QueuedImages::Values(images) => images,
+            QueuedImages::PackedRgb8(packed) => {
+                return self.finish_packed(done.frames, packed, timings, deliver);
+            }
+        };
+        let [_, h, w, c] = images.dims();
         let clock = Instant::now();
         // f32 images stay f32 on the host (the f64 copy cost as much as the PNG); any other
         // dtype is read as f64, as `to_host` reads it.
-        let data = read_data(done.images).with_context(|| format!("reading frame {first} back"))?;
+        let data = read_data(images).with_context(|| format!("reading frame {first} back"))?;
         let pixels = match data.dtype() {
             DType::F32 => Pixels::F32(data.try_into_vec::<f32>().map_err(|e| anyhow!("{e:?}"))?),
             _ => Pixels::F64(
@@ -836,6 +862,41 @@ impl FrameContext<'_> {
                 height: h,
                 rgb,
                 keyframe,
+            })?;
+        }
+        Ok(())
+    }
+}
+
+impl FrameContext<'_> {
+    /// [`FrameContext::finish`]'s read-back of levels packed on the device: the pictures of
+    /// `frames`, none tinted or a keyframe.
+    fn finish_packed(
+        &self,
+        frames: Range<usize>,
+        packed: Tensor<3>,
+        timings: &mut PathTimings,
+        deliver: &mut dyn FnMut(Frame) -> Result<()>,
+    ) -> Result<()> {
+        let [_, h, w] = packed.dims();
+        let first = frames.start;
+        let clock = Instant::now();
+        let levels: Vec<f32> = read_data(packed)
+            .with_context(|| format!("reading frame {first} back"))?
+            .convert::<f32>()
+            .try_into_vec::<f32>()
+            .map_err(|e| anyhow!("{e:?}"))?;
+        timings.read_back += clock.elapsed();
+        for (i, index) in frames.enumerate() {
+            let clock = Instant::now();
+            let rgb = unpack_rgb8(&levels[i * h * w..(i + 1) * h * w]);
+            timings.read_back += clock.elapsed();
+            deliver(Frame {
+                index,
+                width: w,
+                height: h,
+                rgb,
+                keyframe: None,
             })?;
         }
         Ok(())
