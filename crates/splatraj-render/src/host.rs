@@ -25,7 +25,9 @@ pub fn to_host<const D: usize>(t: Tensor<D>) -> Result<Vec<f64>, ReadBackError> 
 /// The data of a tensor on the host in its own dtype (a counted read). A failure of the device
 /// since the last read (a buffer larger than it can allocate, a lost device) surfaces here:
 /// it is returned as an error, where burn's `into_data` would panic.
-pub fn read_data<const D: usize>(t: Tensor<D>) -> Result<TensorData, ReadBackError> {
+pub fn read_data<const D: usize, K: burn::tensor::kind::Basic>(
+    t: Tensor<D, K>,
+) -> Result<TensorData, ReadBackError> {
     let data = t
         .try_into_data()
         .map_err(|e| ReadBackError(device_failure(&e.to_string())))?;

@@ -6,7 +6,7 @@
 
 use std::io::Cursor;
 
-use burn::tensor::Tensor;
+use burn::tensor::{Int, Tensor};
 
 use crate::camera::Intrinsics;
 
@@ -105,38 +105,41 @@ fn rgb8_into<E: Copy + Into<f64>>(
 }
 
 /// The 8-bit levels of the first three channels of `images` `[B, H, W, C ≥ 3]`, made where the
-/// images are and packed into one value a pixel: r + 256·g + 65536·b `[B, H, W]` (below 2²⁴,
-/// so exact in f32). [`unpack_rgb8`] reads them back.
+/// images are and packed into one integer a pixel: r + 256·g + 65536·b `[B, H, W]`.
+/// [`unpack_rgb8`] reads them back.
 ///
 /// Why: a GPU's frames came back as floats, 4 bytes a channel (RGB and the object's mask at
 /// 720p: 14.7 MB a frame, 4 GB over a first-try run); packed they are 4 bytes a pixel. The
 /// levels follow [`to_u8`]'s rule (the nearest, halves up) computed in the images' precision:
 /// in f32, a value within about 1e-5 of half a level may land one level from `to_u8` of the
 /// same value, which computes in f64 (`tests/backend.rs`, `packed_levels_are_rgb8_s_on_every_backend`).
-pub fn packed_rgb8(images: Tensor<4>) -> Tensor<3> {
-    let [batch, height, width, _] = images.dims();
-    // floor(l + 0.5) is `to_u8`'s "whole part, plus one from a half up" in one op.
-    let level = |channel: usize| {
-        images
-            .clone()
-            .narrow(3, channel, 1)
-            .clamp(0.0, 1.0)
-            .mul_scalar(255.0)
-            .add_scalar(0.5)
-            .floor()
-    };
-    (level(0) + level(1).mul_scalar(256.0) + level(2).mul_scalar(65_536.0))
-        .reshape([batch, height, width])
+pub fn packed_rgb8(images: Tensor<4>) -> Tensor<3, Int> {
+    let [batch, height, width, channels] = images.dims();
+    // Each channel's level weighted by its place (1, 256, 65 536, then 0 for the mask and any
+    // further channel) and summed over the channels: one elementwise chain into one reduction
+    // (slicing the three channels out, and `floor`, ran every op alone on lavapipe).
+    let places: Vec<i32> = (0..channels)
+        .map(|c| if c < 3 { 1 << (8 * c) } else { 0 })
+        .collect();
+    let places = Tensor::<1, Int>::from_data(
+        burn::tensor::TensorData::new(places, [channels]),
+        &images.device(),
+    )
+    .reshape([1, 1, 1, channels]);
+    // The whole part of l + 0.5 (l ≥ 0) is `to_u8`'s "whole part, plus one from a half up".
+    let levels = images
+        .clamp(0.0, 1.0)
+        .mul_scalar(255.0)
+        .add_scalar(0.5)
+        .int(); // [B, H, W, C]
+    (levels * places).sum_dim(3).reshape([batch, height, width])
 }
 
 /// 8-bit RGB `[P·3]` of [`packed_rgb8`]'s values `[P]` as read back.
-pub fn unpack_rgb8(packed: &[f32]) -> Vec<u8> {
+pub fn unpack_rgb8(packed: &[i32]) -> Vec<u8> {
     packed
         .iter()
-        .flat_map(|&value| {
-            let levels = value as u32;
-            [levels as u8, (levels >> 8) as u8, (levels >> 16) as u8]
-        })
+        .flat_map(|&levels| [levels as u8, (levels >> 8) as u8, (levels >> 16) as u8])
         .collect()
 }
 

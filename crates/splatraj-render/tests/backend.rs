@@ -178,10 +178,10 @@ fn packed_levels_are_rgb8_s_on_every_backend() {
             TensorData::new(pixels.clone(), [batch, height, width, channels]),
             (&backend.device().unwrap(), DType::F32),
         );
-        let packed: Vec<f32> = packed_rgb8(images)
+        let packed: Vec<i32> = packed_rgb8(images)
             .into_data()
-            .convert::<f32>()
-            .try_into_vec::<f32>()
+            .convert::<i32>()
+            .try_into_vec::<i32>()
             .unwrap();
         assert_eq!(packed.len(), batch * height * width, "{backend}");
         let got = unpack_rgb8(&packed);

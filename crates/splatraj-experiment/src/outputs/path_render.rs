@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, anyhow, bail};
-use burn::tensor::{DType, Tensor};
+use burn::tensor::{DType, Int, Tensor};
 use rayon::prelude::*;
 use splatraj_render::backend::Execution;
 use splatraj_render::camera::Pose;
@@ -715,7 +715,7 @@ enum QueuedImages {
     /// The 8-bit RGB levels made and packed on the GPU `[B, H, W]` (`images::packed_rgb8`):
     /// 4 bytes a pixel read back instead of 4 a channel. For a GPU's passes in which no frame
     /// is tinted or a keyframe, the two pictures that need the mask on the host.
-    PackedRgb8(Tensor<3>),
+    PackedRgb8(Tensor<3, Int>),
 }
 
 impl FrameContext<'_> {
@@ -874,17 +874,17 @@ impl FrameContext<'_> {
     fn finish_packed(
         &self,
         frames: Range<usize>,
-        packed: Tensor<3>,
+        packed: Tensor<3, Int>,
         timings: &mut PathTimings,
         deliver: &mut dyn FnMut(Frame) -> Result<()>,
     ) -> Result<()> {
         let [_, h, w] = packed.dims();
         let first = frames.start;
         let clock = Instant::now();
-        let levels: Vec<f32> = read_data(packed)
+        let levels: Vec<i32> = read_data(packed)
             .with_context(|| format!("reading frame {first} back"))?
-            .convert::<f32>()
-            .try_into_vec::<f32>()
+            .convert::<i32>()
+            .try_into_vec::<i32>()
             .map_err(|e| anyhow!("{e:?}"))?;
         timings.read_back += clock.elapsed();
         for (i, index) in frames.enumerate() {
