@@ -112,7 +112,8 @@ fn rgb8_into<E: Copy + Into<f64>>(
 /// 720p: 14.7 MB a frame, 4 GB over a first-try run); packed they are 4 bytes a pixel. The
 /// levels follow [`to_u8`]'s rule (the nearest, halves up) computed in the images' precision:
 /// in f32, a value within about 1e-5 of half a level may land one level from `to_u8` of the
-/// same value, which computes in f64 (`tests/backend.rs`, `packed_levels_are_rgb8_s_on_every_backend`).
+/// same value, which computes in f64 (`tests/backend.rs`,
+/// `packed_levels_are_rgb8_s_on_every_backend`).
 pub fn packed_rgb8(images: Tensor<4>) -> Tensor<3, Int> {
     let [batch, height, width, channels] = images.dims();
     // Each channel's level weighted by its place (1, 256, 65 536, then 0 for the mask and any

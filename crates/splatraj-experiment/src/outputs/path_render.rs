@@ -825,24 +825,36 @@ impl FrameContext<'_> {
             }
             timings.metrics += clock.elapsed();
         }
-        let images = match done.images {
-            QueuedImages::Values(images) => images,
-            QueuedImages::PackedRgb8(packed) => {
-                return self.finish_packed(done.frames, packed, timings, deliver);
-            }
-        };
-        let [_, h, w, c] = images.dims();
         let clock = Instant::now();
-        // f32 images stay f32 on the host (the f64 copy cost as much as the PNG); any other
-        // dtype is read as f64, as `to_host` reads it.
-        let data = read_data(images).with_context(|| format!("reading frame {first} back"))?;
-        let pixels = match data.dtype() {
-            DType::F32 => Pixels::F32(data.try_into_vec::<f32>().map_err(|e| anyhow!("{e:?}"))?),
-            _ => Pixels::F64(
-                data.convert::<f64>()
-                    .try_into_vec::<f64>()
-                    .map_err(|e| anyhow!("{e:?}"))?,
-            ),
+        let reading = || format!("reading frame {first} back");
+        // Values a pixel `c`: the channels, or one packed value.
+        let (pixels, [h, w, c]) = match done.images {
+            QueuedImages::Values(images) => {
+                let [_, h, w, c] = images.dims();
+                // f32 images stay f32 on the host (the f64 copy cost as much as the PNG); any
+                // other dtype is read as f64, as `to_host` reads it.
+                let data = read_data(images).with_context(reading)?;
+                let pixels = match data.dtype() {
+                    DType::F32 => {
+                        Pixels::F32(data.try_into_vec::<f32>().map_err(|e| anyhow!("{e:?}"))?)
+                    }
+                    _ => Pixels::F64(
+                        data.convert::<f64>()
+                            .try_into_vec::<f64>()
+                            .map_err(|e| anyhow!("{e:?}"))?,
+                    ),
+                };
+                (pixels, [h, w, c])
+            }
+            QueuedImages::PackedRgb8(packed) => {
+                let [_, h, w] = packed.dims();
+                let levels = read_data(packed)
+                    .with_context(reading)?
+                    .convert::<i32>()
+                    .try_into_vec::<i32>()
+                    .map_err(|e| anyhow!("{e:?}"))?;
+                (Pixels::PackedRgb8(levels), [h, w, 1])
+            }
         };
         timings.read_back += clock.elapsed();
         for (i, index) in done.frames.enumerate() {
@@ -868,49 +880,18 @@ impl FrameContext<'_> {
     }
 }
 
-impl FrameContext<'_> {
-    /// [`FrameContext::finish`]'s read-back of levels packed on the device: the pictures of
-    /// `frames`, none tinted or a keyframe.
-    fn finish_packed(
-        &self,
-        frames: Range<usize>,
-        packed: Tensor<3, Int>,
-        timings: &mut PathTimings,
-        deliver: &mut dyn FnMut(Frame) -> Result<()>,
-    ) -> Result<()> {
-        let [_, h, w] = packed.dims();
-        let first = frames.start;
-        let clock = Instant::now();
-        let levels: Vec<i32> = read_data(packed)
-            .with_context(|| format!("reading frame {first} back"))?
-            .convert::<i32>()
-            .try_into_vec::<i32>()
-            .map_err(|e| anyhow!("{e:?}"))?;
-        timings.read_back += clock.elapsed();
-        for (i, index) in frames.enumerate() {
-            let clock = Instant::now();
-            let rgb = unpack_rgb8(&levels[i * h * w..(i + 1) * h * w]);
-            timings.read_back += clock.elapsed();
-            deliver(Frame {
-                index,
-                width: w,
-                height: h,
-                rgb,
-                keyframe: None,
-            })?;
-        }
-        Ok(())
-    }
-}
-
-/// A batch's images on the host, `[B·H·W·C]`, in the precision they were rendered in.
+/// A batch's images on the host, `[B·H·W·C]`, in the precision they were rendered in, or
+/// their RGB levels packed on the device `[B·H·W]` (C = 1; a pass none of whose frames is
+/// tinted or a keyframe: [`QueuedImages::PackedRgb8`]).
 enum Pixels {
     F32(Vec<f32>),
     F64(Vec<f64>),
+    PackedRgb8(Vec<i32>),
 }
 
 impl Pixels {
-    /// [`rgb8`] of the values in `range`, rows split over the rayon pool.
+    /// [`rgb8`] of the values in `range`, rows split over the rayon pool (packed levels are
+    /// never tinted: their passes have no tinted frame).
     fn rgb8(&self, range: std::ops::Range<usize>, channels: usize, tint: Option<f64>) -> Vec<u8> {
         fn rows<E: Copy + Into<f64> + Sync>(
             values: &[E],
@@ -928,6 +909,7 @@ impl Pixels {
         match self {
             Pixels::F32(v) => rows(&v[range], channels, tint),
             Pixels::F64(v) => rows(&v[range], channels, tint),
+            Pixels::PackedRgb8(v) => unpack_rgb8(&v[range]),
         }
     }
 }

@@ -5,9 +5,9 @@
 //! differentiable, and the host-side tile lists, and returns the channel images and alpha
 //! packed in one tensor `[B, H, W, C + 1]`, which [`composite_packed`] splits with
 //! differentiable slicing, or the channel images alone `[B, H, W, C]` where the plan drops
-//! alpha ([`crate::rasterize::AlphaChannel`]). Its backward is registered in burn's autodiff graph through the
-//! backend extension (`#[backend_extension]`), so the pose gradient is still assembled by
-//! burn from end to end.
+//! alpha ([`crate::rasterize::AlphaChannel`]). Its backward is registered in burn's autodiff
+//! graph through the backend extension (`#[backend_extension]`), so the pose gradient is still
+//! assembled by burn from end to end.
 //!
 //! Backends: on Flex and ndarray the compositing kernels ([`cpu`]) run in plain Rust on the
 //! host, in parallel over (pose, tile), reading the inputs into host vectors (a copy in
