@@ -1,0 +1,118 @@
+//! A GPU's output frames come back as 8-bit levels packed on the device (4 bytes a pixel), and
+//! as floats only in the passes whose frames need the mask on the host (the report's tinted
+//! keyframes): the bytes read back are exactly that, and the frames are flex's, a level apart
+//! at most where the two backends' f32 values straddle half a level (docs/gpu.md, "Frames read
+//! back as 8-bit levels").
+//!
+//! Runs on the wgpu backend (lavapipe in CI); its own test binary, as the render counters are
+//! process-wide.
+#![cfg(feature = "wgpu")]
+
+use burn::tensor::DType;
+use glam::DVec3;
+use splatraj_experiment::config::MaskOverlay;
+use splatraj_experiment::outputs::camera_paths::PathFrames;
+use splatraj_experiment::outputs::path_render::{
+    PathObject, PathRender, Video, keyframe_indices, render_path,
+};
+use splatraj_render::backend::BackendKind;
+use splatraj_render::camera::{Intrinsics, Pose};
+use splatraj_render::counters;
+use splatraj_render::render::{DeviceScene, Rasterizer};
+use splatraj_scene::demo::{DEMO_VIEWPOINT, DemoConfig, demo_layout, demo_scene};
+
+#[test]
+fn gpu_frames_read_back_packed_levels_except_keyframes() {
+    let scene = demo_scene(&DemoConfig {
+        gaussians: 20_000,
+        ..DemoConfig::default()
+    })
+    .unwrap();
+    let ids = &scene.extras.labels.as_ref().unwrap().ids;
+    let mug = demo_layout()
+        .into_iter()
+        .find(|o| o.name == "red mug")
+        .unwrap();
+    let mask: Vec<f32> = ids
+        .iter()
+        .map(|&id| if id == mug.id { 1.0 } else { 0.0 })
+        .collect();
+
+    // 12 frames of one window, of which the report takes 5 as tinted keyframes.
+    let (width, height) = (64, 48);
+    let k = Intrinsics::from_fov_x(70.0, width, height).unwrap();
+    let eye = DVec3::from_array(DEMO_VIEWPOINT.map(f64::from));
+    let count = 12;
+    let frames = PathFrames {
+        cuts: Vec::new(),
+        times: (0..count).map(|i| i as f64 / (count - 1) as f64).collect(),
+        poses: (0..count)
+            .map(|i| {
+                let target = DVec3::new(0.05 * i as f64, 0.3, 0.8);
+                Pose::look_at(eye + DVec3::X * 0.03 * i as f64, target, DVec3::Z)
+                    .unwrap()
+                    .0
+            })
+            .collect(),
+        cameras: vec![k; count],
+        fps: 4.0,
+    };
+    let job = PathRender {
+        frames: &frames,
+        objects: vec![PathObject {
+            mask: &mask,
+            target_ratio: 0.1,
+        }],
+        overlay: MaskOverlay::None,
+        rasterizer: Rasterizer::Fused,
+        video: Video::None,
+    };
+    let render = |backend: BackendKind| {
+        let uploaded = DeviceScene::new(&scene, &backend.device().unwrap(), DType::F32);
+        let dir = tempfile::tempdir().unwrap();
+        let before = counters::snapshot();
+        render_path(&uploaded, &job, dir.path(), &mut |_| {}).unwrap();
+        let read = counters::snapshot().since(&before);
+        let pictures: Vec<Vec<u8>> = (0..count)
+            .map(|i| {
+                let path = dir.path().join(format!("frames/frame_{i:04}.png"));
+                image::open(&path).unwrap().to_rgb8().into_raw()
+            })
+            .collect();
+        (read, pictures)
+    };
+    let (gpu, gpu_pictures) = render(BackendKind::Wgpu);
+    let (_, flex_pictures) = render(BackendKind::Flex);
+
+    // Each pass is one frame (the default schedule) and reads its TCE, TRE and coverage (3
+    // floats), then its picture: RGB and the mask as floats for a keyframe, else one packed
+    // 32-bit value a pixel.
+    let keyframes = keyframe_indices(&frames.times, 1).concat();
+    assert_eq!(keyframes.len(), 5, "the report's keyframes of the window");
+    let pixels = (width * height) as u64;
+    let floats = keyframes.len() as u64 * pixels * 4 * 4;
+    let packed = (count - keyframes.len()) as u64 * pixels * 4;
+    let framing = count as u64 * 3 * 4;
+    assert_eq!(gpu.reads, 2 * count as u64);
+    assert_eq!(gpu.bytes_down, floats + packed + framing);
+
+    // The same pictures as flex's, but where the two backends' f32 values lie on either side
+    // of half a level.
+    let mut apart = 0;
+    for (i, (got, want)) in gpu_pictures.iter().zip(&flex_pictures).enumerate() {
+        assert_eq!(got.len(), want.len());
+        for (&g, &w) in got.iter().zip(want) {
+            assert!(
+                g.abs_diff(w) <= 1,
+                "frame {i}: level {g} on wgpu, {w} on flex"
+            );
+            apart += usize::from(g != w);
+        }
+    }
+    let values = count * width * height * 3;
+    assert!(apart * 200 < values, "{apart} of {values} levels apart");
+    assert!(
+        gpu_pictures.iter().flatten().any(|&v| v > 60),
+        "the frames show something"
+    );
+}
