@@ -8,18 +8,19 @@
 //! process-wide.
 #![cfg(feature = "wgpu")]
 
+mod common;
+
 use burn::tensor::DType;
-use glam::DVec3;
 use splatraj_experiment::config::MaskOverlay;
-use splatraj_experiment::outputs::camera_paths::PathFrames;
 use splatraj_experiment::outputs::path_render::{
     PathObject, PathRender, Video, keyframe_indices, render_path,
 };
 use splatraj_render::backend::BackendKind;
-use splatraj_render::camera::{Intrinsics, Pose};
+use splatraj_render::camera::Intrinsics;
 use splatraj_render::counters;
 use splatraj_render::render::{DeviceScene, Rasterizer};
-use splatraj_scene::demo::{DEMO_VIEWPOINT, DemoConfig, demo_layout, demo_scene};
+use splatraj_scene::demo::{DemoConfig, demo_scene};
+use splatraj_semantic::sources::label_mask;
 
 #[test]
 fn gpu_frames_read_back_packed_levels_except_keyframes() {
@@ -28,35 +29,13 @@ fn gpu_frames_read_back_packed_levels_except_keyframes() {
         ..DemoConfig::default()
     })
     .unwrap();
-    let ids = &scene.extras.labels.as_ref().unwrap().ids;
-    let mug = demo_layout()
-        .into_iter()
-        .find(|o| o.name == "red mug")
-        .unwrap();
-    let mask: Vec<f32> = ids
-        .iter()
-        .map(|&id| if id == mug.id { 1.0 } else { 0.0 })
-        .collect();
+    let mask = label_mask(&scene, "red mug").unwrap();
 
     // 12 frames of one window, of which the report takes 5 as tinted keyframes.
     let (width, height) = (64, 48);
     let k = Intrinsics::from_fov_x(70.0, width, height).unwrap();
-    let eye = DVec3::from_array(DEMO_VIEWPOINT.map(f64::from));
     let count = 12;
-    let frames = PathFrames {
-        cuts: Vec::new(),
-        times: (0..count).map(|i| i as f64 / (count - 1) as f64).collect(),
-        poses: (0..count)
-            .map(|i| {
-                let target = DVec3::new(0.05 * i as f64, 0.3, 0.8);
-                Pose::look_at(eye + DVec3::X * 0.03 * i as f64, target, DVec3::Z)
-                    .unwrap()
-                    .0
-            })
-            .collect(),
-        cameras: vec![k; count],
-        fps: 4.0,
-    };
+    let frames = common::dolly_frames(k, count, (0.03, 0.05), 4.0);
     let job = PathRender {
         frames: &frames,
         objects: vec![PathObject {

@@ -4,6 +4,8 @@
 //! time with their frames rendered interleaved) gives byte-identical frames, keyframes,
 //! `frame_metrics.csv` and `video.mp4`, with both rasterizers and both overlays.
 
+mod common;
+
 use std::path::Path;
 
 use burn::tensor::{DType, Device};
@@ -15,7 +17,8 @@ use splatraj_experiment::outputs::path_render::{
 };
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::render::{DeviceScene, Rasterizer};
-use splatraj_scene::demo::{DEMO_VIEWPOINT, DemoConfig, demo_layout, demo_scene};
+use splatraj_scene::demo::{DEMO_VIEWPOINT, DemoConfig, demo_scene};
+use splatraj_semantic::sources::label_mask;
 
 /// Every file under `dir`, relative path and bytes, sorted by path.
 fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
@@ -43,39 +46,18 @@ fn pipelined_and_batched_frames_are_the_sequential_frames_byte_for_byte() {
         ..DemoConfig::default()
     })
     .unwrap();
-    let ids = &scene.extras.labels.as_ref().unwrap().ids;
-    let layout = demo_layout();
     let masks: Vec<Vec<f32>> = ["red mug", "blue box"]
         .iter()
-        .map(|name| {
-            let object = layout.iter().find(|o| o.name == *name).unwrap();
-            ids.iter()
-                .map(|&id| if id == object.id { 1.0 } else { 0.0 })
-                .collect()
-        })
+        .map(|name| label_mask(&scene, name).unwrap())
         .collect();
     let uploaded = DeviceScene::new(&scene, &Device::flex(), DType::F32);
 
     // 7 frames over two windows (4 + 3: a pass of 3 poses ends at the window's edge), 520 px
     // wide so the keyframes are shrunk, odd height so the video pads.
     let k = Intrinsics::from_fov_x(70.0, 520, 67).unwrap();
-    let eye = DVec3::from_array(DEMO_VIEWPOINT.map(f64::from));
     let count = 7;
-    let frames = PathFrames {
-        cuts: Vec::new(),
-        times: (0..count).map(|i| i as f64 / (count - 1) as f64).collect(),
-        poses: (0..count)
-            .map(|i| {
-                let target = DVec3::new(0.1 * i as f64, 0.3, 0.8);
-                Pose::look_at(eye + DVec3::X * 0.05 * i as f64, target, DVec3::Z)
-                    .unwrap()
-                    .0
-            })
-            .collect(),
-        cameras: vec![k; count],
-        // Groups of pictures of 3 frames (a keyframe every 2 s): 0–2, 3–5 and 6.
-        fps: 1.5,
-    };
+    // Groups of pictures of 3 frames (a keyframe every 2 s): 0–2, 3–5 and 6.
+    let frames = common::dolly_frames(k, count, (0.05, 0.1), 1.5);
     let objects: Vec<PathObject> = masks
         .iter()
         .map(|mask| PathObject {

@@ -421,36 +421,12 @@ fn render_scene_loss(
     (host(out.images), host(poses.grad(&grads).unwrap()))
 }
 
-#[test]
-fn pose_gradients_of_fused_and_tensor_renders_agree() {
-    let (_, mask) = scene();
-    for (pruning, channels) in [
-        (
-            Pruning::None,
-            vec![Channel::Rgb, Channel::Depth, Channel::Mask(mask.clone())],
-        ),
-        (Pruning::ObjectOnly, vec![Channel::Mask(mask.clone())]),
-    ] {
-        let (image_f, grad_f) = render_loss(Rasterizer::Fused, pruning, channels.clone());
-        let (image_t, grad_t) = render_loss(Rasterizer::Tensor, pruning, channels);
-        assert!(
-            relative_error(&image_f, &image_t) < 1e-10,
-            "{pruning:?}: images"
-        );
-        assert!(
-            relative_error(&grad_f, &grad_t) < 1e-8,
-            "{pruning:?}: pose gradients {grad_f:?} vs {grad_t:?}"
-        );
-        assert!(grad_f.iter().any(|g| g.abs() > 1e-4));
-    }
-}
-
-#[test]
-fn dropping_alpha_keeps_the_channels_and_their_gradient() {
-    // Without alpha the fused op writes C values a pixel instead of C + 1, and its backward
-    // reads them so (alpha's gradient zero): checked against the tensor path, which composites
-    // alpha and drops it after, on five channels (RGB, depth, mask) and on a mask alone.
+/// The fused and tensor renders agree, images to 1e-10 and pose gradients to 1e-8, on five
+/// channels (RGB, depth, mask) and on a mask alone, with alpha returned (and in the loss) or
+/// dropped; returns the fused images of each case.
+fn assert_fused_matches_tensor(alpha: AlphaChannel) -> Vec<Vec<f64>> {
     let (scene, mask) = scene();
+    let mut images = Vec::new();
     for (pruning, channels) in [
         (
             Pruning::None,
@@ -465,27 +441,39 @@ fn dropping_alpha_keeps_the_channels_and_their_gradient() {
                 pruning,
                 channels.clone(),
                 Approximations::default(),
-                AlphaChannel::Dropped,
+                alpha,
             )
         };
         let (image, grad) = run(Rasterizer::Fused);
         let (want_image, want_grad) = run(Rasterizer::Tensor);
         assert!(
             relative_error(&image, &want_image) < 1e-10,
-            "{pruning:?}: images"
+            "{pruning:?} {alpha:?}: images"
         );
         assert!(
             relative_error(&grad, &want_grad) < 1e-8,
-            "{pruning:?}: pose gradients {grad:?} vs {want_grad:?}"
+            "{pruning:?} {alpha:?}: pose gradients {grad:?} vs {want_grad:?}"
         );
         assert!(grad.iter().any(|g| g.abs() > 1e-4), "a gradient to compare");
-        // The same channel images as a render that returns alpha.
-        let (returned, _) = render_loss(Rasterizer::Fused, pruning, channels.clone());
-        assert_eq!(
-            image, returned,
-            "{pruning:?}: the channels do not depend on alpha"
-        );
+        images.push(image);
     }
+    images
+}
+
+#[test]
+fn pose_gradients_of_fused_and_tensor_renders_agree() {
+    assert_fused_matches_tensor(AlphaChannel::Returned);
+}
+
+#[test]
+fn dropping_alpha_keeps_the_channels_and_their_gradient() {
+    // Without alpha the fused op writes C values a pixel instead of C + 1, and its backward
+    // reads them so (alpha's gradient zero): checked against the tensor path, which composites
+    // alpha and drops it after.
+    let dropped = assert_fused_matches_tensor(AlphaChannel::Dropped);
+    // The same channel images as a render that returns alpha.
+    let returned = assert_fused_matches_tensor(AlphaChannel::Returned);
+    assert_eq!(dropped, returned, "the channels do not depend on alpha");
 }
 
 #[test]
