@@ -13,6 +13,7 @@ use splatraj_scene::Scene;
 use crate::camera::{Intrinsics, Pose};
 use crate::decide::{HostGeometry, decide_zoomed};
 use crate::focus::{ObjectFocus, PoseFocus, Surroundings};
+use crate::fused::colours::colours_of_rows;
 use crate::fused::projection::{
     PackedColumn, ProjectionCamera, ProjectionPlan, SPLAT_COLUMNS, project_packed_zoomed,
 };
@@ -633,8 +634,8 @@ pub fn render_at(
         .keeping(request.alpha));
     }
     // Index tensors `[R]`, uploaded once and only when a select needs them: each row's scene
-    // index (SH colours and per-Gaussian tensors select with it) and its pose (each row's
-    // camera centre for the SH colours).
+    // index (per-Gaussian tensors and the tensor path's SH colours select with it) and its
+    // pose (each row's camera centre for the tensor path's SH colours).
     let index_tensor = |values: Vec<i64>| {
         crate::counters::upload(8 * values.len());
         let len = values.len();
@@ -706,6 +707,11 @@ pub fn render_at(
     let mut values = Vec::with_capacity(request.channels.len());
     for channel in &request.channels {
         values.push(match channel {
+            // The fused colours: one launch, where the tensor path's ~20 ops each pass over
+            // `[R, K, 3]` values (a frame of a million degree-3 Gaussians: most of its time).
+            Channel::Rgb if request.rasterizer == Rasterizer::Fused => {
+                colours_of_rows(&scene.geometry, &scene.sh, poses.clone(), plan.clone())
+            }
             Channel::Rgb => {
                 let index = scene_index();
                 let sh = ShTensors {

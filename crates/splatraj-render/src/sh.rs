@@ -8,17 +8,18 @@ use burn::tensor::{DType, Device, Tensor, TensorData};
 use splatraj_scene::Scene;
 
 // The reference renderer keeps its own copy of these constants on purpose: it shares no code
-// with the tensor path it checks.
-const C0: f64 = 0.282_094_791_773_878_14;
-const C1: f64 = 0.488_602_511_902_919_9;
-const C2: [f64; 5] = [
+// with the tensor path it checks. The fused colours (`crate::fused::colours`) share them: the
+// tensor path is their yardstick, and a wrong constant would show in the reference's tests.
+pub(crate) const C0: f64 = 0.282_094_791_773_878_14;
+pub(crate) const C1: f64 = 0.488_602_511_902_919_9;
+pub(crate) const C2: [f64; 5] = [
     1.092_548_430_592_079_2,
     -1.092_548_430_592_079_2,
     0.315_391_565_252_520_05,
     -1.092_548_430_592_079_2,
     0.546_274_215_296_039_6,
 ];
-const C3: [f64; 7] = [
+pub(crate) const C3: [f64; 7] = [
     -0.590_043_589_926_643_5,
     2.890_611_442_640_554,
     -0.457_045_799_464_465_8,

@@ -593,6 +593,39 @@ fn gpu_kernels_match_host_kernels_on_a_long_replay() {
     });
 }
 
+/// 3000 Gaussians, a tenth spread far (behind the cameras, beyond the Jacobian's clamp): a
+/// dozen of the GPU kernels' cubes a pose, a partial last one.
+#[cfg(feature = "wgpu")]
+fn gpu_scene(seed: u64) -> Scene {
+    let mut rng = common::Rng(seed);
+    let mut scene = Scene::default();
+    for i in 0..3000 {
+        let spread = if i % 10 == 0 { 8.0 } else { 1.5 };
+        scene
+            .means
+            .push(std::array::from_fn(|_| rng.range(-spread, spread) as f32));
+        scene
+            .scales
+            .push(std::array::from_fn(|_| rng.range(0.01, 0.2) as f32));
+        scene
+            .rotations
+            .push(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
+        scene.opacities.push(rng.range(0.05, 1.0) as f32);
+    }
+    scene
+}
+
+/// Three poses on both of Rodrigues' branches (ω = 0 among them).
+#[cfg(feature = "wgpu")]
+fn gpu_poses() -> [Pose; 3] {
+    let up = DVec3::new(0.0, -1.0, 0.0);
+    [
+        Pose::look_at(DVec3::new(3.0, -1.0, 4.0), DVec3::ZERO, up).unwrap(),
+        Pose([0.03, -0.04, 0.02, 0.1, 0.2, -4.0]),
+        Pose([0.0, 0.0, 0.0, -0.2, 0.1, -5.0]),
+    ]
+}
+
 /// The GPU's packed rows within f32 rounding of the host's where `in_view` (rows a pass can
 /// composite), and its pose gradient within 1e-3 of the host's norm, which it returns.
 #[cfg(feature = "wgpu")]
@@ -638,29 +671,10 @@ fn gpu_projection_matches_host_projection() {
     };
     use splatraj_render::project::{NEAR_PLANE, SceneTensors};
 
-    let mut rng = common::Rng(0x2545f4914f6cdd1d);
-    let mut scene = Scene::default();
-    for i in 0..3000 {
-        let spread = if i % 10 == 0 { 8.0 } else { 1.5 };
-        scene
-            .means
-            .push(std::array::from_fn(|_| rng.range(-spread, spread) as f32));
-        scene
-            .scales
-            .push(std::array::from_fn(|_| rng.range(0.01, 0.2) as f32));
-        scene
-            .rotations
-            .push(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
-        scene.opacities.push(rng.range(0.05, 1.0) as f32);
-    }
+    let scene = gpu_scene(0x2545f4914f6cdd1d);
     let mut used: Vec<u32> = (0..3000).rev().collect();
     used.push(17);
-    let up = DVec3::new(0.0, -1.0, 0.0);
-    let poses = [
-        Pose::look_at(DVec3::new(3.0, -1.0, 4.0), DVec3::ZERO, up).unwrap(),
-        Pose([0.03, -0.04, 0.02, 0.1, 0.2, -4.0]),
-        Pose([0.0, 0.0, 0.0, -0.2, 0.1, -5.0]),
-    ];
+    let poses = gpu_poses();
     let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
     let intrinsics = Intrinsics::from_fov_x(60.0, 160, 120).unwrap();
     // Rows a pass can composite: in front of the camera and near the image. The others
@@ -730,28 +744,9 @@ fn gpu_zoomed_projection_matches_host_projection() {
     };
     use splatraj_render::project::{NEAR_PLANE, SceneTensors};
 
-    let mut rng = common::Rng(0x9e3779b97f4a7c15);
-    let mut scene = Scene::default();
-    for i in 0..3000 {
-        let spread = if i % 10 == 0 { 8.0 } else { 1.5 };
-        scene
-            .means
-            .push(std::array::from_fn(|_| rng.range(-spread, spread) as f32));
-        scene
-            .scales
-            .push(std::array::from_fn(|_| rng.range(0.01, 0.2) as f32));
-        scene
-            .rotations
-            .push(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
-        scene.opacities.push(rng.range(0.05, 1.0) as f32);
-    }
+    let scene = gpu_scene(0x9e3779b97f4a7c15);
     let used: Vec<u32> = (0..3000).collect();
-    let up = DVec3::new(0.0, -1.0, 0.0);
-    let poses = [
-        Pose::look_at(DVec3::new(3.0, -1.0, 4.0), DVec3::ZERO, up).unwrap(),
-        Pose([0.03, -0.04, 0.02, 0.1, 0.2, -4.0]),
-        Pose([0.0, 0.0, 0.0, -0.2, 0.1, -5.0]),
-    ];
+    let poses = gpu_poses();
     let zoom = [1.8f64, 0.6, 2.5];
     let flat: Vec<f64> = poses.iter().flat_map(|p| p.0).collect();
     let intrinsics = Intrinsics::from_fov_x(60.0, 160, 120).unwrap();
@@ -827,6 +822,86 @@ fn gpu_zoomed_projection_matches_host_projection() {
         (rows_gpu, grad_gpu, zoom_gpu),
         "the GPU kernels are deterministic"
     );
+}
+
+/// The GPU colour kernels against the host kernels, both f32 (the host kernels are checked
+/// against the tensor SH colours in f64, `tests/fused_colours.rs`): SH degrees 0 to 3, the
+/// rows dense and per pose (uneven, one pose without rows), the colours and the pose gradient
+/// of a weighted sum of them.
+#[cfg(feature = "wgpu")]
+#[test]
+fn gpu_colours_match_host_colours() {
+    use splatraj_render::fused::colours::colours_of_rows;
+    use splatraj_render::fused::projection::{ProjectionCamera, ProjectionPlan};
+    use splatraj_render::project::{NEAR_PLANE, SceneTensors};
+    use splatraj_render::sh::ShTensors;
+
+    let poses: Vec<f64> = gpu_poses().iter().flat_map(|p| p.0).collect();
+    let camera =
+        ProjectionCamera::new(&Intrinsics::from_fov_x(60.0, 160, 120).unwrap(), NEAR_PLANE);
+    let used: Vec<u32> = (0..3000).rev().collect();
+    let per_pose = ProjectionPlan {
+        gaussians: [&used[..700], &used[1000..2900]].concat(),
+        rows: splatraj_render::rows::PoseRows::from_counts([700, 0, 1900]),
+        camera,
+    };
+    for degree in 0..=3u8 {
+        let mut scene = gpu_scene(0x51ed + u64::from(degree));
+        let mut rng = common::Rng(u64::from(degree) + 1);
+        scene.sh_degree = degree;
+        scene.sh = (0..3000 * scene.sh_coeffs() * 3)
+            .map(|_| rng.range(-3.0, 3.0) as f32)
+            .collect();
+        for plan in [ProjectionPlan::dense(&used, 3, camera), per_pose.clone()] {
+            let count = plan.rows.total();
+            let weights: Vec<f64> = (0..count * 3)
+                .map(|i| ((i * 7919) % 29) as f64 / 29.0 - 0.45)
+                .collect();
+            let run = |backend: BackendKind| -> (Vec<f64>, Vec<f64>) {
+                let device = backend.device().unwrap().autodiff();
+                let geometry = SceneTensors::new(&scene, None, &device, DType::F32);
+                let sh = ShTensors::new(&scene, None, &device, DType::F32);
+                let pose_tensor = Tensor::<2>::from_data(
+                    TensorData::new(poses.clone(), [3, 6]),
+                    (&device, DType::F32),
+                )
+                .require_grad();
+                let rgb = colours_of_rows(&geometry, &sh, pose_tensor.clone(), plan.clone());
+                let w = Tensor::<2>::from_data(
+                    TensorData::new(weights.clone(), [count, 3]),
+                    (&device, DType::F32),
+                );
+                let grads = (rgb.clone() * w).sum().backward();
+                (host(rgb), host(pose_tensor.grad(&grads).unwrap()))
+            };
+            let (rgb_host, grad_host) = run(BackendKind::Flex);
+            let (rgb_gpu, grad_gpu) = run(BackendKind::Wgpu);
+            for (i, (g, h)) in rgb_gpu.iter().zip(&rgb_host).enumerate() {
+                assert!(
+                    (g - h).abs() <= 1e-5 * (1.0 + h.abs()),
+                    "degree {degree}, rgb {i}: GPU {g} vs host {h}"
+                );
+            }
+            let norm = grad_host.iter().map(|g| g * g).sum::<f64>().sqrt();
+            assert!(
+                degree == 0 || norm > 1.0,
+                "degree {degree}: a gradient to compare"
+            );
+            for (k, (g, h)) in grad_gpu.iter().zip(&grad_host).enumerate() {
+                assert!(
+                    (g - h).abs() <= 1e-4 * norm.max(1.0),
+                    "degree {degree}, dΦ[{}][{}]: GPU {g} vs host {h} (norm {norm})",
+                    k / 6,
+                    k % 6
+                );
+            }
+            assert_eq!(
+                run(BackendKind::Wgpu),
+                (rgb_gpu, grad_gpu),
+                "the GPU kernels are deterministic"
+            );
+        }
+    }
 }
 
 /// A GPU's largest buffer bounds a pass: `poses_per_pass` keeps the images within it, and a

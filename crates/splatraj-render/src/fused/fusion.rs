@@ -22,6 +22,7 @@ use burn::tensor::{DType, Shape};
 use burn_cubecl::CubeBackend;
 use burn_cubecl::tensor::CubeTensor;
 
+use super::colours::{ColourKernels, FusedColours};
 use super::plan::CompositePlan;
 use super::projection::{FusedProjection, ProjectionKernels, ProjectionPlan, SPLAT_COLUMNS};
 use super::{CompositeKernels, ForwardUse, FusedComposite, SplatPrimitives};
@@ -247,5 +248,58 @@ impl FusedProjection for Cube {
         plan: Arc<ProjectionPlan>,
     ) -> FloatTensor<Self> {
         Self::projection_forward(poses, zoom, components, opacities, plan).0
+    }
+}
+
+impl ColourKernels for Cube {
+    type Saved = Deferred<<CubeBackend as ColourKernels>::Saved>;
+
+    fn colours_forward(
+        poses: FloatTensor<Self>,
+        components: FloatTensor<Self>,
+        coeffs: FloatTensor<Self>,
+        plan: Arc<ProjectionPlan>,
+    ) -> (FloatTensor<Self>, Self::Saved) {
+        // The backward's output is the gradient of the poses only.
+        let saved = Deferred::new(&[&poses]);
+        let colours = Shape::from(vec![plan.rows.total(), 3]); // [R, 3]
+        let dtype = components.dtype();
+        let keep = saved.clone();
+        let outputs = queue(
+            Stage::Project,
+            vec![poses, components, coeffs],
+            vec![(colours, dtype)],
+            move |tensors| {
+                let mut each = tensors.into_iter();
+                let mut next = || each.next().expect("the three inputs it was queued with");
+                let (poses, components, coeffs) = (next(), next(), next());
+                let (colours, state) =
+                    CubeBackend::colours_forward(poses, components, coeffs, plan.clone());
+                keep.put(state);
+                vec![colours]
+            },
+        );
+        (one(outputs), saved)
+    }
+
+    fn colours_backward(saved: Self::Saved, v_colours: FloatTensor<Self>) -> FloatTensor<Self> {
+        let outputs = saved.inputs.clone();
+        one(queue(
+            Stage::ProjectBackward,
+            vec![v_colours],
+            outputs,
+            move |tensors| vec![CubeBackend::colours_backward(saved.take(), one(tensors))],
+        ))
+    }
+}
+
+impl FusedColours for Cube {
+    fn fused_colours(
+        poses: FloatTensor<Self>,
+        components: FloatTensor<Self>,
+        coeffs: FloatTensor<Self>,
+        plan: Arc<ProjectionPlan>,
+    ) -> FloatTensor<Self> {
+        Self::colours_forward(poses, components, coeffs, plan).0
     }
 }

@@ -14,6 +14,7 @@
 //! memory). The GPU backend (`Cube`, i.e. wgpu) runs the same rules as CubeCL kernels
 //! (`cube`, one workgroup per tile); only the tile lists travel from the host.
 
+pub mod colours;
 pub mod cpu;
 #[cfg(feature = "wgpu")]
 pub mod cube;

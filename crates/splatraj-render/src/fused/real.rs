@@ -26,6 +26,8 @@ pub trait Real:
     fn of(x: f64) -> Self;
     /// e^self.
     fn exp(self) -> Self;
+    /// The square root.
+    fn sqrt(self) -> Self;
     /// The value as f64.
     fn to_f64(self) -> f64;
     /// `values` as f32 where Self is f32 (the 8-lane kernels run in f32 only), else `None`.
@@ -43,6 +45,9 @@ impl Real for f32 {
     }
     fn exp(self) -> Self {
         f32::exp(self)
+    }
+    fn sqrt(self) -> Self {
+        f32::sqrt(self)
     }
     fn to_f64(self) -> f64 {
         self as f64
@@ -64,6 +69,9 @@ impl Real for f64 {
     }
     fn exp(self) -> Self {
         f64::exp(self)
+    }
+    fn sqrt(self) -> Self {
+        f64::sqrt(self)
     }
     fn to_f64(self) -> f64 {
         self

@@ -36,8 +36,8 @@ use crate::camera::SERIES_BELOW_THETA_SQ;
 use crate::fused::cube::int_tensor;
 use crate::project::{LOW_PASS, NORMALISED_DET_FLOOR};
 
-/// Units per cube, and Gaussians per chunk of the launch grid.
-const UNITS: usize = 256;
+/// Units per cube, and Gaussians per chunk of the launch grid (the fused colours' too).
+pub(crate) const UNITS: usize = 256;
 /// Values a row's gradient has before Rodrigues: the three axes (9), the centre (3) and the
 /// zoom (1).
 const PARTIAL: usize = 13;
@@ -320,14 +320,14 @@ fn forward_kernel<F: Float, I: Int>(
     }
 }
 
-/// Sums `values[k·256 + p]` over the cube's 256 units into `values[k·256]`, for k < 13, by a
-/// fixed tree (the same sum on every run).
+/// Sums `values[k·256 + p]` over the cube's 256 units into `values[k·256]`, for k < `count`,
+/// by a fixed tree (the same sum on every run).
 #[cube]
-fn tree_sum<F: Float>(values: &mut Shared<[F]>, p: usize) {
+pub(crate) fn tree_sum<F: Float>(values: &mut Shared<[F]>, p: usize, #[comptime] count: usize) {
     let mut half = 128usize;
     while half > 0 {
         if p < half {
-            for k in 0..13usize {
+            for k in 0..count {
                 let other = values[k * 256 + p + half];
                 values[k * 256 + p] += other;
             }
@@ -475,7 +475,7 @@ fn backward_kernel<F: Float, I: Int>(
         shared[k * 256 + p] = acc[k];
     }
     sync_cube();
-    tree_sum::<F>(&mut shared, p);
+    tree_sum::<F>(&mut shared, p, PARTIAL);
     if p < 13 {
         partial[(pose * CUBE_COUNT_X as usize + CUBE_POS_X as usize) * 13 + p] = shared[p * 256];
     }
@@ -503,7 +503,7 @@ fn reduce_kernel<F: Float>(
         shared[k * 256 + p] = sum;
     }
     sync_cube();
-    tree_sum::<F>(&mut shared, p);
+    tree_sum::<F>(&mut shared, p, PARTIAL);
     if p == 0 {
         let w0 = poses[pose * 6];
         let w1 = poses[pose * 6 + 1];
@@ -569,7 +569,7 @@ pub enum CubeSaved {
 
 /// The launch grid: (cubes per pose, poses), and the chunks of 256 rows the pose with the
 /// most rows has (a cube past a pose's rows only writes its zero partial).
-fn grid(batch: usize, largest: usize) -> (CubeCount, u32, usize) {
+pub(crate) fn grid(batch: usize, largest: usize) -> (CubeCount, u32, usize) {
     let chunks = largest.div_ceil(UNITS).max(1);
     let per_pose = chunks.min(MAX_PER_AXIS);
     (
