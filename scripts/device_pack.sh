@@ -4,7 +4,7 @@
 # scenes the check reads, the Vulkan loader's Debian packages, and the script the machine runs.
 #
 #   cargo build --release --features wgpu          # here, about 30 minutes on 2 cores
-#   scripts/device_pack.sh [BINARY] [DATA_DIR] [BRANCH_BINARY]
+#   scripts/device_pack.sh [BINARY] [DATA_DIR] [BRANCH_BINARY] [SPIRV_BINARY]
 #                                                  # here: fills .gpu/ (git ignores it)
 #
 # then, on the machine (the workplace's device tool: `run` with carry [".gpu"]):
@@ -17,7 +17,10 @@
 # here on the JSON that came back. BRANCH_BINARY (optional) is a wgpu build of a branch to
 # compare, such as gpu-forward-cut: after the check, the machine times one profiled guitar step
 # with it (GPU_CHECK_BRANCH_SECONDS, 80) and prints that step's stage table below the check's,
-# to read beside the check's own "wgpu step, ms, each kernel waited for". BINARY defaults to
+# to read beside the check's own "wgpu step, ms, each kernel waited for". SPIRV_BINARY
+# (optional; BRANCH_BINARY may then be "") is a `--features vulkan` build: before the check,
+# the machine runs the short check with it (GPU_CHECK_SHORT=1, GPU_CHECK_SPIRV_SECONDS, 100):
+# CubeCL's SPIR-V compiler beside WGSL on the same GPU. BINARY defaults to
 # $CARGO_TARGET_DIR/release/splatraj (else target/release/splatraj), DATA_DIR to
 # ../shared/data. Everything travels within the tool's 64 MiB. The loader packages follow the
 # device notes of this workplace (Debian's libvulkan1, unpacked over / on the machine; the
@@ -28,11 +31,14 @@ cd "$(dirname "$0")/.."
 bin="${1:-${CARGO_TARGET_DIR:-target}/release/splatraj}"
 data="${2:-../shared/data}"
 branch_bin="${3:-}"
+spirv_bin="${4:-}"
 [ -x "$bin" ] || { echo "device_pack: no binary at $bin (build with --features wgpu)" >&2; exit 2; }
-if [ -n "$branch_bin" ] && [ ! -x "$branch_bin" ]; then
-  echo "device_pack: no branch binary at $branch_bin" >&2
-  exit 2
-fi
+for extra in "$branch_bin" "$spirv_bin"; do
+  if [ -n "$extra" ] && [ ! -x "$extra" ]; then
+    echo "device_pack: no binary at $extra" >&2
+    exit 2
+  fi
+done
 for f in biker.compressed.ply guitar.compressed.ply; do
   [ -f "$data/$f" ] || { echo "device_pack: $data/$f is missing (give DATA_DIR)" >&2; exit 2; }
 done
@@ -45,6 +51,9 @@ pack_binary() { strip -o ".gpu/$2" "$1" && xz -T0 -6 ".gpu/$2"; }
 pack_binary "$bin" splatraj
 if [ -n "$branch_bin" ]; then
   pack_binary "$branch_bin" splatraj-branch
+fi
+if [ -n "$spirv_bin" ]; then
+  pack_binary "$spirv_bin" splatraj-spirv
 fi
 # The loader for the machine's amd64 Debian, whatever this machine runs.
 lists=/tmp/device_pack_apt
@@ -70,14 +79,25 @@ xz -dkf .gpu/splatraj.xz && chmod +x .gpu/splatraj
 # tool's time limit stops the check (give `run` a timeout_s above GPU_CHECK_SECONDS).
 json="$out/gpu_check_json"
 mkdir -p "$json"
+# The device tool gives a command 600 s: the SPIR-V build's short check comes out of the
+# main check's time.
+check_seconds="${GPU_CHECK_SECONDS:-500}"
 {
   nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader || true
   git log -1 --format='commit %h %s' 2>/dev/null || true
-  timeout "${GPU_CHECK_SECONDS:-500}" scripts/gpu_check.sh .gpu/splatraj .gpu/data "$json"
+  if [ -f .gpu/splatraj-spirv.xz ]; then
+    xz -dkf .gpu/splatraj-spirv.xz && chmod +x .gpu/splatraj-spirv
+    spirv_seconds="${GPU_CHECK_SPIRV_SECONDS:-100}"
+    check_seconds="${GPU_CHECK_SECONDS:-$((500 - spirv_seconds))}"
+    echo "== the SPIR-V build (--features vulkan): the short check, WGSL's table follows"
+    GPU_CHECK_SHORT=1 timeout "$spirv_seconds" scripts/gpu_check.sh .gpu/splatraj-spirv \
+      .gpu/data "$out/gpu_check_json_spirv" || echo "the SPIR-V short check exited with status $?"
+  fi
+  timeout "$check_seconds" scripts/gpu_check.sh .gpu/splatraj .gpu/data "$json"
   status=$?
   echo "gpu_check exit status $status"
   if [ "$status" -eq 124 ]; then
-    echo "gpu_check stopped after ${GPU_CHECK_SECONDS:-500} s; the table of what it measured:"
+    echo "gpu_check stopped after $check_seconds s; the table of what it measured:"
     python3 scripts/gpu_check_table.py "$json"
   fi
   if [ -f .gpu/splatraj-branch.xz ]; then

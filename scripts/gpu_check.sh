@@ -44,7 +44,10 @@
 # tabulates a partial OUT_DIR: `python3 scripts/gpu_check_table.py OUT_DIR`). Exit status 1
 # when parity fails. The cheap, decisive measurements come first (9., then 0.).
 # GPU_CHECK_QUICK=1 shrinks every workload (a smoke test of the script, e.g. on lavapipe):
-# the figures then mean nothing.
+# the figures then mean nothing. GPU_CHECK_SHORT=1 measures a second build beside the first
+# in about a minute (`.gpu/run.sh` does it for a SPIR-V build, docs/gpu.md): 0., 9., the 100k
+# mask passes of 1. with their parity, and on wgpu only the guitar step of 4. and the profiled
+# step of 7.
 set -euo pipefail
 
 bin="${1:?usage: scripts/gpu_check.sh BINARY [DATA_DIR] [OUT_DIR]}"
@@ -72,6 +75,9 @@ if [ "${GPU_CHECK_QUICK:-0}" = 1 ]; then
   quick=(--set optimiser.iterations=3 --set output.frames=3 --set output.width=160
     --set output.height=90 --set output.metric_samples=8)
 fi
+if [ "${GPU_CHECK_SHORT:-0}" = 1 ] && [ "${GPU_CHECK_QUICK:-0}" != 1 ]; then
+  sizes=100000
+fi
 for backend in wgpu flex; do
   echo "== $backend: bench launches" >&2
   "$bin" bench launches --backend "$backend" --iterations "$launch_iterations" --json \
@@ -91,6 +97,14 @@ for backend in wgpu flex; do
   "$bin" bench render --backend "$backend" --sizes "$sizes" --resolutions 128 \
     --rasterizer fused --repeats "$repeats" --scene "$data/biker.compressed.ply" --json \
     >"$out/render_$backend.json"
+  if [ "${GPU_CHECK_SHORT:-0}" = 1 ]; then
+    [ "$backend" = wgpu ] || continue
+    echo "== $backend: bench step (guitar)" >&2
+    "$bin" bench step --config configs/first-try/guitar.toml --steps "$steps" \
+      --set "backend=\"$backend\"" --set "scene.path=\"$data/guitar.compressed.ply\"" --json \
+      >"$out/step_$backend.json"
+    continue
+  fi
   echo "== $backend: bench frames" >&2
   "$bin" bench frames --backend "$backend" --sizes "$frame_size" --frames 4 \
     --gaussians "$demo" --schedule pipelined,pipelined:4 --scene "$data/biker.compressed.ply" --json \
@@ -104,6 +118,14 @@ for backend in wgpu flex; do
     --set "scene.path=\"$data/guitar.compressed.ply\"" "${quick[@]}" \
     --runs-dir "$runs/$backend" --json >"$out/first_try_$backend.json"
 done
+if [ "${GPU_CHECK_SHORT:-0}" = 1 ]; then
+  echo "== wgpu: bench step (guitar), each kernel waited for" >&2
+  CUBECL_DEBUG_OPTION=profile-medium "$bin" bench step --config configs/first-try/guitar.toml \
+    --steps "$steps" --set 'backend="wgpu"' --set "scene.path=\"$data/guitar.compressed.ply\"" \
+    --json >"$out/step_wgpu_profiled.json"
+  python3 "$repo/scripts/gpu_check_table.py" "$out" "$SECONDS"
+  exit 0
+fi
 echo "== wgpu: bench render, each kernel waited for" >&2
 CUBECL_DEBUG_OPTION=profile-medium "$bin" bench render --backend wgpu --sizes "$sizes" \
   --resolutions 128 --rasterizer fused --repeats 1 --scene "$data/biker.compressed.ply" --json \
