@@ -13,8 +13,6 @@
 
 use std::sync::Arc;
 
-use rayon::iter::{IntoParallelRefIterator, ParallelIterator};
-
 use burn::backend::TensorMetadata;
 use burn::backend::tensor::FloatTensor;
 use burn::tensor::DType;
@@ -27,9 +25,8 @@ use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::tensor::CubeTensor;
 
 use super::{ColourKernels, HostSaved, host_backward, host_forward};
-use crate::fused::cube::int_tensor;
 use crate::fused::projection::ProjectionPlan;
-use crate::fused::projection::cube::{UNITS, grid, tree_sum};
+use crate::fused::projection::cube::{CubeSaved, UNITS, grid, tree_sum, upload_rows};
 use crate::sh::{C0, C1, C2, C3};
 
 /// The tensor path's floor of the view direction's squared length.
@@ -341,15 +338,6 @@ pub struct DeviceSaved {
     plan: Arc<ProjectionPlan>,
 }
 
-/// The backward state: on the device, or on the host for f64 passes.
-#[derive(Debug, Clone)]
-pub enum CubeSaved {
-    /// f32 passes: everything on the device.
-    Device(Box<DeviceSaved>),
-    /// f64 passes: the host kernels' state.
-    Host(Box<HostSaved<CubeBackend>>),
-}
-
 fn empty(shape: Vec<usize>, tensor: &CubeTensor) -> CubeTensor {
     CubeBackend::float_empty(shape.into(), &tensor.device, tensor.dtype.into())
 }
@@ -367,14 +355,7 @@ fn device_forward(
     let n = components.shape().dims::<2>()[1];
     let basis = coeffs.shape().dims::<3>()[1];
     let largest = plan.rows.largest();
-    let gaussians = int_tensor(
-        plan.gaussians.par_iter().map(|&g| g as i32).collect(),
-        &poses.device,
-    );
-    let starts = int_tensor(
-        plan.rows.starts().iter().map(|&s| s as i32).collect(),
-        &poses.device,
-    );
+    let (gaussians, starts) = upload_rows(&plan, &poses.device);
     let colours = empty(vec![plan.rows.total(), 3], &poses);
     let (cubes, chunks, _) = grid(batch, largest);
     if batch > 0 && largest > 0 {
@@ -460,14 +441,14 @@ fn device_backward(saved: DeviceSaved, v_colours: CubeTensor) -> CubeTensor {
 }
 
 impl ColourKernels for CubeBackend {
-    type Saved = CubeSaved;
+    type Saved = CubeSaved<DeviceSaved, HostSaved<CubeBackend>>;
 
     fn colours_forward(
         poses: FloatTensor<Self>,
         components: FloatTensor<Self>,
         coeffs: FloatTensor<Self>,
         plan: Arc<ProjectionPlan>,
-    ) -> (FloatTensor<Self>, CubeSaved) {
+    ) -> (FloatTensor<Self>, Self::Saved) {
         if components.dtype() == DType::F64 {
             let (colours, saved) = host_forward::<Self>(poses, components, coeffs, plan);
             return (colours, CubeSaved::Host(Box::new(saved)));
@@ -476,7 +457,7 @@ impl ColourKernels for CubeBackend {
         (colours, CubeSaved::Device(Box::new(saved)))
     }
 
-    fn colours_backward(saved: CubeSaved, v_colours: FloatTensor<Self>) -> FloatTensor<Self> {
+    fn colours_backward(saved: Self::Saved, v_colours: FloatTensor<Self>) -> FloatTensor<Self> {
         match saved {
             CubeSaved::Host(saved) => host_backward::<Self>(*saved, v_colours),
             CubeSaved::Device(saved) => device_backward(*saved, v_colours),

@@ -251,8 +251,8 @@ impl<B: ColourKernels, C: CheckpointStrategy> FusedColours for Autodiff<B, C> {
 /// The RGB `[R, 3]` of the plan's rows (Gaussians by their index into `scene`, pose after
 /// pose) seen from `poses` `[B, 6]`: max(0, 0.5 + Σ_k basis_k(d) · coeff_k), d the unit vector
 /// from the camera centre to the mean, as [`crate::sh::sh_colours_of_rows`] computes it;
-/// differentiable in the poses' centres. Panics when the plan's poses are not B (a caller's
-/// bug).
+/// differentiable in the poses' centres. Panics when the plan's poses are not B or the
+/// degree is above 3 (a caller's bug).
 pub fn colours_of_rows(
     scene: &SceneTensors,
     sh: &ShTensors,
@@ -266,6 +266,12 @@ pub fn colours_of_rows(
         plan.gaussians.len(),
         plan.rows.total(),
         "a colour plan names a Gaussian for each row"
+    );
+    // Scenes are validated to degree ≤ 3; the kernels hold at most 16 basis functions.
+    let basis = sh.coeffs.dims()[1];
+    assert!(
+        [1, 4, 9, 16].contains(&basis),
+        "SH coefficients of degree 0 to 3, not {basis} a channel"
     );
     Tensor::<2>::from_dispatch(<Dispatch as FusedColours>::fused_colours(
         poses.into_dispatch(),

@@ -558,13 +558,28 @@ pub struct DeviceSaved {
     plan: Arc<ProjectionPlan>,
 }
 
-/// The backward state: on the device, or on the host for f64 passes.
+/// A fused op's backward state on the GPU backend: on the device (`D`), or the host kernels'
+/// state (`H`) for f64 passes. The projection's and the colours' ops keep one each.
 #[derive(Debug, Clone)]
-pub enum CubeSaved {
+pub enum CubeSaved<D, H> {
     /// f32 passes: everything on the device.
-    Device(Box<DeviceSaved>),
+    Device(Box<D>),
     /// f64 passes: the host kernels' state.
-    Host(Box<HostSaved<CubeBackend>>),
+    Host(Box<H>),
+}
+
+/// The row table a plan's kernels read, uploaded: each row's Gaussian `[R]` and each pose's
+/// first row, then R, `[B + 1]` (4 bytes a row and a pose).
+pub(crate) fn upload_rows(plan: &ProjectionPlan, device: &CubeDevice) -> (CubeTensor, CubeTensor) {
+    let gaussians = int_tensor(
+        plan.gaussians.par_iter().map(|&g| g as i32).collect(),
+        device,
+    );
+    let starts = int_tensor(
+        plan.rows.starts().iter().map(|&s| s as i32).collect(),
+        device,
+    );
+    (gaussians, starts)
 }
 
 /// The launch grid: (cubes per pose, poses), and the chunks of 256 rows the pose with the
@@ -607,14 +622,7 @@ fn device_forward(
     let batch = poses.shape().dims::<2>()[0];
     let n = components.shape().dims::<2>()[1];
     let largest = plan.rows.largest();
-    let gaussians = int_tensor(
-        plan.gaussians.par_iter().map(|&g| g as i32).collect(),
-        &device,
-    );
-    let starts = int_tensor(
-        plan.rows.starts().iter().map(|&s| s as i32).collect(),
-        &device,
-    );
+    let (gaussians, starts) = upload_rows(&plan, &device);
     let camera = camera_tensor(&plan, &device, dtype);
     let rows = empty(vec![plan.rows.total(), SPLAT_COLUMNS], &device, dtype);
     let (cubes, chunks, _) = grid(batch, largest);
@@ -710,7 +718,7 @@ fn device_backward(saved: DeviceSaved, v_rows: CubeTensor) -> (CubeTensor, CubeT
 impl HostView for CubeBackend {}
 
 impl ProjectionKernels for CubeBackend {
-    type Saved = CubeSaved;
+    type Saved = CubeSaved<DeviceSaved, HostSaved<CubeBackend>>;
 
     fn projection_forward(
         poses: FloatTensor<Self>,
@@ -718,7 +726,7 @@ impl ProjectionKernels for CubeBackend {
         components: FloatTensor<Self>,
         opacities: FloatTensor<Self>,
         plan: Arc<ProjectionPlan>,
-    ) -> (FloatTensor<Self>, CubeSaved) {
+    ) -> (FloatTensor<Self>, Self::Saved) {
         if components.dtype() == DType::F64 {
             let (rows, saved) = host_forward::<Self>(poses, zoom, components, opacities, plan);
             return (rows, CubeSaved::Host(Box::new(saved)));
@@ -728,7 +736,7 @@ impl ProjectionKernels for CubeBackend {
     }
 
     fn projection_backward(
-        saved: CubeSaved,
+        saved: Self::Saved,
         v_rows: FloatTensor<Self>,
     ) -> (FloatTensor<Self>, FloatTensor<Self>) {
         match saved {
