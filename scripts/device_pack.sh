@@ -19,7 +19,7 @@
 # with it (GPU_CHECK_BRANCH_SECONDS, 80) and prints that step's stage table below the check's,
 # to read beside the check's own "wgpu step, ms, each kernel waited for". SPIRV_BINARY
 # (optional; BRANCH_BINARY may then be "") is a `--features vulkan` build: before the check,
-# the machine runs the short check with it (GPU_CHECK_SHORT=1, GPU_CHECK_SPIRV_SECONDS, 100):
+# the machine runs the short check with it (GPU_CHECK_SHORT=1, GPU_CHECK_SPIRV_SECONDS, 120):
 # CubeCL's SPIR-V compiler beside WGSL on the same GPU. BINARY defaults to
 # $CARGO_TARGET_DIR/release/splatraj (else target/release/splatraj), DATA_DIR to
 # ../shared/data. Everything travels within the tool's 64 MiB. The loader packages follow the
@@ -87,11 +87,16 @@ check_seconds="${GPU_CHECK_SECONDS:-500}"
   git log -1 --format='commit %h %s' 2>/dev/null || true
   if [ -f .gpu/splatraj-spirv.xz ]; then
     xz -dkf .gpu/splatraj-spirv.xz && chmod +x .gpu/splatraj-spirv
-    spirv_seconds="${GPU_CHECK_SPIRV_SECONDS:-100}"
+    spirv_seconds="${GPU_CHECK_SPIRV_SECONDS:-120}"
     check_seconds="${GPU_CHECK_SECONDS:-$((500 - spirv_seconds))}"
     echo "== the SPIR-V build (--features vulkan): the short check, WGSL's table follows"
     GPU_CHECK_SHORT=1 timeout "$spirv_seconds" scripts/gpu_check.sh .gpu/splatraj-spirv \
-      .gpu/data "$out/gpu_check_json_spirv" || echo "the SPIR-V short check exited with status $?"
+      .gpu/data "$out/gpu_check_json_spirv"
+    spirv_status=$?
+    if [ "$spirv_status" -ne 0 ]; then
+      echo "the SPIR-V short check exited with status $spirv_status; what it measured:"
+      python3 scripts/gpu_check_table.py "$out/gpu_check_json_spirv" || true
+    fi
   fi
   timeout "$check_seconds" scripts/gpu_check.sh .gpu/splatraj .gpu/data "$json"
   status=$?

@@ -1,6 +1,6 @@
 //! `splatraj scene convert` to the written formats: the format follows the output's name (or
-//! `--format`), a name it cannot write is refused before anything is read, and what it writes
-//! `scene info` reads back.
+//! `--format`), a name it cannot write is refused before anything is read, what it writes
+//! `scene info` reads back, and `--sh-degree` writes another SH degree.
 
 mod common;
 
@@ -79,4 +79,60 @@ fn a_folder_in_the_way_is_not_replaced() {
     let out = splatraj(&["scene", "convert", s(&input), s(&target)]);
     assert_clean_failure(&out, &["out.compressed.ply", "a folder"]);
     assert!(target.is_dir());
+}
+
+#[test]
+fn sh_degree_lowers_and_raises_what_is_written() {
+    // Degree 3 in, as real captures hold.
+    let input = fixture("fruit_drops_minimal.ply");
+    let dir = tempfile::tempdir().unwrap();
+    let degree_of = |path: &std::path::Path| -> serde_json::Value {
+        let info = splatraj(&["scene", "info", s(path), "--json"]);
+        assert!(info.status.success(), "{}", stderr(&info));
+        let json: serde_json::Value = serde_json::from_str(&stdout(&info)).unwrap();
+        assert_eq!(json["gaussians"], 4721);
+        json["sh_degree"].clone()
+    };
+    assert_eq!(degree_of(&input), 3);
+    for (degree, name) in [
+        ("0", "zero.ply"),
+        ("1", "one.spz"),
+        ("3", "three.compressed.ply"),
+    ] {
+        let target = dir.path().join(name);
+        let out = splatraj(&[
+            "scene",
+            "convert",
+            s(&input),
+            s(&target),
+            "--sh-degree",
+            degree,
+        ]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        assert!(
+            stderr(&out).contains(&format!("SH degree {degree}")),
+            "{}",
+            stderr(&out)
+        );
+        assert_eq!(degree_of(&target).to_string(), degree);
+    }
+    // From degree 0 back up to 2: zeros above the colour, written and read back.
+    let raised = dir.path().join("raised.ply");
+    let zero = dir.path().join("zero.ply");
+    let out = splatraj(&["scene", "convert", s(&zero), s(&raised), "--sh-degree", "2"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(degree_of(&raised), 2);
+    let target = dir.path().join("four.ply");
+    let out = splatraj(&[
+        "scene",
+        "convert",
+        s(&input),
+        s(&target),
+        "--sh-degree",
+        "4",
+    ]);
+    // clap refuses it before anything is read.
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("--sh-degree") && stderr(&out).contains("0..=3"));
+    assert!(!target.exists());
 }

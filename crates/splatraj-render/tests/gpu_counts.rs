@@ -4,7 +4,8 @@
 //! gradient, and the scene is not uploaded again; the same with a zoom per pose whose values
 //! the caller holds; and a pass of several objects (an optimisation step's windows, each
 //! object alone) launches what one object's pass does; a long tile list is cut into segments
-//! for a tracked pass only; and burn's fusion merges a chain of elementwise ops.
+//! for a tracked pass only; burn's fusion merges a chain of elementwise ops; and an RGB pass's
+//! colours are one launch whatever the SH degree.
 //!
 //! Its own test binary with one test: the counters are process-wide and the harness runs the
 //! tests of one binary side by side.
@@ -19,7 +20,8 @@ use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::counters::{self, Counts};
 use splatraj_render::focus::Surroundings;
 use splatraj_render::render::{
-    Channel, DeviceScene, ObjectMasks, ObjectView, Pruning, RenderRequest, Zoom, render_at,
+    AlphaChannel, Channel, DeviceScene, ObjectMasks, ObjectView, Pruning, RenderRequest, Zoom,
+    render_at,
 };
 use splatraj_scene::Scene;
 
@@ -299,5 +301,42 @@ fn launches_do_not_grow_with_the_batch_and_reads_stay_at_one() {
     assert!(
         fused.launches > 0 && fused.launches < 8,
         "eight elementwise ops are fused into fewer kernels: {fused:?}"
+    );
+
+    // An RGB pass's colours are one launch whatever the SH degree (`fused/colours`): as burn
+    // ops they were about 19 more, and more with the degree.
+    let rgb_launches = |degree: u8| {
+        let (mut scene, _) = self::scene();
+        scene.sh_degree = degree;
+        let mut rng = common::Rng(5);
+        scene.sh = (0..scene.len() * scene.sh_coeffs() * 3)
+            .map(|_| rng.range(-0.5, 0.5) as f32)
+            .collect();
+        let scene = DeviceScene::new(&scene, &device, DType::F32);
+        let mut request = RenderRequest::new(
+            Intrinsics::from_fov_x(60.0, 64, 48).unwrap(),
+            vec![Channel::Rgb],
+        );
+        request.alpha = AlphaChannel::Dropped;
+        let pose = &poses[..1];
+        let tensor = Tensor::<2>::from_data(
+            TensorData::new(pose[0].0.to_vec(), [1, 6]),
+            (&device, DType::F32),
+        );
+        let count = || {
+            let before = counters::snapshot();
+            let out = render_at(&scene, tensor.clone(), Some(pose), &request).unwrap();
+            splatraj_render::host::to_host(out.images).unwrap();
+            counters::snapshot().since(&before)
+        };
+        count(); // kernels compile on their first use
+        count()
+    };
+    let (flat, view_dependent) = (rgb_launches(0), rgb_launches(3));
+    eprintln!("an RGB pass, SH degree 0: {flat:?}\ndegree 3: {view_dependent:?}");
+    assert_eq!(view_dependent.launches, flat.launches, "{view_dependent:?}");
+    assert!(
+        view_dependent.launches <= 5,
+        "projection, colours, compositing and a fill: {view_dependent:?}"
     );
 }

@@ -148,6 +148,29 @@ impl Scene {
         &self.sh[i * stride..(i + 1) * stride]
     }
 
+    /// The same scene with SH of `degree`: a lower degree drops the coefficients above it (the
+    /// finer view dependence), a higher one adds zero coefficients (the same colours, at the
+    /// cost of the higher degree: what `bench frames --sh-degree` times). Panics above 3, which
+    /// callers check ([`sh_degree_for_coeffs`] names the valid degrees).
+    pub fn with_sh_degree(mut self, degree: u8) -> Scene {
+        assert!(degree <= 3, "SH degree {degree}: 0 to 3 only");
+        let (from, to) = (self.sh_coeffs(), sh_coeffs_for_degree(degree));
+        if from != to {
+            let kept = 3 * from.min(to);
+            let mut sh = vec![0.0f32; self.len() * 3 * to];
+            for (new, old) in sh
+                .chunks_exact_mut(3 * to)
+                .zip(self.sh.chunks_exact(3 * from))
+            {
+                // `[coefficient][channel]`: the first coefficients of each Gaussian are kept.
+                new[..kept].copy_from_slice(&old[..kept]);
+            }
+            self.sh = sh;
+        }
+        self.sh_degree = degree;
+        self
+    }
+
     /// Base (view-independent) colour of Gaussian `i`: max(0, 0.5 + C0 · f_dc).
     pub fn base_color(&self, i: usize) -> [f32; 3] {
         let dc = &self.sh_of(i)[..3];

@@ -41,6 +41,11 @@ pub struct BenchFramesArgs {
     /// pictures encoded at once; default: half the cores).
     #[arg(long, value_delimiter = ',', default_values = ["sequential", "pipelined"], value_parser = FrameSchedule::from_str)]
     schedule: Vec<FrameSchedule>,
+    /// SH degree the scenes are brought to, 0 to 3 (a higher one adds zero coefficients: the
+    /// same pictures at that degree's cost; real captures mostly hold 3); default: as built
+    /// or read (the demo holds 1).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=3))]
+    sh_degree: Option<u8>,
     /// Compositing: fused or tensor.
     #[arg(long, default_value = "fused", value_parser = Rasterizer::from_str)]
     rasterizer: Rasterizer,
@@ -80,6 +85,7 @@ pub(super) fn run(args: &BenchFramesArgs) -> Result<()> {
         object: args.framing.object.clone(),
         target_ratio: args.framing.target_ratio,
         fov: args.framing.fov,
+        sh_degree: args.sh_degree,
     };
     let report = run_frames(&bench, &mut |row| eprintln!("timing {row} …"))?;
     if args.json {

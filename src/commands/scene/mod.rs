@@ -41,6 +41,10 @@ pub enum SceneCommand {
         /// Output format, whatever the output's name: inria-ply, compressed-ply or spz.
         #[arg(long, value_parser = SceneFormat::writable_from_name)]
         format: Option<SceneFormat>,
+        /// SH degree to write, 0 to 3: a lower one drops the finer view-dependent colour (a
+        /// smaller file), a higher one adds zero coefficients; default: the input's.
+        #[arg(long, value_parser = clap::value_parser!(u8).range(0..=3))]
+        sh_degree: Option<u8>,
         #[command(flatten)]
         read: ReadArgs,
     },
@@ -81,9 +85,10 @@ pub fn run(command: SceneCommand) -> Result<()> {
             input,
             output,
             format,
+            sh_degree,
             read,
         } => {
-            let converted = convert_scene(&input, &output, format, &read.options())?;
+            let converted = convert_scene(&input, &output, format, sh_degree, &read.options())?;
             warn_dropped(&input, converted.loaded.dropped);
             for line in converted.summary(&output) {
                 eprintln!("{line}");

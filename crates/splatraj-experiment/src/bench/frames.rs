@@ -60,6 +60,10 @@ pub struct FramesBench {
     pub target_ratio: f64,
     /// Horizontal field of view, degrees.
     pub fov: f64,
+    /// SH degree every timed scene is brought to ([`splatraj_scene::Scene::with_sh_degree`]: higher degrees
+    /// add zeros, so the pictures stay the same); None: as built or read. Real captures mostly
+    /// hold degree 3, the demo scene degree 1.
+    pub sh_degree: Option<u8>,
 }
 
 impl FramesBench {
@@ -76,6 +80,8 @@ pub struct FramesRow {
     pub scene: String,
     /// Gaussians in the scene.
     pub gaussians: usize,
+    /// The scene's SH degree as rendered.
+    pub sh_degree: u8,
     /// Frame width, pixels.
     pub width: usize,
     /// Frame height, pixels.
@@ -247,6 +253,7 @@ fn time_frames(
     Ok(FramesRow {
         scene: setup.name.clone(),
         gaussians: setup.scene.len(),
+        sh_degree: setup.scene.sh_degree,
         width: size.0,
         height: size.1,
         schedule: schedule.name(),
@@ -323,7 +330,10 @@ pub fn run_frames(bench: &FramesBench, progress: &mut dyn FnMut(&str)) -> Result
     let mut rows = Vec::new();
     for source in sources {
         let clock = Instant::now();
-        let setup = source()?;
+        let mut setup = source()?;
+        if let Some(degree) = bench.sh_degree {
+            setup.scene = setup.scene.with_sh_degree(degree);
+        }
         // Frames are rendered on the plain device, as `Experiment::plain_scene` uploads them.
         let uploaded = DeviceScene::new(&setup.scene, &device, DType::F32);
         let setup_s = clock.elapsed().as_secs_f64();
@@ -376,8 +386,8 @@ impl FramesReport {
             return out;
         };
         out += &format!(
-            "{:<20} {:>9} {:>9} {:>11} {:>6}",
-            "scene", "gaussians", "size", "schedule", "frames"
+            "{:<20} {:>9} {:>2} {:>9} {:>11} {:>6}",
+            "scene", "gaussians", "sh", "size", "schedule", "frames"
         );
         for (name, _) in &first.parts_ms {
             out += &format!(" {:>9}", name);
@@ -388,9 +398,10 @@ impl FramesReport {
         );
         for row in &self.rows {
             out += &format!(
-                "{:<20} {:>9} {:>9} {:>11} {:>6}",
+                "{:<20} {:>9} {:>2} {:>9} {:>11} {:>6}",
                 row.scene,
                 row.gaussians,
+                row.sh_degree,
                 format!("{}×{}", row.width, row.height),
                 row.schedule,
                 row.frames

@@ -71,18 +71,26 @@ impl Converted {
     }
 }
 
-/// Reads `input` and writes it to `output` in `format` (else the one its name asks for): the
-/// format and the target are checked before the scene is read.
+/// Reads `input` and writes it to `output` in `format` (else the one its name asks for), with
+/// SH of `sh_degree` where given (0 to 3; [`Scene::with_sh_degree`]): the format and the
+/// target are checked before the scene is read.
 pub fn convert_scene(
     input: &Path,
     output: &Path,
     format: Option<SceneFormat>,
+    sh_degree: Option<u8>,
     options: &ReadOptions,
 ) -> Result<Converted> {
     // Decided before reading, so a wrong name fails at once.
     let format = SceneFormat::for_output_as(output, format)?;
     check_output_target(output)?;
-    let loaded = read_scene(input, options)?;
+    if let Some(degree) = sh_degree.filter(|&d| d > 3) {
+        bail!("--sh-degree {degree}: SH degrees are 0 to 3");
+    }
+    let mut loaded = read_scene(input, options)?;
+    if let Some(degree) = sh_degree {
+        loaded.scene = loaded.scene.with_sh_degree(degree);
+    }
     let dropped_extras = format.dropped_extras(&loaded.scene);
     write_scene(&loaded.scene, output, format)?;
     Ok(Converted {
