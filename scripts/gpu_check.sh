@@ -12,7 +12,8 @@
 #   1. parity and the mask pass: `bench render` (demo 100k and 1 M, 128², pruned and full; biker
 #      128² full): image (TCE, TRE, coverage) and pose gradient, wgpu against flex, and the
 #      forward + backward time, kernel launches, reads and bytes per pass;
-#   2. output frames: `bench frames` (biker and demo 1 M at 1080p, a frame a pass and four);
+#   2. output frames: `bench frames` (biker and demo 1 M at 1080p, a frame a pass and four;
+#      both at SH degree 3, as real captures hold it: zero coefficients added);
 #   3. the first-try guitar run (`configs/first-try/guitar.toml`) whole: time, each window's
 #      verdict and TCE;
 #   4. an optimisation step of the guitar config: `bench step` with its windows in one render
@@ -110,7 +111,7 @@ for backend in wgpu flex; do
     continue
   fi
   echo "== $backend: bench frames" >&2
-  "$bin" bench frames --backend "$backend" --sizes "$frame_size" --frames 4 \
+  "$bin" bench frames --backend "$backend" --sizes "$frame_size" --frames 4 --sh-degree 3 \
     --gaussians "$demo" --schedule pipelined,pipelined:4 --scene "$data/biker.compressed.ply" --json \
     >"$out/frames_$backend.json"
   echo "== $backend: bench step (guitar)" >&2

@@ -153,8 +153,10 @@ def output_frames():
         c = r.get("counts")
         per = lambda key: f"{c[key] / max(r['frames'], 1):.1f}" if c else "-"
         down = f"{c['bytes_down'] / max(r['frames'], 1) / 1e6:.1f}" if c else "-"
+        # The SH degree rendered (absent before 30 November's sixteenth session).
+        sh = f" SH {r['sh_degree']}" if "sh_degree" in r else ""
         if f:
-            print(f"| {r['scene']} {r['gaussians']} {r['schedule']} | {r['frame_ms']:.0f} | "
+            print(f"| {r['scene']} {r['gaussians']}{sh} {r['schedule']} | {r['frame_ms']:.0f} | "
                   f"{f['frame_ms']:.0f} | {per('launches')} | {down} |")
 
 
