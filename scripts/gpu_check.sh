@@ -25,6 +25,9 @@
 #   6. the compositing backward's two ways of summing a list entry over a tile (pipelined, the
 #      default, against one entry at a time: SPLATRAJ_ENTRY_SUMS): the mask passes of 1. on
 #      wgpu both ways, time and parity;
+#   6b. the compositing kernels launched unchecked (SPLATRAJ_INDEX_CHECKS=trusted: no guard
+#      on each index into a buffer, no bounded loops) against the default: the mask passes
+#      of 1. on wgpu both ways, time and parity;
 #   7. where a wgpu optimisation step spends its time: `bench step` on the guitar config with
 #      each kernel waited for, by render stage, beside the time a step (the stages'
 #      totals also hold the run's closing evaluation, so read them as shares, not a sum);
@@ -140,6 +143,10 @@ echo "== wgpu: bench render, the backward summing one entry at a time" >&2
 SPLATRAJ_ENTRY_SUMS=one-at-a-time "$bin" bench render --backend wgpu --sizes "$sizes" \
   --resolutions 128 --rasterizer fused --repeats "$repeats" --scene "$data/biker.compressed.ply" \
   --json >"$out/render_wgpu_one_at_a_time.json"
+echo "== wgpu: bench render, the compositing kernels launched unchecked" >&2
+SPLATRAJ_INDEX_CHECKS=trusted "$bin" bench render --backend wgpu --sizes "$sizes" \
+  --resolutions 128 --rasterizer fused --repeats "$repeats" --scene "$data/biker.compressed.ply" \
+  --json >"$out/render_wgpu_unchecked.json"
 echo "== wgpu: bench render and bench step, lists whole" >&2
 SPLATRAJ_SEGMENT_ENTRIES=0 "$bin" bench render --backend wgpu --sizes "$sizes" \
   --resolutions 128 --rasterizer fused --repeats "$repeats" --scene "$data/biker.compressed.ply" \

@@ -236,6 +236,8 @@ section("launch, read and upload costs", launch_costs)
 section("mask passes", mask_passes)
 section("backward's entry sums", variant_table(
     "backward's entry sums", "pipelined", "one at a time", "render_wgpu_one_at_a_time.json"))
+section("compositing kernels unchecked", variant_table(
+    "compositing kernels unchecked", "checked", "unchecked", "render_wgpu_unchecked.json"))
 section("tile lists in the backward", variant_table(
     "tile lists in the backward", "cut", "whole", "render_wgpu_whole_lists.json"))
 section("mask passes, each kernel waited for", profiled_passes)

@@ -112,6 +112,51 @@ impl EntrySums {
 /// (the default): for measuring both on a GPU (`scripts/gpu_check.sh`), not for runs.
 pub const ENTRY_SUMS_VARIABLE: &str = "SPLATRAJ_ENTRY_SUMS";
 
+/// Whether the compositing kernels' global-memory indices are guarded at run time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum IndexChecks {
+    /// CubeCL's checked launch (the default): every index into a buffer is compared with its
+    /// length (a read past it gives 0, a write is dropped), and on WGSL every loop is bounded.
+    Guarded,
+    /// CubeCL's unchecked launch: no guard. Every index of these kernels stays within its
+    /// buffer by construction (tile pixels outside the image are skipped by `inside`, list
+    /// entries by their segment's bounds); `tests/backend.rs` passes both ways on lavapipe.
+    Trusted,
+}
+
+/// Environment variable that launches the compositing kernels unchecked (`trusted`; the
+/// default is `guarded`): for measuring what the guards cost on a GPU (`scripts/gpu_check.sh`),
+/// not for runs.
+pub const INDEX_CHECKS_VARIABLE: &str = "SPLATRAJ_INDEX_CHECKS";
+
+static ASKED_INDEX_CHECKS: std::sync::OnceLock<IndexChecks> = std::sync::OnceLock::new();
+
+/// The index checks [`INDEX_CHECKS_VARIABLE`] asks for.
+pub fn index_checks() -> IndexChecks {
+    *ASKED_INDEX_CHECKS.get_or_init(|| match std::env::var(INDEX_CHECKS_VARIABLE).as_deref() {
+        Ok("trusted") => IndexChecks::Trusted,
+        Ok("guarded") | Err(_) => IndexChecks::Guarded,
+        Ok(other) => {
+            tracing::warn!(
+                "{INDEX_CHECKS_VARIABLE}={other:?} is neither `trusted` nor `guarded`; the \
+                 compositing kernels stay guarded"
+            );
+            IndexChecks::Guarded
+        }
+    })
+}
+
+/// Launches a compositing kernel checked or unchecked, as [`index_checks`] says.
+macro_rules! launch_compositing {
+    ($kernel:ident, $($arg:expr),* $(,)?) => {
+        match index_checks() {
+            IndexChecks::Guarded => $kernel::launch($($arg),*),
+            // SAFETY: the kernels index only within their buffers (see `IndexChecks::Trusted`).
+            IndexChecks::Trusted => unsafe { $kernel::launch_unchecked($($arg),*) },
+        }
+    };
+}
+
 static ASKED_ENTRY_SUMS: std::sync::OnceLock<EntrySums> = std::sync::OnceLock::new();
 
 fn asked_entry_sums() -> EntrySums {
@@ -213,7 +258,7 @@ fn tile_pixel<F: Float, I: Int>(
     }
 }
 
-#[cube(launch)]
+#[cube(launch, launch_unchecked)]
 #[allow(clippy::too_many_arguments)]
 fn forward_kernel<F: Float, I: Int>(
     splats: &Tensor<F>,      // [R, S]: u, v, conic a, b, c, opacity, …
@@ -374,7 +419,7 @@ fn forward_kernel<F: Float, I: Int>(
     }
 }
 
-#[cube(launch)]
+#[cube(launch, launch_unchecked)]
 #[allow(clippy::too_many_arguments)]
 fn backward_kernel<F: Float, I: Int>(
     splats: &Tensor<F>,    // [R, S]
@@ -601,7 +646,7 @@ fn backward_kernel<F: Float, I: Int>(
     }
 }
 
-#[cube(launch)]
+#[cube(launch, launch_unchecked)]
 #[allow(clippy::too_many_arguments)]
 fn gather_kernel<F: Float, I: Int>(
     slots: &Tensor<F>,        // [pairs, 6 + C]
@@ -766,7 +811,8 @@ fn device_forward(
         dtype.into(),
     );
     if work_count > 0 {
-        forward_kernel::launch(
+        launch_compositing!(
+            forward_kernel,
             &client,
             tile_grid(work_count),
             CubeDim::new_1d(TILE_PIXELS as u32),
@@ -830,7 +876,8 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
     );
     let int_dtype = dtype_to_storage_type(last.dtype);
     if work_count > 0 {
-        backward_kernel::launch(
+        launch_compositing!(
+            backward_kernel,
             &client,
             tile_grid(work_count),
             CubeDim::new_1d(TILE_PIXELS as u32),
@@ -868,7 +915,8 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
         let cubes = rows.div_ceil(256);
         let cube_count =
             CubeCount::Static(cubes.min(65_535) as u32, cubes.div_ceil(65_535) as u32, 1);
-        gather_kernel::launch(
+        launch_compositing!(
+            gather_kernel,
             &client,
             cube_count,
             cube_dim,
