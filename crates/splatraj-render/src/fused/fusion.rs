@@ -1,14 +1,15 @@
-//! The two fused ops on burn's fusion backend, which is what wgpu runs on (`burn::backend::Cube`
-//! is `Fusion<CubeBackend>` with burn's `fusion` feature).
+//! The fused ops (compositing, projection, colours) on burn's fusion backend, which is what
+//! wgpu runs on (`burn::backend::Cube` is `Fusion<CubeBackend>` with burn's `fusion` feature).
 //!
 //! Why fusion: on a GPU an optimisation step was ~400 launches of tiny kernels besides ours
 //! (the costs, Adam, the model's forward: docs/gpu.md), each a few microseconds whatever it
 //! computes. Burn's fusion backend queues tensor ops and merges chains of elementwise ones into
 //! single kernels. An op it does not know, like ours, joins that queue as one opaque operation:
-//! it declares its outputs' shapes up front and runs the CubeCL kernels of [`super::cube`] and
-//! [`super::projection::cube`] on the inner backend's tensors when the queue reaches it. So the
-//! state a backward needs cannot be returned by the forward call: the forward fills a
-//! [`Deferred`] slot when it runs, and the backward, queued later on the same stream, takes it.
+//! it declares its outputs' shapes up front and runs the CubeCL kernels of [`super::cube`],
+//! [`super::projection::cube`] and [`super::colours::cube`] on the inner backend's tensors when
+//! the queue reaches it. So the state a backward needs cannot be returned by the forward call:
+//! the forward fills a [`Deferred`] slot when it runs, and the backward, queued later on the
+//! same stream, takes it.
 
 use std::sync::{Arc, Mutex};
 
