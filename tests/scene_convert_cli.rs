@@ -93,45 +93,36 @@ fn sh_degree_lowers_and_raises_what_is_written() {
         assert_eq!(json["gaussians"], 4721);
         json["sh_degree"].clone()
     };
+    let convert = |from: &std::path::Path, name: &str, degree: &str| {
+        let target = dir.path().join(name);
+        let args = [
+            "scene",
+            "convert",
+            s(from),
+            s(&target),
+            "--sh-degree",
+            degree,
+        ];
+        (splatraj(&args), target)
+    };
     assert_eq!(degree_of(&input), 3);
     for (degree, name) in [
         ("0", "zero.ply"),
         ("1", "one.spz"),
         ("3", "three.compressed.ply"),
     ] {
-        let target = dir.path().join(name);
-        let out = splatraj(&[
-            "scene",
-            "convert",
-            s(&input),
-            s(&target),
-            "--sh-degree",
-            degree,
-        ]);
+        let (out, target) = convert(&input, name, degree);
         assert!(out.status.success(), "{}", stderr(&out));
-        assert!(
-            stderr(&out).contains(&format!("SH degree {degree}")),
-            "{}",
-            stderr(&out)
-        );
+        let said = stderr(&out);
+        assert!(said.contains(&format!("SH degree {degree}")), "{said}");
         assert_eq!(degree_of(&target).to_string(), degree);
     }
     // From degree 0 back up to 2: zeros above the colour, written and read back.
-    let raised = dir.path().join("raised.ply");
-    let zero = dir.path().join("zero.ply");
-    let out = splatraj(&["scene", "convert", s(&zero), s(&raised), "--sh-degree", "2"]);
+    let (out, raised) = convert(&dir.path().join("zero.ply"), "raised.ply", "2");
     assert!(out.status.success(), "{}", stderr(&out));
     assert_eq!(degree_of(&raised), 2);
-    let target = dir.path().join("four.ply");
-    let out = splatraj(&[
-        "scene",
-        "convert",
-        s(&input),
-        s(&target),
-        "--sh-degree",
-        "4",
-    ]);
-    // clap refuses it before anything is read.
+    // clap refuses 4 before anything is read.
+    let (out, target) = convert(&input, "four.ply", "4");
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert!(stderr(&out).contains("--sh-degree") && stderr(&out).contains("0..=3"));
     assert!(!target.exists());
