@@ -112,6 +112,22 @@ impl EntrySums {
 /// (the default): for measuring both on a GPU (`scripts/gpu_check.sh`), not for runs.
 pub const ENTRY_SUMS_VARIABLE: &str = "SPLATRAJ_ENTRY_SUMS";
 
+static ASKED_ENTRY_SUMS: std::sync::OnceLock<EntrySums> = std::sync::OnceLock::new();
+
+fn asked_entry_sums() -> EntrySums {
+    match std::env::var(ENTRY_SUMS_VARIABLE).as_deref() {
+        Ok("one-at-a-time") => EntrySums::OneAtATime,
+        Ok("pipelined") | Err(_) => EntrySums::Pipelined,
+        Ok(other) => {
+            tracing::warn!(
+                "{ENTRY_SUMS_VARIABLE}={other:?} is neither `one-at-a-time` nor `pipelined`; \
+                 the backward stays pipelined"
+            );
+            EntrySums::Pipelined
+        }
+    }
+}
+
 /// Whether the compositing kernels' global-memory indices are guarded at run time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum IndexChecks {
@@ -155,22 +171,6 @@ macro_rules! launch_compositing {
             IndexChecks::Trusted => unsafe { $kernel::launch_unchecked($($arg),*) },
         }
     };
-}
-
-static ASKED_ENTRY_SUMS: std::sync::OnceLock<EntrySums> = std::sync::OnceLock::new();
-
-fn asked_entry_sums() -> EntrySums {
-    match std::env::var(ENTRY_SUMS_VARIABLE).as_deref() {
-        Ok("one-at-a-time") => EntrySums::OneAtATime,
-        Ok("pipelined") | Err(_) => EntrySums::Pipelined,
-        Ok(other) => {
-            tracing::warn!(
-                "{ENTRY_SUMS_VARIABLE}={other:?} is neither `one-at-a-time` nor `pipelined`; \
-                 the backward stays pipelined"
-            );
-            EntrySums::Pipelined
-        }
-    }
 }
 
 /// The workgroup memory of `device` in bytes: None on the host backends.
