@@ -17,7 +17,6 @@ use burn::backend::TensorMetadata;
 use burn::backend::tensor::FloatTensor;
 use burn::tensor::DType;
 use burn_backend::cubecl::dtype_to_storage_type;
-use burn_backend::ops::FloatTensorOps;
 use burn_cubecl::CubeBackend;
 use burn_cubecl::cubecl;
 use burn_cubecl::cubecl::prelude::*;
@@ -26,7 +25,7 @@ use burn_cubecl::tensor::CubeTensor;
 
 use super::{ColourKernels, HostSaved, host_backward, host_forward};
 use crate::fused::projection::ProjectionPlan;
-use crate::fused::projection::cube::{CubeSaved, UNITS, grid, tree_sum, upload_rows};
+use crate::fused::projection::cube::{CubeSaved, UNITS, empty, grid, tree_sum, upload_rows};
 use crate::sh::{C0, C1, C2, C3};
 
 /// The tensor path's floor of the view direction's squared length.
@@ -338,10 +337,6 @@ pub struct DeviceSaved {
     plan: Arc<ProjectionPlan>,
 }
 
-fn empty(shape: Vec<usize>, tensor: &CubeTensor) -> CubeTensor {
-    CubeBackend::float_empty(shape.into(), &tensor.device, tensor.dtype.into())
-}
-
 fn device_forward(
     poses: CubeTensor,
     components: CubeTensor,
@@ -356,7 +351,7 @@ fn device_forward(
     let basis = coeffs.shape().dims::<3>()[1];
     let largest = plan.rows.largest();
     let (gaussians, starts) = upload_rows(&plan, &poses.device);
-    let colours = empty(vec![plan.rows.total(), 3], &poses);
+    let colours = empty(vec![plan.rows.total(), 3], &poses.device, dtype);
     let (cubes, chunks, _) = grid(batch, largest);
     if batch > 0 && largest > 0 {
         forward_kernel::launch(
@@ -405,8 +400,8 @@ fn device_backward(saved: DeviceSaved, v_colours: CubeTensor) -> CubeTensor {
     let n = components.shape().dims::<2>()[1];
     let basis = coeffs.shape().dims::<3>()[1];
     let (cubes, chunks, per_pose) = grid(batch, plan.rows.largest());
-    let partial = empty(vec![batch, per_pose, 3], &poses);
-    let v_poses = empty(vec![batch, 6], &poses);
+    let partial = empty(vec![batch, per_pose, 3], &poses.device, dtype);
+    let v_poses = empty(vec![batch, 6], &poses.device, dtype);
     if batch == 0 {
         return v_poses;
     }

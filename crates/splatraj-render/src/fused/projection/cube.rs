@@ -594,7 +594,8 @@ pub(crate) fn grid(batch: usize, largest: usize) -> (CubeCount, u32, usize) {
     )
 }
 
-fn empty(shape: Vec<usize>, device: &CubeDevice, dtype: DType) -> CubeTensor {
+/// A float device tensor of `shape` whose values the kernels will write (no fill launch).
+pub(crate) fn empty(shape: Vec<usize>, device: &CubeDevice, dtype: DType) -> CubeTensor {
     CubeBackend::float_empty(shape.into(), device, dtype.into())
 }
 
