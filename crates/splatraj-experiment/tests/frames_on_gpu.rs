@@ -50,7 +50,7 @@ fn gpu_frames_read_back_packed_levels_except_keyframes() {
         let uploaded = DeviceScene::new(&scene, &backend.device().unwrap(), DType::F32);
         let dir = tempfile::tempdir().unwrap();
         let before = counters::snapshot();
-        render_path(&uploaded, &job, dir.path(), &mut |_| {}).unwrap();
+        let rendered = render_path(&uploaded, &job, dir.path(), &mut |_| {}).unwrap();
         let read = counters::snapshot().since(&before);
         let pictures: Vec<Vec<u8>> = (0..count)
             .map(|i| {
@@ -58,22 +58,47 @@ fn gpu_frames_read_back_packed_levels_except_keyframes() {
                 image::open(&path).unwrap().to_rgb8().into_raw()
             })
             .collect();
-        (read, pictures)
+        (read, pictures, rendered.metrics)
     };
-    let (gpu, gpu_pictures) = render(BackendKind::Wgpu);
-    let (_, flex_pictures) = render(BackendKind::Flex);
+    let (gpu, gpu_pictures, gpu_metrics) = render(BackendKind::Wgpu);
+    let (_, flex_pictures, flex_metrics) = render(BackendKind::Flex);
 
-    // Each pass is one frame (the default schedule) and reads its TCE, TRE and coverage (3
-    // floats), then its picture: RGB and the mask as floats for a keyframe, else one packed
-    // 32-bit value a pixel.
+    // Each pass is one frame (the default schedule) and reads its mask's moment sums (4
+    // floats: the framing figures are made of them on the host), then its picture: RGB and
+    // the mask as floats for a keyframe, else one packed 32-bit value a pixel.
     let keyframes = keyframe_indices(&frames.times, 1).concat();
     assert_eq!(keyframes.len(), 5, "the report's keyframes of the window");
     let pixels = (width * height) as u64;
     let floats = keyframes.len() as u64 * pixels * 4 * 4;
     let packed = (count - keyframes.len()) as u64 * pixels * 4;
-    let framing = count as u64 * 3 * 4;
+    let framing = count as u64 * 4 * 4;
     assert_eq!(gpu.reads, 2 * count as u64);
     assert_eq!(gpu.bytes_down, floats + packed + framing);
+
+    // The same framing figures as flex's, within f32 sums' rounding, and the object in view.
+    assert_eq!(gpu_metrics.len(), count);
+    assert_eq!(flex_metrics.len(), count);
+    for (g, f) in gpu_metrics.iter().zip(&flex_metrics) {
+        let frame = g.frame;
+        assert_eq!(
+            (g.frame, g.window, g.tce.is_some()),
+            (f.frame, f.window, f.tce.is_some())
+        );
+        assert!(
+            (g.coverage - f.coverage).abs() <= 1e-5,
+            "frame {frame}: {g:?} vs {f:?}"
+        );
+        assert!(
+            (g.tre - f.tre).abs() <= 1e-5,
+            "frame {frame}: {g:?} vs {f:?}"
+        );
+        let (gt, ft) = (g.tce.unwrap_or(0.0), f.tce.unwrap_or(0.0));
+        assert!((gt - ft).abs() <= 1e-4, "frame {frame}: {g:?} vs {f:?}");
+    }
+    assert!(
+        flex_metrics.iter().all(|m| m.coverage > 1e-3),
+        "the object is in view"
+    );
 
     // The same pictures as flex's, but where the two backends' f32 values lie on either side
     // of half a level.

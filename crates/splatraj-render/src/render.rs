@@ -590,11 +590,11 @@ pub fn render_at(
     let u = used.count();
     // The projection's plan holds the scene index of each row's Gaussian `[R]`, which the
     // channel values read too (shared, not copied).
-    let plan = Arc::new(ProjectionPlan {
-        gaussians: scene_of_row,
-        rows: rows.clone(),
-        camera: ProjectionCamera::new(&request.intrinsics, request.near),
-    });
+    let plan = Arc::new(ProjectionPlan::new(
+        scene_of_row,
+        rows.clone(),
+        ProjectionCamera::new(&request.intrinsics, request.near),
+    ));
     let scene_of_row = &plan.gaussians;
     let pairs: usize = work.iter().map(|list| list.gaussians.len()).sum();
     crate::counters::composite(pairs, rows.total());

@@ -686,11 +686,11 @@ fn gpu_projection_matches_host_projection() {
     let camera = ProjectionCamera::new(&intrinsics, NEAR_PLANE);
     // Every pose every Gaussian; and each pose its own rows (pose 1 none, pose 2 more cubes
     // than pose 0), as a pass of several windows lays them out.
-    let per_pose = ProjectionPlan {
-        gaussians: [&used[..700], &used[1000..2900]].concat(),
-        rows: splatraj_render::rows::PoseRows::from_counts([700, 0, 1900]),
+    let per_pose = ProjectionPlan::new(
+        [&used[..700], &used[1000..2900]].concat(),
+        splatraj_render::rows::PoseRows::from_counts([700, 0, 1900]),
         camera,
-    };
+    );
     for plan in [ProjectionPlan::dense(&used, 3, camera), per_pose] {
         let count = plan.rows.total();
         let mut weights: Vec<f64> = (0..count * SPLAT_COLUMNS)
@@ -840,11 +840,11 @@ fn gpu_colours_match_host_colours() {
     let camera =
         ProjectionCamera::new(&Intrinsics::from_fov_x(60.0, 160, 120).unwrap(), NEAR_PLANE);
     let used: Vec<u32> = (0..3000).rev().collect();
-    let per_pose = ProjectionPlan {
-        gaussians: [&used[..700], &used[1000..2900]].concat(),
-        rows: splatraj_render::rows::PoseRows::from_counts([700, 0, 1900]),
+    let per_pose = ProjectionPlan::new(
+        [&used[..700], &used[1000..2900]].concat(),
+        splatraj_render::rows::PoseRows::from_counts([700, 0, 1900]),
         camera,
-    };
+    );
     for degree in 0..=3u8 {
         let mut scene = gpu_scene(0x51ed + u64::from(degree));
         let mut rng = common::Rng(u64::from(degree) + 1);

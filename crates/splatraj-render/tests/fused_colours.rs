@@ -45,11 +45,11 @@ fn plan(scene: &Scene, batch: usize) -> ProjectionPlan {
     let own: Vec<Vec<u32>> = (0..batch as u32)
         .map(|b| (0..n).filter(|g| (g + b) % 3 != 0).chain([0, 5]).collect())
         .collect();
-    ProjectionPlan {
-        gaussians: own.concat(),
-        rows: PoseRows::from_counts(own.iter().map(Vec::len)),
-        camera: ProjectionCamera::new(&Intrinsics::from_fov_x(60.0, 160, 120).unwrap(), NEAR_PLANE),
-    }
+    ProjectionPlan::new(
+        own.concat(),
+        PoseRows::from_counts(own.iter().map(Vec::len)),
+        ProjectionCamera::new(&Intrinsics::from_fov_x(60.0, 160, 120).unwrap(), NEAR_PLANE),
+    )
 }
 
 /// Colours `[R, 3]` and the pose gradient of Σ w·colours, in `dtype` on Flex.

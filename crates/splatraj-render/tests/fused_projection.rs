@@ -257,11 +257,11 @@ fn rows_laid_out_per_pose_are_the_tensor_rows_they_name() {
     let intrinsics = intrinsics();
 
     let pose_rows = pose_tensor(poses, &device, dtype).require_grad();
-    let plan = ProjectionPlan {
-        gaussians: own.concat(),
-        rows: PoseRows::from_counts(own.map(<[u32]>::len)),
-        camera: ProjectionCamera::new(&intrinsics, NEAR_PLANE),
-    };
+    let plan = ProjectionPlan::new(
+        own.concat(),
+        PoseRows::from_counts(own.map(<[u32]>::len)),
+        ProjectionCamera::new(&intrinsics, NEAR_PLANE),
+    );
     let rows = project_packed(&geometry, pose_rows.clone(), plan); // [R, 7]
     let w = Tensor::<2>::from_data(
         TensorData::new(weights.clone(), [pairs.len(), SPLAT_COLUMNS]),

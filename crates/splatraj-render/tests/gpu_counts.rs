@@ -304,36 +304,48 @@ fn launches_do_not_grow_with_the_batch_and_reads_stay_at_one() {
     );
 
     // An RGB pass's colours are one launch whatever the SH degree (`fused/colours`): as burn
-    // ops they were about 19 more, and more with the degree.
-    let rgb_launches = |degree: u8| {
-        let (mut scene, _) = self::scene();
+    // ops they were about 19 more, and more with the degree. The colours read the row table
+    // the projection uploaded: an RGB pass uploads what a mask pass of the same pose does, less
+    // the mask's value a row (uploading the table again would be 4 bytes a row and a pose more).
+    let rgb_and_mask = |degree: u8| {
+        let (mut scene, mask) = self::scene();
         scene.sh_degree = degree;
         let mut rng = common::Rng(5);
         scene.sh = (0..scene.len() * scene.sh_coeffs() * 3)
             .map(|_| rng.range(-0.5, 0.5) as f32)
             .collect();
         let scene = DeviceScene::new(&scene, &device, DType::F32);
-        let mut request = RenderRequest::new(
-            Intrinsics::from_fov_x(60.0, 64, 48).unwrap(),
-            vec![Channel::Rgb],
-        );
-        request.alpha = AlphaChannel::Dropped;
+        let request_of = |channel: Channel| {
+            let mut request =
+                RenderRequest::new(Intrinsics::from_fov_x(60.0, 64, 48).unwrap(), vec![channel]);
+            request.alpha = AlphaChannel::Dropped;
+            request
+        };
         let pose = &poses[..1];
         let tensor = Tensor::<2>::from_data(
             TensorData::new(pose[0].0.to_vec(), [1, 6]),
             (&device, DType::F32),
         );
-        let count = || {
+        let count = |request: &RenderRequest| {
             let before = counters::snapshot();
-            let out = render_at(&scene, tensor.clone(), Some(pose), &request).unwrap();
+            let out = render_at(&scene, tensor.clone(), Some(pose), request).unwrap();
             splatraj_render::host::to_host(out.images).unwrap();
             counters::snapshot().since(&before)
         };
-        count(); // kernels compile on their first use
-        count()
+        let rgb = request_of(Channel::Rgb);
+        count(&rgb); // kernels compile on their first use
+        (count(&rgb), count(&request_of(Channel::Mask(mask))))
     };
-    let (flat, view_dependent) = (rgb_launches(0), rgb_launches(3));
+    let ((flat, mask_pass), (view_dependent, _)) = (rgb_and_mask(0), rgb_and_mask(3));
     eprintln!("an RGB pass, SH degree 0: {flat:?}\ndegree 3: {view_dependent:?}");
+    eprintln!("a mask pass: {mask_pass:?}");
+    assert!(flat.rows > 0 && flat.rows == mask_pass.rows, "{flat:?}");
+    assert_eq!(flat.uploads + 1, mask_pass.uploads, "{flat:?}");
+    assert_eq!(
+        flat.bytes_up + 4 * flat.rows,
+        mask_pass.bytes_up,
+        "{flat:?}"
+    );
     assert_eq!(view_dependent.launches, flat.launches, "{view_dependent:?}");
     assert!(
         view_dependent.launches <= 5,

@@ -3,7 +3,8 @@
 
 use burn::tensor::{DType, Device, Tensor, TensorData};
 use splatraj_traj::costs::{
-    MaskMoments, MomentSums, NORM_EPSILON, centroid_offset, coverage, tce, tce_of, tre, tre_of,
+    HostMoments, MaskMoments, MomentSums, NORM_EPSILON, centroid_offset, coverage, moment_sums,
+    tce, tce_of, tce_on_host, tre, tre_of, tre_on_host,
 };
 
 /// A mask `[B, H, W]` from host values in `dtype` on `device`.
@@ -282,4 +283,81 @@ fn both_moment_sums_give_the_same_costs_and_gradients() {
     for (a, r) in gradient.iter().zip(&gradient_r) {
         assert!((a - r).abs() <= 1e-10 * largest, "gradient {a} vs {r}");
     }
+}
+
+/// The figures a frame or a sample reports, made on the host in f64 from the moment sums read
+/// back whole, equal the costs' tensor formulas (f64) on the same masks: an off-centre mask, its
+/// mirror, an empty mask (TCE 0, TRE the target), a mask lighter than the mass floor, and random
+/// masks. The sums' fourth column, Σm·x·y, is the brute-force double loop's. The rectangle's TCE
+/// is also its closed form √0.1525.
+#[test]
+fn host_figures_from_moment_sums_match_the_tensor_costs() {
+    let device = Device::flex();
+    let (h, w) = (20, 40);
+    let rect = off_centre_rectangle();
+    let mirrored: Vec<f64> = (0..h)
+        .flat_map(|j| (0..w).rev().map(move |i| (j, i)))
+        .map(|(j, i)| rect[j * w + i])
+        .collect();
+    let mut rng = Rng(0xf00d);
+    let random: Vec<f64> = (0..3 * h * w).map(|_| rng.next()).collect();
+    let mut light = vec![0.0; h * w];
+    light[w + 3] = 4e-4; // below MASS_FLOOR, off centre
+    let values = [rect, mirrored, vec![0.0; h * w], light, random].concat();
+    let b = values.len() / (h * w);
+    let target = 0.15;
+    let masks = mask(values.clone(), [b, h, w], &device, DType::F64);
+    let sums = host(moment_sums(masks.clone().unsqueeze_dim(3), 0));
+    assert_eq!(sums.len(), 4 * b);
+    // The same mask as the middle channel of three, between channels of other values.
+    let junk: Vec<f64> = (0..values.len()).map(|_| 1.0 + rng.next()).collect();
+    let interleaved: Vec<f64> = (0..values.len())
+        .flat_map(|k| [junk[k], values[k], -junk[k]])
+        .collect();
+    let images = Tensor::<4>::from_data(
+        TensorData::new(interleaved, [b, h, w, 3]),
+        (&device, DType::F64),
+    );
+    let of_channel = host(moment_sums(images, 1));
+    for (k, (got, want)) in of_channel.iter().zip(&sums).enumerate() {
+        assert!(
+            (got - want).abs() <= 1e-12,
+            "sum {k}: channel 1 of 3 {got} vs the mask's {want}"
+        );
+    }
+    let figures = HostMoments::from_sums(&sums, h * w);
+    let moments = MaskMoments::summed(masks, MomentSums::Products);
+    let (tces, tres, coverages) = (
+        host(tce_of(&moments)),
+        host(tre_of(&moments, target)),
+        host(moments.coverage()),
+    );
+    for (s, m) in figures.iter().enumerate() {
+        let mut mxy = 0.0;
+        for j in 0..h {
+            for i in 0..w {
+                let (x, y) = (
+                    (i as f64 + 0.5) / w as f64 - 0.5,
+                    (j as f64 + 0.5) / h as f64 - 0.5,
+                );
+                mxy += values[(s * h + j) * w + i] * x * y;
+            }
+        }
+        assert!((sums[4 * s + 3] - mxy).abs() <= 1e-12, "sample {s}: Σm·x·y");
+        let close = |got: f64, want: f64| (got - want).abs() <= 1e-12 * want.abs().max(1.0);
+        assert!(
+            close(tce_on_host(m), tces[s]),
+            "sample {s}: TCE {} vs {}",
+            tce_on_host(m),
+            tces[s]
+        );
+        assert!(close(tre_on_host(m, target), tres[s]), "sample {s}: TRE");
+        assert!(close(m.coverage(), coverages[s]), "sample {s}: coverage");
+    }
+    for rectangle in &figures[..2] {
+        assert!((tce_on_host(rectangle) - 0.1525f64.sqrt()).abs() <= 2.0 * NORM_EPSILON);
+    }
+    assert_eq!(tce_on_host(&figures[2]), 0.0, "an empty mask is centred");
+    assert_eq!(tre_on_host(&figures[2], target), target);
+    assert!(tce_on_host(&figures[3]) > 0.0 && tce_on_host(&figures[3]) < 0.5);
 }

@@ -26,7 +26,7 @@ use splatraj_render::render::{
     AlphaChannel, Channel, DeviceScene, Rasterizer, RenderRequest, render_poses,
 };
 use splatraj_report::video::VideoEncoder;
-use splatraj_traj::costs::{coverage, tce, tre};
+use splatraj_traj::costs::{HostMoments, moment_sums, tce_on_host, tre_on_host};
 use splatraj_traj::optimise::sampling::window_of;
 
 use crate::config::MaskOverlay;
@@ -703,8 +703,17 @@ struct QueuedFrames {
     frames: std::ops::Range<usize>,
     /// Their images, as they will be read back.
     images: QueuedImages,
-    /// Their TCE, TRE and coverage `[3B]`, when the window has an object.
-    framing: Option<Tensor<1>>,
+    /// What their framing figures are made of, when the window has an object.
+    framing: Option<QueuedFraming>,
+}
+
+/// A pass's framing figures queued: the object's mask moments, made into TCE, TRE and
+/// coverage on the host once read back.
+struct QueuedFraming {
+    /// The moment sums of each frame's mask `[B, 4]` ([`moment_sums`]).
+    sums: Tensor<2>,
+    /// The object's target ratio, for TRE.
+    target_ratio: f64,
 }
 
 /// What a pass's frames read back.
@@ -761,18 +770,11 @@ impl FrameContext<'_> {
             .images; // [B, H, W, 3 or 4]
         timings.render += clock.elapsed();
         let clock = Instant::now();
-        let framing = object.map(|o| {
-            let [b, h, w, _] = images.dims();
-            let mask = images.clone().narrow(3, 3, 1).reshape([b, h, w]);
-            // One read for the three (a wait for the device each on a GPU).
-            Tensor::cat(
-                vec![
-                    tce(mask.clone()),
-                    tre(mask.clone(), o.target_ratio),
-                    coverage(mask),
-                ],
-                0,
-            ) // [3B]
+        // The moments, read back whole (one wait on a GPU, and two launches where TCE, TRE and
+        // coverage as tensor ops were 16: docs/gpu.md, "Framing figures from the moments").
+        let framing = object.map(|o| QueuedFraming {
+            sums: moment_sums(images.clone(), 3),
+            target_ratio: o.target_ratio,
         });
         let mask_on_host = object.is_some()
             && (self.job.overlay == MaskOverlay::Tint
@@ -803,24 +805,21 @@ impl FrameContext<'_> {
     ) -> Result<()> {
         let frames = self.job.frames;
         let first = done.frames.start;
-        let b = done.frames.len();
         // The frames of a window with an object have framing figures, and may be tinted.
         let tinted = done.framing.is_some() && self.job.overlay == MaskOverlay::Tint;
         if let Some(framing) = done.framing {
             let clock = Instant::now();
-            let three = to_host(framing)?;
-            let (tce, rest) = three.split_at(b);
-            let (tre, coverage) = rest.split_at(b);
-            for (i, index) in done.frames.clone().enumerate() {
-                let at = |v: &[f64]| v.get(i).copied().unwrap_or(f64::NAN);
-                let shown = at(coverage) > 0.0;
+            let camera = frames.cameras[first];
+            let pixels = camera.width * camera.height;
+            let moments = HostMoments::from_sums(&to_host(framing.sums)?, pixels);
+            for (index, m) in done.frames.clone().zip(&moments) {
                 metrics.push(FrameMetrics {
                     frame: index,
                     t: frames.times[index],
                     window: self.windows[index],
-                    tce: shown.then(|| at(tce)),
-                    tre: at(tre),
-                    coverage: at(coverage),
+                    tce: (m.coverage() > 0.0).then(|| tce_on_host(m)),
+                    tre: tre_on_host(m, framing.target_ratio),
+                    coverage: m.coverage(),
                 });
             }
             timings.metrics += clock.elapsed();

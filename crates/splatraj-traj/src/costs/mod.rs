@@ -82,7 +82,7 @@ pub use expansion::{PoseGradients, expansion_at, per_sample_on_host, per_stretch
 pub use iou::{
     IOU_THRESHOLD, PixelBox, bbox_iou, bbox_iou_batch, box_from_hits, box_iou, mask_box, mask_hits,
 };
-pub use moments::{MaskMoments, MomentSums, mask_mass};
+pub use moments::{HostMoments, MaskMoments, MomentSums, mask_mass, moment_sums};
 pub use motion::{MotionCost, auto_max_speed};
 pub use path::{PathSamples, PathStretch, PerRow};
 pub use prior::{PRIOR_EPSILON_FRACTION, PriorCost, default_prior_radius, prior, prior_on_host};
@@ -90,8 +90,9 @@ pub use registry::{CostConfig, CostRegistry};
 pub use shot::ShotCost;
 pub use tce::{
     MASS_FLOOR, NORM_EPSILON, TceCost, centroid_offset, centroid_offset_of, tce, tce_of,
+    tce_on_host,
 };
-pub use tre::{DEFAULT_TARGET_RATIO, TreCost, coverage, tre, tre_of};
+pub use tre::{DEFAULT_TARGET_RATIO, TreCost, coverage, tre, tre_of, tre_on_host};
 pub use upright::{UprightCost, UprightMode, upright, upright_on_host};
 pub use visibility::{VisibilityCost, hidden_share, hidden_share_of};
 

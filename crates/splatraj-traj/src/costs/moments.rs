@@ -74,21 +74,10 @@ impl MaskMoments {
     /// The moments of `mask` `[B, H, W]`, summed by `sums`.
     pub fn summed(mask: Tensor<3>, sums: MomentSums) -> Self {
         let [batch, height, width] = mask.dims();
-        let (device, dtype) = (mask.device(), mask.dtype());
-        let centres = |n: usize| (0..n).map(move |i| (i as f64 + 0.5) / n as f64 - 0.5);
-        let upload = |values: Vec<f64>, shape: [usize; 3]| {
-            Tensor::<3>::from_data(TensorData::new(values, shape), (&device, dtype))
-        };
         let pixels = width * height;
         match sums {
             MomentSums::Products => {
-                // X = [1 | x]: row i is (1, x_i). Y = [1 ; y]: row 0 all ones, row 1 the y_j.
-                let x = centres(width).flat_map(|x| [1.0, x]).collect();
-                let y = std::iter::repeat_n(1.0, height).chain(centres(height));
-                let x = upload(x, [1, width, 2]);
-                let y = upload(y.collect(), [1, 2, height]);
-                let rows = mask.matmul(x); // [B, H, 2]
-                let sums = y.matmul(rows).reshape([batch, 4]); // Σm, Σm·x, Σm·y, Σm·x·y
+                let sums = moment_sums(mask.unsqueeze_dim(3), 0); // [B, 4]
                 let column = |k: usize| sums.clone().narrow(1, k, 1).reshape([batch]);
                 Self {
                     mass: column(0),
@@ -99,8 +88,8 @@ impl MaskMoments {
             }
             MomentSums::Reductions => {
                 // Broadcast over the batch and the other image axis: W + H numbers uploaded.
-                let x = upload(centres(width).collect(), [1, 1, width]);
-                let y = upload(centres(height).collect(), [1, height, 1]);
+                let x = constant_like(&mask, pixel_centres(width).collect(), [1, 1, width]);
+                let y = constant_like(&mask, pixel_centres(height).collect(), [1, height, 1]);
                 Self {
                     mass: reduced_mass(mask.clone()),
                     first_x: reduced_mass(mask.clone() * x),
@@ -129,6 +118,78 @@ impl MaskMoments {
     /// Σm·y per sample `[B]`, y in image fractions from the centre.
     pub fn first_y(&self) -> Tensor<1> {
         self.first_y.clone()
+    }
+}
+
+/// The moment sums of channel `channel` of images `[B, H, W, C]` as one tensor `[B, 4]`: Σm,
+/// Σm·x, Σm·y, Σm·x·y per sample, by the two matrix products of the module docs. Nothing is cut
+/// out of the images or of the sums, so on a GPU it is two launches: what a caller reads back
+/// whole ([`HostMoments`]) takes this. A mask `[B, H, W]` is `[B, H, W, 1]`, channel 0.
+pub fn moment_sums(images: Tensor<4>, channel: usize) -> Tensor<2> {
+    let [batch, height, width, channels] = images.dims();
+    assert!(channel < channels, "channel {channel} of {channels}");
+    let images = images.reshape([batch, height, width * channels]);
+    // X = [1 | x] with a zero row for each other channel: row i·C + c is (1, x_i) for the
+    // channel, (0, 0) for the others (cheaper on a GPU than a launch to cut the channel out).
+    // Y = [1 ; y]: row 0 all ones, row 1 the y_j.
+    let x = pixel_centres(width)
+        .flat_map(|x| {
+            (0..channels).flat_map(move |c| if c == channel { [1.0, x] } else { [0.0; 2] })
+        })
+        .collect();
+    let y = std::iter::repeat_n(1.0, height).chain(pixel_centres(height));
+    let x = constant_like(&images, x, [1, width * channels, 2]);
+    let y = constant_like(&images, y.collect(), [1, 2, height]);
+    let rows = images.matmul(x); // [B, H, 2]
+    y.matmul(rows).reshape([batch, 4])
+}
+
+/// `values` uploaded as a tensor of `shape` on `like`'s device, in its dtype.
+fn constant_like(like: &Tensor<3>, values: Vec<f64>, shape: [usize; 3]) -> Tensor<3> {
+    Tensor::from_data(
+        TensorData::new(values, shape),
+        (&like.device(), like.dtype()),
+    )
+}
+
+/// x_i = (i + ½)/n − ½ for the n pixels of an image axis: centres in image fractions from the
+/// image centre.
+fn pixel_centres(n: usize) -> impl Iterator<Item = f64> {
+    (0..n).map(move |i| (i as f64 + 0.5) / n as f64 - 0.5)
+}
+
+/// One mask's moments read back to the host, in f64: what a figure reported for a picture
+/// (a frame's or a sample's TCE, TRE and coverage) is made of, without a launch an op on a GPU.
+/// [`super::tce_on_host`] and [`super::tre_on_host`] are the costs' formulas on it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HostMoments {
+    /// Σm, in pixels.
+    pub mass: f64,
+    /// Σm·x, x in image fractions from the centre.
+    pub first_x: f64,
+    /// Σm·y.
+    pub first_y: f64,
+    /// W·H, the pixels of one image.
+    pub pixels: usize,
+}
+
+impl HostMoments {
+    /// Each sample's moments from [`moment_sums`] read back (`[B, 4]` row after row), for
+    /// images of `pixels` pixels.
+    pub fn from_sums(sums: &[f64], pixels: usize) -> Vec<Self> {
+        sums.chunks_exact(4)
+            .map(|row| Self {
+                mass: row[0],
+                first_x: row[1],
+                first_y: row[2],
+                pixels,
+            })
+            .collect()
+    }
+
+    /// Share of the frame the mask covers, Σm / (W·H): [`MaskMoments::coverage`].
+    pub fn coverage(&self) -> f64 {
+        self.mass / self.pixels as f64
     }
 }
 

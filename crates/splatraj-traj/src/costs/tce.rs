@@ -18,7 +18,7 @@
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostError, CostInputs, ImageChannel, MaskMoments, check_weight};
+use super::{Cost, CostError, CostInputs, HostMoments, ImageChannel, MaskMoments, check_weight};
 
 /// Total mask mass (in pixels) below which the centroid is pulled toward the image centre.
 pub const MASS_FLOOR: f64 = 1e-3;
@@ -53,6 +53,14 @@ pub fn tce_of(moments: &MaskMoments) -> Tensor<1> {
         .add_scalar(NORM_EPSILON * NORM_EPSILON)
         .sqrt()
         .sub_scalar(NORM_EPSILON)
+}
+
+/// [`tce_of`] of one mask's moments read back, in f64 on the host: the figure a frame or a
+/// sample reports (the cost's formula, guards included).
+pub fn tce_on_host(moments: &HostMoments) -> f64 {
+    let mass = moments.mass.max(MASS_FLOOR);
+    let (dx, dy) = (moments.first_x / mass, moments.first_y / mass);
+    (dx * dx + dy * dy + NORM_EPSILON * NORM_EPSILON).sqrt() - NORM_EPSILON
 }
 
 /// TCE as a [`Cost`]: config table `[costs.tce]`, key `weight` (default 1).

@@ -10,7 +10,9 @@
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-use super::{Cost, CostError, CostInputs, ImageChannel, MaskMoments, check_weight, mask_mass};
+use super::{
+    Cost, CostError, CostInputs, HostMoments, ImageChannel, MaskMoments, check_weight, mask_mass,
+};
 
 /// Target ratio of the frame the object should cover when none is configured.
 pub const DEFAULT_TARGET_RATIO: f64 = 0.15;
@@ -29,6 +31,12 @@ pub fn tre(mask: Tensor<3>, target: f64) -> Tensor<1> {
 /// [`tre`] of a mask's moments (what a cost reads: [`CostInputs::require_mask_moments`]).
 pub fn tre_of(moments: &MaskMoments, target: f64) -> Tensor<1> {
     moments.coverage().sub_scalar(target).abs()
+}
+
+/// [`tre_of`] of one mask's moments read back, in f64 on the host: the figure a frame or a
+/// sample reports.
+pub fn tre_on_host(moments: &HostMoments, target: f64) -> f64 {
+    (moments.coverage() - target).abs()
 }
 
 /// TRE as a [`Cost`]: config table `[costs.tre]`, key `weight` (default 1). The target ratio

@@ -42,7 +42,10 @@ use splatraj_render::render::{
     render_poses,
 };
 
-use crate::costs::{IOU_THRESHOLD, MaskMoments, box_from_hits, box_iou, mask_hits, tce_of, tre_of};
+use crate::costs::{
+    HostMoments, IOU_THRESHOLD, box_from_hits, box_iou, mask_hits, moment_sums, tce_on_host,
+    tre_on_host,
+};
 use crate::optimise::sampling::stratified_times;
 use crate::trajectory::Pose;
 
@@ -355,9 +358,12 @@ struct SampleMetrics {
 /// A pass of metric samples queued on the device: everything [`SampleMetrics`] needs, in one
 /// tensor to read (see [`queue_samples`]).
 struct QueuedSamples {
-    /// TCE, TRE, coverage, the two masks' sums `[5B]`, then the row hits `[2·B·H]` and the
-    /// column hits `[2·B·W]` of the visible mask and the object alone.
+    /// The visible mask's moment sums `[B·4]` ([`moment_sums`]), the object alone's mass
+    /// `[B]`, then the row hits `[2·B·H]` and the column hits `[2·B·W]` of the visible mask
+    /// and the object alone.
     read: Tensor<1>,
+    /// The object's target ratio, for TRE.
+    target_ratio: f64,
     batch: usize,
     height: usize,
     width: usize,
@@ -395,8 +401,9 @@ fn queue_samples(
     let alone = mask_of(object.alone, vec![1.0; object.alone.len()])?;
     let [batch, height, width] = visible.dims();
     // Everything the metrics need in one read (one wait on a GPU), reduced where the masks
-    // are: the masks' boxes from their row and column hits, their sums for the occlusion.
-    let moments = MaskMoments::of(visible.clone());
+    // are: the visible mask's moments (TCE, TRE and coverage are made of them on the host, as
+    // a frame's are), the masks' boxes from their row and column hits, their sums for the
+    // occlusion.
     let sums = |m: Tensor<3>| m.sum_dim(2).sum_dim(1).reshape([batch]);
     let (seen_rows, seen_columns) = mask_hits(visible.clone(), IOU_THRESHOLD);
     let (alone_rows, alone_columns) = mask_hits(alone.clone(), IOU_THRESHOLD);
@@ -406,10 +413,7 @@ fn queue_samples(
     };
     let read = Tensor::cat(
         vec![
-            tce_of(&moments),
-            tre_of(&moments, object.target_ratio),
-            moments.coverage(),
-            sums(visible),
+            flat(moment_sums(visible.unsqueeze_dim(3), 0)),
             sums(alone),
             flat(seen_rows),
             flat(alone_rows),
@@ -424,6 +428,7 @@ fn queue_samples(
         .map_err(|e| RenderError::ReadBack(format!("starting the metrics' renders: {e}")))?;
     Ok(QueuedSamples {
         read,
+        target_ratio: object.target_ratio,
         batch,
         height,
         width,
@@ -435,27 +440,28 @@ impl QueuedSamples {
     fn finish(self) -> Result<Vec<SampleMetrics>, RenderError> {
         let Self {
             read,
+            target_ratio,
             batch,
             height,
             width,
         } = self;
         let read = to_host(read).map_err(|e| RenderError::ReadBack(e.to_string()))?;
-        Ok(sample_metrics_of(&read, batch, height, width))
+        Ok(sample_metrics_of(&read, target_ratio, batch, height, width))
     }
 }
 
 /// Each sample's [`SampleMetrics`] from a pass's values read back ([`QueuedSamples::read`]).
 fn sample_metrics_of(
     read: &[f64],
+    target_ratio: f64,
     batch: usize,
     height: usize,
     width: usize,
 ) -> Vec<SampleMetrics> {
-    let (per_sample, rest) = read.split_at(5 * batch);
+    let (sums, rest) = read.split_at(4 * batch);
+    let (alone_sums, rest) = rest.split_at(batch);
     let (rows, columns) = rest.split_at(2 * batch * height);
-    let column = |k: usize| &per_sample[k * batch..(k + 1) * batch];
-    let (tces, tres, coverages, seen_sums, alone_sums) =
-        (column(0), column(1), column(2), column(3), column(4));
+    let moments = HostMoments::from_sums(sums, height * width);
     let box_of = |mask: usize, k: usize| {
         let at = mask * batch + k;
         box_from_hits(
@@ -466,14 +472,15 @@ fn sample_metrics_of(
     (0..batch)
         .map(|k| {
             let (seen, alone) = (box_of(0, k), box_of(1, k));
+            let visible = &moments[k];
             SampleMetrics {
-                tce: tces[k],
-                tre: tres[k],
-                coverage: coverages[k],
+                tce: tce_on_host(visible),
+                tre: tre_on_host(visible, target_ratio),
+                coverage: visible.coverage(),
                 iou: box_iou(seen, alone),
                 shows: seen.is_some(),
                 occluded: (alone.is_some() && alone_sums[k] > 0.0)
-                    .then(|| (1.0 - seen_sums[k] / alone_sums[k]).clamp(0.0, 1.0)),
+                    .then(|| (1.0 - visible.mass / alone_sums[k]).clamp(0.0, 1.0)),
             }
         })
         .collect()

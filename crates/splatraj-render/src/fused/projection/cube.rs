@@ -568,18 +568,28 @@ pub enum CubeSaved<D, H> {
     Host(Box<H>),
 }
 
-/// The row table a plan's kernels read, uploaded: each row's Gaussian `[R]` and each pose's
-/// first row, then R, `[B + 1]` (4 bytes a row and a pose).
+/// The row table a plan's kernels read: each row's Gaussian `[R]` and each pose's first row,
+/// then R, `[B + 1]` (4 bytes a row and a pose), uploaded by the first op of the plan that
+/// reads it on `device` and shared by the others.
 pub(crate) fn upload_rows(plan: &ProjectionPlan, device: &CubeDevice) -> (CubeTensor, CubeTensor) {
-    let gaussians = int_tensor(
-        plan.gaussians.par_iter().map(|&g| g as i32).collect(),
-        device,
-    );
-    let starts = int_tensor(
-        plan.rows.starts().iter().map(|&s| s as i32).collect(),
-        device,
-    );
-    (gaussians, starts)
+    let upload = || {
+        let gaussians = int_tensor(
+            plan.gaussians.par_iter().map(|&g| g as i32).collect(),
+            device,
+        );
+        let starts = int_tensor(
+            plan.rows.starts().iter().map(|&s| s as i32).collect(),
+            device,
+        );
+        (gaussians, starts)
+    };
+    let uploaded = plan.device_rows.uploaded.get_or_init(upload);
+    // A plan is one pass's, on one device; another device gets its own copy.
+    if uploaded.0.device == *device {
+        uploaded.clone()
+    } else {
+        upload()
+    }
 }
 
 /// The launch grid: (cubes per pose, poses), and the chunks of 256 rows the pose with the

@@ -112,16 +112,48 @@ pub struct ProjectionPlan {
     pub rows: PoseRows,
     /// The camera.
     pub camera: ProjectionCamera,
+    /// The row table once uploaded to a GPU.
+    device_rows: DeviceRows,
 }
 
 impl ProjectionPlan {
+    /// Pose b projects the Gaussians `gaussians[rows.range(b)]` (scene indices) through
+    /// `camera`.
+    pub fn new(gaussians: Vec<u32>, rows: PoseRows, camera: ProjectionCamera) -> Self {
+        ProjectionPlan {
+            gaussians,
+            rows,
+            camera,
+            device_rows: DeviceRows::default(),
+        }
+    }
+
     /// Every one of `batch` poses projects each of `used` (scene indices): row b·U + u.
     pub fn dense(used: &[u32], batch: usize, camera: ProjectionCamera) -> Self {
-        ProjectionPlan {
-            gaussians: (0..batch).flat_map(|_| used.iter().copied()).collect(),
-            rows: PoseRows::dense(batch, used.len()),
+        Self::new(
+            (0..batch).flat_map(|_| used.iter().copied()).collect(),
+            PoseRows::dense(batch, used.len()),
             camera,
-        }
+        )
+    }
+}
+
+/// A plan's row table uploaded to a GPU the first time one of its ops reads it, so that an
+/// RGB pass's projection and colours upload it once (`cube::upload_rows`). A cache, not part
+/// of what the plan says: plans compare equal whatever it holds.
+#[derive(Debug, Clone, Default)]
+struct DeviceRows {
+    /// Each row's Gaussian `[R]` and each pose's first row, then R, `[B + 1]`.
+    #[cfg(feature = "wgpu")]
+    uploaded: std::sync::OnceLock<(
+        burn_cubecl::tensor::CubeTensor,
+        burn_cubecl::tensor::CubeTensor,
+    )>,
+}
+
+impl PartialEq for DeviceRows {
+    fn eq(&self, _: &Self) -> bool {
+        true
     }
 }
 
