@@ -395,9 +395,12 @@ pub fn optimise_trajectory(
         let evaluated_lens = module.lens.as_ref().map(|l| l.val().without_autodiff());
         let backward_started = Instant::now();
         let grads = backward(&loss)?;
-        let finite = match module.weights.val().grad(&grads) {
-            Some(g) => g.is_finite().all().float().cast(evaluated.dtype()),
-            None => Tensor::<1>::ones([1], (&evaluated.device(), evaluated.dtype())),
+        let [rows, _] = evaluated.dims();
+        // The gradient itself is read back (K·6 values) and checked on the host: on a GPU the
+        // check as tensor ops (`is_finite().all()` and its casts) was 8 launches a step.
+        let gradient = match module.weights.val().grad(&grads) {
+            Some(g) => g.cast(evaluated.dtype()).reshape([rows * POSE_DIM]),
+            None => Tensor::<1>::zeros([rows * POSE_DIM], (&evaluated.device(), evaluated.dtype())),
         };
         let backward_done = Instant::now();
         // Adam steps now; the finiteness of the gradient is read with the next step's poses,
@@ -405,9 +408,8 @@ pub fn optimise_trajectory(
         let before = Box::new((module.clone(), optim.clone()));
         let grads = GradientsParams::from_grads(grads, &module);
         module = optim.step(options.learning_rate, module, grads);
-        let [rows, _] = evaluated.dims();
         means.push(loss.clone().without_autodiff());
-        means.push(finite);
+        means.push(gradient);
         means.push(evaluated.reshape([rows * POSE_DIM]));
         let lens_weights = if let Some(lens) = evaluated_lens {
             means.push(lens.reshape([rows]));
@@ -502,8 +504,9 @@ struct Pending {
     step: usize,
     /// Per window, each term's `(name, weight)`.
     labels: Vec<Vec<(&'static str, f64)>>,
-    /// Per window its terms' means, then the loss, the gradient's finiteness (1 or 0) and
-    /// the weights the loss was measured at `[K·6]`, then the zoom's `[K]` when it zooms.
+    /// Per window its terms' means, then the loss, the gradient of the weights `[K·6]` (for
+    /// its finiteness) and the weights the loss was measured at `[K·6]`, then the zoom's `[K]`
+    /// when it zooms.
     values: Tensor<1>,
     /// How many zoom weights end `values` (0 for the fixed lens).
     lens_weights: usize,
@@ -618,11 +621,13 @@ impl Bookkeeping<'_> {
             })
             .collect();
         let total = next.next().unwrap_or(f64::NAN);
-        let finite = next.next().is_some_and(|flag| flag != 0.0);
         let mut rest: Vec<f64> = next.collect();
-        // The zoom's K weights follow the K·6 pose weights when the lens zooms.
+        // The zoom's K weights follow the K·6 pose weights when the lens zooms; before them,
+        // as many gradient values as pose weights.
         let lens = (done.lens_weights > 0).then(|| rest.split_off(rest.len() - done.lens_weights));
-        let evaluated: Vec<[f64; 6]> = rest
+        let weights = rest.split_off(rest.len() / 2);
+        let finite = !rest.is_empty() && rest.iter().all(|v| v.is_finite());
+        let evaluated: Vec<[f64; 6]> = weights
             .chunks_exact(POSE_DIM)
             .map(|p| std::array::from_fn(|k| p[k]))
             .collect();
