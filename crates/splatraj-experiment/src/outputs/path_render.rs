@@ -771,7 +771,8 @@ impl FrameContext<'_> {
         timings.render += clock.elapsed();
         let clock = Instant::now();
         // The moments, read back whole (one wait on a GPU, and two launches where TCE, TRE and
-        // coverage as tensor ops were 16: docs/gpu.md, "Framing figures from the moments").
+        // coverage as tensor ops were 16: docs/gpu.md, "Made on the host from what is read
+        // anyway").
         let framing = object.map(|o| QueuedFraming {
             sums: moment_sums(images.clone(), 3),
             target_ratio: o.target_ratio,

@@ -21,6 +21,10 @@
 //!   lavapipe, a 128² mask pass 50 → 33 launches and a first-try guitar step 120 → 94 (with the
 //!   loss's forward handed to the device before its backward, [`crate::optimise::backward`]).
 //!
+//! A figure that is read back rather than differentiated (a frame's or a metric sample's TCE,
+//! TRE and coverage) takes the four sums as one tensor ([`moment_sums`]: two launches on a
+//! GPU, nothing cut) and applies the costs' formulas to them on the host ([`HostMoments`]).
+//!
 //! [`super::CostInputs`] makes the moments once for every cost that reads them; a quantity
 //! that needs only the mass ([`mask_mass`]: the coverage, the object alone's pixels) takes
 //! only that on a GPU, where every queued op is a launch whether it is read or not.
@@ -124,7 +128,8 @@ impl MaskMoments {
 /// The moment sums of channel `channel` of images `[B, H, W, C]` as one tensor `[B, 4]`: Σm,
 /// Σm·x, Σm·y, Σm·x·y per sample, by the two matrix products of the module docs. Nothing is cut
 /// out of the images or of the sums, so on a GPU it is two launches: what a caller reads back
-/// whole ([`HostMoments`]) takes this. A mask `[B, H, W]` is `[B, H, W, 1]`, channel 0.
+/// whole ([`HostMoments`]) takes this. A mask `[B, H, W]` is `[B, H, W, 1]`, channel 0;
+/// `channel` must be one of the C.
 pub fn moment_sums(images: Tensor<4>, channel: usize) -> Tensor<2> {
     let [batch, height, width, channels] = images.dims();
     assert!(channel < channels, "channel {channel} of {channels}");
