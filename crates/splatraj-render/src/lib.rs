@@ -5,8 +5,9 @@
 //! with its own backward, or as burn tensor ops, their readable specification), an
 //! independent brute-force f64 reference renderer (the yardstick for tests and a CPU preview),
 //! the backend choice for burn tensors, and the lifting of per-pixel values onto the Gaussians
-//! through the rasterizer's backward ([`lift`]). It does not read files or pick objects: it takes a [`splatraj_scene::Scene`]
-//! and per-Gaussian channels from the crates before it in the pipeline.
+//! through the rasterizer's backward ([`lift`]). It does not read files or pick objects: it
+//! takes a [`splatraj_scene::Scene`] and per-Gaussian channels from the crates before it in the
+//! pipeline.
 
 #![warn(missing_docs)]
 

@@ -60,9 +60,9 @@ pub struct FramesBench {
     pub target_ratio: f64,
     /// Horizontal field of view, degrees.
     pub fov: f64,
-    /// SH degree every timed scene is brought to ([`splatraj_scene::Scene::with_sh_degree`]: higher degrees
-    /// add zeros, so the pictures stay the same); None: as built or read. Real captures mostly
-    /// hold degree 3, the demo scene degree 1.
+    /// SH degree every timed scene is brought to ([`splatraj_scene::Scene::with_sh_degree`]:
+    /// higher degrees add zeros, so the pictures stay the same); None: as built or read. Real
+    /// captures mostly hold degree 3, the demo scene degree 1.
     pub sh_degree: Option<u8>,
 }
 

@@ -402,9 +402,8 @@ fn queue_samples(
     let [batch, height, width] = visible.dims();
     // Everything the metrics need in one read (one wait on a GPU), reduced where the masks
     // are: the visible mask's moments (TCE, TRE and coverage are made of them on the host, as
-    // a frame's are), the masks' boxes from their row and column hits, their sums for the
-    // occlusion.
-    let sums = |m: Tensor<3>| m.sum_dim(2).sum_dim(1).reshape([batch]);
+    // a frame's are), the masks' boxes from their row and column hits, the object alone's
+    // sum for the occlusion.
     let (seen_rows, seen_columns) = mask_hits(visible.clone(), IOU_THRESHOLD);
     let (alone_rows, alone_columns) = mask_hits(alone.clone(), IOU_THRESHOLD);
     let flat = |t: Tensor<2>| {
@@ -414,7 +413,7 @@ fn queue_samples(
     let read = Tensor::cat(
         vec![
             flat(moment_sums(visible.unsqueeze_dim(3), 0)),
-            sums(alone),
+            alone.sum_dim(2).sum_dim(1).reshape([batch]),
             flat(seen_rows),
             flat(alone_rows),
             flat(seen_columns),
