@@ -6,9 +6,11 @@
 
 use std::io::Cursor;
 
+use burn::backend::Dispatch;
 use burn::tensor::{Int, Tensor};
 
 use crate::camera::Intrinsics;
+use crate::fused::levels::PackedLevels;
 
 /// Colour of the object highlight in pictures (magenta).
 pub const HIGHLIGHT_RGB: [f64; 3] = [1.0, 0.2, 0.8];
@@ -109,31 +111,18 @@ fn rgb8_into<E: Copy + Into<f64>>(
 /// [`unpack_rgb8`] reads them back.
 ///
 /// Why: a GPU's frames came back as floats, 4 bytes a channel (RGB and the object's mask at
-/// 720p: 14.7 MB a frame, 4 GB over a first-try run); packed they are 4 bytes a pixel. The
-/// levels follow [`to_u8`]'s rule (the nearest, halves up) computed in the images' precision:
-/// in f32, a value within about 1e-5 of half a level may land one level from `to_u8` of the
-/// same value, which computes in f64 (`tests/backend.rs`,
-/// `packed_levels_are_rgb8_s_on_every_backend`).
+/// 720p: 14.7 MB a frame, 4 GB over a first-try run); packed they are 4 bytes a pixel. One
+/// operation ([`crate::fused::levels`]): one kernel on a GPU, a loop on the host. The levels
+/// follow [`to_u8`]'s rule (the nearest, halves up) computed in f32: a value within about 1e-5
+/// of half a level may land one level from `to_u8` of the same value, which computes in f64
+/// (`tests/backend.rs`, `packed_levels_are_rgb8_s_on_every_backend`). Panics when C < 3 (a
+/// caller's bug).
 pub fn packed_rgb8(images: Tensor<4>) -> Tensor<3, Int> {
-    let [batch, height, width, channels] = images.dims();
-    // Each channel's level weighted by its place (1, 256, 65 536, then 0 for the mask and any
-    // further channel) and summed over the channels: one elementwise chain into one reduction
-    // (slicing the three channels out, and `floor`, ran every op alone on lavapipe).
-    let places: Vec<i32> = (0..channels)
-        .map(|c| if c < 3 { 1 << (8 * c) } else { 0 })
-        .collect();
-    let places = Tensor::<1, Int>::from_data(
-        burn::tensor::TensorData::new(places, [channels]),
-        &images.device(),
-    )
-    .reshape([1, 1, 1, channels]);
-    // The whole part of l + 0.5 (l ≥ 0) is `to_u8`'s "whole part, plus one from a half up".
-    let levels = images
-        .clamp(0.0, 1.0)
-        .mul_scalar(255.0)
-        .add_scalar(0.5)
-        .int(); // [B, H, W, C]
-    (levels * places).sum_dim(3).reshape([batch, height, width])
+    let channels = images.dims()[3];
+    assert!(channels >= 3, "packing RGB levels of {channels} channels");
+    Tensor::from_dispatch(<Dispatch as PackedLevels>::packed_rgb8(
+        images.into_dispatch(),
+    ))
 }
 
 /// 8-bit RGB `[P·3]` of [`packed_rgb8`]'s values `[P]` as read back.

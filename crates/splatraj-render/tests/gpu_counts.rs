@@ -5,7 +5,7 @@
 //! the caller holds; and a pass of several objects (an optimisation step's windows, each
 //! object alone) launches what one object's pass does; a long tile list is cut into segments
 //! for a tracked pass only; burn's fusion merges a chain of elementwise ops; and an RGB pass's
-//! colours are one launch whatever the SH degree.
+//! colours are one launch whatever the SH degree; a frame's 8-bit levels are packed by one.
 //!
 //! Its own test binary with one test: the counters are process-wide and the harness runs the
 //! tests of one binary side by side.
@@ -351,4 +351,23 @@ fn launches_do_not_grow_with_the_batch_and_reads_stay_at_one() {
         view_dependent.launches <= 5,
         "projection, colours, compositing and a fill: {view_dependent:?}"
     );
+
+    // A frame's 8-bit levels are packed by one kernel (`fused/levels`), nothing uploaded: as
+    // burn ops they were four launches (the clamp chain, the cast, the places, the sum).
+    let [batch, height, width, channels] = [2, 48, 64, 4];
+    let mut rng = common::Rng(9);
+    let values: Vec<f32> = (0..batch * height * width * channels)
+        .map(|_| rng.range(-0.1, 1.1) as f32)
+        .collect();
+    let images = Tensor::<4>::from_data(
+        TensorData::new(values, [batch, height, width, channels]),
+        (&device, DType::F32),
+    );
+    splatraj_render::host::to_host(images.clone()).unwrap();
+    let before = counters::snapshot();
+    let packed = splatraj_render::images::packed_rgb8(images).into_data();
+    let packing = counters::snapshot().since(&before);
+    eprintln!("packing a frame's levels: {packing:?}");
+    assert_eq!(packed.num_elements(), batch * height * width);
+    assert_eq!((packing.launches, packing.uploads), (1, 0), "{packing:?}");
 }

@@ -17,13 +17,14 @@ use burn::backend::fusion::custom::{
     CustomOpIr, HandleContainer, OperationFn, OperationIr, StreamId, TensorIr,
 };
 use burn::backend::fusion::{FusionBackend, FusionRuntime, FusionTensor};
-use burn::backend::tensor::FloatTensor;
+use burn::backend::tensor::{FloatTensor, IntTensor};
 use burn::backend::{Cube, TensorMetadata};
 use burn::tensor::{DType, Shape};
 use burn_cubecl::CubeBackend;
 use burn_cubecl::tensor::CubeTensor;
 
 use super::colours::{ColourKernels, FusedColours};
+use super::levels::PackedLevels;
 use super::plan::CompositePlan;
 use super::projection::{FusedProjection, ProjectionKernels, ProjectionPlan, SPLAT_COLUMNS};
 use super::{CompositeKernels, ForwardUse, FusedComposite, SplatPrimitives};
@@ -64,9 +65,9 @@ impl<S> Deferred<S> {
 /// Queues `run` as one operation of the fusion stream: when the stream reaches it, `run` gets
 /// the inner backend's tensors of `inputs` (in order) and returns tensors of `outputs`' shapes
 /// and dtypes (in order), which the returned lazy tensors stand for. Its time is added to
-/// `stage` when it runs: the caller's own timer sees only the queueing.
+/// `stage` (where it has one) when it runs: the caller's own timer sees only the queueing.
 fn queue(
-    stage: Stage,
+    stage: Option<Stage>,
     inputs: Vec<FusionTensor<Runtime>>,
     outputs: Vec<(Shape, DType)>,
     run: impl Fn(Vec<CubeTensor>) -> Vec<CubeTensor> + Send + Sync + 'static,
@@ -92,11 +93,13 @@ fn queue(
         for (id, tensor) in writes.iter().zip(run(tensors)) {
             handles.register_float_tensor::<CubeBackend>(id, tensor);
         }
-        crate::stages::add(stage, started.elapsed());
+        if let Some(stage) = stage {
+            crate::stages::add(stage, started.elapsed());
+        }
         Ok(())
     });
     let description = CustomOpIr {
-        id: format!("splatraj_{}", stage.name()),
+        id: format!("splatraj_{}", stage.map_or("packed_levels", Stage::name)),
         inputs,
         outputs,
         scalars: Vec::new(),
@@ -144,7 +147,7 @@ impl CompositeKernels for Cube {
         let dtype = inputs.splats.dtype();
         let keep = saved.clone();
         let outputs = queue(
-            Stage::Composite,
+            Some(Stage::Composite),
             vec![inputs.splats, inputs.values],
             vec![(image, dtype)],
             move |tensors| {
@@ -164,7 +167,7 @@ impl CompositeKernels for Cube {
     fn composite_backward(saved: Self::Saved, v_image: FloatTensor<Self>) -> SplatPrimitives<Self> {
         let outputs = saved.inputs.clone();
         let (splats, values) = two(queue(
-            Stage::CompositeBackward,
+            Some(Stage::CompositeBackward),
             vec![v_image],
             outputs,
             move |tensors| {
@@ -201,7 +204,7 @@ impl ProjectionKernels for Cube {
         let dtype = components.dtype();
         let keep = saved.clone();
         let outputs = queue(
-            Stage::Project,
+            Some(Stage::Project),
             vec![poses, zoom, components, opacities],
             vec![(rows, dtype)],
             move |tensors| {
@@ -228,7 +231,7 @@ impl ProjectionKernels for Cube {
     ) -> (FloatTensor<Self>, FloatTensor<Self>) {
         let outputs = saved.inputs.clone();
         two(queue(
-            Stage::ProjectBackward,
+            Some(Stage::ProjectBackward),
             vec![v_rows],
             outputs,
             move |tensors| {
@@ -267,7 +270,7 @@ impl ColourKernels for Cube {
         let dtype = components.dtype();
         let keep = saved.clone();
         let outputs = queue(
-            Stage::Project,
+            Some(Stage::Project),
             vec![poses, components, coeffs],
             vec![(colours, dtype)],
             move |tensors| {
@@ -286,7 +289,7 @@ impl ColourKernels for Cube {
     fn colours_backward(saved: Self::Saved, v_colours: FloatTensor<Self>) -> FloatTensor<Self> {
         let outputs = saved.inputs.clone();
         one(queue(
-            Stage::ProjectBackward,
+            Some(Stage::ProjectBackward),
             vec![v_colours],
             outputs,
             move |tensors| vec![CubeBackend::colours_backward(saved.take(), one(tensors))],
@@ -302,5 +305,17 @@ impl FusedColours for Cube {
         plan: Arc<ProjectionPlan>,
     ) -> FloatTensor<Self> {
         Self::colours_forward(poses, components, coeffs, plan).0
+    }
+}
+
+impl PackedLevels for Cube {
+    fn packed_rgb8(images: FloatTensor<Self>) -> IntTensor<Self> {
+        let [batch, height, width, _] = images.shape().dims::<4>();
+        one(queue(
+            None,
+            vec![images],
+            vec![(Shape::from(vec![batch, height, width]), DType::I32)],
+            |tensors| vec![super::levels::cube::packed_rgb8(one(tensors))],
+        ))
     }
 }

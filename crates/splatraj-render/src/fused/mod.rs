@@ -20,6 +20,7 @@ pub mod cpu;
 pub mod cube;
 #[cfg(feature = "wgpu")]
 pub mod fusion;
+pub mod levels;
 pub mod plan;
 pub mod projection;
 pub mod real;
