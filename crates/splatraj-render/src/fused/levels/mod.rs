@@ -36,7 +36,7 @@ pub trait PackedLevels: Backend {
 
 /// One channel value's 8-bit level in f32, as every backend computes it (module docs).
 #[inline]
-pub fn level_f32(v: f32) -> u32 {
+fn level_f32(v: f32) -> u32 {
     // NaN stays NaN through the clamp and the cast makes it 0 (Rust's float casts saturate).
     (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u32
 }
