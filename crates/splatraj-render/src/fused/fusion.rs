@@ -1,13 +1,14 @@
-//! The fused ops (compositing, projection, colours) on burn's fusion backend, which is what
-//! wgpu runs on (`burn::backend::Cube` is `Fusion<CubeBackend>` with burn's `fusion` feature).
+//! The fused ops (compositing, projection, colours, packed levels) on burn's fusion backend,
+//! which is what wgpu runs on (`burn::backend::Cube` is `Fusion<CubeBackend>` with burn's
+//! `fusion` feature).
 //!
 //! Why fusion: on a GPU an optimisation step was ~400 launches of tiny kernels besides ours
 //! (the costs, Adam, the model's forward: docs/gpu.md), each a few microseconds whatever it
 //! computes. Burn's fusion backend queues tensor ops and merges chains of elementwise ones into
 //! single kernels. An op it does not know, like ours, joins that queue as one opaque operation:
 //! it declares its outputs' shapes up front and runs the CubeCL kernels of [`super::cube`],
-//! [`super::projection::cube`] and [`super::colours::cube`] on the inner backend's tensors when
-//! the queue reaches it. So the state a backward needs cannot be returned by the forward call:
+//! [`super::projection::cube`], [`super::colours::cube`] and [`super::levels::cube`] on the
+//! inner backend's tensors when the queue reaches it. So the state a backward needs cannot be returned by the forward call:
 //! the forward fills a [`Deferred`] slot when it runs, and the backward, queued later on the
 //! same stream, takes it.
 
@@ -311,6 +312,8 @@ impl FusedColours for Cube {
 impl PackedLevels for Cube {
     fn packed_rgb8(images: FloatTensor<Self>) -> IntTensor<Self> {
         let [batch, height, width, _] = images.shape().dims::<4>();
+        // `queue` registers its outputs as float handles: on `CubeBackend` an integer tensor
+        // is the same `CubeTensor`, its dtype (I32 here) saying what it holds.
         one(queue(
             None,
             vec![images],
