@@ -178,11 +178,17 @@ fn packed_levels_are_rgb8_s_on_every_backend() {
             TensorData::new(pixels.clone(), [batch, height, width, channels]),
             (&backend.device().unwrap(), DType::F32),
         );
-        let packed: Vec<i32> = packed_rgb8(images)
-            .into_data()
-            .convert::<i32>()
-            .try_into_vec::<i32>()
-            .unwrap();
+        let pack = |images: Tensor<4>| -> Vec<i32> {
+            packed_rgb8(images)
+                .into_data()
+                .convert::<i32>()
+                .try_into_vec::<i32>()
+                .unwrap()
+        };
+        // The colour channels as a strided view (the mask cut away): the same levels.
+        let view = pack(images.clone().narrow(3, 0, 3));
+        let packed = pack(images);
+        assert_eq!(view, packed, "{backend}: a strided view packs as the whole");
         assert_eq!(packed.len(), batch * height * width, "{backend}");
         let got = unpack_rgb8(&packed);
         let mut apart = 0;
