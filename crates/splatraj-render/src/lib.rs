@@ -24,6 +24,7 @@ pub mod focus;
 pub mod fused;
 pub mod host;
 pub mod images;
+pub mod joined_rows;
 pub mod lift;
 pub mod orbit;
 pub mod pass_size;

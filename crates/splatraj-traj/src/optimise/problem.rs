@@ -14,6 +14,7 @@ use splatraj_render::backend::BackendKind;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::focus::Surroundings;
 use splatraj_render::host::{OnDevice, as_stored};
+use splatraj_render::joined_rows::cut_rows;
 use splatraj_render::rasterize::{Approximations, RenderStats};
 use splatraj_render::render::{
     AlphaChannel, Channel, DeviceScene, ObjectMasks, ObjectView, Pruning, Rasterizer, RenderError,
@@ -1009,10 +1010,17 @@ impl<'a> Problem<'a> {
             None
         };
         let mask_at = channel(|c| matches!(c, Channel::ObjectMasks(_)));
+        // The samples seen with the scene, then (where drawn) each alone: cut apart by one
+        // joined cut, whose backward is a concatenation (`joined_rows`).
+        let total = images.dims()[0];
+        let counts: Vec<usize> = [rows, total - rows]
+            .into_iter()
+            .filter(|&c| c > 0)
+            .collect();
+        let halves = cut_rows(images, &counts);
         let part = |(offset, width): (usize, usize), first: usize| {
-            images
+            halves[usize::from(first > 0)]
                 .clone()
-                .narrow(0, first, rows)
                 .narrow(3, offset, width)
         };
         let flat = |t: Tensor<4>| t.reshape([rows, height, width]);
