@@ -77,26 +77,30 @@ fn slice_part<B: Backend>(whole: FloatTensor<B>, joint: &Joint, part: usize) -> 
     B::float_slice(whole, &joint.slices(part, rank))
 }
 
-#[cfg(feature = "flex")]
-impl JoinedRows for burn::backend::Flex {
-    fn joined_part(whole: FloatTensor<Self>, joint: Arc<Joint>, part: usize) -> FloatTensor<Self> {
-        slice_part::<Self>(whole, &joint, part)
-    }
+/// Implements [`JoinedRows`] for backends without autodiff: [`slice_part`].
+macro_rules! sliced_parts {
+    ($($(#[$attr:meta])* $backend:ty;)*) => {$(
+        $(#[$attr])*
+        impl JoinedRows for $backend {
+            fn joined_part(
+                whole: FloatTensor<Self>,
+                joint: Arc<Joint>,
+                part: usize,
+            ) -> FloatTensor<Self> {
+                slice_part::<Self>(whole, &joint, part)
+            }
+        }
+    )*};
 }
 
-#[cfg(feature = "ndarray")]
-#[allow(deprecated)]
-impl JoinedRows for burn::backend::NdArray {
-    fn joined_part(whole: FloatTensor<Self>, joint: Arc<Joint>, part: usize) -> FloatTensor<Self> {
-        slice_part::<Self>(whole, &joint, part)
-    }
-}
-
-#[cfg(feature = "wgpu")]
-impl JoinedRows for burn::backend::Cube {
-    fn joined_part(whole: FloatTensor<Self>, joint: Arc<Joint>, part: usize) -> FloatTensor<Self> {
-        slice_part::<Self>(whole, &joint, part)
-    }
+sliced_parts! {
+    #[cfg(feature = "flex")]
+    burn::backend::Flex;
+    #[cfg(feature = "ndarray")]
+    #[allow(deprecated)]
+    burn::backend::NdArray;
+    #[cfg(feature = "wgpu")]
+    burn::backend::Cube;
 }
 
 /// A part's backward step: leaves its gradient with the joint; the first hands the joining
