@@ -26,9 +26,9 @@ use burn::tensor::{Shape, Slice, Tensor};
 pub struct Joint {
     /// Each part's rows, consecutive from 0 to the whole's.
     parts: Vec<Range<usize>>,
-    /// The joining node's tensor (an autodiff tensor of the backend), once made; then each
-    /// part's gradient as its backward leaves it, and whether the joining node has been handed
-    /// one to start from.
+    /// The joining node's tensor (an autodiff tensor of the backend) while the parts are made;
+    /// then each part's gradient as its backward leaves it, and whether the joining node has
+    /// been handed one to start from.
     state: Mutex<JointState>,
 }
 
@@ -220,7 +220,7 @@ pub fn cut_rows<const D: usize>(whole: Tensor<D>, rows: &[usize]) -> Vec<Tensor<
         }),
         parts,
     });
-    (0..rows.len())
+    let cut = (0..rows.len())
         .map(|part| {
             Tensor::from_dispatch(<Dispatch as JoinedRows>::joined_part(
                 whole.clone().into_dispatch(),
@@ -228,7 +228,11 @@ pub fn cut_rows<const D: usize>(whole: Tensor<D>, rows: &[usize]) -> Vec<Tensor<
                 part,
             ))
         })
-        .collect()
+        .collect();
+    // The joining node's tensor was needed only to make the parts: kept, it would hold the
+    // whole's buffer until the backward.
+    joint.lock().join = None;
+    cut
 }
 
 #[cfg(test)]

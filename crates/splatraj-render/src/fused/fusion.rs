@@ -63,11 +63,13 @@ impl<S> Deferred<S> {
     }
 }
 
-/// Queues `run` as one operation of the fusion stream: when the stream reaches it, `run` gets
-/// the inner backend's tensors of `inputs` (in order) and returns tensors of `outputs`' shapes
-/// and dtypes (in order), which the returned lazy tensors stand for. Its time is added to
-/// `stage` (where it has one) when it runs: the caller's own timer sees only the queueing.
+/// Queues `run` as one operation of the fusion stream, named `name` in its IR: when the stream
+/// reaches it, `run` gets the inner backend's tensors of `inputs` (in order) and returns
+/// tensors of `outputs`' shapes and dtypes (in order), which the returned lazy tensors stand
+/// for. Its time is added to `stage` (where it has one) when it runs: the caller's own timer
+/// sees only the queueing.
 fn queue(
+    name: &str,
     stage: Option<Stage>,
     inputs: Vec<FusionTensor<Runtime>>,
     outputs: Vec<(Shape, DType)>,
@@ -100,7 +102,7 @@ fn queue(
         Ok(())
     });
     let description = CustomOpIr {
-        id: format!("splatraj_{}", stage.map_or("packed_levels", Stage::name)),
+        id: format!("splatraj_{name}"),
         inputs,
         outputs,
         scalars: Vec::new(),
@@ -148,6 +150,7 @@ impl CompositeKernels for Cube {
         let dtype = inputs.splats.dtype();
         let keep = saved.clone();
         let outputs = queue(
+            "composite",
             Some(Stage::Composite),
             vec![inputs.splats, inputs.values],
             vec![(image, dtype)],
@@ -168,6 +171,7 @@ impl CompositeKernels for Cube {
     fn composite_backward(saved: Self::Saved, v_image: FloatTensor<Self>) -> SplatPrimitives<Self> {
         let outputs = saved.inputs.clone();
         let (splats, values) = two(queue(
+            "composite_backward",
             Some(Stage::CompositeBackward),
             vec![v_image],
             outputs,
@@ -205,6 +209,7 @@ impl ProjectionKernels for Cube {
         let dtype = components.dtype();
         let keep = saved.clone();
         let outputs = queue(
+            "projection",
             Some(Stage::Project),
             vec![poses, zoom, components, opacities],
             vec![(rows, dtype)],
@@ -232,6 +237,7 @@ impl ProjectionKernels for Cube {
     ) -> (FloatTensor<Self>, FloatTensor<Self>) {
         let outputs = saved.inputs.clone();
         two(queue(
+            "projection_backward",
             Some(Stage::ProjectBackward),
             vec![v_rows],
             outputs,
@@ -271,6 +277,7 @@ impl ColourKernels for Cube {
         let dtype = components.dtype();
         let keep = saved.clone();
         let outputs = queue(
+            "colours",
             Some(Stage::Project),
             vec![poses, components, coeffs],
             vec![(colours, dtype)],
@@ -290,6 +297,7 @@ impl ColourKernels for Cube {
     fn colours_backward(saved: Self::Saved, v_colours: FloatTensor<Self>) -> FloatTensor<Self> {
         let outputs = saved.inputs.clone();
         one(queue(
+            "colours_backward",
             Some(Stage::ProjectBackward),
             vec![v_colours],
             outputs,
@@ -315,6 +323,7 @@ impl PackedLevels for Cube {
         // `queue` registers its outputs as float handles: on `CubeBackend` an integer tensor
         // is the same `CubeTensor`, its dtype (I32 here) saying what it holds.
         one(queue(
+            "packed_levels",
             None,
             vec![images],
             vec![(Shape::from(vec![batch, height, width]), DType::I32)],
