@@ -22,8 +22,6 @@
 
 use std::sync::Arc;
 
-use rayon::iter::{IntoParallelRefIterator, ParallelIterator};
-
 use burn::backend::TensorMetadata;
 use burn::backend::tensor::FloatTensor;
 use burn::tensor::{DType, IntDType, TensorData};
@@ -35,6 +33,7 @@ use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::tensor::CubeTensor;
 use burn_cubecl::{CubeDevice, cubecl};
 
+use super::host_pool;
 use super::plan::CompositePlan;
 use super::segments::{SEGMENT_COLUMNS, Segments};
 use super::{CompositeKernels, ForwardUse, HostSaved, SplatPrimitives, host_backward};
@@ -741,8 +740,7 @@ fn upload_plan(plan: &CompositePlan, used: ForwardUse, device: &CubeDevice) -> P
     PlanTensors {
         work: int_tensor(segments.work, device),
         starts: int_tensor(segments.starts, device),
-        // A step's lists hold about a million entries: converted on every core.
-        rows: int_tensor(plan.rows.par_iter().map(|&r| r as i32).collect(), device),
+        rows: int_tensor(host_pool::i32s(&plan.rows), device),
         count,
         cut,
         segment_entries,
@@ -908,7 +906,7 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
     let v_splats = CubeBackend::float_empty(vec![rows, columns].into(), &device, dtype.into());
     let v_values = CubeBackend::float_empty(vec![rows, channels].into(), &device, dtype.into());
     if rows > 0 {
-        let (order, starts) = plan.slots_by_row();
+        let (order, starts) = host_pool::run(|| plan.slots_by_row());
         let order = int_tensor(order, &device);
         let starts = int_tensor(starts, &device);
         let cube_dim = CubeDim::new_1d(256);
@@ -946,7 +944,8 @@ impl CompositeKernels for CubeBackend {
         used: ForwardUse,
     ) -> (FloatTensor<Self>, CubeSaved) {
         if inputs.splats.dtype() == DType::F64 {
-            let (image, saved) = super::host_forward::<Self>(inputs, plan);
+            // The host kernels run on every core: on the pool that never waits on the device.
+            let (image, saved) = host_pool::run(|| super::host_forward::<Self>(inputs, plan));
             return (image, CubeSaved::Host(saved));
         }
         let (image, saved) = device_forward(inputs, plan, used);
@@ -955,7 +954,7 @@ impl CompositeKernels for CubeBackend {
 
     fn composite_backward(saved: CubeSaved, v_image: FloatTensor<Self>) -> SplatPrimitives<Self> {
         match saved {
-            CubeSaved::Host(saved) => host_backward::<Self>(saved, v_image),
+            CubeSaved::Host(saved) => host_pool::run(|| host_backward::<Self>(saved, v_image)),
             CubeSaved::Device(saved) => device_backward(*saved, v_image),
         }
     }

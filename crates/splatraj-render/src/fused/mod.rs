@@ -20,6 +20,8 @@ pub mod cpu;
 pub mod cube;
 #[cfg(feature = "wgpu")]
 pub mod fusion;
+#[cfg(feature = "wgpu")]
+mod host_pool;
 pub mod levels;
 pub mod plan;
 pub mod projection;

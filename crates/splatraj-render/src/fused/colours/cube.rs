@@ -24,6 +24,7 @@ use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::tensor::CubeTensor;
 
 use super::{ColourKernels, HostSaved, host_backward, host_forward};
+use crate::fused::host_pool;
 use crate::fused::projection::ProjectionPlan;
 use crate::fused::projection::cube::{CubeSaved, UNITS, empty, grid, tree_sum, upload_rows};
 use crate::sh::{C0, C1, C2, C3};
@@ -445,7 +446,9 @@ impl ColourKernels for CubeBackend {
         plan: Arc<ProjectionPlan>,
     ) -> (FloatTensor<Self>, Self::Saved) {
         if components.dtype() == DType::F64 {
-            let (colours, saved) = host_forward::<Self>(poses, components, coeffs, plan);
+            // The host kernels run on every core: on the pool that never waits on the device.
+            let (colours, saved) =
+                host_pool::run(|| host_forward::<Self>(poses, components, coeffs, plan));
             return (colours, CubeSaved::Host(Box::new(saved)));
         }
         let (colours, saved) = device_forward(poses, components, coeffs, plan);
@@ -454,7 +457,7 @@ impl ColourKernels for CubeBackend {
 
     fn colours_backward(saved: Self::Saved, v_colours: FloatTensor<Self>) -> FloatTensor<Self> {
         match saved {
-            CubeSaved::Host(saved) => host_backward::<Self>(*saved, v_colours),
+            CubeSaved::Host(saved) => host_pool::run(|| host_backward::<Self>(*saved, v_colours)),
             CubeSaved::Device(saved) => device_backward(*saved, v_colours),
         }
     }

@@ -15,8 +15,6 @@
 
 use std::sync::Arc;
 
-use rayon::iter::{IntoParallelRefIterator, ParallelIterator};
-
 use burn::backend::TensorMetadata;
 use burn::backend::tensor::FloatTensor;
 use burn::tensor::{DType, TensorData};
@@ -34,6 +32,7 @@ use super::{
 };
 use crate::camera::SERIES_BELOW_THETA_SQ;
 use crate::fused::cube::int_tensor;
+use crate::fused::host_pool;
 use crate::project::{LOW_PASS, NORMALISED_DET_FLOOR};
 
 /// Units per cube, and Gaussians per chunk of the launch grid (the fused colours' too).
@@ -573,10 +572,7 @@ pub enum CubeSaved<D, H> {
 /// reads it on `device` and shared by the others.
 pub(crate) fn upload_rows(plan: &ProjectionPlan, device: &CubeDevice) -> (CubeTensor, CubeTensor) {
     let upload = || {
-        let gaussians = int_tensor(
-            plan.gaussians.par_iter().map(|&g| g as i32).collect(),
-            device,
-        );
+        let gaussians = int_tensor(host_pool::i32s(&plan.gaussians), device);
         let starts = int_tensor(
             plan.rows.starts().iter().map(|&s| s as i32).collect(),
             device,
@@ -739,7 +735,9 @@ impl ProjectionKernels for CubeBackend {
         plan: Arc<ProjectionPlan>,
     ) -> (FloatTensor<Self>, Self::Saved) {
         if components.dtype() == DType::F64 {
-            let (rows, saved) = host_forward::<Self>(poses, zoom, components, opacities, plan);
+            // The host kernels run on every core: on the pool that never waits on the device.
+            let (rows, saved) =
+                host_pool::run(|| host_forward::<Self>(poses, zoom, components, opacities, plan));
             return (rows, CubeSaved::Host(Box::new(saved)));
         }
         let (rows, saved) = device_forward(poses, zoom, components, opacities, plan);
@@ -751,7 +749,7 @@ impl ProjectionKernels for CubeBackend {
         v_rows: FloatTensor<Self>,
     ) -> (FloatTensor<Self>, FloatTensor<Self>) {
         match saved {
-            CubeSaved::Host(saved) => host_backward::<Self>(*saved, v_rows),
+            CubeSaved::Host(saved) => host_pool::run(|| host_backward::<Self>(*saved, v_rows)),
             CubeSaved::Device(saved) => device_backward(*saved, v_rows),
         }
     }
