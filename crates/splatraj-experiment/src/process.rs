@@ -497,8 +497,8 @@ impl Experiment {
             .map_err(|e| match e.downcast::<splatraj_scene::stop::Stopped>() {
                 Ok(stopped) => splatraj_scene::stop::Stopped {
                     what: format!(
-                        "{}; {} keeps its checkpoint: `splatraj run --resume {}` writes the \
-                         outputs again",
+                        "{}; {} is cut back to its config and checkpoint (what was written \
+                         is removed): `splatraj run --resume {}` writes the outputs again",
                         stopped.what,
                         dir.display(),
                         dir.display()
