@@ -53,21 +53,30 @@ pub fn bin_tiles(
         decisions.kept.len(),
         "one selection per pose"
     );
-    decisions
-        .kept
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(b, kept)| {
+    let poses = decisions.kept.len();
+    // The poses that keep the most first: a step's poses differ several-fold (a wide shot's
+    // against a close-up's), and one of the largest started last kept the other cores
+    // waiting (first-try guitar on 2 cores: 17.0 ms for 26.5 ms of work).
+    let mut heaviest_first: Vec<usize> = (0..poses).collect();
+    heaviest_first.sort_by_key(|&b| std::cmp::Reverse(decisions.kept[b].len()));
+    let binned: Vec<(usize, Vec<TileWork>)> = heaviest_first
+        .into_par_iter()
+        .map(|b| {
             let pose = PoseToBin {
-                kept,
+                kept: &decisions.kept[b],
                 b,
                 selection: selection[b],
                 // The cores the other poses leave: a frame's one pose gets all of them.
-                bands: (rayon::current_num_threads() / decisions.kept.len()).max(1),
+                bands: (rayon::current_num_threads() / poses).max(1),
             };
-            bin_one_pose(pose, grid)
+            (b, bin_one_pose(pose, grid))
         })
-        .collect()
+        .collect();
+    let mut by_pose: Vec<Vec<TileWork>> = vec![Vec::new(); poses];
+    for (b, work) in binned {
+        by_pose[b] = work;
+    }
+    by_pose.into_iter().flatten().collect()
 }
 
 /// One pose's share of [`bin_tiles`]: what it keeps, its index, what it visits, and how many
