@@ -114,9 +114,13 @@ pub fn lay_out_rows(work: &mut [TileWork], batch: usize, n: usize) -> LaidOutRow
     if !work.is_sorted_by_key(|list| list.batch) {
         work.sort_by_key(|list| list.batch);
     }
-    let mut read: Vec<(usize, GaussianBits)> = work
-        .chunk_by_mut(|a, b| a.batch == b.batch)
-        .collect::<Vec<_>>()
+    let mut poses: Vec<&mut [TileWork]> = work.chunk_by_mut(|a, b| a.batch == b.batch).collect();
+    // The poses with the most entries first: a step's wide shots hold most of its entries, and
+    // one of them started last kept the other cores waiting (as in binning, `tiles.rs`).
+    poses.sort_by_key(|lists| {
+        std::cmp::Reverse(lists.iter().map(|l| l.gaussians.len()).sum::<usize>())
+    });
+    let mut read: Vec<(usize, GaussianBits)> = poses
         .into_par_iter()
         .map(|lists| (lists[0].batch, lay_out_pose(lists, n)))
         .collect();
