@@ -8,9 +8,9 @@
 //! single kernels. An op it does not know, like ours, joins that queue as one opaque operation:
 //! it declares its outputs' shapes up front and runs the CubeCL kernels of [`super::cube`],
 //! [`super::projection::cube`], [`super::colours::cube`] and [`super::levels::cube`] on the
-//! inner backend's tensors when the queue reaches it. So the state a backward needs cannot be returned by the forward call:
-//! the forward fills a [`Deferred`] slot when it runs, and the backward, queued later on the
-//! same stream, takes it.
+//! inner backend's tensors when the queue reaches it. So the state a backward needs cannot be
+//! returned by the forward call: the forward fills a [`Deferred`] slot when it runs, and the
+//! backward, queued later on the same stream, takes it.
 
 use std::sync::{Arc, Mutex};
 
