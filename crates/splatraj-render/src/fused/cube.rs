@@ -33,10 +33,10 @@ use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::tensor::CubeTensor;
 use burn_cubecl::{CubeDevice, cubecl};
 
-use super::host_pool;
 use super::plan::CompositePlan;
 use super::segments::{SEGMENT_COLUMNS, Segments};
 use super::{CompositeKernels, ForwardUse, HostSaved, SplatPrimitives, host_backward};
+use super::{host_pool, launch_grid};
 use crate::rasterize::{AlphaChannel, MAX_ALPHA, MIN_ALPHA};
 use crate::tiles::TILE_PIXELS;
 
@@ -213,7 +213,8 @@ fn channels_within(max_shared: usize) -> usize {
         .unwrap_or(1)
 }
 
-/// Work tile index of this cube (the launch grid is 2D when there are more than 65 535 tiles).
+/// Work tile index of this cube (the launch grid is 2D past its per-axis cap:
+/// [`super::launch_grid`]).
 #[cube]
 fn work_index() -> usize {
     CUBE_POS_Y as usize * CUBE_COUNT_X as usize + CUBE_POS_X as usize
@@ -747,13 +748,6 @@ fn upload_plan(plan: &CompositePlan, used: ForwardUse, device: &CubeDevice) -> P
     }
 }
 
-/// Cubes for `work` tiles, 2D past the per-axis limit.
-fn tile_grid(work: usize) -> CubeCount {
-    const MAX_PER_AXIS: usize = 65_535;
-    let x = work.clamp(1, MAX_PER_AXIS);
-    CubeCount::Static(x as u32, work.div_ceil(x).max(1) as u32, 1)
-}
-
 fn zeros(shape: Vec<usize>, device: &CubeDevice, dtype: DType) -> CubeTensor {
     CubeBackend::float_zeros(shape.into(), device, dtype.into())
 }
@@ -812,7 +806,7 @@ fn device_forward(
         launch_compositing!(
             forward_kernel,
             &client,
-            tile_grid(work_count),
+            launch_grid::linear(work_count),
             CubeDim::new_1d(TILE_PIXELS as u32),
             inputs[0].clone().into_tensor_arg(),
             inputs[1].clone().into_tensor_arg(),
@@ -877,7 +871,7 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
         launch_compositing!(
             backward_kernel,
             &client,
-            tile_grid(work_count),
+            launch_grid::linear(work_count),
             CubeDim::new_1d(TILE_PIXELS as u32),
             inputs[0].clone().into_tensor_arg(),
             inputs[1].clone().into_tensor_arg(),
@@ -910,9 +904,7 @@ fn device_backward(saved: DeviceSaved, v_image: CubeTensor) -> SplatPrimitives<C
         let order = int_tensor(order, &device);
         let starts = int_tensor(starts, &device);
         let cube_dim = CubeDim::new_1d(256);
-        let cubes = rows.div_ceil(256);
-        let cube_count =
-            CubeCount::Static(cubes.min(65_535) as u32, cubes.div_ceil(65_535) as u32, 1);
+        let cube_count = launch_grid::linear(rows.div_ceil(256));
         launch_compositing!(
             gather_kernel,
             &client,

@@ -22,6 +22,8 @@ pub mod cube;
 pub mod fusion;
 #[cfg(feature = "wgpu")]
 mod host_pool;
+#[cfg(feature = "wgpu")]
+pub mod launch_grid;
 pub mod levels;
 pub mod plan;
 pub mod projection;

@@ -14,8 +14,6 @@ use burn_cubecl::tensor::CubeTensor;
 
 /// Units a cube.
 const UNITS: u32 = 256;
-/// The launch grid's largest extent per axis.
-const MAX_PER_AXIS: u32 = 65_535;
 
 /// One channel value's level: [`super::level_f32`]'s rule.
 #[cube]
@@ -57,11 +55,9 @@ pub fn packed_rgb8(images: CubeTensor) -> CubeTensor {
         IntDType::I32,
     );
     if pixels > 0 {
-        let cubes = (pixels as u32).div_ceil(UNITS);
-        let x = cubes.min(MAX_PER_AXIS);
         pack_kernel::launch(
             &images.client,
-            CubeCount::Static(x, cubes.div_ceil(x), 1),
+            crate::fused::launch_grid::linear(pixels.div_ceil(UNITS as usize)),
             CubeDim::new_1d(UNITS),
             images.clone().into_tensor_arg(),
             packed.clone().into_tensor_arg(),

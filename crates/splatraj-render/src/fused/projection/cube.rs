@@ -32,7 +32,7 @@ use super::{
 };
 use crate::camera::SERIES_BELOW_THETA_SQ;
 use crate::fused::cube::int_tensor;
-use crate::fused::host_pool;
+use crate::fused::{host_pool, launch_grid};
 use crate::project::{LOW_PASS, NORMALISED_DET_FLOOR};
 
 /// Units per cube, and Gaussians per chunk of the launch grid (the fused colours' too).
@@ -40,8 +40,6 @@ pub(crate) const UNITS: usize = 256;
 /// Values a row's gradient has before Rodrigues: the three axes (9), the centre (3) and the
 /// zoom (1).
 const PARTIAL: usize = 13;
-/// The launch grid's largest extent per axis.
-const MAX_PER_AXIS: usize = 65_535;
 
 /// One pose's camera as the kernels read it, in the pass's float type (as in [`super::cpu`]:
 /// fx, fy zoomed by s; lim_x, lim_y the unzoomed clamp of s·x/z, s·y/z).
@@ -589,10 +587,11 @@ pub(crate) fn upload_rows(plan: &ProjectionPlan, device: &CubeDevice) -> (CubeTe
 }
 
 /// The launch grid: (cubes per pose, poses), and the chunks of 256 rows the pose with the
-/// most rows has (a cube past a pose's rows only writes its zero partial).
+/// most rows has. A pose's cubes take its chunks in turn when there are more chunks than the
+/// axis cap ([`launch_grid`]); a cube past a pose's rows only writes its zero partial.
 pub(crate) fn grid(batch: usize, largest: usize) -> (CubeCount, u32, usize) {
     let chunks = largest.div_ceil(UNITS).max(1);
-    let per_pose = chunks.min(MAX_PER_AXIS);
+    let per_pose = chunks.min(launch_grid::axis_cap());
     (
         CubeCount::Static(per_pose as u32, batch as u32, 1),
         chunks as u32,
