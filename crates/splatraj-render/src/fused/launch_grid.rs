@@ -2,10 +2,10 @@
 //! the largest extent one axis of a grid may have, and that cap.
 //!
 //! Why in one place: the packing, the gather, the compositing tiles and the projection's
-//! chunks each reach the cap on real captures (a step of a 6 M capture has more than
-//! 65 535 × 256 rows), and no test input is large enough to reach it on lavapipe. A test lowers
-//! the cap here ([`set_axis_cap`]) so the same small pass runs on 2D grids and must give the
-//! same results (`tests/grid_axis.rs`).
+//! chunks each reach the cap on real captures (a step whose 40 poses keep 420 k Gaussians each
+//! has more than 65 535 × 256 rows), and no test input is large enough to reach it on lavapipe.
+//! A test lowers the cap here ([`set_axis_cap`]) so the same small pass runs on 2D grids and
+//! must give the same results (`tests/gpu_same_pass.rs`).
 //!
 //! Kernels read a linear grid's cube as `CUBE_POS_Y · CUBE_COUNT_X + CUBE_POS_X` (or
 //! `ABSOLUTE_POS`, which both CubeCL compilers linearise the same way) and skip the cubes past
