@@ -46,6 +46,22 @@ def machine():
     print(f"machine: {gpu}, {os.cpu_count()} CPU cores, {platform.platform()}")
 
 
+def wgpu_device():
+    """What the wgpu measurements ran on, as the binary recorded it (absent before 30 November's
+    twentieth session): a check whose wgpu ran on an emulated GPU measured the CPU."""
+    found = []
+    for name, rows in (("render_wgpu.json", lambda d: d["rows"]),
+                       ("frames_wgpu.json", lambda d: [d]),
+                       ("step_wgpu.json", lambda d: d)):
+        try:
+            found += [r["device"] for r in rows(load(name)) if r.get("device")]
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    devices = sorted(set(found))
+    print(f"wgpu ran on: {', '.join(devices) if devices else 'not recorded'}")
+    return [d for d in devices if d.startswith("emulated")]
+
+
 def process_start():
     start = load("process_start.json")
     print(f"\na fresh process, four guitar steps (two step variants, one untimed step and one timed "
@@ -231,6 +247,7 @@ def first_try():
 
 
 machine()
+emulated = wgpu_device()
 section("process start", process_start)
 section("launch, read and upload costs", launch_costs)
 section("mask passes", mask_passes)
@@ -249,6 +266,9 @@ section("first-try guitar", first_try)
 print(f"\nJSON in {out}")
 if len(sys.argv) > 2:
     print(f"the check's measurements took {int(sys.argv[2]) / 60:.1f} minutes")
+if emulated:
+    print(f"WARNING: wgpu ran on {', '.join(emulated)}, not a GPU: its figures are the CPU's "
+          "(is the GPU's Vulkan ICD installed and found? `vulkaninfo --summary`)")
 if missing:
     print("not measured (the check stopped before them, or they failed): " + ", ".join(missing))
 if failed:

@@ -120,9 +120,12 @@ pub fn run(args: RenderPathArgs) -> Result<()> {
             );
         }
         eprintln!(
-            "path: {} → {} frames at {} fps, {}×{}",
-            plan.description, plan.frames, plan.fps, plan.width, plan.height
+            "path: {} → {} frames at {} fps, {}×{} on {}",
+            plan.description, plan.frames, plan.fps, plan.width, plan.height, plan.hardware
         );
+        if let Some(warning) = plan.hardware.warning() {
+            eprintln!("warning: {warning}");
+        }
         bar.set_length(plan.frames as u64);
         bar.set_message("frames");
     };

@@ -29,6 +29,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
+use splatraj_render::backend::Hardware;
 use splatraj_render::counters::Counts;
 use splatraj_traj::metrics::WindowMetrics;
 use splatraj_traj::optimise::StopReason;
@@ -315,13 +316,17 @@ impl Experiment {
     pub fn plan_lines(&self) -> Vec<String> {
         let experiment = self;
         let mut lines = Vec::new();
+        let hardware = Hardware::of(&experiment.device);
         lines.push(format!(
-            "scene: {} ({} Gaussians), backend {:?}, rasterizer {:?}",
+            "scene: {} ({} Gaussians), backend {:?} on {hardware}, rasterizer {:?}",
             experiment.scene_name,
             experiment.scene.len(),
             experiment.config.backend,
             experiment.config.rasterizer
         ));
+        if let Some(warning) = hardware.warning() {
+            lines.push(format!("warning: {warning}"));
+        }
         lines.push(experiment.up.describe());
         if experiment.up.doubtful() {
             lines.push(
@@ -750,6 +755,9 @@ pub fn run_pose_experiment(
     let experiment = Experiment::prepare(&config)?;
     let plan = experiment.check_pose_run(request.sgld)?;
     let index = config.pose.query;
+    if let Some(warning) = Hardware::of(&experiment.device).warning() {
+        observer.line(&format!("warning: {warning}"));
+    }
     observer.line(&format!(
         "query {:?}: {} Gaussians, {} start(s), costs {:?}",
         experiment.windows[index].name,

@@ -133,6 +133,74 @@ impl Execution {
     }
 }
 
+/// What a device computes on, as runs and benchmarks report it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Hardware {
+    /// The host's cores (flex, ndarray): rayon's threads.
+    Cpu {
+        /// Threads of rayon's global pool.
+        threads: usize,
+    },
+    /// A GPU, by the name its driver gives (`NVIDIA H200`).
+    Gpu {
+        /// The adapter's name.
+        name: String,
+    },
+    /// wgpu on a CPU adapter (Mesa's lavapipe, "llvmpipe …"): no GPU driver was found, so every
+    /// kernel runs emulated on the host, many times slower than flex.
+    EmulatedGpu {
+        /// The adapter's name.
+        name: String,
+    },
+}
+
+impl Hardware {
+    /// What `device` computes on. On wgpu this starts the device if nothing has yet.
+    pub fn of(device: &Device) -> Hardware {
+        #[cfg(feature = "wgpu")]
+        if let burn_dispatch::DispatchDevice::Cube(cube) = device.as_dispatch().clone().inner() {
+            let identity = cube.client().properties().identity.clone();
+            // CubeCL leaves `physical` empty for a CPU adapter (a software rasterizer) only.
+            return match identity.physical {
+                Some(_) => Hardware::Gpu {
+                    name: identity.name,
+                },
+                None => Hardware::EmulatedGpu {
+                    name: identity.name,
+                },
+            };
+        }
+        #[cfg(not(feature = "wgpu"))]
+        let _ = device;
+        Hardware::Cpu {
+            threads: rayon::current_num_threads(),
+        }
+    }
+
+    /// Why a run on this hardware will be slow and what to do, where it will be.
+    pub fn warning(&self) -> Option<String> {
+        match self {
+            Hardware::EmulatedGpu { name } => Some(format!(
+                "backend \"wgpu\" found no GPU driver and runs on {name}, a GPU emulated on the \
+                 CPU, many times slower than backend \"flex\": install the GPU's Vulkan driver \
+                 (NVIDIA: the driver's Vulkan ICD; AMD and Intel: mesa-vulkan-drivers), or pick \
+                 a GPU with CUBECL_WGPU_DEFAULT_DEVICE=DiscreteGpu(0)"
+            )),
+            Hardware::Cpu { .. } | Hardware::Gpu { .. } => None,
+        }
+    }
+}
+
+impl fmt::Display for Hardware {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Hardware::Cpu { threads } => write!(f, "CPU ({threads} threads)"),
+            Hardware::Gpu { name } => write!(f, "GPU {name}"),
+            Hardware::EmulatedGpu { name } => write!(f, "emulated GPU {name}"),
+        }
+    }
+}
+
 impl fmt::Display for BackendKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.feature())

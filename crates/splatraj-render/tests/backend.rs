@@ -7,7 +7,7 @@ mod common;
 use burn::tensor::{DType, Tensor, TensorData};
 use common::{host, ref_camera};
 use glam::DVec3;
-use splatraj_render::backend::{BackendKind, Precision};
+use splatraj_render::backend::{BackendKind, Hardware, Precision};
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::reference::{RefChannels, render_reference};
 use splatraj_render::render::{
@@ -229,6 +229,45 @@ fn missing_backend_names_its_feature() {
             .unwrap_err()
             .contains("unknown backend 'cuda'")
     );
+}
+
+/// What each compiled backend runs on, as runs report it: the CPU with rayon's threads, and on
+/// wgpu the adapter by name, Mesa's software one (lavapipe, named "llvmpipe") as an emulated
+/// GPU with a warning that names it and says what to install.
+#[test]
+fn each_backend_says_what_it_runs_on() {
+    for backend in BackendKind::compiled() {
+        let hardware = Hardware::of(&backend.device().unwrap());
+        match backend {
+            BackendKind::Flex | BackendKind::Ndarray => {
+                assert_eq!(
+                    hardware,
+                    Hardware::Cpu {
+                        threads: rayon::current_num_threads()
+                    }
+                );
+                assert_eq!(hardware.warning(), None);
+            }
+            BackendKind::Wgpu => match &hardware {
+                Hardware::EmulatedGpu { name } => {
+                    assert!(
+                        name.contains("llvmpipe"),
+                        "{name}: only lavapipe is known here"
+                    );
+                    let warning = hardware.warning().expect("a warning");
+                    assert!(
+                        warning.contains(name.as_str()) && warning.contains("Vulkan driver"),
+                        "{warning}"
+                    );
+                }
+                Hardware::Gpu { name } => {
+                    assert!(!name.contains("llvmpipe"), "{name} is software");
+                    assert_eq!(hardware.warning(), None);
+                }
+                Hardware::Cpu { .. } => panic!("wgpu reported as the host's cores"),
+            },
+        }
+    }
 }
 
 #[test]

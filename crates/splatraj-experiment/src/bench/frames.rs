@@ -16,7 +16,7 @@ use anyhow::{Context, Result, anyhow, bail};
 use burn::tensor::DType;
 use glam::DVec3;
 use serde::Serialize;
-use splatraj_render::backend::BackendKind;
+use splatraj_render::backend::{BackendKind, Hardware};
 use splatraj_render::camera::Intrinsics;
 use splatraj_render::counters::{self, Counts};
 use splatraj_render::orbit::Orbit;
@@ -116,6 +116,9 @@ pub struct FramesRow {
 pub struct FramesReport {
     /// Tensor backend.
     pub backend: String,
+    /// What the frames were rendered on ([`Hardware`]): a GPU by name, an emulated one, or the
+    /// CPU.
+    pub device: String,
     /// Compositing.
     pub rasterizer: String,
     /// Threads of rayon's pool.
@@ -354,6 +357,7 @@ pub fn run_frames(bench: &FramesBench, progress: &mut dyn FnMut(&str)) -> Result
     }
     Ok(FramesReport {
         backend: bench.backend.to_string(),
+        device: Hardware::of(&device).to_string(),
         rasterizer: rasterizer_name(bench.rasterizer).into(),
         rayon_threads: rayon::current_num_threads(),
         cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
@@ -370,10 +374,12 @@ impl FramesReport {
     pub fn table(&self) -> String {
         let load = |l: Option<f64>| l.map_or("-".into(), |l| format!("{l:.2}"));
         let mut out = format!(
-            "output frames (RGB + object mask, metrics, PNG, H.264), backend {}, {} rasterizer, \
+            "output frames (RGB + object mask, metrics, PNG, H.264), backend {} on {}, {} \
+             rasterizer, \
              rayon pool {} threads on {} cores, load {} → {}; ms per frame; video = {} s at {} \
              fps (~: extrapolated from the frames timed)\n",
             self.backend,
+            self.device,
             self.rasterizer,
             self.rayon_threads,
             self.cores,

@@ -23,7 +23,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, anyhow, bail};
 use burn::tensor::DType;
 use serde::{Deserialize, Serialize};
-use splatraj_render::backend::BackendKind;
+use splatraj_render::backend::{BackendKind, Hardware};
 use splatraj_render::camera::Intrinsics;
 use splatraj_render::counters::{self, Counts};
 use splatraj_render::render::{Pruning, Rasterizer};
@@ -178,6 +178,7 @@ impl BenchConfig {
             peak_mb: None,
             cpu_per_wall: None,
             rayon_threads: 0,
+            device: String::new(),
             stages_ms: Vec::new(),
             counts: Counts::default(),
             launch_names: Vec::new(),
@@ -252,6 +253,9 @@ pub struct BenchRow {
     pub cpu_per_wall: Option<f64>,
     /// Threads of rayon's global pool in the child.
     pub rayon_threads: usize,
+    /// What the child ran on ([`Hardware`]): a GPU by name, an emulated one, or the CPU.
+    #[serde(default)]
+    pub device: String,
     /// Mean ms per forward + backward pass in each render stage (`splatraj_render::stages`
     /// names), then `other`: the rest of the pass (the projection's autodiff backward, costs).
     #[serde(default)]
@@ -291,9 +295,16 @@ impl BenchReport {
     /// The human-readable table, then the fused speed-ups.
     pub fn table(&self) -> String {
         let report = self;
+        // The children's: a row that was skipped has none.
+        let device = report
+            .rows
+            .iter()
+            .find(|r| !r.device.is_empty())
+            .map_or_else(String::new, |r| format!(" on {}", r.device));
         let mut out = format!(
-            "mask pass (render + TCE + TRE), backend {}, {}, median of {}, rayon pool {} threads on \
-         {} cores, target coverage {:.2}; ns/pair = time / (tile–Gaussian pairs × 256)\n",
+            "mask pass (render + TCE + TRE), backend {}{device}, {}, median of {}, rayon pool {} \
+             threads on {} cores, target coverage {:.2}; ns/pair = time / (tile–Gaussian pairs × \
+             256)\n",
             report.backend,
             report.dtype,
             report.repeats,
@@ -522,6 +533,7 @@ pub fn run_one(args: &BenchSettings, config: &BenchConfig) -> Result<BenchRow> {
         peak_mb: peak_mb(),
         cpu_per_wall,
         rayon_threads: rayon::current_num_threads(),
+        device: Hardware::of(&device).to_string(),
         stages_ms,
         counts,
         launch_names,

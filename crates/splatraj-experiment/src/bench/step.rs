@@ -19,6 +19,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use serde::Serialize;
+use splatraj_render::backend::Hardware;
 use splatraj_render::counters::{self, Counts};
 use splatraj_render::stages;
 use splatraj_traj::optimise::{Flow, StepPasses, optimise_trajectory};
@@ -32,6 +33,8 @@ use crate::prepare::experiment::Experiment;
 pub struct StepRow {
     /// `shared` or `per-window`.
     pub passes: &'static str,
+    /// What the steps ran on ([`Hardware`]): a GPU by name, an emulated one, or the CPU.
+    pub device: String,
     /// Wall time of the timed steps over their number, ms: every wait for the device included.
     pub ms_per_step: f64,
     /// Per step: launches, reads, uploads, bytes, render calls.
@@ -90,6 +93,7 @@ pub fn run_step_bench(path: &Path, set: &[String], steps: usize) -> Result<Vec<S
             .collect();
         rows.push(StepRow {
             passes: name,
+            device: Hardware::of(&experiment.device).to_string(),
             ms_per_step: ms / options.iterations as f64,
             counts,
             steps: options.iterations,
@@ -103,7 +107,10 @@ pub fn run_step_bench(path: &Path, set: &[String], steps: usize) -> Result<Vec<S
 
 /// The rows as a table.
 pub fn step_table(rows: &[StepRow]) -> String {
-    let mut out = format!(
+    let mut out = rows.first().map_or_else(String::new, |r| {
+        format!("optimisation steps on {}\n", r.device)
+    });
+    out += &format!(
         "{:<11} {:>9} {:>9} {:>6} {:>8} {:>9} {:>8} {:>9} {:>9} {:>12}\n",
         "passes",
         "ms/step",

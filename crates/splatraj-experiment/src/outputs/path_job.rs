@@ -8,7 +8,7 @@ use std::path::Path;
 
 use anyhow::{Result, bail};
 use burn::tensor::DType;
-use splatraj_render::backend::BackendKind;
+use splatraj_render::backend::{BackendKind, Hardware};
 use splatraj_render::render::{DeviceScene, Rasterizer};
 use splatraj_scene::formats::ReadOptions;
 
@@ -115,6 +115,8 @@ pub struct PathPlan {
     pub height: usize,
     /// Invalid Gaussians dropped from a scene file (under `InvalidPolicy::Drop`).
     pub dropped: usize,
+    /// What the frames are rendered on.
+    pub hardware: Hardware,
 }
 
 /// Reads and checks `job`'s inputs, tells `plan` what will be rendered, then renders the frames
@@ -182,6 +184,7 @@ pub fn render_path_job(
         width: frames.cameras[0].width,
         height: frames.cameras[0].height,
         dropped,
+        hardware: Hardware::of(&scene.geometry.means.device()),
     });
     let render = PathRender {
         frames: &frames,

@@ -12,6 +12,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
+use splatraj_render::backend::Hardware;
 use splatraj_render::counters::Counts;
 use splatraj_scene::atomic::is_partial_file;
 use splatraj_traj::metrics::{Smoothness, WindowMetrics};
@@ -85,6 +86,8 @@ pub struct RunReport {
     pub peak_memory_mb: Option<f64>,
     /// Backend and precision.
     pub backend: String,
+    /// What the run computed on ([`Hardware`]): a GPU by name, an emulated one, or the CPU.
+    pub device: String,
     /// What each stage asked of the device: kernel launches, reads and uploads (docs/gpu.md
     /// "Counters"; launches are counted on a GPU only).
     pub counts: StageCounts,
@@ -141,6 +144,7 @@ impl RunReport {
             total_s: times.total.as_secs_f64(),
             peak_memory_mb: crate::resources::peak_mb(),
             backend: format!("{:?} {:?}", config.backend, config.precision),
+            device: Hardware::of(&experiment.device).to_string(),
             counts: times.counts,
         }
     }
