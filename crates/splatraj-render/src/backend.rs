@@ -40,18 +40,30 @@ impl Precision {
     }
 }
 
-/// A backend was asked for that this build does not have.
+/// A backend was asked for that this build or this machine cannot give.
 #[derive(Debug, Clone, thiserror::Error)]
-#[error(
-    "backend '{requested}' is not compiled into this build (available: {available}); rebuild with `--features {feature}`"
-)]
-pub struct BackendUnavailable {
-    /// The backend asked for.
-    pub requested: BackendKind,
-    /// The cargo feature that provides it.
-    pub feature: &'static str,
-    /// The backends this build has.
-    pub available: String,
+pub enum BackendUnavailable {
+    /// The backend is not compiled into this build.
+    #[error(
+        "backend '{requested}' is not compiled into this build (available: {available}); rebuild with `--features {feature}`"
+    )]
+    NotCompiled {
+        /// The backend asked for.
+        requested: BackendKind,
+        /// The cargo feature that provides it.
+        feature: &'static str,
+        /// The backends this build has.
+        available: String,
+    },
+    /// wgpu found no adapter it could start (no Vulkan, Metal or DX12 driver, or none of the
+    /// kind `CUBECL_WGPU_DEFAULT_DEVICE` asks for).
+    #[error(
+        "backend 'wgpu' could not start a device: {reason}. Install the GPU's Vulkan driver (NVIDIA: the driver's Vulkan ICD; AMD and Intel: mesa-vulkan-drivers, which also brings a CPU emulation), check CUBECL_WGPU_DEFAULT_DEVICE if it is set, or run with backend = \"flex\""
+    )]
+    NoDevice {
+        /// What wgpu said.
+        reason: String,
+    },
 }
 
 impl BackendKind {
@@ -92,11 +104,12 @@ impl BackendKind {
             BackendKind::Ndarray => Ok(Device::ndarray()),
             #[cfg(feature = "wgpu")]
             BackendKind::Wgpu => {
+                start_wgpu()?;
                 crate::counters::watch_launches();
                 Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice))
             }
             #[allow(unreachable_patterns)] // reachable when a feature is off
-            other => Err(BackendUnavailable {
+            other => Err(BackendUnavailable::NotCompiled {
                 requested: other,
                 feature: other.feature(),
                 available: Self::compiled()
@@ -107,6 +120,27 @@ impl BackendKind {
             }),
         }
     }
+}
+
+/// Starts wgpu's default device once a process, as burn would on its first op, but returning
+/// what went wrong: burn starts it on a thread of its own and panics there when no adapter
+/// answers (a machine without a GPU driver, a `CUBECL_WGPU_DEFAULT_DEVICE` naming no adapter),
+/// which ended a command as an internal error. The runtime registered here under the default
+/// device's id (automatic graphics API) is the one burn's `Device::wgpu(DefaultDevice)` then
+/// uses.
+#[cfg(feature = "wgpu")]
+fn start_wgpu() -> Result<(), BackendUnavailable> {
+    use burn_cubecl::cubecl::wgpu::{AutoGraphicsApi, RuntimeOptions, WgpuDevice, try_init_setup};
+    static STARTED: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
+    STARTED
+        .get_or_init(|| {
+            let options = RuntimeOptions::try_default().map_err(|e| e.to_string())?;
+            try_init_setup::<AutoGraphicsApi>(&WgpuDevice::default(), options)
+                .map(drop)
+                .map_err(|e| e.to_string())
+        })
+        .clone()
+        .map_err(|reason| BackendUnavailable::NoDevice { reason })
 }
 
 /// How `device` runs tensor ops: as kernel launches on a GPU (each op a launch, queued and

@@ -270,6 +270,45 @@ fn each_backend_says_what_it_runs_on() {
     }
 }
 
+/// A wgpu that cannot start a device is an error that says what wgpu said and what to do, the
+/// second time too, not a panic on burn's device thread (an "internal error", exit 101, until
+/// 30 November). Its own process: the adapter is chosen once per process, here one that no
+/// machine has (`CUBECL_WGPU_DEFAULT_DEVICE`, read when the device starts).
+#[cfg(feature = "wgpu")]
+#[test]
+fn a_gpu_that_cannot_start_is_an_error() {
+    const CHILD: &str = "SPLATRAJ_TEST_NO_DEVICE_CHILD";
+    const NO_SUCH_GPU: &str = "DiscreteGpu(200)";
+    if std::env::var_os(CHILD).is_some() {
+        for _ in 0..2 {
+            let message = BackendKind::Wgpu.device().unwrap_err().to_string();
+            assert!(
+                message.contains("could not start a device")
+                    && message.contains(NO_SUCH_GPU)
+                    && message.contains("backend = \"flex\""),
+                "{message}"
+            );
+        }
+        return;
+    }
+    let out = std::process::Command::new(std::env::current_exe().unwrap())
+        .args([
+            "--exact",
+            "a_gpu_that_cannot_start_is_an_error",
+            "--nocapture",
+        ])
+        .env(CHILD, "1")
+        .env("CUBECL_WGPU_DEFAULT_DEVICE", NO_SUCH_GPU)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{:?}: {}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 #[test]
 fn f64_is_really_f64() {
     let device = BackendKind::Flex.device().unwrap();
