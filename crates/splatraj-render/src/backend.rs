@@ -40,6 +40,10 @@ impl Precision {
     }
 }
 
+/// What to install for wgpu to find a GPU.
+const DRIVER_ADVICE: &str = "Install the GPU's Vulkan driver (NVIDIA: the driver's Vulkan ICD; \
+     AMD and Intel: mesa-vulkan-drivers)";
+
 /// A backend was asked for that this build or this machine cannot give.
 #[derive(Debug, Clone, thiserror::Error)]
 pub enum BackendUnavailable {
@@ -58,7 +62,7 @@ pub enum BackendUnavailable {
     /// wgpu found no adapter it could start (no Vulkan, Metal or DX12 driver, or none of the
     /// kind `CUBECL_WGPU_DEFAULT_DEVICE` asks for).
     #[error(
-        "backend 'wgpu' could not start a device: {reason}. Install the GPU's Vulkan driver (NVIDIA: the driver's Vulkan ICD; AMD and Intel: mesa-vulkan-drivers, which also brings a CPU emulation), check CUBECL_WGPU_DEFAULT_DEVICE if it is set, or run with backend = \"flex\""
+        "backend 'wgpu' could not start a device: {reason}. {DRIVER_ADVICE}, check CUBECL_WGPU_DEFAULT_DEVICE if it is set, or run with backend = \"flex\""
     )]
     NoDevice {
         /// What wgpu said.
@@ -189,7 +193,7 @@ pub enum Hardware {
 }
 
 impl Hardware {
-    /// What `device` computes on. On wgpu this starts the device if nothing has yet.
+    /// What `device` computes on.
     pub fn of(device: &Device) -> Hardware {
         #[cfg(feature = "wgpu")]
         if let burn_dispatch::DispatchDevice::Cube(cube) = device.as_dispatch().clone().inner() {
@@ -216,9 +220,8 @@ impl Hardware {
         match self {
             Hardware::EmulatedGpu { name } => Some(format!(
                 "backend \"wgpu\" found no GPU driver and runs on {name}, a GPU emulated on the \
-                 CPU, many times slower than backend \"flex\": install the GPU's Vulkan driver \
-                 (NVIDIA: the driver's Vulkan ICD; AMD and Intel: mesa-vulkan-drivers), or pick \
-                 a GPU with CUBECL_WGPU_DEFAULT_DEVICE=DiscreteGpu(0)"
+                 CPU, many times slower than backend \"flex\". {DRIVER_ADVICE}, or pick a GPU \
+                 with CUBECL_WGPU_DEFAULT_DEVICE=DiscreteGpu(0)"
             )),
             Hardware::Cpu { .. } | Hardware::Gpu { .. } => None,
         }
