@@ -11,6 +11,9 @@
 #
 #   bash .gpu/run.sh                               # GPU_CHECK_QUICK=1 for a smoke test
 #
+# It first asks the binary what wgpu runs on and stops (status 3, with the Vulkan ICDs it saw)
+# unless that is a GPU: a smoke test on a machine without one adds GPU_CHECK_ALLOW_EMULATED=1.
+#
 # which writes $OUT/gpu_check.txt (the table and the log) and $OUT/gpu_check_json/ (every
 # measurement's JSON, written as it finishes). The check stops after GPU_CHECK_SECONDS (500)
 # and then tabulates what it measured; `python3 scripts/gpu_check_table.py DIR` does the same
@@ -75,6 +78,30 @@ fi
 icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
 [ -f "$icd" ] && export VK_DRIVER_FILES="${VK_DRIVER_FILES:-$icd}"
 xz -dkf .gpu/splatraj.xz && chmod +x .gpu/splatraj
+# What wgpu runs on, before any device minute goes to the check: without the GPU's Vulkan ICD
+# wgpu falls back to Mesa's CPU emulation and the check would measure the CPU (and use up the
+# session's device time). GPU_CHECK_ALLOW_EMULATED=1 runs it anyway, as a smoke test does.
+export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
+probe="$(.gpu/splatraj bench render --one demo:1000:64:object:fused --backend wgpu --repeats 1 \
+  --json 2>"$out/probe.err" | tail -1)"
+device="$(printf '%s' "$probe" | python3 -c 'import json, sys; print(json.load(sys.stdin)["device"])' \
+  2>/dev/null)"
+echo "wgpu runs on: ${device:-nothing (the probe failed)}" | tee "$out/gpu_check.txt"
+case "$device" in
+  "GPU "*) ;;
+  *)
+    if [ "${GPU_CHECK_ALLOW_EMULATED:-0}" != 1 ]; then
+      {
+        echo "no GPU for wgpu: the check is not run (GPU_CHECK_ALLOW_EMULATED=1 runs it anyway)"
+        tail -5 "$out/probe.err"
+        ls /usr/share/vulkan/icd.d /etc/vulkan/icd.d /usr/local/nvidia/share/vulkan/icd.d 2>&1
+        echo "VK_DRIVER_FILES=${VK_DRIVER_FILES:-}"
+        vulkaninfo --summary 2>&1 | head -30
+      } | tee -a "$out/gpu_check.txt"
+      exit 3
+    fi
+    ;;
+esac
 # Every measurement's JSON straight under OUT: what finished comes back even when the device
 # tool's time limit stops the check (give `run` a timeout_s above GPU_CHECK_SECONDS).
 json="$out/gpu_check_json"
@@ -113,7 +140,7 @@ check_seconds="${GPU_CHECK_SECONDS:-500}"
       --set 'backend="wgpu"' --set "scene.path=\"$PWD/.gpu/data/guitar.compressed.ply\"" \
       || echo "the branch's step exited with status $?"
   fi
-} >"$out/gpu_check.txt" 2>&1
+} >>"$out/gpu_check.txt" 2>&1
 tail -60 "$out/gpu_check.txt"
 grep -q '^gpu_check exit status 0$' "$out/gpu_check.txt"
 RUN
