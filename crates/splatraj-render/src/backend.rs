@@ -108,9 +108,9 @@ impl BackendKind {
             BackendKind::Ndarray => Ok(Device::ndarray()),
             #[cfg(feature = "wgpu")]
             BackendKind::Wgpu => {
-                start_wgpu()?;
+                let device = wgpu_device()?;
                 crate::counters::watch_launches();
-                Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice))
+                Ok(device)
             }
             #[allow(unreachable_patterns)] // reachable when a feature is off
             other => Err(BackendUnavailable::NotCompiled {
@@ -126,23 +126,15 @@ impl BackendKind {
     }
 }
 
-/// Starts wgpu's default device once a process, as burn would on its first op, but returning
-/// what went wrong: burn starts it on a thread of its own and panics there when no adapter
-/// answers (a machine without a GPU driver, a `CUBECL_WGPU_DEFAULT_DEVICE` naming no adapter),
-/// which ended a command as an internal error. The runtime registered here under the default
-/// device's id (automatic graphics API) is the one burn's `Device::wgpu(DefaultDevice)` then
-/// uses.
+/// wgpu's default device, started once a process with burn's fallible `Device::wgpu_options()
+/// .init()`: burn's lazy `Device::wgpu` starts it on a thread of its own at the first op and
+/// panics there when no adapter answers (a machine without a GPU driver, a
+/// `CUBECL_WGPU_DEFAULT_DEVICE` naming no adapter), which ended a command as an internal error.
 #[cfg(feature = "wgpu")]
-fn start_wgpu() -> Result<(), BackendUnavailable> {
-    use burn_cubecl::cubecl::wgpu::{AutoGraphicsApi, RuntimeOptions, WgpuDevice, try_init_setup};
-    static STARTED: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
+fn wgpu_device() -> Result<Device, BackendUnavailable> {
+    static STARTED: std::sync::OnceLock<Result<Device, String>> = std::sync::OnceLock::new();
     STARTED
-        .get_or_init(|| {
-            let options = RuntimeOptions::try_default().map_err(|e| e.to_string())?;
-            try_init_setup::<AutoGraphicsApi>(&WgpuDevice::default(), options)
-                .map(drop)
-                .map_err(|e| e.to_string())
-        })
+        .get_or_init(|| Device::wgpu_options().init().map_err(|e| e.to_string()))
         .clone()
         .map_err(|reason| BackendUnavailable::NoDevice { reason })
 }
