@@ -220,6 +220,8 @@ impl Hardware {
     }
 }
 
+/// The words `scripts/gpu_check_table.py` and the device pack's `run.sh` read: `GPU …` for a
+/// GPU, `emulated GPU …` for a CPU adapter.
 impl fmt::Display for Hardware {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
