@@ -681,22 +681,14 @@ fn gpu_kernels_match_host_kernels_on_a_long_replay() {
 /// dozen of the GPU kernels' cubes a pose, a partial last one.
 #[cfg(feature = "wgpu")]
 fn gpu_scene(seed: u64) -> Scene {
-    let mut rng = common::Rng(seed);
-    let mut scene = Scene::default();
-    for i in 0..3000 {
-        let spread = if i % 10 == 0 { 8.0 } else { 1.5 };
-        scene
-            .means
-            .push(std::array::from_fn(|_| rng.range(-spread, spread) as f32));
-        scene
-            .scales
-            .push(std::array::from_fn(|_| rng.range(0.01, 0.2) as f32));
-        scene
-            .rotations
-            .push(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
-        scene.opacities.push(rng.range(0.05, 1.0) as f32);
-    }
-    scene
+    let spread = |i: usize| if i.is_multiple_of(10) { 8.0 } else { 1.5 };
+    common::random_scene(
+        &mut common::Rng(seed),
+        3000,
+        spread,
+        (0.01, 0.2),
+        (0.05, 1.0),
+    )
 }
 
 /// Three poses on both of Rodrigues' branches (ω = 0 among them).

@@ -40,23 +40,11 @@ const POISON_PAGE: usize = 64 << 20;
 
 fn scene() -> Scene {
     let mut rng = common::Rng(0x9a1d);
-    let mut scene = Scene::default();
-    for _ in 0..GAUSSIANS {
-        scene
-            .means
-            .push(std::array::from_fn(|_| rng.range(-1.5, 1.5) as f32));
-        scene
-            .scales
-            .push(std::array::from_fn(|_| rng.range(0.03, 0.2) as f32));
-        scene
-            .rotations
-            .push(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
-        scene.opacities.push(rng.range(0.05, 0.6) as f32);
-        // Degree 1: the colours depend on the view, so the fused colours' kernels run too.
-        scene.sh.extend(std::array::from_fn::<f32, 12, _>(|_| {
-            rng.range(-0.6, 0.6) as f32
-        }));
-    }
+    let mut scene = common::random_scene(&mut rng, GAUSSIANS, |_| 1.5, (0.03, 0.2), (0.05, 0.6));
+    // Degree 1: the colours depend on the view, so the fused colours' kernels run too.
+    scene.sh = (0..12 * GAUSSIANS)
+        .map(|_| rng.range(-0.6, 0.6) as f32)
+        .collect();
     scene.sh_degree = 1;
     scene
 }
@@ -182,7 +170,8 @@ fn a_pass_is_the_same_on_reused_buffers_and_folded_grids() {
         .iter()
         .zip(&host.images)
         .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
-    assert!(images_gap < 1e-5, "images {images_gap} from flex's");
+    // f32 on both sides, with the suite's bound (`compiled_backends_agree_on_image_and_gradient`).
+    assert!(images_gap < 1e-4, "images {images_gap} from flex's");
     common::assert_within(
         "gradient against flex's",
         &first.gradient,

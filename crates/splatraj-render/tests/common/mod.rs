@@ -41,6 +41,35 @@ impl Rng {
     }
 }
 
+/// `n` Gaussians drawn from `rng`: centre coordinates within ±`spread(i)`, scales and opacities
+/// uniform in their ranges, rotations from four uniform values in [-1, 1) (the renderer
+/// normalises them).
+pub fn random_scene(
+    rng: &mut Rng,
+    n: usize,
+    spread: impl Fn(usize) -> f64,
+    scales: (f64, f64),
+    opacities: (f64, f64),
+) -> Scene {
+    let mut scene = Scene::default();
+    for i in 0..n {
+        let spread = spread(i);
+        scene
+            .means
+            .push(std::array::from_fn(|_| rng.range(-spread, spread) as f32));
+        scene.scales.push(std::array::from_fn(|_| {
+            rng.range(scales.0, scales.1) as f32
+        }));
+        scene
+            .rotations
+            .push(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
+        scene
+            .opacities
+            .push(rng.range(opacities.0, opacities.1) as f32);
+    }
+    scene
+}
+
 /// 60 Gaussians around the origin, 15 of them far out (off screen, beyond the Jacobian's
 /// clamp, behind the cameras), and a needle whose normalised determinant is floored.
 pub fn projection_scene(seed: u64) -> Scene {
