@@ -251,3 +251,42 @@ impl FromStr for BackendKind {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::Hardware;
+
+    /// The device pack's `run.sh` measures only where the words start with `GPU `, and
+    /// `gpu_check_table.py` warns where they start with `emulated GPU`: a rename here must
+    /// change them too.
+    #[test]
+    fn hardware_words_are_the_ones_the_scripts_read() {
+        let gpu = Hardware::Gpu {
+            name: "NVIDIA H200".into(),
+        };
+        let emulated = Hardware::EmulatedGpu {
+            name: "llvmpipe (LLVM 15.0.6, 256 bits)".into(),
+        };
+        assert_eq!(gpu.to_string(), "GPU NVIDIA H200");
+        assert!(emulated.to_string().starts_with("emulated GPU llvmpipe"));
+        assert_eq!(
+            Hardware::Cpu { threads: 16 }.to_string(),
+            "CPU (16 threads)"
+        );
+        for script in [
+            "../../scripts/device_pack.sh",
+            "../../scripts/gpu_check_table.py",
+        ] {
+            let text = std::fs::read_to_string(
+                concat!(env!("CARGO_MANIFEST_DIR"), "/").to_owned() + script,
+            )
+            .unwrap_or_else(|e| panic!("{script}: {e}"));
+            let read = if script.ends_with(".sh") {
+                "\"GPU \"*)"
+            } else {
+                "startswith(\"emulated\")"
+            };
+            assert!(text.contains(read), "{script} no longer reads {read}");
+        }
+    }
+}
