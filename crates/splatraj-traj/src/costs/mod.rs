@@ -398,9 +398,10 @@ impl CostInputs {
             Some(each) => each.iter().flat_map(f).collect(),
         };
         let count = rows.len() / K;
-        Tensor::from_data(
+        splatraj_render::host::upload(
             TensorData::new(rows, [count, K]),
-            (&self.poses.device(), self.poses.dtype()),
+            &self.poses.device(),
+            self.poses.dtype(),
         )
     }
 
@@ -591,9 +592,10 @@ impl CostInputs {
 
     /// A host vector as a `[1, 3]` row on the poses' device and dtype (for broadcasting).
     pub fn row(&self, v: [f64; 3]) -> Tensor<2> {
-        Tensor::from_data(
+        splatraj_render::host::upload(
             TensorData::new(v.to_vec(), [1, 3]),
-            (&self.poses.device(), self.poses.dtype()),
+            &self.poses.device(),
+            self.poses.dtype(),
         )
     }
 

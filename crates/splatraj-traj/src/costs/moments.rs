@@ -151,10 +151,7 @@ pub fn moment_sums(images: Tensor<4>, channel: usize) -> Tensor<2> {
 
 /// `values` uploaded as a tensor of `shape` on `like`'s device, in its dtype.
 fn constant_like(like: &Tensor<3>, values: Vec<f64>, shape: [usize; 3]) -> Tensor<3> {
-    Tensor::from_data(
-        TensorData::new(values, shape),
-        (&like.device(), like.dtype()),
-    )
+    splatraj_render::host::upload(TensorData::new(values, shape), &like.device(), like.dtype())
 }
 
 /// x_i = (i + ½)/n − ½ for the n pixels of an image axis: centres in image fractions from the

@@ -170,9 +170,10 @@ impl PathSamples {
                 .collect()
         };
         let count = rows.len() / K;
-        Tensor::from_data(
+        splatraj_render::host::upload(
             TensorData::new(rows, [count, K]),
-            (&self.poses.device(), self.poses.dtype()),
+            &self.poses.device(),
+            self.poses.dtype(),
         )
     }
 
@@ -199,9 +200,10 @@ impl PathSamples {
             }
             start += s.rows;
         }
-        let weights = Tensor::<2>::from_data(
+        let weights: Tensor<2> = splatraj_render::host::upload(
             TensorData::new(weights, [windows, count]),
-            (&values.device(), values.dtype()),
+            &values.device(),
+            values.dtype(),
         );
         weights
             .matmul(values.reshape([count, 1]))
@@ -221,9 +223,10 @@ impl PathSamples {
         for (k, &i) in self.stretch_of_pose()[..count].iter().enumerate() {
             select[k * windows + i] = 1.0;
         }
-        let select = Tensor::<2>::from_data(
+        let select: Tensor<2> = splatraj_render::host::upload(
             TensorData::new(select, [count, windows]),
-            (&values.device(), values.dtype()),
+            &values.device(),
+            values.dtype(),
         );
         select.matmul(values.reshape([windows, 1])).reshape([count])
     }
@@ -238,9 +241,10 @@ impl PathSamples {
 
     fn upload1(&self, values: Vec<f64>) -> Tensor<1> {
         let count = values.len();
-        Tensor::from_data(
+        splatraj_render::host::upload(
             TensorData::new(values, [count]),
-            (&self.poses.device(), self.poses.dtype()),
+            &self.poses.device(),
+            self.poses.dtype(),
         )
     }
 }

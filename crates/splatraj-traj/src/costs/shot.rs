@@ -81,9 +81,10 @@ impl Cost for ShotCost {
                 .iter()
                 .flat_map(|&s| point(s.clamp(0.0, 1.0)).to_array())
                 .collect();
-            Tensor::from_data(
+            splatraj_render::host::upload(
                 TensorData::new(values, [batch, 3]),
-                (&centres.device(), inputs.dtype()),
+                &centres.device(),
+                inputs.dtype(),
             )
         };
         let wanted = rows(&|s| shot.centre_at(s)); // [B, 3]

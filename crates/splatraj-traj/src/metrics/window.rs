@@ -381,7 +381,7 @@ fn queue_samples(
     let zoom = zooms.map(|host| {
         let data = TensorData::new(host.clone(), [host.len()]);
         Zoom::at(
-            Tensor::from_data(data, (&scene.device(), scene.dtype())),
+            splatraj_render::host::upload(data, &scene.device(), scene.dtype()),
             host,
         )
     });

@@ -264,8 +264,8 @@ impl StepEvaluation {
                 .iter()
                 .flat_map(|&c| std::iter::repeat_n(1.0 / (n * c) as f64, c))
                 .collect();
-            let weights =
-                Tensor::<1>::from_data(TensorData::new(weights, [rows]), (&device, dtype));
+            let weights: Tensor<1> =
+                splatraj_render::host::upload(TensorData::new(weights, [rows]), &device, dtype);
             loss.push((batched.total.clone() * weights).sum());
             // Means per window: [n, ΣS] (1/S_i on window i's samples) · [ΣS, terms].
             let averages: Vec<f64> = (0..n)
@@ -275,8 +275,8 @@ impl StepEvaluation {
                     })
                 })
                 .collect();
-            let averages =
-                Tensor::<2>::from_data(TensorData::new(averages, [n, rows]), (&device, dtype));
+            let averages: Tensor<2> =
+                splatraj_render::host::upload(TensorData::new(averages, [n, rows]), &device, dtype);
             let terms = batched.terms.len();
             let values = Tensor::cat(
                 batched
@@ -340,6 +340,7 @@ impl StepEvaluation {
             flat
         } else {
             let device = flat.device();
+            splatraj_render::counters::upload(8 * order.len());
             let index = Tensor::<1, Int>::from_data(TensorData::new(order, [offset]), &device);
             flat.select(0, index)
         };

@@ -17,7 +17,7 @@
 
 use std::time::{Duration, Instant};
 
-use burn::tensor::{Tensor, TensorData};
+use burn::tensor::TensorData;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -137,7 +137,7 @@ pub fn sample_poses_sgld(
     for step in 0..options.iterations {
         let flat: Vec<f64> = theta.iter().flatten().copied().collect();
         let normalised =
-            Tensor::<2>::from_data(TensorData::new(flat, [chains, 6]), (&device, dtype))
+            splatraj_render::host::upload::<2>(TensorData::new(flat, [chains, 6]), &device, dtype)
                 .require_grad();
         let poses = units.to_scene(normalised.clone());
         // The chains live on the host, so the render takes their poses from there and the

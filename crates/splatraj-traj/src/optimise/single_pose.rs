@@ -198,7 +198,7 @@ pub fn optimise_poses_observed(
     let units = options.units();
     let to_tensor = |rows: &[[f64; 6]]| {
         let flat: Vec<f64> = rows.iter().flat_map(|p| units.normalise(p)).collect();
-        Tensor::<2>::from_data(TensorData::new(flat, [rows.len(), 6]), (&device, dtype))
+        splatraj_render::host::upload::<2>(TensorData::new(flat, [rows.len(), 6]), &device, dtype)
     };
     // Scene poses (already denormalised on the device) as host rows.
     let from_tensor = |t: Tensor<2>| -> Result<Vec<[f64; 6]>, OptimiseError> {

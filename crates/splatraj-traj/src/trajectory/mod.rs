@@ -147,7 +147,7 @@ pub trait Basis: std::fmt::Debug + Send + Sync {
             .try_into_vec_as::<f64>()
             .expect("float tensor data converts to f64");
         let data = TensorData::new(self.matrix(&host), [batch, self.count()]);
-        Tensor::from_data(data, (&device, dtype))
+        splatraj_render::host::upload(data, &device, dtype)
     }
 }
 
@@ -488,7 +488,7 @@ impl Trajectory {
         }
         let flat: Vec<f64> = weights.iter().flatten().copied().collect();
         let data = TensorData::new(flat, [weights.len(), POSE_DIM]);
-        let weights = Param::from_tensor(Tensor::from_data(data, (device, dtype)));
+        let weights = Param::from_tensor(splatraj_render::host::upload(data, device, dtype));
         Ok(Self {
             weights,
             model,
@@ -508,7 +508,7 @@ impl Trajectory {
         lens.validate(self.model.count())?;
         let value = self.weights.val();
         let data = TensorData::new(lens.weights.clone(), [lens.weights.len(), 1]);
-        let tensor = Tensor::from_data(data, (&value.device(), value.dtype()));
+        let tensor = splatraj_render::host::upload(data, &value.device(), value.dtype());
         self.lens = Some(Param::from_tensor(tensor));
         self.zoom_range = Some(lens.range);
         Ok(self)

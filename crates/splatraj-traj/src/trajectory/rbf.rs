@@ -170,9 +170,10 @@ impl Basis for Rbf {
     /// exp(−(t − t_k)²/(2σ²)) by broadcasting `[B, 1] − [1, K]`, on the times' device and dtype.
     fn tensor(&self, times: Tensor<1>) -> Tensor<2> {
         let k = self.count();
-        let centres = Tensor::<2>::from_data(
+        let centres: Tensor<2> = splatraj_render::host::upload(
             TensorData::new(self.centres(), [1, k]),
-            (&times.device(), times.dtype()),
+            &times.device(),
+            times.dtype(),
         );
         let diff = times.unsqueeze_dim::<2>(1) - centres; // [B, 1] − [1, K] → [B, K]
         let inv_two_var = 1.0 / (2.0 * self.effective_sigma().powi(2));
