@@ -22,6 +22,7 @@ pub use splatraj_camera::camera_file;
 pub mod decide;
 pub mod focus;
 pub mod fused;
+pub mod heaviest_first;
 pub mod host;
 pub mod images;
 pub mod joined_rows;

@@ -13,6 +13,7 @@
 use rayon::prelude::*;
 
 use crate::bitset::GaussianBits;
+use crate::heaviest_first::map_heaviest_first;
 use crate::tiles::TileWork;
 
 /// Rows of a pass, pose after pose: pose b owns rows `starts[b]..starts[b + 1]`.
@@ -114,17 +115,12 @@ pub fn lay_out_rows(work: &mut [TileWork], batch: usize, n: usize) -> LaidOutRow
     if !work.is_sorted_by_key(|list| list.batch) {
         work.sort_by_key(|list| list.batch);
     }
-    let mut poses: Vec<&mut [TileWork]> = work.chunk_by_mut(|a, b| a.batch == b.batch).collect();
-    // The poses with the most entries first: a step's wide shots hold most of its entries, and
-    // one of them started last kept the other cores waiting (as in binning, `tiles.rs`).
-    poses.sort_by_key(|lists| {
-        std::cmp::Reverse(lists.iter().map(|l| l.gaussians.len()).sum::<usize>())
-    });
-    let mut read: Vec<(usize, GaussianBits)> = poses
-        .into_par_iter()
-        .map(|lists| (lists[0].batch, lay_out_pose(lists, n)))
-        .collect();
-    read.sort_by_key(|(pose, _)| *pose);
+    // The poses with the most entries first; the results in pose order.
+    let read: Vec<(usize, GaussianBits)> = map_heaviest_first(
+        work.chunk_by_mut(|a, b| a.batch == b.batch).collect(),
+        |lists| lists.iter().map(|l| l.gaussians.len()).sum(),
+        |lists| (lists[0].batch, lay_out_pose(lists, n)),
+    );
     let mut counts = vec![0; batch];
     for (pose, bits) in &read {
         counts[*pose] = bits.count();

@@ -14,6 +14,7 @@ use rayon::prelude::*;
 
 use crate::bitset::GaussianBits;
 use crate::decide::{Decided, Decisions};
+use crate::heaviest_first::map_heaviest_first;
 pub use crate::tile_grid::{TILE_PIXELS, TILE_SIZE, TileGrid};
 
 /// Which tiles and Gaussians a pass must visit.
@@ -54,14 +55,11 @@ pub fn bin_tiles(
         "one selection per pose"
     );
     let poses = decisions.kept.len();
-    // The poses that keep the most first: a step's poses differ several-fold (a wide shot's
-    // against a close-up's), and one of the largest started last kept the other cores
-    // waiting (first-try guitar on 2 cores: 17.0 ms for 26.5 ms of work).
-    let mut heaviest_first: Vec<usize> = (0..poses).collect();
-    heaviest_first.sort_by_key(|&b| std::cmp::Reverse(decisions.kept[b].len()));
-    let binned: Vec<(usize, Vec<TileWork>)> = heaviest_first
-        .into_par_iter()
-        .map(|b| {
+    // The poses that keep the most first.
+    let by_pose = map_heaviest_first(
+        (0..poses).collect(),
+        |&b| decisions.kept[b].len(),
+        |b| {
             let pose = PoseToBin {
                 kept: &decisions.kept[b],
                 b,
@@ -69,13 +67,9 @@ pub fn bin_tiles(
                 // The cores the other poses leave: a frame's one pose gets all of them.
                 bands: (rayon::current_num_threads() / poses).max(1),
             };
-            (b, bin_one_pose(pose, grid))
-        })
-        .collect();
-    let mut by_pose: Vec<Vec<TileWork>> = vec![Vec::new(); poses];
-    for (b, work) in binned {
-        by_pose[b] = work;
-    }
+            bin_one_pose(pose, grid)
+        },
+    );
     by_pose.into_iter().flatten().collect()
 }
 

@@ -62,6 +62,7 @@ pub fn run_step_bench(path: &Path, set: &[String], steps: usize) -> Result<Vec<S
         .starts
         .first()
         .ok_or_else(|| anyhow::anyhow!("the config makes no start trajectory"))?;
+    let device = Hardware::of(&experiment.device).to_string();
     let mut rows = Vec::new();
     for (passes, name) in [
         (StepPasses::PerWindow, "per-window"),
@@ -93,7 +94,7 @@ pub fn run_step_bench(path: &Path, set: &[String], steps: usize) -> Result<Vec<S
             .collect();
         rows.push(StepRow {
             passes: name,
-            device: Hardware::of(&experiment.device).to_string(),
+            device: device.clone(),
             ms_per_step: ms / options.iterations as f64,
             counts,
             steps: options.iterations,
