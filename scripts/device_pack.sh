@@ -87,6 +87,8 @@ probe="$(.gpu/splatraj bench render --one demo:1000:64:object:fused --backend wg
 device="$(printf '%s' "$probe" | python3 -c 'import json, sys; print(json.load(sys.stdin)["device"])' \
   2>/dev/null)"
 echo "wgpu runs on: ${device:-nothing (the probe failed)}" | tee "$out/gpu_check.txt"
+# Every adapter wgpu sees, the one it took marked (a binary older than `devices` says so).
+.gpu/splatraj devices 2>&1 | tee -a "$out/gpu_check.txt"
 case "$device" in
   "GPU "*) ;;
   *)

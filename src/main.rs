@@ -77,6 +77,9 @@ enum Command {
     RenderPath(commands::render_path::RenderPathArgs),
     /// Rebuild a run folder's report.html from its files.
     Report(commands::report::ReportArgs),
+    /// List what this machine can compute on: the CPU's threads and wgpu's adapters, with the
+    /// CUBECL_WGPU_DEFAULT_DEVICE value that picks each.
+    Devices(commands::devices::DevicesArgs),
 }
 
 /// What the work planned, for the message of an allocation that fails anyway: the largest
@@ -147,6 +150,7 @@ fn main() -> ExitCode {
         Command::RenderPath(args) => commands::render_path::run(args),
         Command::Report(args) => commands::report::run(args),
         Command::EncodeText(args) => commands::encode_text::run(args),
+        Command::Devices(args) => commands::devices::run(args),
     });
     match result {
         Ok(()) => ExitCode::SUCCESS,

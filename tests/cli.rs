@@ -153,3 +153,30 @@ fn demo_rejects_an_absurd_size() {
     );
     assert!(!path.exists());
 }
+
+/// `splatraj devices` without wgpu in the build: the CPU's threads as rayon counts them
+/// (RAYON_NUM_THREADS), and why there is no GPU listing; status 0.
+#[test]
+fn devices_lists_the_cpu_threads_and_says_why_no_gpu() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_splatraj"))
+        .args(["devices", "--json"])
+        .env("RAYON_NUM_THREADS", "3")
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let listing: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON on stdout");
+    assert_eq!(listing["cpu_threads"], 3);
+    if cfg!(feature = "wgpu") {
+        return;
+    }
+    assert!(listing["wgpu"].is_null());
+    let why = listing["wgpu_unavailable"].as_str().unwrap();
+    assert!(why.contains("--features wgpu"), "{why}");
+    let text = splatraj(&["devices"]);
+    assert!(text.status.success());
+    let text = String::from_utf8_lossy(&text.stdout);
+    assert!(
+        text.contains("threads") && text.contains("--features wgpu"),
+        "{text}"
+    );
+}

@@ -1,6 +1,7 @@
 //! One module per top-level subcommand.
 
 pub mod bench;
+pub mod devices;
 pub mod encode_text;
 pub mod export;
 pub mod pose;

@@ -113,15 +113,20 @@ impl BackendKind {
                 Ok(device)
             }
             #[allow(unreachable_patterns)] // reachable when a feature is off
-            other => Err(BackendUnavailable::NotCompiled {
-                requested: other,
-                feature: other.feature(),
-                available: Self::compiled()
-                    .iter()
-                    .map(ToString::to_string)
-                    .collect::<Vec<_>>()
-                    .join(", "),
-            }),
+            other => Err(other.not_compiled()),
+        }
+    }
+
+    /// The error for asking this build for this backend when it lacks it.
+    pub(crate) fn not_compiled(self) -> BackendUnavailable {
+        BackendUnavailable::NotCompiled {
+            requested: self,
+            feature: self.feature(),
+            available: Self::compiled()
+                .iter()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>()
+                .join(", "),
         }
     }
 }
@@ -213,7 +218,7 @@ impl Hardware {
             Hardware::EmulatedGpu { name } => Some(format!(
                 "backend \"wgpu\" found no GPU driver and runs on {name}, a GPU emulated on the \
                  CPU, many times slower than backend \"flex\". {DRIVER_ADVICE}, or pick a GPU \
-                 with CUBECL_WGPU_DEFAULT_DEVICE=DiscreteGpu(0)"
+                 `splatraj devices` lists with CUBECL_WGPU_DEFAULT_DEVICE"
             )),
             Hardware::Cpu { .. } | Hardware::Gpu { .. } => None,
         }

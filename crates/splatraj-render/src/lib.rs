@@ -11,6 +11,7 @@
 
 #![warn(missing_docs)]
 
+pub mod adapters;
 pub mod alpha_reach;
 pub mod backend;
 pub mod bitset;

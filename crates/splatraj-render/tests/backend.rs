@@ -270,6 +270,58 @@ fn each_backend_says_what_it_runs_on() {
     }
 }
 
+/// `splatraj devices` marks the adapter a run takes and gives each the
+/// `CUBECL_WGPU_DEFAULT_DEVICE` value that picks it. CubeCL's own device start is the yardstick:
+/// the adapter marked is the one whose name the started device reports, and each listed value,
+/// set in a process of its own (the adapter is chosen once a process), starts a device of the
+/// listed name.
+#[cfg(feature = "wgpu")]
+#[test]
+fn the_listed_adapters_are_the_ones_a_run_starts() {
+    use splatraj_render::adapters::{SELECTOR_VARIABLE, wgpu_adapters};
+    const CHILD: &str = "SPLATRAJ_TEST_LISTED_ADAPTER_NAME";
+    let started = |expected: &str| match Hardware::of(&BackendKind::Wgpu.device().unwrap()) {
+        Hardware::Gpu { name } | Hardware::EmulatedGpu { name } => {
+            assert_eq!(name, expected, "the device started is not the one listed")
+        }
+        Hardware::Cpu { .. } => panic!("wgpu reported as the host's cores"),
+    };
+    if let Ok(expected) = std::env::var(CHILD) {
+        started(&expected);
+        return;
+    }
+    // The device first: CubeCL and the listing each make a Vulkan instance, and the loader
+    // does not like two made at once.
+    let variable = std::env::var(SELECTOR_VARIABLE).ok();
+    BackendKind::Wgpu.device().unwrap();
+    let listing = wgpu_adapters(variable.as_deref()).unwrap();
+    assert!(
+        !listing.adapters.is_empty(),
+        "a device started, so wgpu has an adapter"
+    );
+    started(&listing.taken().expect("the adapter a run takes").name);
+    for adapter in &listing.adapters {
+        let out = std::process::Command::new(std::env::current_exe().unwrap())
+            .args([
+                "--exact",
+                "the_listed_adapters_are_the_ones_a_run_starts",
+                "--nocapture",
+            ])
+            .env(CHILD, &adapter.name)
+            .env(SELECTOR_VARIABLE, adapter.selector.to_string())
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}={}: {:?}: {}",
+            SELECTOR_VARIABLE,
+            adapter.selector,
+            out.status,
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+}
+
 /// A wgpu that cannot start a device is an error that says what wgpu said and what to do, the
 /// second time too, not a panic on burn's device thread (an "internal error", exit 101, until
 /// 30 November). Its own process: the adapter is chosen once per process, here one that no
