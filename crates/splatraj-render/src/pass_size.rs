@@ -49,7 +49,22 @@ pub fn poses_per_pass(
     channels: usize,
 ) -> usize {
     let limit = max_buffer_bytes(device).map_or(PASS_IMAGE_BYTES, |m| m.min(PASS_IMAGE_BYTES));
-    poses_within(limit, dtype.size(), width, height, channels + 1)
+    let fit = poses_within(limit, dtype.size(), width, height, channels + 1);
+    max_poses(device).map_or(fit, |most| fit.min(most))
+}
+
+/// The most poses one pass may hold on `device`: on a GPU, the projection's and colours'
+/// kernels put a pass's poses on one axis of their launch grid, which holds 65 535 cubes
+/// (`fused/launch_grid.rs`; 16×16 masks would otherwise fit 65 536 poses in the image bound);
+/// None on the host backends.
+pub fn max_poses(device: &Device) -> Option<usize> {
+    #[cfg(feature = "wgpu")]
+    if crate::backend::Execution::of(device) == crate::backend::Execution::Kernels {
+        return Some(crate::fused::launch_grid::MAX_PER_AXIS);
+    }
+    #[cfg(not(feature = "wgpu"))]
+    let _ = device;
+    None
 }
 
 /// Poses whose images of `width`×`height`×`values` values of `value_bytes` each fit in

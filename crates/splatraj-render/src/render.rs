@@ -19,7 +19,7 @@ use crate::fused::projection::{
 };
 use crate::fused::{CompositePlan, composite_packed};
 use crate::host::{OnDevice, to_host, upload};
-use crate::pass_size::{PassBuffer, first_oversized};
+use crate::pass_size::{PassBuffer, first_oversized, max_poses};
 use crate::project::{NEAR_PLANE, SceneTensors, project_zoomed};
 pub use crate::rasterize::AlphaChannel;
 use crate::rasterize::{
@@ -273,6 +273,17 @@ pub enum RenderError {
         /// The device's largest buffer, bytes.
         max: u64,
     },
+    /// More poses in one pass than the device's launch grids hold ([`max_poses`]).
+    #[error(
+        "a render pass of {batch} poses: a pass on this device holds at most {max}; render them \
+         in passes (`pass_size::passes` with `pass_size::poses_per_pass`)"
+    )]
+    TooManyPoses {
+        /// Poses in the pass.
+        batch: usize,
+        /// The most a pass may hold.
+        max: usize,
+    },
     /// Alpha was read from a render whose request dropped it ([`RenderRequest::alpha`]).
     #[error("the render's request dropped alpha (`RenderRequest::alpha`)")]
     AlphaDropped,
@@ -452,6 +463,9 @@ pub fn render_at(
     let dtype = scene.geometry.means.dtype();
     if request.channels.is_empty() && request.gaussian_values.is_none() {
         return Err(RenderError::NoChannel);
+    }
+    if let Some(max) = max_poses(&device).filter(|&max| batch > max) {
+        return Err(RenderError::TooManyPoses { batch, max });
     }
     for (index, channel) in request.channels.iter().enumerate() {
         if channel.width() == 0 {

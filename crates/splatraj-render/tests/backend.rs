@@ -1117,6 +1117,45 @@ fn a_pass_whose_rows_exceed_the_gpus_largest_buffer_is_an_error() {
     );
 }
 
+/// The projection's and colours' kernels put a pass's poses on one axis of their launch grid,
+/// which holds 65 535 cubes: a split into passes (`poses_per_pass`, which the metrics and the
+/// frames use) keeps under it where the image bound alone would not (16×16 masks: 65 536
+/// poses in 128 MiB), and a larger render call is refused before any work instead of failing
+/// on the device. The host backends keep the image bound alone.
+#[test]
+fn a_pass_never_holds_more_poses_than_a_launch_grid_axis() {
+    use splatraj_render::backend::Execution;
+    use splatraj_render::pass_size::{PASS_IMAGE_BYTES, max_buffer_bytes, poses_per_pass};
+
+    for backend in BackendKind::compiled() {
+        let device = backend.device().unwrap();
+        // A 16×16 mask and its alpha in f32: 2 KiB a pose.
+        let limit = max_buffer_bytes(&device).map_or(PASS_IMAGE_BYTES, |m| m.min(PASS_IMAGE_BYTES));
+        let fit = usize::try_from(limit / (16 * 16 * 2 * 4)).unwrap();
+        let per_pass = poses_per_pass(&device, DType::F32, 16, 16, 1);
+        match Execution::of(&device) {
+            Execution::Host => assert_eq!(per_pass, fit, "{backend}"),
+            Execution::Kernels => {
+                assert_eq!(per_pass, fit.min(65_535), "{backend}");
+                let (scene, _, intrinsics, _) = setup();
+                let uploaded = DeviceScene::new(&scene, &device, DType::F32);
+                let batch = 65_536;
+                let poses = Tensor::<2>::zeros([batch, 6], (&device, DType::F32));
+                let request = RenderRequest::new(intrinsics, vec![Channel::Depth]);
+                let message = render(&uploaded, poses, &request)
+                    .map(|_| ())
+                    .expect_err("a pass past the launch grid's axis is refused")
+                    .to_string();
+                assert!(
+                    message.contains("a render pass of 65536 poses")
+                        && message.contains("at most 65535"),
+                    "{message}"
+                );
+            }
+        }
+    }
+}
+
 /// A GPU kernel stages every channel of 256 entries in workgroup memory, so a device holds only
 /// so many channels a composite (lavapipe 16; a feature render of a mask file has one per
 /// label). Past that, a pass failed on the device ("Too much shared memory requested"); now
