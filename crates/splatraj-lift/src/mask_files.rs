@@ -18,7 +18,7 @@
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
-use burn::tensor::{DType, Device, Tensor, TensorData};
+use burn::tensor::{DType, Device, Tensor};
 use image::DynamicImage;
 use rayon::prelude::*;
 use splatraj_render::render::{Channel, DeviceScene, RenderError, RenderRequest, render};
@@ -428,10 +428,7 @@ pub fn render_label_mask(
         .flat_map(|l| ids.iter().map(move |id| f32::from(u8::from(id == l))))
         .collect();
     let device = device_scene.geometry.means.device();
-    let pose = Tensor::<2>::from_data(
-        TensorData::new(view.pose.0.to_vec(), [1, 6]),
-        (&device, DType::F32),
-    );
+    let pose = splatraj_render::host::poses_tensor(&[view.pose], &device, DType::F32);
     let request = RenderRequest::new(view.intrinsics, vec![Channel::Features { dim, values }]);
     let out = render(device_scene, pose, &request)?;
     let read = |t: Tensor<4>| -> Result<Vec<f32>> {

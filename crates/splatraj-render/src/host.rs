@@ -5,7 +5,7 @@
 //! gradients) goes through [`to_host`], so there is one conversion rule: any float dtype is
 //! read as f64.
 
-use burn::tensor::{DType, Device, Tensor, TensorData};
+use burn::tensor::{DType, Device, Int, Tensor, TensorData};
 
 use crate::camera::Pose;
 
@@ -56,6 +56,17 @@ fn device_failure(report: &str) -> String {
 pub fn upload<const D: usize>(data: TensorData, device: &Device, dtype: DType) -> Tensor<D> {
     crate::counters::upload(data.as_bytes().len());
     Tensor::from_data(data, (device, dtype))
+}
+
+/// An integer tensor (indices) from host `values` of `shape` on `device` (a counted upload).
+pub fn upload_ints<const D: usize>(
+    values: Vec<i64>,
+    shape: [usize; D],
+    device: &Device,
+) -> Tensor<D, Int> {
+    let data = TensorData::new(values, shape);
+    crate::counters::upload(data.as_bytes().len());
+    Tensor::from_data(data, device)
 }
 
 /// The single value of a one-element tensor (or NaN if it cannot be read).

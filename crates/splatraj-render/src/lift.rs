@@ -143,7 +143,7 @@ pub fn lift_views(
             .flat_map(|f| f.iter().copied().chain([1.0]))
             .collect();
         let shape = [views.len(), intrinsics.height, intrinsics.width, dim + 1];
-        let f = Tensor::<4>::from_data(TensorData::new(with_ones, shape), (&device, dtype));
+        let f: Tensor<4> = crate::host::upload(TensorData::new(with_ones, shape), &device, dtype);
         let grads = (rendered.images * f).sum().backward();
         let Some(gradient) = values.grad(&grads) else {
             continue; // no used Gaussian reached the image

@@ -12,9 +12,10 @@
 //! skip and stop decisions carry no gradient; the gradient flows through α of the Gaussians
 //! that are kept, and through the channel values.
 
-use burn::tensor::{Int, Tensor, TensorData};
+use burn::tensor::{Tensor, TensorData};
 use splatraj_config::ConfigError;
 
+use crate::host::{upload, upload_ints};
 use crate::rows::PoseRows;
 use crate::tiles::{TILE_PIXELS, TILE_SIZE, TileGrid, TileWork};
 
@@ -270,10 +271,7 @@ pub fn composite(
     for (slot, &w) in order.iter().enumerate() {
         slot_from_tile[work[w].batch * grid.len() + work[w].tile] = slot as i64;
     }
-    let index = Tensor::<1, Int>::from_data(
-        TensorData::new(slot_from_tile, [batch * grid.len()]),
-        &device,
-    );
+    let index = upload_ints(slot_from_tile, [batch * grid.len()], &device);
     let full = tiles.select(0, index); // [B · tiles, 256, C + 1]
     let image = full
         .reshape([
@@ -370,13 +368,11 @@ fn composite_group(
                 (ty * TILE_SIZE) as f64 + 0.5 * TILE_SIZE as f64,
             ));
         }
-        let index = Tensor::<1, Int>::from_data(TensorData::new(index, [tiles * k]), &device);
+        let index = upload_ints(index, [tiles * k], &device);
         let centre_x: Vec<f64> = centres.iter().map(|c| c.0).collect();
         let centre_y: Vec<f64> = centres.iter().map(|c| c.1).collect();
-        let centre_x =
-            Tensor::<3>::from_data(TensorData::new(centre_x, [tiles, 1, 1]), (&device, dtype));
-        let centre_y =
-            Tensor::<3>::from_data(TensorData::new(centre_y, [tiles, 1, 1]), (&device, dtype));
+        let centre_x: Tensor<3> = upload(TensorData::new(centre_x, [tiles, 1, 1]), &device, dtype);
+        let centre_y: Tensor<3> = upload(TensorData::new(centre_y, [tiles, 1, 1]), &device, dtype);
 
         let means = inputs
             .means_2d
@@ -471,7 +467,7 @@ fn composite_group(
         let keep: Vec<usize> = (0..tiles).filter(|r| !done.contains(r)).collect();
         let rows = |rows: &[usize]| {
             let rows: Vec<i64> = rows.iter().map(|&r| r as i64).collect();
-            Tensor::<1, Int>::from_data(TensorData::new(rows.clone(), [rows.len()]), &device)
+            upload_ints(rows.clone(), [rows.len()], &device)
         };
         let done_rows = rows(&done);
         let result = finish(
@@ -500,7 +496,7 @@ fn composite_group(
         }
         parts.push(part);
     }
-    let order = Tensor::<1, Int>::from_data(TensorData::new(position_of, [group.len()]), &device);
+    let order = upload_ints(position_of, [group.len()], &device);
     Tensor::cat(parts, 0).select(0, order)
 }
 
@@ -522,8 +518,9 @@ fn pixel_features(device: &burn::tensor::Device, dtype: burn::tensor::DType) -> 
         let y = (p / TILE_SIZE) as f64 + 0.5 - 0.5 * TILE_SIZE as f64;
         features.extend([x * x, x * y, y * y, x, y, 1.0]);
     }
-    Tensor::from_data(
+    upload(
         TensorData::new(features, [1, TILE_PIXELS, 6]),
-        (device, dtype),
+        device,
+        dtype,
     )
 }

@@ -6,7 +6,7 @@
 
 use std::sync::Arc;
 
-use burn::tensor::{DType, Device, Int, Tensor, TensorData};
+use burn::tensor::{DType, Device, Tensor, TensorData};
 use rayon::prelude::*;
 use splatraj_scene::Scene;
 
@@ -651,9 +651,8 @@ pub fn render_at(
     // index (per-Gaussian tensors and the tensor path's SH colours select with it) and its
     // pose (each row's camera centre for the tensor path's SH colours).
     let index_tensor = |values: Vec<i64>| {
-        crate::counters::upload(8 * values.len());
         let len = values.len();
-        Tensor::<1, Int>::from_data(TensorData::new(values, [len]), &device)
+        crate::host::upload_ints(values, [len], &device)
     };
     let scene_index = std::cell::OnceCell::new();
     let scene_index = || {

@@ -9,7 +9,7 @@
 //!
 //! [`Cost::channels`]: crate::costs::Cost::channels
 
-use burn::tensor::{DType, Device, Int, Tensor, TensorData};
+use burn::tensor::{DType, Device, Tensor, TensorData};
 use splatraj_render::backend::BackendKind;
 use splatraj_render::camera::{Intrinsics, Pose};
 use splatraj_render::focus::Surroundings;
@@ -340,8 +340,7 @@ impl StepEvaluation {
             flat
         } else {
             let device = flat.device();
-            splatraj_render::counters::upload(8 * order.len());
-            let index = Tensor::<1, Int>::from_data(TensorData::new(order, [offset]), &device);
+            let index = splatraj_render::host::upload_ints(order, [offset], &device);
             flat.select(0, index)
         };
         StepEvaluation {
