@@ -197,22 +197,23 @@ fn gradients_match_finite_differences_in_f64() {
     }
 }
 
-/// The moments of a random non-square mask batch, summed both ways (the host's two matrix
+/// The moments of random non-square mask batches, summed both ways (the host's two matrix
 /// products and the GPU's three reductions), equal a brute-force f64 double loop over the
 /// pixels, in both precisions; an all-ones 1280×720 frame keeps its mass
-/// (921 600 pixels) in f32.
+/// (921 600 pixels) in f32. Three sizes, two sharing a height and two a width, one after the
+/// other: the pixel centres of a size are kept on the device and must not be taken for
+/// another's.
 #[test]
 fn mask_moments_match_brute_force_sums() {
     let device = Device::flex();
-    let (b, h, w) = (2, 91, 160);
-    let mut rng = Rng(0xa11ce);
-    let values: Vec<f64> = (0..b * h * w).map(|_| rng.next()).collect();
     let ways = [MomentSums::Products, MomentSums::Reductions];
-    for (dtype, tolerance, sums) in [DType::F64, DType::F32]
+    let mut rng = Rng(0xa11ce);
+    for (b, h, w, dtype, tolerance, sums) in [(2, 91, 160), (1, 91, 64), (3, 40, 160)]
         .into_iter()
-        .zip([1e-12, 1e-5])
-        .flat_map(|(d, t)| ways.map(|s| (d, t, s)))
+        .flat_map(|size| [(size, DType::F64, 1e-12), (size, DType::F32, 1e-5)])
+        .flat_map(|((b, h, w), d, t)| ways.map(|s| (b, h, w, d, t, s)))
     {
+        let values: Vec<f64> = (0..b * h * w).map(|_| rng.next()).collect();
         let moments = MaskMoments::summed(mask(values.clone(), [b, h, w], &device, dtype), sums);
         let (mass, first_x, first_y) = (
             host(moments.mass()),
@@ -318,12 +319,28 @@ fn host_figures_from_moment_sums_match_the_tensor_costs() {
         TensorData::new(interleaved, [b, h, w, 3]),
         (&device, DType::F64),
     );
-    let of_channel = host(moment_sums(images, 1));
+    let of_channel = host(moment_sums(images.clone(), 1));
     for (k, (got, want)) in of_channel.iter().zip(&sums).enumerate() {
         assert!(
             (got - want).abs() <= 1e-12,
             "sum {k}: channel 1 of 3 {got} vs the mask's {want}"
         );
+    }
+    // Its neighbours through the same layout after it (the same shape of constants, other
+    // values: each channel's selection must be its own), against each alone.
+    for (channel, sign) in [(0, 1.0), (2, -1.0)] {
+        let alone: Vec<f64> = junk.iter().map(|v| sign * v).collect();
+        let alone = host(moment_sums(
+            mask(alone, [b, h, w], &device, DType::F64).unsqueeze_dim(3),
+            0,
+        ));
+        let of_channel = host(moment_sums(images.clone(), channel));
+        for (k, (got, want)) in of_channel.iter().zip(&alone).enumerate() {
+            assert!(
+                (got - want).abs() <= 1e-9,
+                "sum {k}: channel {channel} of 3 {got} vs alone {want}"
+            );
+        }
     }
     let figures = HostMoments::from_sums(&sums, h * w);
     let moments = MaskMoments::summed(masks, MomentSums::Products);

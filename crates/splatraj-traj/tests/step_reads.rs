@@ -236,6 +236,30 @@ impl Cost for NanGradientFrom2 {
     }
 }
 
+/// The moments' pixel centres go up once per image size and device, not every pass (on a GPU
+/// each upload is a transfer a pass waits behind): a second mask of the same size uploads
+/// nothing, one of another height its rows' centres. Sizes no other test here renders.
+#[test]
+fn the_moments_pixel_centres_go_up_once_per_size() {
+    use splatraj_traj::costs::MaskMoments;
+
+    let _counted = COUNTED.lock().unwrap();
+    let device = Device::flex();
+    let mask =
+        |height: usize, width: usize| Tensor::<3>::ones([2, height, width], (&device, DType::F32));
+    let uploads_of = |mask: Tensor<3>| {
+        let before = counters::snapshot();
+        let moments = MaskMoments::of(mask);
+        to_host(moments.mass()).unwrap();
+        counters::snapshot().since(&before).uploads
+    };
+    // One constant per image axis (the columns' centres, the rows').
+    assert_eq!(uploads_of(mask(29, 37)), 2, "a new size: both axes");
+    assert_eq!(uploads_of(mask(29, 37)), 0, "the same size again");
+    assert_eq!(uploads_of(mask(31, 37)), 1, "another height: its rows only");
+    assert_eq!(uploads_of(mask(31, 37)), 0);
+}
+
 #[test]
 fn a_step_with_a_non_finite_gradient_is_undone() {
     let _counted = COUNTED.lock().unwrap();

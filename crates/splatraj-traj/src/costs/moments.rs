@@ -149,9 +149,36 @@ pub fn moment_sums(images: Tensor<4>, channel: usize) -> Tensor<2> {
     y.matmul(rows).reshape([batch, 4])
 }
 
-/// `values` uploaded as a tensor of `shape` on `like`'s device, in its dtype.
+/// `values` as a tensor of `shape` on `like`'s device, in its dtype: uploaded the first time,
+/// then the same device tensor again (the pixel centres of an image size are the same every
+/// pass, and on a GPU each upload is a transfer the pass waits behind).
 fn constant_like(like: &Tensor<3>, values: Vec<f64>, shape: [usize; 3]) -> Tensor<3> {
-    splatraj_render::host::upload(TensorData::new(values, shape), &like.device(), like.dtype())
+    /// A handful: one entry per image size, mask layout and device a process renders at.
+    const KEPT: usize = 16;
+    type Entry = (
+        (
+            burn::tensor::Device,
+            burn::tensor::DType,
+            [usize; 3],
+            Vec<f64>,
+        ),
+        Tensor<3>,
+    );
+    static KEPT_CONSTANTS: std::sync::Mutex<Vec<Entry>> = std::sync::Mutex::new(Vec::new());
+    let key = (like.device(), like.dtype(), shape, values);
+    let mut kept = KEPT_CONSTANTS
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if let Some((_, tensor)) = kept.iter().find(|(k, _)| *k == key) {
+        return tensor.clone();
+    }
+    let tensor: Tensor<3> =
+        splatraj_render::host::upload(TensorData::new(key.3.clone(), shape), &key.0, key.1);
+    if kept.len() == KEPT {
+        kept.remove(0);
+    }
+    kept.push((key, tensor.clone()));
+    tensor
 }
 
 /// x_i = (i + ½)/n − ½ for the n pixels of an image axis: centres in image fractions from the
