@@ -131,6 +131,7 @@ pub fn read(bytes: usize) {
 pub fn upload(bytes: usize) {
     UPLOADS.fetch_add(1, Ordering::Relaxed);
     BYTES_UP.fetch_add(bytes as u64, Ordering::Relaxed);
+    tracing::trace!(bytes, "upload");
 }
 
 /// A render pass.
