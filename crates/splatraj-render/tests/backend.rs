@@ -1104,17 +1104,22 @@ fn a_pass_whose_rows_exceed_the_gpus_largest_buffer_is_an_error() {
         TensorData::new(pose.0.repeat(batch), [batch, 6]),
         (&device, DType::F32),
     );
-    let request = RenderRequest::new(intrinsics, vec![Channel::Depth]);
-    let message = render(&uploaded, poses, &request)
-        .map(|_| ())
-        .expect_err("rows beyond the largest buffer are refused")
-        .to_string();
+    let message = refused_depth_pass(&uploaded, poses, intrinsics);
     assert!(
         // Every pose sees every Gaussian: 50 × 100 000 rows.
         message.contains("a pass's packed rows (5000000 pose–Gaussian rows")
             && message.contains("largest buffer"),
         "{message}"
     );
+}
+
+/// The error of a depth pass of `poses` that must be refused before any work.
+fn refused_depth_pass(scene: &DeviceScene, poses: Tensor<2>, intrinsics: Intrinsics) -> String {
+    let request = RenderRequest::new(intrinsics, vec![Channel::Depth]);
+    render(scene, poses, &request)
+        .map(|_| ())
+        .expect_err("the pass is refused")
+        .to_string()
 }
 
 /// The projection's and colours' kernels put a pass's poses on one axis of their launch grid,
@@ -1141,11 +1146,7 @@ fn a_pass_never_holds_more_poses_than_a_launch_grid_axis() {
                 let uploaded = DeviceScene::new(&scene, &device, DType::F32);
                 let batch = 65_536;
                 let poses = Tensor::<2>::zeros([batch, 6], (&device, DType::F32));
-                let request = RenderRequest::new(intrinsics, vec![Channel::Depth]);
-                let message = render(&uploaded, poses, &request)
-                    .map(|_| ())
-                    .expect_err("a pass past the launch grid's axis is refused")
-                    .to_string();
+                let message = refused_depth_pass(&uploaded, poses, intrinsics);
                 assert!(
                     message.contains("a render pass of 65536 poses")
                         && message.contains("at most 65535"),
