@@ -59,6 +59,17 @@ pub enum BackendUnavailable {
         /// The backends this build has.
         available: String,
     },
+    /// The device has no 64-bit floats (wgpu on Metal, OpenGL and some GPUs) and f64 was asked
+    /// for.
+    #[error(
+        "backend 'wgpu' runs on {hardware}, which has no 64-bit floats (its GPU or graphics API \
+         lacks them: Metal, OpenGL and some GPUs): use precision = \"f32\" (`--dtype f32`), or \
+         backend = \"flex\" for f64"
+    )]
+    NoFloat64 {
+        /// What the device computes on ([`Hardware`]'s words).
+        hardware: String,
+    },
     /// wgpu found no adapter it could start (no Vulkan, Metal or DX12 driver, or none of the
     /// kind `CUBECL_WGPU_DEFAULT_DEVICE` asks for).
     #[error(
@@ -117,6 +128,20 @@ impl BackendKind {
         }
     }
 
+    /// A device of this backend that holds tensors of `dtype`: [`Self::device`], and an error
+    /// where f64 is asked of a device without 64-bit floats. burn would find that out only
+    /// when a kernel failed to compile deep inside a pass (naga: "Using `f64` values requires
+    /// the FLOAT64 capability"), and the pass would end in a panic.
+    pub fn device_for(self, dtype: DType) -> Result<Device, BackendUnavailable> {
+        let device = self.device()?;
+        if dtype == DType::F64 && !has_f64(&device) {
+            return Err(BackendUnavailable::NoFloat64 {
+                hardware: Hardware::of(&device).to_string(),
+            });
+        }
+        Ok(device)
+    }
+
     /// The error for asking this build for this backend when it lacks it.
     pub(crate) fn not_compiled(self) -> BackendUnavailable {
         BackendUnavailable::NotCompiled {
@@ -142,6 +167,22 @@ fn wgpu_device() -> Result<Device, BackendUnavailable> {
         .get_or_init(|| Device::wgpu_options().init().map_err(|e| e.to_string()))
         .clone()
         .map_err(|reason| BackendUnavailable::NoDevice { reason })
+}
+
+/// Whether `device` computes in 64-bit floats: the host backends always; a wgpu device where its
+/// adapter and graphics API have them (CubeCL registers the types the adapter offers).
+pub fn has_f64(device: &Device) -> bool {
+    #[cfg(feature = "wgpu")]
+    if let burn_dispatch::DispatchDevice::Cube(cube) = device.as_dispatch().clone().inner() {
+        use burn_cubecl::cubecl::ir::{ElemType, FloatKind};
+        return cube
+            .client()
+            .properties()
+            .supports_type(ElemType::Float(FloatKind::F64));
+    }
+    #[cfg(not(feature = "wgpu"))]
+    let _ = device;
+    true
 }
 
 /// How `device` runs tensor ops: as kernel launches on a GPU (each op a launch, queued and

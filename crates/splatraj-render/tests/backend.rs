@@ -322,6 +322,67 @@ fn the_listed_adapters_are_the_ones_a_run_starts() {
     }
 }
 
+/// f64 asked of a device without 64-bit floats is an error before any work, naming the device
+/// and the way out: wgpu on OpenGL (Metal, some GPUs) has none, and a pass then failed to compile
+/// a kernel and ended in a panic (found running the lavapipe tests with wgpu on Mesa's OpenGL).
+/// Lavapipe's Vulkan has them. The OpenGL case runs in a child process whose Vulkan loader finds
+/// no driver (`VK_DRIVER_FILES` naming none), so wgpu settles on OpenGL where the machine has it.
+#[cfg(feature = "wgpu")]
+#[test]
+fn f64_is_refused_where_the_device_has_none() {
+    use splatraj_render::backend::{BackendUnavailable, has_f64};
+    const CHILD: &str = "SPLATRAJ_TEST_NO_F64_CHILD";
+    if std::env::var_os(CHILD).is_some() {
+        let Ok(device) = BackendKind::Wgpu.device() else {
+            println!("no OpenGL adapter either: nothing to check");
+            return;
+        };
+        assert!(!has_f64(&device), "wgpu on OpenGL offers no f64");
+        assert!(BackendKind::Wgpu.device_for(DType::F32).is_ok());
+        let refused = BackendKind::Wgpu.device_for(DType::F64).unwrap_err();
+        assert!(matches!(refused, BackendUnavailable::NoFloat64 { .. }));
+        let message = refused.to_string();
+        assert!(
+            message.contains("no 64-bit floats") && message.contains("precision = \"f32\""),
+            "{message}"
+        );
+        println!("refused: {message}");
+        return;
+    }
+    for backend in BackendKind::compiled() {
+        let device = backend.device().unwrap();
+        assert!(
+            has_f64(&device),
+            "{backend}: f64 here (lavapipe's Vulkan has it)"
+        );
+        assert!(backend.device_for(DType::F64).is_ok(), "{backend}");
+    }
+    let out = std::process::Command::new(std::env::current_exe().unwrap())
+        .args([
+            "--exact",
+            "f64_is_refused_where_the_device_has_none",
+            "--nocapture",
+        ])
+        .env(CHILD, "1")
+        .env("VK_DRIVER_FILES", "/nonexistent/no_icd.json")
+        .env_remove("CUBECL_WGPU_DEFAULT_DEVICE")
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{:?}: {said}{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    eprintln!(
+        "{}",
+        said.lines()
+            .find(|l| l.starts_with("refused") || l.starts_with("no OpenGL"))
+            .unwrap_or("")
+    );
+}
+
 /// A wgpu that cannot start a device is an error that says what wgpu said and what to do, the
 /// second time too, not a panic on burn's device thread (an "internal error", exit 101, until
 /// 30 November). Its own process: the adapter is chosen once per process, here one that no

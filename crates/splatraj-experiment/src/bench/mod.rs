@@ -452,8 +452,8 @@ pub fn speedups(rows: &[BenchRow]) -> Vec<(String, f64, f64)> {
 /// Runs one configuration in this process: builds its scene and camera, warms up, then times
 /// the mask pass forward and forward + backward.
 pub fn run_one(args: &BenchSettings, config: &BenchConfig) -> Result<BenchRow> {
-    let device = args.backend.device()?;
     let dtype = args.dtype;
+    let device = args.backend.device_for(dtype)?;
     let intrinsics = Intrinsics::from_fov_x(args.fov, config.resolution, config.resolution)?;
     // Camera placement is calibrated at 64² so every resolution sees the same view.
     let calibration = Intrinsics::from_fov_x(args.fov, 64, 64)?;
@@ -623,7 +623,7 @@ pub fn run_render_bench(
     let configs = BenchConfig::all(&sources, &grid.resolutions, &grid.rasterizers)?;
     check_render_bench_work(settings, grid, &configs)?;
     // Fail early, before spawning children, on an uncompiled backend or missing scene.
-    settings.backend.device()?;
+    settings.backend.device_for(settings.dtype)?;
     if let Some(path) = &settings.scene
         && !path.is_file()
     {

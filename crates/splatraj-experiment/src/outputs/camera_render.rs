@@ -126,7 +126,7 @@ pub fn render_camera(
     request: &CameraRenderRequest,
     mut warn: impl FnMut(String),
 ) -> Result<CameraRender> {
-    let device = request.backend.device()?;
+    let device = request.backend.device_for(request.precision.dtype())?;
     let camera = read_camera_file(&request.camera)?;
     let intrinsics = resize(&camera.intrinsics, request.width, request.height)?;
     let limit = MemoryLimit::new(request.max_memory_gb)?;

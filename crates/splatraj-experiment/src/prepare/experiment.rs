@@ -147,7 +147,7 @@ impl Experiment {
         let centre: [f64; 3] =
             std::array::from_fn(|i| 0.5 * (bounds.min[i] + bounds.max[i]) as f64);
         let half: [f64; 3] = std::array::from_fn(|i| 0.5 * (bounds.max[i] - bounds.min[i]) as f64);
-        let device = config.backend.device()?;
+        let device = config.backend.device_for(config.precision.dtype())?;
         let intrinsics = config.camera.intrinsics()?;
         // One window per query (grounding keeps their order and count).
         let model = config
