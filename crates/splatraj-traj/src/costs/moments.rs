@@ -155,9 +155,12 @@ pub fn moment_sums(images: Tensor<4>, channel: usize) -> Tensor<2> {
 fn constant_like(like: &Tensor<3>, values: Vec<f64>, shape: [usize; 3]) -> Tensor<3> {
     /// A handful: one entry per image size, mask layout and device a process renders at.
     const KEPT: usize = 16;
+    // The device and whether it records gradients: burn's device equality ignores autodiff, and
+    // a constant is made on the device of the tensors it meets.
     type Entry = (
         (
             burn::tensor::Device,
+            bool,
             burn::tensor::DType,
             [usize; 3],
             Vec<f64>,
@@ -165,7 +168,14 @@ fn constant_like(like: &Tensor<3>, values: Vec<f64>, shape: [usize; 3]) -> Tenso
         Tensor<3>,
     );
     static KEPT_CONSTANTS: std::sync::Mutex<Vec<Entry>> = std::sync::Mutex::new(Vec::new());
-    let key = (like.device(), like.dtype(), shape, values);
+    let device = like.device();
+    let key = (
+        device.clone(),
+        device.is_autodiff(),
+        like.dtype(),
+        shape,
+        values,
+    );
     let mut kept = KEPT_CONSTANTS
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner);
@@ -173,7 +183,7 @@ fn constant_like(like: &Tensor<3>, values: Vec<f64>, shape: [usize; 3]) -> Tenso
         return tensor.clone();
     }
     let tensor: Tensor<3> =
-        splatraj_render::host::upload(TensorData::new(key.3.clone(), shape), &key.0, key.1);
+        splatraj_render::host::upload(TensorData::new(key.4.clone(), shape), &device, key.2);
     if kept.len() == KEPT {
         kept.remove(0);
     }
