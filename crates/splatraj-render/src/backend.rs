@@ -169,11 +169,23 @@ fn wgpu_device() -> Result<Device, BackendUnavailable> {
         .map_err(|reason| BackendUnavailable::NoDevice { reason })
 }
 
+/// The CubeCL device inside `device` where it is a wgpu device; None on the host backends. The
+/// one place that unwraps burn's type-erased device: what a device can hold and do (its largest
+/// buffer, workgroup memory, float types, name) is a property of its CubeCL client.
+#[cfg(feature = "wgpu")]
+pub(crate) fn cube_device(device: &Device) -> Option<burn_cubecl::CubeDevice> {
+    match device.as_dispatch().clone().inner() {
+        burn_dispatch::DispatchDevice::Cube(cube) => Some(cube),
+        #[allow(unreachable_patterns)] // reachable when a host backend is compiled in
+        _ => None,
+    }
+}
+
 /// Whether `device` computes in 64-bit floats: the host backends always; a wgpu device where its
 /// adapter and graphics API have them (CubeCL registers the types the adapter offers).
 pub fn has_f64(device: &Device) -> bool {
     #[cfg(feature = "wgpu")]
-    if let burn_dispatch::DispatchDevice::Cube(cube) = device.as_dispatch().clone().inner() {
+    if let Some(cube) = cube_device(device) {
         use burn_cubecl::cubecl::ir::{ElemType, FloatKind};
         return cube
             .client()
@@ -200,7 +212,7 @@ impl Execution {
     /// How `device` runs ops.
     pub fn of(device: &Device) -> Self {
         #[cfg(feature = "wgpu")]
-        if let burn_dispatch::DispatchDevice::Cube(_) = device.as_dispatch().clone().inner() {
+        if cube_device(device).is_some() {
             return Execution::Kernels;
         }
         #[cfg(not(feature = "wgpu"))]
@@ -234,7 +246,7 @@ impl Hardware {
     /// What `device` computes on.
     pub fn of(device: &Device) -> Hardware {
         #[cfg(feature = "wgpu")]
-        if let burn_dispatch::DispatchDevice::Cube(cube) = device.as_dispatch().clone().inner() {
+        if let Some(cube) = cube_device(device) {
             let identity = cube.client().properties().identity.clone();
             // CubeCL leaves `physical` empty for a CPU adapter (a software rasterizer) only.
             return match identity.physical {

@@ -30,7 +30,7 @@ pub const PASS_IMAGE_BYTES: u64 = 128 << 20;
 /// The largest buffer one tensor may occupy on `device`, in bytes; None on the host backends.
 pub fn max_buffer_bytes(device: &Device) -> Option<u64> {
     #[cfg(feature = "wgpu")]
-    if let burn_dispatch::DispatchDevice::Cube(cube) = device.as_dispatch().clone().inner() {
+    if let Some(cube) = crate::backend::cube_device(device) {
         return Some(cube.client().properties().memory.max_page_size);
     }
     #[cfg(not(feature = "wgpu"))]

@@ -174,12 +174,8 @@ macro_rules! launch_compositing {
 
 /// The workgroup memory of `device` in bytes: None on the host backends.
 fn max_shared_bytes(device: &burn::tensor::Device) -> Option<usize> {
-    match device.as_dispatch().clone().inner() {
-        burn_dispatch::DispatchDevice::Cube(cube) => {
-            Some(cube.client().properties().hardware.max_shared_memory_size)
-        }
-        _ => None,
-    }
+    crate::backend::cube_device(device)
+        .map(|cube| cube.client().properties().hardware.max_shared_memory_size)
 }
 
 /// How the backward sums entries on `device` (a GPU device of the wgpu backend; None on the
